@@ -1,0 +1,42 @@
+"""pytest-n2r: metamorphic tests for perception code on rendered views of real scenes.
+
+The top-level names are imported lazily, so ``import pytest_n2r`` (and the pytest plugin) costs
+nothing until a name is used.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+#: public name -> module that defines it
+_EXPORTS: dict[str, str] = {
+    "Camera": "pytest_n2r.geometry",
+    "Transform": "pytest_n2r.geometry",
+    "Units": "pytest_n2r.geometry",
+    "Scene": "pytest_n2r.scene",
+    "SceneView": "pytest_n2r.scene",
+    "RenderedView": "pytest_n2r.render",
+    "N2RError": "pytest_n2r.errors",
+    "InvalidArgument": "pytest_n2r.errors",
+    "InvalidType": "pytest_n2r.errors",
+    "SceneFileError": "pytest_n2r.errors",
+    "IngestError": "pytest_n2r.errors",
+}
+
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pytest_n2r' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

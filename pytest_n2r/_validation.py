@@ -1,0 +1,68 @@
+"""Shared argument checks, so every error message has the same shape: ``name=value``, what was expected."""
+
+from __future__ import annotations
+
+import math
+from numbers import Real
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidArgument, InvalidType
+
+
+def check_real(name: str, value: Any) -> float:
+    """Return ``value`` as a finite float, or raise naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (Real, np.floating, np.integer)):
+        raise InvalidType(f"{name}={value!r} must be a real number, not {type(value).__name__}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise InvalidArgument(f"{name}={value!r} must be finite")
+    return value
+
+
+def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:
+    """Return ``value`` as a finite float in ``[lo, hi]`` (either bound may be ``None``), or raise."""
+    value = check_real(name, value)
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        lo_s = "-inf" if lo is None else f"{lo:g}"
+        hi_s = "inf" if hi is None else f"{hi:g}"
+        raise InvalidArgument(f"{name}={value!r} is out of range; expected a value in [{lo_s}, {hi_s}]")
+    return value
+
+
+def check_positive(name: str, value: Any) -> float:
+    """Return ``value`` as a finite float > 0, or raise."""
+    value = check_real(name, value)
+    if value <= 0:
+        raise InvalidArgument(f"{name}={value!r} must be > 0")
+    return value
+
+
+def check_array(
+    name: str, value: Any, shape: str, *, dtype: type | None = None, finite: bool = True
+) -> np.ndarray:
+    """Return ``value`` as an array whose shape matches the spec ``shape``, or raise naming ``name``.
+
+    ``shape`` is a space-separated spec: integers must match exactly, a letter matches any length, and
+    a leading ``*`` matches any number of leading axes (``"* 3"``, ``"N 2"``, ``"4 4"``, ``"H W 3"``).
+    """
+    try:
+        arr = np.asarray(value) if dtype is None else np.asarray(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise InvalidType(f"{name} must be an array of shape ({shape}), got {type(value).__name__}") from exc
+    if arr.dtype == object:
+        raise InvalidType(f"{name} must be a numeric array of shape ({shape}), got an object array")
+    dims = shape.split()
+    batch = bool(dims) and dims[0] == "*"
+    dims = dims[1:] if batch else dims
+    ok = arr.ndim >= len(dims) if batch else arr.ndim == len(dims)
+    if ok:
+        tail = arr.shape[arr.ndim - len(dims):]
+        ok = all(not d.isdigit() or int(d) == n for d, n in zip(dims, tail))
+    if not ok:
+        raise InvalidType(f"{name} must have shape ({shape}), got {arr.shape}")
+    if finite and arr.dtype.kind in "fc" and not np.all(np.isfinite(arr)):
+        bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        raise InvalidArgument(f"{name} contains {bad} non-finite value(s) (NaN or Inf)")
+    return arr

@@ -1,0 +1,1 @@
+"""The ``n2r`` command line."""

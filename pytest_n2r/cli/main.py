@@ -1,0 +1,52 @@
+"""``n2r``: the command line. Each subcommand lives in its own module of this package.
+
+A subcommand module defines ``add_parser(subparsers)``, which registers its parser and sets
+``func=run`` (a callable taking the parsed arguments and returning an exit code). Heavy imports
+(torch, pycolmap) belong inside ``run`` so ``n2r --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from .. import __version__
+from ..errors import N2RError
+
+#: Subcommand modules, in the order ``n2r --help`` lists them.
+COMMANDS: tuple[str, ...] = ()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="n2r",
+        description="pytest-n2r: fit scene fields from photos and render test views for perception code.",
+    )
+    parser.add_argument("--version", action="version", version=f"pytest-n2r {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        importlib.import_module(f"{__package__}.{name}").add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``n2r`` console script; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except N2RError as exc:
+        print(f"n2r {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"n2r {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

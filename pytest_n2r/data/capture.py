@@ -1,0 +1,80 @@
+"""What ingestion produces: a captured scene as views with cameras, poses and images."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from ..geometry import Camera
+
+__all__ = ["CapturedView", "Capture", "heldout_split"]
+
+Split = Literal["train", "heldout"]
+
+
+@dataclass(frozen=True, eq=False)
+class CapturedView:
+    """One captured image with its camera and pose.
+
+    ``camera`` is the ideal pinhole camera of ``image`` (distortion already removed, at the loaded
+    resolution); ``c2w`` is camera-to-world 4x4 float64 with OpenCV axes; ``image`` is H×W×3 uint8 RGB
+    or ``None`` when images were not loaded.
+    """
+
+    name: str
+    camera: Camera
+    c2w: np.ndarray
+    split: Split = "train"
+    image: np.ndarray | None = None
+
+
+@dataclass(eq=False)
+class Capture:
+    """A captured scene ready for fitting.
+
+    Attributes
+    ----------
+    views:
+        The registered views, in capture order (sorted by file name for image folders).
+    points:
+        ``(N, 3)`` float64 sparse surface points in world (scene) units: SfM points, or points
+        triangulated from the given poses. May be empty.
+    bounds:
+        ``(2, 3)`` float64 axis-aligned box ``[min, max]`` of the region the cameras observe (scene units).
+    reference_length:
+        The median z-depth of ``points`` seen from the cameras (scene units): the unit of transform
+        translations in the public API.
+    source:
+        Where the capture came from (path, as given).
+    skipped:
+        ``(file, reason)`` for every input image that was not used (missing, unreadable, not registered).
+    report:
+        Timings and counts for ``n2r poses`` (plain JSON-ready values).
+    """
+
+    views: list[CapturedView]
+    points: np.ndarray
+    bounds: np.ndarray
+    reference_length: float
+    source: str = ""
+    skipped: list[tuple[str, str]] = field(default_factory=list)
+    report: dict = field(default_factory=dict)
+
+    @property
+    def train_views(self) -> list[CapturedView]:
+        return [v for v in self.views if v.split == "train"]
+
+    @property
+    def heldout_views(self) -> list[CapturedView]:
+        return [v for v in self.views if v.split == "heldout"]
+
+
+def heldout_split(n: int, every: int = 8) -> list[Split]:
+    """The NeRF custom: every ``every``-th image (0, 8, 16, ...) is held out, the rest train.
+
+    >>> heldout_split(10)
+    ['heldout', 'train', 'train', 'train', 'train', 'train', 'train', 'train', 'heldout', 'train']
+    """
+    return ["heldout" if every > 0 and i % every == 0 else "train" for i in range(n)]

@@ -1,0 +1,1 @@
+"""Built-in procedural demo scenes with exact ground truth."""

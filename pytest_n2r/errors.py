@@ -1,0 +1,47 @@
+"""The exceptions pytest-n2r raises.
+
+Every error the package raises on purpose is an :class:`N2RError`, so a caller can catch them all at once.
+Argument errors are also a :class:`ValueError` (bad value) or :class:`TypeError` (bad type), so code that
+already catches those keeps working. Messages name the argument, file or field, what was found and what
+was expected.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "N2RError",
+    "InvalidArgument",
+    "InvalidType",
+    "IngestError",
+    "SceneFileError",
+    "FitError",
+    "SUTOutputError",
+]
+
+
+class N2RError(Exception):
+    """Base class of every error raised by pytest-n2r."""
+
+
+class InvalidArgument(N2RError, ValueError):
+    """An argument has the right type but a value outside what is accepted (non-finite, out of range)."""
+
+
+class InvalidType(N2RError, TypeError):
+    """An argument or a returned value has the wrong type or shape."""
+
+
+class IngestError(N2RError):
+    """A capture (images folder, COLMAP model, transforms.json) cannot be turned into a scene."""
+
+
+class SceneFileError(N2RError):
+    """A ``.n2r`` scene file is missing, truncated, of another format version or inconsistent."""
+
+
+class FitError(N2RError):
+    """Fitting a scene field failed (diverged to NaN, no usable views, ...)."""
+
+
+class SUTOutputError(InvalidType):
+    """The system under test returned something a metric cannot use (None, NaN, wrong shape)."""

@@ -1,0 +1,1 @@
+"""Scene fields: trainable radiance fields that a scene file stores and the renderer queries."""

@@ -1,0 +1,153 @@
+"""Pinhole camera intrinsics.
+
+Convention
+----------
+- Pixel centres at integer coordinates (OpenCV): the top-left pixel's centre is ``(0, 0)`` and the
+  image spans ``[-0.5, width - 0.5] x [-0.5, height - 0.5]``. COLMAP, nerfstudio and instant-ngp put
+  the top-left centre at ``(0.5, 0.5)``: ``cx_opencv = cx_colmap - 0.5`` (see :meth:`Camera.from_colmap_pixels`).
+- Camera axes: x right, y down, z forward (OpenCV). A camera-frame point ``(X, Y, Z)`` with ``Z > 0``
+  projects to ``u = fx * X / Z + cx``, ``v = fy * Y / Z + cy``.
+- ``distortion`` holds OpenCV coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])``; rendered views are
+  always ideal pinhole images, so a camera used for rendering has ``distortion == ()``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .._validation import check_positive, check_real
+from ..errors import InvalidArgument, InvalidType
+
+__all__ = ["Camera"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole intrinsics of an image of ``width`` x ``height`` pixels (all values in pixels)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion: tuple[float, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise InvalidType(f"Camera {name}={value!r} must be an int (pixels)")
+            if value < 1:
+                raise InvalidArgument(f"Camera {name}={value!r} must be >= 1 pixel")
+            object.__setattr__(self, name, int(value))
+        for name in ("fx", "fy"):
+            object.__setattr__(self, name, check_positive(f"Camera {name}", getattr(self, name)))
+        for name in ("cx", "cy"):
+            object.__setattr__(self, name, check_real(f"Camera {name}", getattr(self, name)))
+        coeffs = tuple(check_real("Camera distortion", c) for c in self.distortion)
+        if len(coeffs) not in (0, 4, 5, 8):
+            raise InvalidArgument(
+                f"Camera distortion has {len(coeffs)} coefficients; expected 0, 4 (k1 k2 p1 p2), 5 (+k3) or 8"
+            )
+        if coeffs and not any(coeffs):
+            coeffs = ()
+        object.__setattr__(self, "distortion", coeffs)
+
+    @classmethod
+    def from_K(cls, K: np.ndarray, width: int, height: int, distortion: tuple[float, ...] = ()) -> "Camera":
+        """Build from a 3x3 OpenCV intrinsic matrix (pixel centres at integer coordinates)."""
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise InvalidType(f"K must have shape (3, 3), got {K.shape}")
+        return cls(width, height, K[0, 0], K[1, 1], K[0, 2], K[1, 2], tuple(distortion))
+
+    @classmethod
+    def from_colmap_pixels(
+        cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
+        distortion: tuple[float, ...] = (),
+    ) -> "Camera":
+        """Build from intrinsics whose top-left pixel centre is ``(0.5, 0.5)`` (COLMAP, nerfstudio)."""
+        return cls(width, height, fx, fy, float(cx) - 0.5, float(cy) - 0.5, tuple(distortion))
+
+    @property
+    def K(self) -> np.ndarray:
+        """The 3x3 intrinsic matrix, float64."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(width, height)`` in pixels, the order OpenCV uses."""
+        return self.width, self.height
+
+    @property
+    def is_distorted(self) -> bool:
+        return bool(self.distortion)
+
+    def resized(self, width: int, height: int) -> "Camera":
+        """The same camera for an image resized to ``width`` x ``height``.
+
+        Per axis with scale ``s = new / old``: ``f' = f * s`` and ``c' = (c + 0.5) * s - 0.5``, so the
+        image borders (not the pixel centres) stay where they were.
+
+        >>> Camera(640, 480, 500.0, 500.0, 319.5, 239.5).resized(320, 240).cx
+        159.5
+        """
+        sx, sy = width / self.width, height / self.height
+        return replace(
+            self, width=int(width), height=int(height), fx=self.fx * sx, fy=self.fy * sy,
+            cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5,
+        )
+
+    def scaled(self, scale: float) -> "Camera":
+        """Resize by a factor (``0.25`` = a quarter of the width and height, rounded to whole pixels)."""
+        scale = check_positive("scale", scale)
+        return self.resized(max(1, round(self.width * scale)), max(1, round(self.height * scale)))
+
+    def fit_within(self, max_size: int) -> "Camera":
+        """Downscale (never upscale) so the longer side is at most ``max_size`` pixels."""
+        longer = max(self.width, self.height)
+        return self if longer <= max_size else self.scaled(max_size / longer)
+
+    def undistorted(self) -> "Camera":
+        """The ideal pinhole camera that :func:`undistort_image` maps this camera's images to."""
+        return replace(self, distortion=())
+
+    def undistort_image(self, image: np.ndarray) -> np.ndarray:
+        """Remove lens distortion from an image taken with this camera (keeps ``K`` and the size).
+
+        The result is what :meth:`undistorted` sees. Pixels that map from outside the source image are
+        filled by replicating the border, so no black wedges enter a fit.
+        """
+        import cv2
+
+        if not self.distortion:
+            return image
+        if image.shape[:2] != (self.height, self.width):
+            raise InvalidArgument(
+                f"image of shape {image.shape[:2]} does not match the camera's {self.height}x{self.width}"
+            )
+        map1, map2 = cv2.initUndistortRectifyMap(
+            self.K, np.asarray(self.distortion), None, self.K, (self.width, self.height), cv2.CV_32FC1
+        )
+        return cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+    def to_dict(self) -> dict:
+        """Plain JSON-ready form (OpenCV pixel convention)."""
+        return {
+            "width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy,
+            "cx": self.cx, "cy": self.cy, "distortion": list(self.distortion),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Camera":
+        """Inverse of :meth:`to_dict`."""
+        try:
+            return cls(
+                int(data["width"]), int(data["height"]), data["fx"], data["fy"], data["cx"], data["cy"],
+                tuple(data.get("distortion", ())),
+            )
+        except KeyError as exc:
+            raise InvalidArgument(f"camera record is missing the field {exc.args[0]!r}") from None

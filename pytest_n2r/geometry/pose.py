@@ -1,0 +1,244 @@
+"""Camera poses and the pose transforms τ of metamorphic relations.
+
+Convention
+----------
+- A pose is a camera-to-world (``world_from_camera``) 4x4 float64 matrix; the camera frame is OpenCV's
+  (x right, y down, z forward).
+- A transform τ = (roll, pitch, yaw, x, y, z) acts **in the source camera's own frame**:
+  ``c2w_tau = c2w @ T(tau)``.
+- ``T(tau)`` rotates by ``R = R_y(yaw) @ R_x(pitch) @ R_z(roll)`` (right-handed rotations about the
+  camera's own axes: yaw about y, then pitch about the new x, then roll about the new optical axis) and
+  translates by ``(x, y, z) * length`` in the source camera frame.
+- In words: +yaw turns the view right, +pitch tilts it up, +roll turns the camera clockwise about its
+  optical axis as seen from behind (image content turns counter-clockwise); +x moves right, +y moves
+  **down**, +z moves forward.
+- Angles are **degrees** in every public function; radians only inside.
+- Translations are in *reference lengths* (see :class:`Units`) unless stated otherwise: the public API
+  multiplies them by the scene's length scale.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from enum import Enum
+
+import numpy as np
+
+from .._validation import check_array, check_range, check_real
+from ..errors import InvalidArgument
+
+__all__ = [
+    "Transform",
+    "Units",
+    "rotation_from_euler",
+    "euler_from_rotation",
+    "orthonormalize",
+    "compose",
+    "invert_pose",
+    "check_pose",
+    "relative_pose",
+]
+
+
+class Units(str, Enum):
+    """What a transform's ``x, y, z`` are measured in.
+
+    ``reference``: fractions of the scene's reference length (the median z-depth of the surface seen
+    from the training cameras) -- the default, so one bound means the same on every scene.
+    ``scene``: the scene's own (arbitrary, SfM) units. ``metres``: metres, for scenes fitted with a
+    known scale.
+    """
+
+    REFERENCE = "reference"
+    SCENE = "scene"
+    METRES = "metres"
+
+
+def _rx(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def rotation_from_euler(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """``R = R_y(yaw) @ R_x(pitch) @ R_z(roll)``, angles in **degrees**, camera axes (OpenCV).
+
+    >>> R = rotation_from_euler(0, 0, 90)        # yaw right by 90 degrees
+    >>> np.round(R @ [0, 0, 1], 12) + 0.0        # the optical axis now points along old +x
+    array([1., 0., 0.])
+    """
+    roll = check_real("roll", roll)
+    pitch = check_real("pitch", pitch)
+    yaw = check_real("yaw", yaw)
+    return _ry(math.radians(yaw)) @ _rx(math.radians(pitch)) @ _rz(math.radians(roll))
+
+
+def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of :func:`rotation_from_euler`: ``(roll, pitch, yaw)`` in **degrees**.
+
+    Ranges: pitch in [-90, 90], roll and yaw in (-180, 180]. At gimbal lock (pitch = ±90°) roll and yaw
+    turn about the same axis; the result then puts all of it in yaw and returns roll = 0 (never NaN).
+    """
+    R = check_array("R", R, "3 3", dtype=np.float64)
+    sin_pitch = -R[1, 2]
+    cos_pitch = math.hypot(R[1, 0], R[1, 1])
+    pitch = math.atan2(sin_pitch, cos_pitch)
+    if cos_pitch > 1e-9:
+        yaw = math.atan2(R[0, 2], R[2, 2])
+        roll = math.atan2(R[1, 0], R[1, 1])
+    else:  # gimbal lock: R[0, :2] = (cos, sin) of yaw -/+ roll; put it all in yaw
+        roll = 0.0
+        yaw = math.atan2(math.copysign(1.0, sin_pitch) * R[0, 1], R[0, 0])
+    return _wrap(math.degrees(roll)), math.degrees(pitch), _wrap(math.degrees(yaw))
+
+
+def _wrap(deg: float) -> float:
+    """Wrap an angle in degrees to (-180, 180]."""
+    wrapped = math.fmod(deg, 360.0)
+    if wrapped <= -180.0:
+        wrapped += 360.0
+    elif wrapped > 180.0:
+        wrapped -= 360.0
+    return wrapped + 0.0
+
+
+def orthonormalize(R: np.ndarray) -> np.ndarray:
+    """The rotation matrix nearest to ``R`` (Frobenius norm), via SVD; fixes accumulated round-off."""
+    U, _, Vt = np.linalg.svd(np.asarray(R, dtype=np.float64))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
+    return U @ D @ Vt
+
+
+def check_pose(c2w: np.ndarray, name: str = "c2w") -> np.ndarray:
+    """Return ``c2w`` as a float64 4x4 rigid transform, or raise naming ``name`` and what is wrong."""
+    M = check_array(name, c2w, "4 4", dtype=np.float64)
+    if not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise InvalidArgument(f"{name} must have last row [0, 0, 0, 1], got {M[3].tolist()}")
+    R = M[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    if err > 1e-5 or np.linalg.det(R) < 0:
+        raise InvalidArgument(
+            f"{name} rotation block is not a rotation (|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4g})"
+        )
+    return M
+
+
+def invert_pose(M: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform (``camera_from_world`` from ``world_from_camera`` and back)."""
+    M = np.asarray(M, dtype=np.float64)
+    out = np.eye(4)
+    out[:3, :3] = M[:3, :3].T
+    out[:3, 3] = -M[:3, :3].T @ M[:3, 3]
+    return out
+
+
+def compose(*matrices: np.ndarray) -> np.ndarray:
+    """Product of rigid 4x4 transforms, left to right, with the rotation re-orthonormalized."""
+    out = np.eye(4)
+    for M in matrices:
+        out = out @ np.asarray(M, dtype=np.float64)
+    out[:3, :3] = orthonormalize(out[:3, :3])
+    return out
+
+
+def relative_pose(c2w_from: np.ndarray, c2w_to: np.ndarray) -> np.ndarray:
+    """``to_from_from``: maps points in the ``from`` camera frame into the ``to`` camera frame."""
+    return invert_pose(c2w_to) @ np.asarray(c2w_from, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Transform:
+    """A pose transform τ in the source camera's frame (angles in degrees, translation in ``units``).
+
+    >>> tau = Transform(yaw=10, x=0.1)
+    >>> tau
+    Transform(yaw=10.0, x=0.1)
+    >>> Transform.from_matrix(tau.matrix()).yaw
+    10.0
+    """
+
+    roll: float = 0.0
+    pitch: float = 0.0
+    yaw: float = 0.0
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = check_real(f.name, getattr(self, f.name))
+            if f.name in ("roll", "pitch", "yaw"):
+                value = check_range(f.name, value, -360.0, 360.0)
+            object.__setattr__(self, f.name, value + 0.0)
+
+    @classmethod
+    def identity(cls) -> "Transform":
+        return cls()
+
+    @property
+    def is_identity(self) -> bool:
+        return all(getattr(self, f.name) == 0.0 for f in fields(self))
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """The 3x3 rotation ``R_y(yaw) @ R_x(pitch) @ R_z(roll)`` (camera frame)."""
+        return rotation_from_euler(self.roll, self.pitch, self.yaw)
+
+    @property
+    def translation(self) -> np.ndarray:
+        """``(x, y, z)`` in this transform's units, camera frame."""
+        return np.array([self.x, self.y, self.z])
+
+    def matrix(self, length: float = 1.0) -> np.ndarray:
+        """The 4x4 ``T(tau)``; translation multiplied by ``length`` (scene units per translation unit)."""
+        length = check_real("length", length)
+        T = np.eye(4)
+        T[:3, :3] = self.rotation
+        T[:3, 3] = self.translation * length
+        return T
+
+    @classmethod
+    def from_matrix(cls, T: np.ndarray, length: float = 1.0) -> "Transform":
+        """Inverse of :meth:`matrix` (see :func:`euler_from_rotation` for angle ranges)."""
+        T = check_pose(T, "T")
+        length = check_real("length", length)
+        if length <= 0:
+            raise InvalidArgument(f"length={length!r} must be > 0")
+        roll, pitch, yaw = euler_from_rotation(T[:3, :3])
+        x, y, z = (T[:3, 3] / length).tolist()
+        return cls(roll, pitch, yaw, x, y, z)
+
+    def apply(self, c2w: np.ndarray, length: float = 1.0) -> np.ndarray:
+        """The follow-up pose ``c2w @ T(tau)`` (translation scaled by ``length``)."""
+        return compose(check_pose(c2w), self.matrix(length))
+
+    def then(self, other: "Transform") -> "Transform":
+        """The single transform equal to applying ``self`` and then ``other`` (in the moved frame)."""
+        return Transform.from_matrix(compose(self.matrix(), other.matrix()))
+
+    def inverse(self) -> "Transform":
+        """The transform that undoes this one: ``tau.then(tau.inverse())`` is the identity."""
+        return Transform.from_matrix(invert_pose(self.matrix()))
+
+    def as_dict(self) -> dict[str, float]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def __repr__(self) -> str:
+        parts = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self) if getattr(self, f.name) != 0.0]
+        return f"Transform({', '.join(parts)})"
+
+    def describe(self, units: str = "ref") -> str:
+        """Human-readable form for failure messages, e.g. ``yaw=+5.12°, x=+0.100 ref``."""
+        parts = [f"{n}={getattr(self, n):+.3f}°" for n in ("roll", "pitch", "yaw") if getattr(self, n)]
+        parts += [f"{n}={getattr(self, n):+.4g} {units}" for n in ("x", "y", "z") if getattr(self, n)]
+        return ", ".join(parts) or "identity"

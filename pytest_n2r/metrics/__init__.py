@@ -1,0 +1,1 @@
+"""Metrics of metamorphic relations: SUT output agreement and image quality."""

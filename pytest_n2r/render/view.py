@@ -1,0 +1,44 @@
+"""The result of rendering a scene at one pose."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import Camera
+
+__all__ = ["RenderedView", "OUTPUTS"]
+
+#: Every output a scene can render; ask only for what you need (each costs time and memory).
+OUTPUTS = ("rgb", "depth", "opacity")
+
+
+@dataclass(frozen=True, eq=False)
+class RenderedView:
+    """A rendered view: only the outputs asked for are set, the others are ``None``.
+
+    - ``rgb``: H×W×3 ``uint8``, **RGB** order (convert before handing to OpenCV functions that expect BGR).
+    - ``depth``: H×W ``float32`` **z-depth** (along the optical axis) in scene units. Where ``opacity`` is
+      ~0 the field has nothing; depth there is the far bound of the ray, not to be trusted.
+    - ``opacity``: H×W ``float32`` in [0, 1], the accumulated weight along the ray.
+    - ``camera`` and ``c2w`` (camera-to-world 4x4, OpenCV axes): the view's geometry, so metrics can
+      map pixels between two views.
+    """
+
+    camera: Camera
+    c2w: np.ndarray
+    rgb: np.ndarray | None = None
+    depth: np.ndarray | None = None
+    opacity: np.ndarray | None = None
+
+    def require(self, *outputs: str) -> None:
+        """Raise a clear error if an output a metric needs was not rendered."""
+        missing = [o for o in outputs if getattr(self, o) is None]
+        if missing:
+            from ..errors import InvalidArgument
+
+            raise InvalidArgument(
+                f"this view was rendered without {', '.join(missing)}; render with outputs including "
+                f"{tuple(outputs)!r}"
+            )

@@ -1,0 +1,131 @@
+"""The scene interface every renderable scene implements (fitted fields and exact demo scenes alike)."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InvalidArgument, InvalidType
+from ..geometry import Camera, Transform, Units, check_pose
+from ..render.view import OUTPUTS, RenderedView
+
+__all__ = ["Scene", "SceneView", "normalize_outputs"]
+
+
+@dataclass(frozen=True, eq=False)
+class SceneView:
+    """A captured view of a scene: its name, ideal pinhole camera, camera-to-world pose (OpenCV axes),
+    train / held-out split and, if the scene stores it, the real photo (H×W×3 uint8 RGB)."""
+
+    index: int
+    name: str
+    camera: Camera
+    c2w: np.ndarray
+    split: str = "train"
+    image: np.ndarray | None = None
+
+
+def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:
+    """Validate ``outputs`` and return them in canonical order (``rgb``, ``depth``, ``opacity``)."""
+    if isinstance(outputs, str):
+        outputs = (outputs,)
+    try:
+        asked = set(outputs)
+    except TypeError:
+        raise InvalidType(f"outputs={outputs!r} must be a name or a sequence of names from {OUTPUTS}") from None
+    unknown = asked - set(OUTPUTS)
+    if unknown or not asked:
+        raise InvalidArgument(f"outputs={tuple(outputs)!r}: expected one or more of {OUTPUTS}")
+    return tuple(o for o in OUTPUTS if o in asked)
+
+
+class Scene(ABC):
+    """A scene that renders RGB, z-depth and opacity at any pinhole camera and pose.
+
+    Subclasses implement :meth:`_render`; this class validates arguments and handles transforms.
+    Rendering must be deterministic: the same pose, camera and settings give bit-identical output.
+    """
+
+    #: Short name used in test ids and reports.
+    name: str
+    #: The captured views (held-out ones are the natural sources of metamorphic tests).
+    views: Sequence[SceneView]
+    #: Median z-depth of the surface seen from the training cameras, in scene units.
+    reference_length: float
+    #: Metres per scene unit when the capture's scale is known, else ``None``.
+    metres_per_unit: float | None = None
+
+    @property
+    @abstractmethod
+    def content_hash(self) -> str:
+        """A hex digest that changes whenever anything that affects rendering changes (cache key)."""
+
+    @abstractmethod
+    def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """Render the validated ``outputs`` (canonical order) and return them by name."""
+
+    def render(self, c2w: np.ndarray, camera: Camera, outputs: str | Iterable[str] = ("rgb",)) -> RenderedView:
+        """Render the view of ``camera`` at camera-to-world pose ``c2w`` (OpenCV axes, scene units).
+
+        Only the ``outputs`` asked for are computed (``"rgb"``, ``"depth"``, ``"opacity"``).
+        """
+        c2w = check_pose(c2w)
+        if not isinstance(camera, Camera):
+            raise InvalidType(f"camera must be a pytest_n2r.geometry.Camera, got {type(camera).__name__}")
+        if camera.distortion:
+            raise InvalidArgument("camera has lens distortion; scenes render ideal pinhole views only")
+        outputs = normalize_outputs(outputs)
+        return RenderedView(camera=camera, c2w=c2w, **self._render(c2w, camera, outputs))
+
+    def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
+        """Scene units per unit of transform translation in ``units``."""
+        units = Units(units)
+        if units is Units.REFERENCE:
+            return float(self.reference_length)
+        if units is Units.SCENE:
+            return 1.0
+        if self.metres_per_unit is None:
+            raise InvalidArgument(
+                f"units='metres' needs a scene with a known scale; scene {self.name!r} has none "
+                "(pass the scale at fit time, or use units='reference')"
+            )
+        return 1.0 / float(self.metres_per_unit)
+
+    def view(self, index: int | str) -> SceneView:
+        """A captured view by index or image name."""
+        if isinstance(index, str):
+            for v in self.views:
+                if v.name == index:
+                    return v
+            raise InvalidArgument(f"scene {self.name!r} has no view named {index!r}")
+        if not 0 <= int(index) < len(self.views):
+            raise InvalidArgument(f"view={index!r} is out of range; scene {self.name!r} has {len(self.views)} views")
+        return self.views[int(index)]
+
+    def pair(
+        self,
+        view: SceneView | int | str,
+        tau: Transform,
+        outputs: str | Iterable[str] = ("rgb",),
+        camera: Camera | None = None,
+        units: Units | str = Units.REFERENCE,
+    ) -> tuple[RenderedView, RenderedView]:
+        """Render the source view and its follow-up under ``tau`` (applied in the source camera frame).
+
+        ``camera`` overrides the view's own camera (e.g. a smaller render size); translations of ``tau``
+        are in ``units`` (default: reference lengths).
+        """
+        if not isinstance(view, SceneView):
+            view = self.view(view)
+        if not isinstance(tau, Transform):
+            raise InvalidType(f"tau must be a pytest_n2r.Transform, got {type(tau).__name__}")
+        camera = view.camera if camera is None else camera
+        source = self.render(view.c2w, camera, outputs)
+        follow = self.render(tau.apply(view.c2w, self.length_scale(units)), camera, outputs)
+        return source, follow
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r}: {len(self.views)} views>"
