@@ -24,6 +24,8 @@ _EXPORTS: dict[str, str] = {
     "InvalidType": "pytest_n2r.errors",
     "SceneFileError": "pytest_n2r.errors",
     "IngestError": "pytest_n2r.errors",
+    "ingest": "pytest_n2r.data",
+    "Capture": "pytest_n2r.data",
 }
 
 __all__ = ["__version__", *_EXPORTS]
