@@ -139,7 +139,8 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
             if file.is_file() and file.suffix.lower() in IMAGE_SUFFIXES and name not in registered:
                 skipped.append((name, "not registered in the COLMAP model"))
     return PoseSet(frames=frames, points=points, source=str(found), kind="colmap", skipped=skipped,
-                   report={"images_dir": None if images_dir is None else str(images_dir)})
+                   report={"images_dir": None if images_dir is None else str(images_dir),
+                           "points_method": "points3D of the COLMAP model" if len(points) else ""})
 
 
 def write_colmap_text(folder: str | os.PathLike, poses: PoseSet | Sequence[SourceFrame]) -> Path:

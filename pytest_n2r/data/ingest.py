@@ -26,7 +26,7 @@ from .poses import PoseSet, SourceFrame
 from .transforms_json import find_transforms_json, read_transforms_json
 from .triangulate import triangulate_views
 
-__all__ = ["ingest", "load_poses", "source_kind", "TRIANGULATION_MAX_SIZE"]
+__all__ = ["ingest", "load_poses", "complete_points", "extent", "source_kind", "TRIANGULATION_MAX_SIZE"]
 
 #: Longer image side (pixels) used to triangulate points for sources that come without points.
 TRIANGULATION_MAX_SIZE = 640
@@ -125,50 +125,73 @@ def ingest(
 
     poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher)
     frames = poses.frames
-    if len(frames) < 3:
-        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
-    need_points = len(poses.points) == 0
-
-    start = time.perf_counter()
-    images: list[np.ndarray | None] = [None] * len(frames)
-    small: list[np.ndarray] = []
-    small_cameras: list[Camera] = []
-    if load_images or need_points:
-        for k, frame in enumerate(frames):
-            full = _undistorted_image(frame)
-            if load_images:
-                images[k] = resize_image(full, out_cameras[k].width, out_cameras[k].height)
-            if need_points:
-                cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
-                small.append(resize_image(full, cam.width, cam.height))
-                small_cameras.append(cam)
-    poses.report.setdefault("time_s", {})["images"] = time.perf_counter() - start
-
-    if need_points:
-        start = time.perf_counter()
-        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in frames])
-        poses.report["points_method"] = "SIFT matches between neighbouring views, triangulated with the given poses"
-        poses.report["time_s"]["triangulation"] = time.perf_counter() - start
-        del small
-    else:
-        poses.report.setdefault("points_method", "structure from motion")
-
+    images = _load_pixels(poses, out_cameras if load_images else None)
     splits = heldout_split(len(frames), heldout_every)
     views = [
         CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
         for f, cam, split, img in zip(frames, out_cameras, splits, images)
     ]
-    train = [v for v in views if v.split == "train"] or views
-    c2ws = [v.c2w for v in train]
-    ref = reference_length(poses.points, [v.camera for v in train], c2ws)
-    bounds = scene_bounds(poses.points, [v.camera for v in views], [v.c2w for v in views])
+    bounds, ref = extent(poses, heldout_every)
     report = dict(poses.report)
     report.update(kind=poses.kind, registered=len(frames), points=int(len(poses.points)))
     return Capture(
         views=views, points=np.asarray(poses.points, dtype=np.float64), bounds=bounds, reference_length=ref,
         source=str(source), skipped=list(poses.skipped), report=report,
     )
+
+
+def complete_points(poses: PoseSet) -> PoseSet:
+    """Fill ``poses.points`` (in place) by triangulation when the source had none; returns ``poses``.
+
+    Reads each image once at up to :data:`TRIANGULATION_MAX_SIZE` pixels (see
+    :mod:`pytest_n2r.data.triangulate` for the method).
+    """
+    _load_pixels(poses, None)
+    return poses
+
+
+def extent(poses: PoseSet, heldout_every: int = 8) -> tuple[np.ndarray, float]:
+    """``(bounds, reference_length)`` of a pose set with points: the box of the points seen by all
+    cameras and the median z-depth of the points seen by the training cameras (scene units)."""
+    frames = poses.frames
+    if len(frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+    splits = heldout_split(len(frames), heldout_every)
+    train = [f for f, s in zip(frames, splits) if s == "train"] or frames
+    ref = reference_length(poses.points, [f.camera for f in train], [f.c2w for f in train])
+    bounds = scene_bounds(poses.points, [f.camera for f in frames], [f.c2w for f in frames])
+    return bounds, ref
+
+
+def _load_pixels(poses: PoseSet, out_cameras: list[Camera] | None) -> list[np.ndarray | None]:
+    """Decode, undistort and resize the images to ``out_cameras`` (``None``: keep none); triangulate
+    points on the way when the pose set has none. Each file is read once."""
+    frames = poses.frames
+    if len(frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+    need_points = len(poses.points) == 0
+    images: list[np.ndarray | None] = [None] * len(frames)
+    small: list[np.ndarray] = []
+    small_cameras: list[Camera] = []
+    start = time.perf_counter()
+    if out_cameras is not None or need_points:
+        for k, frame in enumerate(frames):
+            full = _undistorted_image(frame)
+            if out_cameras is not None:
+                images[k] = resize_image(full, out_cameras[k].width, out_cameras[k].height)
+            if need_points:
+                cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
+                small.append(resize_image(full, cam.width, cam.height))
+                small_cameras.append(cam)
+    times = poses.report.setdefault("time_s", {})
+    times["images"] = time.perf_counter() - start
+    if need_points:
+        start = time.perf_counter()
+        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in frames])
+        poses.report["points_method"] = "SIFT matches between neighbouring views, triangulated with the given poses"
+        times["triangulation"] = time.perf_counter() - start
+    return images
 
 
 def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Camera:

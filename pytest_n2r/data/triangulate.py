@@ -45,7 +45,7 @@ def neighbour_pairs(c2ws: Sequence[np.ndarray], neighbours: int = 4, max_angle_d
 
 def triangulate_views(
     images: Sequence[np.ndarray], cameras: Sequence[Camera], c2ws: Sequence[np.ndarray], *,
-    neighbours: int = 4, max_reprojection_px: float = 2.0, min_angle_deg: float = 1.5, max_features: int = 4000,
+    neighbours: int = 4, max_reprojection_px: float = 2.0, min_angle_deg: float = 1.5, max_features: int = 2000,
 ) -> np.ndarray:
     """Triangulate SIFT matches between neighbouring views with known poses → ``(N, 3)`` world points.
 
