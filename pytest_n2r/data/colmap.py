@@ -80,19 +80,25 @@ def colmap_camera_params(camera: Camera) -> tuple[str, list[float]]:
     return "PINHOLE", [camera.fx, camera.fy, cx, cy]
 
 
-def _default_images_dir(model: Path) -> Path | None:
-    for candidate in (model.parent / "images", model.parent.parent / "images", model / "images",
-                      model.parent.parent.parent / "images"):
-        if candidate.is_dir():
-            return candidate
-    return None
+def _default_images_dir(model: Path, names: list[str]) -> Path | None:
+    """The folder beside the model in which the most of ``names`` exist (``images`` folders first)."""
+    up = [model, *model.parents[:3]]
+    candidates = [p / "images" for p in up[1:]] + [model / "images"] + up[1:]
+    best, found = None, 0
+    for folder in candidates:
+        if folder.is_dir():
+            count = sum((folder / n).is_file() for n in names[:50])
+            if count > found:
+                best, found = folder, count
+    return best
 
 
 def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | None = None) -> PoseSet:
     """Read a COLMAP sparse model (binary or text) into a :class:`PoseSet`, frames sorted by image name.
 
-    ``images_dir`` defaults to an ``images`` folder beside the model (``project/images`` for
-    ``project/sparse/0``); frames whose file is not there get ``path=None``. Images in that folder that
+    ``images_dir`` defaults to the folder near the model that holds the most of its image names
+    (``project/images`` for ``project/sparse/0``, else ``project``); frames whose file is not
+    there get ``path=None``. Images in that folder that
     the model did not register are listed in ``skipped``. Raises :class:`IngestError` naming the folder.
     """
     import pycolmap
@@ -107,7 +113,8 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
         rec = pycolmap.Reconstruction(str(found))
     except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError with C++ messages
         raise IngestError(f"COLMAP model {str(found)!r} cannot be read: {exc}") from None
-    images_dir = Path(images_dir) if images_dir is not None else _default_images_dir(found)
+    names = sorted(im.name for im in rec.images.values())
+    images_dir = Path(images_dir) if images_dir is not None else _default_images_dir(found, names)
 
     cameras: dict[int, Camera] = {}
     for cam_id, cam in rec.cameras.items():

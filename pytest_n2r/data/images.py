@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import IngestError
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
-           "read_images_skipping"]
+           "iter_readable"]
 
 #: File suffixes treated as images when a folder is listed (compared lower-case).
 IMAGE_SUFFIXES: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm")
@@ -122,25 +122,17 @@ def resize_image(image: np.ndarray, width: int, height: int) -> np.ndarray:
     return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
 
 
-def read_images_skipping(
-    paths: Sequence[Path], *, min_count: int = 1, what: str = "images",
-) -> tuple[list[tuple[Path, np.ndarray]], list[tuple[str, str]]]:
-    """Read every file, skipping (with a warning naming it) those that cannot be decoded.
+def iter_readable(paths: Sequence[Path], skipped: list[tuple[str, str]]) -> Iterator[tuple[Path, np.ndarray]]:
+    """Yield ``(path, image)`` for every decodable file, one at a time (memory stays one image).
 
-    Returns ``(read, skipped)`` with ``skipped`` as ``(file, reason)`` pairs; raises
-    :class:`IngestError` when fewer than ``min_count`` images remain.
+    A file that cannot be read is skipped with a warning naming it and recorded in ``skipped`` as
+    ``(file name, reason)``; the caller decides how many readable images are enough.
     """
-    read: list[tuple[Path, np.ndarray]] = []
-    skipped: list[tuple[str, str]] = []
     for path in paths:
         try:
-            read.append((path, read_image(path)))
+            image = read_image(path)
         except IngestError as exc:
-            warnings.warn(f"skipping {path}: {exc}", stacklevel=2)
-            skipped.append((str(path), str(exc)))
-    if len(read) < min_count:
-        raise IngestError(
-            f"only {len(read)} of {len(paths)} {what} could be read; at least {min_count} are needed"
-            + (f" (first failure: {skipped[0][1]})" if skipped else "")
-        )
-    return read, skipped
+            warnings.warn(f"skipping {path}: {exc}", stacklevel=3)
+            skipped.append((Path(path).name, str(exc)))
+            continue
+        yield Path(path), image

@@ -201,9 +201,16 @@ def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Ca
     return cam if max_size is None else cam.fit_within(max_size)
 
 
+def poses_source(frame: SourceFrame) -> str:
+    return "the COLMAP model" if frame.path is None else str(frame.path.parent)
+
+
 def _undistorted_image(frame: SourceFrame) -> np.ndarray:
     if frame.path is None:
-        raise IngestError(f"frame {frame.name!r} has no image file; cannot load its image")
+        raise IngestError(
+            f"image {frame.name!r} of {poses_source(frame)} was not found; put the images in an 'images' folder "
+            "beside the model (they are needed to load views, and to triangulate points when the model has none)"
+        )
     image = read_image(frame.path)
     cam = frame.camera
     if image.shape[:2] != (cam.height, cam.width):

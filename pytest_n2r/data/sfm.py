@@ -20,7 +20,6 @@ from __future__ import annotations
 import os
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +27,7 @@ import numpy as np
 from ..errors import IngestError
 from ..geometry import invert_pose, orthonormalize
 from .colmap import camera_from_colmap
-from .images import list_images, read_image, resize_image
+from .images import iter_readable, list_images, resize_image
 from .poses import PoseSet, SourceFrame
 
 __all__ = ["run_sfm", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS"]
@@ -67,13 +66,7 @@ def run_sfm(
         work = Path(tmp)
         (work / "images").mkdir()
         names: dict[str, Path] = {}  # work file name -> original file
-        for k, file in enumerate(files):
-            try:
-                image = read_image(file)
-            except IngestError as exc:
-                warnings.warn(f"skipping {file}: {exc}", stacklevel=2)
-                skipped.append((file.name, str(exc)))
-                continue
+        for k, (file, image) in enumerate(iter_readable(files, skipped)):
             h, w = image.shape[:2]
             sizes.setdefault((w, h), []).append(file.name)
             scale = min(1.0, max_size / max(w, h))
