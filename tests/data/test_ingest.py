@@ -163,6 +163,7 @@ def test_colmap_source_ingests_like_the_json(corner, tmp_path):
 
 def test_colmap_model_without_its_images(corner, tmp_path):
     poses = read_transforms_json(write_transforms(corner))
-    write_colmap_text(tmp_path / "model", poses)  # far from the images
+    model = tmp_path / "a" / "b" / "c" / "d" / "model"  # too far from the images to find them
+    write_colmap_text(model, poses)
     with pytest.raises(IngestError, match=r"image 'images/view_000.png' of the COLMAP model was not found"):
-        ingest(tmp_path / "model")
+        ingest(model)
