@@ -253,3 +253,13 @@ def test_spread_of_far_apart_sets_is_zero_and_grows_with_overlap():
     assert metric(a, a + [40.0, 0.0], view, same).score == 0.0
     half = metric(a, a + [5.0, 0.0], view, same).score
     assert 0.2 < half < 0.6 and metric(a, a + [1.0, 0.0], view, same).score > half
+
+
+@settings(max_examples=40, deadline=None)
+@given(points=st.lists(st.tuples(st.floats(-10, 170), st.floats(-10, 130)), max_size=20), radius=st.floats(0.3, 12))
+def test_coverage_mask_equals_the_brute_force_definition(points, radius):
+    pts = np.array(points, dtype=np.float64).reshape(-1, 2)
+    v, u = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
+    d2 = (u[..., None] - pts[:, 0]) ** 2 + (v[..., None] - pts[:, 1]) ** 2
+    expected = np.any(d2 <= (radius + 1e-6) ** 2, axis=-1)
+    np.testing.assert_array_equal(coverage_mask(pts, CAMERA, radius), expected)
