@@ -24,7 +24,7 @@ Convention
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -34,6 +34,8 @@ from .errors import InvalidArgument, InvalidType
 
 if TYPE_CHECKING:
     from hypothesis.strategies import SearchStrategy
+
+    from .render.view import RenderedView
 
 __all__ = [
     "Mutation",
@@ -86,6 +88,16 @@ class Mutation(ABC):
         """The mutated copy of ``rgb`` (H×W×3 uint8 RGB); the input is not modified."""
         rgb = _check_image(rgb)
         return rgb.copy() if self.is_identity else self._apply(rgb)
+
+    def apply_to_view(self, view: RenderedView) -> RenderedView:
+        """The follow-up view of a mutation relation: ``view`` with its ``rgb`` mutated; pose, camera,
+        depth and opacity unchanged (a mutation does not move the camera)."""
+        from .render.view import RenderedView
+
+        if not isinstance(view, RenderedView):
+            raise InvalidType(f"view must be a RenderedView, got {type(view).__name__}")
+        view.require("rgb")
+        return replace(view, rgb=self.apply(view.rgb))
 
     @abstractmethod
     def _apply(self, rgb: np.ndarray) -> np.ndarray:

@@ -117,3 +117,21 @@ def test_mutations_are_immutable():
     mutation = m.Brightness(20)
     with pytest.raises(AttributeError):
         mutation.levels = 30  # type: ignore[misc]
+
+
+def test_follow_up_view_keeps_the_geometry():
+    from pytest_n2r.geometry import Camera
+    from pytest_n2r.render.view import RenderedView
+
+    camera = Camera(8, 6, 10.0, 10.0, 3.5, 2.5)
+    rgb = np.full((6, 8, 3), 100, np.uint8)
+    depth = np.full((6, 8), 2.0, np.float32)
+    view = RenderedView(camera, np.eye(4), rgb=rgb, depth=depth, opacity=np.ones_like(depth))
+    follow = m.Brightness(-100).apply_to_view(view)
+    assert follow.camera is camera and follow.depth is depth and follow.opacity is view.opacity
+    np.testing.assert_array_equal(follow.c2w, view.c2w)
+    assert int(follow.rgb.max()) == 0 and int(view.rgb.min()) == 100
+    with pytest.raises(InvalidArgument, match="rendered without rgb"):
+        m.Brightness(1).apply_to_view(RenderedView(camera, np.eye(4), depth=depth))
+    with pytest.raises(InvalidType, match="view must be a RenderedView, got ndarray"):
+        m.Brightness(1).apply_to_view(rgb)
