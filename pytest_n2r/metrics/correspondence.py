@@ -30,9 +30,17 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_array, check_range
-from ..errors import InvalidType
-from ..geometry import Camera, apply_homography, backproject, plane_homography, project, rotation_homography
+from .._validation import check_array, check_range, check_real
+from ..errors import InvalidArgument, InvalidType
+from ..geometry import (
+    Camera,
+    apply_homography,
+    backproject,
+    camera_rays,
+    plane_homography,
+    project,
+    rotation_homography,
+)
 from ..render.view import RenderedView
 
 __all__ = [
@@ -209,18 +217,20 @@ class HomographyMapping(PointMapping):
     """Map pixels through a 3x3 homography ``H`` (source → follow-up pixels, OpenCV pixel centres).
 
     Exact for a planar scene (:meth:`from_views` with ``plane``) or a pure camera rotation (``plane=None``);
-    points landing outside the other image are rejected. No depth or opacity is used.
+    points landing outside the other image are rejected. No depth or opacity is used. Built with
+    :meth:`from_views`, it also rejects points whose scene point is behind either camera (a homography
+    alone maps those to plausible-looking pixels); built from a bare ``H`` it cannot tell.
     """
 
     def __init__(self, H: np.ndarray, source_camera: Camera, follow_camera: Camera) -> None:
         self.H = check_array("H", H, "3 3", dtype=np.float64)
         if abs(np.linalg.det(self.H)) < 1e-12 * max(1.0, float(np.abs(self.H).max()) ** 3):
-            from ..errors import InvalidArgument
-
             raise InvalidArgument("H is singular; a homography between two views must be invertible")
         self.H_inv = np.linalg.inv(self.H)
         self.source_camera = source_camera
         self.follow_camera = follow_camera
+        self._views: tuple[RenderedView, RenderedView] | None = None
+        self.plane: tuple[np.ndarray, float] | None = None
 
     @classmethod
     def from_views(
@@ -238,21 +248,42 @@ class HomographyMapping(PointMapping):
                 normal, offset = plane
             except (TypeError, ValueError):
                 raise InvalidType(f"plane={plane!r} must be a pair (normal (3,), offset) or None") from None
-            H = plane_homography(source.camera, source.c2w, follow.camera, follow.c2w, normal, float(offset))
-        return cls(H, source.camera, follow.camera)
+            normal = check_array("plane normal", normal, "3", dtype=np.float64)
+            offset = check_real("plane offset", offset)
+            if not np.any(normal):
+                raise InvalidArgument("plane normal is the zero vector; expected the plane's normal n of n·X + d = 0")
+            plane = (normal, offset)
+            H = plane_homography(source.camera, source.c2w, follow.camera, follow.c2w, normal, offset)
+        mapping = cls(H, source.camera, follow.camera)
+        mapping._views = (source, follow)
+        mapping.plane = plane
+        return mapping
 
     def to_follow(self, uv_source: np.ndarray) -> MappedPoints:
-        return self._map(uv_source, self.H, self.source_camera, self.follow_camera)
+        return self._map(uv_source, self.H, self.source_camera, self.follow_camera, forward=True)
 
     def to_source(self, uv_follow: np.ndarray) -> MappedPoints:
-        return self._map(uv_follow, self.H_inv, self.follow_camera, self.source_camera)
+        return self._map(uv_follow, self.H_inv, self.follow_camera, self.source_camera, forward=False)
 
-    @staticmethod
-    def _map(uv: np.ndarray, H: np.ndarray, cam_a: Camera, cam_b: Camera) -> MappedPoints:
+    def _in_front(self, uv: np.ndarray, forward: bool) -> np.ndarray:
+        """(N,) bool: the scene point seen at ``uv`` is in front of both cameras (True without views)."""
+        if self._views is None:
+            return np.ones(len(uv), dtype=bool)
+        a, b = self._views if forward else self._views[::-1]
+        origins, dirs = camera_rays(a.camera, a.c2w, uv)
+        if self.plane is None:  # a direction (point at infinity): in front of b if it points forward there
+            return (dirs @ np.asarray(b.c2w, dtype=np.float64)[:3, 2]) > 0
+        n, d = self.plane
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -(origins @ n + d) / (dirs @ n)  # z-depth in a of the plane along each ray
+        front = np.isfinite(t) & (t > 0)
+        z_b = project(origins + dirs * np.where(front, t, 0.0)[:, None], b.camera, b.c2w)[1]
+        return front & (z_b > 0)
+
+    def _map(self, uv: np.ndarray, H: np.ndarray, cam_a: Camera, cam_b: Camera, forward: bool) -> MappedPoints:
         uv = check_array("uv", uv, "N 2", dtype=np.float64)
-        inside_a = inside_image(uv, cam_a)
         mapped = apply_homography(H, uv)
-        visible = inside_a & inside_image(mapped, cam_b)
+        visible = inside_image(uv, cam_a) & inside_image(mapped, cam_b) & self._in_front(uv, forward)
         mapped[~visible] = np.nan
         return MappedPoints(mapped, visible, {"outside": int(np.count_nonzero(~visible))})
 

@@ -263,3 +263,30 @@ def test_coverage_mask_equals_the_brute_force_definition(points, radius):
     d2 = (u[..., None] - pts[:, 0]) ** 2 + (v[..., None] - pts[:, 1]) ** 2
     expected = np.any(d2 <= (radius + 1e-6) ** 2, axis=-1)
     np.testing.assert_array_equal(coverage_mask(pts, CAMERA, radius), expected)
+
+
+@pytest.mark.parametrize(
+    ("tau", "plane"),
+    [(Transform(yaw=180), None), (Transform(yaw=150), WALL_PLANE), (Transform(z=5), WALL_PLANE)],
+    ids=["turned-around", "turned-away-from-wall", "moved-through-wall"],
+)
+def test_homography_rejects_points_behind_a_camera(tau, plane):
+    """A bare homography maps points behind the camera to plausible pixels; the views tell them apart."""
+    source, follow = pair(tau)
+    mapping = HomographyMapping.from_views(source, follow, plane)
+    bare = HomographyMapping(mapping.H, source.camera, follow.camera)
+    p = grid_points(step=7)
+    assert bare.to_follow(p).visible.any() or bare.to_source(p).visible.any(), "the case must be a trap"
+    assert not mapping.to_follow(p).visible.any() and not mapping.to_source(p).visible.any()
+    result = repeatability(mapping="homography", plane=plane)(p, p, source, follow)
+    assert not result.valid, result
+
+
+def test_bad_planes():
+    source, follow = pair(Transform())
+    with pytest.raises(InvalidArgument, match="plane normal is the zero vector"):
+        HomographyMapping.from_views(source, follow, (np.zeros(3), 1.0))
+    with pytest.raises(InvalidType, match="must be a pair"):
+        HomographyMapping.from_views(source, follow, np.ones(3))
+    with pytest.raises(InvalidArgument, match="H is singular"):
+        HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)
