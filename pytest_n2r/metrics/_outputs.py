@@ -16,14 +16,9 @@ __all__ = ["as_numeric", "as_vector", "as_keypoints"]
 
 
 def _to_numpy(value: Any) -> Any:
-    """Tensors (torch, anything with ``detach``/``cpu``/``numpy``) to numpy; other values unchanged."""
-    if hasattr(value, "detach") and hasattr(value, "cpu"):
-        value = value.detach().cpu()
-    if hasattr(value, "numpy") and not isinstance(value, np.ndarray):
-        try:
-            return value.numpy()
-        except (TypeError, RuntimeError):  # e.g. bfloat16 tensors: fall back to np.asarray below
-            return value
+    """Tensors (torch: any device, any float dtype incl. bfloat16) to float64 numpy; others unchanged."""
+    if hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double"):
+        return value.detach().cpu().double().numpy()
     return value
 
 
@@ -33,11 +28,16 @@ def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
         raise SUTOutputError(f"{which} output is None; expected {expected}")
     value = _to_numpy(value)
     try:
-        arr = np.asarray(value, dtype=np.float64)
+        arr = np.asarray(value)
+        kind = arr.dtype.kind
+        if kind != "c":
+            arr = arr.astype(np.float64, copy=False)
     except (TypeError, ValueError) as exc:
         raise SUTOutputError(
             f"{which} output of type {type(value).__name__} is not numeric; expected {expected}"
         ) from exc
+    if kind == "c":
+        raise SUTOutputError(f"{which} output is complex; expected {expected}")
     if not np.all(np.isfinite(arr)):
         n_nan = int(np.count_nonzero(np.isnan(arr)))
         n_inf = int(np.count_nonzero(np.isinf(arr)))

@@ -92,6 +92,7 @@ def test_accepts_keras_batches_and_tensors():
     t = torch.tensor([0.1, 0.7, 0.2], requires_grad=True)
     assert class_invariance()(v, t).score == 1.0
     assert l2_norm()(v, t * 1).score < 1e-7
+    assert class_invariance()(t.detach().to(torch.bfloat16), v).score == 1.0
 
 
 @pytest.mark.parametrize(
@@ -104,6 +105,8 @@ def test_accepts_keras_batches_and_tensors():
         (np.zeros((2, 3)), [0.5, 0.5], SUTOutputError, r"source output has shape \(2, 3\); expected a 1-D vector"),
         ([], [0.5, 0.5], SUTOutputError, "source output is empty"),
         ([0.5, 0.5], {"cat": 1}, SUTOutputError, "follow-up output of type dict is not numeric"),
+        ([0.5, 0.5], np.array([0.5 + 1j, 0.5]), SUTOutputError, "follow-up output is complex"),
+        ([0.5, 0.5], [[0.5], [0.5, 0.2]], SUTOutputError, "follow-up output of type list is not numeric"),
     ],
 )
 def test_bad_outputs_name_the_output(source, follow, error, match):
