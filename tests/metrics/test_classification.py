@@ -144,3 +144,10 @@ def test_probability_vector_check():
 def test_assert_within_message_has_score_deviation_and_eps():
     with pytest.raises(AssertionError, match=r"l2_norm\(\): score 1\.4142 deviates 1\.4142 from the ideal 0, more than eps=0\.5"):
         l2_norm().assert_within([1.0, 0.0], [0.0, 1.0], eps=0.5)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+def test_accepts_cuda_tensors():
+    v = torch.tensor([0.1, 0.7, 0.2], device="cuda")
+    assert class_invariance()(v, v.cpu()).score == 1.0
+    assert l2_norm()(v, v).score == 0.0

@@ -290,3 +290,14 @@ def test_bad_planes():
         HomographyMapping.from_views(source, follow, np.ones(3))
     with pytest.raises(InvalidArgument, match="H is singular"):
         HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)
+
+
+def test_views_of_different_resolutions():
+    """The follow-up may be rendered with another camera (a smaller size): points map through both."""
+    small = CAMERA.resized(80, 60)
+    source = render_planes(np.eye(4), [WALL])
+    follow = render_planes(Transform(yaw=3, x=0.1).apply(np.eye(4)), [WALL], small)
+    X = world_points_on_wall(np.random.default_rng(3), 30, half=0.8)
+    p, q = pixels_of(X, source), pixels_of(X, follow)
+    assert repeatability(px=0.5)(p, q, source, follow).score == 1.0
+    assert repeatability(px=0.5)(q, p, follow, source).score == 1.0
