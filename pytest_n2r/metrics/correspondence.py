@@ -50,6 +50,7 @@ __all__ = [
     "HomographyMapping",
     "sample_depth",
     "inside_image",
+    "check_plane",
     "DEFAULT_MIN_OPACITY",
     "DEFAULT_DEPTH_TOLERANCE",
 ]
@@ -117,6 +118,22 @@ def sample_depth(depth: np.ndarray, uv: np.ndarray, rel_tolerance: float = DEFAU
         nearest = d[rows, cols]
         out = np.where(smooth, 1.0 / np.where(smooth, inv_d, 1.0), nearest)
     return np.where(np.isfinite(out) & (out > 0), out, np.nan)
+
+
+def check_plane(plane: Any) -> tuple[np.ndarray, float] | None:
+    """``plane = (n, d)`` of the world plane ``n·X + d = 0`` as ``(float64 (3,), float)``; ``None`` stays
+    ``None`` (the plane at infinity). Raises naming what is wrong."""
+    if plane is None:
+        return None
+    try:
+        normal, offset = plane
+    except (TypeError, ValueError):
+        raise InvalidType(f"plane={plane!r} must be a pair (normal (3,), offset) or None") from None
+    normal = check_array("plane normal", normal, "3", dtype=np.float64)
+    offset = check_real("plane offset", offset)
+    if not np.any(normal):
+        raise InvalidArgument("plane normal is the zero vector; expected the plane's normal n of n·X + d = 0")
+    return normal, offset
 
 
 class PointMapping(ABC):
@@ -241,19 +258,11 @@ class HomographyMapping(PointMapping):
         world coordinates, scene units), or of the plane at infinity (pure rotation) when ``None``."""
         source = _check_view("source", source, ())
         follow = _check_view("follow", follow, ())
+        plane = check_plane(plane)
         if plane is None:
             H = rotation_homography(source.camera, source.c2w, follow.camera, follow.c2w)
         else:
-            try:
-                normal, offset = plane
-            except (TypeError, ValueError):
-                raise InvalidType(f"plane={plane!r} must be a pair (normal (3,), offset) or None") from None
-            normal = check_array("plane normal", normal, "3", dtype=np.float64)
-            offset = check_real("plane offset", offset)
-            if not np.any(normal):
-                raise InvalidArgument("plane normal is the zero vector; expected the plane's normal n of n·X + d = 0")
-            plane = (normal, offset)
-            H = plane_homography(source.camera, source.c2w, follow.camera, follow.c2w, normal, offset)
+            H = plane_homography(source.camera, source.c2w, follow.camera, follow.c2w, *plane)
         mapping = cls(H, source.camera, follow.camera)
         mapping._views = (source, follow)
         mapping.plane = plane

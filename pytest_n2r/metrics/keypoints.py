@@ -20,6 +20,7 @@ detector reporting one location at several octaves) count once.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from typing import Any, Literal
 
 import numpy as np
@@ -37,6 +38,7 @@ from .correspondence import (
     DepthMapping,
     HomographyMapping,
     PointMapping,
+    check_plane,
 )
 
 __all__ = ["Repeatability", "InterestPointSpread", "repeatability", "interest_point_spread", "coverage_mask"]
@@ -72,7 +74,7 @@ class _KeypointMetric(Metric):
         if plane is not None and mapping != "homography":
             raise InvalidArgument(f"plane={plane!r} is only used with mapping='homography', not {mapping!r}")
         self.mapping = mapping
-        self.plane = plane
+        self.plane = check_plane(plane)
         self.min_opacity = check_range("min_opacity", min_opacity, 0.0, 1.0)
         self.depth_tolerance = check_range("depth_tolerance", depth_tolerance, 0.0)
         self.needs = ("depth", "opacity") if mapping == "depth" else ()
@@ -112,14 +114,16 @@ class _KeypointMetric(Metric):
             return self.result(0.0, **details)
         return self._score(p_in_follow, q_visible, follow.camera, details)
 
+    @abstractmethod
     def _score(self, p: np.ndarray, q: np.ndarray, camera: Camera, details: dict[str, Any]) -> MetricResult:
-        raise NotImplementedError  # pragma: no cover - every subclass defines it
+        """Score ``p`` (source points mapped into the follow-up image) against ``q`` (follow-up points),
+        both non-empty and visible in both views, on the follow-up ``camera``'s pixel grid."""
 
     def _mapping_repr(self) -> str:
         parts = [f"mapping={self.mapping!r}"]
         if self.plane is not None:
             n, d = self.plane
-            parts.append(f"plane=({np.asarray(n, dtype=float).tolist()!r}, {float(d)!r})")
+            parts.append(f"plane=({n.tolist()!r}, {d!r})")
         if self.mapping == "depth":
             if self.min_opacity != DEFAULT_MIN_OPACITY:
                 parts.append(f"min_opacity={self.min_opacity!r}")

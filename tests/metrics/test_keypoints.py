@@ -288,6 +288,10 @@ def test_bad_planes():
         HomographyMapping.from_views(source, follow, (np.zeros(3), 1.0))
     with pytest.raises(InvalidType, match="must be a pair"):
         HomographyMapping.from_views(source, follow, np.ones(3))
+    with pytest.raises(InvalidArgument, match="plane normal is the zero vector"):
+        repeatability(mapping="homography", plane=([0, 0, 0], 1.0))  # checked when the metric is built
+    with pytest.raises(InvalidType, match=r"plane normal must have shape \(3\)"):
+        interest_point_spread(mapping="homography", plane=([0, 1], 1.0))
     with pytest.raises(InvalidArgument, match="H is singular"):
         HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)
 
