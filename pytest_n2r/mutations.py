@@ -110,7 +110,7 @@ class Mutation(ABC):
 
     @abstractmethod
     def describe(self) -> str:
-        """Words for reports: ``"brightness +12% (+31 levels)"``."""
+        """Words for reports: ``"brightness +30 levels (+11.8% of full scale)"``."""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain JSON-ready parameters, with the mutation's ``name``."""
