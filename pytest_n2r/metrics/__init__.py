@@ -21,13 +21,19 @@ from .classification import (
 )
 from .correspondence import DepthMapping, HomographyMapping, MappedPoints, PointMapping
 from .image_quality import SSIM, lpips, psnr, ssim, ssim_metric
-from .keypoints import InterestPointSpread, Repeatability, interest_point_spread, repeatability
+from .keypoints import (
+    InterestPointSpread,
+    KeypointCorrespondences,
+    Repeatability,
+    interest_point_spread,
+    repeatability,
+)
 
 __all__ = [
     "Metric", "MetricResult", "METRICS", "resolve_metric",
     "cosine_similarity", "l2_norm", "class_invariance", "repeatability", "interest_point_spread", "ssim_metric",
     "CosineSimilarity", "L2Norm", "ClassInvariance", "Repeatability", "InterestPointSpread", "SSIM",
-    "PointMapping", "DepthMapping", "HomographyMapping", "MappedPoints",
+    "PointMapping", "DepthMapping", "HomographyMapping", "MappedPoints", "KeypointCorrespondences",
     "psnr", "ssim", "lpips",
 ]
 

@@ -21,6 +21,7 @@ detector reporting one location at several octaves) count once.
 from __future__ import annotations
 
 from abc import abstractmethod
+from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
@@ -41,7 +42,10 @@ from .correspondence import (
     check_plane,
 )
 
-__all__ = ["Repeatability", "InterestPointSpread", "repeatability", "interest_point_spread", "coverage_mask"]
+__all__ = [
+    "Repeatability", "InterestPointSpread", "KeypointCorrespondences", "repeatability", "interest_point_spread",
+    "coverage_mask",
+]
 
 Mapping = Literal["depth", "homography"]
 _MAPPINGS = ("depth", "homography")
@@ -60,6 +64,26 @@ def _unique_rows(points: np.ndarray) -> np.ndarray:
     sorted_points = points[np.lexsort((points[:, 1], points[:, 0]))]
     keep = np.r_[True, np.any(sorted_points[1:] != sorted_points[:-1], axis=1)]
     return sorted_points[keep]
+
+
+@dataclass(frozen=True)
+class KeypointCorrespondences:
+    """The keypoints of a pair as a keypoint metric sees them, for overlays and debugging.
+
+    ``source`` ``(n_s, 2)`` and ``follow`` ``(n_f, 2)`` are the distinct keypoints (rounded to 1e-6 px) in
+    their own images; ``source_in_follow`` ``(n_s, 2)`` are the source points mapped into the follow-up
+    image (NaN where not visible in both views); ``source_visible`` / ``follow_visible`` say which points
+    count; ``matches`` ``(M, 2)`` holds index pairs ``(i, j)`` into ``source`` / ``follow`` of the mutual
+    nearest neighbours within the tolerance (empty for metrics that do not match points).
+    """
+
+    source: np.ndarray
+    follow: np.ndarray
+    source_in_follow: np.ndarray
+    source_visible: np.ndarray
+    follow_visible: np.ndarray
+    matches: np.ndarray
+    rejected: dict[str, int] = field(default_factory=dict)
 
 
 class _KeypointMetric(Metric):
@@ -91,33 +115,52 @@ class _KeypointMetric(Metric):
             return DepthMapping(source, follow, min_opacity=self.min_opacity, depth_tolerance=self.depth_tolerance)
         return HomographyMapping.from_views(source, follow, self.plane)
 
-    def compute(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> MetricResult:
+    def correspondences(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> KeypointCorrespondences:
+        """Which keypoints count, where the source points land in the follow-up image, and (for
+        repeatability) which ones match: what :meth:`compute` scores, for overlays."""
         # exact duplicates (one location reported at several scales) are one detection
         p = _unique_rows(as_keypoints(out_source, "source"))
         q = _unique_rows(as_keypoints(out_follow, "follow-up"))
         if len(p) == 0 and len(q) == 0:
-            return self.result(1.0, n_source=0, n_follow=0, note="no keypoints in either view")
+            empty = np.zeros((0, 2))
+            return KeypointCorrespondences(p, q, empty, np.zeros(0, bool), np.zeros(0, bool),
+                                           np.zeros((0, 2), np.intp))
         mapping = self.point_mapping(source, follow)
         fwd, bwd = mapping.to_follow(p), mapping.to_source(q)
-        p_in_follow, q_visible = fwd.uv[fwd.visible], q[bwd.visible]
-        n1, n2 = len(p_in_follow), len(q_visible)
+        rejected = {key: fwd.rejected.get(key, 0) + bwd.rejected.get(key, 0)
+                    for key in sorted(set(fwd.rejected) | set(bwd.rejected))}
+        matches = np.zeros((0, 2), np.intp)
+        if fwd.visible.any() and bwd.visible.any():
+            i_vis, j_vis = np.flatnonzero(fwd.visible), np.flatnonzero(bwd.visible)
+            pairs = self._match(fwd.uv[i_vis], q[j_vis])
+            matches = np.stack([i_vis[pairs[:, 0]], j_vis[pairs[:, 1]]], axis=1)
+        return KeypointCorrespondences(p, q, fwd.uv, fwd.visible, bwd.visible, matches, rejected)
+
+    def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """``(M, 2)`` index pairs of matched points (none unless the metric matches points)."""
+        return np.zeros((0, 2), np.intp)
+
+    def compute(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> MetricResult:
+        c = self.correspondences(out_source, out_follow, source, follow)
+        if len(c.source) == 0 and len(c.follow) == 0:
+            return self.result(1.0, n_source=0, n_follow=0, note="no keypoints in either view")
+        n1, n2 = int(c.source_visible.sum()), int(c.follow_visible.sum())
         details: dict[str, Any] = {
-            "n_source": len(p), "n_follow": len(q), "n_source_visible": n1, "n_follow_visible": n2,
+            "n_source": len(c.source), "n_follow": len(c.follow), "n_source_visible": n1, "n_follow_visible": n2,
+            **{f"rejected_{key}": n for key, n in c.rejected.items()},
         }
-        for key in sorted(set(fwd.rejected) | set(bwd.rejected)):
-            details[f"rejected_{key}"] = fwd.rejected.get(key, 0) + bwd.rejected.get(key, 0)
         if n1 == 0 and n2 == 0:
             return MetricResult.undefined(
                 self.name, "no keypoint of either view lies in the region both views see", **details
             )
         if n1 == 0 or n2 == 0:
             return self.result(0.0, **details)
-        return self._score(p_in_follow, q_visible, follow.camera, details)
+        return self._score(c, follow.camera, details)
 
     @abstractmethod
-    def _score(self, p: np.ndarray, q: np.ndarray, camera: Camera, details: dict[str, Any]) -> MetricResult:
-        """Score ``p`` (source points mapped into the follow-up image) against ``q`` (follow-up points),
-        both non-empty and visible in both views, on the follow-up ``camera``'s pixel grid."""
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        """Score the correspondences (at least one visible point on each side) on the follow-up
+        ``camera``'s pixel grid."""
 
     def _mapping_repr(self) -> str:
         parts = [f"mapping={self.mapping!r}"]
@@ -155,9 +198,12 @@ class Repeatability(_KeypointMetric):
         self.form = form
         super().__init__(mapping, plane, min_opacity, depth_tolerance)
 
-    def _score(self, p: np.ndarray, q: np.ndarray, camera: Camera, details: dict[str, Any]) -> MetricResult:
-        m = len(mutual_nearest(p, q, self.px))
-        n1, n2 = len(p), len(q)
+    def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return mutual_nearest(p, q, self.px)
+
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        m = len(c.matches)
+        n1, n2 = int(c.source_visible.sum()), int(c.follow_visible.sum())
         score = m / min(n1, n2) if self.form == "schmid" else 2.0 * m / (n1 + n2)
         return self.result(score, n_matched=m, **details)
 
@@ -217,8 +263,9 @@ class InterestPointSpread(_KeypointMetric):
         self.radius = check_positive("radius", radius)
         super().__init__(mapping, plane, min_opacity, depth_tolerance)
 
-    def _score(self, p: np.ndarray, q: np.ndarray, camera: Camera, details: dict[str, Any]) -> MetricResult:
-        a, b = coverage_mask(p, camera, self.radius), coverage_mask(q, camera, self.radius)
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        a = coverage_mask(c.source_in_follow[c.source_visible], camera, self.radius)
+        b = coverage_mask(c.follow[c.follow_visible], camera, self.radius)
         inter, union = int(np.count_nonzero(a & b)), int(np.count_nonzero(a | b))
         return self.result(inter / union, covered_source=int(a.sum()), covered_follow=int(b.sum()),
                            covered_both=inter, **details)

@@ -305,3 +305,20 @@ def test_views_of_different_resolutions():
     p, q = pixels_of(X, source), pixels_of(X, follow)
     assert repeatability(px=0.5)(p, q, source, follow).score == 1.0
     assert repeatability(px=0.5)(q, p, follow, source).score == 1.0
+
+
+def test_correspondences_explain_the_score():
+    source, follow = pair(Transform(yaw=6, x=0.1))
+    p = grid_points()
+    mapped = DepthMapping(source, follow).to_follow(p)
+    q = np.vstack([mapped.uv[mapped.visible][::2] + [1.5, 0.0], [[3.0, 3.0]]])  # half found again, one extra
+    metric = repeatability(px=2)
+    c = metric.correspondences(p, q, source, follow)
+    result = metric(p, q, source, follow)
+    assert len(c.matches) == result.details["n_matched"] == (mapped.visible.sum() + 1) // 2
+    i, j = c.matches.T
+    assert np.all(np.hypot(*(c.source_in_follow[i] - c.follow[j]).T) <= 2.0)
+    assert c.source_visible[i].all() and c.follow_visible[j].all()
+    assert np.isnan(c.source_in_follow[~c.source_visible]).all()
+    assert result.score == pytest.approx(len(c.matches) / min(c.source_visible.sum(), c.follow_visible.sum()))
+    assert len(interest_point_spread().correspondences(p, q, source, follow).matches) == 0
