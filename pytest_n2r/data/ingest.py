@@ -5,7 +5,9 @@ Sources (:func:`source_kind` decides):
 - a ``transforms.json`` file (nerfstudio / instant-ngp), or a folder holding one;
 - a COLMAP sparse model folder (``cameras.bin|txt``, ``images.bin|txt``, ``points3D.bin|txt``), or a
   project folder holding one under ``sparse/0`` or ``sparse``;
-- a folder of images (or a project folder with an ``images`` subfolder): structure from motion.
+- a folder of images (or a project folder with an ``images`` subfolder): structure from motion;
+- a video file: its sharpest frames (:mod:`pytest_n2r.data.video`), then structure from motion with
+  sequential matching.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from .images import read_image, resize_image
 from .poses import PoseSet, SourceFrame
 from .transforms_json import find_transforms_json, read_transforms_json
 from .triangulate import triangulate_views
+from .video import VIDEO_SUFFIXES, extract_frames, is_video
 
 __all__ = ["ingest", "load_poses", "complete_points", "extent", "source_kind", "TRIANGULATION_MAX_SIZE"]
 
@@ -33,18 +36,21 @@ TRIANGULATION_MAX_SIZE = 640
 
 
 def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
-    """``(kind, path)``: ``kind`` is ``"transforms.json"``, ``"colmap"`` or ``"images"``; ``path`` is the
-    json file, the model folder or the images folder. Raises :class:`IngestError` naming ``source``."""
+    """``(kind, path)``: ``kind`` is ``"transforms.json"``, ``"colmap"``, ``"images"`` or ``"video"``;
+    ``path`` is the json file, the model folder, the images folder or the video file. Raises
+    :class:`IngestError` naming ``source``."""
     path = Path(source)
     if not path.exists():
         raise IngestError(f"source {str(path)!r} does not exist")
     found = find_transforms_json(path)
     if found is not None:
         return "transforms.json", found
+    if is_video(path):
+        return "video", path
     if path.is_file():
         raise IngestError(
-            f"source {str(path)!r} is a file but not a .json file; expected a transforms.json, "
-            "a COLMAP model folder or a folder of images"
+            f"source {str(path)!r} is a file but neither a .json file nor a video ({', '.join(VIDEO_SUFFIXES)}); "
+            "expected a transforms.json, a COLMAP model folder, a folder of images or a video"
         )
     from .colmap import find_colmap_model
 
@@ -56,13 +62,18 @@ def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
     return "images", path
 
 
-def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto") -> PoseSet:
+def load_poses(
+    source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto", max_frames: int = 120,
+    frames_dir: str | os.PathLike | None = None,
+) -> PoseSet:
     """Read or compute the poses of a source (see :func:`source_kind`); no images are kept.
 
     For an images folder this runs structure from motion (:func:`pytest_n2r.data.sfm.run_sfm`) on
     copies downscaled to at most ``sfm_max_size`` pixels, matching ``"exhaustive"``-ly,
-    ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images).
-    Points of a transforms.json are not triangulated here (see :func:`ingest`).
+    ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images; sequential
+    for a video). A video is first cut into its ``max_frames`` sharpest frames, written to
+    ``frames_dir`` (default ``<video stem>_frames`` beside it). Points of a transforms.json are not
+    triangulated here (see :func:`ingest`).
     """
     kind, path = source_kind(source)
     start = time.perf_counter()
@@ -72,6 +83,14 @@ def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: s
         from .colmap import read_colmap_model
 
         poses = read_colmap_model(path)
+    elif kind == "video":
+        from .sfm import run_sfm
+
+        frames = extract_frames(path, frames_dir, max_frames=max_frames)
+        poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher)
+        poses.kind = "video"
+        poses.report["video"] = str(path)
+        poses.report.setdefault("time_s", {})["frames"] = time.perf_counter() - start
     else:
         from .sfm import run_sfm
 
@@ -83,13 +102,14 @@ def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: s
 def ingest(
     source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
     load_images: bool = True, heldout_every: int = 8, sfm_max_size: int = 960, matcher: str = "auto",
+    max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
 ) -> Capture:
     """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
 
     Parameters
     ----------
     source:
-        A transforms.json (or its folder), a COLMAP model folder, or a folder of images (SfM).
+        A transforms.json (or its folder), a COLMAP model folder, a folder of images or a video (SfM).
     downscale:
         Image scale factor in ``(0, 1]`` (``0.25`` → a quarter of the width and height, rounded to
         whole pixels; intrinsics follow :meth:`Camera.resized`).
@@ -100,8 +120,8 @@ def ingest(
         images once at low resolution to triangulate points).
     heldout_every:
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
-    sfm_max_size, matcher:
-        Structure from motion settings for images folders (see :func:`load_poses`).
+    sfm_max_size, matcher, max_frames, frames_dir:
+        Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
     Returns
     -------
@@ -123,7 +143,8 @@ def ingest(
     if isinstance(heldout_every, bool) or not isinstance(heldout_every, (int, np.integer)) or heldout_every < 0:
         raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0")
 
-    poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher)
+    poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
+                       frames_dir=frames_dir)
     frames = poses.frames
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
     images = _load_pixels(poses, out_cameras if load_images else None)

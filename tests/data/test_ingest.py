@@ -125,7 +125,7 @@ def test_missing_source(tmp_path):
     with pytest.raises(IngestError, match="does not exist"):
         ingest(tmp_path / "nothing")
     (tmp_path / "notes.txt").write_text("hi")
-    with pytest.raises(IngestError, match="not a .json file"):
+    with pytest.raises(IngestError, match="neither a .json file nor a video"):
         ingest(tmp_path / "notes.txt")
 
 
