@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -145,9 +147,9 @@ def ingest(
 
     poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
                        frames_dir=frames_dir)
-    frames = poses.frames
+    images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
+    frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
-    images = _load_pixels(poses, out_cameras if load_images else None)
     splits = heldout_split(len(frames), heldout_every)
     views = [
         CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
@@ -185,31 +187,55 @@ def extent(poses: PoseSet, heldout_every: int = 8) -> tuple[np.ndarray, float]:
     return bounds, ref
 
 
-def _load_pixels(poses: PoseSet, out_cameras: list[Camera] | None) -> list[np.ndarray | None]:
-    """Decode, undistort and resize the images to ``out_cameras`` (``None``: keep none); triangulate
-    points on the way when the pose set has none. Each file is read once."""
-    frames = poses.frames
-    if len(frames) < 3:
-        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+def _load_pixels(
+    poses: PoseSet, out_camera: Callable[[Camera], Camera] | None,
+) -> list[np.ndarray | None]:
+    """Decode, undistort and resize each frame's image to ``out_camera(frame.camera)`` (``None``: keep
+    no images); triangulate points on the way when the pose set has none. Each file is read once.
+
+    Frames whose image cannot be decoded are dropped from ``poses.frames`` with a warning naming the
+    file and recorded in ``poses.skipped``; fewer than 3 remaining frames is an error.
+    """
+    if len(poses.frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(poses.frames)} registered images; at least 3 are needed")
     need_points = len(poses.points) == 0
-    images: list[np.ndarray | None] = [None] * len(frames)
+    kept: list[SourceFrame] = []
+    images: list[np.ndarray | None] = []
     small: list[np.ndarray] = []
     small_cameras: list[Camera] = []
     start = time.perf_counter()
-    if out_cameras is not None or need_points:
-        for k, frame in enumerate(frames):
+    for frame in poses.frames:
+        if out_camera is None and not need_points:
+            kept.append(frame)
+            images.append(None)
+            continue
+        try:
             full = _undistorted_image(frame)
-            if out_cameras is not None:
-                images[k] = resize_image(full, out_cameras[k].width, out_cameras[k].height)
-            if need_points:
-                cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
-                small.append(resize_image(full, cam.width, cam.height))
-                small_cameras.append(cam)
+        except _Undecodable as exc:
+            warnings.warn(f"skipping frame {frame.name!r}: {exc}", stacklevel=3)
+            poses.skipped.append((frame.name, str(exc)))
+            continue
+        kept.append(frame)
+        if out_camera is not None:
+            cam = out_camera(frame.camera)
+            images.append(resize_image(full, cam.width, cam.height))
+        else:
+            images.append(None)
+        if need_points:
+            cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
+            small.append(resize_image(full, cam.width, cam.height))
+            small_cameras.append(cam)
+    poses.frames = kept
+    if len(kept) < 3:
+        raise IngestError(
+            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed "
+            f"(first failure: {poses.skipped[-1][1]})"
+        )
     times = poses.report.setdefault("time_s", {})
     times["images"] = time.perf_counter() - start
     if need_points:
         start = time.perf_counter()
-        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in frames])
+        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in kept])
         poses.report["points_method"] = "SIFT matches between neighbouring views, triangulated with the given poses"
         times["triangulation"] = time.perf_counter() - start
     return images
@@ -222,17 +248,21 @@ def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Ca
     return cam if max_size is None else cam.fit_within(max_size)
 
 
-def poses_source(frame: SourceFrame) -> str:
-    return "the COLMAP model" if frame.path is None else str(frame.path.parent)
+class _Undecodable(IngestError):
+    """An image file that exists but cannot be decoded (the frame is skipped, not fatal)."""
 
 
 def _undistorted_image(frame: SourceFrame) -> np.ndarray:
     if frame.path is None:
         raise IngestError(
-            f"image {frame.name!r} of {poses_source(frame)} was not found; put the images in an 'images' folder "
-            "beside the model (they are needed to load views, and to triangulate points when the model has none)"
+            f"image {frame.name!r} listed in the COLMAP model was not found; put the images in an 'images' "
+            "folder beside the model (they are needed to load views, and to triangulate points when the "
+            "model has none)"
         )
-    image = read_image(frame.path)
+    try:
+        image = read_image(frame.path)
+    except IngestError as exc:
+        raise _Undecodable(str(exc)) from None
     cam = frame.camera
     if image.shape[:2] != (cam.height, cam.width):
         raise IngestError(
