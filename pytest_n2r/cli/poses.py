@@ -6,6 +6,12 @@ import argparse
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..data.poses import PoseSet
 
 __all__ = ["add_parser", "run"]
 
@@ -60,8 +66,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def format_summary(poses, bounds, ref: float, total_s: float) -> str:
-    """The plain-text summary ``n2r poses`` prints."""
+def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: float) -> str:
+    """The plain-text summary ``n2r poses`` prints (``bounds`` and ``ref`` in scene units, time in seconds)."""
     frames = poses.frames
     listed = poses.report.get("listed", poses.report.get("images", len(frames) + len(poses.skipped)))
     lines = [

@@ -89,15 +89,17 @@ def load_poses(
         from .sfm import run_sfm
 
         frames = extract_frames(path, frames_dir, max_frames=max_frames)
+        extracted = time.perf_counter() - start
         poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher)
         poses.kind = "video"
         poses.report["video"] = str(path)
-        poses.report.setdefault("time_s", {})["frames"] = time.perf_counter() - start
+        poses.report["time_s"] = {"frames": extracted, **poses.report["time_s"]}
     else:
         from .sfm import run_sfm
 
         poses = run_sfm(path, max_size=sfm_max_size, matcher=matcher)
-    poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
+    if kind in ("transforms.json", "colmap"):  # SfM reports its own stages
+        poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
     return poses
 
 
@@ -232,7 +234,8 @@ def _load_pixels(
             f"(first failure: {poses.skipped[-1][1]})"
         )
     times = poses.report.setdefault("time_s", {})
-    times["images"] = time.perf_counter() - start
+    if out_camera is not None or need_points:
+        times["images"] = time.perf_counter() - start
     if need_points:
         start = time.perf_counter()
         poses.points = triangulate_views(small, small_cameras, [f.c2w for f in kept])
