@@ -34,7 +34,7 @@ from .video import VIDEO_SUFFIXES, extract_frames, is_video
 __all__ = ["ingest", "load_poses", "complete_points", "extent", "source_kind", "TRIANGULATION_MAX_SIZE"]
 
 #: Longer image side (pixels) used to triangulate points for sources that come without points.
-TRIANGULATION_MAX_SIZE = 640
+TRIANGULATION_MAX_SIZE = 480
 
 
 def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
