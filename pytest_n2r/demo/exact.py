@@ -22,7 +22,7 @@ import numpy as np
 
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView
-from .primitives import Primitive
+from .primitives import T_MIN, Group, Primitive, slab_hits
 
 __all__ = ["GroundTruthScene"]
 
@@ -38,7 +38,8 @@ class GroundTruthScene(Scene):
     name:
         Short name (``"wall"``, ``"object"``).
     primitives:
-        The analytic surfaces.
+        The analytic surfaces; a :class:`~pytest_n2r.demo.primitives.Group` is tested only by the rays
+        that enter its bounding box (``self.primitives`` lists every surface, groups flattened).
     views:
         The capture trajectory (every 8th view held out).
     light:
@@ -59,7 +60,18 @@ class GroundTruthScene(Scene):
         supersample: int = 2, metres_per_unit: float | None = 1.0,
     ) -> None:
         self.name = name
-        self.primitives = tuple(primitives)
+        flat: list[Primitive] = []
+        self._groups: list[tuple[np.ndarray, np.ndarray, list[int]]] = []
+        for item in primitives:
+            if isinstance(item, Group):
+                start = len(flat)
+                flat.extend(item.children)
+                self._groups.append((np.asarray(item.lo, float), np.asarray(item.hi, float),
+                                     list(range(start, len(flat)))))
+            else:
+                self._groups.append((None, None, [len(flat)]))
+                flat.append(item)
+        self.primitives = tuple(flat)
         self.views = tuple(views)
         light = np.asarray(light, dtype=np.float64)
         self.light = light / np.linalg.norm(light)
@@ -78,6 +90,8 @@ class GroundTruthScene(Scene):
             h = hashlib.sha256(f"GroundTruthScene/{RENDERER_VERSION}/{self.name}".encode())
             for prim in self.primitives:
                 h.update(prim.describe().encode())
+            for lo, _, members in self._groups:  # grouping changes no pixel, but say so explicitly
+                h.update(f"{members}".encode() if lo is not None else b"")
             h.update(np.asarray([*self.light, self.ambient, *self.background, self.far, self.supersample]).tobytes())
             for v in self.views:
                 h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
@@ -114,7 +128,16 @@ class GroundTruthScene(Scene):
     # -- ray casting -------------------------------------------------------------------------------------
     def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest hit of rays ``o + t d`` (``(N, 3)`` each): ``t`` (``inf`` on a miss) and the primitive index."""
-        ts = np.stack([p.intersect(o, d) for p in self.primitives], axis=0)
+        ts = np.full((len(self.primitives), len(o)), np.inf)
+        for lo, hi, members in self._groups:
+            if lo is None:
+                ts[members[0]] = self.primitives[members[0]].intersect(o, d)
+                continue
+            t_near, t_far = slab_hits(o, d, lo, hi)
+            sel = np.nonzero((t_near <= t_far) & (t_far > T_MIN))[0]
+            if sel.size:
+                for k in members:
+                    ts[k, sel] = self.primitives[k].intersect(o[sel], d[sel])
         which = np.argmin(ts, axis=0)
         return ts[which, np.arange(len(o))], which
 

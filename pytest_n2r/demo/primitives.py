@@ -19,7 +19,7 @@ import numpy as np
 
 from .materials import Material
 
-__all__ = ["Primitive", "Disc", "Box", "Cylinder", "ReliefWall", "T_MIN"]
+__all__ = ["Primitive", "Group", "Disc", "Box", "Cylinder", "ReliefWall", "T_MIN", "slab_hits"]
 
 #: Hits closer than this (scene units along the ray parameter) are ignored.
 T_MIN = 1e-6
@@ -41,6 +41,29 @@ class Primitive(ABC):
     @abstractmethod
     def describe(self) -> str:
         """A stable text form of every parameter (part of the scene's content hash)."""
+
+
+def slab_hits(o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Entry and exit ``t`` of rays through the axis-aligned box ``[lo, hi]`` (no hit where entry > exit)."""
+    t_near = np.full(len(o), -np.inf)
+    t_far = np.full(len(o), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(3):
+            inv = 1.0 / d[:, k]
+            t0, t1 = (lo[k] - o[:, k]) * inv, (hi[k] - o[:, k]) * inv
+            # a ray parallel to a slab gives (+-inf, +-inf) or NaN on its boundary; fmin/fmax ignore NaN
+            t_near = np.fmax(t_near, np.fmin(t0, t1))
+            t_far = np.fmin(t_far, np.fmax(t0, t1))
+    return t_near, t_far
+
+
+@dataclass(frozen=True, eq=False)
+class Group:
+    """Primitives inside the box ``[lo, hi]``: rays that miss the box are not tested against them (speed)."""
+
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+    children: tuple[Primitive, ...]
 
 
 def _vertical_face_coords(p: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,12 +108,7 @@ class Box(Primitive):
     materials: dict[str, Material]
 
     def intersect(self, o: np.ndarray, d: np.ndarray) -> np.ndarray:
-        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / d
-            t0, t1 = (lo - o) * inv, (hi - o) * inv
-        t_near = np.nanmax(np.minimum(t0, t1), axis=1)
-        t_far = np.nanmin(np.maximum(t0, t1), axis=1)
+        t_near, t_far = slab_hits(o, d, np.asarray(self.lo, float), np.asarray(self.hi, float))
         hit = (t_near <= t_far) & (t_far > T_MIN)
         t = np.where(t_near > T_MIN, t_near, t_far)  # from inside, the exit face
         return np.where(hit, t, np.inf)

@@ -22,7 +22,7 @@ from ..geometry import Camera
 from ..scene.base import SceneView
 from .exact import GroundTruthScene
 from .materials import Blend, Flat, Poster, Radial, Textured
-from .primitives import Box, Cylinder, Disc, ReliefWall
+from .primitives import Box, Cylinder, Disc, Group, ReliefWall
 from .textures import Texture
 
 __all__ = ["SCENES", "build_scene", "look_at", "default_camera"]
@@ -164,7 +164,10 @@ def object_scene() -> GroundTruthScene:
         target = np.array([0.2 * math.sin(0.7 * i), 0.2 * math.cos(0.9 * i), 1.0])
         poses.append(look_at(eye, target))
     return GroundTruthScene(
-        "object", [ground, cargo, cabin, chassis, *wheels, *crates], _views(poses, camera, "object"),
+        "object",
+        [ground, Group((-2.3, -1.1, -0.01), (2.3, 1.1, 2.7), (cargo, cabin, chassis, *wheels)),
+         Group((3.5, 1.9, -0.01), (4.5, 2.9, 0.9), (crates[0],)), Group((-4.7, -3.1, -0.01), (-3.7, -2.1, 0.7), (crates[1],))],
+        _views(poses, camera, "object"),
         light=(0.5, 0.35, 1.0), ambient=0.45, background=(0.62, 0.75, 0.90), far=60.0,
     )
 
