@@ -41,8 +41,10 @@ def check_size(size: int | tuple[int, int], camera: Camera) -> Camera:
 def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points: int = 4000) -> Capture:
     """Render every view of ``scene`` at ``size`` and sample ``n_points`` true surface points.
 
-    Points are back-projected from the exact depth of the training views at 64 pixels wide and thinned
-    with a fixed stride (deterministic); ``bounds`` is their axis-aligned box grown by 5 % per side.
+    Points are back-projected from the exact depth of the training views at 64 pixels wide, kept up to
+    twice the reference length from the camera (like the well-triangulated points of a real capture;
+    farther surfaces are background) and thinned with a fixed stride (deterministic). ``bounds`` is the
+    box of their 1st to 99th percentiles grown by 5 % per side, as ingestion computes it for photos.
     """
     views = []
     points = []
@@ -53,13 +55,13 @@ def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points
         if v.split == "train":
             small = v.camera.fit_within(64)
             depth = scene.render(v.c2w, small, ("depth", "opacity"))
-            hit = depth.opacity.ravel() >= 1.0
+            hit = (depth.opacity.ravel() >= 1.0) & (depth.depth.ravel() <= 2 * scene.reference_length)
             uv = pixel_grid(small).reshape(-1, 2)[hit]
             points.append(backproject(uv, depth.depth.ravel()[hit].astype(np.float64), small, v.c2w))
     pts = np.concatenate(points) if points else np.zeros((0, 3))
     if len(pts) > n_points:
         pts = pts[np.linspace(0, len(pts) - 1, n_points).round().astype(np.int64)]
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
     margin = 0.05 * (hi - lo)
     return Capture(
         views=views, points=pts, bounds=np.stack([lo - margin, hi + margin]),
