@@ -1,0 +1,121 @@
+"""A self-contained HTML report of relation runs (one file: inline CSS, SVG histograms, base64 images).
+
+Built from plain :class:`~pytest_n2r.report.records.RelationRecord` data only, so it can be regenerated from
+a JSON results file without pytest.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+from pathlib import Path
+
+from .baseline import atomic_write_text
+from .records import ExampleRecord, RelationRecord
+
+__all__ = ["render_html", "write_html"]
+
+_CSS = """
+body{font-family:system-ui,sans-serif;margin:2rem;color:#222;max-width:1200px}
+h1{font-size:1.6rem}h2{font-size:1.15rem;margin-top:2rem;border-bottom:1px solid #ddd;padding-bottom:.3rem}
+table{border-collapse:collapse;margin:.5rem 0}td,th{border:1px solid #ddd;padding:.25rem .6rem;text-align:right}
+th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}
+.passed{color:#1a7f37}.failed{color:#cf222e}.skipped{color:#9a6700}
+.ex{display:flex;gap:1rem;flex-wrap:wrap;align-items:flex-start}.ex figure{margin:0}
+.ex img{max-width:360px;border:1px solid #ccc}figcaption{font-size:.8rem;color:#555}
+pre{background:#f6f8fa;padding:.6rem;overflow-x:auto;font-size:.8rem}
+"""
+
+
+def _histogram_svg(deviations: list[float], eps: float, bins: int = 20, width: int = 360, height: int = 120) -> str:
+    """An SVG histogram of deviations with the eps threshold as a red line."""
+    if not deviations:
+        return "<p><em>no valid example</em></p>"
+    hi = max(max(deviations), eps) * 1.05 or 1.0
+    counts = [0] * bins
+    for d in deviations:
+        counts[min(bins - 1, int(d / hi * bins))] += 1
+    top = max(counts)
+    bw = width / bins
+    bars = "".join(
+        f'<rect x="{i * bw:.1f}" y="{height - 20 - c / top * (height - 30):.1f}" width="{bw - 1:.1f}" '
+        f'height="{c / top * (height - 30):.1f}" fill="#4c78a8"><title>{c} example(s) in '
+        f'[{i * hi / bins:.3g}, {(i + 1) * hi / bins:.3g})</title></rect>'
+        for i, c in enumerate(counts) if c
+    )
+    x_eps = eps / hi * width
+    return (
+        f'<svg xmlns="http://www.w3.org/2000/svg" width="{width}" height="{height}" role="img" '
+        f'aria-label="histogram of deviations">{bars}'
+        f'<line x1="{x_eps:.1f}" x2="{x_eps:.1f}" y1="0" y2="{height - 20}" stroke="#cf222e" stroke-width="2"/>'
+        f'<text x="{min(x_eps + 3, width - 60):.1f}" y="12" font-size="11" fill="#cf222e">eps={eps:g}</text>'
+        f'<text x="0" y="{height - 4}" font-size="11">0</text>'
+        f'<text x="{width - 40}" y="{height - 4}" font-size="11">{hi:.3g}</text></svg>'
+    )
+
+
+def _image_tag(path: str, alt: str) -> str:
+    p = Path(path)
+    if not p.is_file():
+        return f"<p><em>{html.escape(alt)}: image {html.escape(path)} not found</em></p>"
+    data = base64.b64encode(p.read_bytes()).decode("ascii")
+    mime = "image/png" if p.suffix.lower() == ".png" else "image/jpeg"
+    return f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{data}">'
+
+
+def _example_block(title: str, ex: ExampleRecord) -> str:
+    transform = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in ex.transform.items() if v)
+    figures = "".join(
+        f"<figure>{_image_tag(path, name)}<figcaption>{html.escape(name)}</figcaption></figure>"
+        for name, path in sorted(ex.images.items())
+    )
+    return (
+        f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
+        f"<code>{html.escape(ex.view)}</code>, transform <code>{html.escape(transform or 'identity')}</code>: "
+        f"score {ex.score:.4f}, deviation {ex.deviation:.4f}</p><div class=\"ex\">{figures}</div>"
+    )
+
+
+def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report") -> str:
+    """The report as one HTML string."""
+    summary_rows = []
+    sections = []
+    for i, rel in enumerate(sorted(relations, key=lambda r: r.nodeid)):
+        valid = rel.valid_examples
+        rate = rel.inconsistencies / len(valid) if valid else math.nan
+        worst = rel.worst
+        anchor = f"rel{i}"
+        summary_rows.append(
+            f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{rel.outcome}">'
+            f"{rel.outcome}</td><td>{len(rel.examples)}</td><td>{rel.rejected}</td><td>{rel.inconsistencies}</td>"
+            f"<td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
+            f"<td>{'—' if worst is None else f'{worst.deviation:.4f}'}</td><td>{rel.eps:g}</td></tr>"
+        )
+        timings = ", ".join(f"{k} {v:.2f} s" for k, v in rel.timings.items())
+        body = [
+            f'<h2 id="{anchor}">{html.escape(rel.nodeid)}</h2>',
+            f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
+            f'<span class="{rel.outcome}">{rel.outcome}</span>' + (f"; time: {html.escape(timings)}" if timings else "") + "</p>",
+            _histogram_svg([e.deviation for e in valid], rel.eps),
+        ]
+        if rel.minimal is not None:
+            body.append(_example_block("Minimal failing example (shrunk)", rel.minimal))
+        if worst is not None and worst.images and worst is not rel.minimal:
+            body.append(_example_block("Worst example", worst))
+        if rel.message:
+            body.append(f"<pre>{html.escape(rel.message)}</pre>")
+        sections.append("\n".join(body))
+    return (
+        f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+        f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
+        "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th>"
+        "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th></tr></thead><tbody>"
+        + "".join(summary_rows) + "</tbody></table>" + "\n".join(sections) + "</body></html>\n"
+    )
+
+
+def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report") -> Path:
+    """Write :func:`render_html` to ``path`` atomically."""
+    return atomic_write_text(path, render_html(relations, title))

@@ -1,0 +1,44 @@
+"""The HTML report is one self-contained file built from plain records."""
+
+from __future__ import annotations
+
+import re
+
+import cv2
+import numpy as np
+
+from pytest_n2r.report import ExampleRecord, RelationRecord
+from pytest_n2r.report.html import render_html, write_html
+
+
+def _failing_relation(tmp_path):
+    img = tmp_path / "follow.png"
+    cv2.imwrite(str(img), np.full((8, 8, 3), 200, np.uint8))
+    minimal = ExampleRecord("wall", "view3", {"yaw": 5.25}, 0.7, 0.3, False, images={"follow-up": str(img)})
+    ok = ExampleRecord("wall", "view3", {"yaw": 1.0}, 0.95, 0.05, True)
+    rejected = ExampleRecord("wall", "view3", {"yaw": 80.0}, float("nan"), float("nan"), False, valid=False)
+    return RelationRecord("test_x.py::test_orb[wall]", "repeatability(px=2.0)", 0.2, [ok, minimal, rejected],
+                          outcome="failed", message="boom <b>", timings={"render": 1.5}, minimal=minimal)
+
+
+def test_report_shows_counts_histogram_and_embedded_images(tmp_path):
+    page = render_html([_failing_relation(tmp_path)])
+    row = re.search(r"<tr><td><a href=\"#rel0\">.*?</tr>", page).group(0)
+    cells = re.findall(r"<td[^>]*>(.*?)</td>", row)
+    assert cells[1:] == ["failed", "3", "1", "1", "50.0%", "0.3000", "0.2"], cells
+    assert "<svg" in page and 'aria-label="histogram of deviations"' in page
+    assert "data:image/png;base64," in page, "artifact images must be embedded, not linked"
+    assert "boom &lt;b&gt;" in page, "messages must be escaped"
+    assert "Minimal failing example" in page
+
+
+def test_missing_image_is_reported_not_fatal(tmp_path):
+    rel = _failing_relation(tmp_path)
+    rel.minimal.images["source"] = str(tmp_path / "gone.png")
+    assert "image " + str(tmp_path / "gone.png") + " not found" in render_html([rel])
+
+
+def test_write_html_is_atomic(tmp_path):
+    out = write_html(tmp_path / "r" / "report.html", [_failing_relation(tmp_path)])
+    assert out.read_text().startswith("<!DOCTYPE html>")
+    assert sorted(p.name for p in out.parent.iterdir()) == ["report.html"]
