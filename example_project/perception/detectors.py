@@ -32,8 +32,9 @@ class Detector:
             return cv2.ORB_create(nfeatures=self.max_points, **self.params)
         if self.kind == "sift":
             return cv2.SIFT_create(nfeatures=self.max_points, **self.params)
-        if self.kind == "akaze":
-            return cv2.AKAZE_create(**self.params)
+        if self.kind == "akaze":  # OpenCV 5 moved AKAZE to the contrib module xfeatures2d
+            create = getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create
+            return create(**self.params)
         raise ValueError(f"kind={self.kind!r}; expected 'orb', 'sift' or 'akaze'")
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
