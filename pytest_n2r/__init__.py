@@ -24,6 +24,23 @@ _EXPORTS: dict[str, str] = {
     "InvalidType": "pytest_n2r.errors",
     "SceneFileError": "pytest_n2r.errors",
     "IngestError": "pytest_n2r.errors",
+    "ingest": "pytest_n2r.data",
+    "Capture": "pytest_n2r.data",
+    "SUTOutputError": "pytest_n2r.errors",
+    "MetricUndefined": "pytest_n2r.errors",
+    "Metric": "pytest_n2r.metrics",
+    "MetricResult": "pytest_n2r.metrics",
+    "resolve_metric": "pytest_n2r.metrics",
+    "cosine_similarity": "pytest_n2r.metrics",
+    "l2_norm": "pytest_n2r.metrics",
+    "class_invariance": "pytest_n2r.metrics",
+    "repeatability": "pytest_n2r.metrics",
+    "interest_point_spread": "pytest_n2r.metrics",
+    "Mutation": "pytest_n2r.mutations",
+    "Brightness": "pytest_n2r.mutations",
+    "NoisePatch": "pytest_n2r.mutations",
+    "BlackPatches": "pytest_n2r.mutations",
+    "GroundTruthScene": "pytest_n2r.demo",
 }
 
 __all__ = ["__version__", *_EXPORTS]
