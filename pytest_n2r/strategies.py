@@ -39,6 +39,9 @@ ANGLES = ("roll", "pitch", "yaw")
 MAX_ANGLE = 180.0
 #: At least this many grid steps across a bound (see the module docstring).
 MIN_STEPS = 2000
+#: Wide step ranges are drawn as one of about this many buckets plus an offset (see _draw_steps).
+_BUCKETS = 64
+_BUCKET = 255
 
 Bound = tuple[float, float]
 
@@ -72,6 +75,21 @@ def _grid_step(lo: float, hi: float) -> float:
     return 10.0 ** math.floor(math.log10(span / MIN_STEPS)) if span > 0 else 1.0
 
 
+def _draw_steps(draw: Any, n: int) -> int:
+    """An integer in ``[0, n]``, spread over the whole range, that shrinks to the smallest failing value.
+
+    Hypothesis draws a wide integer range with a strong bias toward small values (the median draw of
+    ``integers(0, 8000)`` is about 800), so a wide range first draws a bucket start (a near-uniform small
+    range), then the smaller of two values between that start and ``n`` (which offsets the upward skew
+    of starting inside a bucket). Shrinking lowers the bucket to 0 while the values stay valid in the
+    widened range, then binary-searches the smaller value: the result is the smallest failing integer.
+    """
+    if n <= _BUCKET:
+        return draw(st.integers(0, n))
+    start = draw(st.integers(0, _BUCKETS - 1)) * n // _BUCKETS
+    return min(draw(st.integers(start, n)), draw(st.integers(start, n)))
+
+
 def _draw_axis(draw: Any, lo: float, hi: float) -> float:
     """A value in ``[lo, hi]`` that shrinks toward the point of the interval nearest 0, step by step."""
     if lo == hi:
@@ -79,14 +97,17 @@ def _draw_axis(draw: Any, lo: float, hi: float) -> float:
     origin = min(max(0.0, lo), hi)
     step = _grid_step(lo, hi)
     digits = max(0, -int(round(math.log10(step))))
-    n_up = math.floor((hi - origin) / step + 1e-9)
-    n_down = math.floor((origin - lo) / step + 1e-9)
-    k = draw(st.integers(-n_down - (origin - n_down * step > lo), n_up + (origin + n_up * step < hi)))
-    if k > n_up:
-        return hi
-    if k < -n_down:
-        return lo
-    return round(origin + k * step, digits) + 0.0
+    sides = []  # (sign, steps on the grid, the exact end of the bound)
+    for sign, end in ((1, hi), (-1, lo)):
+        n = math.floor(abs(end - origin) / step + 1e-9)
+        if abs(end - origin) > 0:
+            sides.append((sign, n + (abs(origin + sign * n * step - end) > 1e-12), end))
+    sign, n, end = sides[draw(st.integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
+    k = _draw_steps(draw, n)
+    value = origin + sign * k * step
+    if sign * (value - end) >= 0 or k == n:
+        return end
+    return min(max(round(value, digits), lo), hi) + 0.0  # rounding may cross a bound that is off the grid
 
 
 def look_at_compensation(x: float, y: float, z: float, depth: float = 1.0) -> tuple[float, float]:

@@ -142,3 +142,16 @@ def test_interpolating_views_draws_poses_between_neighbours(data):
     view = data.draw(n2r.views(scene, interpolate=True))
     ys = [v.c2w[1, 3] for v in scene.views]
     assert min(ys) <= view.c2w[1, 3] <= max(ys)
+
+
+def test_draws_spread_over_the_whole_bound():
+    drawn = []
+
+    @settings(max_examples=300, database=None)
+    @given(n2r.transforms(yaw=80))
+    def collect(tau):
+        drawn.append(abs(tau.yaw))
+
+    collect()
+    far = np.mean(np.asarray(drawn) > 40)
+    assert far > 0.3, f"only {far:.0%} of draws had |yaw| > 40 for a bound of 80: draws crowd near 0"
