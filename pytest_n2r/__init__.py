@@ -24,6 +24,16 @@ _EXPORTS: dict[str, str] = {
     "InvalidType": "pytest_n2r.errors",
     "SceneFileError": "pytest_n2r.errors",
     "IngestError": "pytest_n2r.errors",
+    "SUTOutputError": "pytest_n2r.errors",
+    "metamorphic": "pytest_n2r.marker",
+    "transforms": "pytest_n2r.strategies",
+    "views": "pytest_n2r.strategies",
+    "Relation": "pytest_n2r.relations",
+    "RelationFailure": "pytest_n2r.relations",
+    "SUTError": "pytest_n2r.relations",
+    "check_relation": "pytest_n2r.relations",
+    "RenderCache": "pytest_n2r.cache",
+    "Validity": "pytest_n2r.validity",
 }
 
 __all__ = ["__version__", *_EXPORTS]

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from hypothesis import HealthCheck, assume, given, target
+from hypothesis import HealthCheck, Phase, assume, given, target
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 from hypothesis.errors import Unsatisfiable
@@ -54,6 +54,10 @@ class RelationFailure(AssertionError):
     def __init__(self, message: str, stats: "RelationStats | None" = None):
         super().__init__(message)
         self.stats = stats
+
+
+#: Give up on a relation once this many draws were invalid and they are more than ``max_rejected`` of all.
+_MIN_REJECTED_TO_GIVE_UP = 40
 
 
 class SUTError(N2RError):
@@ -219,7 +223,7 @@ class RelationStats:
         if self.rejected:
             rejected += " (" + ", ".join(f"{n} {r}" for r, n in self.rejected.most_common()) + ")"
         return (
-            f"{self.outcome.upper():6s} {self.test_id}: {self.examples} examples, {rejected}, "
+            f"{self.outcome.upper():6s} {self.test_id}: {_plural(self.examples, 'example')}, {rejected}, "
             f"{self.inconsistencies} inconsistent, worst deviation {worst} (eps {self.eps:g}); "
             f"time render {self.render_s:.2f} s / SUT {self.sut_s:.2f} s / metric {self.metric_s:.2f} s"
         )
@@ -239,6 +243,10 @@ class RelationStats:
             timings={"render": self.render_s, "sut": self.sut_s, "metric": self.metric_s},
             minimal=example(self.minimal) if self.minimal else None,
         )
+
+
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
 
 
 # -- the engine -----------------------------------------------------------------------------------------
@@ -274,6 +282,7 @@ class _Engine:
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
         self.source_outputs_cache: dict[str, Any] = {}
         self.failed = False
+        self.gave_up = False
 
     # -- pieces -----------------------------------------------------------------------------------------
 
@@ -326,8 +335,19 @@ class _Engine:
 
     # -- one example ------------------------------------------------------------------------------------
 
+    def reject(self, reason: str) -> None:
+        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid."""
+        stats = self.stats
+        stats.rejected[reason] += 1
+        drawn = stats.examples + stats.n_rejected
+        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+            self.gave_up = True  # check_relation raises once Hypothesis stops
+        assume(False)
+
     def example(self, view: SceneView, tau: Any) -> None:
         __tracebackhide__ = True
+        if self.gave_up:  # reject the rest of the draws without rendering them
+            assume(False)
         stats = self.stats
         mutation = _mutation_like(tau)
         describe = tau.describe() if mutation else self.describe_transform(tau)
@@ -341,8 +361,7 @@ class _Engine:
             follow = self.render(follow_c2w, view, self.follow_outputs, "follow-up")
             verdict = self.relation.validity.check(follow, self.scene)
             if not verdict.valid:
-                stats.rejected[verdict.reason] += 1
-                assume(False)
+                self.reject(verdict.reason)
         key = f"{view.name}|{source.camera.width}x{source.camera.height}"
         if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
             self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
@@ -350,8 +369,7 @@ class _Engine:
         out_follow = self.run_sut(follow.rgb, "follow-up", where)
         result = self.compute(out_source, out_follow, source, follow, where)
         if not getattr(result, "valid", True):
-            stats.rejected["metric undefined"] += 1
-            assume(False)
+            self.reject("metric undefined")
         deviation = float(result.deviation)
         if self.relation.search == "targeted":
             target(deviation, label="deviation")
@@ -402,8 +420,8 @@ class _Engine:
         lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
                      f"{self.relation.eps:g}" + (f" ({details})" if details else ""))
         s = self.stats
-        lines.append(f"  search:     {s.examples} examples, {s.n_rejected} rejected as invalid, "
-                     f"{s.shrink_examples} shrink steps")
+        lines.append(f"  search:     {_plural(s.examples, 'example')}, {s.n_rejected} rejected as invalid, "
+                     f"{_plural(s.shrink_examples, 'shrink step')}")
         if record.get("images"):
             images = record["images"]
             lines.append(f"  images:     source   {images['source']}")
@@ -450,13 +468,16 @@ def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[Scene
 
 def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
                    settings: RunSettings | None = None, cache: RenderCache | None = None,
-                   test_id: str = "relation") -> RelationStats:
+                   test_id: str = "relation",
+                   on_start: Callable[[RelationStats], None] | None = None) -> RelationStats:
     """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
 
     Returns the run's :class:`RelationStats` when the relation held on every valid example; raises
     :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform otherwise, or
     :class:`~pytest_n2r.errors.InvalidArgument` when almost every drawn follow-up view was invalid.
-    ``test_id`` names the run in reports and keys its Hypothesis database entries and seed.
+    ``test_id`` names the run in reports and keys its Hypothesis database entries and seed;
+    ``on_start`` receives the (still empty) stats before the search starts, so a caller keeps them even
+    when the run raises.
     """
     __tracebackhide__ = True
     if not isinstance(scene, Scene):
@@ -469,6 +490,8 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     settings = settings or RunSettings()
     cache = cache if cache is not None else RenderCache(None)
     stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps)
+    if on_start is not None:
+        on_start(stats)
     engine = _Engine(scene, sut, relation, settings, cache, stats)
     examples = relation.examples or settings.examples
 
@@ -481,6 +504,8 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     options: dict[str, Any] = {
         "max_examples": examples, "deadline": None, "derandomize": settings.derandomize,
         "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large],
+        # no "explain" phase: it re-runs variations of the failure (renders) to annotate source lines
+        "phases": [Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink],
     }
     if settings.database != "default":
         options["database"] = settings.database
@@ -498,7 +523,7 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
         raise
     drawn = stats.examples + stats.n_rejected
-    if drawn and stats.n_rejected / drawn > relation.validity.max_rejected:
+    if engine.gave_up or (drawn and stats.n_rejected / drawn > relation.validity.max_rejected):
         stats.outcome = "error"
         raise InvalidArgument(_too_many_invalid(stats, relation))
     return stats
