@@ -13,19 +13,13 @@ from __future__ import annotations
 from typing import Any, Callable, TypeVar
 
 from .errors import N2RError
+from .plugin import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
 from .relations import Relation
 from .validity import Validity
 
-__all__ = ["metamorphic", "RELATION_ATTR", "ERROR_ATTR", "MARKER"]
+__all__ = ["metamorphic"]
 
 F = TypeVar("F", bound=Callable[..., Any])
-
-#: Attribute holding the :class:`~pytest_n2r.relations.Relation` on a decorated test function.
-RELATION_ATTR = "__n2r_relation__"
-#: Attribute holding the message of an invalid ``@metamorphic(...)`` call (reported at collection).
-ERROR_ATTR = "__n2r_error__"
-#: The pytest marker the decorator applies (so ``-m n2r_relation`` selects relation tests).
-MARKER = "n2r_relation"
 
 
 def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None = None,
@@ -70,6 +64,6 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
             return test
         setattr(test, RELATION_ATTR, relation)
         test = pytest.mark.usefixtures("n2r_scene")(test)
-        return getattr(pytest.mark, MARKER)(test)
+        return getattr(pytest.mark, RELATION_MARKER)(test)
 
     return decorate

@@ -42,6 +42,12 @@ DEFAULTS = {
     "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300", "n2r_derandomize": "auto",
 }
 SCENE_MARKER = "n2r_scene"
+#: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.marker).
+RELATION_ATTR = "__n2r_relation__"
+#: Attribute holding the message of an invalid ``@metamorphic(...)`` call (reported at collection).
+ERROR_ATTR = "__n2r_error__"
+#: The marker ``@metamorphic`` applies (``-m n2r_relation`` selects relation tests).
+RELATION_MARKER = "n2r_relation"
 
 _SESSION = pytest.StashKey["Any"]()
 _STATS = pytest.StashKey["dict"]()
@@ -155,7 +161,7 @@ def pytest_configure(config: pytest.Config) -> None:
         "markers", f"{SCENE_MARKER}(*names): run this test only on the named scenes (configured scene names, "
         "or a .n2r path, 'demo:<name>' or 'module:function')",
     )
-    config.addinivalue_line("markers", "n2r_relation: a @metamorphic relation test (set by the decorator)")
+    config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
     config.pluginmanager.register(_Summary(config), "n2r-summary")
     if _used(config):
         session = _session(config)  # bad options fail now, before collection
@@ -189,8 +195,6 @@ def _describe(config: pytest.Config, session: Any) -> str:
 def pytest_pycollect_makeitem(collector: pytest.Collector, name: str, obj: Any) -> None:
     """Report an invalid ``@metamorphic(...)`` as a collection error naming the test."""
     if inspect.isfunction(obj):
-        from .marker import ERROR_ATTR
-
         error = obj.__dict__.get(ERROR_ATTR)
         if error:
             raise collector.CollectError(f"{collector.nodeid}::{name}: {error}")
@@ -231,8 +235,6 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
 @pytest.hookimpl(tryfirst=True)
 def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     """Run a ``@metamorphic`` test: call it for the SUT, then check the relation on ``n2r_scene``."""
-    from .marker import RELATION_ATTR
-
     relation = getattr(pyfuncitem.obj, RELATION_ATTR, None)
     if relation is None:
         return None

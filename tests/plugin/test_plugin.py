@@ -320,3 +320,97 @@ def test_header_lists_scenes_device_threads_and_cache(n2r_project):
     n2r_project.write("def test_nothing():\n    pass\n")
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "mycache")
     result.stdout.fnmatch_lines(["n2r: scenes plane; device auto; torch threads *; cache */mycache"])
+
+
+def test_the_plugin_does_nothing_when_unused(n2r_project):
+    n2r_project.pytester.makepyfile(test_plain="""
+import sys
+
+def test_plain():
+    loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
+    assert loaded == ["pytest_n2r.plugin"], loaded
+""")
+    result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
+    assert "n2r:" not in result.stdout.str() and "pytest-n2r" not in result.stdout.str()
+    ours = [p.name for p in n2r_project.pytester.path.rglob("*") if "n2r" in p.name.lower()]
+    assert not ours, f"an unused plugin left files behind: {ours}"
+
+
+def test_p_no_n2r_disables_the_plugin(n2r_project):
+    n2r_project.pytester.makepyfile(test_plain="def test_plain():\n    pass\n")
+    n2r_project.pytester.runpytest("-p", "no:n2r").assert_outcomes(passed=1)
+    result = n2r_project.pytester.runpytest("-p", "no:n2r", "--n2r-scene", PLANE)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR and "unrecognized arguments: --n2r-scene" in result.stderr.str()
+
+
+def test_a_mutation_strategy_as_transform(n2r_project):
+    n2r_project.write("""
+from hypothesis import strategies as st
+
+
+class Darken:
+    def __init__(self, amount):
+        self.amount = amount
+
+    @property
+    def is_identity(self):
+        return self.amount == 0
+
+    def apply(self, rgb):
+        return (rgb * (1 - self.amount)).astype(np.uint8)
+
+    def describe(self):
+        return f"darken(amount={self.amount})"
+
+
+@metamorphic(AbsDifference(), eps=20, transform=st.integers(0, 100).map(lambda k: Darken(k / 100)), examples=30)
+def test_darkening(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    amount = float(re.search(r"mutated by darken\(amount=([\d.]+)\)", text).group(1))
+    assert 0.05 < amount < 0.3, f"shrunk to darken(amount={amount}):\n{text}"
+
+
+def test_targeted_search_runs_and_reports(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=15, search="targeted")
+def test_targeted(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
+    assert "15 examples" in n2r_project.summary(result, "test_targeted[plane]")
+
+
+def test_a_hanging_sut_is_stopped_by_the_time_limit(n2r_project):
+    n2r_project.write("""
+import time
+
+
+def hangs(rgb):
+    time.sleep(30)
+
+
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=3)
+def test_hang(n2r_scene):
+    return hangs
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-timeout", "0.2")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*the system under test on the source view (*) did not finish within 0.2 s "
+                                 "(--n2r-timeout / ini n2r_timeout)*"])
+    assert result.duration < 20, f"the hang was not interrupted ({result.duration:.1f} s)"
+
+
+def test_no_scene_configured_and_no_demo_scene_skips_with_instructions(n2r_project, monkeypatch):
+    import pytest_n2r.session as session
+
+    monkeypatch.setattr(session, "default_scene_specs", lambda: [])
+    n2r_project.write("def test_uses_scene(n2r_scene):\n    pass\n")
+    result = n2r_project.run("-rs")
+    result.assert_outcomes(skipped=1)
+    result.stdout.fnmatch_lines(["*no scene configured for pytest-n2r: pass --n2r-scene PATH*n2r_scenes*"])
