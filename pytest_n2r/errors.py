@@ -16,6 +16,7 @@ __all__ = [
     "SceneFileError",
     "FitError",
     "SUTOutputError",
+    "MetricUndefined",
 ]
 
 
@@ -45,3 +46,8 @@ class FitError(N2RError):
 
 class SUTOutputError(InvalidType):
     """The system under test returned something a metric cannot use (None, NaN, wrong shape)."""
+
+
+class MetricUndefined(N2RError):
+    """A metric has no value for this pair of outputs, so the pair tests nothing (e.g. no keypoint lies in
+    the region both views see). Inside a Hypothesis test the example is rejected instead of raised."""

@@ -15,7 +15,6 @@ caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
 from collections import Counter
@@ -33,7 +32,7 @@ from ._timeout import time_limit
 from ._validation import check_range
 from .artifacts import artifact_dir, save_pair
 from .cache import RenderCache
-from .errors import InvalidArgument, InvalidType, N2RError, SUTOutputError
+from .errors import InvalidArgument, InvalidType, MetricUndefined, N2RError, SUTOutputError
 from .geometry import Transform, Units
 from .metrics.base import Metric, MetricResult
 from .render.size import RenderSize
@@ -68,35 +67,21 @@ class SUTError(N2RError):
 
 
 def resolve_metric(metric: Any) -> Metric:
-    """A :class:`Metric` instance, or a metric's name (``"repeatability"``) built with its defaults."""
+    """A :class:`Metric` instance, or a metric's name (``"repeatability"``) built with its defaults
+    (:data:`pytest_n2r.metrics.METRICS` lists the names)."""
+    from . import metrics
+
     if isinstance(metric, Metric):
         return metric
     if isinstance(metric, str):
-        factories = _metric_factories()
-        if metric in factories:
-            built = factories[metric]()
-            if isinstance(built, Metric):
-                return built
-        known = ", ".join(sorted(factories)) or "none installed"
-        raise InvalidArgument(f"metric={metric!r} is not a known metric; known names: {known}")
+        if metric not in metrics.METRICS:
+            known = ", ".join(sorted(metrics.METRICS))
+            raise InvalidArgument(f"metric={metric!r} is not a known metric; known names: {known}")
+        return metrics.resolve_metric(metric)
     raise InvalidType(
         f"metric={metric!r} must be a pytest_n2r.metrics.Metric (e.g. repeatability(px=2)) or a metric name, "
         f"not {type(metric).__name__}"
     )
-
-
-def _metric_factories() -> dict[str, Callable[[], Any]]:
-    """Metric names → zero-argument factories, from the metrics package's registry or public functions."""
-    module = importlib.import_module("pytest_n2r.metrics")
-    for attr in ("REGISTRY", "METRICS"):
-        registry = getattr(module, attr, None)
-        if isinstance(registry, dict):
-            return dict(registry)
-    names = getattr(module, "__all__", [n for n in dir(module) if not n.startswith("_")])
-    return {
-        n: getattr(module, n) for n in names
-        if callable(getattr(module, n, None)) and not isinstance(getattr(module, n), type)
-    }
 
 
 def _resolve_transform(transform: Any) -> st.SearchStrategy:
@@ -318,6 +303,8 @@ class _Engine:
         start = time.perf_counter()
         try:
             result = self.metric.compute(out_source, out_follow, source, follow)
+        except MetricUndefined as exc:  # the pair tests nothing (e.g. no keypoint in the common region)
+            return MetricResult.undefined(self.metric.name, str(exc))
         except (InvalidType, InvalidArgument) as exc:
             if isinstance(exc, SUTOutputError):
                 raise
@@ -353,9 +340,11 @@ class _Engine:
         describe = tau.describe() if mutation else self.describe_transform(tau)
         where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
         source = self.render(view.c2w, view, self.outputs, "source")
-        if mutation:
-            follow = RenderedView(camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb),
-                                  depth=source.depth, opacity=source.opacity)
+        if mutation:  # the follow-up is the mutated source render, same pose
+            apply_to_view = getattr(tau, "apply_to_view", None)
+            follow = apply_to_view(source) if callable(apply_to_view) else RenderedView(
+                camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb), depth=source.depth,
+                opacity=source.opacity)
         else:
             follow_c2w = tau.apply(view.c2w, self.scene.length_scale(self.units))
             follow = self.render(follow_c2w, view, self.follow_outputs, "follow-up")

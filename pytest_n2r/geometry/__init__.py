@@ -1,5 +1,6 @@
 """Camera geometry: intrinsics, poses, transforms τ, projection (see each module's *Convention*)."""
 
+from .align import apply_similarity_to_pose, rotation_angle_deg, umeyama
 from .camera import Camera
 from .conventions import c2w_from_colmap, colmap_from_c2w, opencv_to_opengl, opengl_to_opencv
 from .pose import (
@@ -29,5 +30,5 @@ __all__ = [
     "check_pose", "relative_pose",
     "opengl_to_opencv", "opencv_to_opengl", "c2w_from_colmap", "colmap_from_c2w",
     "pixel_grid", "camera_rays", "project", "backproject", "plane_homography", "rotation_homography",
-    "apply_homography",
+    "apply_homography", "umeyama", "apply_similarity_to_pose", "rotation_angle_deg",
 ]

@@ -14,6 +14,7 @@ Convention
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -129,9 +130,7 @@ class Camera:
             raise InvalidArgument(
                 f"image of shape {image.shape[:2]} does not match the camera's {self.height}x{self.width}"
             )
-        map1, map2 = cv2.initUndistortRectifyMap(
-            self.K, np.asarray(self.distortion), None, self.K, (self.width, self.height), cv2.CV_32FC1
-        )
+        map1, map2 = _undistort_maps(self)
         return cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
     def to_dict(self) -> dict:
@@ -151,3 +150,13 @@ class Camera:
             )
         except KeyError as exc:
             raise InvalidArgument(f"camera record is missing the field {exc.args[0]!r}") from None
+
+
+@lru_cache(maxsize=8)
+def _undistort_maps(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """The remap tables of :meth:`Camera.undistort_image`, cached: a capture has one camera for many images."""
+    import cv2
+
+    return cv2.initUndistortRectifyMap(
+        camera.K, np.asarray(camera.distortion), None, camera.K, (camera.width, camera.height), cv2.CV_32FC1
+    )

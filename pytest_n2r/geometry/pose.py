@@ -87,18 +87,24 @@ def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     """Inverse of :func:`rotation_from_euler`: ``(roll, pitch, yaw)`` in **degrees**.
 
     Ranges: pitch in [-90, 90], roll and yaw in (-180, 180]. At gimbal lock (pitch = ±90°) roll and yaw
-    turn about the same axis; the result then puts all of it in yaw and returns roll = 0 (never NaN).
+    turn about the same axis; the result then puts all of it in yaw and returns roll ≈ 0 (never NaN).
+    Roll is solved last from the remaining rotation, so the angles always rebuild ``R`` to round-off.
     """
     R = check_array("R", R, "3 3", dtype=np.float64)
     sin_pitch = -R[1, 2]
     cos_pitch = math.hypot(R[1, 0], R[1, 1])
     pitch = math.atan2(sin_pitch, cos_pitch)
-    if cos_pitch > 1e-9:
+    # (R[0, 2], R[2, 2]) = cos(pitch) * (sin, cos)(yaw): yaw is as accurate as cos(pitch) is large, and
+    # an error in yaw moves R only by that error times cos(pitch), which roll (below) cannot absorb.
+    # So the gimbal branch starts where that product is below round-off, not at a looser threshold.
+    if cos_pitch > 1e-14:
         yaw = math.atan2(R[0, 2], R[2, 2])
-        roll = math.atan2(R[1, 0], R[1, 1])
     else:  # gimbal lock: R[0, :2] = (cos, sin) of yaw -/+ roll; put it all in yaw
-        roll = 0.0
         yaw = math.atan2(math.copysign(1.0, sin_pitch) * R[0, 1], R[0, 0])
+    # Roll from what yaw and pitch leave over, so the three angles rebuild R to round-off even where
+    # yaw is poorly conditioned (near gimbal lock, where roll comes out ~0).
+    M = (_ry(yaw) @ _rx(pitch)).T @ R
+    roll = math.atan2(M[1, 0], M[0, 0])
     return _wrap(math.degrees(roll)), math.degrees(pitch), _wrap(math.degrees(yaw))
 
 

@@ -7,11 +7,14 @@ most ``eps`` (design.md §6): repeatability 0.74 → deviation 0.26 → fails at
 
 from __future__ import annotations
 
+import math
+import sys
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from .._validation import check_range
+from ..errors import MetricUndefined
 from ..render.view import RenderedView
 
 __all__ = ["Metric", "MetricResult"]
@@ -20,15 +23,27 @@ __all__ = ["Metric", "MetricResult"]
 @dataclass(frozen=True)
 class MetricResult:
     """One evaluation: the ``score``, its ``deviation`` from the ideal, and counts that explain it
-    (e.g. ``{"n_source": 100, "n_follow": 96, "n_visible": 80, "n_matched": 59}``)."""
+    (e.g. ``{"n_source": 100, "n_follow": 96, "n_visible": 80, "n_matched": 59}``).
+
+    ``valid`` is False when the metric is undefined for this pair (e.g. no keypoint lies in the region
+    both views see): then ``score`` and ``deviation`` are NaN, ``details["reason"]`` says why, and the
+    pair is *not a test* -- it neither passes nor fails (:meth:`Metric.assert_within` rejects it).
+    """
 
     metric: str
     score: float
     deviation: float
     details: dict[str, Any] = field(default_factory=dict)
+    valid: bool = True
+
+    @classmethod
+    def undefined(cls, metric: str, reason: str, **details: Any) -> "MetricResult":
+        """A result flagged ``valid=False`` with NaN score and deviation, and ``reason`` in the details."""
+        return cls(metric, math.nan, math.nan, {"reason": reason, **details}, valid=False)
 
     def holds(self, eps: float) -> bool:
-        return self.deviation <= eps
+        """True when the result is valid and its deviation is at most ``eps``."""
+        return self.valid and self.deviation <= eps
 
 
 class Metric(ABC):
@@ -40,8 +55,9 @@ class Metric(ABC):
     #: The score of two identical outputs (1 for similarities, 0 for distances).
     ideal: ClassVar[float]
     #: Render outputs the metric needs besides what the SUT consumes (``("depth", "opacity")`` for
-    #: metrics that map pixels between the two views).
-    needs: ClassVar[tuple[str, ...]] = ()
+    #: metrics that map pixels between the two views). An instance may override it when its parameters
+    #: decide (``repeatability(mapping="homography")`` needs no depth).
+    needs: tuple[str, ...] = ()
 
     @abstractmethod
     def compute(
@@ -52,6 +68,11 @@ class Metric(ABC):
     def deviation(self, score: float) -> float:
         """Distance of ``score`` from :attr:`ideal` (``|score - ideal|``)."""
         return abs(float(score) - float(self.ideal))
+
+    def result(self, score: float, **details: Any) -> MetricResult:
+        """A valid :class:`MetricResult` of this metric for ``score`` (deviation computed here)."""
+        score = float(score)
+        return MetricResult(self.name, score, self.deviation(score), details)
 
     def __call__(
         self, out_source: Any, out_follow: Any, source: RenderedView | None = None,
@@ -67,6 +88,8 @@ class Metric(ABC):
         __tracebackhide__ = True
         eps = check_range("eps", eps, 0.0)
         result = self.compute(out_source, out_follow, source, follow)
+        if not result.valid:
+            _reject(f"{self!r} is undefined for this pair: {result.details.get('reason', 'no reason given')}")
         if not result.holds(eps):
             details = ", ".join(f"{k}={v}" for k, v in result.details.items())
             raise AssertionError(
@@ -74,3 +97,13 @@ class Metric(ABC):
                 f"{self.ideal:g}, more than eps={eps:g}" + (f" ({details})" if details else "")
             )
         return result
+
+
+def _reject(message: str) -> None:
+    """Reject the current Hypothesis example (the pair tests nothing), or raise :class:`MetricUndefined`
+    outside Hypothesis. Hypothesis is only consulted if the caller already imported it."""
+    __tracebackhide__ = True
+    hypothesis = sys.modules.get("hypothesis")
+    if hypothesis is not None and hypothesis.currently_in_test_context():
+        hypothesis.reject()
+    raise MetricUndefined(message)

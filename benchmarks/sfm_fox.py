@@ -1,0 +1,83 @@
+"""Structure from motion on the fox photos vs the poses shipped in its transforms.json.
+
+Runs what ``n2r poses ../shared/scenes/fox/images`` runs (pycolmap SfM on copies <= 960 px), aligns the
+recovered camera centres to the shipped ones with a similarity (Umeyama), and prints the registered
+count, the time per stage, the rotation error of every camera (degrees) and the camera-centre error as a
+percentage of the camera spread (RMS distance of the shipped centres from their mean).
+
+Usage: ``nice -n 10 python benchmarks/sfm_fox.py [--max-size 960] [--matcher auto]``
+Targets (issue 2): all 50 registered, < 2 min, rotation error < 1 deg, centre error < 1 %.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from pytest_n2r.data.sfm import run_sfm  # noqa: E402
+from pytest_n2r.data.transforms_json import read_transforms_json  # noqa: E402
+from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, umeyama  # noqa: E402
+
+FOX = ROOT.parent / "shared" / "scenes" / "fox"
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--max-size", type=int, default=960)
+    parser.add_argument("--matcher", default="auto")
+    args = parser.parse_args()
+    if not (FOX / "transforms.json").is_file():
+        print(f"fox scene not found at {FOX}; nothing to benchmark")
+        return 1
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = read_transforms_json(FOX / "transforms.json")
+    start = time.perf_counter()
+    sfm = run_sfm(FOX / "images", max_size=args.max_size, matcher=args.matcher)
+    total = time.perf_counter() - start
+
+    ref_by_name = {Path(f.name).name: f for f in reference.frames}
+    pairs = [(f, ref_by_name[f.name]) for f in sfm.frames if f.name in ref_by_name]
+    src = np.array([f.c2w[:3, 3] for f, _ in pairs])
+    dst = np.array([r.c2w[:3, 3] for _, r in pairs])
+    s, R, t = umeyama(src, dst)
+    aligned = [apply_similarity_to_pose(f.c2w, s, R, t) for f, _ in pairs]
+    rot_err = np.array([rotation_angle_deg(a[:3, :3], r.c2w[:3, :3]) for a, (_, r) in zip(aligned, pairs)])
+    spread = float(np.sqrt(np.mean(np.sum((dst - dst.mean(0)) ** 2, axis=1))))
+    centre_err = np.array([np.linalg.norm(a[:3, 3] - r.c2w[:3, 3]) for a, (_, r) in zip(aligned, pairs)]) / spread * 100
+    cam, ref_cam = sfm.frames[0].camera, reference.frames[0].camera
+
+    times = sfm.report["time_s"]
+    rows = [
+        ("images found", f"{sfm.report['images']}", "50"),
+        ("registered", f"{len(sfm.frames)}", "50"),
+        ("matched to transforms.json", f"{len(pairs)}", "50"),
+        ("matcher", sfm.report["matcher"], ""),
+        *[(f"time: {k}", f"{v:.1f} s", "") for k, v in times.items()],
+        ("time: total", f"{total:.1f} s", "< 120 s"),
+        ("rotation error max", f"{rot_err.max():.3f} deg", "< 1 deg"),
+        ("rotation error median", f"{np.median(rot_err):.3f} deg", ""),
+        ("centre error max", f"{centre_err.max():.3f} %", "< 1 %"),
+        ("centre error median", f"{np.median(centre_err):.3f} %", ""),
+        ("focal length (SfM / shipped)", f"{cam.fx:.1f} / {ref_cam.fx:.1f} px", ""),
+        ("sparse points", f"{len(sfm.points)}", ""),
+    ]
+    width = max(len(r[0]) for r in rows)
+    print(f"SfM on {FOX / 'images'} (max size {args.max_size} px) vs transforms.json, similarity-aligned")
+    print(f"{'measure':<{width}}  {'value':>18}  target")
+    for name, value, target in rows:
+        print(f"{name:<{width}}  {value:>18}  {target}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

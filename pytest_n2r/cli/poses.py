@@ -1,0 +1,84 @@
+"""``n2r poses SOURCE``: recover or read the camera poses of a capture, summarize, optionally save them."""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from pathlib import Path
+
+__all__ = ["add_parser", "run"]
+
+_MAX_SKIPPED_SHOWN = 10
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "poses",
+        help="camera poses of a capture (SfM on photos, or read a COLMAP model / transforms.json)",
+        description=(
+            "Read or recover the cameras and poses of SOURCE and print a summary: images, registered, "
+            "skipped with reasons, intrinsics, scene bounds, reference length (median z-depth of the "
+            "sparse points seen by the training cameras) and time taken. SOURCE is a folder of photos "
+            "(structure from motion with pycolmap), a COLMAP sparse model folder, or a transforms.json."
+        ),
+    )
+    p.add_argument("source", metavar="SOURCE", help="images folder, COLMAP model folder or transforms.json")
+    p.add_argument("-o", "--output", metavar="PATH", type=Path, default=None,
+                   help="write the poses as a nerfstudio transforms.json (image file names kept)")
+    p.add_argument("--max-size", metavar="PX", type=int, default=960,
+                   help="longer image side for structure from motion, in pixels (default: 960)")
+    p.add_argument("--matcher", choices=("auto", "exhaustive", "sequential"), default="auto",
+                   help="feature matching for structure from motion: exhaustive up to 100 images with "
+                        "'auto', sequential for ordered video frames (default: auto)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..data.ingest import complete_points, extent, load_poses
+    from ..data.transforms_json import write_transforms_json
+
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
+        poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher)
+        complete_points(poses)
+    bounds, ref = extent(poses)
+    total = time.perf_counter() - start
+    print(format_summary(poses, bounds, ref, total))
+    if args.output is not None:
+        extra = {"n2r": {"source": str(args.source), "reference_length": ref, "bounds": bounds.tolist(),
+                         "note": "camera-to-world in OpenGL axes like every transforms.json"}}
+        path = write_transforms_json(args.output, poses, extra=extra)
+        print(f"wrote       {path} ({len(poses.frames)} frames)")
+    return 0
+
+
+def format_summary(poses, bounds, ref: float, total_s: float) -> str:
+    """The plain-text summary ``n2r poses`` prints."""
+    frames = poses.frames
+    listed = poses.report.get("listed", poses.report.get("images", len(frames) + len(poses.skipped)))
+    lines = [
+        f"source      {poses.source} ({poses.kind})",
+        f"images      {listed} found, {len(frames)} registered, {len(poses.skipped)} skipped",
+    ]
+    for name, reason in poses.skipped[:_MAX_SKIPPED_SHOWN]:
+        lines.append(f"  skipped   {name}: {reason}")
+    if len(poses.skipped) > _MAX_SKIPPED_SHOWN:
+        lines.append(f"  skipped   ... and {len(poses.skipped) - _MAX_SKIPPED_SHOWN} more")
+    cameras = list(dict.fromkeys(f.camera for f in frames))
+    lines.append(f"cameras     {len(cameras)} (OpenCV pixel centres; COLMAP/nerfstudio cx = cx + 0.5)")
+    for cam in cameras[:3]:
+        dist = " ".join(f"{k}={v:.4g}" for k, v in zip(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), cam.distortion))
+        lines.append(f"  {cam.width}x{cam.height} fx={cam.fx:.2f} fy={cam.fy:.2f} cx={cam.cx:.2f} cy={cam.cy:.2f}"
+                     + (f" {dist}" if dist else " no distortion"))
+    if len(cameras) > 3:
+        lines.append(f"  ... and {len(cameras) - 3} more")
+    lines.append(f"points      {len(poses.points)} ({poses.report.get('points_method', '')})")
+    lo, hi = bounds
+    lines.append("bounds      min (" + ", ".join(f"{v:.3f}" for v in lo) + ")  max (" + ", ".join(f"{v:.3f}" for v in hi)
+                 + ") scene units")
+    lines.append(f"reference   {ref:.4g} scene units (median z-depth of the points seen by the training cameras)")
+    stages = ", ".join(f"{k} {v:.1f} s" for k, v in poses.report.get("time_s", {}).items())
+    lines.append(f"time        {total_s:.1f} s ({stages})")
+    return "\n".join(lines)

@@ -1,0 +1,138 @@
+"""Listing and reading the photos of a capture.
+
+Convention
+----------
+Every image leaves this module as an ``H x W x 3`` ``uint8`` array in **RGB** order (OpenCV reads BGR;
+the conversion happens here and nowhere else). EXIF orientation is applied, so the array is upright
+as a person would view the photo. Grayscale is repeated to three channels, an alpha channel is
+dropped (the colour under it is kept), 16-bit images are scaled by ``255 / 65535`` and floating-point
+images are clipped to ``[0, 1]`` then scaled by 255.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import IngestError
+
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
+           "iter_readable"]
+
+#: File suffixes treated as images when a folder is listed (compared lower-case).
+IMAGE_SUFFIXES: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm")
+
+
+def list_images(folder: str | os.PathLike) -> list[Path]:
+    """The image files directly inside ``folder``, sorted by name (hidden files ignored).
+
+    Raises :class:`IngestError` naming the folder when it does not exist, is not a folder, or holds
+    no file with an image suffix (:data:`IMAGE_SUFFIXES`).
+    """
+    folder = Path(folder)
+    if not folder.exists():
+        raise IngestError(f"images folder {str(folder)!r} does not exist")
+    if not folder.is_dir():
+        raise IngestError(f"{str(folder)!r} is not a folder; expected a folder of images")
+    files = sorted(
+        p for p in folder.iterdir()
+        if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
+    )
+    if not files:
+        raise IngestError(
+            f"images folder {str(folder)!r} holds no images; expected files ending in {', '.join(IMAGE_SUFFIXES)}"
+        )
+    return files
+
+
+def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
+    """Convert a decoded image (gray, gray+alpha, 3 or 4 channels; uint8, uint16 or float) to RGB uint8.
+
+    ``bgr`` says the colour channels are in OpenCV's BGR(A) order.
+    """
+    import cv2
+
+    img = np.asarray(image)
+    if img.ndim == 2:
+        img = img[:, :, None]
+    if img.ndim != 3 or img.shape[2] not in (1, 2, 3, 4):
+        raise IngestError(f"image of shape {img.shape} is not gray, gray+alpha, RGB or RGBA")
+    if img.dtype == np.uint8:
+        pass
+    elif img.dtype == np.uint16:
+        img = ((img.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
+    elif img.dtype.kind == "f":
+        img = np.round(np.clip(np.nan_to_num(img, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
+    elif img.dtype.kind in "iu":
+        info = np.iinfo(img.dtype)
+        img = np.round(np.clip(img.astype(np.float64), 0, info.max) * (255.0 / info.max)).astype(np.uint8)
+    else:
+        raise IngestError(f"image of dtype {img.dtype} cannot be converted to 8-bit RGB")
+    channels = img.shape[2]
+    if channels in (1, 2):  # gray (+ alpha)
+        return np.ascontiguousarray(np.repeat(img[:, :, :1], 3, axis=2))
+    img = img[:, :, :3]
+    return np.ascontiguousarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB) if bgr else img)
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read one photo as an upright ``H x W x 3`` RGB uint8 array (see the module's *Convention*).
+
+    Raises :class:`IngestError` naming the file when it is missing or cannot be decoded.
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise IngestError(f"image file {str(path)!r} does not exist")
+    data = np.fromfile(path, dtype=np.uint8)
+    # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation.
+    img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
+    if img is None:
+        raise IngestError(f"image file {str(path)!r} cannot be decoded as an image (corrupt or not an image)")
+    return to_rgb8(img)
+
+
+def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
+    """``(width, height)`` of an upright image without decoding its pixels when possible (EXIF applied)."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    try:
+        with Image.open(path) as im:
+            width, height = im.size
+            orientation = im.getexif().get(0x0112, 1)
+    except (OSError, UnidentifiedImageError):
+        height, width = read_image(path).shape[:2]
+        return width, height
+    return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+
+
+def resize_image(image: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Resize an RGB image to ``width x height`` (area averaging when shrinking, bilinear when growing)."""
+    import cv2
+
+    if image.shape[1] == width and image.shape[0] == height:
+        return image
+    shrink = width < image.shape[1] and height < image.shape[0]
+    return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
+
+
+def iter_readable(paths: Sequence[Path], skipped: list[tuple[str, str]]) -> Iterator[tuple[Path, np.ndarray]]:
+    """Yield ``(path, image)`` for every decodable file, one at a time (memory stays one image).
+
+    A file that cannot be read is skipped with a warning naming it and recorded in ``skipped`` as
+    ``(file name, reason)``; the caller decides how many readable images are enough.
+    """
+    for path in paths:
+        try:
+            image = read_image(path)
+        except IngestError as exc:
+            warnings.warn(f"skipping {path}: {exc}", stacklevel=3)
+            skipped.append((Path(path).name, str(exc)))
+            continue
+        yield Path(path), image

@@ -1,0 +1,221 @@
+"""The one entry point of ingestion: any supported source → :class:`~pytest_n2r.data.capture.Capture`.
+
+Sources (:func:`source_kind` decides):
+
+- a ``transforms.json`` file (nerfstudio / instant-ngp), or a folder holding one;
+- a COLMAP sparse model folder (``cameras.bin|txt``, ``images.bin|txt``, ``points3D.bin|txt``), or a
+  project folder holding one under ``sparse/0`` or ``sparse``;
+- a folder of images (or a project folder with an ``images`` subfolder): structure from motion.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._validation import check_positive
+from ..errors import IngestError, InvalidArgument, InvalidType
+from ..geometry import Camera
+from .capture import Capture, CapturedView, heldout_split
+from .extent import reference_length, scene_bounds
+from .images import read_image, resize_image
+from .poses import PoseSet, SourceFrame
+from .transforms_json import find_transforms_json, read_transforms_json
+from .triangulate import triangulate_views
+
+__all__ = ["ingest", "load_poses", "complete_points", "extent", "source_kind", "TRIANGULATION_MAX_SIZE"]
+
+#: Longer image side (pixels) used to triangulate points for sources that come without points.
+TRIANGULATION_MAX_SIZE = 640
+
+
+def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
+    """``(kind, path)``: ``kind`` is ``"transforms.json"``, ``"colmap"`` or ``"images"``; ``path`` is the
+    json file, the model folder or the images folder. Raises :class:`IngestError` naming ``source``."""
+    path = Path(source)
+    if not path.exists():
+        raise IngestError(f"source {str(path)!r} does not exist")
+    found = find_transforms_json(path)
+    if found is not None:
+        return "transforms.json", found
+    if path.is_file():
+        raise IngestError(
+            f"source {str(path)!r} is a file but not a .json file; expected a transforms.json, "
+            "a COLMAP model folder or a folder of images"
+        )
+    from .colmap import find_colmap_model
+
+    model = find_colmap_model(path)
+    if model is not None:
+        return "colmap", model
+    if (path / "images").is_dir():
+        return "images", path / "images"
+    return "images", path
+
+
+def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto") -> PoseSet:
+    """Read or compute the poses of a source (see :func:`source_kind`); no images are kept.
+
+    For an images folder this runs structure from motion (:func:`pytest_n2r.data.sfm.run_sfm`) on
+    copies downscaled to at most ``sfm_max_size`` pixels, matching ``"exhaustive"``-ly,
+    ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images).
+    Points of a transforms.json are not triangulated here (see :func:`ingest`).
+    """
+    kind, path = source_kind(source)
+    start = time.perf_counter()
+    if kind == "transforms.json":
+        poses = read_transforms_json(path)
+    elif kind == "colmap":
+        from .colmap import read_colmap_model
+
+        poses = read_colmap_model(path)
+    else:
+        from .sfm import run_sfm
+
+        poses = run_sfm(path, max_size=sfm_max_size, matcher=matcher)
+    poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
+    return poses
+
+
+def ingest(
+    source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
+    load_images: bool = True, heldout_every: int = 8, sfm_max_size: int = 960, matcher: str = "auto",
+) -> Capture:
+    """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
+
+    Parameters
+    ----------
+    source:
+        A transforms.json (or its folder), a COLMAP model folder, or a folder of images (SfM).
+    downscale:
+        Image scale factor in ``(0, 1]`` (``0.25`` → a quarter of the width and height, rounded to
+        whole pixels; intrinsics follow :meth:`Camera.resized`).
+    max_size:
+        If given, further shrink so the longer side is at most this many pixels.
+    load_images:
+        Decode the images (``False``: views carry ``image=None``; a transforms.json still reads its
+        images once at low resolution to triangulate points).
+    heldout_every:
+        Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
+    sfm_max_size, matcher:
+        Structure from motion settings for images folders (see :func:`load_poses`).
+
+    Returns
+    -------
+    Capture
+        Views with ideal pinhole cameras (lens distortion removed by remapping the full-resolution
+        image, then area-averaged down), camera-to-world poses with OpenCV axes, the sparse points,
+        ``bounds`` (:func:`~pytest_n2r.data.extent.scene_bounds`) and ``reference_length`` (median
+        z-depth of the points seen by the training cameras). Points of a transforms.json are
+        triangulated from its poses (:mod:`pytest_n2r.data.triangulate`).
+    """
+    downscale = check_positive("downscale", downscale)
+    if downscale > 1:
+        raise InvalidArgument(f"downscale={downscale!r} is out of range; expected a value in (0, 1]")
+    if max_size is not None:
+        if isinstance(max_size, bool) or not isinstance(max_size, (int, np.integer)):
+            raise InvalidType(f"max_size={max_size!r} must be an int (pixels) or None")
+        if max_size < 16:
+            raise InvalidArgument(f"max_size={max_size!r} is too small; expected at least 16 pixels")
+    if isinstance(heldout_every, bool) or not isinstance(heldout_every, (int, np.integer)) or heldout_every < 0:
+        raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0")
+
+    poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher)
+    frames = poses.frames
+    out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
+    images = _load_pixels(poses, out_cameras if load_images else None)
+    splits = heldout_split(len(frames), heldout_every)
+    views = [
+        CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
+        for f, cam, split, img in zip(frames, out_cameras, splits, images)
+    ]
+    bounds, ref = extent(poses, heldout_every)
+    report = dict(poses.report)
+    report.update(kind=poses.kind, registered=len(frames), points=int(len(poses.points)))
+    return Capture(
+        views=views, points=np.asarray(poses.points, dtype=np.float64), bounds=bounds, reference_length=ref,
+        source=str(source), skipped=list(poses.skipped), report=report,
+    )
+
+
+def complete_points(poses: PoseSet) -> PoseSet:
+    """Fill ``poses.points`` (in place) by triangulation when the source had none; returns ``poses``.
+
+    Reads each image once at up to :data:`TRIANGULATION_MAX_SIZE` pixels (see
+    :mod:`pytest_n2r.data.triangulate` for the method).
+    """
+    _load_pixels(poses, None)
+    return poses
+
+
+def extent(poses: PoseSet, heldout_every: int = 8) -> tuple[np.ndarray, float]:
+    """``(bounds, reference_length)`` of a pose set with points: the box of the points seen by all
+    cameras and the median z-depth of the points seen by the training cameras (scene units)."""
+    frames = poses.frames
+    if len(frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+    splits = heldout_split(len(frames), heldout_every)
+    train = [f for f, s in zip(frames, splits) if s == "train"] or frames
+    ref = reference_length(poses.points, [f.camera for f in train], [f.c2w for f in train])
+    bounds = scene_bounds(poses.points, [f.camera for f in frames], [f.c2w for f in frames])
+    return bounds, ref
+
+
+def _load_pixels(poses: PoseSet, out_cameras: list[Camera] | None) -> list[np.ndarray | None]:
+    """Decode, undistort and resize the images to ``out_cameras`` (``None``: keep none); triangulate
+    points on the way when the pose set has none. Each file is read once."""
+    frames = poses.frames
+    if len(frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+    need_points = len(poses.points) == 0
+    images: list[np.ndarray | None] = [None] * len(frames)
+    small: list[np.ndarray] = []
+    small_cameras: list[Camera] = []
+    start = time.perf_counter()
+    if out_cameras is not None or need_points:
+        for k, frame in enumerate(frames):
+            full = _undistorted_image(frame)
+            if out_cameras is not None:
+                images[k] = resize_image(full, out_cameras[k].width, out_cameras[k].height)
+            if need_points:
+                cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
+                small.append(resize_image(full, cam.width, cam.height))
+                small_cameras.append(cam)
+    times = poses.report.setdefault("time_s", {})
+    times["images"] = time.perf_counter() - start
+    if need_points:
+        start = time.perf_counter()
+        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in frames])
+        poses.report["points_method"] = "SIFT matches between neighbouring views, triangulated with the given poses"
+        times["triangulation"] = time.perf_counter() - start
+    return images
+
+
+def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Camera:
+    cam = camera.undistorted()
+    if downscale != 1.0:
+        cam = cam.scaled(downscale)
+    return cam if max_size is None else cam.fit_within(max_size)
+
+
+def poses_source(frame: SourceFrame) -> str:
+    return "the COLMAP model" if frame.path is None else str(frame.path.parent)
+
+
+def _undistorted_image(frame: SourceFrame) -> np.ndarray:
+    if frame.path is None:
+        raise IngestError(
+            f"image {frame.name!r} of {poses_source(frame)} was not found; put the images in an 'images' folder "
+            "beside the model (they are needed to load views, and to triangulate points when the model has none)"
+        )
+    image = read_image(frame.path)
+    cam = frame.camera
+    if image.shape[:2] != (cam.height, cam.width):
+        raise IngestError(
+            f"image {str(frame.path)!r} is {image.shape[1]}x{image.shape[0]} pixels but its camera says "
+            f"{cam.width}x{cam.height} (after EXIF orientation)"
+        )
+    return cam.undistort_image(image)

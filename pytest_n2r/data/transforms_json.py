@@ -1,0 +1,223 @@
+"""Read and write nerfstudio / instant-ngp ``transforms.json`` files.
+
+Convention
+----------
+- ``transform_matrix`` is camera-to-world with **OpenGL** camera axes (x right, y up, z backward); it is
+  converted to ours (OpenCV: x right, y down, z forward) on reading and back on writing.
+- Intrinsics ``fl_x fl_y cx cy w h`` may be global (top level) or per frame (a frame's value wins).
+  ``cx, cy`` put the top-left pixel centre at ``(0.5, 0.5)`` as in COLMAP; ours is ``(0, 0)``, so
+  ``cx_ours = cx - 0.5``. Without ``fl_x`` the focal length comes from ``camera_angle_x`` (radians,
+  full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; ``fl_y`` falls back to
+  ``camera_angle_y``, then to ``fl_x``; ``cx, cy`` fall back to the image centre.
+- Distortion ``k1 k2 p1 p2 [k3 [k4 k5 k6]]`` is OpenCV's radial-tangential model; fisheye camera
+  models are refused.
+- ``file_path`` is relative to the json's folder; a path without a suffix gets ``.png`` (the NeRF
+  synthetic data sets list ``./train/r_0``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import IngestError, N2RError
+from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv
+from .atomic import atomic_write_text
+from .images import read_image_size
+from .poses import PoseSet, SourceFrame
+
+__all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json"]
+
+_DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+_FISHEYE_MODELS = ("OPENCV_FISHEYE", "EQUIRECTANGULAR", "FISHEYE")
+
+
+def find_transforms_json(source: str | os.PathLike) -> Path | None:
+    """``source`` itself if it is a ``.json`` file, ``source/transforms.json`` if that exists, else ``None``."""
+    source = Path(source)
+    if source.is_file() and source.suffix.lower() == ".json":
+        return source
+    candidate = source / "transforms.json"
+    return candidate if candidate.is_file() else None
+
+
+def read_transforms_json(path: str | os.PathLike) -> PoseSet:
+    """Read the frames of a transforms.json whose image files exist (no pixels are decoded).
+
+    Frames whose image file is missing are skipped with a warning naming the file. Raises
+    :class:`IngestError` naming the file, the frame index and the field when a field is missing or
+    malformed, a matrix is not a finite rigid transform, or no frame has its image.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise IngestError(f"transforms file {str(path)!r} does not exist")
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise IngestError(f"{path}: not a readable JSON file ({exc})") from None
+    if not isinstance(meta, dict):
+        raise IngestError(f"{path}: expected a JSON object at the top level, found {type(meta).__name__}")
+    raw_frames = meta.get("frames")
+    if not isinstance(raw_frames, list) or not raw_frames:
+        raise IngestError(f"{path}: field 'frames' is missing or empty; expected a list of frames")
+    model = str(meta.get("camera_model", "OPENCV")).upper()
+    if model in _FISHEYE_MODELS:
+        raise IngestError(f"{path}: camera_model={model!r} is not supported; expected a pinhole (OPENCV) model")
+
+    root = path.parent
+    frames: list[SourceFrame] = []
+    skipped: list[tuple[str, str]] = []
+    for i, raw in enumerate(raw_frames):
+        where = f"{path}: frames[{i}]"
+        if not isinstance(raw, dict):
+            raise IngestError(f"{where}: expected an object, found {type(raw).__name__}")
+        name = raw.get("file_path")
+        if not isinstance(name, str) or not name:
+            raise IngestError(f"{where}: field 'file_path' is missing or not a string")
+        image = _resolve_image(root, name)
+        c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
+        if image is None:
+            reason = f"image file {str(root / name)!r} listed in {path.name} frames[{i}] does not exist"
+            warnings.warn(f"skipping frame: {reason}", stacklevel=2)
+            skipped.append((name, reason))
+            continue
+        camera = _read_camera(meta, raw, where, image)
+        frames.append(SourceFrame(name=name, path=image, camera=camera, c2w=c2w))
+    if not frames:
+        raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
+    return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped,
+                   report={"listed": len(raw_frames)})
+
+
+def _resolve_image(root: Path, name: str) -> Path | None:
+    image = root / name
+    if image.is_file():
+        return image
+    if not image.suffix:
+        for suffix in (".png", ".jpg", ".jpeg"):
+            if image.with_suffix(suffix).is_file():
+                return image.with_suffix(suffix)
+    return None
+
+
+def _read_matrix(raw: dict, where: str) -> np.ndarray:
+    if "transform_matrix" not in raw:
+        raise IngestError(f"{where}: field 'transform_matrix' is missing")
+    try:
+        M = np.asarray(raw["transform_matrix"], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise IngestError(f"{where}: field 'transform_matrix' is not a numeric matrix") from None
+    if M.shape == (3, 4):
+        M = np.vstack([M, [0.0, 0.0, 0.0, 1.0]])
+    if M.shape != (4, 4):
+        raise IngestError(f"{where}: field 'transform_matrix' has shape {M.shape}; expected (4, 4) or (3, 4)")
+    if not np.all(np.isfinite(M)):
+        raise IngestError(f"{where}: field 'transform_matrix' contains non-finite values (NaN or Inf)")
+    R = M[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    if err > 1e-3 or np.linalg.det(R) <= 0 or not np.allclose(M[3], [0, 0, 0, 1], atol=1e-6):
+        raise IngestError(
+            f"{where}: field 'transform_matrix' is not a rigid camera-to-world transform "
+            f"(|R^T R - I| = {err:.3g}, det(R) = {np.linalg.det(R):.4g}, last row {M[3].tolist()})"
+        )
+    return opengl_to_opencv(M)
+
+
+def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
+    value = raw.get(key, meta.get(key))
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise IngestError(f"{where}: field {key!r}={value!r} must be a finite number")
+    return float(value)
+
+
+def _read_camera(meta: dict, raw: dict, where: str, image: Path) -> Camera:
+    w, h = _number(meta, raw, "w", where), _number(meta, raw, "h", where)
+    if w is None or h is None:
+        w, h = read_image_size(image)
+    fx, fy = _number(meta, raw, "fl_x", where), _number(meta, raw, "fl_y", where)
+    focal_given = fx is not None
+    if fx is None:
+        angle_x = _number(meta, raw, "camera_angle_x", where)
+        if angle_x is None:
+            raise IngestError(f"{where}: no focal length; expected field 'fl_x' or 'camera_angle_x'")
+        if not 0 < angle_x < math.pi:
+            raise IngestError(f"{where}: field 'camera_angle_x'={angle_x!r} must be in (0, pi) radians")
+        fx = 0.5 * w / math.tan(0.5 * angle_x)
+    if fy is None:
+        angle_y = _number(meta, raw, "camera_angle_y", where)
+        if angle_y is not None and not focal_given:
+            if not 0 < angle_y < math.pi:
+                raise IngestError(f"{where}: field 'camera_angle_y'={angle_y!r} must be in (0, pi) radians")
+            fy = 0.5 * h / math.tan(0.5 * angle_y)
+        else:
+            fy = fx
+    cx = _number(meta, raw, "cx", where)
+    cy = _number(meta, raw, "cy", where)
+    coeffs = [_number(meta, raw, k, where) or 0.0 for k in _DISTORTION_KEYS]
+    n = 8 if any(coeffs[5:]) else 5 if coeffs[4] else 4
+    try:
+        return Camera.from_colmap_pixels(
+            int(round(w)), int(round(h)), fx, fy, w / 2 if cx is None else cx, h / 2 if cy is None else cy,
+            tuple(coeffs[:n]),
+        )
+    except N2RError as exc:
+        raise IngestError(f"{where}: bad intrinsics: {exc}") from None
+
+
+def write_transforms_json(
+    path: str | os.PathLike, frames: list[SourceFrame] | PoseSet, *, extra: dict[str, Any] | None = None,
+) -> Path:
+    """Write frames as a nerfstudio-compatible transforms.json (atomically) and return its path.
+
+    ``file_path`` is the image's path relative to the json's folder when the frame knows its file
+    (else the frame's name), so two pose sets of the same images can be compared frame by frame.
+    Intrinsics shared by every frame are written once at the top level, otherwise per frame.
+    ``extra`` adds top-level fields (e.g. ``{"reference_length": ...}``).
+    """
+    path = Path(path)
+    frames = frames.frames if isinstance(frames, PoseSet) else list(frames)
+    if not frames:
+        raise IngestError(f"cannot write {path}: no frames")
+    cameras = [_camera_fields(f.camera) for f in frames]
+    shared = cameras[0] if all(c == cameras[0] for c in cameras) else None
+    out: dict[str, Any] = {"camera_model": "OPENCV"}
+    if shared is not None:
+        out.update(shared)
+    out.update(extra or {})
+    records = []
+    for frame, cam in zip(frames, cameras):
+        record: dict[str, Any] = {"file_path": _relative_name(frame, path.parent)}
+        if shared is None:
+            record.update(cam)
+        record["transform_matrix"] = opencv_to_opengl(frame.c2w).tolist()
+        records.append(record)
+    out["frames"] = records
+    atomic_write_text(path, json.dumps(out, indent=2) + "\n")
+    return path
+
+
+def _camera_fields(camera: Camera) -> dict[str, float]:
+    fields: dict[str, float] = {
+        "w": camera.width, "h": camera.height, "fl_x": camera.fx, "fl_y": camera.fy,
+        "cx": camera.cx + 0.5, "cy": camera.cy + 0.5,
+    }
+    for key, value in zip(_DISTORTION_KEYS, camera.distortion or (0.0, 0.0, 0.0, 0.0)):
+        fields[key] = value
+    return fields
+
+
+def _relative_name(frame: SourceFrame, root: Path) -> str:
+    if frame.path is None:
+        return frame.name
+    try:
+        return Path(os.path.relpath(Path(frame.path).resolve(), root.resolve())).as_posix()
+    except ValueError:  # another drive on Windows
+        return Path(frame.path).resolve().as_posix()

@@ -1,0 +1,161 @@
+"""Image quality between a test image and a reference image: PSNR, SSIM and (when available) LPIPS.
+
+Used to judge how real rendered views are (a render against the held-out photo at the same pose) and
+how far a mutation moves an image. Images are H×W×3 (or H×W) arrays of the same shape: ``uint8`` with
+values 0..255, or floats with values in [0, 1] (or pass ``data_range``).
+
+LPIPS needs the ``lpips`` package, ``torchvision`` and the ImageNet backbone weights in the torch hub
+cache (``torch.hub.get_dir()/checkpoints``). They are never downloaded: when any is missing,
+:func:`lpips` warns once (:class:`LPIPSUnavailable`) and returns ``None``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .._validation import check_array, check_positive
+from ..errors import InvalidArgument, InvalidType
+from ._outputs import as_numeric
+from .base import Metric, MetricResult
+
+__all__ = ["psnr", "ssim", "lpips", "lpips_unavailable_reason", "LPIPSUnavailable", "SSIM", "ssim_metric"]
+
+#: torchvision checkpoint file of each LPIPS backbone (what ``lpips.LPIPS(net=...)`` would download).
+LPIPS_BACKBONES = {
+    "alex": "alexnet-owt-7be5be79.pth",
+    "vgg": "vgg16-397923af.pth",
+    "squeeze": "squeezenet1_1-b8a52dc0.pth",
+}
+
+
+class LPIPSUnavailable(UserWarning):
+    """LPIPS cannot run here (package, torchvision or backbone weights missing); it is skipped."""
+
+
+def _pair(image_true: Any, image_test: Any, data_range: float | None) -> tuple[np.ndarray, np.ndarray, float]:
+    a = check_array("image_true", image_true, "H W" if np.ndim(image_true) == 2 else "H W 3")
+    b = check_array("image_test", image_test, "H W" if np.ndim(image_test) == 2 else "H W 3")
+    if a.shape != b.shape:
+        raise InvalidArgument(f"image_true has shape {a.shape} but image_test has {b.shape}; expected equal shapes")
+    if a.dtype != b.dtype:
+        raise InvalidType(f"image_true is {a.dtype} but image_test is {b.dtype}; expected the same dtype")
+    if data_range is not None:
+        data_range = check_positive("data_range", data_range)
+    elif a.dtype == np.uint8:
+        data_range = 255.0
+    elif a.dtype.kind == "f":
+        lo, hi = float(min(a.min(), b.min())), float(max(a.max(), b.max()))
+        if lo < 0.0 or hi > 1.0:
+            raise InvalidArgument(
+                f"float images have values in [{lo:.4g}, {hi:.4g}], not [0, 1]; pass data_range= explicitly"
+            )
+        data_range = 1.0
+    else:
+        raise InvalidType(f"images of dtype {a.dtype} need data_range=; expected uint8 (0..255) or float (0..1)")
+    return a.astype(np.float64), b.astype(np.float64), float(data_range)
+
+
+def psnr(image_true: np.ndarray, image_test: np.ndarray, *, data_range: float | None = None) -> float:
+    """Peak signal-to-noise ratio in dB: ``10 log10(data_range² / MSE)``; ``inf`` for identical images.
+
+    >>> a = np.zeros((4, 4, 3), np.uint8)
+    >>> round(psnr(a, a + 1), 2)
+    48.13
+    """
+    a, b, data_range = _pair(image_true, image_test, data_range)
+    mse = float(np.mean((a - b) ** 2))
+    return math.inf if mse == 0.0 else 10.0 * math.log10(data_range**2 / mse)
+
+
+def ssim(image_true: np.ndarray, image_test: np.ndarray, *, data_range: float | None = None) -> float:
+    """Structural similarity (Wang et al. 2004) in [-1, 1], 1 for identical images.
+
+    scikit-image with the paper's settings: an 11×11 Gaussian window (σ = 1.5), population covariance,
+    averaged over channels. Images must be at least 11 pixels on each side.
+    """
+    from skimage.metrics import structural_similarity
+
+    a, b, data_range = _pair(image_true, image_test, data_range)
+    if min(a.shape[:2]) < 11:
+        raise InvalidArgument(f"images of {a.shape[1]}x{a.shape[0]} pixels are too small for SSIM; expected >= 11x11")
+    return float(structural_similarity(
+        a, b, data_range=data_range, channel_axis=-1 if a.ndim == 3 else None,
+        gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+    ))
+
+
+def lpips_unavailable_reason(net: str = "alex") -> str | None:
+    """Why LPIPS with backbone ``net`` cannot run here, or ``None`` when it can (nothing is downloaded)."""
+    if net not in LPIPS_BACKBONES:
+        raise InvalidArgument(f"net={net!r}; expected one of {tuple(LPIPS_BACKBONES)}")
+    for package in ("lpips", "torchvision"):
+        if importlib.util.find_spec(package) is None:
+            return f"the {package!r} package is not installed"
+    import torch
+
+    weights = Path(torch.hub.get_dir()) / "checkpoints" / LPIPS_BACKBONES[net]
+    if not weights.is_file():
+        return f"the {net} backbone weights are not at {weights} (they would have to be downloaded)"
+    return None
+
+
+_warned: set[str] = set()
+_models: dict[str, Any] = {}
+
+
+def lpips(image_true: np.ndarray, image_test: np.ndarray, *, net: str = "alex") -> float | None:
+    """Learned perceptual distance (Zhang et al. 2018), 0 for identical images, lower is closer.
+
+    Returns ``None``, warning once per reason (:class:`LPIPSUnavailable`), when LPIPS cannot run here.
+    Images are uint8 (or floats in [0, 1]) H×W×3 RGB.
+    """
+    reason = lpips_unavailable_reason(net)
+    if reason is not None:
+        if reason not in _warned:
+            _warned.add(reason)
+            warnings.warn(f"LPIPS skipped: {reason}", LPIPSUnavailable, stacklevel=2)
+        return None
+    a, b, data_range = _pair(image_true, image_test, None)
+    if a.ndim != 3:
+        raise InvalidType(f"LPIPS needs H×W×3 RGB images, got shape {a.shape}")
+    import torch
+
+    if net not in _models:
+        import lpips as lpips_package
+
+        _models[net] = lpips_package.LPIPS(net=net, verbose=False).eval()
+
+    def tensor(x: np.ndarray) -> torch.Tensor:  # H×W×3 in [0, data_range] → 1×3×H×W in [-1, 1]
+        return torch.from_numpy(x / data_range * 2.0 - 1.0).permute(2, 0, 1)[None].float()
+
+    with torch.no_grad():
+        return float(_models[net](tensor(a), tensor(b)).reshape(-1)[0])
+
+
+class SSIM(Metric):
+    """SSIM between the SUT's two output *images* (for SUTs that return images: denoisers, enhancers).
+
+    Range [-1, 1], ideal 1, deviation ``1 - score``; see :func:`ssim`.
+    """
+
+    name = "ssim"
+    ideal = 1.0
+
+    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
+        for which, out in (("source", out_source), ("follow-up", out_follow)):
+            as_numeric(out, which, "an H×W×3 or H×W image")  # None / NaN / Inf named by the output
+        return self.result(ssim(out_source, out_follow))
+
+    def __repr__(self) -> str:
+        return "ssim_metric()"
+
+
+def ssim_metric() -> SSIM:
+    """The :class:`SSIM` metric for relations whose SUT returns images."""
+    return SSIM()

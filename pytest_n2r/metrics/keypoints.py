@@ -1,0 +1,306 @@
+"""Interest-point detector metrics: repeatability and interest-point spread.
+
+SUT output: keypoints as an ``(N, 2)`` array of ``(u, v)`` pixels (OpenCV pixel centres), an
+``(N, K >= 2)`` array whose extra columns are ignored, or a sequence of ``cv2.KeyPoint``.
+
+Both metrics compare the points in the **follow-up image frame**: source points are mapped into it
+(:mod:`~pytest_n2r.metrics.correspondence`), and only points *visible in both views* count: source points
+that map into the follow-up view unoccluded, and follow-up points that map back into the source view.
+
+Edge cases (``n1``, ``n2`` = visible source / follow-up points):
+
+- the SUT found no keypoint in either view: score 1 (the outputs agree: nothing in both);
+- ``n1 = n2 = 0`` otherwise: no keypoint lies in the region both views see, so the pair tests nothing:
+  the result has ``valid=False`` (see :class:`~pytest_n2r.metrics.base.MetricResult`);
+- exactly one of ``n1``, ``n2`` is 0: score 0 (points found in the common region have no counterpart).
+
+Keypoint coordinates are rounded to 1e-6 px, and keypoints at the same coordinates (a multi-scale
+detector reporting one location at several octaves) count once.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from .._validation import check_positive, check_range
+from ..errors import InvalidArgument, InvalidType
+from ..geometry import Camera
+from ..render.view import RenderedView
+from ._matching import mutual_nearest
+from ._outputs import as_keypoints
+from .base import Metric, MetricResult
+from .correspondence import (
+    DEFAULT_DEPTH_TOLERANCE,
+    DEFAULT_MIN_OPACITY,
+    DepthMapping,
+    HomographyMapping,
+    PointMapping,
+    check_plane,
+)
+
+__all__ = [
+    "Repeatability", "InterestPointSpread", "KeypointCorrespondences", "repeatability", "interest_point_spread",
+    "coverage_mask",
+]
+
+Mapping = Literal["depth", "homography"]
+_MAPPINGS = ("depth", "homography")
+_FORMS = ("schmid", "symmetric")
+
+
+def _unique_rows(points: np.ndarray) -> np.ndarray:
+    """``points`` rounded to 1e-6 px, without duplicate rows, sorted by ``u`` then ``v``.
+
+    Rounding first means two detections closer than round-off count once, so mapping round-off
+    (~1e-12 px) can never swap which of them is whose nearest neighbour. Faster than ``np.unique``.
+    """
+    points = np.round(points, 6)
+    if len(points) < 2:
+        return points
+    sorted_points = points[np.lexsort((points[:, 1], points[:, 0]))]
+    keep = np.r_[True, np.any(sorted_points[1:] != sorted_points[:-1], axis=1)]
+    return sorted_points[keep]
+
+
+@dataclass(frozen=True)
+class KeypointCorrespondences:
+    """The keypoints of a pair as a keypoint metric sees them, for overlays and debugging.
+
+    ``source`` ``(n_s, 2)`` and ``follow`` ``(n_f, 2)`` are the distinct keypoints (rounded to 1e-6 px) in
+    their own images; ``source_in_follow`` ``(n_s, 2)`` are the source points mapped into the follow-up
+    image (NaN where not visible in both views); ``source_visible`` / ``follow_visible`` say which points
+    count; ``matches`` ``(M, 2)`` holds index pairs ``(i, j)`` into ``source`` / ``follow`` of the mutual
+    nearest neighbours within the tolerance (empty for metrics that do not match points).
+    """
+
+    source: np.ndarray
+    follow: np.ndarray
+    source_in_follow: np.ndarray
+    source_visible: np.ndarray
+    follow_visible: np.ndarray
+    matches: np.ndarray
+    rejected: dict[str, int] = field(default_factory=dict)
+
+
+class _KeypointMetric(Metric):
+    """Shared machinery: parse keypoints, map them between the views, apply the edge-case rules."""
+
+    def __init__(
+        self, mapping: Mapping, plane: tuple[np.ndarray, float] | None, min_opacity: float,
+        depth_tolerance: float,
+    ) -> None:
+        if mapping not in _MAPPINGS:
+            raise InvalidArgument(f"mapping={mapping!r}; expected one of {_MAPPINGS}")
+        if plane is not None and mapping != "homography":
+            raise InvalidArgument(f"plane={plane!r} is only used with mapping='homography', not {mapping!r}")
+        self.mapping = mapping
+        self.plane = check_plane(plane)
+        self.min_opacity = check_range("min_opacity", min_opacity, 0.0, 1.0)
+        self.depth_tolerance = check_range("depth_tolerance", depth_tolerance, 0.0)
+        self.needs = ("depth", "opacity") if mapping == "depth" else ()
+
+    def point_mapping(self, source: Any, follow: Any) -> PointMapping:
+        """The mapping between the two views this metric was configured with."""
+        for name, view in (("source", source), ("follow", follow)):
+            if not isinstance(view, RenderedView):
+                raise InvalidType(
+                    f"{self.name} needs the {name} RenderedView to map points between the views, "
+                    f"got {type(view).__name__}"
+                )
+        if self.mapping == "depth":
+            return DepthMapping(source, follow, min_opacity=self.min_opacity, depth_tolerance=self.depth_tolerance)
+        return HomographyMapping.from_views(source, follow, self.plane)
+
+    def correspondences(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> KeypointCorrespondences:
+        """Which keypoints count, where the source points land in the follow-up image, and (for
+        repeatability) which ones match: what :meth:`compute` scores, for overlays."""
+        # exact duplicates (one location reported at several scales) are one detection
+        p = _unique_rows(as_keypoints(out_source, "source"))
+        q = _unique_rows(as_keypoints(out_follow, "follow-up"))
+        if len(p) == 0 and len(q) == 0:
+            empty = np.zeros((0, 2))
+            return KeypointCorrespondences(p, q, empty, np.zeros(0, bool), np.zeros(0, bool),
+                                           np.zeros((0, 2), np.intp))
+        mapping = self.point_mapping(source, follow)
+        fwd, bwd = mapping.to_follow(p), mapping.to_source(q)
+        rejected = {key: fwd.rejected.get(key, 0) + bwd.rejected.get(key, 0)
+                    for key in sorted(set(fwd.rejected) | set(bwd.rejected))}
+        matches = np.zeros((0, 2), np.intp)
+        if fwd.visible.any() and bwd.visible.any():
+            i_vis, j_vis = np.flatnonzero(fwd.visible), np.flatnonzero(bwd.visible)
+            pairs = self._match(fwd.uv[i_vis], q[j_vis])
+            matches = np.stack([i_vis[pairs[:, 0]], j_vis[pairs[:, 1]]], axis=1)
+        return KeypointCorrespondences(p, q, fwd.uv, fwd.visible, bwd.visible, matches, rejected)
+
+    def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """``(M, 2)`` index pairs of matched points (none unless the metric matches points)."""
+        return np.zeros((0, 2), np.intp)
+
+    def compute(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> MetricResult:
+        c = self.correspondences(out_source, out_follow, source, follow)
+        if len(c.source) == 0 and len(c.follow) == 0:
+            return self.result(1.0, n_source=0, n_follow=0, note="no keypoints in either view")
+        n1, n2 = int(c.source_visible.sum()), int(c.follow_visible.sum())
+        details: dict[str, Any] = {
+            "n_source": len(c.source), "n_follow": len(c.follow), "n_source_visible": n1, "n_follow_visible": n2,
+            **{f"rejected_{key}": n for key, n in c.rejected.items()},
+        }
+        if n1 == 0 and n2 == 0:
+            return MetricResult.undefined(
+                self.name, "no keypoint of either view lies in the region both views see", **details
+            )
+        if n1 == 0 or n2 == 0:
+            return self.result(0.0, **details)
+        return self._score(c, follow.camera, details)
+
+    @abstractmethod
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        """Score the correspondences (at least one visible point on each side) on the follow-up
+        ``camera``'s pixel grid."""
+
+    def _mapping_repr(self) -> str:
+        parts = [f"mapping={self.mapping!r}"]
+        if self.plane is not None:
+            n, d = self.plane
+            parts.append(f"plane=({n.tolist()!r}, {d!r})")
+        if self.mapping == "depth":
+            if self.min_opacity != DEFAULT_MIN_OPACITY:
+                parts.append(f"min_opacity={self.min_opacity!r}")
+            if self.depth_tolerance != DEFAULT_DEPTH_TOLERANCE:
+                parts.append(f"depth_tolerance={self.depth_tolerance!r}")
+        return ", ".join(parts)
+
+
+class Repeatability(_KeypointMetric):
+    """Fraction of keypoints detected again at the same scene point (Schmid et al. 2000).
+
+    With ``n1`` source points mapped into the follow-up image and ``n2`` follow-up points, all visible in
+    both views, ``m`` is the number of **mutual nearest neighbours** at most ``px`` pixels apart (each point
+    matched at most once). The score is ``m / min(n1, n2)`` (``form="schmid"``, default) or
+    ``2 m / (n1 + n2)`` (``form="symmetric"``). Range [0, 1], ideal 1, deviation ``1 - score``.
+    """
+
+    name = "repeatability"
+    ideal = 1.0
+
+    def __init__(
+        self, px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
+        plane: tuple[np.ndarray, float] | None = None, min_opacity: float = DEFAULT_MIN_OPACITY,
+        depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+    ) -> None:
+        self.px = check_positive("px", px)
+        if form not in _FORMS:
+            raise InvalidArgument(f"form={form!r}; expected one of {_FORMS}")
+        self.form = form
+        super().__init__(mapping, plane, min_opacity, depth_tolerance)
+
+    def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+        return mutual_nearest(p, q, self.px)
+
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        m = len(c.matches)
+        n1, n2 = int(c.source_visible.sum()), int(c.follow_visible.sum())
+        score = m / min(n1, n2) if self.form == "schmid" else 2.0 * m / (n1 + n2)
+        return self.result(score, n_matched=m, **details)
+
+    def __repr__(self) -> str:
+        form = "" if self.form == "schmid" else f", form={self.form!r}"
+        return f"repeatability(px={self.px!r}{form}, {self._mapping_repr()})"
+
+
+#: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
+#: flip a pixel centre lying exactly on the circle.
+_DISC_SLACK = 1e-6
+
+
+def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
+    """``H x W`` bool mask of the pixel centres within ``radius`` pixels (inclusive) of any point.
+
+    ``points`` is ``(N, 2)`` ``(u, v)`` in pixels of ``camera``'s image; discs are exact at sub-pixel
+    positions and clipped to the image. Each disc is painted as one horizontal run per pixel row
+    (a difference array summed along the rows), so the cost is ``N * (2 radius + 1)`` plus one pass
+    over the image.
+    """
+    radius = check_positive("radius", radius) + _DISC_SLACK
+    h, w = camera.height, camera.width
+    if len(points) == 0:
+        return np.zeros((h, w), dtype=bool)
+    r = int(np.ceil(radius))
+    rows = np.floor(points[:, 1] + 0.5).astype(np.intp)[:, None] + np.arange(-r, r + 1)[None, :]
+    dy2 = (rows - points[:, 1, None]) ** 2
+    ok = (dy2 <= radius * radius) & (rows >= 0) & (rows < h)
+    half = np.sqrt(np.maximum(radius * radius - dy2, 0.0))
+    u = np.broadcast_to(points[:, 0, None], rows.shape)
+    first = np.clip(np.ceil(u - half), 0, w).astype(np.intp)
+    last = np.clip(np.floor(u + half) + 1, 0, w).astype(np.intp)  # one past the run's last column
+    ok &= first < last
+    rows, first, last = rows[ok], first[ok], last[ok]
+    diff = np.bincount(rows * (w + 1) + first, minlength=h * (w + 1))
+    diff -= np.bincount(rows * (w + 1) + last, minlength=h * (w + 1))
+    return np.cumsum(diff.reshape(h, w + 1), axis=1)[:, :w] > 0
+
+
+class InterestPointSpread(_KeypointMetric):
+    """How much of the same image area the two point sets cover (after Bailo et al. 2018).
+
+    Each set of points visible in both views covers the union of discs of ``radius`` pixels around its
+    points, rasterized on the follow-up image's pixel grid (source points mapped into it). The score is
+    the intersection over union of the two coverage areas. Range [0, 1], ideal 1, deviation ``1 - score``.
+    """
+
+    name = "interest_point_spread"
+    ideal = 1.0
+
+    def __init__(
+        self, radius: float = 8.0, mapping: Mapping = "depth", *,
+        plane: tuple[np.ndarray, float] | None = None, min_opacity: float = DEFAULT_MIN_OPACITY,
+        depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+    ) -> None:
+        self.radius = check_positive("radius", radius)
+        super().__init__(mapping, plane, min_opacity, depth_tolerance)
+
+    def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
+        a = coverage_mask(c.source_in_follow[c.source_visible], camera, self.radius)
+        b = coverage_mask(c.follow[c.follow_visible], camera, self.radius)
+        inter, union = int(np.count_nonzero(a & b)), int(np.count_nonzero(a | b))
+        return self.result(inter / union, covered_source=int(a.sum()), covered_follow=int(b.sum()),
+                           covered_both=inter, **details)
+
+    def __repr__(self) -> str:
+        return f"interest_point_spread(radius={self.radius!r}, {self._mapping_repr()})"
+
+
+def repeatability(
+    px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
+    plane: tuple[np.ndarray, float] | None = None, min_opacity: float = DEFAULT_MIN_OPACITY,
+    depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+) -> Repeatability:
+    """Keypoint repeatability with a tolerance of ``px`` pixels (follow-up image); see :class:`Repeatability`.
+
+    ``mapping="depth"`` maps points with the rendered z-depth and poses (needs ``depth`` and ``opacity``;
+    ``min_opacity`` in [0, 1], ``depth_tolerance`` relative); ``mapping="homography"`` uses the homography
+    of the world plane ``plane = (n, d)`` (``n·X + d = 0``), or of a pure rotation when ``plane`` is None.
+
+    >>> repeatability(px=2)
+    repeatability(px=2.0, mapping='depth')
+    """
+    return Repeatability(px, mapping, form=form, plane=plane, min_opacity=min_opacity,
+                         depth_tolerance=depth_tolerance)
+
+
+def interest_point_spread(
+    radius: float = 8.0, mapping: Mapping = "depth", *, plane: tuple[np.ndarray, float] | None = None,
+    min_opacity: float = DEFAULT_MIN_OPACITY, depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+) -> InterestPointSpread:
+    """IoU of the areas covered by discs of ``radius`` pixels around each point set; see
+    :class:`InterestPointSpread` (mapping parameters as in :func:`repeatability`).
+
+    >>> interest_point_spread(radius=5)
+    interest_point_spread(radius=5.0, mapping='depth')
+    """
+    return InterestPointSpread(radius, mapping, plane=plane, min_opacity=min_opacity,
+                               depth_tolerance=depth_tolerance)

@@ -1,0 +1,259 @@
+"""2-D image mutations: the DeepXplore baselines the paper compares rendered transforms against.
+
+- **m1** :class:`Brightness`: a constant number of grey levels added to every channel (camera
+  over-/under-exposure);
+- **m2** :class:`NoisePatch`: one large rectangle of uniform random pixels (a sensor or cable fault);
+- **m3** :class:`BlackPatches`: several small black rectangles (dirt on the lens).
+
+Convention
+----------
+- Images are H×W×3 ``uint8`` RGB (what scenes render); a mutation returns a new image and never
+  changes its input. The follow-up of a mutation relation is the mutated source render at the same
+  pose, so depth and opacity are unchanged.
+- Every patch size and position is a **fraction of the image size**, so one mutation means the same thing at
+  any resolution: a patch of ``size=0.25`` is a quarter of the width by a quarter of the height. A
+  position ``x=0`` puts a patch against the left border, ``x=1`` against the right (likewise ``y``,
+  top to bottom); patches always lie inside the image.
+- Random pixels and positions come from ``numpy.random.default_rng(seed)``: the same mutation gives
+  the same image, bit for bit.
+- The Hypothesis strategies (:func:`brightness`, :func:`noise_patch`, :func:`black_patches`,
+  :func:`any_mutation`) shrink toward **no change**: a failing example is reported as the smallest
+  mutation that still breaks the SUT.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from ._validation import check_array, check_range
+from .errors import InvalidArgument, InvalidType
+
+if TYPE_CHECKING:
+    from hypothesis.strategies import SearchStrategy
+
+    from .render.view import RenderedView
+
+__all__ = [
+    "Mutation",
+    "Brightness",
+    "NoisePatch",
+    "BlackPatches",
+    "brightness",
+    "noise_patch",
+    "black_patches",
+    "any_mutation",
+]
+
+_MAX_SEED = 2**32 - 1
+_MAX_COUNT = 64
+
+
+def _check_image(rgb: Any) -> np.ndarray:
+    arr = check_array("rgb", rgb, "H W 3")
+    if arr.dtype != np.uint8:
+        raise InvalidType(f"rgb must be an H×W×3 uint8 RGB image, got dtype {arr.dtype}")
+    return arr
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InvalidType(f"{name}={value!r} must be an int, not {type(value).__name__}")
+    if not lo <= value <= hi:
+        raise InvalidArgument(f"{name}={value!r} is out of range; expected an int in [{lo}, {hi}]")
+    return int(value)
+
+
+def _patch_pixels(size: float, extent: int) -> int:
+    """Pixels of a patch that is ``size`` of ``extent``: at least 1 when ``size > 0``, at most ``extent``."""
+    return 0 if size == 0 else min(extent, max(1, round(size * extent)))
+
+
+class Mutation(ABC):
+    """An immutable, seeded image mutation: ``apply(rgb) -> rgb`` on H×W×3 uint8 RGB images.
+
+    ``repr`` rebuilds the constructor call; :meth:`describe` says what it does in words.
+    """
+
+    #: Short name used in reports (``"brightness"``).
+    name: ClassVar[str]
+
+    def __call__(self, rgb: np.ndarray) -> np.ndarray:
+        return self.apply(rgb)
+
+    def apply(self, rgb: np.ndarray) -> np.ndarray:
+        """The mutated copy of ``rgb`` (H×W×3 uint8 RGB); the input is not modified."""
+        rgb = _check_image(rgb)
+        return rgb.copy() if self.is_identity else self._apply(rgb)
+
+    def apply_to_view(self, view: RenderedView) -> RenderedView:
+        """The follow-up view of a mutation relation: ``view`` with its ``rgb`` mutated; pose, camera,
+        depth and opacity unchanged (a mutation does not move the camera)."""
+        from .render.view import RenderedView
+
+        if not isinstance(view, RenderedView):
+            raise InvalidType(f"view must be a RenderedView, got {type(view).__name__}")
+        view.require("rgb")
+        return replace(view, rgb=self.apply(view.rgb))
+
+    @abstractmethod
+    def _apply(self, rgb: np.ndarray) -> np.ndarray:
+        """The mutated image as a new array (``rgb`` is a checked H×W×3 uint8 image; leave it alone)."""
+
+    @property
+    @abstractmethod
+    def is_identity(self) -> bool:
+        """True when the mutation changes no pixel of any image."""
+
+    @abstractmethod
+    def describe(self) -> str:
+        """Words for reports: ``"brightness +30 levels (+11.8% of full scale)"``."""
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain JSON-ready parameters, with the mutation's ``name``."""
+        return {"name": self.name, **{f.name: getattr(self, f.name) for f in fields(self)}}  # type: ignore[arg-type]
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self))  # type: ignore[arg-type]
+        return f"{type(self).__name__}({args})"
+
+
+@dataclass(frozen=True, repr=False)
+class Brightness(Mutation):
+    """m1: add ``levels`` grey levels (an int in [-255, 255]; 26 ≈ +10 % of full scale) to every channel,
+    saturating at 0 and 255."""
+
+    levels: int = 0
+    name: ClassVar[str] = "brightness"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "levels", _check_int("levels", self.levels, -255, 255))
+
+    @property
+    def is_identity(self) -> bool:
+        return self.levels == 0
+
+    def _apply(self, rgb: np.ndarray) -> np.ndarray:
+        import cv2
+
+        table = np.clip(np.arange(256) + self.levels, 0, 255).astype(np.uint8)
+        return cv2.LUT(np.ascontiguousarray(rgb), table)
+
+    def describe(self) -> str:
+        return f"brightness {self.levels:+d} levels ({self.levels / 255 * 100:+.1f}% of full scale)"
+
+
+@dataclass(frozen=True, repr=False)
+class NoisePatch(Mutation):
+    """m2: one rectangle of uniform random pixels, ``size`` of the width by ``size`` of the height
+    (``size`` in [0, 1]), placed at relative position ``(x, y)`` in [0, 1] (see the module conventions)."""
+
+    size: float = 0.0
+    x: float = 0.5
+    y: float = 0.5
+    seed: int = 0
+    name: ClassVar[str] = "noise_patch"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "size", check_range("size", self.size, 0.0, 1.0) + 0.0)
+        object.__setattr__(self, "x", check_range("x", self.x, 0.0, 1.0) + 0.0)
+        object.__setattr__(self, "y", check_range("y", self.y, 0.0, 1.0) + 0.0)
+        object.__setattr__(self, "seed", _check_int("seed", self.seed, 0, _MAX_SEED))
+
+    @property
+    def is_identity(self) -> bool:
+        return self.size == 0.0
+
+    def _apply(self, rgb: np.ndarray) -> np.ndarray:
+        out = rgb.copy()
+        h, w = out.shape[:2]
+        ph, pw = _patch_pixels(self.size, h), _patch_pixels(self.size, w)
+        top, left = round(self.y * (h - ph)), round(self.x * (w - pw))
+        out[top:top + ph, left:left + pw] = np.random.default_rng(self.seed).integers(
+            0, 256, size=(ph, pw, 3), dtype=np.uint8)
+        return out
+
+    def describe(self) -> str:
+        return (f"noise patch {self.size * 100:.0f}%×{self.size * 100:.0f}% of the image at "
+                f"({self.x:.2f}, {self.y:.2f}), seed {self.seed}")
+
+
+@dataclass(frozen=True, repr=False)
+class BlackPatches(Mutation):
+    """m3: ``count`` black rectangles (default 6), each ``size`` of the width by ``size`` of the height
+    (``size`` in [0, 1]), at positions drawn uniformly from ``seed`` (they may overlap)."""
+
+    size: float = 0.0
+    count: int = 6
+    seed: int = 0
+    name: ClassVar[str] = "black_patches"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "size", check_range("size", self.size, 0.0, 1.0) + 0.0)
+        object.__setattr__(self, "count", _check_int("count", self.count, 0, _MAX_COUNT))
+        object.__setattr__(self, "seed", _check_int("seed", self.seed, 0, _MAX_SEED))
+
+    @property
+    def is_identity(self) -> bool:
+        return self.size == 0.0 or self.count == 0
+
+    def positions(self) -> np.ndarray:
+        """``(count, 2)`` relative ``(x, y)`` positions in [0, 1] of the patches."""
+        return np.random.default_rng(self.seed).random((self.count, 2))
+
+    def _apply(self, rgb: np.ndarray) -> np.ndarray:
+        out = rgb.copy()
+        h, w = out.shape[:2]
+        ph, pw = _patch_pixels(self.size, h), _patch_pixels(self.size, w)
+        for x, y in self.positions():
+            top, left = round(y * (h - ph)), round(x * (w - pw))
+            out[top:top + ph, left:left + pw] = 0
+        return out
+
+    def describe(self) -> str:
+        return f"{self.count} black patches of {self.size * 100:.1f}%×{self.size * 100:.1f}%, seed {self.seed}"
+
+
+# --- Hypothesis strategies: validate eagerly, draw lazily (private composites whose repr is the call) --
+
+
+def brightness(max_levels: int = 128) -> SearchStrategy[Brightness]:
+    """:class:`Brightness` with ``levels`` in ``[-max_levels, max_levels]``; shrinks toward ``levels=0``
+    (integers shrink exactly: a failure is reported at the smallest offset that breaks the SUT)."""
+    from . import _mutation_strategies as s
+
+    return s.brightness(max_levels=_check_int("max_levels", max_levels, 0, 255))
+
+
+def noise_patch(max_size: float = 0.5, min_size: float = 0.0) -> SearchStrategy[NoisePatch]:
+    """:class:`NoisePatch` with ``size`` in ``[min_size, max_size]``, any position and seed; shrinks toward
+    ``size=min_size`` (no change when 0), the top-left position and seed 0."""
+    from . import _mutation_strategies as s
+
+    max_size = check_range("max_size", max_size, 0.0, 1.0)
+    return s.noise_patch(max_size=max_size, min_size=check_range("min_size", min_size, 0.0, max_size))
+
+
+def black_patches(max_size: float = 0.08, count: int = 6) -> SearchStrategy[BlackPatches]:
+    """:class:`BlackPatches` of ``count`` patches with ``size`` in ``[0, max_size]`` and any seed; shrinks
+    toward ``size=0`` (no change) and seed 0."""
+    from . import _mutation_strategies as s
+
+    return s.black_patches(max_size=check_range("max_size", max_size, 0.0, 1.0),
+                           count=_check_int("count", count, 0, _MAX_COUNT))
+
+
+def any_mutation(
+    max_levels: int = 128, max_noise_size: float = 0.5, max_patch_size: float = 0.08,
+) -> SearchStrategy[Mutation]:
+    """One of m1, m2, m3 with the given bounds; shrinks toward ``Brightness(levels=0)`` (no change)."""
+    from . import _mutation_strategies as s
+
+    return s.any_mutation(
+        max_levels=_check_int("max_levels", max_levels, 0, 255),
+        max_noise_size=check_range("max_noise_size", max_noise_size, 0.0, 1.0),
+        max_patch_size=check_range("max_patch_size", max_patch_size, 0.0, 1.0),
+    )

@@ -1,0 +1,39 @@
+"""``n2r poses``: the summary it prints and the transforms.json it writes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from pytest_n2r.cli.main import main
+from pytest_n2r.data import read_transforms_json
+
+from .synthetic import write_transforms
+
+
+def test_poses_prints_a_summary_and_writes_transforms_json(corner, tmp_path, capsys):
+    (corner.images_dir / corner.names[5]).unlink()
+    src = write_transforms(corner)
+    out = tmp_path / "out" / "poses.json"
+    assert main(["poses", str(src), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    for expected in (
+        "6 found, 5 registered, 1 skipped", f"images/{corner.names[5]}", "160x120 fx=150.00 fy=150.00 cx=79.50",
+        "reference", "bounds", "time", f"wrote       {out}",
+    ):
+        assert expected in text, f"{expected!r} missing from the summary:\n{text}"
+    written = read_transforms_json(out)
+    assert [f.path.name for f in written.frames] == corner.names[:5]
+    for frame, c2w in zip(written.frames, corner.c2ws):
+        np.testing.assert_allclose(frame.c2w, c2w, atol=1e-12)
+        assert frame.camera == corner.camera
+    meta = json.loads(out.read_text())
+    ref = float(text.split("reference   ")[1].split()[0])
+    assert abs(meta["n2r"]["reference_length"] - ref) <= 1e-3 * ref
+
+
+def test_poses_error_names_the_source(tmp_path, capsys):
+    assert main(["poses", str(tmp_path / "missing")]) == 2
+    err = capsys.readouterr().err
+    assert "n2r poses: error:" in err and "missing" in err and "does not exist" in err

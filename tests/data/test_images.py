@@ -1,0 +1,107 @@
+"""Image listing and decoding: EXIF orientation, gray/RGBA/16-bit conversion, unreadable files."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from pytest_n2r.data.images import list_images, read_image, read_image_size, iter_readable, to_rgb8
+from pytest_n2r.errors import IngestError
+
+
+def _pattern() -> np.ndarray:
+    """6 rows x 4 columns RGB with a red top-left pixel and a blue bottom-left pixel."""
+    img = np.full((6, 4, 3), 128, np.uint8)
+    img[0, 0] = (255, 0, 0)
+    img[5, 0] = (0, 0, 255)
+    return img
+
+
+def test_rgb_order_is_rgb(tmp_path):
+    Image.fromarray(_pattern()).save(tmp_path / "a.png")
+    img = read_image(tmp_path / "a.png")
+    assert img.dtype == np.uint8 and img.shape == (6, 4, 3)
+    assert img[0, 0].tolist() == [255, 0, 0], "channels are not in RGB order"
+
+
+@pytest.mark.parametrize(
+    ("orientation", "corner"),
+    [(1, (0, 0)), (3, (5, 3)), (6, (0, 5)), (8, (3, 0))],  # where the red top-left pixel ends up (row, col)
+)
+def test_exif_orientation_is_applied(tmp_path, orientation, corner):
+    big = cv2.resize(_pattern(), (40, 60), interpolation=cv2.INTER_NEAREST)
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.fromarray(big).save(tmp_path / "a.jpg", exif=exif, quality=100)
+    img = read_image(tmp_path / "a.jpg")
+    rotated = orientation in (6, 8)
+    assert img.shape[:2] == ((40, 60) if rotated else (60, 40))
+    assert read_image_size(tmp_path / "a.jpg") == (img.shape[1], img.shape[0])
+    r, c = corner
+    r, c = r * 10 + 5, c * 10 + 5
+    assert img[r, c, 0] > 200 and img[r, c, 2] < 60, f"orientation {orientation}: red pixel not at {corner}"
+
+
+def test_gray_rgba_and_16_bit(tmp_path):
+    Image.fromarray(np.full((5, 7), 77, np.uint8)).save(tmp_path / "g.png")
+    assert read_image(tmp_path / "g.png").tolist() == np.full((5, 7, 3), 77).tolist()
+    rgba = np.zeros((5, 7, 4), np.uint8)
+    rgba[..., 0], rgba[..., 3] = 200, 10
+    Image.fromarray(rgba).save(tmp_path / "a.png")
+    out = read_image(tmp_path / "a.png")
+    assert out.shape == (5, 7, 3) and out[0, 0].tolist() == [200, 0, 0]
+    deep = np.zeros((5, 7, 3), np.uint16)
+    deep[..., 2] = 65535
+    deep[..., 1] = 257 * 100
+    cv2.imwrite(str(tmp_path / "d.png"), deep)  # OpenCV writes BGR: channel 2 is red
+    out = read_image(tmp_path / "d.png")
+    assert out.dtype == np.uint8 and out[0, 0].tolist() == [255, 100, 0]
+    gray16 = np.full((5, 7), 65535, np.uint16)
+    cv2.imwrite(str(tmp_path / "g16.png"), gray16)
+    assert read_image(tmp_path / "g16.png")[0, 0].tolist() == [255, 255, 255]
+
+
+def test_float_images_are_clipped_and_scaled():
+    out = to_rgb8(np.array([[[0.5, -1.0, 2.0]]], np.float32), bgr=False)
+    assert out.tolist() == [[[128, 0, 255]]]
+
+
+def test_corrupt_and_missing_files_name_the_file(tmp_path):
+    (tmp_path / "bad.jpg").write_bytes(b"not a jpeg at all")
+    with pytest.raises(IngestError, match=r"bad\.jpg.*cannot be decoded"):
+        read_image(tmp_path / "bad.jpg")
+    with pytest.raises(IngestError, match=r"nope\.png.*does not exist"):
+        read_image(tmp_path / "nope.png")
+    (tmp_path / "empty.png").write_bytes(b"")
+    with pytest.raises(IngestError, match="empty.png"):
+        read_image(tmp_path / "empty.png")
+
+
+def test_list_images_sorted_and_filtered(tmp_path):
+    for name in ("b.JPG", "a.png", ".hidden.png", "notes.txt", "c.tiff"):
+        (tmp_path / name).write_bytes(b"x")
+    (tmp_path / "sub.png").mkdir()
+    assert [p.name for p in list_images(tmp_path)] == ["a.png", "b.JPG", "c.tiff"]
+
+
+def test_list_images_errors(tmp_path):
+    with pytest.raises(IngestError, match="does not exist"):
+        list_images(tmp_path / "missing")
+    with pytest.raises(IngestError, match="holds no images"):
+        list_images(tmp_path)
+    (tmp_path / "f.png").write_bytes(b"x")
+    with pytest.raises(IngestError, match="is not a folder"):
+        list_images(tmp_path / "f.png")
+
+
+def test_unreadable_files_are_skipped_with_a_warning_naming_them(tmp_path):
+    Image.fromarray(_pattern()).save(tmp_path / "a.png")
+    (tmp_path / "b.png").write_bytes(b"garbage")
+    Image.fromarray(_pattern()).save(tmp_path / "c.png")
+    skipped: list = []
+    with pytest.warns(UserWarning, match=r"skipping .*b\.png"):
+        read = list(iter_readable(list_images(tmp_path), skipped))
+    assert [p.name for p, _ in read] == ["a.png", "c.png"]
+    assert skipped[0][0] == "b.png" and "cannot be decoded" in skipped[0][1]

@@ -1,0 +1,80 @@
+"""Structure from motion on a folder of synthetic renders, and its input errors."""
+
+from __future__ import annotations
+
+import time
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+from pytest_n2r.data import ingest
+from pytest_n2r.data.sfm import run_sfm
+from pytest_n2r.errors import IngestError
+from pytest_n2r.geometry import Camera, apply_similarity_to_pose, rotation_angle_deg, umeyama
+
+from .synthetic import make_capture
+
+
+def _errors(views, truth_by_name):
+    src = np.array([v.c2w[:3, 3] for v in views])
+    dst = np.array([truth_by_name[v.name][:3, 3] for v in views])
+    s, R, t = umeyama(src, dst)
+    rot = [rotation_angle_deg(apply_similarity_to_pose(v.c2w, s, R, t)[:3, :3], truth_by_name[v.name][:3, :3])
+           for v in views]
+    spread = np.sqrt(np.mean(np.sum((dst - dst.mean(0)) ** 2, axis=1)))
+    centre = np.linalg.norm(src * s @ R.T + t - dst, axis=1) / spread
+    return max(rot), centre.max()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("matcher", ["exhaustive", "sequential"])
+def test_sfm_recovers_the_rendered_poses(tmp_path, matcher):
+    cap = make_capture(tmp_path, n=10, camera=Camera(320, 240, 280.0, 280.0, 159.5, 119.5))
+    noise = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    cv2.imwrite(str(cap.images_dir / "zz_noise.png"), noise)  # cannot register
+    start = time.perf_counter()
+    result = ingest(cap.images_dir, matcher=matcher, downscale=0.5)
+    took = time.perf_counter() - start
+    assert took < 30, f"SfM of 11 small images took {took:.1f} s"
+    assert [v.name for v in result.views] == cap.names, f"registered: {[v.name for v in result.views]}"
+    assert result.skipped == [("zz_noise.png", "not registered by structure from motion")]
+    assert result.report["matcher"] == matcher and result.views[0].image.shape == (120, 160, 3)
+    rot, centre = _errors(result.views, dict(zip(cap.names, cap.c2ws)))
+    assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"
+    assert result.views[0].camera.fx == pytest.approx(140.0, rel=0.02)  # 280 px at half size
+    assert result.reference_length > 0 and np.all(result.bounds[0] < result.bounds[1])
+
+
+def _folder_of(tmp_path, sizes):
+    tmp_path.mkdir(exist_ok=True)
+    for k, (w, h) in enumerate(sizes):
+        Image.fromarray(np.full((h, w, 3), 100, np.uint8)).save(tmp_path / f"{k}.png")
+    return tmp_path
+
+
+def test_mixed_image_sizes_are_refused_naming_them(tmp_path):
+    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48), (48, 64), (64, 48)])
+    with pytest.raises(IngestError, match=r"mixes image sizes \(64x48: 0.png, 1.png, 3.png; 48x64: 2.png\)"):
+        run_sfm(folder)
+
+
+def test_too_few_readable_images(tmp_path):
+    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
+    (folder / "2.png").write_bytes(b"broken")
+    with pytest.warns(UserWarning, match=r"2\.png"), pytest.raises(IngestError, match="only 2 of 3 images are readable"):
+        run_sfm(folder)
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [({"matcher": "vocab"}, "matcher='vocab'"), ({"max_size": 10}, "max_size=10")])
+def test_bad_settings(tmp_path, kwargs, match):
+    with pytest.raises(IngestError, match=match):
+        run_sfm(_folder_of(tmp_path / "imgs", [(64, 48)] * 3), **kwargs)
+
+
+@pytest.mark.slow
+def test_featureless_images_register_nothing(tmp_path):
+    folder = _folder_of(tmp_path / "imgs", [(64, 48)] * 3)
+    with pytest.raises(IngestError, match="registered"):
+        run_sfm(folder)

@@ -1,0 +1,190 @@
+"""Reading and writing nerfstudio / instant-ngp transforms.json, and every malformed-file error."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pytest_n2r.data import read_transforms_json, write_transforms_json
+from pytest_n2r.errors import IngestError
+
+from .synthetic import write_transforms
+
+
+def test_reads_cameras_poses_and_names(corner):
+    poses = read_transforms_json(write_transforms(corner))
+    assert [f.name for f in poses.frames] == [f"images/{n}" for n in corner.names]
+    assert poses.kind == "transforms.json" and poses.skipped == []
+    for frame, c2w in zip(poses.frames, corner.c2ws):
+        np.testing.assert_allclose(frame.c2w, c2w, atol=1e-12)
+        assert frame.camera == corner.camera  # cx written as cx + 0.5, read back as cx
+        assert frame.path == corner.images_dir / frame.name.split("/")[1]
+
+
+def test_per_frame_intrinsics_win_over_global(corner):
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    meta["frames"][1].update(fl_x=200.0, fl_y=210.0, cx=70.0, k1=0.1)
+    path.write_text(json.dumps(meta))
+    frames = read_transforms_json(path).frames
+    cam = frames[1].camera
+    assert (cam.fx, cam.fy, cam.cx, cam.distortion) == (200.0, 210.0, 69.5, (0.1, 0.0, 0.0, 0.0))
+    assert frames[0].camera == corner.camera
+
+
+def test_camera_angle_fallback_and_centre_default(corner):
+    angle = 2 * math.atan(0.5 * 160 / 150.0)
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    for key in ("fl_x", "fl_y", "cx", "cy"):
+        del meta[key]
+    meta["camera_angle_x"] = angle
+    path.write_text(json.dumps(meta))
+    cam = read_transforms_json(path).frames[0].camera
+    assert cam.fx == pytest.approx(150.0) and cam.fy == pytest.approx(150.0)
+    assert (cam.cx, cam.cy) == (79.5, 59.5)
+
+
+def test_size_from_the_image_when_w_h_absent(corner):
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    del meta["w"], meta["h"]
+    path.write_text(json.dumps(meta))
+    assert read_transforms_json(path).frames[0].camera.size == (160, 120)
+
+
+def test_missing_image_is_skipped_with_a_warning_naming_it(corner):
+    (corner.images_dir / corner.names[2]).unlink()
+    with pytest.warns(UserWarning, match=rf"images/{corner.names[2]}.*frames\[2\] does not exist"):
+        poses = read_transforms_json(write_transforms(corner))
+    assert len(poses.frames) == 5
+    assert poses.skipped[0][0] == f"images/{corner.names[2]}"
+
+
+def test_suffixless_file_path_finds_png(corner):
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    meta["frames"][0]["file_path"] = "./images/" + corner.names[0].removesuffix(".png")
+    path.write_text(json.dumps(meta))
+    assert read_transforms_json(path).frames[0].path.name == corner.names[0]
+
+
+def test_three_by_four_matrix_is_accepted(corner):
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    meta["frames"][0]["transform_matrix"] = meta["frames"][0]["transform_matrix"][:3]
+    path.write_text(json.dumps(meta))
+    np.testing.assert_allclose(read_transforms_json(path).frames[0].c2w, corner.c2ws[0], atol=1e-12)
+
+
+def _break(corner, mutate) -> str:
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    mutate(meta)
+    path.write_text(json.dumps(meta))
+    with pytest.raises(IngestError) as exc:
+        read_transforms_json(path)
+    assert str(path) in str(exc.value), f"error does not name the file: {exc.value}"
+    return str(exc.value)
+
+
+def test_missing_transform_matrix_names_frame_and_field(corner):
+    msg = _break(corner, lambda m: m["frames"][3].pop("transform_matrix"))
+    assert "frames[3]" in msg and "'transform_matrix' is missing" in msg
+
+
+def test_non_finite_matrix_names_frame(corner):
+    def mutate(m):
+        m["frames"][4]["transform_matrix"][0][3] = float("nan")
+    msg = _break(corner, mutate)
+    assert "frames[4]" in msg and "non-finite" in msg
+
+
+def test_non_rigid_matrix_is_refused(corner):
+    def mutate(m):
+        m["frames"][1]["transform_matrix"] = (np.eye(4) * 2).tolist()
+    assert "not a rigid" in _break(corner, mutate)
+
+
+def test_wrong_matrix_shape(corner):
+    def mutate(m):
+        m["frames"][0]["transform_matrix"] = [[1, 0], [0, 1]]
+    assert "shape (2, 2)" in _break(corner, mutate)
+
+
+def test_missing_file_path(corner):
+    msg = _break(corner, lambda m: m["frames"][0].pop("file_path"))
+    assert "frames[0]" in msg and "'file_path'" in msg
+
+
+def test_no_focal_length(corner):
+    def mutate(m):
+        del m["fl_x"], m["fl_y"]
+    assert "'fl_x' or 'camera_angle_x'" in _break(corner, mutate)
+
+
+def test_non_numeric_intrinsic(corner):
+    def mutate(m):
+        m["cx"] = "middle"
+    assert "'cx'='middle' must be a finite number" in _break(corner, mutate)
+
+
+def test_bad_focal_value(corner):
+    def mutate(m):
+        m["fl_x"] = -5.0
+    assert "bad intrinsics" in _break(corner, mutate)
+
+
+def test_missing_frames_field(corner):
+    assert "'frames' is missing or empty" in _break(corner, lambda m: m.pop("frames"))
+
+
+def test_fisheye_is_refused(corner):
+    def mutate(m):
+        m["camera_model"] = "OPENCV_FISHEYE"
+    assert "OPENCV_FISHEYE" in _break(corner, mutate)
+
+
+def test_no_frame_has_its_image(corner):
+    for name in corner.names:
+        (corner.images_dir / name).unlink()
+    with pytest.warns(UserWarning), pytest.raises(IngestError, match="none of the 6 frames has its image"):
+        read_transforms_json(write_transforms(corner))
+
+
+def test_not_json(tmp_path):
+    path = tmp_path / "transforms.json"
+    path.write_text("{not json")
+    with pytest.raises(IngestError, match="not a readable JSON file"):
+        read_transforms_json(path)
+    with pytest.raises(IngestError, match="does not exist"):
+        read_transforms_json(tmp_path / "nope.json")
+
+
+def test_write_then_read_keeps_names_cameras_and_poses(corner, tmp_path):
+    poses = read_transforms_json(write_transforms(corner))
+    out = tmp_path / "elsewhere" / "poses.json"
+    write_transforms_json(out, poses, extra={"n2r": {"reference_length": 3.0}})
+    again = read_transforms_json(out)
+    assert [f.path.resolve() for f in again.frames] == [f.path.resolve() for f in poses.frames]
+    meta = json.loads(out.read_text())
+    assert meta["frames"][0]["file_path"] == f"../images/{corner.names[0]}"
+    assert meta["n2r"] == {"reference_length": 3.0}
+    for a, b in zip(again.frames, poses.frames):
+        assert a.camera == b.camera
+        np.testing.assert_allclose(a.c2w, b.c2w, atol=1e-12)
+    assert not list(out.parent.glob(".*tmp")), "temporary file left behind"
+
+
+def test_write_per_frame_intrinsics_when_cameras_differ(corner, tmp_path):
+    from dataclasses import replace
+
+    poses = read_transforms_json(write_transforms(corner))
+    poses.frames[0] = replace(poses.frames[0], camera=poses.frames[0].camera.resized(80, 60))
+    out = write_transforms_json(tmp_path / "t.json", poses)
+    meta = json.loads(out.read_text())
+    assert "fl_x" not in meta and meta["frames"][0]["w"] == 80
+    assert read_transforms_json(out).frames[0].camera == poses.frames[0].camera

@@ -1,0 +1,149 @@
+"""Transforms τ: Euler round trips, composition and inverse, orthonormality, gimbal lock, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r.geometry import (
+    Transform, check_pose, compose, euler_from_rotation, invert_pose, rotation_from_euler,
+)
+
+from .strategies import angle_diff, pitch, poses, roll_yaw, transforms
+
+
+@given(transforms(max_pitch=89.0))
+def test_transform_matrix_transform_round_trip(tau):
+    back = Transform.from_matrix(tau.matrix())
+    for name in ("roll", "pitch", "yaw"):
+        assert angle_diff(getattr(back, name), getattr(tau, name)) < 1e-9, f"{name}: {tau} -> {back}"
+    np.testing.assert_allclose(back.translation, tau.translation, atol=1e-12)
+
+
+@given(transforms())
+def test_euler_of_any_rotation_rebuilds_it_and_is_canonical(tau):
+    """Even at and near gimbal lock the extracted angles rebuild the same rotation, in canonical ranges."""
+    roll, p, yaw = euler_from_rotation(tau.rotation)
+    assert -180.0 < roll <= 180.0 and -90.0 <= p <= 90.0 and -180.0 < yaw <= 180.0, (roll, p, yaw)
+    err = np.abs(rotation_from_euler(roll, p, yaw) - tau.rotation).max()
+    assert err < 1e-12, f"{tau}: angles {(roll, p, yaw)} rebuild the rotation with error {err:.3g}"
+
+
+@given(transforms())
+def test_compose_with_inverse_is_identity(tau):
+    for M in (tau.matrix() @ tau.inverse().matrix(), tau.inverse().matrix() @ tau.matrix(),
+              compose(tau.matrix(), invert_pose(tau.matrix()))):
+        err = np.abs(M - np.eye(4)).max()
+        assert err < 1e-12, f"{tau}: tau composed with its inverse is off identity by {err:.3g}"
+
+
+@given(transforms(), transforms())
+def test_then_equals_matrix_product(a, b):
+    np.testing.assert_allclose(a.then(b).matrix(), a.matrix() @ b.matrix(), atol=1e-11)
+
+
+@given(poses(), transforms())
+def test_apply_acts_in_the_source_camera_frame(c2w, tau):
+    out = tau.apply(c2w, length=2.0)
+    np.testing.assert_allclose(out[:3, 3], c2w[:3, 3] + c2w[:3, :3] @ (2.0 * tau.translation), atol=1e-12)
+    np.testing.assert_allclose(out[:3, :3], c2w[:3, :3] @ tau.rotation, atol=1e-12)
+
+
+@settings(max_examples=3, deadline=None)
+@given(st.lists(transforms(), min_size=1, max_size=5))
+def test_rotation_stays_orthonormal_after_10000_compositions(steps):
+    M = np.eye(4)
+    for k in range(10_000):
+        M = compose(M, steps[k % len(steps)].matrix())
+    R = M[:3, :3]
+    err = np.linalg.norm(R.T @ R - np.eye(3))
+    assert err < 1e-12, f"|R^T R - I| = {err:.3g} after 10 000 compositions"
+    assert np.linalg.det(R) > 0
+
+
+def test_rotation_order_is_yaw_then_pitch_then_roll():
+    a, b, c = math.radians(10), math.radians(20), math.radians(30)
+    Ry = np.array([[math.cos(c), 0, math.sin(c)], [0, 1, 0], [-math.sin(c), 0, math.cos(c)]])
+    Rx = np.array([[1, 0, 0], [0, math.cos(b), -math.sin(b)], [0, math.sin(b), math.cos(b)]])
+    Rz = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    np.testing.assert_allclose(rotation_from_euler(10, 20, 30), Ry @ Rx @ Rz, atol=1e-15)
+
+
+@pytest.mark.parametrize("p", [90.0, -90.0])
+@given(roll=roll_yaw, yaw=roll_yaw)
+def test_gimbal_lock_gives_finite_angles_that_rebuild_the_rotation(p, roll, yaw):
+    R = rotation_from_euler(roll, p, yaw)
+    angles = euler_from_rotation(R)
+    assert all(math.isfinite(a) for a in angles), angles
+    assert angles[1] == pytest.approx(p, abs=1e-6)
+    assert np.abs(rotation_from_euler(*angles) - R).max() < 1e-12
+    tau = Transform(roll=roll, pitch=p, yaw=yaw)
+    assert np.all(np.isfinite(tau.inverse().matrix()))
+
+
+@given(pitch)
+def test_pitch_alone_round_trips_exactly_enough(p):
+    assert Transform.from_matrix(Transform(pitch=p).matrix()).pitch == pytest.approx(p, abs=1e-9)
+
+
+@pytest.mark.parametrize("name", ["roll", "pitch", "yaw", "x", "y", "z"])
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_non_finite_transform_raises_value_error_naming_the_argument(name, bad):
+    with pytest.raises(ValueError, match=rf"\b{name}=") as exc:
+        Transform(**{name: bad})
+    assert "finite" in str(exc.value)
+
+
+@pytest.mark.parametrize("name", ["roll", "pitch", "yaw"])
+def test_out_of_range_angle_raises_value_error_naming_it(name):
+    with pytest.raises(ValueError, match=rf"{name}=400.0 is out of range"):
+        Transform(**{name: 400})
+
+
+def test_wrong_types_raise_type_error():
+    with pytest.raises(TypeError, match="yaw="):
+        Transform(yaw="10")
+    with pytest.raises(TypeError, match="roll="):
+        rotation_from_euler(True, 0, 0)
+
+
+@pytest.mark.parametrize("name", ["roll", "pitch", "yaw"])
+def test_rotation_from_euler_rejects_nan(name):
+    kwargs = {"roll": 0.0, "pitch": 0.0, "yaw": 0.0, name: math.nan}
+    with pytest.raises(ValueError, match=name):
+        rotation_from_euler(**kwargs)
+
+
+def test_check_pose_names_the_problem():
+    with pytest.raises(ValueError, match="c2w contains 1 non-finite"):
+        M = np.eye(4)
+        M[0, 3] = np.nan
+        check_pose(M)
+    with pytest.raises(ValueError, match="not a rotation"):
+        check_pose(np.diag([1.0, 1.0, -1.0, 1.0]))
+    with pytest.raises(ValueError, match="last row"):
+        M = np.eye(4)
+        M[3, 0] = 1
+        check_pose(M)
+    with pytest.raises(TypeError, match=r"shape \(4 4\)"):
+        check_pose(np.eye(3))
+
+
+def test_from_matrix_rejects_bad_length():
+    with pytest.raises(ValueError, match="length"):
+        Transform.from_matrix(np.eye(4), length=0.0)
+    with pytest.raises(ValueError, match="length"):
+        Transform(x=1).matrix(length=math.nan)
+
+
+@pytest.mark.parametrize("p", [90 - 3.2e-8, -90 + 3.2e-8, 90 - 1e-12, 90 - 1e-5])
+@given(roll=roll_yaw, yaw=roll_yaw)
+def test_near_gimbal_lock_euler_rebuilds_rotation_to_round_off(p, roll, yaw):
+    """Regression: a gimbal-lock threshold of cos(pitch) <= 1e-9 rebuilt R with errors up to 2e-9."""
+    R = rotation_from_euler(roll, p, yaw)
+    err = np.abs(rotation_from_euler(*euler_from_rotation(R)) - R).max()
+    assert err < 1e-12, f"pitch={p}: rebuild error {err:.3g}"

@@ -1,0 +1,57 @@
+"""Depth sampling: exact on planes (inverse depth is affine in pixels), never in between at depth edges."""
+
+from __future__ import annotations
+
+import hypothesis.strategies as st
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+from pytest_n2r.geometry import Camera, Transform, camera_rays
+from pytest_n2r.metrics.correspondence import inside_image, sample_depth
+
+from .scenes import CAMERA
+
+
+def plane_depth(camera: Camera, c2w: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
+    """Exact z-depth of the world plane z = 4 seen from ``c2w`` (at pixel centres or at ``uv``)."""
+    origins, dirs = camera_rays(camera, c2w, uv)
+    return (4.0 - origins[..., 2]) / dirs[..., 2]
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    tau=st.builds(Transform, pitch=st.floats(-30, 30), yaw=st.floats(-30, 30), roll=st.floats(-90, 90),
+                  x=st.floats(-1, 1), z=st.floats(-1, 1)),
+    uv=st.lists(st.tuples(st.floats(-0.5, CAMERA.width - 0.5), st.floats(-0.5, CAMERA.height - 0.5)),
+                min_size=1, max_size=20),
+)
+def test_sampled_depth_is_exact_on_a_plane_up_to_the_border(tau, uv):
+    c2w = tau.apply(np.eye(4))
+    uv = np.array(uv)
+    depth = plane_depth(CAMERA, c2w)  # float64: the property is about interpolation, not storage
+    exact = plane_depth(CAMERA, c2w, uv)
+    np.testing.assert_allclose(sample_depth(depth, uv, rel_tolerance=1.0), exact, rtol=1e-9)
+
+
+@settings(max_examples=50)
+@given(u=st.floats(-0.5, 9.5), v=st.floats(-0.5, 5.5), near=st.floats(0.5, 2), far=st.floats(3, 100))
+def test_at_a_depth_edge_the_sample_is_foreground_or_background_never_between(u, v, near, far):
+    depth = np.full((6, 10), far)
+    depth[:, :5] = near  # a vertical depth edge between columns 4 and 5
+    d = sample_depth(depth, np.array([[u, v]]), rel_tolerance=0.05)[0]
+    expected = near if u < 4.5 else far  # the nearest pixel's side (u = 4.5 rounds to column 5)
+    assert d == pytest.approx(expected, rel=1e-12), d
+
+
+def test_one_pixel_wide_images_and_bad_depths():
+    depth = np.array([[2.0], [2.0], [np.inf]])
+    out = sample_depth(depth, np.array([[0.0, 0.0], [0.2, 1.0], [0.0, 2.0]]))
+    assert out[0] == 2.0 and out[1] == 2.0 and np.isnan(out[2])
+    assert np.isnan(sample_depth(np.zeros((3, 3)), np.array([[1.0, 1.0]]))[0])
+
+
+def test_inside_image_uses_pixel_borders():
+    cam = Camera(4, 3, 1.0, 1.0, 1.5, 1.0)
+    uv = np.array([[-0.5, -0.5], [3.5, 2.5], [-0.51, 0.0], [0.0, 2.51], [np.nan, 0.0]])
+    assert inside_image(uv, cam).tolist() == [True, True, False, False, False]

@@ -1,0 +1,324 @@
+"""Repeatability and interest-point spread on hand-built plane scenes with exact depth."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import hypothesis.strategies as st
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis.errors import Unsatisfiable
+
+from pytest_n2r.errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
+from pytest_n2r.geometry import Transform
+from pytest_n2r.metrics._matching import mutual_nearest
+from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping
+from pytest_n2r.metrics.keypoints import coverage_mask, interest_point_spread, repeatability
+
+from .scenes import CAMERA, WALL, Plane, pair, pixels_of, render_planes, world_points_on_wall
+
+WALL_PLANE = (np.array(WALL.normal), WALL.offset)
+small_motion = st.builds(
+    Transform,
+    roll=st.floats(-5, 5), pitch=st.floats(-5, 5), yaw=st.floats(-5, 5),
+    x=st.floats(-0.3, 0.3), y=st.floats(-0.3, 0.3), z=st.floats(-0.5, 0.5),
+)
+rotation = st.builds(Transform, roll=st.floats(-20, 20), pitch=st.floats(-15, 15), yaw=st.floats(-15, 15))
+pixels = st.tuples(st.floats(0, CAMERA.width - 1), st.floats(0, CAMERA.height - 1))
+pixel_sets = st.lists(pixels, min_size=1, max_size=40).map(lambda pts: np.array(pts, dtype=np.float64))
+
+
+def grid_points(step: float = 12.0, margin: float = 10.0) -> np.ndarray:
+    """Sparse source keypoints (further apart than any tolerance used here)."""
+    u, v = np.meshgrid(np.arange(margin, CAMERA.width - margin, step), np.arange(margin, CAMERA.height - margin, step))
+    return np.column_stack([u.ravel(), v.ravel()])
+
+
+@settings(max_examples=25, deadline=None)
+@given(points=pixel_sets, form=st.sampled_from(["schmid", "symmetric"]))
+def test_identical_outputs_on_the_same_view_score_the_ideal(points, form):
+    view, same = pair(Transform())
+    result = repeatability(form=form)(points, points.copy(), view, same)
+    assert result.valid and result.score == 1.0, result
+    assert interest_point_spread()(points, points, view, same).score == 1.0
+
+
+@settings(max_examples=25, deadline=None)
+@given(tau=small_motion, a=pixel_sets, b=pixel_sets, form=st.sampled_from(["schmid", "symmetric"]))
+def test_scores_stay_in_range(tau, a, b, form):
+    source, follow = pair(tau)
+    for metric in (repeatability(px=3, form=form), interest_point_spread(radius=4)):
+        result = metric(a, b, source, follow)
+        assert not result.valid or 0.0 <= result.score <= 1.0, (metric, result)
+        assert not result.valid or result.deviation == pytest.approx(1.0 - result.score)
+
+
+@settings(max_examples=25, deadline=None)
+@given(a=pixel_sets, b=pixel_sets)
+def test_symmetric_form_is_symmetric_on_one_view(a, b):
+    view, same = pair(Transform())
+    metric = repeatability(px=3, form="symmetric")
+    assert metric(a, b, view, same).score == pytest.approx(metric(b, a, same, view).score)
+
+
+@settings(max_examples=25, deadline=None)
+@given(tau=rotation, seed=st.integers(0, 2**16), jitter=st.floats(0, 3))
+def test_depth_mapping_under_pure_rotation_equals_the_rotation_homography(tau, seed, jitter):
+    rng = np.random.default_rng(seed)
+    source, follow = pair(tau)
+    p = grid_points()
+    q = pixels_of(world_points_on_wall(rng, 60), follow)  # unrelated points, some near mapped ones
+    q = np.vstack([q, HomographyMapping.from_views(source, follow).to_follow(p).uv[::2]])
+    q = q[np.all(np.isfinite(q), axis=1)] + rng.uniform(-jitter, jitter, size=(1, 2))
+    by_depth = repeatability(px=2)(p, q, source, follow)
+    by_rotation = repeatability(px=2, mapping="homography")(p, q, source, follow)
+    assert by_depth.valid == by_rotation.valid
+    if by_depth.valid:
+        assert by_depth.score == pytest.approx(by_rotation.score, abs=1e-12), (by_depth, by_rotation)
+
+
+@settings(max_examples=25, deadline=None)
+@given(tau=small_motion, seed=st.integers(0, 2**16))
+def test_depth_variant_equals_plane_homography_variant_on_a_plane(tau, seed):
+    rng = np.random.default_rng(seed)
+    source, follow = pair(tau)
+    p = pixels_of(world_points_on_wall(rng, 80), source)
+    q = pixels_of(world_points_on_wall(rng, 80), follow)
+    q = q[np.all(np.isfinite(q), axis=1)]
+    by_depth = DepthMapping(source, follow).to_follow(p)
+    by_plane = HomographyMapping.from_views(source, follow, WALL_PLANE).to_follow(p)
+    np.testing.assert_array_equal(by_depth.visible, by_plane.visible)
+    np.testing.assert_allclose(by_depth.uv, by_plane.uv, atol=1e-6, equal_nan=True)
+    for metric_depth, metric_plane in [
+        (repeatability(px=3), repeatability(px=3, mapping="homography", plane=WALL_PLANE)),
+        (interest_point_spread(), interest_point_spread(mapping="homography", plane=WALL_PLANE)),
+    ]:
+        a, b = metric_depth(p, q, source, follow), metric_plane(p, q, source, follow)
+        assert a.valid == b.valid
+        if a.valid:
+            assert abs(a.score - b.score) <= 1e-6, (a, b)
+
+
+def test_points_shifted_by_3px_fail_at_2px_and_pass_at_4px():
+    source, follow = pair(Transform(yaw=4, x=0.1))
+    p = grid_points()
+    q = DepthMapping(source, follow).to_follow(p)
+    q_shifted = q.uv[q.visible] + [3.0, 0.0]
+    with pytest.raises(AssertionError, match=r"score 0\.0000 deviates 1\.0000 from the ideal 1"):
+        repeatability(px=2).assert_within(p, q_shifted, source, follow, eps=0.2)
+    result = repeatability(px=4).assert_within(p, q_shifted, source, follow, eps=0.2)
+    assert result.score > 0.9, result  # only points pushed out of the source image are lost
+
+
+def test_occluded_points_are_excluded():
+    """A square occluder in front of the wall hides, in the follow-up view, wall points the source saw."""
+    occluder = Plane((0.0, 0.0, 1.0), -2.0, centre=(0.35, 0.0, 2.0), half=0.25)
+    scene = [WALL, occluder]
+    source = render_planes(np.eye(4), scene)
+    follow = render_planes(Transform(x=0.5).apply(np.eye(4)), scene)
+    rng = np.random.default_rng(1)
+    X = world_points_on_wall(rng, 400, half=0.8)
+    # keep wall points the source sees (not behind the occluder from the origin)
+    seen = np.abs(X[:, :2] * 0.5 - [0.35, 0.0]).max(axis=1) > 0.25 + 1e-3
+    X = X[seen]
+    # a wall point is hidden from the follow-up camera at (0.5, 0, 0) when its ray crosses the square
+    hit = np.array([0.5, 0.0]) + (X[:, :2] - [0.5, 0.0]) * 0.5
+    hidden = np.abs(hit - [0.35, 0.0]).max(axis=1) <= 0.25
+    assert 10 < hidden.sum() < len(X) - 10, "the scene must hide some points and not others"
+    p = pixels_of(X, source)
+    mapped = DepthMapping(source, follow).to_follow(p)
+    margin = np.abs(np.abs(hit - [0.35, 0.0]).max(axis=1) - 0.25) > 0.01  # away from the occluder's edge
+    np.testing.assert_array_equal(mapped.visible[margin], ~hidden[margin])
+    q = pixels_of(X[~hidden], follow)  # the detector finds every visible point again
+    result = repeatability(px=1)(p, q, source, follow)
+    assert result.score == pytest.approx(1.0), result
+    assert result.details["rejected_occluded"] >= hidden[margin].sum(), result.details
+    # the homography variant ignores the occluder: the hidden source points count as not repeated
+    # (visible in the symmetric form; the min(n1, n2) form only looks at the smaller set)
+    naive = repeatability(px=1, mapping="homography", plane=WALL_PLANE, form="symmetric")(p, q, source, follow)
+    assert naive.score == pytest.approx(2 * len(q) / (len(p) + len(q))), naive
+
+
+def test_low_opacity_points_are_rejected():
+    patch = Plane((0.0, 0.0, 1.0), -4.0, centre=(0.0, 0.0, 4.0), half=1.0)  # a finite wall; sky around it
+    source, follow = pair(Transform(yaw=8), [patch])
+    p = np.array([[2.0, 2.0], [80.0, 60.0]])  # a corner on empty sky, the centre on the wall
+    mapped = DepthMapping(source, follow).to_follow(p)
+    assert mapped.visible.tolist() == [False, True]
+    assert mapped.rejected["low_opacity"] == 1
+
+
+def test_edge_cases_of_empty_outputs():
+    source, follow = pair(Transform(yaw=5))
+    none = np.zeros((0, 2))
+    both_empty = repeatability()(none, [], source, follow)
+    assert (both_empty.valid, both_empty.score) == (True, 1.0)
+    assert repeatability()(grid_points(), none, source, follow).score == 0.0
+    assert interest_point_spread()(none, grid_points(), source, follow).score == 0.0
+
+
+def test_no_point_in_the_common_region_is_not_a_test():
+    source, follow = pair(Transform(yaw=80))  # the views no longer overlap
+    p = grid_points()
+    result = repeatability()(p, p, source, follow)
+    assert not result.valid and math.isnan(result.score) and "region both views see" in result.details["reason"]
+    assert not result.holds(1.0)
+    with pytest.raises(MetricUndefined, match="repeatability.*undefined for this pair"):
+        repeatability().assert_within(p, p, source, follow, eps=0.5)
+
+
+def test_hypothesis_rejects_pairs_that_test_nothing():
+    source, follow = pair(Transform(yaw=80))
+    p = grid_points()
+
+    @settings(max_examples=5, database=None)
+    @given(st.just(None))
+    def always_undefined(_):
+        repeatability().assert_within(p, p, source, follow, eps=0.5)
+
+    with pytest.raises(Unsatisfiable):
+        always_undefined()
+
+
+def test_accepted_keypoint_forms_agree():
+    source, follow = pair(Transform(pitch=3))
+    p = grid_points()
+    q = DepthMapping(source, follow).to_follow(p)
+    q = q.uv[q.visible]
+    keypoints = [cv2.KeyPoint(float(u), float(v), 3.0) for u, v in q]
+    with_scores = np.column_stack([q, np.ones(len(q)), np.zeros(len(q))])
+    scores = {repeatability()(p, out, source, follow).score for out in (q, q.tolist(), keypoints, with_scores)}
+    assert scores == {1.0}
+
+
+@pytest.mark.parametrize(
+    ("follow_output", "match"),
+    [
+        (np.array([[1.0, np.nan], [np.nan, 2.0], [np.nan, 3.0]]), "follow-up output contains 3 NaN values"),
+        (np.array([[1.0, np.inf]]), "follow-up output contains 1 infinite values"),
+        (None, r"follow-up output is None; expected keypoints as an \(N, 2\) array"),
+        (np.zeros((4, 1)), r"follow-up output has shape \(4, 1\); expected keypoints"),
+        (np.zeros(5), r"follow-up output has shape \(5,\)"),
+        ("points", "follow-up output of type str is not numeric"),
+    ],
+)
+def test_bad_sut_outputs_name_the_output(follow_output, match):
+    source, follow = pair(Transform())
+    with pytest.raises(SUTOutputError, match=match):
+        repeatability()(grid_points(), follow_output, source, follow)
+
+
+def test_bad_arguments_and_views():
+    source, follow = pair(Transform())
+    with pytest.raises(InvalidArgument, match=r"px=-1\.0 must be > 0"):
+        repeatability(px=-1)
+    with pytest.raises(InvalidArgument, match="mapping='flow'; expected one of"):
+        repeatability(mapping="flow")
+    with pytest.raises(InvalidArgument, match="plane=.* only used with mapping='homography'"):
+        repeatability(plane=WALL_PLANE)
+    with pytest.raises(InvalidType, match="needs the source RenderedView"):
+        repeatability()(grid_points(), grid_points(), None, follow)
+    rgb_only = type(source)(camera=source.camera, c2w=source.c2w, rgb=np.zeros((120, 160, 3), np.uint8))
+    with pytest.raises(InvalidArgument, match="rendered without depth, opacity"):
+        repeatability()(grid_points(), grid_points(), rgb_only, follow)
+    assert repeatability(mapping="homography")(grid_points(), grid_points(), rgb_only, rgb_only).score == 1.0
+    assert repeatability().needs == ("depth", "opacity") and repeatability(mapping="homography").needs == ()
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**16), n_a=st.integers(0, 300), n_b=st.integers(0, 300), radius=st.floats(0.5, 20))
+def test_numpy_matching_equals_kdtree_matching(seed, n_a, n_b, radius):
+    rng = np.random.default_rng(seed)  # continuous coordinates: no equidistant ties to break differently
+    a, b = rng.uniform(0, 100, size=(n_a, 2)), rng.uniform(0, 100, size=(n_b, 2))
+    fast = {tuple(r) for r in mutual_nearest(a, b, radius)}
+    slow = {tuple(r) for r in mutual_nearest(a, b, radius, use_scipy=False)}
+    assert fast == slow
+    for i, j in fast:
+        assert np.hypot(*(a[i] - b[j])) <= radius
+
+
+def test_coverage_mask_is_a_disc_of_the_stated_radius():
+    mask = coverage_mask(np.array([[80.0, 60.0]]), CAMERA, 10.0)
+    assert abs(mask.sum() - math.pi * 100) < 0.05 * math.pi * 100
+    assert mask[60, 90] and not mask[60, 91] and mask[50, 80] and not mask[49, 80]
+    assert coverage_mask(np.array([[0.0, 0.0]]), CAMERA, 3.0).sum() < 0.3 * math.pi * 9 + 4  # clipped
+
+
+def test_spread_of_far_apart_sets_is_zero_and_grows_with_overlap():
+    view, same = pair(Transform())
+    a = np.array([[20.0, 20.0]])
+    metric = interest_point_spread(radius=5)
+    assert metric(a, a + [40.0, 0.0], view, same).score == 0.0
+    half = metric(a, a + [5.0, 0.0], view, same).score
+    assert 0.2 < half < 0.6 and metric(a, a + [1.0, 0.0], view, same).score > half
+
+
+@settings(max_examples=40, deadline=None)
+@given(points=st.lists(st.tuples(st.floats(-10, 170), st.floats(-10, 130)), max_size=20), radius=st.floats(0.3, 12))
+def test_coverage_mask_equals_the_brute_force_definition(points, radius):
+    pts = np.array(points, dtype=np.float64).reshape(-1, 2)
+    v, u = np.mgrid[0:CAMERA.height, 0:CAMERA.width]
+    d2 = (u[..., None] - pts[:, 0]) ** 2 + (v[..., None] - pts[:, 1]) ** 2
+    expected = np.any(d2 <= (radius + 1e-6) ** 2, axis=-1)
+    np.testing.assert_array_equal(coverage_mask(pts, CAMERA, radius), expected)
+
+
+@pytest.mark.parametrize(
+    ("tau", "plane"),
+    [(Transform(yaw=180), None), (Transform(yaw=150), WALL_PLANE), (Transform(z=5), WALL_PLANE)],
+    ids=["turned-around", "turned-away-from-wall", "moved-through-wall"],
+)
+def test_homography_rejects_points_behind_a_camera(tau, plane):
+    """A bare homography maps points behind the camera to plausible pixels; the views tell them apart."""
+    source, follow = pair(tau)
+    mapping = HomographyMapping.from_views(source, follow, plane)
+    bare = HomographyMapping(mapping.H, source.camera, follow.camera)
+    p = grid_points(step=7)
+    assert bare.to_follow(p).visible.any() or bare.to_source(p).visible.any(), "the case must be a trap"
+    assert not mapping.to_follow(p).visible.any() and not mapping.to_source(p).visible.any()
+    result = repeatability(mapping="homography", plane=plane)(p, p, source, follow)
+    assert not result.valid, result
+
+
+def test_bad_planes():
+    source, follow = pair(Transform())
+    with pytest.raises(InvalidArgument, match="plane normal is the zero vector"):
+        HomographyMapping.from_views(source, follow, (np.zeros(3), 1.0))
+    with pytest.raises(InvalidType, match="must be a pair"):
+        HomographyMapping.from_views(source, follow, np.ones(3))
+    with pytest.raises(InvalidArgument, match="plane normal is the zero vector"):
+        repeatability(mapping="homography", plane=([0, 0, 0], 1.0))  # checked when the metric is built
+    with pytest.raises(InvalidType, match=r"plane normal must have shape \(3\)"):
+        interest_point_spread(mapping="homography", plane=([0, 1], 1.0))
+    with pytest.raises(InvalidArgument, match="H is singular"):
+        HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)
+
+
+def test_views_of_different_resolutions():
+    """The follow-up may be rendered with another camera (a smaller size): points map through both."""
+    small = CAMERA.resized(80, 60)
+    source = render_planes(np.eye(4), [WALL])
+    follow = render_planes(Transform(yaw=3, x=0.1).apply(np.eye(4)), [WALL], small)
+    X = world_points_on_wall(np.random.default_rng(3), 30, half=0.8)
+    p, q = pixels_of(X, source), pixels_of(X, follow)
+    assert repeatability(px=0.5)(p, q, source, follow).score == 1.0
+    assert repeatability(px=0.5)(q, p, follow, source).score == 1.0
+
+
+def test_correspondences_explain_the_score():
+    source, follow = pair(Transform(yaw=6, x=0.1))
+    p = grid_points()
+    mapped = DepthMapping(source, follow).to_follow(p)
+    q = np.vstack([mapped.uv[mapped.visible][::2] + [1.5, 0.0], [[3.0, 3.0]]])  # half found again, one extra
+    metric = repeatability(px=2)
+    c = metric.correspondences(p, q, source, follow)
+    result = metric(p, q, source, follow)
+    assert len(c.matches) == result.details["n_matched"] == (mapped.visible.sum() + 1) // 2
+    i, j = c.matches.T
+    assert np.all(np.hypot(*(c.source_in_follow[i] - c.follow[j]).T) <= 2.0)
+    assert c.source_visible[i].all() and c.follow_visible[j].all()
+    assert np.isnan(c.source_in_follow[~c.source_visible]).all()
+    assert result.score == pytest.approx(len(c.matches) / min(c.source_visible.sum(), c.follow_visible.sum()))
+    assert len(interest_point_spread().correspondences(p, q, source, follow).matches) == 0
