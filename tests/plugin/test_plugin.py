@@ -414,3 +414,24 @@ def test_no_scene_configured_and_no_demo_scene_skips_with_instructions(n2r_proje
     result = n2r_project.run("-rs")
     result.assert_outcomes(skipped=1)
     result.stdout.fnmatch_lines(["*no scene configured for pytest-n2r: pass --n2r-scene PATH*n2r_scenes*"])
+
+
+def test_a_metric_by_name_from_the_registry_with_a_corner_detector(n2r_project):
+    n2r_project.write("""
+import cv2
+
+
+def corners(rgb):
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    found = cv2.goodFeaturesToTrack(gray, 50, 0.05, 4)
+    return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2)
+
+
+@metamorphic("repeatability", eps=0.6, transform=transforms(yaw=2), examples=8)
+def test_corners(n2r_scene):
+    return corners
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-size", "160x120")
+    result.assert_outcomes(passed=1)
+    line = n2r_project.summary(result, "test_corners[plane]")
+    assert "8 examples" in line and "0 inconsistent" in line, line
