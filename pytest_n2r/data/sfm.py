@@ -20,6 +20,8 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +74,8 @@ def run_sfm(
             scale = min(1.0, max_size / max(w, h))
             small = resize_image(image, max(1, round(w * scale)), max(1, round(h * scale)))
             work_name = f"{k:06d}.png"
-            cv2.imwrite(str(work / "images" / work_name), cv2.cvtColor(small, cv2.COLOR_RGB2BGR))
+            if not cv2.imwrite(str(work / "images" / work_name), cv2.cvtColor(small, cv2.COLOR_RGB2BGR)):
+                raise IngestError(f"cannot write a downscaled copy of {str(file)!r} to the temporary folder {tmp!r}")
             names[work_name] = file
         if len(names) < 3:
             raise IngestError(
@@ -90,39 +93,35 @@ def run_sfm(
         times["read"] = time.perf_counter() - start
 
         db = work / "database.db"
-        start = time.perf_counter()
         reader = pycolmap.ImageReaderOptions()
         reader.camera_model = "SIMPLE_RADIAL"
         extraction = pycolmap.FeatureExtractionOptions()
         extraction.num_threads = num_threads
         extraction.sift.max_num_features = max_features
         extraction.sift.first_octave = 0  # no 2x upsampling: 3-4x faster, enough features at <= 960 px
-        _quiet(pycolmap)
-        pycolmap.extract_features(
-            db, work / "images", camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
-            extraction_options=extraction, device=pycolmap.Device.cpu,
-        )
-        times["features"] = time.perf_counter() - start
+        with _stage("features", images_dir, times):
+            pycolmap.extract_features(
+                db, work / "images", camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
+                extraction_options=extraction, device=pycolmap.Device.cpu,
+            )
 
-        start = time.perf_counter()
         matching = pycolmap.FeatureMatchingOptions()
         matching.num_threads = num_threads
         used = matcher if matcher != "auto" else ("exhaustive" if len(names) <= EXHAUSTIVE_MAX_IMAGES else "sequential")
-        if used == "exhaustive":
-            pycolmap.match_exhaustive(db, matching_options=matching, device=pycolmap.Device.cpu)
-        else:
-            pycolmap.match_sequential(db, matching_options=matching, device=pycolmap.Device.cpu)
-        times["matching"] = time.perf_counter() - start
+        with _stage("matching", images_dir, times):
+            if used == "exhaustive":
+                pycolmap.match_exhaustive(db, matching_options=matching, device=pycolmap.Device.cpu)
+            else:
+                pycolmap.match_sequential(db, matching_options=matching, device=pycolmap.Device.cpu)
 
-        start = time.perf_counter()
         options = pycolmap.IncrementalPipelineOptions()
         options.num_threads = num_threads
         options.random_seed = seed
         options.mapper.random_seed = seed
         options.triangulation.random_seed = seed
         options.extract_colors = False
-        models = pycolmap.incremental_mapping(db, work / "images", work / "sparse", options=options)
-        times["mapping"] = time.perf_counter() - start
+        with _stage("mapping", images_dir, times):
+            models = pycolmap.incremental_mapping(db, work / "images", work / "sparse", options=options)
 
     if not models:
         raise IngestError(
@@ -160,9 +159,21 @@ def run_sfm(
                    report=report)
 
 
-def _quiet(pycolmap) -> None:
-    """Keep COLMAP's INFO and WARNING log off stderr (errors still show); our report says what happened."""
+@contextmanager
+def _stage(name: str, images_dir: Path, times: dict[str, float]) -> Iterator[None]:
+    """Time a pycolmap stage into ``times[name]``, keep COLMAP's INFO and WARNING log off stderr (our
+    report says what happened; errors still show), and turn its exceptions into :class:`IngestError`."""
+    import pycolmap
+
+    level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 2
+    start = time.perf_counter()
     try:
-        pycolmap.logging.minloglevel = 2
-    except AttributeError:  # pragma: no cover - older pycolmap
-        pass
+        yield
+    except IngestError:
+        raise
+    except Exception as exc:  # pycolmap raises RuntimeError/ValueError carrying C++ check messages
+        raise IngestError(f"structure from motion on {str(images_dir)!r} failed during {name}: {exc}") from None
+    finally:
+        pycolmap.logging.minloglevel = level
+        times[name] = time.perf_counter() - start

@@ -78,3 +78,17 @@ def test_featureless_images_register_nothing(tmp_path):
     folder = _folder_of(tmp_path / "imgs", [(64, 48)] * 3)
     with pytest.raises(IngestError, match="registered"):
         run_sfm(folder)
+
+
+def test_pycolmap_failures_become_ingest_errors_naming_the_stage(tmp_path, monkeypatch):
+    import pycolmap
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("[matching.cc:1] Check failed: out of memory")
+
+    monkeypatch.setattr(pycolmap, "match_exhaustive", broken)
+    level = pycolmap.logging.minloglevel
+    folder = _folder_of(tmp_path / "imgs", [(64, 48)] * 3)
+    with pytest.raises(IngestError, match=r"imgs' failed during matching: .*out of memory"):
+        run_sfm(folder)
+    assert pycolmap.logging.minloglevel == level, "COLMAP's log level was not restored"
