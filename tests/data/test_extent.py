@@ -43,7 +43,7 @@ def test_no_point_seen_is_an_error():
         scene_bounds(np.zeros((0, 3)), [CAM], [np.eye(4)])
 
 
-@settings(max_examples=25)
+@settings(deadline=None, max_examples=25)
 @given(st.integers(0, 2**32 - 1))
 def test_bounds_ignore_stray_points_and_are_padded(seed):
     rng = np.random.default_rng(seed)

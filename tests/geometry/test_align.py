@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, umeyama
@@ -12,6 +12,7 @@ from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, um
 from .strategies import poses, transforms
 
 
+@settings(deadline=None)
 @given(transforms(), st.floats(0.01, 100.0), st.integers(0, 2**32 - 1))
 def test_umeyama_recovers_a_similarity(tau, scale, seed):
     src = np.random.default_rng(seed).normal(size=(12, 3))
@@ -23,6 +24,7 @@ def test_umeyama_recovers_a_similarity(tau, scale, seed):
     np.testing.assert_allclose(t2, t, atol=1e-8 * (1 + scale))
 
 
+@settings(deadline=None)
 @given(poses(), transforms(), st.floats(0.1, 10.0))
 def test_aligned_pose_moves_with_the_world(c2w, tau, s):
     out = apply_similarity_to_pose(c2w, s, tau.rotation, tau.translation)

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.geometry import Camera, backproject, project
@@ -14,6 +14,7 @@ from pytest_n2r.geometry import Camera, backproject, project
 from .strategies import cameras
 
 
+@settings(deadline=None)
 @given(cameras(), st.integers(8, 3000), st.integers(8, 3000), st.floats(0.0, 1.0), st.floats(0.0, 1.0))
 def test_resized_keeps_image_borders_where_they_were(cam, w, h, fu, fv):
     """A point seen at a fraction of the image width/height stays at that fraction after resizing."""
@@ -24,6 +25,7 @@ def test_resized_keeps_image_borders_where_they_were(cam, w, h, fu, fv):
     np.testing.assert_allclose(uv[0], [-0.5 + fu * w, -0.5 + fv * h], atol=1e-7 * max(w, h, cam.width, cam.height))
 
 
+@settings(deadline=None)
 @given(cameras(), st.integers(8, 3000), st.integers(8, 3000))
 def test_resized_there_and_back_is_identity(cam, w, h):
     back = cam.resized(w, h).resized(cam.width, cam.height)

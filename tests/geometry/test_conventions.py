@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 
 from pytest_n2r.geometry import c2w_from_colmap, colmap_from_c2w, opencv_to_opengl, opengl_to_opencv
 from pytest_n2r.geometry.conventions import quaternion_to_rotation, rotation_to_quaternion
@@ -14,11 +14,13 @@ from .strategies import poses
 pycolmap = pytest.importorskip("pycolmap")
 
 
+@settings(deadline=None)
 @given(poses())
 def test_opengl_opencv_round_trip(c2w):
     np.testing.assert_allclose(opengl_to_opencv(opencv_to_opengl(c2w)), c2w, atol=1e-12)
 
 
+@settings(deadline=None)
 @given(poses())
 def test_opengl_camera_looks_down_its_minus_z(c2w):
     gl = opencv_to_opengl(c2w)
@@ -28,6 +30,7 @@ def test_opengl_camera_looks_down_its_minus_z(c2w):
     np.testing.assert_allclose(gl[:3, 3], c2w[:3, 3], atol=1e-15)
 
 
+@settings(deadline=None)
 @given(poses())
 def test_colmap_round_trip_and_canonical_quaternion(c2w):
     q, t = colmap_from_c2w(c2w)
@@ -35,6 +38,7 @@ def test_colmap_round_trip_and_canonical_quaternion(c2w):
     np.testing.assert_allclose(c2w_from_colmap(q, t), c2w, atol=1e-12)
 
 
+@settings(deadline=None)
 @given(poses())
 def test_quaternions_agree_with_pycolmap(c2w):
     """pycolmap (Eigen, xyzw order) is an independent implementation of COLMAP's convention."""

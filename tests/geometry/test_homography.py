@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import assume, given
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.geometry import (
@@ -21,6 +21,7 @@ small_tau = st.builds(
 )
 
 
+@settings(deadline=None)
 @given(cameras(), cameras(), small_tau, unit, st.floats(2.0, 10.0))
 def test_plane_homography_equals_project_of_backproject_on_the_plane(cam_a, cam_b, tau, normal, dist):
     c2w_a = np.eye(4)
@@ -39,6 +40,7 @@ def test_plane_homography_equals_project_of_backproject_on_the_plane(cam_a, cam_
     np.testing.assert_allclose(apply_homography(H, uv), expected, atol=1e-6 * (1 + np.abs(expected).max()))
 
 
+@settings(deadline=None)
 @given(cameras(), small_tau, st.floats(0.5, 100.0))
 def test_rotation_homography_maps_points_at_any_depth(cam, tau, depth):
     rot_only = Transform(roll=tau.roll, pitch=tau.pitch, yaw=tau.yaw)

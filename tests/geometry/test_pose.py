@@ -16,6 +16,7 @@ from pytest_n2r.geometry import (
 from .strategies import angle_diff, pitch, poses, roll_yaw, transforms
 
 
+@settings(deadline=None)
 @given(transforms(max_pitch=89.0))
 def test_transform_matrix_transform_round_trip(tau):
     back = Transform.from_matrix(tau.matrix())
@@ -24,6 +25,7 @@ def test_transform_matrix_transform_round_trip(tau):
     np.testing.assert_allclose(back.translation, tau.translation, atol=1e-12)
 
 
+@settings(deadline=None)
 @given(transforms())
 def test_euler_of_any_rotation_rebuilds_it_and_is_canonical(tau):
     """Even at and near gimbal lock the extracted angles rebuild the same rotation, in canonical ranges."""
@@ -33,6 +35,7 @@ def test_euler_of_any_rotation_rebuilds_it_and_is_canonical(tau):
     assert err < 1e-12, f"{tau}: angles {(roll, p, yaw)} rebuild the rotation with error {err:.3g}"
 
 
+@settings(deadline=None)
 @given(transforms())
 def test_compose_with_inverse_is_identity(tau):
     for M in (tau.matrix() @ tau.inverse().matrix(), tau.inverse().matrix() @ tau.matrix(),
@@ -41,11 +44,13 @@ def test_compose_with_inverse_is_identity(tau):
         assert err < 1e-12, f"{tau}: tau composed with its inverse is off identity by {err:.3g}"
 
 
+@settings(deadline=None)
 @given(transforms(), transforms())
 def test_then_equals_matrix_product(a, b):
     np.testing.assert_allclose(a.then(b).matrix(), a.matrix() @ b.matrix(), atol=1e-11)
 
 
+@settings(deadline=None)
 @given(poses(), transforms())
 def test_apply_acts_in_the_source_camera_frame(c2w, tau):
     out = tau.apply(c2w, length=2.0)
@@ -74,6 +79,7 @@ def test_rotation_order_is_yaw_then_pitch_then_roll():
 
 
 @pytest.mark.parametrize("p", [90.0, -90.0])
+@settings(deadline=None)
 @given(roll=roll_yaw, yaw=roll_yaw)
 def test_gimbal_lock_gives_finite_angles_that_rebuild_the_rotation(p, roll, yaw):
     R = rotation_from_euler(roll, p, yaw)
@@ -86,6 +92,7 @@ def test_gimbal_lock_gives_finite_angles_that_rebuild_the_rotation(p, roll, yaw)
     assert np.all(np.isfinite(tau.inverse().matrix()))
 
 
+@settings(deadline=None)
 @given(pitch)
 def test_pitch_alone_round_trips_exactly_enough(p):
     assert Transform.from_matrix(Transform(pitch=p).matrix()).pitch == pytest.approx(p, abs=1e-9)
@@ -142,6 +149,7 @@ def test_from_matrix_rejects_bad_length():
 
 
 @pytest.mark.parametrize("p", [90 - 3.2e-8, -90 + 3.2e-8, 90 - 1e-12, 90 - 1e-5])
+@settings(deadline=None)
 @given(roll=roll_yaw, yaw=roll_yaw)
 def test_near_gimbal_lock_euler_rebuilds_rotation_to_round_off(p, roll, yaw):
     """Regression: a gimbal-lock threshold of cos(pitch) <= 1e-9 rebuilt R with errors up to 2e-9."""

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import assume, given
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.geometry import Camera, Transform, backproject, camera_rays, project
@@ -24,6 +24,7 @@ def pixels_and_depths(draw, camera: Camera, n: int = 8):
     return uv, depth
 
 
+@settings(deadline=None)
 @given(st.data(), cameras(), poses())
 def test_project_after_backproject_is_identity(data, camera, c2w):
     uv, depth = data.draw(pixels_and_depths(camera))
@@ -32,6 +33,7 @@ def test_project_after_backproject_is_identity(data, camera, c2w):
     np.testing.assert_allclose(uv2, uv, atol=1e-7)
 
 
+@settings(deadline=None)
 @given(cameras(), poses(), st.lists(st.tuples(*[st.floats(-5, 5)] * 2, st.floats(0.1, 50)), min_size=1, max_size=8))
 def test_backproject_after_project_is_identity(camera, c2w, pts_cam):
     X = np.array(pts_cam) @ c2w[:3, :3].T + c2w[:3, 3]  # points in front of the camera, world frame
@@ -39,6 +41,7 @@ def test_backproject_after_project_is_identity(camera, c2w, pts_cam):
     np.testing.assert_allclose(backproject(uv, z, camera, c2w), X, atol=1e-8 * (1 + np.abs(X).max()))
 
 
+@settings(deadline=None)
 @given(cameras(), poses())
 def test_ray_parameter_is_z_depth(camera, c2w):
     uv = np.array([[0.0, 0.0], [camera.width - 1.0, camera.height - 1.0]])
@@ -84,18 +87,21 @@ def _moved(point: np.ndarray, tau: Transform) -> tuple[np.ndarray, np.ndarray]:
     return before[0], after[0]
 
 
+@settings(deadline=None)
 @given(ahead, angle)
 def test_positive_yaw_moves_points_left(point, a):
     before, after = _moved(point, Transform(yaw=a))
     assert after[0] < before[0], f"yaw=+{a}: u went {before[0]:.2f} -> {after[0]:.2f}, expected left"
 
 
+@settings(deadline=None)
 @given(ahead, angle)
 def test_positive_pitch_moves_points_down(point, a):
     before, after = _moved(point, Transform(pitch=a))
     assert after[1] > before[1], f"pitch=+{a}: v went {before[1]:.2f} -> {after[1]:.2f}, expected down"
 
 
+@settings(deadline=None)
 @given(ahead, angle)
 def test_positive_roll_turns_content_counter_clockwise(point, a):
     before, after = _moved(point, Transform(roll=a))
@@ -108,18 +114,21 @@ def test_positive_roll_turns_content_counter_clockwise(point, a):
     assert turn == pytest.approx(a, abs=1e-6), f"roll=+{a}: content turned {turn:.4f} deg (ccw positive)"
 
 
+@settings(deadline=None)
 @given(ahead, st.floats(0.01, 0.5))
 def test_positive_x_moves_camera_right_so_points_move_left(point, d):
     before, after = _moved(point, Transform(x=d))
     assert after[0] < before[0] and after[1] == pytest.approx(before[1], abs=1e-9 + abs(before[1] - CAM.cy))
 
 
+@settings(deadline=None)
 @given(ahead, st.floats(0.01, 0.5))
 def test_positive_y_moves_camera_down_so_points_move_up(point, d):
     before, after = _moved(point, Transform(y=d))
     assert after[1] < before[1], f"y=+{d}: v went {before[1]:.2f} -> {after[1]:.2f}, expected up"
 
 
+@settings(deadline=None)
 @given(ahead, st.floats(0.01, 0.9))
 def test_positive_z_moves_camera_forward_so_points_spread_out(point, d):
     assume(np.hypot(point[0, 0], point[0, 1]) > 1e-3)
