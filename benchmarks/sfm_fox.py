@@ -22,9 +22,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from pytest_n2r.data.compare import compare_poses  # noqa: E402
 from pytest_n2r.data.sfm import run_sfm  # noqa: E402
 from pytest_n2r.data.transforms_json import read_transforms_json  # noqa: E402
-from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, umeyama  # noqa: E402
 
 FOX = ROOT.parent / "shared" / "scenes" / "fox"
 
@@ -45,22 +45,15 @@ def main() -> int:
     sfm = run_sfm(FOX / "images", max_size=args.max_size, matcher=args.matcher)
     total = time.perf_counter() - start
 
-    ref_by_name = {Path(f.name).name: f for f in reference.frames}
-    pairs = [(f, ref_by_name[f.name]) for f in sfm.frames if f.name in ref_by_name]
-    src = np.array([f.c2w[:3, 3] for f, _ in pairs])
-    dst = np.array([r.c2w[:3, 3] for _, r in pairs])
-    s, R, t = umeyama(src, dst)
-    aligned = [apply_similarity_to_pose(f.c2w, s, R, t) for f, _ in pairs]
-    rot_err = np.array([rotation_angle_deg(a[:3, :3], r.c2w[:3, :3]) for a, (_, r) in zip(aligned, pairs)])
-    spread = float(np.sqrt(np.mean(np.sum((dst - dst.mean(0)) ** 2, axis=1))))
-    centre_err = np.array([np.linalg.norm(a[:3, 3] - r.c2w[:3, 3]) for a, (_, r) in zip(aligned, pairs)]) / spread * 100
+    cmp = compare_poses(sfm, reference)
+    rot_err, centre_err = cmp.rotation_deg, cmp.centre_error * 100
     cam, ref_cam = sfm.frames[0].camera, reference.frames[0].camera
 
     times = sfm.report["time_s"]
     rows = [
         ("images found", f"{sfm.report['images']}", "50"),
         ("registered", f"{len(sfm.frames)}", "50"),
-        ("matched to transforms.json", f"{len(pairs)}", "50"),
+        ("matched to transforms.json", f"{len(cmp.names)}", "50"),
         ("matcher", sfm.report["matcher"], ""),
         *[(f"time: {k}", f"{v:.1f} s", "") for k, v in times.items()],
         ("time: total", f"{total:.1f} s", "< 120 s"),

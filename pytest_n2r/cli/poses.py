@@ -42,6 +42,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
     p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
                    help="for a video: where to write its frames (default: <video stem>_frames beside it)")
+    p.add_argument("--compare", metavar="OTHER", default=None,
+                   help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
+                        "image by image after a similarity alignment")
     p.set_defaults(func=run)
 
 
@@ -58,6 +61,14 @@ def run(args: argparse.Namespace) -> int:
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
     print(format_summary(poses, bounds, ref, total))
+    if args.compare is not None:
+        from ..data.compare import compare_poses
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            other = load_poses(args.compare, sfm_max_size=args.max_size, matcher=args.matcher,
+                               max_frames=args.max_frames)
+        print(f"compare     against {other.source} ({other.kind}): {compare_poses(poses, other).summary()}")
     if args.output is not None:
         extra = {"n2r": {"source": str(args.source), "reference_length": ref, "bounds": bounds.tolist(),
                          "note": "camera-to-world in OpenGL axes like every transforms.json"}}

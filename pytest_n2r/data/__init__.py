@@ -1,6 +1,7 @@
 """Scene ingestion: image folders, videos, COLMAP models and transforms.json into a :class:`Capture`."""
 
 from .capture import Capture, CapturedView, heldout_split
+from .compare import PoseComparison, compare_poses
 from .colmap import read_colmap_model, write_colmap_text
 from .ingest import complete_points, extent, ingest, load_poses, source_kind
 from .poses import PoseSet, SourceFrame
@@ -11,5 +12,5 @@ from .video import extract_frames
 __all__ = [
     "Capture", "CapturedView", "heldout_split", "ingest", "load_poses", "complete_points", "extent",
     "source_kind", "PoseSet", "SourceFrame", "read_transforms_json", "write_transforms_json",
-    "read_colmap_model", "write_colmap_text", "run_sfm", "extract_frames",
+    "read_colmap_model", "write_colmap_text", "run_sfm", "extract_frames", "compare_poses", "PoseComparison",
 ]
