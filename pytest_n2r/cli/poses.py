@@ -6,6 +6,12 @@ import argparse
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..data.poses import PoseSet
 
 __all__ = ["add_parser", "run"]
 
@@ -20,10 +26,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
             "Read or recover the cameras and poses of SOURCE and print a summary: images, registered, "
             "skipped with reasons, intrinsics, scene bounds, reference length (median z-depth of the "
             "sparse points seen by the training cameras) and time taken. SOURCE is a folder of photos "
-            "(structure from motion with pycolmap), a COLMAP sparse model folder, or a transforms.json."
+            "or a video (structure from motion with pycolmap), a COLMAP sparse model folder, or a "
+            "transforms.json."
         ),
     )
-    p.add_argument("source", metavar="SOURCE", help="images folder, COLMAP model folder or transforms.json")
+    p.add_argument("source", metavar="SOURCE", help="images folder, video, COLMAP model folder or transforms.json")
     p.add_argument("-o", "--output", metavar="PATH", type=Path, default=None,
                    help="write the poses as a nerfstudio transforms.json (image file names kept)")
     p.add_argument("--max-size", metavar="PX", type=int, default=960,
@@ -31,6 +38,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--matcher", choices=("auto", "exhaustive", "sequential"), default="auto",
                    help="feature matching for structure from motion: exhaustive up to 100 images with "
                         "'auto', sequential for ordered video frames (default: auto)")
+    p.add_argument("--max-frames", metavar="N", type=int, default=120,
+                   help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
+    p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
+                   help="for a video: where to write its frames (default: <video stem>_frames beside it)")
     p.set_defaults(func=run)
 
 
@@ -41,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
-        poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher)
+        poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher,
+                           max_frames=args.max_frames, frames_dir=args.frames_dir)
         complete_points(poses)
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
@@ -54,8 +66,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def format_summary(poses, bounds, ref: float, total_s: float) -> str:
-    """The plain-text summary ``n2r poses`` prints."""
+def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: float) -> str:
+    """The plain-text summary ``n2r poses`` prints (``bounds`` and ``ref`` in scene units, time in seconds)."""
     frames = poses.frames
     listed = poses.report.get("listed", poses.report.get("images", len(frames) + len(poses.skipped)))
     lines = [

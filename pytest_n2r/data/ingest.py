@@ -5,13 +5,17 @@ Sources (:func:`source_kind` decides):
 - a ``transforms.json`` file (nerfstudio / instant-ngp), or a folder holding one;
 - a COLMAP sparse model folder (``cameras.bin|txt``, ``images.bin|txt``, ``points3D.bin|txt``), or a
   project folder holding one under ``sparse/0`` or ``sparse``;
-- a folder of images (or a project folder with an ``images`` subfolder): structure from motion.
+- a folder of images (or a project folder with an ``images`` subfolder): structure from motion;
+- a video file: its sharpest frames (:mod:`pytest_n2r.data.video`), then structure from motion with
+  sequential matching.
 """
 
 from __future__ import annotations
 
 import os
 import time
+import warnings
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,26 +29,30 @@ from .images import read_image, resize_image
 from .poses import PoseSet, SourceFrame
 from .transforms_json import find_transforms_json, read_transforms_json
 from .triangulate import triangulate_views
+from .video import VIDEO_SUFFIXES, extract_frames, is_video
 
 __all__ = ["ingest", "load_poses", "complete_points", "extent", "source_kind", "TRIANGULATION_MAX_SIZE"]
 
 #: Longer image side (pixels) used to triangulate points for sources that come without points.
-TRIANGULATION_MAX_SIZE = 640
+TRIANGULATION_MAX_SIZE = 480
 
 
 def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
-    """``(kind, path)``: ``kind`` is ``"transforms.json"``, ``"colmap"`` or ``"images"``; ``path`` is the
-    json file, the model folder or the images folder. Raises :class:`IngestError` naming ``source``."""
+    """``(kind, path)``: ``kind`` is ``"transforms.json"``, ``"colmap"``, ``"images"`` or ``"video"``;
+    ``path`` is the json file, the model folder, the images folder or the video file. Raises
+    :class:`IngestError` naming ``source``."""
     path = Path(source)
     if not path.exists():
         raise IngestError(f"source {str(path)!r} does not exist")
     found = find_transforms_json(path)
     if found is not None:
         return "transforms.json", found
+    if is_video(path):
+        return "video", path
     if path.is_file():
         raise IngestError(
-            f"source {str(path)!r} is a file but not a .json file; expected a transforms.json, "
-            "a COLMAP model folder or a folder of images"
+            f"source {str(path)!r} is a file but neither a .json file nor a video ({', '.join(VIDEO_SUFFIXES)}); "
+            "expected a transforms.json, a COLMAP model folder, a folder of images or a video"
         )
     from .colmap import find_colmap_model
 
@@ -56,13 +64,18 @@ def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
     return "images", path
 
 
-def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto") -> PoseSet:
+def load_poses(
+    source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto", max_frames: int = 120,
+    frames_dir: str | os.PathLike | None = None,
+) -> PoseSet:
     """Read or compute the poses of a source (see :func:`source_kind`); no images are kept.
 
     For an images folder this runs structure from motion (:func:`pytest_n2r.data.sfm.run_sfm`) on
     copies downscaled to at most ``sfm_max_size`` pixels, matching ``"exhaustive"``-ly,
-    ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images).
-    Points of a transforms.json are not triangulated here (see :func:`ingest`).
+    ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images; sequential
+    for a video). A video is first cut into its ``max_frames`` sharpest frames, written to
+    ``frames_dir`` (default ``<video stem>_frames`` beside it). Points of a transforms.json are not
+    triangulated here (see :func:`ingest`).
     """
     kind, path = source_kind(source)
     start = time.perf_counter()
@@ -72,24 +85,35 @@ def load_poses(source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: s
         from .colmap import read_colmap_model
 
         poses = read_colmap_model(path)
+    elif kind == "video":
+        from .sfm import run_sfm
+
+        frames = extract_frames(path, frames_dir, max_frames=max_frames)
+        extracted = time.perf_counter() - start
+        poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher)
+        poses.kind = "video"
+        poses.report["video"] = str(path)
+        poses.report["time_s"] = {"frames": extracted, **poses.report["time_s"]}
     else:
         from .sfm import run_sfm
 
         poses = run_sfm(path, max_size=sfm_max_size, matcher=matcher)
-    poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
+    if kind in ("transforms.json", "colmap"):  # SfM reports its own stages
+        poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
     return poses
 
 
 def ingest(
     source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
     load_images: bool = True, heldout_every: int = 8, sfm_max_size: int = 960, matcher: str = "auto",
+    max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
 ) -> Capture:
     """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
 
     Parameters
     ----------
     source:
-        A transforms.json (or its folder), a COLMAP model folder, or a folder of images (SfM).
+        A transforms.json (or its folder), a COLMAP model folder, a folder of images or a video (SfM).
     downscale:
         Image scale factor in ``(0, 1]`` (``0.25`` → a quarter of the width and height, rounded to
         whole pixels; intrinsics follow :meth:`Camera.resized`).
@@ -100,8 +124,8 @@ def ingest(
         images once at low resolution to triangulate points).
     heldout_every:
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
-    sfm_max_size, matcher:
-        Structure from motion settings for images folders (see :func:`load_poses`).
+    sfm_max_size, matcher, max_frames, frames_dir:
+        Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
     Returns
     -------
@@ -123,10 +147,11 @@ def ingest(
     if isinstance(heldout_every, bool) or not isinstance(heldout_every, (int, np.integer)) or heldout_every < 0:
         raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0")
 
-    poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher)
-    frames = poses.frames
+    poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
+                       frames_dir=frames_dir)
+    images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
+    frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
-    images = _load_pixels(poses, out_cameras if load_images else None)
     splits = heldout_split(len(frames), heldout_every)
     views = [
         CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
@@ -164,31 +189,56 @@ def extent(poses: PoseSet, heldout_every: int = 8) -> tuple[np.ndarray, float]:
     return bounds, ref
 
 
-def _load_pixels(poses: PoseSet, out_cameras: list[Camera] | None) -> list[np.ndarray | None]:
-    """Decode, undistort and resize the images to ``out_cameras`` (``None``: keep none); triangulate
-    points on the way when the pose set has none. Each file is read once."""
-    frames = poses.frames
-    if len(frames) < 3:
-        raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
+def _load_pixels(
+    poses: PoseSet, out_camera: Callable[[Camera], Camera] | None,
+) -> list[np.ndarray | None]:
+    """Decode, undistort and resize each frame's image to ``out_camera(frame.camera)`` (``None``: keep
+    no images); triangulate points on the way when the pose set has none. Each file is read once.
+
+    Frames whose image cannot be decoded are dropped from ``poses.frames`` with a warning naming the
+    file and recorded in ``poses.skipped``; fewer than 3 remaining frames is an error.
+    """
+    if len(poses.frames) < 3:
+        raise IngestError(f"{poses.source}: only {len(poses.frames)} registered images; at least 3 are needed")
     need_points = len(poses.points) == 0
-    images: list[np.ndarray | None] = [None] * len(frames)
+    kept: list[SourceFrame] = []
+    images: list[np.ndarray | None] = []
     small: list[np.ndarray] = []
     small_cameras: list[Camera] = []
     start = time.perf_counter()
-    if out_cameras is not None or need_points:
-        for k, frame in enumerate(frames):
+    for frame in poses.frames:
+        if out_camera is None and not need_points:
+            kept.append(frame)
+            images.append(None)
+            continue
+        try:
             full = _undistorted_image(frame)
-            if out_cameras is not None:
-                images[k] = resize_image(full, out_cameras[k].width, out_cameras[k].height)
-            if need_points:
-                cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
-                small.append(resize_image(full, cam.width, cam.height))
-                small_cameras.append(cam)
+        except _Undecodable as exc:
+            warnings.warn(f"skipping frame {frame.name!r}: {exc}", stacklevel=3)
+            poses.skipped.append((frame.name, str(exc)))
+            continue
+        kept.append(frame)
+        if out_camera is not None:
+            cam = out_camera(frame.camera)
+            images.append(resize_image(full, cam.width, cam.height))
+        else:
+            images.append(None)
+        if need_points:
+            cam = frame.camera.undistorted().fit_within(TRIANGULATION_MAX_SIZE)
+            small.append(resize_image(full, cam.width, cam.height))
+            small_cameras.append(cam)
+    poses.frames = kept
+    if len(kept) < 3:
+        raise IngestError(
+            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed "
+            f"(first failure: {poses.skipped[-1][1]})"
+        )
     times = poses.report.setdefault("time_s", {})
-    times["images"] = time.perf_counter() - start
+    if out_camera is not None or need_points:
+        times["images"] = time.perf_counter() - start
     if need_points:
         start = time.perf_counter()
-        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in frames])
+        poses.points = triangulate_views(small, small_cameras, [f.c2w for f in kept])
         poses.report["points_method"] = "SIFT matches between neighbouring views, triangulated with the given poses"
         times["triangulation"] = time.perf_counter() - start
     return images
@@ -201,17 +251,21 @@ def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Ca
     return cam if max_size is None else cam.fit_within(max_size)
 
 
-def poses_source(frame: SourceFrame) -> str:
-    return "the COLMAP model" if frame.path is None else str(frame.path.parent)
+class _Undecodable(IngestError):
+    """An image file that exists but cannot be decoded (the frame is skipped, not fatal)."""
 
 
 def _undistorted_image(frame: SourceFrame) -> np.ndarray:
     if frame.path is None:
         raise IngestError(
-            f"image {frame.name!r} of {poses_source(frame)} was not found; put the images in an 'images' folder "
-            "beside the model (they are needed to load views, and to triangulate points when the model has none)"
+            f"image {frame.name!r} listed in the COLMAP model was not found; put the images in an 'images' "
+            "folder beside the model (they are needed to load views, and to triangulate points when the "
+            "model has none)"
         )
-    image = read_image(frame.path)
+    try:
+        image = read_image(frame.path)
+    except IngestError as exc:
+        raise _Undecodable(str(exc)) from None
     cam = frame.camera
     if image.shape[:2] != (cam.height, cam.width):
         raise IngestError(

@@ -51,7 +51,7 @@ class PoseSet:
     source:
         The path the set was read from.
     kind:
-        ``"transforms.json"``, ``"colmap"`` or ``"images"`` (structure from motion).
+        ``"transforms.json"``, ``"colmap"``, ``"images"`` or ``"video"`` (structure from motion).
     skipped:
         ``(file, reason)`` for every listed or found image that is not among ``frames``.
     report:

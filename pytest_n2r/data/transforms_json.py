@@ -161,12 +161,11 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path) -> Camera:
             fy = fx
     cx = _number(meta, raw, "cx", where)
     cy = _number(meta, raw, "cy", where)
-    coeffs = [_number(meta, raw, k, where) or 0.0 for k in _DISTORTION_KEYS]
-    n = 8 if any(coeffs[5:]) else 5 if coeffs[4] else 4
+    coeffs = [_number(meta, raw, k, where) or 0.0 for k in _DISTORTION_KEYS]  # Camera drops trailing zeros
     try:
         return Camera.from_colmap_pixels(
             int(round(w)), int(round(h)), fx, fy, w / 2 if cx is None else cx, h / 2 if cy is None else cy,
-            tuple(coeffs[:n]),
+            tuple(coeffs),
         )
     except N2RError as exc:
         raise IngestError(f"{where}: bad intrinsics: {exc}") from None

@@ -7,8 +7,9 @@ Convention
   the top-left centre at ``(0.5, 0.5)``: ``cx_opencv = cx_colmap - 0.5`` (see :meth:`Camera.from_colmap_pixels`).
 - Camera axes: x right, y down, z forward (OpenCV). A camera-frame point ``(X, Y, Z)`` with ``Z > 0``
   projects to ``u = fx * X / Z + cx``, ``v = fy * Y / Z + cy``.
-- ``distortion`` holds OpenCV coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])``; rendered views are
-  always ideal pinhole images, so a camera used for rendering has ``distortion == ()``.
+- ``distortion`` holds OpenCV coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])``, stored without
+  trailing zero terms (8 → 5 → 4 → none), so equal lenses compare equal; rendered views are always
+  ideal pinhole images, so a camera used for rendering has ``distortion == ()``.
 """
 
 from __future__ import annotations
@@ -53,6 +54,11 @@ class Camera:
             raise InvalidArgument(
                 f"Camera distortion has {len(coeffs)} coefficients; expected 0, 4 (k1 k2 p1 p2), 5 (+k3) or 8"
             )
+        # Canonical form, so equal lenses compare equal: trailing zero terms add nothing in OpenCV's model.
+        if len(coeffs) == 8 and not any(coeffs[5:]):
+            coeffs = coeffs[:5]
+        if len(coeffs) == 5 and not coeffs[4]:
+            coeffs = coeffs[:4]
         if coeffs and not any(coeffs):
             coeffs = ()
         object.__setattr__(self, "distortion", coeffs)

@@ -87,7 +87,7 @@ def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     """Inverse of :func:`rotation_from_euler`: ``(roll, pitch, yaw)`` in **degrees**.
 
     Ranges: pitch in [-90, 90], roll and yaw in (-180, 180]. At gimbal lock (pitch = ±90°) roll and yaw
-    turn about the same axis; the result then puts all of it in yaw and returns roll ≈ 0 (never NaN).
+    turn about the same axis; the result then puts all of it in yaw and returns roll = 0 (never NaN).
     Roll is solved last from the remaining rotation, so the angles always rebuild ``R`` to round-off.
     """
     R = check_array("R", R, "3 3", dtype=np.float64)
@@ -99,10 +99,11 @@ def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
     # So the gimbal branch starts where that product is below round-off, not at a looser threshold.
     if cos_pitch > 1e-14:
         yaw = math.atan2(R[0, 2], R[2, 2])
-    else:  # gimbal lock: R[0, :2] = (cos, sin) of yaw -/+ roll; put it all in yaw
+    else:  # gimbal lock: R[0, :2] = (cos, sin) of yaw -/+ roll; put it all in yaw (error <= pi * 1e-14)
         yaw = math.atan2(math.copysign(1.0, sin_pitch) * R[0, 1], R[0, 0])
+        return 0.0, math.degrees(pitch), _wrap(math.degrees(yaw))
     # Roll from what yaw and pitch leave over, so the three angles rebuild R to round-off even where
-    # yaw is poorly conditioned (near gimbal lock, where roll comes out ~0).
+    # yaw is poorly conditioned (close to gimbal lock).
     M = (_ry(yaw) @ _rx(pitch)).T @ R
     roll = math.atan2(M[1, 0], M[0, 0])
     return _wrap(math.degrees(roll)), math.degrees(pitch), _wrap(math.degrees(yaw))

@@ -125,7 +125,7 @@ def test_missing_source(tmp_path):
     with pytest.raises(IngestError, match="does not exist"):
         ingest(tmp_path / "nothing")
     (tmp_path / "notes.txt").write_text("hi")
-    with pytest.raises(IngestError, match="not a .json file"):
+    with pytest.raises(IngestError, match="neither a .json file nor a video"):
         ingest(tmp_path / "notes.txt")
 
 
@@ -165,5 +165,21 @@ def test_colmap_model_without_its_images(corner, tmp_path):
     poses = read_transforms_json(write_transforms(corner))
     model = tmp_path / "a" / "b" / "c" / "d" / "model"  # too far from the images to find them
     write_colmap_text(model, poses)
-    with pytest.raises(IngestError, match=r"image 'images/view_000.png' of the COLMAP model was not found"):
+    with pytest.raises(IngestError, match=r"image 'images/view_000.png' listed in the COLMAP model was not found"):
         ingest(model)
+
+
+def test_undecodable_image_is_skipped_with_a_warning(corner, capture_json):
+    (corner.images_dir / corner.names[1]).write_bytes(b"not a png")
+    with pytest.warns(UserWarning, match=rf"skipping frame 'images/{corner.names[1]}'.*cannot be decoded"):
+        cap = ingest(capture_json, downscale=0.5)
+    assert [v.name for v in cap.views] == [f"images/{n}" for n in corner.names if n != corner.names[1]]
+    assert cap.skipped[0][0] == f"images/{corner.names[1]}"
+    assert all(v.image.shape == (60, 80, 3) for v in cap.views)
+
+
+def test_too_few_decodable_images(corner, capture_json):
+    for name in corner.names[:4]:
+        (corner.images_dir / name).write_bytes(b"")
+    with pytest.warns(UserWarning), pytest.raises(IngestError, match="only 2 images could be read; at least 3"):
+        ingest(capture_json)

@@ -83,3 +83,14 @@ def test_camera_dict_round_trip_and_missing_field():
     assert Camera.from_dict(cam.to_dict()) == cam
     with pytest.raises(ValueError, match="'fx'"):
         Camera.from_dict({"width": 64, "height": 48})
+
+
+def test_distortion_is_stored_without_trailing_zero_terms():
+    def dist(coeffs):
+        return Camera(64, 48, 50.0, 50.0, 31.5, 23.5, coeffs).distortion
+
+    assert dist((0.1, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0, 0.0)) == (0.1, 0.0, 0.0, 0.0, 0.2)
+    assert dist((0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)) == (0.1, 0.0, 0.0, 0.0)
+    assert dist((0.1, 0.0, 0.0, 0.0, 0.0)) == (0.1, 0.0, 0.0, 0.0)
+    assert dist((0.0, 0.0, 0.0, 0.0, 0.0)) == ()
+    assert dist((0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3)) == (0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3)

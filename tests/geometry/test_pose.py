@@ -79,6 +79,7 @@ def test_gimbal_lock_gives_finite_angles_that_rebuild_the_rotation(p, roll, yaw)
     R = rotation_from_euler(roll, p, yaw)
     angles = euler_from_rotation(R)
     assert all(math.isfinite(a) for a in angles), angles
+    assert angles[0] == 0.0, f"at gimbal lock all the turn goes into yaw, got roll={angles[0]}"
     assert angles[1] == pytest.approx(p, abs=1e-6)
     assert np.abs(rotation_from_euler(*angles) - R).max() < 1e-12
     tau = Transform(roll=roll, pitch=p, yaw=yaw)

@@ -1,0 +1,87 @@
+"""Reference length and bounds from sparse points; triangulation input checks; atomic writes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r.data.atomic import atomic_write_text
+from pytest_n2r.data.extent import reference_length, scene_bounds, seen_depths
+from pytest_n2r.data.triangulate import neighbour_pairs, triangulate_views
+from pytest_n2r.errors import IngestError, InvalidArgument
+from pytest_n2r.geometry import Camera, Transform
+
+CAM = Camera(100, 80, 100.0, 100.0, 49.5, 39.5)
+
+
+def test_only_points_in_front_and_inside_the_image_count():
+    points = np.array([
+        [0.0, 0.0, 2.0],     # centre, depth 2
+        [0.0, 0.0, 4.0],     # centre, depth 4
+        [10.0, 0.0, 2.0],    # far outside the image (u = 549.5)
+        [0.0, 0.0, -3.0],    # behind
+        [0.99, 0.0, 2.0],    # u = 49.5 + 49.5 = 99.0, inside the last column
+    ])
+    depths, seen = seen_depths(points, [CAM], [np.eye(4)])
+    assert sorted(depths.tolist()) == [2.0, 2.0, 4.0]
+    assert seen.tolist() == [True, True, False, False, True]
+    assert reference_length(points, [CAM], [np.eye(4)]) == 2.0
+
+
+def test_reference_length_is_the_median_over_all_sightings():
+    points = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 3.0], [0.0, 0.0, 5.0]])
+    back = Transform(z=-1.0).apply(np.eye(4))  # a second camera one unit behind: depths 2, 4, 6
+    assert reference_length(points, [CAM, CAM], [np.eye(4), back]) == 3.5
+
+
+def test_no_point_seen_is_an_error():
+    with pytest.raises(IngestError, match="none of the 1 sparse points is seen by the 1 cameras"):
+        reference_length(np.array([[0.0, 0.0, -1.0]]), [CAM], [np.eye(4)])
+    with pytest.raises(IngestError, match="no scene bounds"):
+        scene_bounds(np.zeros((0, 3)), [CAM], [np.eye(4)])
+
+
+@settings(max_examples=25)
+@given(st.integers(0, 2**32 - 1))
+def test_bounds_ignore_stray_points_and_are_padded(seed):
+    rng = np.random.default_rng(seed)
+    inlier = rng.uniform([-0.5, -0.4, 2.0], [0.5, 0.4, 3.0], size=(2000, 3))
+    strays = np.array([[0.0, 0.0, 500.0], [50.0, 0.0, 400.0]])  # seen, but far away
+    lo, hi = scene_bounds(np.vstack([inlier, strays]), [CAM], [np.eye(4)])
+    size = inlier.max(0) - inlier.min(0)
+    assert np.all(hi[2] < 3.5) and np.all(hi[0] < 1.0), f"stray points widened the box: {lo}, {hi}"
+    np.testing.assert_allclose(hi - lo, 1.1 * size, rtol=0.1)
+
+
+def test_neighbour_pairs_respect_viewing_direction():
+    ahead = [Transform(x=k).matrix() for k in range(4)]  # a row of cameras looking the same way
+    behind = Transform(yaw=180, x=0.5).matrix()          # close by, but looking the other way
+    pairs = neighbour_pairs(ahead + [behind], neighbours=1)
+    assert pairs == [(0, 1), (1, 2), (2, 3)]
+
+
+def test_triangulate_views_checks_its_inputs():
+    img = np.zeros((80, 100, 3), np.uint8)
+    with pytest.raises(InvalidArgument, match="one entry per view; got 2, 1, 1"):
+        triangulate_views([img, img], [CAM], [np.eye(4)])
+    with pytest.raises(InvalidArgument, match="cameras\\[0\\] has lens distortion"):
+        triangulate_views([img], [Camera(100, 80, 100.0, 100.0, 49.5, 39.5, (0.1, 0, 0, 0))], [np.eye(4)])
+    with pytest.raises(InvalidArgument, match="images\\[0\\] has size 100x80; its camera is 50x40"):
+        triangulate_views([img], [CAM.resized(50, 40)], [np.eye(4)])
+    assert triangulate_views([img, img], [CAM, CAM], [np.eye(4), Transform(x=1).matrix()]).shape == (0, 3)
+
+
+def test_atomic_write_leaves_the_old_file_when_writing_fails(tmp_path, monkeypatch):
+    target = tmp_path / "poses.json"
+    atomic_write_text(target, "old")
+
+    def broken_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr("os.replace", broken_replace)
+    with pytest.raises(OSError, match="disk full"):
+        atomic_write_text(target, "new")
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.json"], "temporary file left behind"
