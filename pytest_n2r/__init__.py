@@ -40,6 +40,7 @@ _EXPORTS: dict[str, str] = {
     "Brightness": "pytest_n2r.mutations",
     "NoisePatch": "pytest_n2r.mutations",
     "BlackPatches": "pytest_n2r.mutations",
+    "GroundTruthScene": "pytest_n2r.demo",
     "metamorphic": "pytest_n2r.marker",
     "transforms": "pytest_n2r.strategies",
     "views": "pytest_n2r.strategies",

@@ -11,33 +11,18 @@ import json
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
 from .records import STATS, RelationRecord
 
 __all__ = ["FORMAT", "save_baseline", "load_baseline", "CompareRule", "parse_compare_rules", "Comparison",
-           "compare_runs", "atomic_write_text"]
+           "compare_runs", "format_comparison_table"]
 
 FORMAT = "pytest-n2r-baseline"
 VERSION = 1
-
-
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta: dict | None = None) -> Path:

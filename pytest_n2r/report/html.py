@@ -12,7 +12,7 @@ import math
 import os
 from pathlib import Path
 
-from .baseline import atomic_write_text
+from ..data.atomic import atomic_write_text
 from .records import ExampleRecord, RelationRecord
 
 __all__ = ["render_html", "write_html"]

@@ -1,0 +1,182 @@
+"""An exact scene: ray casting against analytic surfaces, with Lambertian shading under a fixed light.
+
+Convention
+----------
+- Poses and cameras follow :mod:`pytest_n2r.geometry` (camera-to-world, OpenCV axes, pixel centres at
+  integer coordinates); the demo world is z-up, in scene units.
+- ``rgb`` is the mean of ``supersample × supersample`` rays spread evenly over each pixel (antialiased);
+  shading is ``albedo * (ambient + (1 - ambient) * max(0, n·l))`` with a fixed light direction ``l``, so
+  a surface point has one colour from every viewpoint (a field can learn it view-independently).
+- ``depth`` is the exact z-depth of the surface under the pixel **centre**; where that ray hits nothing,
+  depth is the scene's ``far`` distance.
+- ``opacity`` is the fraction of the pixel's supersampling rays that hit a surface (1 inside a surface,
+  between 0 and 1 on silhouettes, 0 for open water or sky).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..geometry import Camera, camera_rays, pixel_grid
+from ..scene.base import Scene, SceneView
+from .primitives import T_MIN, Group, Primitive, slab_hits
+
+__all__ = ["GroundTruthScene"]
+
+#: Bump when the renderer's output changes for the same scene description (part of the content hash).
+RENDERER_VERSION = "1"
+
+
+class GroundTruthScene(Scene):
+    """An exact procedural scene (see the module *Convention*).
+
+    Parameters
+    ----------
+    name:
+        Short name (``"wall"``, ``"object"``).
+    primitives:
+        The analytic surfaces; a :class:`~pytest_n2r.demo.primitives.Group` is tested only by the rays
+        that enter its bounding box (``self.primitives`` lists every surface, groups flattened).
+    views:
+        The capture trajectory (every 8th view held out).
+    light:
+        Direction towards the light, world frame (normalized here).
+    ambient:
+        Fraction of the albedo seen in shadow-facing regions, in ``[0, 1]``.
+    background:
+        RGB in ``[0, 1]`` of rays that hit nothing (open water, sky).
+    far:
+        z-depth reported where nothing is hit (scene units).
+    supersample:
+        Rays per pixel along each axis for ``rgb`` and ``opacity``.
+    """
+
+    def __init__(
+        self, name: str, primitives: Sequence[Primitive], views: Sequence[SceneView], *,
+        light: Sequence[float], ambient: float, background: Sequence[float], far: float,
+        supersample: int = 2, metres_per_unit: float | None = 1.0,
+    ) -> None:
+        self.name = name
+        flat: list[Primitive] = []
+        self._groups: list[tuple[np.ndarray, np.ndarray, list[int]]] = []
+        for item in primitives:
+            if isinstance(item, Group):
+                start = len(flat)
+                flat.extend(item.children)
+                self._groups.append((np.asarray(item.lo, float), np.asarray(item.hi, float),
+                                     list(range(start, len(flat)))))
+            else:
+                self._groups.append((None, None, [len(flat)]))
+                flat.append(item)
+        self.primitives = tuple(flat)
+        self.views = tuple(views)
+        light = np.asarray(light, dtype=np.float64)
+        self.light = light / np.linalg.norm(light)
+        self.ambient = float(ambient)
+        self.background = np.asarray(background, dtype=np.float32)
+        self.far = float(far)
+        self.supersample = int(supersample)
+        self.metres_per_unit = metres_per_unit
+        self._hash: str | None = None
+        self.reference_length = self._median_train_depth()
+
+    # -- Scene interface -------------------------------------------------------------------------------
+    @property
+    def content_hash(self) -> str:
+        if self._hash is None:
+            h = hashlib.sha256(f"GroundTruthScene/{RENDERER_VERSION}/{self.name}".encode())
+            for prim in self.primitives:
+                h.update(prim.describe().encode())
+            for lo, _, members in self._groups:  # grouping changes no pixel, but say so explicitly
+                h.update(f"{members}".encode() if lo is not None else b"")
+            h.update(np.asarray([*self.light, self.ambient, *self.background, self.far, self.supersample]).tobytes())
+            for v in self.views:
+                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
+                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            self._hash = h.hexdigest()
+        return self._hash
+
+    def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        h, w = camera.height, camera.width
+        if "rgb" in outputs or "opacity" in outputs:
+            n = self.supersample
+            offsets = (np.arange(n) + 0.5) / n - 0.5
+            grid = pixel_grid(camera)
+            uv = np.stack(
+                [grid + np.array([du, dv]) for dv in offsets for du in offsets], axis=2
+            )  # H W S 2
+            o, d = camera_rays(camera, c2w, uv.reshape(-1, 2))
+            t, which = self.cast(o, d)
+            hit = np.isfinite(t)
+            if "rgb" in outputs:
+                footprint = t / (0.5 * (camera.fx + camera.fy) * n)
+                colour = self.shade(o, d, t, which, footprint)
+                mean = colour.reshape(h, w, n * n, 3).mean(axis=2)
+                out["rgb"] = np.clip(np.rint(mean * 255.0), 0, 255).astype(np.uint8)
+            if "opacity" in outputs:
+                out["opacity"] = hit.reshape(h, w, n * n).mean(axis=2).astype(np.float32)
+        if "depth" in outputs:
+            o, d = camera_rays(camera, c2w)
+            t, _ = self.cast(o.reshape(-1, 3), d.reshape(-1, 3))
+            out["depth"] = np.where(np.isfinite(t), t, self.far).reshape(h, w).astype(np.float32)
+        return out
+
+    # -- ray casting -------------------------------------------------------------------------------------
+    def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest hit of rays ``o + t d`` (``(N, 3)`` each): ``t`` (``inf`` on a miss) and the primitive index."""
+        ts = np.full((len(self.primitives), len(o)), np.inf)
+        for lo, hi, members in self._groups:
+            if lo is None:
+                ts[members[0]] = self.primitives[members[0]].intersect(o, d)
+                continue
+            t_near, t_far = slab_hits(o, d, lo, hi)
+            sel = np.nonzero((t_near <= t_far) & (t_far > T_MIN))[0]
+            if sel.size:
+                for k in members:
+                    ts[k, sel] = self.primitives[k].intersect(o[sel], d[sel])
+        which = np.argmin(ts, axis=0)
+        return ts[which, np.arange(len(o))], which
+
+    def shade(
+        self, o: np.ndarray, d: np.ndarray, t: np.ndarray, which: np.ndarray, footprint: np.ndarray
+    ) -> np.ndarray:
+        """Linear RGB ``(N, 3)`` float32 in ``[0, 1]`` of the hits ``t`` (``inf``: background).
+
+        ``footprint`` is the ray's sample spacing at the hit, in scene units, before foreshortening.
+        """
+        colour = np.broadcast_to(self.background, (len(o), 3)).copy()
+        for k, prim in enumerate(self.primitives):
+            idx = np.nonzero((which == k) & np.isfinite(t))[0]
+            if not idx.size:
+                continue
+            p = o[idx] + t[idx, None] * d[idx]
+            normals, a, b, groups = prim.surface(p)
+            unit = d[idx] / np.linalg.norm(d[idx], axis=1, keepdims=True)
+            cos = np.abs(np.einsum("ij,ij->i", normals, unit))
+            fp = footprint[idx] / np.maximum(cos, 0.2)
+            albedo = np.empty((idx.size, 3), dtype=np.float32)
+            for sel, material in groups:
+                if sel.size:
+                    albedo[sel] = material.albedo(a[sel], b[sel], fp[sel])
+            lambert = np.clip(normals @ self.light, 0.0, 1.0)
+            light = (self.ambient + (1.0 - self.ambient) * lambert).astype(np.float32)
+            colour[idx] = albedo * light[:, None]
+        return colour
+
+    # -- helpers -----------------------------------------------------------------------------------------
+    def _median_train_depth(self, size: int = 64) -> float:
+        """Median z-depth of the surface seen from the training views, rendered ``size`` pixels wide."""
+        depths = []
+        for v in self.views:
+            if v.split != "train":
+                continue
+            cam = v.camera.fit_within(size)
+            o, d = camera_rays(cam, v.c2w)
+            t, _ = self.cast(o.reshape(-1, 3), d.reshape(-1, 3))
+            depths.append(t[np.isfinite(t)])
+        hits = np.concatenate(depths) if depths else np.empty(0)
+        return float(np.median(hits)) if hits.size else 1.0
