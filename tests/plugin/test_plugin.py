@@ -249,7 +249,7 @@ def test_far(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws*narrow the bounds*"])
+    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws (empty view: *narrow the bounds*"])
     assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
 
 
