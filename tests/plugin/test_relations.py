@@ -47,7 +47,7 @@ def test_only_the_outputs_the_metric_and_the_validity_checks_need_are_rendered(m
     relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3))
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert set().union(*asked) == {"rgb", "depth", "opacity"}, set(asked)
-    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3), validity=Validity(0, 0))
+    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3), validity=Validity(max_empty_increase=1, min_coverage=0))
     asked.clear()
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert set().union(*asked) == {"rgb", "depth"}, "with the validity checks off, opacity is not rendered"
