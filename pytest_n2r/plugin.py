@@ -271,6 +271,7 @@ def _plain(stats: Any) -> dict:
         "worst_deviation": stats.worst_deviation, "render_s": stats.render_s, "sut_s": stats.sut_s,
         "metric_s": stats.metric_s, "renders": stats.renders, "summary": stats.summary_line(),
         "images": (stats.minimal or {}).get("images", {}),
+        "record": stats.to_record().to_dict(),
     }
 
 
@@ -282,6 +283,15 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
         if stats is not None:
             report.n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
     return report
+
+
+def relation_records(config: pytest.Config) -> list[Any]:
+    """The :class:`pytest_n2r.report.RelationRecord` of every relation run so far in this session
+    (including those of pytest-xdist workers), for reports and baselines."""
+    from .report.records import RelationRecord
+
+    summary = config.pluginmanager.get_plugin("n2r-summary")
+    return [RelationRecord.from_dict(run["record"]) for run in (summary.runs if summary else [])]
 
 
 class _Summary:
