@@ -17,6 +17,9 @@ from typing import Any
 
 import pytest
 
+#: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
+pytest_plugins = ["pytest_n2r.plugin_report"]
+
 #: (CLI flag, ini name, metavar, help) of every option with an ini twin.
 OPTIONS: tuple[tuple[str, str, str, str], ...] = (
     ("--n2r-scene", "n2r_scenes", "PATH",
