@@ -328,7 +328,7 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    assert loaded == ["pytest_n2r.plugin"], loaded
+    assert loaded == ["pytest_n2r.plugin", "pytest_n2r.plugin_report"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
