@@ -278,14 +278,13 @@ def _plain(stats: Any) -> dict:
     }
 
 
-@pytest.hookimpl(wrapper=True)
+@pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
-    report = yield
+    outcome = yield
     if call.when == "call":
         stats = item.stash.get(_STATS, None)
         if stats is not None:
-            report.n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
-    return report
+            outcome.get_result().n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
 
 
 def relation_records(config: pytest.Config) -> list[Any]:

@@ -477,6 +477,7 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     if not isinstance(relation, Relation):
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
     settings = settings or RunSettings()
+    scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
     cache = cache if cache is not None else RenderCache(None)
     stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps)
     if on_start is not None:

@@ -216,3 +216,11 @@ def test_mutations_use_the_source_pose():
     relation = Relation.build(AbsDifference(), 300, st.just(Invert()), examples=3)
     stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert stats.records[0]["transform"] == {"mutation": "invert()"} and stats.n_rejected == 0
+
+
+def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 1, transforms(x=0.1, units="metres"))
+    with pytest.raises(InvalidArgument, match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
+        check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
+    assert scene.calls == 0
