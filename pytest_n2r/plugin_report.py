@@ -57,10 +57,13 @@ def pytest_configure(config: pytest.Config) -> None:
             raise pytest.UsageError(f"pytest-n2r: {exc}") from None
 
 
-@pytest.hookimpl(wrapper=True)
+@pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
-    """Relation results as JUnit XML properties (``n2r_examples``, ``n2r_inconsistencies``, ...)."""
-    report = yield
+    """Relation results as JUnit XML properties (``n2r_examples``, ``n2r_inconsistencies``, ...).
+
+    An old-style wrapper, like the plugin's, so pytest 7.4 (the declared minimum) works too."""
+    outcome = yield
+    report = outcome.get_result()
     stats = getattr(report, "n2r_stats", None)
     if call.when == "call" and stats is not None:
         item.user_properties.extend([
@@ -69,7 +72,6 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
             ("n2r_inconsistencies", stats["inconsistencies"]),
             ("n2r_worst_deviation", stats["worst_deviation"]),
         ])
-    return report
 
 
 @pytest.hookimpl(trylast=True)

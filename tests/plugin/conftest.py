@@ -18,12 +18,6 @@ import pytest_n2r.strategies  # noqa: E402,F401
 from . import fakemetrics  # noqa: F401
 from .fakescene import RENDER_LOG_ENV
 
-# Import what inner runs use here, in the outer process: pytester's in-process runs drop the modules an inner
-# run imported first, while `pytest_n2r`'s lazily cached attributes (`metamorphic`, ...) keep the classes of
-# that run alive; a second inner run would then mix two copies of `Metric`.
-from . import fakemetrics  # noqa: E402,F401
-import pytest_n2r.marker  # noqa: E402,F401
-
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 #: The inner project's conftest: its own Hypothesis database in its own folder.
