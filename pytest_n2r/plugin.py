@@ -17,6 +17,9 @@ from typing import Any
 
 import pytest
 
+#: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
+pytest_plugins = ["pytest_n2r.plugin_report"]
+
 #: (CLI flag, ini name, metavar, help) of every option with an ini twin.
 OPTIONS: tuple[tuple[str, str, str, str], ...] = (
     ("--n2r-scene", "n2r_scenes", "PATH",
@@ -271,17 +274,26 @@ def _plain(stats: Any) -> dict:
         "worst_deviation": stats.worst_deviation, "render_s": stats.render_s, "sut_s": stats.sut_s,
         "metric_s": stats.metric_s, "renders": stats.renders, "summary": stats.summary_line(),
         "images": (stats.minimal or {}).get("images", {}),
+        "record": stats.to_record().to_dict(),
     }
 
 
-@pytest.hookimpl(wrapper=True)
+@pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
-    report = yield
+    outcome = yield
     if call.when == "call":
         stats = item.stash.get(_STATS, None)
         if stats is not None:
-            report.n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
-    return report
+            outcome.get_result().n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
+
+
+def relation_records(config: pytest.Config) -> list[Any]:
+    """The :class:`pytest_n2r.report.RelationRecord` of every relation run so far in this session
+    (including those of pytest-xdist workers), for reports and baselines."""
+    from .report.records import RelationRecord
+
+    summary = config.pluginmanager.get_plugin("n2r-summary")
+    return [RelationRecord.from_dict(run["record"]) for run in (summary.runs if summary else [])]
 
 
 class _Summary:

@@ -263,7 +263,7 @@ class _Engine:
         self.size = relation.size or settings.size
         self.units = transform_units(relation.transform)
         needs = tuple(getattr(self.metric, "needs", ()) or ())
-        self.outputs = normalize_outputs(("rgb", *needs))
+        self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
         self.source_outputs_cache: dict[str, Any] = {}
         self.failed = False
@@ -348,7 +348,7 @@ class _Engine:
         else:
             follow_c2w = tau.apply(view.c2w, self.scene.length_scale(self.units))
             follow = self.render(follow_c2w, view, self.follow_outputs, "follow-up")
-            verdict = self.relation.validity.check(follow, self.scene)
+            verdict = self.relation.validity.check(follow, self.scene, source)
             if not verdict.valid:
                 self.reject(verdict.reason)
         key = f"{view.name}|{source.camera.width}x{source.camera.height}"
@@ -477,6 +477,7 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     if not isinstance(relation, Relation):
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
     settings = settings or RunSettings()
+    scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
     cache = cache if cache is not None else RenderCache(None)
     stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps)
     if on_start is not None:

@@ -153,7 +153,7 @@ class N2RSession:
         """The scene of ``spec``, loaded once per session."""
         scene = self._loaded.get(spec.source)
         if scene is None:
-            scene = _load(spec, self.device)
+            scene = load_scene_spec(spec, self.device)
             self._loaded[spec.source] = scene
         return scene
 
@@ -164,7 +164,8 @@ class N2RSession:
                               on_start=self.stats.append)
 
 
-def _load(spec: SceneSpec, device: str) -> Scene:
+def load_scene_spec(spec: SceneSpec, device: str = "auto") -> Scene:
+    """The scene a spec names: a demo scene, a Python callable's scene, or a loaded .n2r file."""
     if spec.kind == "demo":
         try:
             from .demo import ground_truth

@@ -195,6 +195,7 @@ def transforms(
     strategy = _transforms(**bounds, **extra)
     strategy.n2r_units = units  # read by the relation engine through transform_units()
     strategy.n2r_bounds = dict(bounds)
+    strategy.n2r_look_at = look_at
     return strategy
 
 

@@ -4,8 +4,9 @@ A scene field only knows what its training cameras saw. A follow-up view that lo
 region shows empty space (low opacity) or surfaces no training camera saw (rendered from guesswork); a SUT
 that disagrees there is not inconsistent, the input is. Two checks, both on the follow-up render:
 
-- **opacity**: mean opacity at least ``min_opacity`` and at most ``max_empty`` of the pixels with opacity
-  below 0.5;
+- **empty**: the share of *empty* pixels (opacity below 0.5) may exceed the source view's by at most
+  ``max_empty_increase``: a view that turns from the captured content to nothing is rejected, while a
+  scene whose views always show some empty sky (an object in the open) is not;
 - **coverage**: of the surface points the view sees (a grid of ``grid x grid`` pixels with opacity >= 0.5,
   back-projected with the rendered z-depth), at least ``min_coverage`` must project inside the image of
   at least one training camera, in front of it.
@@ -31,7 +32,7 @@ VALID = "valid"
 
 @dataclass(frozen=True)
 class Verdict:
-    """Whether a view is valid; if not, ``reason`` is ``"low opacity"`` or ``"outside the captured
+    """Whether a view is valid; if not, ``reason`` is ``"empty view"`` or ``"outside the captured
     region"`` and ``detail`` gives the numbers."""
 
     valid: bool
@@ -43,8 +44,7 @@ class Verdict:
 class Validity:
     """Thresholds of the validity checks (fractions in [0, 1]; 0 disables a check)."""
 
-    min_opacity: float = 0.9
-    max_empty: float = 0.1
+    max_empty_increase: float = 0.1
     min_coverage: float = 0.8
     grid: int = 16
     #: Fail the relation (a usage error, not an inconsistency) when more than this fraction of the draws
@@ -52,30 +52,31 @@ class Validity:
     max_rejected: float = 0.9
 
     def __post_init__(self) -> None:
-        for name in ("min_opacity", "max_empty", "min_coverage", "max_rejected"):
+        for name in ("max_empty_increase", "min_coverage", "max_rejected"):
             check_range(name, getattr(self, name), 0.0, 1.0)
         check_range("grid", self.grid, 2, 256)
 
     @property
     def outputs(self) -> tuple[str, ...]:
-        """The render outputs the checks need."""
+        """The render outputs the checks need (of the follow-up view; the source needs ``opacity``)."""
         if self.min_coverage > 0:
             return ("depth", "opacity")
-        return ("opacity",) if (self.min_opacity > 0 or self.max_empty < 1) else ()
+        return ("opacity",) if self.max_empty_increase < 1 else ()
 
-    def check(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> Verdict:
-        """Judge a rendered follow-up ``view`` of ``scene`` (rendered with :attr:`outputs`); ``cameras``
-        are the views the field was fitted on (default: the scene's training views, or all of them)."""
+    def check(self, view: RenderedView, scene: Scene, source: RenderedView | None = None,
+              cameras: Sequence[SceneView] | None = None) -> Verdict:
+        """Judge a rendered follow-up ``view`` of ``scene`` (rendered with :attr:`outputs`) against its
+        ``source`` view (rendered with ``opacity``; without it, the source counts as full). ``cameras`` are
+        the views the field was fitted on (default: the scene's training views, or all of them)."""
         if not self.outputs:
             return Verdict(True)
         view.require(*self.outputs)
-        opacity = view.opacity
-        mean = float(opacity.mean())
-        empty = float((opacity < 0.5).mean())
-        if mean < self.min_opacity or empty > self.max_empty:
-            return Verdict(False, "low opacity",
-                           f"mean opacity {mean:.2f} (min {self.min_opacity:g}), {empty:.0%} of pixels empty "
-                           f"(max {self.max_empty:.0%})")
+        empty = float((view.opacity < 0.5).mean())
+        before = float((source.opacity < 0.5).mean()) if source is not None and source.opacity is not None else 0.0
+        if empty - before > self.max_empty_increase:
+            return Verdict(False, "empty view",
+                           f"{empty:.0%} of the pixels are empty (opacity < 0.5), {before:.0%} in the source view "
+                           f"(at most {self.max_empty_increase:.0%} more allowed)")
         if self.min_coverage <= 0:
             return Verdict(True)
         coverage = self.coverage(view, cameras if cameras is not None else training_views(scene))

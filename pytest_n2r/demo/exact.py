@@ -54,6 +54,8 @@ class GroundTruthScene(Scene):
         Rays per pixel along each axis for ``rgb`` and ``opacity``.
     """
 
+    is_exact = True
+
     def __init__(
         self, name: str, primitives: Sequence[Primitive], views: Sequence[SceneView], *,
         light: Sequence[float], ambient: float, background: Sequence[float], far: float,

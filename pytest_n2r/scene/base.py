@@ -57,6 +57,8 @@ class Scene(ABC):
     reference_length: float
     #: Metres per scene unit when the capture's scale is known, else ``None``.
     metres_per_unit: float | None = None
+    #: True when renders are the exact truth (procedural demo scenes), not a fitted approximation.
+    is_exact: bool = False
 
     @property
     @abstractmethod

@@ -249,7 +249,7 @@ def test_far(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws*narrow the bounds*"])
+    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws (empty view: *narrow the bounds*"])
     assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
 
 
@@ -328,7 +328,7 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    assert loaded == ["pytest_n2r.plugin"], loaded
+    assert loaded == ["pytest_n2r.plugin", "pytest_n2r.plugin_report"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
@@ -435,3 +435,27 @@ def test_corners(n2r_scene):
     result.assert_outcomes(passed=1)
     line = n2r_project.summary(result, "test_corners[plane]")
     assert "8 examples" in line and "0 inconsistent" in line, line
+
+
+def test_relation_records_reach_the_controller_as_plain_data(n2r_project):
+    n2r_project.pytester.makeconftest(n2r_project.pytester.path.joinpath("conftest.py").read_text() + """
+import json
+
+def pytest_sessionfinish(session):
+    from pytest_n2r.plugin import relation_records
+
+    records = relation_records(session.config)
+    with open("records.json", "w") as f:
+        json.dump([r.to_dict() for r in records], f, default=str)
+""")
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=6)
+def test_a(n2r_scene):
+    return mean_colour
+""")
+    n2r_project.run("--n2r-scene", PLANE).assert_outcomes(passed=1)
+    import json
+
+    (record,) = json.loads((n2r_project.pytester.path / "records.json").read_text())
+    assert record["nodeid"].endswith("test_a[plane]") and record["outcome"] == "passed"
+    assert len(record["examples"]) == 6 and record["examples"][0]["scene"] == "plane"

@@ -42,11 +42,15 @@ def test_only_the_outputs_the_metric_and_the_validity_checks_need_are_rendered(m
     asked = _recording(scene, monkeypatch)
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), validity=Validity(min_coverage=0))
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
-    assert set().union(*asked) == {"rgb", "opacity"} and ("rgb", "opacity") in asked, set(asked)
+    assert set().union(*asked) == {"rgb", "opacity"}, set(asked)
     asked.clear()
     relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3))
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
-    assert set().union(*asked) == {"rgb", "depth", "opacity"} and ("rgb", "depth") in asked, set(asked)
+    assert set().union(*asked) == {"rgb", "depth", "opacity"}, set(asked)
+    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3), validity=Validity(max_empty_increase=1, min_coverage=0))
+    asked.clear()
+    check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert set().union(*asked) == {"rgb", "depth"}, "with the validity checks off, opacity is not rendered"
 
 
 def test_the_render_size_of_the_relation_wins_over_the_run_setting():
@@ -154,7 +158,12 @@ def test_validity_rejects_empty_and_uncovered_views():
     outputs = ("rgb", "depth", "opacity")
     assert Validity().check(scene.render(view.c2w, view.camera, outputs), scene).valid
     empty = Validity().check(scene.render(Transform(yaw=50).apply(view.c2w), view.camera, outputs), scene)
-    assert (empty.valid, empty.reason) == (False, "low opacity"), empty
+    assert (empty.valid, empty.reason) == (False, "empty view"), empty
+    source = scene.render(view.c2w, view.camera, outputs)
+    half = scene.render(Transform(yaw=30).apply(view.c2w), view.camera, outputs)
+    assert not Validity().check(half, scene, source).valid
+    # a source that already shows that much emptiness (an object against the sky) makes the same view fair
+    assert Validity(min_coverage=0).check(half, scene, half).valid
     # large plane: opacity stays 1, but the training cameras never saw that far out
     wide = PlaneScene(half_width=50.0)
     uncovered = Validity().check(wide.render(Transform(yaw=40).apply(view.c2w), view.camera, outputs), wide)
@@ -162,8 +171,8 @@ def test_validity_rejects_empty_and_uncovered_views():
 
 
 def test_validity_thresholds_are_checked():
-    with pytest.raises(InvalidArgument, match=r"min_opacity=1.5 is out of range"):
-        Validity(min_opacity=1.5)
+    with pytest.raises(InvalidArgument, match=r"max_empty_increase=1.5 is out of range"):
+        Validity(max_empty_increase=1.5)
 
 
 @pytest.mark.parametrize(("text", "size"), [("480x270", (480, 270)), ("96", (96, 72)), ((40, 30), (40, 30))])
@@ -207,3 +216,11 @@ def test_mutations_use_the_source_pose():
     relation = Relation.build(AbsDifference(), 300, st.just(Invert()), examples=3)
     stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert stats.records[0]["transform"] == {"mutation": "invert()"} and stats.n_rejected == 0
+
+
+def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 1, transforms(x=0.1, units="metres"))
+    with pytest.raises(InvalidArgument, match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
+        check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
+    assert scene.calls == 0

@@ -1,0 +1,84 @@
+"""``n2r study``: the N2R-Tester paper's evaluation (RQ1 realness, RQ2 diversity, RQ3 efficiency)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def _eps_list(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--eps {text!r}: expected numbers separated by commas (0.1,0.2,0.5)") from None
+    if not values or any(not v >= 0 for v in values):
+        raise argparse.ArgumentTypeError(f"--eps {text!r}: expected one or more numbers >= 0")
+    return values
+
+
+def _wxh(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size {text!r}: expected WIDTHxHEIGHT, e.g. 480x270") from None
+    if w < 1 or h < 1:
+        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be >= 1")
+    return w, h
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "study", help="characterize SUTs on scenes as the N2R-Tester paper did (RQ1-RQ3)",
+        description="Render τ0 (captured poses), τ1–τ6 and the mutations m1–m3, run every SUT, and write CSV "
+                    "and Markdown tables and PNG plots: realness (PSNR/SSIM/LPIPS), inconsistencies per SUT, "
+                    "metric and eps, and render frames/s.",
+    )
+    parser.add_argument("scenes", nargs="+", metavar="SCENE",
+                        help="a .n2r file, 'demo:<name>' or 'module:function' returning a Scene")
+    parser.add_argument("--sut", action="append", required=True, metavar="SUT",
+                        help="orb, sift, akaze, or 'module:callable' (repeatable)")
+    parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    parser.add_argument("--examples", type=int, default=5, metavar="N",
+                        help="draws per transform family, source view and scene (default: 5)")
+    parser.add_argument("--views", type=int, default=3, metavar="N",
+                        help="held-out source views per scene, spread over the trajectory (default: 3)")
+    parser.add_argument("--size", type=int, default=480, metavar="PX",
+                        help="longer side of the test renders in pixels (default: 480)")
+    parser.add_argument("--eps", type=_eps_list, default=(0.1, 0.2, 0.5), metavar="E1,E2,...",
+                        help="thresholds at which inconsistencies are counted (default: 0.1,0.2,0.5)")
+    parser.add_argument("--fps-size", type=_wxh, action="append", metavar="WxH", dest="fps_sizes",
+                        help="render size timed for RQ3, landscape (portrait scenes swap it); repeatable "
+                             "(default: 480x270, 960x540, 1920x1080 as in the paper)")
+    parser.add_argument("--fps-frames", type=int, default=3, metavar="N", help="frames timed per size (default: 3)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every draw (default: 0)")
+    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="render device")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from ..session import load_scene_spec, parse_scene_specs
+    from ..study import StudyConfig, resolve_sut, run_study, write_study
+
+    config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
+                         fps_frames=args.fps_frames, seed=args.seed,
+                         **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))
+    scenes = [load_scene_spec(spec, args.device) for spec in parse_scene_specs(args.scenes, Path.cwd(), "SCENE")]
+    view = scenes[0].views[0]
+    probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).rgb
+    suts = [resolve_sut(spec, probe) for spec in args.sut]
+    with tqdm(desc="n2r study", unit="step", file=sys.stderr, disable=None) as bar:
+        def progress(message: str) -> None:
+            bar.set_postfix_str(message)
+            bar.update()
+
+        result = run_study(scenes, suts, config, progress)
+    paths = write_study(result, args.out)
+    print(Path(args.out) / "study.md")
+    print(f"wrote {len(paths)} files to {args.out}")
+    for note in result.notes:
+        print(f"note: {note}")
+    return 0

@@ -1,0 +1,198 @@
+"""``n2r study``: the N2R-Tester paper's evaluation (RQ1 realness, RQ2 diversity, RQ3 efficiency) as rows.
+
+Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytest_n2r.study.output`):
+
+- ``realness``: per scene, view and source (τ0 = the scene's render at the captured pose, m1–m3 = the
+  mutated real photo): PSNR (dB), SSIM and LPIPS (when available) against the real photo.
+- ``domain_shift``: per scene, view, SUT and metric: the metric between the SUT's output on the real
+  photo and on the τ0 render (RQ1's "SUT performance under the reality-to-field shift").
+- ``examples``: per scene, view, SUT, metric and drawn transform / mutation: score and deviation.
+- ``inconsistencies``: ``examples`` counted per scene, SUT, metric and family at each eps (RQ2).
+- ``fps``: per scene and render size: frames per second of RGB renders (RQ3).
+
+"Real photo" is the view's stored image (``SceneView.image``); for an exact demo scene without stored
+images it is the exact render at the captured pose. Scenes with neither skip RQ1.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidArgument, MetricUndefined, N2RError
+from ..geometry import Camera
+from ..metrics.image_quality import lpips, psnr, ssim
+from ..render.view import RenderedView
+from ..scene.base import Scene, SceneView
+from ..validity import Validity
+from .sampling import MUTATION_FAMILIES, TRANSFORM_FAMILIES, sample_mutation, sample_transform
+from .suts import SUT
+
+__all__ = ["StudyConfig", "StudyResult", "run_study"]
+
+#: Render sizes of RQ3 (width, height), as in the paper's FPS table; portrait scenes swap them.
+FPS_SIZES = ((480, 270), (960, 540), (1920, 1080))
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """What the study draws: ``examples`` transforms / mutations per family, source view and SUT; at most
+    ``max_views`` held-out views per scene; renders ``size`` pixels on the longer side; counts
+    inconsistencies at every ``eps``; ``fps_frames`` frames per size for RQ3; ``seed`` for every draw."""
+
+    examples: int = 5
+    max_views: int = 3
+    size: int = 480
+    eps: tuple[float, ...] = (0.1, 0.2, 0.5)
+    families: tuple[str, ...] = TRANSFORM_FAMILIES + MUTATION_FAMILIES
+    fps_frames: int = 3
+    fps_sizes: tuple[tuple[int, int], ...] = FPS_SIZES
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("examples", "max_views", "size", "fps_frames"):
+            if int(getattr(self, name)) < 1:
+                raise InvalidArgument(f"{name}={getattr(self, name)!r} must be >= 1")
+        unknown = set(self.families) - set(TRANSFORM_FAMILIES + MUTATION_FAMILIES)
+        if unknown:
+            raise InvalidArgument(f"families {sorted(unknown)} unknown; expected {TRANSFORM_FAMILIES + MUTATION_FAMILIES}")
+
+
+@dataclass
+class StudyResult:
+    realness: list[dict] = field(default_factory=list)
+    domain_shift: list[dict] = field(default_factory=list)
+    examples: list[dict] = field(default_factory=list)
+    fps: list[dict] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    eps: tuple[float, ...] = ()
+
+    @property
+    def inconsistencies(self) -> list[dict]:
+        """``examples`` counted per (scene, SUT, metric, family): valid examples and failures per eps."""
+        groups: dict[tuple, list[dict]] = {}
+        for row in self.examples:
+            groups.setdefault((row["scene"], row["sut"], row["metric"], row["family"]), []).append(row)
+        out = []
+        for (scene, sut, metric, family), rows in sorted(groups.items()):
+            valid = [r for r in rows if r["valid"]]
+            row = {"scene": scene, "sut": sut, "metric": metric, "family": family,
+                   "kind": "n2r" if family.startswith("tau") else "mutation",
+                   "drawn": len(rows), "valid": len(valid)}
+            for eps in self.eps:
+                row[f"inc@{eps:g}"] = sum(r["deviation"] > eps for r in valid)
+            out.append(row)
+        return out
+
+
+def _reference_image(scene: Scene, view: SceneView, camera: Camera) -> np.ndarray | None:
+    import cv2
+
+    if view.image is not None:
+        img = view.image
+        if img.shape[:2] != (camera.height, camera.width):
+            img = cv2.resize(img, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
+        return img
+    exact = getattr(scene, "is_exact", False)
+    return scene.render(view.c2w, camera, ("rgb",)).rgb if exact else None
+
+
+def _source_views(scene: Scene, max_views: int) -> list[SceneView]:
+    views = [v for v in scene.views if v.split == "heldout"] or list(scene.views)
+    if len(views) > max_views:  # spread over the trajectory rather than the first few
+        views = [views[i] for i in np.linspace(0, len(views) - 1, max_views).round().astype(int)]
+    return views
+
+
+def _score(metric: Any, out_s: Any, out_f: Any, source: RenderedView, follow: RenderedView) -> tuple[float, float, bool]:
+    try:
+        result = metric.compute(out_s, out_f, source, follow)
+    except MetricUndefined:
+        return float("nan"), float("nan"), False
+    return float(result.score), float(result.deviation), bool(result.valid)
+
+
+def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig = StudyConfig(),
+              progress: Callable[[str], None] | None = None) -> StudyResult:
+    """Run RQ1–RQ3 on every scene for every SUT; see the module docstring for the rows produced."""
+    result = StudyResult(eps=tuple(config.eps))
+    validity = Validity()
+    say = progress or (lambda _msg: None)
+    for scene in scenes:
+        rng = np.random.default_rng(config.seed)
+        outputs = ("rgb", "depth", "opacity")
+        for view in _source_views(scene, config.max_views):
+            camera = view.camera.fit_within(config.size)
+            say(f"{scene.name} / {view.name}")
+            source = scene.render(view.c2w, camera, outputs)
+            real = _reference_image(scene, view, camera)
+            if real is not None:
+                _rq1(result, scene, view, source, real, suts, rng)
+            elif not any("RQ1" in n and scene.name in n for n in result.notes):
+                result.notes.append(f"RQ1 skipped for {scene.name}: its views store no real photos")
+            sut_source = {sut.name: sut.fn(source.rgb) for sut in suts}
+            for family in config.families:
+                for _ in range(config.examples):
+                    if family.startswith("tau"):
+                        tau = sample_transform(family, rng)
+                        follow = scene.render(tau.apply(view.c2w, scene.length_scale()), camera, outputs)
+                        valid = validity.check(follow, scene).valid
+                        drawn = tau.describe()
+                    else:
+                        mutation = sample_mutation(family, rng)
+                        follow = mutation.apply_to_view(source)
+                        valid, drawn = True, repr(mutation)
+                    for sut in suts:
+                        out_f = sut.fn(follow.rgb) if valid else None
+                        for name, metric in sut.metrics().items():
+                            score, dev, ok = (_score(metric, sut_source[sut.name], out_f, source, follow)
+                                              if valid else (float("nan"), float("nan"), False))
+                            result.examples.append({
+                                "scene": scene.name, "view": view.name, "family": family, "drawn": drawn,
+                                "sut": sut.name, "metric": name, "score": score, "deviation": dev,
+                                "valid": bool(valid and ok),
+                            })
+        _rq3(result, scene, config, say)
+    return result
+
+
+def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedView, real: np.ndarray,
+         suts: Sequence[SUT], rng: np.random.Generator) -> None:
+    images = {"tau0": source.rgb}
+    images.update({f: sample_mutation(f, rng).apply(real) for f in MUTATION_FAMILIES})
+    for name, img in images.items():
+        result.realness.append({
+            "scene": scene.name, "view": view.name, "source": name, "psnr": psnr(real, img),
+            "ssim": ssim(real, img), "lpips": lpips(real, img),
+        })
+    real_view = RenderedView(source.camera, source.c2w, rgb=real, depth=source.depth, opacity=source.opacity)
+    for sut in suts:
+        out_real, out_field = sut.fn(real), sut.fn(source.rgb)
+        for name, metric in sut.metrics().items():
+            score, dev, ok = _score(metric, out_real, out_field, real_view, source)
+            result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name, "metric": name,
+                                        "score": score, "deviation": dev, "valid": ok})
+
+
+def _rq3(result: StudyResult, scene: Scene, config: StudyConfig, say: Callable[[str], None]) -> None:
+    view = scene.views[0]
+    portrait = view.camera.height > view.camera.width
+    for w, h in config.fps_sizes:
+        size = (h, w) if portrait else (w, h)
+        camera = view.camera.resized(*size)
+        say(f"{scene.name}: frames/s at {size[0]}x{size[1]}")
+        try:
+            scene.render(view.c2w, camera, ("rgb",))  # warm-up (compilation, caches)
+            start = time.perf_counter()
+            for _ in range(config.fps_frames):
+                scene.render(view.c2w, camera, ("rgb",))
+            seconds = (time.perf_counter() - start) / config.fps_frames
+        except (N2RError, MemoryError) as exc:
+            result.notes.append(f"RQ3 {scene.name} at {size[0]}x{size[1]}: {exc}")
+            continue
+        result.fps.append({"scene": scene.name, "width": size[0], "height": size[1],
+                           "fps": 1.0 / seconds, "seconds_per_frame": seconds})

@@ -1,0 +1,49 @@
+"""Reproducible draws of the study's transforms τ1–τ6 and mutations m1–m3.
+
+The study characterizes SUTs, so it samples each family **uniformly** within its bounds from a seeded
+``numpy.random.Generator`` (Hypothesis's draws, made to find and shrink failures, favour boundaries).
+The τ families are the presets of :mod:`pytest_n2r.strategies` (same bounds, same look-at compensation).
+
+Mutation families (the paper gives no parameters; these are ours, stated here):
+
+- m1 brightness: ±13 to ±77 grey levels (5 % to 30 % of full scale), sign drawn at random;
+- m2 one noise patch: 20 % to 50 % of the width and height, anywhere in the image;
+- m3 six black patches: 3 % to 8 % of the width and height each.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry import Transform
+from ..mutations import BlackPatches, Brightness, Mutation, NoisePatch
+
+__all__ = ["TRANSFORM_FAMILIES", "MUTATION_FAMILIES", "sample_transform", "sample_mutation"]
+
+TRANSFORM_FAMILIES = ("tau1", "tau2", "tau3", "tau4", "tau5", "tau6")
+MUTATION_FAMILIES = ("m1", "m2", "m3")
+
+
+def sample_transform(family: str, rng: np.random.Generator) -> Transform:
+    """A transform drawn uniformly within the bounds of preset ``family`` (``"tau1"`` … ``"tau6"``)."""
+    from ..strategies import PRESETS, look_at_compensation
+
+    strategy = PRESETS[family]
+    values = {axis: float(rng.uniform(lo, hi)) for axis, (lo, hi) in sorted(strategy.n2r_bounds.items())}
+    if strategy.n2r_look_at:
+        pitch, yaw = look_at_compensation(values.get("x", 0.0), values.get("y", 0.0), values.get("z", 0.0))
+        values["pitch"] = values.get("pitch", 0.0) + pitch
+        values["yaw"] = values.get("yaw", 0.0) + yaw
+    return Transform(**values)
+
+
+def sample_mutation(family: str, rng: np.random.Generator) -> Mutation:
+    """A mutation of family ``family`` (``"m1"``, ``"m2"``, ``"m3"``) with parameters drawn from ``rng``."""
+    seed = int(rng.integers(0, 2**32 - 1))
+    if family == "m1":
+        return Brightness(int(rng.choice([-1, 1]) * rng.integers(13, 78)))
+    if family == "m2":
+        return NoisePatch(float(rng.uniform(0.2, 0.5)), float(rng.random()), float(rng.random()), seed)
+    if family == "m3":
+        return BlackPatches(float(rng.uniform(0.03, 0.08)), 6, seed)
+    raise KeyError(f"unknown mutation family {family!r}; expected one of {MUTATION_FAMILIES}")

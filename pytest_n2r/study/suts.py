@@ -1,0 +1,104 @@
+"""Systems under test for ``n2r study``: built-in OpenCV detectors, or any ``module:attribute`` callable.
+
+A SUT maps an RGB ``uint8`` image (H×W×3) to either keypoints (an ``(N, 2)`` array of pixel coordinates,
+or a list of ``cv2.KeyPoint``) — a *detector* — or a 1-D score vector (probabilities or logits) — a
+*classifier*. The kind decides which metrics the study applies (:data:`METRICS_BY_KIND`).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from ..errors import InvalidArgument, InvalidType
+from ..metrics import Metric, class_invariance, cosine_similarity, interest_point_spread, l2_norm, repeatability
+
+__all__ = ["SUT", "BUILTIN_SUTS", "resolve_sut", "METRICS_BY_KIND"]
+
+Kind = Literal["detector", "classifier"]
+
+#: The paper's metrics for each kind of SUT (name → metric with the paper's parameters).
+METRICS_BY_KIND: dict[str, Callable[[], dict[str, Metric]]] = {
+    "detector": lambda: {"repeatability": repeatability(px=2.0), "ip_spread": interest_point_spread()},
+    "classifier": lambda: {
+        "cosine": cosine_similarity(), "l2": l2_norm(), "class_invariance": class_invariance(),
+    },
+}
+
+
+def _opencv_detector(make: Callable[[], Any]) -> Callable[[np.ndarray], np.ndarray]:
+    import cv2
+
+    feature = make()
+
+    def detect(rgb: np.ndarray) -> np.ndarray:
+        keypoints = feature.detect(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), None)
+        return np.array([k.pt for k in keypoints], dtype=np.float32).reshape(-1, 2)
+
+    return detect
+
+
+def _builtin(name: str) -> Callable[[np.ndarray], np.ndarray]:
+    import cv2
+
+    makers = {
+        "orb": lambda: cv2.ORB_create(nfeatures=1000),
+        "sift": lambda: cv2.SIFT_create(nfeatures=1000),
+        # OpenCV 5 moved AKAZE to the contrib module xfeatures2d
+        "akaze": lambda: (getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create)(),
+    }
+    return _opencv_detector(makers[name])
+
+
+#: Built-in SUT names (OpenCV detectors with default settings, at most 1000 points for ORB and SIFT).
+BUILTIN_SUTS: dict[str, Kind] = {"orb": "detector", "sift": "detector", "akaze": "detector"}
+
+
+@dataclass(frozen=True)
+class SUT:
+    """A named SUT with its kind and the metrics the study applies to it."""
+
+    name: str
+    kind: Kind
+    fn: Callable[[np.ndarray], Any]
+
+    def metrics(self) -> dict[str, Metric]:
+        return METRICS_BY_KIND[self.kind]()
+
+
+def _kind_of(output: Any, name: str) -> Kind:
+    if isinstance(output, (list, tuple)) and (not output or hasattr(output[0], "pt")):
+        return "detector"
+    arr = np.asarray(output)
+    if arr.ndim == 2 and arr.shape[1] >= 2:
+        return "detector"
+    if arr.ndim == 1 or (arr.ndim == 2 and arr.shape[0] == 1):
+        return "classifier"
+    raise InvalidType(
+        f"--sut {name}: output of shape {arr.shape} is neither keypoints (N, 2) nor a score vector (C,)"
+    )
+
+
+def resolve_sut(spec: str, probe: np.ndarray) -> SUT:
+    """A SUT from a built-in name (``orb``, ``sift``, ``akaze``) or ``package.module:attribute``.
+
+    ``probe`` (an RGB image) is run once to tell detectors from classifiers for imported SUTs.
+    """
+    if spec in BUILTIN_SUTS:
+        return SUT(spec, BUILTIN_SUTS[spec], _builtin(spec))
+    if ":" not in spec:
+        raise InvalidArgument(
+            f"--sut {spec!r} is not a built-in SUT ({', '.join(BUILTIN_SUTS)}) nor 'module:attribute'"
+        )
+    module_name, _, attr = spec.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise InvalidArgument(f"--sut {spec!r}: cannot import {attr!r} from {module_name!r} ({exc})") from None
+    if not callable(fn):
+        raise InvalidType(f"--sut {spec!r} is a {type(fn).__name__}, not a callable image -> output")
+    return SUT(attr, _kind_of(fn(probe), spec), fn)
