@@ -41,6 +41,15 @@ _EXPORTS: dict[str, str] = {
     "NoisePatch": "pytest_n2r.mutations",
     "BlackPatches": "pytest_n2r.mutations",
     "GroundTruthScene": "pytest_n2r.demo",
+    "metamorphic": "pytest_n2r.marker",
+    "transforms": "pytest_n2r.strategies",
+    "views": "pytest_n2r.strategies",
+    "Relation": "pytest_n2r.relations",
+    "RelationFailure": "pytest_n2r.relations",
+    "SUTError": "pytest_n2r.relations",
+    "check_relation": "pytest_n2r.relations",
+    "RenderCache": "pytest_n2r.cache",
+    "Validity": "pytest_n2r.validity",
 }
 
 __all__ = ["__version__", *_EXPORTS]

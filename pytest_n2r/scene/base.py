@@ -94,8 +94,11 @@ class Scene(ABC):
             )
         return 1.0 / float(self.metres_per_unit)
 
-    def view(self, index: int | str) -> SceneView:
-        """A captured view by index or image name."""
+    def view(self, index: int | str | object) -> SceneView:
+        """A captured view by index or image name (or a drawn ``strategies.ViewPick``, resolved here)."""
+        resolve = getattr(index, "resolve", None)
+        if callable(resolve):
+            return resolve(self)
         if isinstance(index, str):
             for v in self.views:
                 if v.name == index:

@@ -1,0 +1,86 @@
+"""Failure pictures: the source and follow-up renders with the SUT's output drawn on them, as PNGs.
+
+What is drawn depends on the output: keypoints (an ``(N, 2+)`` array or ``cv2.KeyPoint`` list) as
+circles, a class (an int, a string, or a 1-D score vector whose argmax is the top-1 class) as text.
+Anything else is saved undecorated. Files are written atomically (temporary name, then rename).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .data.atomic import atomic_write_bytes
+
+__all__ = ["draw_output", "save_png", "save_pair", "artifact_dir"]
+
+_GREEN, _RED = (40, 220, 40), (235, 50, 50)  # RGB
+
+
+def artifact_dir(root: str | Path, test_id: str) -> Path:
+    """``root/<test id made filename-safe>`` (``test_a.py::test_b[fox]`` → ``test_a.py-test_b-fox``)."""
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", test_id).strip("-") or "relation"
+    return Path(root) / safe[:150]
+
+
+def _keypoints(output: Any) -> np.ndarray | None:
+    if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
+        return np.array([k.pt for k in output], dtype=np.float64)
+    if isinstance(output, np.ndarray) and output.ndim == 2 and output.shape[1] >= 2 and output.dtype.kind in "fiu":
+        return output[:, :2].astype(np.float64)
+    return None
+
+
+def _label(output: Any) -> str | None:
+    if isinstance(output, (str, int, np.integer)) and not isinstance(output, bool):
+        return f"class {output}"
+    if isinstance(output, np.ndarray) and output.ndim == 1 and output.size > 1 and output.dtype.kind in "fiu":
+        top = int(np.argmax(output))
+        return f"top-1: {top} ({float(output[top]):.3g})"
+    return None
+
+
+def draw_output(rgb: np.ndarray, output: Any, color: tuple[int, int, int] = _GREEN) -> np.ndarray:
+    """A copy of ``rgb`` (H×W×3 uint8 RGB) with ``output`` drawn on it (see the module docstring)."""
+    import cv2
+
+    canvas = np.ascontiguousarray(rgb, dtype=np.uint8).copy()
+    radius = max(2, round(max(canvas.shape[:2]) / 160))
+    points = _keypoints(output)
+    if points is not None:
+        for u, v in points[np.isfinite(points).all(axis=1)]:
+            cv2.circle(canvas, (int(round(u)), int(round(v))), radius, color, 1, cv2.LINE_AA)
+        text = f"{len(points)} keypoints"
+    else:
+        text = _label(output)
+    if text:
+        scale = max(0.35, canvas.shape[1] / 900)
+        org = (4, int(18 * scale / 0.5))
+        cv2.putText(canvas, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(canvas, text, org, cv2.FONT_HERSHEY_SIMPLEX, scale, color, 1, cv2.LINE_AA)
+    return canvas
+
+
+def save_png(path: str | Path, rgb: np.ndarray) -> Path:
+    """Write an H×W×3 uint8 RGB image as PNG, atomically."""
+    import cv2
+
+    ok, data = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
+    if not ok:  # pragma: no cover - OpenCV fails to encode only on impossible shapes
+        raise ValueError(f"could not encode an image of shape {np.shape(rgb)} as PNG")
+    return atomic_write_bytes(path, data.tobytes())
+
+
+def save_pair(directory: str | Path, source_rgb: np.ndarray, follow_rgb: np.ndarray,
+              out_source: Any, out_follow: Any) -> dict[str, str]:
+    """Save the renders the SUT saw and the same with its outputs drawn; returns ``{role: path}``."""
+    directory = Path(directory)
+    return {
+        "source": str(save_png(directory / "source.png", draw_output(source_rgb, out_source, _GREEN))),
+        "follow": str(save_png(directory / "follow.png", draw_output(follow_rgb, out_follow, _RED))),
+        "source_raw": str(save_png(directory / "source-raw.png", source_rgb)),
+        "follow_raw": str(save_png(directory / "follow-raw.png", follow_rgb)),
+    }

@@ -1,0 +1,248 @@
+"""Render cache: an in-memory LRU for one session over an on-disk, content-addressed store.
+
+A render is identified by everything that determines its pixels: the scene's content hash, the pose
+(exact float64 bytes), the camera, the scene's render settings and the package version. Each output
+(``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs renders only
+the missing ones. Files are written under a temporary name and renamed into place, so concurrent pytest-
+xdist workers sharing one directory never see a torn file: at worst two workers render the same view and
+the second rename wins with identical bytes (rendering is deterministic).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import shutil
+import tempfile
+from collections import OrderedDict
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .data.atomic import atomic_write_text
+from .errors import InvalidArgument
+from .geometry import Camera, check_pose
+from .render.view import RenderedView
+from .scene.base import Scene, normalize_outputs
+
+__all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
+
+DEFAULT_MEMORY_BYTES = 512 * 2**20
+DEFAULT_DISK_BYTES = 2 * 2**30
+#: Check the disk size cap after this many bytes were written (a directory scan is not free).
+_TRIM_EVERY_BYTES = 64 * 2**20
+_SUBDIR = "renders"
+
+_UNITS = {"": 1, "b": 1, "k": 2**10, "kb": 2**10, "kib": 2**10, "m": 2**20, "mb": 2**20, "mib": 2**20,
+          "g": 2**30, "gb": 2**30, "gib": 2**30}
+
+
+def parse_size(text: str | int, name: str = "size") -> int:
+    """``"512MiB"``, ``"2G"``, ``"300kb"`` or a plain number of bytes → bytes (binary units)."""
+    if isinstance(text, int) and not isinstance(text, bool):
+        value = text
+    else:
+        match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([a-zA-Z]*)\s*", str(text))
+        if not match or match.group(2).lower() not in _UNITS:
+            raise InvalidArgument(f"{name}={text!r} is not a size; expected e.g. '2GiB', '512MB' or a byte count")
+        value = int(float(match.group(1)) * _UNITS[match.group(2).lower()])
+    if value < 0:
+        raise InvalidArgument(f"{name}={text!r} must not be negative")
+    return value
+
+
+def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
+    """Hex SHA-256 of what determines a render's pixels (the outputs are stored under this key)."""
+    settings = getattr(scene, "render_settings", None)
+    spec = {
+        "version": __version__,
+        "scene": scene.content_hash,
+        "camera": camera.to_dict(),
+        "settings": settings() if callable(settings) else settings,
+    }
+    h = hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode())
+    h.update(np.ascontiguousarray(c2w, dtype="<f8").tobytes())
+    return h.hexdigest()
+
+
+@dataclass
+class CacheStats:
+    """Counts of one cache's lookups (per output) and of scene renders it had to do."""
+
+    memory_hits: int = 0
+    disk_hits: int = 0
+    renders: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"memory_hits": self.memory_hits, "disk_hits": self.disk_hits, "renders": self.renders}
+
+
+class RenderCache:
+    """Renders through ``scene.render`` only what neither the memory LRU nor the disk store holds.
+
+    ``directory=None`` keeps the cache in memory only. ``memory_bytes`` and ``disk_bytes`` cap the two
+    levels; the disk level evicts the least recently used renders (by modification time, which a hit
+    refreshes) down to 80 % of its cap.
+    """
+
+    def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,
+                 disk_bytes: int = DEFAULT_DISK_BYTES):
+        self.directory = Path(directory) if directory is not None else None
+        self.memory_bytes = parse_size(memory_bytes, "memory_bytes")
+        self.disk_bytes = parse_size(disk_bytes, "disk_bytes")
+        self.stats = CacheStats()
+        self._memory: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
+        self._memory_used = 0
+        self._written_since_trim = 0
+
+    def __repr__(self) -> str:
+        where = str(self.directory) if self.directory else "memory only"
+        return f"RenderCache({where})"
+
+    # -- public ---------------------------------------------------------------------------------------
+
+    def render(self, scene: Scene, c2w: np.ndarray, camera: Camera,
+               outputs: str | Iterable[str] = ("rgb",)) -> RenderedView:
+        """``scene.render(c2w, camera, outputs)``, served from the cache where possible."""
+        outputs = normalize_outputs(outputs)
+        c2w = check_pose(c2w)
+        key = render_key(scene, c2w, camera)
+        arrays: dict[str, np.ndarray] = {}
+        for name in outputs:
+            value = self._memory_get(key, name)
+            if value is not None:
+                self.stats.memory_hits += 1
+            else:
+                value = self._disk_get(key, name)
+                if value is not None:
+                    self.stats.disk_hits += 1
+                    self._memory_put(key, name, value)
+            if value is not None:
+                arrays[name] = value
+        missing = tuple(o for o in outputs if o not in arrays)
+        if missing:
+            self.stats.renders += 1
+            view = scene.render(c2w, camera, missing)
+            for name in missing:
+                value = getattr(view, name)
+                arrays[name] = value
+                self._memory_put(key, name, value)
+                self._disk_put(key, name, value)
+        return RenderedView(camera=camera, c2w=c2w, **arrays)
+
+    def clear(self) -> None:
+        """Forget everything, in memory and on disk."""
+        self._memory.clear()
+        self._memory_used = 0
+        if self.directory is not None and (self.directory / _SUBDIR).exists():
+            shutil.rmtree(self.directory / _SUBDIR, ignore_errors=True)
+
+    def disk_usage(self) -> int:
+        """Bytes the disk store holds now."""
+        return sum(size for _, _, size in self._disk_files())
+
+    # -- memory level ---------------------------------------------------------------------------------
+
+    def _memory_get(self, key: str, name: str) -> np.ndarray | None:
+        value = self._memory.get((key, name))
+        if value is not None:
+            self._memory.move_to_end((key, name))
+        return value
+
+    def _memory_put(self, key: str, name: str, value: np.ndarray) -> None:
+        if value.nbytes > self.memory_bytes:
+            return
+        value.setflags(write=False)  # shared between callers: nobody may draw on the cached array
+        old = self._memory.pop((key, name), None)
+        if old is not None:
+            self._memory_used -= old.nbytes
+        self._memory[(key, name)] = value
+        self._memory_used += value.nbytes
+        while self._memory_used > self.memory_bytes:
+            _, dropped = self._memory.popitem(last=False)
+            self._memory_used -= dropped.nbytes
+
+    # -- disk level -----------------------------------------------------------------------------------
+
+    def _path(self, key: str, name: str) -> Path:
+        assert self.directory is not None
+        return self.directory / _SUBDIR / key[:2] / f"{key}.{name}.npy"
+
+    def _disk_get(self, key: str, name: str) -> np.ndarray | None:
+        if self.directory is None:
+            return None
+        path = self._path(key, name)
+        try:
+            value = np.load(path, allow_pickle=False)
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError):  # unreadable (disk trouble, another version's format): re-render
+            path.unlink(missing_ok=True)
+            return None
+        try:
+            os.utime(path)  # mark as recently used for eviction
+        except OSError:
+            pass
+        return value
+
+    def _disk_put(self, key: str, name: str, value: np.ndarray) -> None:
+        if self.directory is None or value.nbytes > self.disk_bytes:
+            return
+        path = self._path(key, name)
+        self._prepare_directory(path.parent)
+        # temporary name + rename (no fsync: a cache entry lost in a power cut is just re-rendered)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.save(f, np.ascontiguousarray(value), allow_pickle=False)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        self._written_since_trim += value.nbytes
+        if self._written_since_trim >= min(_TRIM_EVERY_BYTES, self.disk_bytes // 10 + 1):
+            self._written_since_trim = 0
+            self.trim()
+
+    def _prepare_directory(self, leaf: Path) -> None:
+        assert self.directory is not None
+        if not (self.directory / "CACHEDIR.TAG").exists():
+            self.directory.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(self.directory / "CACHEDIR.TAG",
+                              "Signature: 8a477f597d28d172789f06886806bc55\n# pytest-n2r render cache\n")
+            atomic_write_text(self.directory / ".gitignore", "# created by pytest-n2r\n*\n")
+        leaf.mkdir(parents=True, exist_ok=True)
+
+    def _disk_files(self) -> list[tuple[float, Path, int]]:
+        if self.directory is None or not (self.directory / _SUBDIR).exists():
+            return []
+        found = []
+        for path in (self.directory / _SUBDIR).glob("*/*.npy"):
+            try:
+                st = path.stat()
+            except FileNotFoundError:  # evicted by another worker meanwhile
+                continue
+            found.append((st.st_mtime, path, st.st_size))
+        return found
+
+    def trim(self) -> int:
+        """Evict least recently used renders until the disk store is at most 80 % of its cap; returns the
+        number of bytes freed. Safe to run from several workers at once."""
+        files = self._disk_files()
+        total = sum(size for _, _, size in files)
+        if total <= self.disk_bytes:
+            return 0
+        freed = 0
+        target = 0.8 * self.disk_bytes
+        for _, path, size in sorted(files):
+            if total - freed <= target:
+                break
+            path.unlink(missing_ok=True)
+            freed += size
+        return freed
+

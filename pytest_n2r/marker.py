@@ -1,0 +1,69 @@
+"""``@metamorphic``: turn a test that returns a system under test into a metamorphic relation check.
+
+The decorated test takes the ``n2r_scene`` fixture (and any other fixtures) and **returns the SUT**, a
+callable ``rgb (H×W×3 uint8, RGB) -> output``. The plugin then renders source and follow-up views,
+runs the SUT on both and compares them with the metric (see :mod:`pytest_n2r.relations`).
+
+Arguments are validated when the module is imported; a bad one becomes a collection error that names
+the test, not a failure in the middle of a run.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, TypeVar
+
+from .errors import N2RError
+from .plugin import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
+from .relations import Relation
+from .validity import Validity
+
+__all__ = ["metamorphic"]
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None = None,
+                size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
+                validity: Validity | None = None) -> Callable[[F], F]:
+    """Check that the SUT the test returns satisfies a metamorphic relation on ``n2r_scene``.
+
+    Parameters
+    ----------
+    metric
+        A :class:`~pytest_n2r.metrics.base.Metric` (``repeatability(px=2)``) or a metric's name.
+    eps
+        Largest allowed deviation of the metric from its ideal (>= 0).
+    transform
+        A strategy of transforms (``transforms(yaw=10, x=0.1)``), a preset name (``"tau1"`` ..
+        ``"tau6"``), a fixed ``Transform`` or a strategy of image mutations.
+    examples, size
+        Hypothesis examples and render size (``"480x270"`` or the longer side); default: the
+        ``--n2r-examples`` / ``--n2r-size`` options, then the ini file.
+    search
+        ``"random"``, or ``"targeted"`` to steer the search toward larger deviations.
+    views, interpolate
+        Source views: ``"heldout"`` (default), ``"train"`` or ``"all"``; ``interpolate=True`` draws poses
+        between consecutive captured views.
+    validity
+        Thresholds that decide when a follow-up view is a fair input (:class:`~pytest_n2r.validity.Validity`).
+    """
+    try:
+        relation: Relation | None = Relation.build(
+            metric, eps, transform, examples=examples, size=size, search=search, views=views,
+            interpolate=interpolate, validity=validity,
+        )
+        error = None
+    except N2RError as exc:
+        relation, error = None, f"@metamorphic(...): {exc}"
+
+    def decorate(test: F) -> F:
+        import pytest
+
+        if error is not None:
+            setattr(test, ERROR_ATTR, error)
+            return test
+        setattr(test, RELATION_ATTR, relation)
+        test = pytest.mark.usefixtures("n2r_scene")(test)
+        return getattr(pytest.mark, RELATION_MARKER)(test)
+
+    return decorate

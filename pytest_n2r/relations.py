@@ -1,0 +1,530 @@
+"""The metamorphic relation engine: render a source and a follow-up view, run the SUT on both, compare.
+
+No pytest here: the plugin (and anyone else) calls :func:`check_relation` with a scene, a SUT and a
+:class:`Relation`, and gets a :class:`RelationStats` back or a :class:`RelationFailure` (an
+``AssertionError``) whose message states the scene, the source view, the minimal transform, the metric's
+score and deviation, ``eps`` and where the failure pictures are.
+
+Hypothesis drives the search: it draws a source view and a transform, shrinks a failure to the smallest
+transform that still fails, replays the last failure first from its example database, seeds from the
+relation's identity when ``derandomize`` is on, and with ``search="targeted"`` steers toward larger
+deviations with :func:`hypothesis.target`. Deadlines are off and the "too slow" / "filters too much"
+health checks are suppressed, because renders are slow and invalid views are expected; a real hang is
+caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from hypothesis import HealthCheck, Phase, assume, given, target
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
+from hypothesis.errors import Unsatisfiable
+
+from ._timeout import time_limit
+from ._validation import check_range
+from .artifacts import artifact_dir, save_pair
+from .cache import RenderCache
+from .errors import InvalidArgument, InvalidType, MetricUndefined, N2RError, SUTOutputError
+from .geometry import Transform, Units
+from .metrics.base import Metric, MetricResult
+from .render.size import RenderSize
+from .render.view import RenderedView
+from .scene.base import Scene, SceneView, normalize_outputs
+from .strategies import PRESETS, SPLITS, interpolate_view, scene_views, transform_units
+from .validity import Validity
+
+__all__ = ["Relation", "RunSettings", "RelationStats", "RelationFailure", "SUTError", "check_relation",
+           "resolve_metric", "SEARCHES"]
+
+SEARCHES = ("random", "targeted")
+
+
+class RelationFailure(AssertionError):
+    """The SUT's outputs on a source view and its follow-up deviate by more than ``eps``."""
+
+    def __init__(self, message: str, stats: "RelationStats | None" = None):
+        super().__init__(message)
+        self.stats = stats
+
+
+#: Give up on a relation once this many draws were invalid and they are more than ``max_rejected`` of all.
+_MIN_REJECTED_TO_GIVE_UP = 40
+
+
+class SUTError(N2RError):
+    """The system under test raised; the original exception is chained (``__cause__``)."""
+
+
+# -- the relation ---------------------------------------------------------------------------------------
+
+
+def resolve_metric(metric: Any) -> Metric:
+    """A :class:`Metric` instance, or a metric's name (``"repeatability"``) built with its defaults
+    (:data:`pytest_n2r.metrics.METRICS` lists the names)."""
+    from . import metrics
+
+    if isinstance(metric, Metric):
+        return metric
+    if isinstance(metric, str):
+        if metric not in metrics.METRICS:
+            known = ", ".join(sorted(metrics.METRICS))
+            raise InvalidArgument(f"metric={metric!r} is not a known metric; known names: {known}")
+        return metrics.resolve_metric(metric)
+    raise InvalidType(
+        f"metric={metric!r} must be a pytest_n2r.metrics.Metric (e.g. repeatability(px=2)) or a metric name, "
+        f"not {type(metric).__name__}"
+    )
+
+
+def _resolve_transform(transform: Any) -> st.SearchStrategy:
+    if isinstance(transform, str):
+        if transform not in PRESETS:
+            raise InvalidArgument(f"transform={transform!r} is not a preset; presets: {', '.join(PRESETS)}")
+        return PRESETS[transform]
+    if isinstance(transform, Transform):
+        return st.just(transform)
+    if isinstance(transform, st.SearchStrategy):
+        return transform
+    raise InvalidType(
+        f"transform={transform!r} must be a strategy such as transforms(yaw=10), a preset name ('tau1' to "
+        f"'tau6'), a mutation strategy or a fixed Transform, not {type(transform).__name__}"
+    )
+
+
+@dataclass(frozen=True)
+class Relation:
+    """A metamorphic relation: ``metric`` deviation at most ``eps`` between the SUT's outputs on a source
+    view and on its follow-up under ``transform``. ``examples``, ``size`` (``None``: the run's setting),
+    ``search`` (``"random"`` or ``"targeted"``), the source ``views`` split (``"heldout"``, ``"train"``,
+    ``"all"``), ``interpolate`` (sources between captured poses) and the ``validity`` thresholds.
+
+    Build it with :meth:`build`, which validates every argument and names the bad one.
+    """
+
+    metric: Metric
+    eps: float
+    transform: st.SearchStrategy
+    examples: int | None = None
+    size: RenderSize | None = None
+    search: str = "random"
+    views: str = "heldout"
+    interpolate: bool = False
+    validity: Validity = field(default_factory=Validity)
+
+    @classmethod
+    def build(cls, metric: Any, eps: Any, transform: Any, *, examples: int | None = None,
+              size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
+              validity: Validity | None = None) -> "Relation":
+        metric = resolve_metric(metric)
+        try:
+            eps = check_range("eps", eps, 0.0)
+        except InvalidType:
+            raise InvalidType(f"eps={eps!r} must be a number >= 0 (the largest allowed deviation)") from None
+        except InvalidArgument:
+            raise InvalidArgument(
+                f"eps={eps!r} must be a finite number >= 0 (the largest allowed deviation of "
+                f"{metric.name} from its ideal {metric.ideal:g})"
+            ) from None
+        strategy = _resolve_transform(transform)
+        if examples is not None and (isinstance(examples, bool) or not isinstance(examples, int) or examples < 1):
+            raise InvalidArgument(f"examples={examples!r} must be a whole number >= 1")
+        if search not in SEARCHES:
+            raise InvalidArgument(f"search={search!r}; expected one of {SEARCHES}")
+        if views not in SPLITS:
+            raise InvalidArgument(f"views={views!r}; expected one of {SPLITS}")
+        if not isinstance(interpolate, bool):
+            raise InvalidType(f"interpolate={interpolate!r} must be True or False")
+        if validity is not None and not isinstance(validity, Validity):
+            raise InvalidType(f"validity={validity!r} must be a pytest_n2r.validity.Validity")
+        return cls(metric, eps, strategy, examples, None if size is None else RenderSize.parse(size),
+                   search, views, interpolate, validity or Validity())
+
+    def describe(self) -> str:
+        return f"{self.metric!r} within eps={self.eps:g} under {self.transform!r}"
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How to run relations: defaults for ``examples`` and ``size`` (a relation's own values win),
+    ``derandomize`` (same examples every run: for CI), ``timeout`` seconds per render / SUT call
+    (``None``: no limit), where failure pictures go (``artifacts``; ``None``: nowhere) and the Hypothesis
+    example ``database`` (``"default"``: Hypothesis's own setting)."""
+
+    examples: int = 50
+    size: RenderSize | None = None
+    derandomize: bool = False
+    timeout: float | None = 300.0
+    artifacts: Path | None = None
+    database: Any = "default"
+
+
+# -- statistics -----------------------------------------------------------------------------------------
+
+
+@dataclass
+class RelationStats:
+    """What one relation run did: counts, the worst and the minimal failing example, the time split.
+
+    ``examples`` counts valid examples before shrinking began; ``shrink_examples`` those Hypothesis ran
+    while shrinking a failure. Times are seconds of wall clock spent rendering (including cache lookups),
+    in the SUT and in the metric.
+    """
+
+    test_id: str
+    scene: str
+    metric: str
+    eps: float
+    examples: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    undefined: int = 0
+    inconsistencies: int = 0
+    shrink_examples: int = 0
+    worst_deviation: float = float("nan")
+    worst: dict[str, Any] | None = None
+    minimal: dict[str, Any] | None = None
+    render_s: float = 0.0
+    sut_s: float = 0.0
+    metric_s: float = 0.0
+    renders: int = 0
+    outcome: str = "passed"
+    message: str = ""
+    records: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def n_rejected(self) -> int:
+        return sum(self.rejected.values())
+
+    def summary_line(self) -> str:
+        worst = "n/a" if math.isnan(self.worst_deviation) else f"{self.worst_deviation:.3g}"
+        rejected = f"{self.n_rejected} rejected as invalid"
+        if self.rejected:
+            rejected += " (" + ", ".join(f"{n} {r}" for r, n in self.rejected.most_common()) + ")"
+        return (
+            f"{self.outcome.upper():6s} {self.test_id}: {_plural(self.examples, 'example')}, {rejected}, "
+            f"{self.inconsistencies} inconsistent, worst deviation {worst} (eps {self.eps:g}); "
+            f"time render {self.render_s:.2f} s / SUT {self.sut_s:.2f} s / metric {self.metric_s:.2f} s"
+        )
+
+    def to_record(self) -> Any:
+        """The plain-data :class:`pytest_n2r.report.records.RelationRecord` of this run."""
+        from .report.records import ExampleRecord, RelationRecord
+
+        def example(d: dict[str, Any]) -> ExampleRecord:
+            return ExampleRecord(scene=self.scene, view=d["view"], transform=d["transform"], score=d["score"],
+                                 deviation=d["deviation"], passed=d["passed"], valid=d["valid"],
+                                 images=d.get("images", {}))
+
+        return RelationRecord(
+            nodeid=self.test_id, metric=self.metric, eps=self.eps,
+            examples=[example(r) for r in self.records], outcome=self.outcome, message=self.message,
+            timings={"render": self.render_s, "sut": self.sut_s, "metric": self.metric_s},
+            minimal=example(self.minimal) if self.minimal else None,
+        )
+
+
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+# -- the engine -----------------------------------------------------------------------------------------
+
+
+def _is_final_example() -> bool:
+    """True while Hypothesis replays the minimal failing example for the last time."""
+    try:
+        from hypothesis.control import current_build_context
+
+        return bool(current_build_context().is_final)
+    except Exception:  # outside Hypothesis, or its internals moved: treat every example as final
+        return True
+
+
+def _mutation_like(value: Any) -> bool:
+    return not isinstance(value, Transform) and callable(getattr(value, "apply", None)) \
+        and callable(getattr(value, "describe", None))
+
+
+class _Engine:
+    """One relation on one scene with one SUT: the body of each Hypothesis example."""
+
+    def __init__(self, scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation,
+                 settings: RunSettings, cache: RenderCache, stats: RelationStats):
+        self.scene, self.sut, self.relation, self.settings = scene, sut, relation, settings
+        self.cache, self.stats = cache, stats
+        self.metric = relation.metric
+        self.size = relation.size or settings.size
+        self.units = transform_units(relation.transform)
+        needs = tuple(getattr(self.metric, "needs", ()) or ())
+        self.outputs = normalize_outputs(("rgb", *needs))
+        self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
+        self.source_outputs_cache: dict[str, Any] = {}
+        self.failed = False
+        self.gave_up = False
+
+    # -- pieces -----------------------------------------------------------------------------------------
+
+    def camera_for(self, view: SceneView):
+        return view.camera if self.size is None else self.size.apply(view.camera)
+
+    def render(self, c2w: np.ndarray, view: SceneView, outputs: tuple[str, ...], role: str) -> RenderedView:
+        start = time.perf_counter()
+        renders = self.cache.stats.renders
+        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}"):
+            rendered = self.cache.render(self.scene, c2w, self.camera_for(view), outputs)
+        self.stats.render_s += time.perf_counter() - start
+        self.stats.renders += self.cache.stats.renders - renders
+        return rendered
+
+    def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
+        start = time.perf_counter()
+        try:
+            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})"):
+                output = self.sut(rgb)
+        except Exception as exc:
+            raise SUTError(
+                f"the system under test raised {type(exc).__name__}: {exc} -- on the {role} view ({where}); "
+                "its traceback is above"
+            ) from exc
+        finally:
+            self.stats.sut_s += time.perf_counter() - start
+        _check_output(output, role, where, self.metric)
+        return output
+
+    def compute(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
+                where: str) -> MetricResult:
+        start = time.perf_counter()
+        try:
+            result = self.metric.compute(out_source, out_follow, source, follow)
+        except MetricUndefined as exc:  # the pair tests nothing (e.g. no keypoint in the common region)
+            return MetricResult.undefined(self.metric.name, str(exc))
+        except (InvalidType, InvalidArgument) as exc:
+            if isinstance(exc, SUTOutputError):
+                raise
+            raise SUTOutputError(f"{self.metric!r} cannot use the SUT's output ({where}): {exc}") from exc
+        finally:
+            self.stats.metric_s += time.perf_counter() - start
+        if not isinstance(result, MetricResult):
+            raise InvalidType(f"{self.metric!r}.compute returned {type(result).__name__}, not a MetricResult")
+        if getattr(result, "valid", True) and not math.isfinite(result.deviation):
+            raise SUTOutputError(
+                f"{self.metric!r} gave deviation {result.deviation} ({where}); the SUT's output probably "
+                "contains NaN or Inf"
+            )
+        return result
+
+    # -- one example ------------------------------------------------------------------------------------
+
+    def reject(self, reason: str) -> None:
+        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid."""
+        stats = self.stats
+        stats.rejected[reason] += 1
+        drawn = stats.examples + stats.n_rejected
+        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+            self.gave_up = True  # check_relation raises once Hypothesis stops
+        assume(False)
+
+    def example(self, view: SceneView, tau: Any) -> None:
+        __tracebackhide__ = True
+        if self.gave_up:  # reject the rest of the draws without rendering them
+            assume(False)
+        stats = self.stats
+        mutation = _mutation_like(tau)
+        describe = tau.describe() if mutation else self.describe_transform(tau)
+        where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
+        source = self.render(view.c2w, view, self.outputs, "source")
+        if mutation:  # the follow-up is the mutated source render, same pose
+            apply_to_view = getattr(tau, "apply_to_view", None)
+            follow = apply_to_view(source) if callable(apply_to_view) else RenderedView(
+                camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb), depth=source.depth,
+                opacity=source.opacity)
+        else:
+            follow_c2w = tau.apply(view.c2w, self.scene.length_scale(self.units))
+            follow = self.render(follow_c2w, view, self.follow_outputs, "follow-up")
+            verdict = self.relation.validity.check(follow, self.scene)
+            if not verdict.valid:
+                self.reject(verdict.reason)
+        key = f"{view.name}|{source.camera.width}x{source.camera.height}"
+        if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
+            self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
+        out_source = self.source_outputs_cache[key]
+        out_follow = self.run_sut(follow.rgb, "follow-up", where)
+        result = self.compute(out_source, out_follow, source, follow, where)
+        if not getattr(result, "valid", True):
+            self.reject("metric undefined")
+        deviation = float(result.deviation)
+        if self.relation.search == "targeted":
+            target(deviation, label="deviation")
+        transform = tau.as_dict() if not mutation else {"mutation": tau.describe()}
+        record = {"view": view.name, "transform": transform, "score": float(result.score),
+                  "deviation": deviation, "passed": deviation <= self.relation.eps, "valid": True}
+        if self.failed:
+            stats.shrink_examples += 1
+        else:
+            stats.examples += 1
+            stats.records.append(record)
+            if not deviation <= stats.worst_deviation:  # also true for the first (NaN)
+                stats.worst_deviation, stats.worst = deviation, record
+        if deviation <= self.relation.eps:
+            return
+        if not self.failed:
+            stats.inconsistencies += 1
+        self.failed = True
+        if not _is_final_example():
+            raise RelationFailure("inconsistent (shrinking)")
+        if self.settings.artifacts is not None:
+            record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id), source.rgb,
+                                         follow.rgb, out_source, out_follow)
+        stats.minimal = record
+        raise RelationFailure(self.failure_message(view, tau, result, record), stats)
+
+    def describe_transform(self, tau: Transform) -> str:
+        return tau.describe("ref" if self.units is Units.REFERENCE else self.units.value)
+
+    def failure_message(self, view: SceneView, tau: Any, result: MetricResult, record: dict) -> str:
+        lines = [
+            f"metamorphic relation violated: {self.metric!r} deviates {result.deviation:.4g} from its ideal "
+            f"{self.metric.ideal:g}, more than eps={self.relation.eps:g}",
+            f"  scene:      {self.scene.name} (content {self.scene.content_hash[:12]})",
+            f"  source:     view {view.name!r} ({view.split}), rendered at "
+            f"{self.camera_for(view).width}x{self.camera_for(view).height}",
+        ]
+        if _mutation_like(tau):
+            lines.append(f"  follow-up:  the source render mutated by {tau.describe()}")
+        else:
+            lines.append(f"  transform:  {self.describe_transform(tau)}  (minimal after shrinking)")
+            if any((tau.x, tau.y, tau.z)):
+                scale = self.scene.length_scale(self.units)
+                lines.append("              = " + ", ".join(
+                    f"{n}={getattr(tau, n) * scale:+.4g}" for n in ("x", "y", "z") if getattr(tau, n)
+                ) + " scene units" + self.metres(tau, scale))
+        details = ", ".join(f"{k}={v}" for k, v in result.details.items())
+        lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
+                     f"{self.relation.eps:g}" + (f" ({details})" if details else ""))
+        s = self.stats
+        lines.append(f"  search:     {_plural(s.examples, 'example')}, {s.n_rejected} rejected as invalid, "
+                     f"{_plural(s.shrink_examples, 'shrink step')}")
+        if record.get("images"):
+            images = record["images"]
+            lines.append(f"  images:     source   {images['source']}")
+            lines.append(f"              follow   {images['follow']}")
+            lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
+                         f"{Path(images['follow_raw']).name})")
+        return "\n".join(lines)
+
+    def metres(self, tau: Transform, scale: float) -> str:
+        mpu = getattr(self.scene, "metres_per_unit", None)
+        if not mpu:
+            return ""
+        parts = [f"{n}={getattr(tau, n) * scale * mpu:+.3g}" for n in ("x", "y", "z") if getattr(tau, n)]
+        return " = " + ", ".join(parts) + " m"
+
+
+def _check_output(output: Any, role: str, where: str, metric: Metric) -> None:
+    """Reject outputs no metric can use: None and non-finite numbers (with the metric's expectation)."""
+    expects = getattr(metric, "expects", None) or f"what {metric.name} compares"
+    if output is None:
+        raise SUTOutputError(
+            f"the system under test returned None on the {role} view ({where}); expected {expects}. "
+            "Did the SUT forget a return statement?"
+        )
+    if isinstance(output, (float, np.floating)) and not math.isfinite(output):
+        raise SUTOutputError(f"the system under test returned {output} on the {role} view ({where}); expected {expects}")
+    if isinstance(output, np.ndarray) and output.dtype.kind in "fc" and not np.isfinite(output).all():
+        bad = int(output.size - np.isfinite(output).sum())
+        raise SUTOutputError(
+            f"the system under test returned an array of shape {output.shape} with {bad} NaN/Inf value(s) on "
+            f"the {role} view ({where}); expected {expects} with finite values"
+        )
+
+
+def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[SceneView]:
+    """Source views by name (so Hypothesis reports ``view='IMG_0042'``, not a pose matrix)."""
+    if relation.interpolate and len(scene.views) >= 2:
+        trajectory = list(scene.views)
+        return st.builds(lambda i, k: interpolate_view(trajectory[i], trajectory[i + 1], k / 100),
+                         st.integers(0, len(trajectory) - 2), st.integers(0, 100))
+    names = [v.name for v in scene_views(scene, relation.views)]
+    return st.sampled_from(names).map(scene.view)
+
+
+def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
+                   settings: RunSettings | None = None, cache: RenderCache | None = None,
+                   test_id: str = "relation",
+                   on_start: Callable[[RelationStats], None] | None = None) -> RelationStats:
+    """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
+
+    Returns the run's :class:`RelationStats` when the relation held on every valid example; raises
+    :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform otherwise, or
+    :class:`~pytest_n2r.errors.InvalidArgument` when almost every drawn follow-up view was invalid.
+    ``test_id`` names the run in reports and keys its Hypothesis database entries and seed;
+    ``on_start`` receives the (still empty) stats before the search starts, so a caller keeps them even
+    when the run raises.
+    """
+    __tracebackhide__ = True
+    if not isinstance(scene, Scene):
+        raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
+    if not callable(sut):
+        raise InvalidType(f"sut={sut!r} must be a callable taking an H×W×3 uint8 RGB image, "
+                          f"not {type(sut).__name__}")
+    if not isinstance(relation, Relation):
+        raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
+    settings = settings or RunSettings()
+    cache = cache if cache is not None else RenderCache(None)
+    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps)
+    if on_start is not None:
+        on_start(stats)
+    engine = _Engine(scene, sut, relation, settings, cache, stats)
+    examples = relation.examples or settings.examples
+
+    def example(view: SceneView, tau: Any) -> None:
+        __tracebackhide__ = True
+        engine.example(view, tau)
+
+    # key this run's database entries and (with derandomize) its seed to the test, scene and relation
+    example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
+    options: dict[str, Any] = {
+        "max_examples": examples, "deadline": None, "derandomize": settings.derandomize,
+        "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large],
+        # no "explain" phase: it re-runs variations of the failure (renders) to annotate source lines
+        "phases": [Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink],
+    }
+    if settings.database != "default":
+        options["database"] = settings.database
+    run = hsettings(**options)(given(view=_views_strategy(scene, relation), tau=relation.transform)(example))
+    try:
+        run()
+    except Unsatisfiable:
+        stats.outcome = "error"
+        raise InvalidArgument(_too_many_invalid(stats, relation)) from None
+    except RelationFailure as exc:
+        stats.outcome, stats.message = "failed", str(exc)
+        exc.stats = stats
+        raise
+    except BaseException as exc:
+        stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
+        raise
+    drawn = stats.examples + stats.n_rejected
+    if engine.gave_up or (drawn and stats.n_rejected / drawn > relation.validity.max_rejected):
+        stats.outcome = "error"
+        raise InvalidArgument(_too_many_invalid(stats, relation))
+    return stats
+
+
+def _too_many_invalid(stats: RelationStats, relation: Relation) -> str:
+    drawn = stats.examples + stats.n_rejected
+    share = stats.n_rejected / drawn if drawn else 1.0
+    reasons = ", ".join(f"{r}: {n}" for r, n in stats.rejected.most_common()) or "no valid example"
+    return (
+        f"{relation.transform!r} leaves what the scene {stats.scene!r} can render faithfully in {share:.0%} of "
+        f"{drawn} draws ({reasons}); narrow the bounds (or use look_at=True) so most follow-up views stay "
+        "in the captured region"
+    )
+

@@ -1,0 +1,57 @@
+"""The size a relation renders at: ``"480x270"`` (exact width x height) or ``"480"`` (longer side)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from ..errors import InvalidArgument, InvalidType
+from ..geometry import Camera
+
+__all__ = ["RenderSize"]
+
+
+@dataclass(frozen=True)
+class RenderSize:
+    """A render size: ``width`` and ``height`` in pixels, or only ``longer`` (the longer side; the
+    camera's aspect ratio is kept). Intrinsics are rescaled with the pixel-centre rule of design.md §3."""
+
+    width: int | None = None
+    height: int | None = None
+    longer: int | None = None
+
+    @classmethod
+    def parse(cls, value: "RenderSize | str | int | tuple[int, int]", name: str = "size") -> "RenderSize":
+        """``"480x270"``, ``(480, 270)``, ``"480"`` or ``480`` → a size; anything else names ``name``."""
+        if isinstance(value, RenderSize):
+            return value
+        if isinstance(value, bool):
+            raise InvalidType(f"{name}={value!r} must be 'WxH', a pair (W, H) or an int (longer side)")
+        if isinstance(value, int):
+            width = height = None
+            longer = value
+        elif isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, int) for v in value):
+            (width, height), longer = value, None
+        elif isinstance(value, str) and (m := re.fullmatch(r"\s*(\d+)\s*(?:[xX×]\s*(\d+))?\s*", value)):
+            if m.group(2) is None:
+                width, height, longer = None, None, int(m.group(1))
+            else:
+                width, height, longer = int(m.group(1)), int(m.group(2)), None
+        else:
+            raise InvalidArgument(
+                f"{name}={value!r} is not a render size; expected 'WxH' (e.g. '480x270'), a pair (W, H) "
+                "or an int for the longer side"
+            )
+        for label, v in (("width", width), ("height", height), ("longer side", longer)):
+            if v is not None and not 1 <= v <= 16384:
+                raise InvalidArgument(f"{name}={value!r}: {label} {v} must be in [1, 16384] pixels")
+        return cls(width, height, longer)
+
+    def apply(self, camera: Camera) -> Camera:
+        """``camera`` resized to this size."""
+        if self.longer is not None:
+            return camera.scaled(self.longer / max(camera.width, camera.height))
+        return camera.resized(self.width, self.height)
+
+    def __str__(self) -> str:
+        return f"{self.width}x{self.height}" if self.longer is None else f"{self.longer}"

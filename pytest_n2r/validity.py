@@ -1,0 +1,114 @@
+"""When is a rendered follow-up view a fair test input? (Invalid ones are rejected, not failed.)
+
+A scene field only knows what its training cameras saw. A follow-up view that looks past the captured
+region shows empty space (low opacity) or surfaces no training camera saw (rendered from guesswork); a SUT
+that disagrees there is not inconsistent, the input is. Two checks, both on the follow-up render:
+
+- **opacity**: mean opacity at least ``min_opacity`` and at most ``max_empty`` of the pixels with opacity
+  below 0.5;
+- **coverage**: of the surface points the view sees (a grid of ``grid x grid`` pixels with opacity >= 0.5,
+  back-projected with the rendered z-depth), at least ``min_coverage`` must project inside the image of
+  at least one training camera, in front of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._validation import check_range
+from .geometry import backproject, project
+from .render.view import RenderedView
+from .scene.base import Scene, SceneView
+
+__all__ = ["Validity", "Verdict"]
+
+#: A verdict's reason when the view passed.
+VALID = "valid"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Whether a view is valid; if not, ``reason`` is ``"low opacity"`` or ``"outside the captured
+    region"`` and ``detail`` gives the numbers."""
+
+    valid: bool
+    reason: str = VALID
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class Validity:
+    """Thresholds of the validity checks (fractions in [0, 1]; 0 disables a check)."""
+
+    min_opacity: float = 0.9
+    max_empty: float = 0.1
+    min_coverage: float = 0.8
+    grid: int = 16
+    #: Fail the relation (a usage error, not an inconsistency) when more than this fraction of the draws
+    #: were invalid: the transform bounds leave the captured region.
+    max_rejected: float = 0.9
+
+    def __post_init__(self) -> None:
+        for name in ("min_opacity", "max_empty", "min_coverage", "max_rejected"):
+            check_range(name, getattr(self, name), 0.0, 1.0)
+        check_range("grid", self.grid, 2, 256)
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The render outputs the checks need."""
+        if self.min_coverage > 0:
+            return ("depth", "opacity")
+        return ("opacity",) if (self.min_opacity > 0 or self.max_empty < 1) else ()
+
+    def check(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> Verdict:
+        """Judge a rendered follow-up ``view`` of ``scene`` (rendered with :attr:`outputs`); ``cameras``
+        are the views the field was fitted on (default: the scene's training views, or all of them)."""
+        if not self.outputs:
+            return Verdict(True)
+        view.require(*self.outputs)
+        opacity = view.opacity
+        mean = float(opacity.mean())
+        empty = float((opacity < 0.5).mean())
+        if mean < self.min_opacity or empty > self.max_empty:
+            return Verdict(False, "low opacity",
+                           f"mean opacity {mean:.2f} (min {self.min_opacity:g}), {empty:.0%} of pixels empty "
+                           f"(max {self.max_empty:.0%})")
+        if self.min_coverage <= 0:
+            return Verdict(True)
+        coverage = self.coverage(view, cameras if cameras is not None else training_views(scene))
+        if coverage < self.min_coverage:
+            return Verdict(False, "outside the captured region",
+                           f"{coverage:.0%} of the visible surface was seen by a training camera "
+                           f"(min {self.min_coverage:.0%})")
+        return Verdict(True)
+
+    def coverage(self, view: RenderedView, cameras: Sequence[SceneView]) -> float:
+        """Fraction of the view's sampled surface points inside some training camera's image."""
+        cam = view.camera
+        us = np.linspace(0, cam.width - 1, self.grid)
+        vs = np.linspace(0, cam.height - 1, self.grid)
+        uv = np.stack(np.meshgrid(us, vs), axis=-1).reshape(-1, 2)
+        iu, iv = np.round(uv[:, 0]).astype(int), np.round(uv[:, 1]).astype(int)
+        solid = view.opacity[iv, iu] >= 0.5
+        if not solid.any():
+            return 0.0
+        points = backproject(uv[solid], view.depth[iv, iu][solid].astype(np.float64), cam, view.c2w)
+        seen = np.zeros(len(points), dtype=bool)
+        for other in cameras:
+            px, z = project(points, other.camera, other.c2w)
+            c = other.camera
+            seen |= (z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= c.width - 0.5) \
+                & (px[:, 1] >= -0.5) & (px[:, 1] <= c.height - 0.5)
+            if seen.all():
+                break
+        return float(seen.mean())
+
+
+def training_views(scene: Scene) -> list[SceneView]:
+    """The views a scene was fitted on (every view when it has no train split, as exact scenes)."""
+    train = [v for v in scene.views if v.split == "train"]
+    return train or list(scene.views)
+

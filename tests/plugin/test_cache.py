@@ -1,0 +1,142 @@
+"""The render cache: memory and disk hits, per-output storage, eviction, corruption, concurrent writers."""
+
+from __future__ import annotations
+
+import multiprocessing
+
+import numpy as np
+import pytest
+
+from pytest_n2r import InvalidArgument, Transform
+from pytest_n2r.cache import RenderCache, parse_size, render_key
+
+from .fakescene import PlaneScene
+
+ALL = ("rgb", "depth", "opacity")
+
+
+def _pose(scene, yaw=0.0):
+    return Transform(yaw=yaw).apply(scene.views[0].c2w)
+
+
+def test_a_second_cache_on_the_same_directory_renders_nothing(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    first = RenderCache(tmp_path)
+    views = [first.render(scene, _pose(scene, yaw), camera, ALL) for yaw in (0, 3, 6)]
+    assert scene.calls == 3 and first.stats.renders == 3
+    again = first.render(scene, _pose(scene, 3), camera, ALL)
+    assert scene.calls == 3 and first.stats.memory_hits == 3, first.stats
+    second = RenderCache(tmp_path)
+    for yaw, view in zip((0, 3, 6), views):
+        cached = second.render(scene, _pose(scene, yaw), camera, ALL)
+        for name in ALL:
+            np.testing.assert_array_equal(getattr(cached, name), getattr(view, name))
+    assert scene.calls == 3, f"the disk cache missed: {second.stats}"
+    assert second.stats.disk_hits == 9 and second.stats.renders == 0
+    assert again.rgb.flags.writeable is False, "cached arrays are shared and must be read-only"
+
+
+def test_only_missing_outputs_are_rendered(tmp_path, monkeypatch):
+    scene = PlaneScene()
+    asked = []
+    original = scene._render
+    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    view = cache.render(scene, _pose(scene), scene.views[0].camera, ("rgb", "opacity"))
+    assert asked == [("rgb",), ("opacity",)]
+    assert view.rgb is not None and view.opacity is not None and view.depth is None
+
+
+def test_the_key_changes_with_everything_that_changes_pixels():
+    scene, other = PlaneScene(), PlaneScene(texture="ramp")
+    camera = scene.views[0].camera
+    base = render_key(scene, _pose(scene), camera)
+    assert render_key(scene, _pose(scene), camera) == base
+    assert render_key(other, _pose(scene), camera) != base
+    assert render_key(scene, _pose(scene, 1e-9), camera) != base
+    assert render_key(scene, _pose(scene), camera.resized(48, 36)) != base
+    scene.render_settings = {"samples": 64}
+    assert render_key(scene, _pose(scene), camera) != base
+
+
+def test_a_corrupt_entry_is_rendered_again(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    (entry,) = (tmp_path / "renders").glob("*/*.rgb.npy")
+    entry.write_bytes(entry.read_bytes()[:40])
+    view = RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    assert scene.calls == 2 and view.rgb.shape == (72, 96, 3)
+
+
+def test_disk_cap_evicts_least_recently_used(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128  # one rgb entry with its .npy header
+    cache = RenderCache(tmp_path, disk_bytes=4 * one)
+    for yaw in range(8):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    assert cache.disk_usage() <= 4 * one, cache.disk_usage()
+    assert len(list((tmp_path / "renders").glob("*/*.npy"))) >= 2
+    assert (tmp_path / "CACHEDIR.TAG").exists() and (tmp_path / ".gitignore").read_text().endswith("*\n")
+
+
+def test_memory_cap_drops_oldest_first():
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    cache = RenderCache(None, memory_bytes=2 * camera.width * camera.height * 3)
+    for yaw in (0, 1, 2):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    cache.render(scene, _pose(scene, 2), camera, "rgb")
+    assert scene.calls == 3
+    cache.render(scene, _pose(scene, 0), camera, "rgb")
+    assert scene.calls == 4, "the oldest entry should have been dropped"
+
+
+def test_clear_forgets_disk_and_memory(tmp_path):
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    cache.clear()
+    assert not (tmp_path / "renders").exists()
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    assert scene.calls == 2
+
+
+def _worker(directory: str, yaws: list[float]) -> None:
+    scene = PlaneScene()
+    cache = RenderCache(directory)
+    for yaw in yaws:
+        cache.render(scene, _pose(scene, yaw), scene.views[0].camera, ALL)
+
+
+def test_concurrent_writers_leave_only_whole_files(tmp_path):
+    yaws = [float(y) for y in range(6)]
+    ctx = multiprocessing.get_context("fork")
+    procs = [ctx.Process(target=_worker, args=(str(tmp_path), yaws)) for _ in range(3)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(60)
+    assert all(p.exitcode == 0 for p in procs), [p.exitcode for p in procs]
+    assert not [f for f in (tmp_path / "renders").rglob("*") if f.name.endswith(".tmp")]
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    for yaw in yaws:
+        view = cache.render(scene, _pose(scene, yaw), scene.views[0].camera, ALL)
+        np.testing.assert_array_equal(view.rgb, scene.render(_pose(scene, yaw), scene.views[0].camera).rgb)
+    assert cache.stats.renders == 0
+
+
+@pytest.mark.parametrize(("text", "expected"), [("2GiB", 2 * 2**30), ("512mb", 512 * 2**20), ("100", 100),
+                                                 ("1.5k", 1536)])
+def test_parse_size(text, expected):
+    assert parse_size(text) == expected
+
+
+def test_parse_size_names_the_option():
+    with pytest.raises(InvalidArgument, match=r"n2r_cache_size='lots' is not a size"):
+        parse_size("lots", "n2r_cache_size")
+

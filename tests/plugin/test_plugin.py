@@ -1,0 +1,437 @@
+"""The pytest plugin end to end, with pytester and the fake plane scenes (tiny renders, fast)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+PLANE = "tests.plugin.fakescene:plane"
+RAMP = "tests.plugin.fakescene:ramp"
+
+
+def test_a_relation_that_holds_passes(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4, x=0.05), examples=20)
+def test_mean_colour(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
+    line = n2r_project.summary(result, "test_mean_colour[plane]")
+    assert "20 examples" in line and "0 inconsistent" in line, line
+    assert re.search(r"time render [\d.]+ s / SUT [\d.]+ s / metric [\d.]+ s", line), line
+
+
+def test_a_sut_breaking_beyond_5_degrees_is_reported_near_5_degrees(n2r_project):
+    n2r_project.write("""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=60)
+def test_heading(n2r_scene):
+    return heading_class
+""")
+    result = n2r_project.run("--n2r-scene", RAMP)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    yaw = float(re.search(r"transform:\s+yaw=([+-][\d.]+)°", text).group(1))
+    assert 5.0 < abs(yaw) <= 5.5, f"shrunk to yaw={yaw}, expected within 0.5° of 5°:\n{text}"
+    for words in ("scene:      ramp", "source:     view", "score 0, deviation 1 > eps 0.5", "images:"):
+        assert words in text, f"{words!r} missing from the failure:\n{text}"
+    pictures = re.findall(r"(?:source|follow)\s+(\S+\.png)", text)
+    assert len(pictures) == 2 and all((n2r_project.pytester.path / p).is_file() for p in pictures), pictures
+
+
+def test_the_database_replays_the_last_failure_first(n2r_project):
+    n2r_project.write("""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=60)
+def test_heading(n2r_scene):
+    return heading_class
+""")
+    first = n2r_project.run("--n2r-scene", RAMP)
+    second = n2r_project.run("--n2r-scene", RAMP)
+    second.assert_outcomes(failed=1)
+    line = n2r_project.summary(second, "test_heading[ramp]")
+    assert line.startswith("FAILED") and ": 1 example," in line, f"the replay should fail at once: {line}"
+    minimal = re.compile(r"transform:\s+(.*)\(minimal")
+    assert minimal.search(first.stdout.str()).group(1) == minimal.search(second.stdout.str()).group(1)
+
+
+@pytest.mark.parametrize(
+    ("decorator", "message"),
+    [
+        ("@metamorphic(AbsDifference(), eps=-0.1, transform=transforms(yaw=5))", "eps=-0.1 must be a finite number >= 0"),
+        ("@metamorphic(AbsDifference(), eps=float('nan'), transform=transforms(yaw=5))", "eps=nan must be a finite"),
+        ("@metamorphic('no_such_metric', eps=0.1, transform=transforms(yaw=5))", "metric='no_such_metric' is not a known metric"),
+        ("@metamorphic(AbsDifference(), eps=0.1, transform='tau9')", "transform='tau9' is not a preset"),
+        ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), search='hard')", "search='hard'"),
+        ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), size='big')", "size='big' is not a render size"),
+    ],
+)
+def test_bad_relation_arguments_are_collection_errors_naming_the_test(n2r_project, decorator, message):
+    n2r_project.write(f"""
+{decorator}
+def test_bad(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines([f"*test_relations.py::test_bad: @metamorphic(...): *{message}*"])
+
+
+def test_bad_bounds_fail_collection_with_the_bound_named(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=(10, -10)))
+def test_bad(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["*InvalidArgument: yaw=(10, -10) has lo > hi; write yaw=(-10, 10)*"])
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--n2r-scene", "missing.n2r"], "--n2r-scene 'missing.n2r': no such file"),
+        (["--n2r-scene", "notascene.txt"], "is not a scene file"),
+        (["--n2r-scene", RAMP, "--n2r-size", "huge"], "--n2r-size / ini n2r_size: n2r_size='huge' is not a render size"),
+        (["--n2r-scene", RAMP, "--n2r-examples", "0"], "--n2r-examples / ini n2r_examples: '0' is not a whole number"),
+        (["--n2r-scene", RAMP, "--n2r-timeout", "-1"], "--n2r-timeout / ini n2r_timeout"),
+        (["--n2r-scene", RAMP, "--n2r-cache-size", "lots"], "n2r_cache_size='lots' is not a size"),
+    ],
+)
+def test_bad_options_are_usage_errors(n2r_project, args, message):
+    (n2r_project.pytester.path / "notascene.txt").write_text("hello")
+    n2r_project.write("""
+def test_nothing():
+    pass
+""")
+    result = n2r_project.run(*args)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, result.stderr.str()
+    assert message in result.stderr.str(), result.stderr.str()
+
+
+def test_an_ini_glob_that_matches_nothing_is_a_usage_error(n2r_project):
+    n2r_project.pytester.makeini("[pytest]\nn2r_scenes = scenes/*.n2r\n")
+    n2r_project.write("def test_nothing():\n    pass\n")
+    result = n2r_project.run()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "ini n2r_scenes 'scenes/*.n2r' matched no file" in result.stderr.str()
+
+
+@pytest.mark.parametrize(
+    ("ini", "cli", "kwarg", "expected"),
+    [
+        (None, None, None, 50),  # the default
+        (7, None, None, 7),  # ini
+        (7, 5, None, 5),  # CLI beats ini
+        (7, 5, 3, 3),  # marker keyword beats both
+        (None, None, 4, 4),
+    ],
+)
+def test_examples_precedence_marker_over_cli_over_ini(n2r_project, ini, cli, kwarg, expected):
+    if ini is not None:
+        n2r_project.pytester.makeini(f"[pytest]\nn2r_examples = {ini}\n")
+    examples = "" if kwarg is None else f", examples={kwarg}"
+    n2r_project.write(f"""
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=3){examples})
+def test_count(n2r_scene):
+    return mean_colour
+""")
+    args = ["--n2r-scene", PLANE] + ([] if cli is None else ["--n2r-examples", str(cli)])
+    result = n2r_project.run(*args)
+    result.assert_outcomes(passed=1)
+    line = n2r_project.summary(result, "test_count[plane]")
+    assert f": {expected} example" in line, f"expected {expected} examples: {line}"
+
+
+def test_scene_precedence_marker_over_cli_over_ini(n2r_project):
+    n2r_project.pytester.makeini(f"[pytest]\nn2r_scenes = {PLANE}\n")
+    n2r_project.write(f"""
+def test_configured(n2r_scene):
+    pass
+
+
+@pytest.mark.n2r_scene({PLANE!r})
+def test_pinned(n2r_scene):
+    assert n2r_scene.name == "plane"
+""")
+    from_ini = n2r_project.run("-v")
+    from_ini.stdout.fnmatch_lines(["*test_configured[[]plane[]] PASSED*", "*test_pinned[[]plane[]] PASSED*"])
+    from_cli = n2r_project.run("-v", "--n2r-scene", RAMP)
+    from_cli.stdout.fnmatch_lines(["*test_configured[[]ramp[]] PASSED*", "*test_pinned[[]plane[]] PASSED*"])
+
+
+def test_every_configured_scene_parametrizes_the_fixture_and_a_pin_selects_one(n2r_project):
+    n2r_project.write("""
+def test_all(n2r_scene):
+    pass
+
+
+@pytest.mark.n2r_scene("ramp")
+def test_ramp_only(n2r_scene):
+    assert n2r_scene.name == "ramp"
+""", name="test_scenes")
+    result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
+    result.assert_outcomes(passed=3)
+    for test in ("test_all[plane]", "test_all[ramp]", "test_ramp_only[ramp]"):
+        assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), test
+
+
+def test_pinning_an_unconfigured_scene_is_a_collection_error_naming_the_test(n2r_project):
+    n2r_project.write("""
+@pytest.mark.n2r_scene("kitchen")
+def test_unknown(n2r_scene):
+    pass
+""", name="test_scenes")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["test_scenes.py::test_unknown: n2r_scene marker names the scene 'kitchen', which "
+                                 "is not configured (configured: plane, ramp)*"])
+
+
+def test_a_sut_that_raises_shows_its_traceback_and_the_transform(n2r_project):
+    n2r_project.write("""
+def fragile(rgb):
+    if heading_class(rgb) != 0:
+        raise ValueError("lost track")
+    return 0
+
+
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=60)
+def test_fragile(n2r_scene):
+    return fragile
+""")
+    result = n2r_project.run("--n2r-scene", RAMP)
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([
+        "*raise ValueError(\"lost track\")*",
+        "*SUTError: the system under test raised ValueError: lost track -- on the follow-up view "
+        "(scene 'ramp', source view 'view*', yaw=+5.010°)*",
+    ])
+
+
+@pytest.mark.parametrize(
+    ("sut", "message"),
+    [
+        ("lambda rgb: None", "the system under test returned None on the source view*expected a class label"),
+        ("lambda rgb: float('nan')", "the system under test returned nan on the source view*"),
+        ("lambda rgb: np.full(3, np.nan)", "*array of shape (3,) with 3 NaN/Inf value(s)*"),
+        ("lambda rgb: [1, 2]", "*SUTOutputError: SameLabel() cannot use the SUT's output*compares class labels*"),
+    ],
+)
+def test_bad_sut_outputs_name_what_was_expected(n2r_project, sut, message):
+    n2r_project.write(f"""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=2), examples=5)
+def test_output(n2r_scene):
+    return {sut}
+""")
+    result = n2r_project.run("--n2r-scene", RAMP)
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([f"*{message}*"])
+
+
+def test_a_test_that_returns_no_sut_fails_clearly(n2r_project):
+    n2r_project.write("""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=2))
+def test_forgot(n2r_scene):
+    heading_class
+""")
+    result = n2r_project.run("--n2r-scene", RAMP)
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*test_forgot*a @metamorphic test must return the system under test*returned None*"])
+
+
+def test_bounds_that_leave_the_captured_region_are_an_error_not_a_pass(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=(60, 80)), examples=10)
+def test_far(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws*narrow the bounds*"])
+    assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
+
+
+def test_a_second_run_renders_nothing(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4, x=0.05), examples=15)
+def test_a(n2r_scene):
+    return mean_colour
+
+
+@pytest.mark.n2r_scene("ramp")
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=3), examples=15)
+def test_b(n2r_scene):
+    return heading_class
+""")
+    n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "--n2r-derandomize", "yes").assert_outcomes(passed=3)
+    cold = n2r_project.renders()
+    assert cold > 0
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "--n2r-derandomize", "yes")
+    result.assert_outcomes(passed=3)
+    assert n2r_project.renders() == cold, f"the warm run rendered {n2r_project.renders() - cold} views"
+    result.stdout.fnmatch_lines(["*3 relations: * 0 renders (the rest from the cache)*"])
+    n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "--n2r-derandomize", "yes", "--n2r-cache-clear")
+    assert n2r_project.renders() == 2 * cold, "--n2r-cache-clear should have forced every render again"
+
+
+def test_ci_derandomizes(n2r_project, monkeypatch):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=10)
+def test_a(n2r_scene):
+    return mean_colour
+""")
+    monkeypatch.setenv("CI", "true")
+    n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
+    first = n2r_project.renders()
+    n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
+    assert n2r_project.renders() == 2 * first
+    log = n2r_project.render_log.read_text().splitlines()
+    assert len(log) == 2 * first  # same number of renders each run: the same examples
+
+
+def test_xdist_gives_the_serial_verdicts_and_shares_the_cache(n2r_project):
+    pytest.importorskip("xdist")
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=10)
+def test_holds(n2r_scene):
+    return mean_colour
+
+
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=30)
+def test_breaks(n2r_scene):
+    return heading_class
+""")
+    args = ["--n2r-scene", RAMP, "--n2r-derandomize", "yes", "-rA", "-p", "no:benchmark"]
+    serial = n2r_project.run(*args)
+    serial.assert_outcomes(passed=1, failed=1)
+    cold = n2r_project.renders()
+    parallel = n2r_project.run(*args, "-n", "2")
+    parallel.assert_outcomes(passed=1, failed=1)
+    verdicts = re.compile(r"^(PASSED|FAILED) (\S+)")
+    assert sorted(m.groups() for m in map(verdicts.match, serial.outlines) if m) == \
+        sorted(m.groups() for m in map(verdicts.match, parallel.outlines) if m)
+    assert n2r_project.renders() == cold, "the xdist workers should have found every render in the shared cache"
+    parallel.stdout.fnmatch_lines(["*transform:  yaw=+5.010°*"])
+
+
+def test_header_lists_scenes_device_threads_and_cache(n2r_project):
+    n2r_project.write("def test_nothing():\n    pass\n")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "mycache")
+    result.stdout.fnmatch_lines(["n2r: scenes plane; device auto; torch threads *; cache */mycache"])
+
+
+def test_the_plugin_does_nothing_when_unused(n2r_project):
+    n2r_project.pytester.makepyfile(test_plain="""
+import sys
+
+def test_plain():
+    loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
+    assert loaded == ["pytest_n2r.plugin"], loaded
+""")
+    result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=1)
+    assert "n2r:" not in result.stdout.str() and "pytest-n2r" not in result.stdout.str()
+    ours = [p.name for p in n2r_project.pytester.path.rglob("*") if "n2r" in p.name.lower()]
+    assert not ours, f"an unused plugin left files behind: {ours}"
+
+
+def test_p_no_n2r_disables_the_plugin(n2r_project):
+    n2r_project.pytester.makepyfile(test_plain="def test_plain():\n    pass\n")
+    n2r_project.pytester.runpytest("-p", "no:n2r").assert_outcomes(passed=1)
+    result = n2r_project.pytester.runpytest("-p", "no:n2r", "--n2r-scene", PLANE)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR and "unrecognized arguments: --n2r-scene" in result.stderr.str()
+
+
+def test_a_mutation_strategy_as_transform(n2r_project):
+    n2r_project.write("""
+from hypothesis import strategies as st
+
+
+class Darken:
+    def __init__(self, amount):
+        self.amount = amount
+
+    @property
+    def is_identity(self):
+        return self.amount == 0
+
+    def apply(self, rgb):
+        return (rgb * (1 - self.amount)).astype(np.uint8)
+
+    def describe(self):
+        return f"darken(amount={self.amount})"
+
+
+@metamorphic(AbsDifference(), eps=20, transform=st.integers(0, 100).map(lambda k: Darken(k / 100)), examples=30)
+def test_darkening(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    amount = float(re.search(r"mutated by darken\(amount=([\d.]+)\)", text).group(1))
+    assert 0.05 < amount < 0.3, f"shrunk to darken(amount={amount}):\n{text}"
+
+
+def test_targeted_search_runs_and_reports(n2r_project):
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=15, search="targeted")
+def test_targeted(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
+    assert "15 examples" in n2r_project.summary(result, "test_targeted[plane]")
+
+
+def test_a_hanging_sut_is_stopped_by_the_time_limit(n2r_project):
+    n2r_project.write("""
+import time
+
+
+def hangs(rgb):
+    time.sleep(30)
+
+
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=3)
+def test_hang(n2r_scene):
+    return hangs
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-timeout", "0.2")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines(["*the system under test on the source view (*) did not finish within 0.2 s "
+                                 "(--n2r-timeout / ini n2r_timeout)*"])
+    assert result.duration < 20, f"the hang was not interrupted ({result.duration:.1f} s)"
+
+
+def test_no_scene_configured_and_no_demo_scene_skips_with_instructions(n2r_project, monkeypatch):
+    import pytest_n2r.session as session
+
+    monkeypatch.setattr(session, "default_scene_specs", lambda: [])
+    n2r_project.write("def test_uses_scene(n2r_scene):\n    pass\n")
+    result = n2r_project.run("-rs")
+    result.assert_outcomes(skipped=1)
+    result.stdout.fnmatch_lines(["*no scene configured for pytest-n2r: pass --n2r-scene PATH*n2r_scenes*"])
+
+
+def test_a_metric_by_name_from_the_registry_with_a_corner_detector(n2r_project):
+    n2r_project.write("""
+import cv2
+
+
+def corners(rgb):
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    found = cv2.goodFeaturesToTrack(gray, 50, 0.05, 4)
+    return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2)
+
+
+@metamorphic("repeatability", eps=0.6, transform=transforms(yaw=2), examples=8)
+def test_corners(n2r_scene):
+    return corners
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-size", "160x120")
+    result.assert_outcomes(passed=1)
+    line = n2r_project.summary(result, "test_corners[plane]")
+    assert "8 examples" in line and "0 inconsistent" in line, line

@@ -1,0 +1,209 @@
+"""The relation engine without pytest in the loop: outputs rendered, counts, records, failure pictures."""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import cv2
+import numpy as np
+import pytest
+from hypothesis import find
+from hypothesis import strategies as st
+
+from pytest_n2r import InvalidArgument, InvalidType, Transform
+from pytest_n2r._timeout import CallTimeout, time_limit
+from pytest_n2r.artifacts import artifact_dir, draw_output, save_png
+from pytest_n2r.cache import RenderCache
+from pytest_n2r.relations import Relation, RelationFailure, RunSettings, check_relation
+from pytest_n2r.render.size import RenderSize
+from pytest_n2r.strategies import transforms
+from pytest_n2r.validity import Validity
+
+from .fakemetrics import AbsDifference, SameLabel
+from .fakescene import PlaneScene, decode_ramp_x
+
+FAST = RunSettings(examples=10, database=None)
+
+
+class NeedsDepth(AbsDifference):
+    needs = ("depth",)
+
+
+def _recording(scene, monkeypatch):
+    asked = []
+    original = scene._render
+    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
+    return asked
+
+
+def test_only_the_outputs_the_metric_and_the_validity_checks_need_are_rendered(monkeypatch):
+    scene = PlaneScene()
+    asked = _recording(scene, monkeypatch)
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), validity=Validity(min_coverage=0))
+    check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert set().union(*asked) == {"rgb", "opacity"} and ("rgb", "opacity") in asked, set(asked)
+    asked.clear()
+    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3))
+    check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert set().union(*asked) == {"rgb", "depth", "opacity"} and ("rgb", "depth") in asked, set(asked)
+
+
+def test_the_render_size_of_the_relation_wins_over_the_run_setting():
+    scene = PlaneScene()
+    shapes = set()
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), size="40x30")
+    check_relation(scene, lambda rgb: shapes.add(rgb.shape) or 0.0, relation,
+                   settings=RunSettings(examples=5, size=RenderSize.parse("64"), database=None))
+    assert shapes == {(30, 40, 3)}
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3))
+    shapes.clear()
+    check_relation(scene, lambda rgb: shapes.add(rgb.shape) or 0.0, relation,
+                   settings=RunSettings(examples=5, size=RenderSize.parse("64"), database=None))
+    assert shapes == {(48, 64, 3)}
+
+
+def test_stats_count_examples_rejections_and_time():
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=25))
+    stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert stats.outcome == "passed" and stats.examples == 10 and stats.inconsistencies == 0
+    assert stats.n_rejected > 0, "yaw up to 25° looks past the plane in some draws"
+    assert min(stats.render_s, stats.sut_s, stats.metric_s) >= 0 and stats.render_s > 0
+    record = stats.to_record()
+    assert len(record.examples) == 10 and record.timings["render"] == stats.render_s
+    assert all(e.valid and e.passed for e in record.examples)
+
+
+def test_a_failure_carries_stats_and_pictures(tmp_path):
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=30)
+    with pytest.raises(RelationFailure) as info:
+        check_relation(scene, lambda rgb: float(decode_ramp_x(rgb)[36, 48]), relation,
+                       settings=RunSettings(artifacts=tmp_path, database=None), test_id="t.py::test[plane]")
+    stats = info.value.stats
+    assert stats.outcome == "failed" and stats.inconsistencies == 1 and stats.minimal["deviation"] > 0.05
+    images = stats.minimal["images"]
+    assert set(images) == {"source", "follow", "source_raw", "follow_raw"}
+    source = cv2.imread(images["source_raw"])[..., ::-1]
+    np.testing.assert_array_equal(source, scene.render(scene.views[1].c2w, scene.views[1].camera.scaled(1.0)).rgb)
+    assert str(artifact_dir(tmp_path, "t.py::test[plane]")) in images["follow"]
+
+
+def test_sut_output_is_computed_once_per_source_view():
+    scene = PlaneScene()
+    calls = []
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), examples=20)
+    stats = check_relation(scene, lambda rgb: calls.append(1) or 0.0, relation, settings=RunSettings(
+        examples=20, database=None))
+    assert len(calls) == stats.examples + len({r["view"] for r in stats.records})
+
+
+def test_shared_cache_makes_a_rerun_render_nothing():
+    scene = PlaneScene()
+    cache = RenderCache(None)
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3, x=0.1), examples=15)
+    settings = RunSettings(derandomize=True, database=None)
+    check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=cache, test_id="a")
+    calls = scene.calls
+    stats = check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=cache, test_id="a")
+    assert scene.calls == calls and stats.renders == 0
+
+
+def test_relation_build_names_bad_arguments():
+    with pytest.raises(InvalidType, match="eps='0.1' must be a number"):
+        Relation.build(AbsDifference(), "0.1", transforms(yaw=3))
+    with pytest.raises(InvalidArgument, match="examples=0 must be a whole number >= 1"):
+        Relation.build(AbsDifference(), 0.1, transforms(yaw=3), examples=0)
+    with pytest.raises(InvalidArgument, match="views='test'"):
+        Relation.build(AbsDifference(), 0.1, transforms(yaw=3), views="test")
+    with pytest.raises(InvalidType, match="metric=<lambda> must be a pytest_n2r.metrics.Metric|metric=.*function"):
+        Relation.build(lambda a, b: 0, 0.1, transforms(yaw=3))
+    with pytest.raises(InvalidType, match="transform=5 must be a strategy"):
+        Relation.build(AbsDifference(), 0.1, 5)
+    assert find(Relation.build(AbsDifference(), 0, Transform(yaw=2)).transform, lambda t: True) == Transform(yaw=2)
+
+
+def test_a_fixed_transform_and_a_preset_are_accepted():
+    scene = PlaneScene()
+    for transform in (Transform(yaw=1), "tau1"):
+        relation = Relation.build(SameLabel(), 0.5, transform, examples=3)
+        stats = check_relation(scene, lambda rgb: 0, relation, settings=FAST)
+        assert stats.outcome == "passed"
+
+
+def test_draw_output_marks_keypoints_and_labels():
+    rgb = np.zeros((60, 80, 3), np.uint8)
+    circled = draw_output(rgb, np.array([[40.0, 30.0]]))
+    assert circled[30, 40:48].any() and not circled[5:10, 60:70].any()
+    labelled = draw_output(rgb, np.array([0.1, 0.7, 0.2]))
+    assert labelled.any()
+    assert not draw_output(rgb, {"odd": "output"}).any(), "unknown outputs are saved undecorated"
+    assert not rgb.any(), "the input must not be drawn on"
+
+
+def test_save_png_round_trips_rgb(tmp_path):
+    rgb = np.random.default_rng(0).integers(0, 255, (9, 11, 3), dtype=np.uint8)
+    path = save_png(tmp_path / "a" / "x.png", rgb)
+    np.testing.assert_array_equal(cv2.imread(str(path))[..., ::-1], rgb)
+
+
+def test_validity_rejects_empty_and_uncovered_views():
+    scene = PlaneScene()
+    view = scene.views[1]
+    outputs = ("rgb", "depth", "opacity")
+    assert Validity().check(scene.render(view.c2w, view.camera, outputs), scene).valid
+    empty = Validity().check(scene.render(Transform(yaw=50).apply(view.c2w), view.camera, outputs), scene)
+    assert (empty.valid, empty.reason) == (False, "low opacity"), empty
+    # large plane: opacity stays 1, but the training cameras never saw that far out
+    wide = PlaneScene(half_width=50.0)
+    uncovered = Validity().check(wide.render(Transform(yaw=40).apply(view.c2w), view.camera, outputs), wide)
+    assert (uncovered.valid, uncovered.reason) == (False, "outside the captured region"), uncovered
+
+
+def test_validity_thresholds_are_checked():
+    with pytest.raises(InvalidArgument, match=r"min_opacity=1.5 is out of range"):
+        Validity(min_opacity=1.5)
+
+
+@pytest.mark.parametrize(("text", "size"), [("480x270", (480, 270)), ("96", (96, 72)), ((40, 30), (40, 30))])
+def test_render_size(text, size):
+    camera = PlaneScene().views[0].camera
+    resized = RenderSize.parse(text).apply(camera)
+    assert (resized.width, resized.height) == size
+
+
+def test_time_limit_interrupts_and_restores_the_previous_timer():
+    previous = signal.signal(signal.SIGALRM, signal.SIG_IGN)
+    try:
+        start = time.perf_counter()
+        with pytest.raises(CallTimeout, match="napping did not finish within 0.1 s"):
+            with time_limit(0.1, "napping"):
+                time.sleep(5)
+        assert time.perf_counter() - start < 2
+        assert signal.getsignal(signal.SIGALRM) is signal.SIG_IGN
+        with time_limit(None, "anything"):
+            pass
+    finally:
+        signal.signal(signal.SIGALRM, previous)
+
+
+def test_interpolated_sources_and_all_views():
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=2), examples=8, interpolate=True)
+    stats = check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
+    assert any("~" in r["view"] for r in stats.records), [r["view"] for r in stats.records]
+
+
+def test_mutations_use_the_source_pose():
+    class Invert:
+        def apply(self, rgb):
+            return 255 - rgb
+
+        def describe(self):
+            return "invert()"
+
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 300, st.just(Invert()), examples=3)
+    stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert stats.records[0]["transform"] == {"mutation": "invert()"} and stats.n_rejected == 0

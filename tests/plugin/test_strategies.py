@@ -1,0 +1,157 @@
+"""Strategy properties: bounds, validation messages, repr, shrinking to the boundary, look-at, views."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import find, given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r import InvalidArgument, InvalidType, Transform
+from pytest_n2r import strategies as n2r
+from pytest_n2r.geometry import Units
+
+from .fakescene import PlaneScene
+
+BOUNDS = st.tuples(st.floats(-170, 170), st.floats(-170, 170)).map(sorted).map(tuple)
+
+
+@given(bound=BOUNDS, data=st.data())
+def test_drawn_values_stay_within_their_bounds(bound, data):
+    tau = data.draw(n2r.transforms(yaw=bound, x=(bound[0] / 100, bound[1] / 100)))
+    assert bound[0] <= tau.yaw <= bound[1], f"yaw={tau.yaw} outside {bound}"
+    assert bound[0] / 100 <= tau.x <= bound[1] / 100, f"x={tau.x} outside {bound} / 100"
+    assert (tau.roll, tau.pitch, tau.y, tau.z) == (0.0, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "words"),
+    [
+        ({"yaw": (10, -10)}, InvalidArgument, "yaw=(10, -10) has lo > hi; write yaw=(-10, 10)"),
+        ({"x": float("nan")}, InvalidArgument, "x=nan must be finite"),
+        ({"pitch": (0, float("inf"))}, InvalidArgument, "pitch[1]=inf must be finite"),
+        ({"roll": "5"}, InvalidType, "roll='5' must be a number b (meaning -b..b) or a pair (lo, hi)"),
+        ({"yaw": (1, 2, 3)}, InvalidArgument, "yaw=(1, 2, 3) must be a number"),
+        ({"yaw": 200}, InvalidArgument, "angles are degrees in [-180, 180]"),
+        ({"x": 0.1, "units": "furlongs"}, InvalidArgument, "units='furlongs' is not a unit"),
+        ({"x": 0.1, "units": "scene", "look_at": True}, InvalidArgument, "look_at=True needs units='reference'"),
+        ({"z": 0.95, "look_at": True}, InvalidArgument, "keep z below 0.9"),
+    ],
+)
+def test_bad_bounds_are_rejected_eagerly_naming_the_argument(kwargs, error, words):
+    with pytest.raises(error) as info:
+        n2r.transforms(**kwargs)
+    assert words in str(info.value)
+
+
+def test_repr_rebuilds_the_call():
+    strategy = n2r.transforms(yaw=10, x=(-0.1, 0.2), look_at=True)
+    assert repr(strategy) == "transforms(look_at=True, x=(-0.1, 0.2), yaw=(-10.0, 10.0))"
+    assert repr(n2r.transforms(x=0.5, units="scene")) == "transforms(units='scene', x=(-0.5, 0.5))"
+    assert n2r.transform_units(n2r.transforms(x=0.5, units="scene")) is Units.SCENE
+
+
+def test_unconstrained_search_shrinks_to_the_identity():
+    assert find(n2r.transforms(roll=5, pitch=5, yaw=30, x=0.2, y=0.2, z=0.2), lambda t: True).is_identity
+
+
+@pytest.mark.parametrize(
+    ("bounds", "condition", "axis", "lo", "hi"),
+    [
+        ({"yaw": 20}, lambda t: abs(t.yaw) > 5, "yaw", 5.0, 5.01),
+        ({"yaw": 20}, lambda t: t.yaw < -12.345, "yaw", -12.36, -12.345),
+        ({"pitch": (-80, 80)}, lambda t: t.pitch > 33.3, "pitch", 33.3, 33.31),
+        ({"x": 0.3}, lambda t: t.x > 0.0123, "x", 0.0123, 0.0124),
+        ({"yaw": (2, 20)}, lambda t: True, "yaw", 2.0, 2.0),
+        ({"yaw": (-20, -2)}, lambda t: True, "yaw", -2.0, -2.0),
+    ],
+)
+def test_failures_shrink_to_the_boundary(bounds, condition, axis, lo, hi):
+    tau = find(n2r.transforms(**bounds), condition, settings=settings(max_examples=500, database=None))
+    assert lo <= getattr(tau, axis) <= hi, f"shrunk to {tau!r}; expected {axis} in [{lo}, {hi}]"
+
+
+def test_a_failure_needing_two_axes_shrinks_both():
+    tau = find(n2r.transforms(yaw=20, y=0.3), lambda t: t.yaw > 4 and t.y < -0.1,
+               settings=settings(max_examples=1000, database=None))
+    assert 4 < tau.yaw <= 4.01 and -0.1001 <= tau.y < -0.1, f"shrunk to {tau!r}"
+
+
+def _moved_point(tau: Transform, point=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """``point`` (source camera frame, reference lengths) in the follow-up camera frame."""
+    T = tau.matrix()
+    return T[:3, :3].T @ (np.asarray(point) - T[:3, 3])
+
+
+@given(tau=n2r.transforms(x=0.4, y=0.4, z=0.5, look_at=True))
+def test_look_at_keeps_the_reference_point_on_the_optical_axis(tau):
+    p = _moved_point(tau)
+    assert p[2] > 0 and math.hypot(p[0], p[1]) < 1e-9 * p[2], f"{tau!r} puts the look-at point at {p}"
+
+
+def test_look_at_tilts_down_when_the_camera_moves_up():
+    tau = find(n2r.transforms(y=0.2, look_at=True), lambda t: t.y < -0.1)
+    assert tau.pitch < 0, f"moving up (y={tau.y}) should pitch down, got pitch={tau.pitch}"
+    tau = find(n2r.transforms(x=0.2, look_at=True), lambda t: t.x > 0.1)
+    assert tau.yaw < 0, f"moving right (x={tau.x}) should yaw left, got yaw={tau.yaw}"
+
+
+@pytest.mark.parametrize("name", sorted(n2r.PRESETS))
+def test_presets_are_look_at_transforms_in_reference_units(name):
+    strategy = n2r.PRESETS[name]
+    assert "look_at=True" in repr(strategy)
+    assert n2r.transform_units(strategy) is Units.REFERENCE
+
+
+def test_views_split_and_fallback():
+    scene = PlaneScene(n_views=4)
+    assert [v.name for v in n2r.scene_views(scene, "heldout")] == ["view1", "view3"]
+    assert [v.name for v in n2r.scene_views(scene, "train")] == ["view0", "view2"]
+    assert len(n2r.scene_views(scene, "all")) == 4
+    single = PlaneScene(n_views=1)  # only a train view: held-out falls back to every view
+    assert [v.name for v in n2r.scene_views(single, "heldout")] == ["view0"]
+    with pytest.raises(InvalidArgument, match="split='test' is not a split"):
+        n2r.views(split="test")
+
+
+def test_views_shrink_to_the_first_view_and_picks_resolve_through_the_scene():
+    scene = PlaneScene(n_views=4)
+    assert find(n2r.views(scene), lambda v: True).name == "view1"
+    pick = find(n2r.views(), lambda v: True)
+    source, _ = scene.pair(pick, Transform(yaw=1))
+    np.testing.assert_array_equal(source.c2w, scene.views[1].c2w)
+
+
+def test_interpolated_views_lie_on_the_trajectory():
+    scene = PlaneScene(n_views=3)
+    a, b = scene.views[0], scene.views[1]
+    mid = n2r.interpolate_view(a, b, 0.5)
+    np.testing.assert_allclose(mid.c2w[:3, 3], (a.c2w[:3, 3] + b.c2w[:3, 3]) / 2)
+    rotated = type(b)(b.index, b.name, b.camera, Transform(yaw=40).apply(b.c2w), b.split)
+    quarter = n2r.interpolate_view(a, rotated, 0.25)
+    np.testing.assert_allclose(quarter.c2w[:3, :3], Transform(yaw=10).rotation, atol=1e-12)
+    assert n2r.interpolate_view(a, b, 0.0) is a
+
+
+@settings(max_examples=20)
+@given(data=st.data())
+def test_interpolating_views_draws_poses_between_neighbours(data):
+    scene = PlaneScene(n_views=3)
+    view = data.draw(n2r.views(scene, interpolate=True))
+    ys = [v.c2w[1, 3] for v in scene.views]
+    assert min(ys) <= view.c2w[1, 3] <= max(ys)
+
+
+def test_draws_spread_over_the_whole_bound():
+    drawn = []
+
+    @settings(max_examples=300, database=None)
+    @given(n2r.transforms(yaw=80))
+    def collect(tau):
+        drawn.append(abs(tau.yaw))
+
+    collect()
+    far = np.mean(np.asarray(drawn) > 40)
+    assert far > 0.3, f"only {far:.0%} of draws had |yaw| > 40 for a bound of 80: draws crowd near 0"
