@@ -11,6 +11,7 @@ import numpy as np
 
 from .._validation import check_positive
 from ..data.capture import Capture, CapturedView
+from ..data.extent import scene_bounds
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera, backproject, pixel_grid
 from .exact import GroundTruthScene
@@ -43,8 +44,8 @@ def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points
 
     Points are back-projected from the exact depth of the training views at 64 pixels wide, kept up to
     twice the reference length from the camera (like the well-triangulated points of a real capture;
-    farther surfaces are background) and thinned with a fixed stride (deterministic). ``bounds`` is the
-    box of their 1st to 99th percentiles grown by 5 % per side, as ingestion computes it for photos.
+    farther surfaces are background) and thinned with a fixed stride (deterministic). ``bounds`` is
+    computed from them as ingestion does for photos (:func:`~pytest_n2r.data.extent.scene_bounds`).
     """
     views = []
     points = []
@@ -61,10 +62,9 @@ def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points
     pts = np.concatenate(points) if points else np.zeros((0, 3))
     if len(pts) > n_points:
         pts = pts[np.linspace(0, len(pts) - 1, n_points).round().astype(np.int64)]
-    lo, hi = np.percentile(pts, [1.0, 99.0], axis=0)
-    margin = 0.05 * (hi - lo)
+    bounds = scene_bounds(pts, [v.camera for v in views], [v.c2w for v in views])
     return Capture(
-        views=views, points=pts, bounds=np.stack([lo - margin, hi + margin]),
+        views=views, points=pts, bounds=bounds,
         reference_length=float(scene.reference_length), source=f"demo:{scene.name}",
         report={"scene": scene.name, "content_hash": scene.content_hash, "n_views": len(views),
                 "n_points": int(len(pts)), "size": [views[0].camera.width, views[0].camera.height]},

@@ -1,0 +1,98 @@
+"""Interest-point detectors under the paper's pose transforms τ1–τ6 (AUV wall inspection).
+
+Each test returns the detector; pytest-n2r renders a source view and its follow-up under τ, runs the
+detector on both and checks the metric. ``eps`` is the largest deviation from the ideal (1) we accept:
+measured on the shipped ORB configuration with a margin, so a worse configuration is caught.
+"""
+
+from __future__ import annotations
+
+from pytest_n2r import metamorphic
+from pytest_n2r.metrics import interest_point_spread, repeatability
+
+from perception.detectors import detector
+
+REPEATABILITY = repeatability(px=3)
+SPREAD = interest_point_spread(radius=8)
+
+
+# -- ORB, the detector the robot runs (PERCEPTION_ORB selects a candidate configuration) ---------------------
+@metamorphic(REPEATABILITY, eps=0.6, transform="tau1")
+def test_orb_repeatability_tau1(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(REPEATABILITY, eps=0.6, transform="tau2")
+def test_orb_repeatability_tau2(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(REPEATABILITY, eps=0.75, transform="tau3")
+def test_orb_repeatability_tau3(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(REPEATABILITY, eps=0.8, transform="tau4")
+def test_orb_repeatability_tau4(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau5")
+def test_orb_repeatability_tau5(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau6")
+def test_orb_repeatability_tau6(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.35, transform="tau1")
+def test_orb_spread_tau1(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.35, transform="tau2")
+def test_orb_spread_tau2(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.55, transform="tau3")
+def test_orb_spread_tau3(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.75, transform="tau4")
+def test_orb_spread_tau4(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.45, transform="tau5")
+def test_orb_spread_tau5(n2r_scene, orb):
+    return orb
+
+
+@metamorphic(SPREAD, eps=0.45, transform="tau6")
+def test_orb_spread_tau6(n2r_scene, orb):
+    return orb
+
+
+# -- SIFT and AKAZE: the alternatives we keep an eye on (small and large motions) -------------------------------
+@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
+def test_sift_repeatability_tau1(n2r_scene):
+    return detector("sift")
+
+
+@metamorphic(REPEATABILITY, eps=0.7, transform="tau4")
+def test_sift_repeatability_tau4(n2r_scene):
+    return detector("sift")
+
+
+@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
+def test_akaze_repeatability_tau1(n2r_scene):
+    return detector("akaze")
+
+
+@metamorphic(REPEATABILITY, eps=0.8, transform="tau4")
+def test_akaze_repeatability_tau4(n2r_scene):
+    return detector("akaze")
