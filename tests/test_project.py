@@ -51,3 +51,10 @@ def test_docs_build_without_warnings(tmp_path):
         cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
     )
     assert result.returncode == 0, f"mkdocs build --strict failed:\n{result.stdout}\n{result.stderr}"
+
+
+@pytest.mark.parametrize("name", sorted(pytest_n2r._EXPORTS))
+def test_every_public_name_resolves(name):
+    value = getattr(pytest_n2r, name)
+    assert getattr(value, "__name__", name) == name or not hasattr(value, "__name__"), \
+        f"pytest_n2r.{name} resolves to {value!r}, whose name differs"
