@@ -319,7 +319,8 @@ class _Summary:
                  for k in ("examples", "inconsistencies", "render_s", "sut_s", "metric_s", "renders")}
         rejected = sum(sum(s["rejected"].values()) for s in runs)
         terminalreporter.write_line(
-            f"{len(runs)} relations: {total['examples']} examples, {rejected} rejected as invalid, "
+            f"{len(runs)} relation{'s' if len(runs) != 1 else ''}: {total['examples']} example"
+            f"{'s' if total['examples'] != 1 else ''}, {rejected} rejected as invalid, "
             f"{total['inconsistencies']} inconsistent; {total['renders']} renders (the rest from the cache); "
             f"time render {total['render_s']:.2f} s / SUT {total['sut_s']:.2f} s / metric "
             f"{total['metric_s']:.2f} s"
