@@ -1,0 +1,98 @@
+"""How a scene field is fitted: grid schedule, optimizer and regularization settings."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+from ..errors import InvalidArgument
+
+__all__ = ["FieldConfig"]
+
+
+@dataclass(frozen=True)
+class FieldConfig:
+    """Settings of :func:`pytest_n2r.field.fit`. The defaults were chosen by measurement
+    (docs/scene-field.md); every field is stored in the scene file.
+
+    Grid
+        ``resolutions``: the grid's vertices per axis, coarse to fine; training moves to the next one at
+        each of ``stage_fractions`` of the run (fractions of the time budget or of ``max_steps``).
+        ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0 or 1.
+    Sampling
+        ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
+    Optimizer (Adam on the rows a step touches)
+        ``lr_density``, ``lr_color``: learning rates, decayed exponentially to ``lr_final_ratio`` of them.
+    Initialization and regularization
+        ``alpha_init``: opacity per sample of the empty field. ``sparsity``: weight of the mean sample
+        opacity in the loss (keeps empty space empty). ``tv_density``, ``tv_color``: weights of a total
+        variation penalty between the touched vertices and their neighbours (smooth fields generalize to
+        new poses). ``prune_alpha``: cells whose densest corner gives
+        less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
+        that training rays sampled in that time without any sample reaching a compositing weight of
+        ``prune_weight`` (one cell of dilation keeps surfaces free to grow).
+    ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
+    """
+
+    resolutions: tuple[int, ...] = (48, 96, 160)
+    stage_fractions: tuple[float, ...] = (0.1, 0.35)
+    shell: float = 0.25
+    sh_degree: int = 1
+    step_ratio: float = 0.5
+    batch_rays: int = 4096
+    lr_density: float = 0.2
+    lr_color: float = 0.1
+    lr_final_ratio: float = 0.1
+    alpha_init: float = 1e-3
+    sparsity: float = 1e-3
+    tv_density: float = 1e-5
+    tv_color: float = 1e-6
+    prune_alpha: float = 1e-3
+    prune_weight: float = 1e-3
+    prune_every: int = 100
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "resolutions", tuple(int(r) for r in self.resolutions))
+        object.__setattr__(self, "stage_fractions", tuple(float(f) for f in self.stage_fractions))
+        res, fr = self.resolutions, self.stage_fractions
+        if not res or any(r < 8 or r > 1024 for r in res) or list(res) != sorted(res):
+            raise InvalidArgument(f"resolutions={res!r}: expected increasing grid sizes in 8..1024")
+        if len(fr) != len(res) - 1 or list(fr) != sorted(fr) or any(not 0.0 < f < 1.0 for f in fr):
+            raise InvalidArgument(f"stage_fractions={fr!r}: expected {len(res) - 1} increasing fractions in (0, 1)")
+        positive = ("shell", "step_ratio", "lr_density", "lr_color", "lr_final_ratio", "alpha_init")
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
+        if not 0 < self.alpha_init < 1 or not 0 <= self.prune_alpha < 1 or not 0 <= self.prune_weight < 1:
+            raise InvalidArgument(f"alpha_init={self.alpha_init!r} and prune_alpha={self.prune_alpha!r} must be in [0, 1)")
+        for name in ("sparsity", "tv_density", "tv_color"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")
+        for name in ("batch_rays", "prune_every"):
+            if not (isinstance(getattr(self, name), int) and getattr(self, name) >= 1):
+                raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected an integer >= 1")
+        if self.sh_degree not in (0, 1):
+            raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0 or 1")
+
+    def stage(self, progress: float) -> int:
+        """The index into ``resolutions`` at ``progress`` (0..1) of the run."""
+        return sum(progress >= f for f in self.stage_fractions)
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "FieldConfig":
+        """The config of ``data``; unknown keys are an error (they would be silently ignored otherwise)."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise InvalidArgument(f"field config has unknown keys {unknown}; known: {sorted(known)}")
+        return cls(**data)
+
+    def replace(self, **changes) -> "FieldConfig":
+        return replace(self, **changes)

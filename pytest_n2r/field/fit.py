@@ -1,0 +1,292 @@
+"""Fitting a scene field to a capture: coarse-to-fine sparse voxel optimization with empty-space skipping.
+
+Each step takes ``batch_rays`` random pixels of the training views, marches their rays through the current
+occupancy grid (only occupied cells are sampled), renders them differentiably and takes an Adam step on the
+grid rows those samples touched. Every ``prune_every`` steps cells the field left (nearly) empty are dropped
+from the occupancy, so training and rendering get faster as the field takes shape; at each stage the grid is
+refined. A non-finite loss stops the fit with :class:`~pytest_n2r.errors.FitError` (the last checkpoint
+stays good).
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field as dataclass_field
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..data.capture import Capture, CapturedView
+from ..errors import FitError, InvalidArgument
+from ..geometry import camera_rays
+from ..render.field_render import FieldRenderer, RenderSettings
+from ..render.lattice import grid_coords
+from ..render.march import MarchGrid, march_compiled, march_dense
+from .config import FieldConfig
+from .grid import SceneField
+from .optim import RowAdam, resolve_device
+from .query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
+from .train_kernels import Composite, Interpolate, RowIndex, add_smoothness_grad, sample_corners, scatter_max
+from .space import SceneSpace
+
+__all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
+
+#: Render settings used for held-out evaluation during and after a fit.
+FIT_RENDER = RenderSettings()
+
+
+@dataclass
+class FitResult:
+    """A fitted field, the config it was fitted with, and the fit report (plain JSON-ready values)."""
+
+    field: SceneField
+    config: FieldConfig
+    report: dict = dataclass_field(default_factory=dict)
+
+
+def evaluate_views(field: SceneField, views: Sequence[CapturedView], settings: RenderSettings = FIT_RENDER) -> list[dict]:
+    """PSNR (dB) and SSIM of the field's render against each view's real image."""
+    from ..metrics.image_quality import psnr, ssim
+
+    renderer = FieldRenderer(field, settings)
+    rows = []
+    for view in views:
+        if view.image is None:
+            continue
+        rgb = renderer.render(view.c2w, view.camera, ("rgb",))["rgb"]
+        rows.append({"view": view.name, "psnr": round(psnr(view.image, rgb), 3), "ssim": round(ssim(view.image, rgb), 4)})
+    return rows
+
+
+def _versions() -> dict:
+    import numba
+
+    from .. import __version__
+
+    return {"pytest_n2r": __version__, "torch": torch.__version__, "numba": numba.__version__,
+            "numpy": np.__version__, "python": platform.python_version()}
+
+
+class _Rays:
+    """Every training pixel as a normalized ray and its colour (float32, on the fitting device)."""
+
+    def __init__(self, views: Sequence[CapturedView], space: SceneSpace, device: torch.device):
+        origins, directions, colors = [], [], []
+        for view in views:
+            o, d = space.normalize_rays(*camera_rays(view.camera, view.c2w))
+            origins.append(o.reshape(-1, 3))
+            directions.append(d.reshape(-1, 3))
+            colors.append(view.image.reshape(-1, 3))
+        self.o = torch.from_numpy(np.concatenate(origins)).to(device)
+        self.d = torch.from_numpy(np.concatenate(directions)).to(device)
+        self.rgb = torch.from_numpy(np.concatenate(colors)).to(device)
+        self.n = self.o.shape[0]
+
+
+class _Trainer:
+    def __init__(self, capture: Capture, config: FieldConfig, device: torch.device):
+        train = [v for v in capture.train_views if v.image is not None]
+        if not train:
+            raise FitError(f"capture {capture.source!r} has no training view with an image; load it with images")
+        self.config, self.device = config, device
+        centers = np.stack([v.c2w[:3, 3] for v in capture.views])
+        self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
+        self.rays = _Rays(train, self.space, device)
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.background = torch.zeros(3, device=device)
+        self.field = SceneField.empty(self.space, config.resolutions[0], config.sh_degree, config.alpha_init,
+                                      config.step_ratio, device)
+        self.stage = 0
+        self.steps = 0
+        self._reset_optimizer()
+
+    def _reset_optimizer(self) -> None:
+        c = self.config
+        width = self.field.values.shape[1]
+        lrs = torch.tensor([c.lr_density] + [c.lr_color] * (width - 1))
+        self.adam = RowAdam(self.field.values, lrs)
+        self.row_index = RowIndex(self.field.values.shape[0]) if self.device.type == "cpu" else None
+        self._rebuild_grid()
+        self._reset_visibility()
+
+    def _reset_visibility(self) -> None:
+        #: The largest compositing weight of any training sample in each cell since the last prune (-1: no
+        #: sample). Only the compiled CPU path records it; on CUDA pruning uses density alone.
+        self.cell_weight = np.full(self.field.occupancy.numel(), -1.0, dtype=np.float32)
+
+    def _rebuild_grid(self) -> None:
+        self.grid = MarchGrid(self.field.occupancy, self.space.shell, self.config.step_ratio, None, FIT_RENDER.far)
+
+    def march(self, o: torch.Tensor, d: torch.Tensor):
+        if self.device.type == "cpu":
+            return march_compiled(o, d, self.grid)
+        return march_dense(o, d, self.grid)
+
+    def step(self, lr_scale: float) -> tuple[float, float]:
+        """One optimization step; returns (loss, batch PSNR in dB)."""
+        c, f = self.config, self.field
+        pick = torch.randint(self.rays.n, (c.batch_rays,), generator=self.generator).to(self.device)
+        o, d = self.rays.o[pick], self.rays.d[pick]
+        target = self.rays.rgb[pick].float() / 255.0
+        ray_idx, t, offsets = self.march(o, d)
+        unit = d / d.norm(dim=-1, keepdim=True)
+        n_samples = max(t.numel(), 1)
+        if self.device.type == "cpu":
+            rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
+                                                  self.space.shell, f.resolution)
+            unique, inverse = self.row_index.unique(rows)
+            unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
+            sub = f.values[unique].requires_grad_(True)
+            v = Interpolate.apply(sub, inverse, weights)
+            rgb, alpha_sum, sample_weight = Composite.apply(v, sh_basis(unit, f.sh_degree), offsets,
+                                                            f.density_shift, c.step_ratio, ALPHA_MAX, self.background)
+            scatter_max(cells, sample_weight.numpy(), self.cell_weight)
+        else:
+            p = o[ray_idx] + t[:, None] * d[ray_idx]
+            rows, weights = trilinear(grid_coords(p, self.space.shell, f.resolution), f.resolution)
+            unique, inverse = torch.unique(rows, return_inverse=True)
+            sub = f.values[unique].requires_grad_(True)
+            alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
+                                  f.density_shift, c.step_ratio)
+            rgb = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], self.background)["rgb"]
+            alpha_sum = alpha.clamp(max=ALPHA_MAX).sum()[None]
+        mse = F.mse_loss(rgb, target)
+        loss = mse + c.sparsity * alpha_sum.sum() / n_samples
+        if not torch.isfinite(loss):
+            raise FitError(f"the fit diverged at step {self.steps}: the loss is {float(loss)} "
+                           "(lower lr_density / lr_color; the last checkpoint is still good)")
+        if t.numel():
+            loss.backward()
+            grad = sub.grad
+            if not torch.isfinite(grad.sum()):
+                raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
+            if self.device.type == "cpu" and (c.tv_density > 0 or c.tv_color > 0):
+                add_smoothness_grad(f.values.numpy(), unique.numpy(), grad.numpy(), f.resolution, c.tv_density,
+                                    c.tv_color)
+            self.adam.step(unique, grad, lr_scale)
+        self.steps += 1
+        return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
+
+    @torch.no_grad()
+    def prune(self) -> None:
+        """Drop cells the field left empty, and cells that training rays reached but that never contributed
+        (hidden behind surfaces or clear air): one cell of dilation keeps what is left free to grow."""
+        keep = self.field.cell_alpha(self.config.step_ratio) >= self.config.prune_alpha
+        seen = torch.from_numpy(self.cell_weight).reshape(keep.shape).to(keep.device)
+        keep &= (seen < 0) | (seen >= self.config.prune_weight)
+        self._reset_visibility()
+        keep = F.max_pool3d(keep[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
+        self.field.occupancy = self.field.occupancy & keep
+        self._rebuild_grid()
+
+    @torch.no_grad()
+    def refine(self) -> None:
+        """Move to the next grid resolution."""
+        self.stage += 1
+        self.field = self.field.upsampled(self.config.resolutions[self.stage])
+        self._reset_optimizer()
+
+
+def fit(
+    capture: Capture,
+    config: FieldConfig | None = None,
+    *,
+    time_budget_s: float | None = None,
+    max_steps: int | None = None,
+    device: str | torch.device = "auto",
+    progress: Callable[[dict], None] | None = None,
+    checkpoint: Callable[[FitResult], None] | None = None,
+    checkpoint_every_s: float = 60.0,
+    eval_at_s: Sequence[float] = (),
+) -> FitResult:
+    """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
+    ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
+    ``max_steps`` alone is reproducible bit for bit on the same machine and thread count).
+
+    ``progress`` receives ``{step, stage, resolution, loss, psnr, elapsed_s, eta_s, occupied}`` about once a
+    second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
+    a scene file stores it); ``eval_at_s`` lists training times at which held-out PSNR/SSIM are recorded
+    in ``report["history"]`` (evaluation time is not counted as training time).
+    """
+    config = config or FieldConfig()
+    if time_budget_s is None and max_steps is None:
+        raise InvalidArgument("fit needs time_budget_s or max_steps (or both)")
+    if time_budget_s is not None and not (math.isfinite(time_budget_s) and time_budget_s > 0):
+        raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected seconds > 0")
+    if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
+        raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
+    dev = resolve_device(device)
+    trainer = _Trainer(capture, config, dev)
+    heldout = [v for v in capture.heldout_views if v.image is not None]
+    history: list[dict] = []
+    pending_evals = sorted(float(s) for s in eval_at_s)
+    train_s = eval_s = 0.0
+    start = time.perf_counter()
+    last_report = last_checkpoint = 0.0
+    loss = batch_psnr = float("nan")
+
+    def progress_fraction() -> float:
+        if max_steps is not None:
+            return trainer.steps / max_steps
+        return train_s / time_budget_s
+
+    def snapshot() -> FitResult:
+        return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2)})
+
+    while progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s):
+        t0 = time.perf_counter()
+        frac = progress_fraction()
+        if config.stage(frac) > trainer.stage:
+            trainer.refine()
+        loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
+        if trainer.steps % config.prune_every == 0:
+            trainer.prune()
+        train_s += time.perf_counter() - t0
+        while pending_evals and train_s >= pending_evals[0]:
+            e0 = time.perf_counter()
+            rows = evaluate_views(trainer.field, heldout)
+            history.append({"seconds": round(pending_evals.pop(0), 1), "train_seconds": round(train_s, 2),
+                            "step": trainer.steps, **_means(rows)})
+            eval_s += time.perf_counter() - e0
+        now = time.perf_counter() - start
+        if progress is not None and now - last_report >= 1.0:
+            last_report = now
+            eta = (train_s / max(frac, 1e-9)) * (1.0 - frac) if frac > 0 else float("nan")
+            progress({"step": trainer.steps, "stage": trainer.stage, "resolution": trainer.field.resolution,
+                      "loss": loss, "psnr": batch_psnr, "elapsed_s": train_s, "eta_s": eta,
+                      "occupied": float(trainer.field.occupancy.float().mean())})
+        if checkpoint is not None and now - last_checkpoint >= checkpoint_every_s:
+            last_checkpoint = now
+            checkpoint(snapshot())
+    trainer.prune()
+    final = trainer.field.quantized()
+    e0 = time.perf_counter()
+    rows = evaluate_views(final, heldout)
+    eval_s += time.perf_counter() - e0
+    report = {
+        "steps": trainer.steps,
+        "train_seconds": round(train_s, 2),
+        "eval_seconds": round(eval_s, 2),
+        "device": str(dev),
+        "threads": torch.get_num_threads(),
+        "time_budget_s": time_budget_s,
+        "max_steps": max_steps,
+        "final_loss": round(loss, 6),
+        "field": final.describe(),
+        "heldout": rows,
+        **_means(rows),
+        "history": history,
+        "versions": _versions(),
+    }
+    return FitResult(final, config, report)
+
+
+def _means(rows: list[dict]) -> dict:
+    if not rows:
+        return {"psnr": None, "ssim": None}
+    return {"psnr": round(float(np.mean([r["psnr"] for r in rows])), 3),
+            "ssim": round(float(np.mean([r["ssim"] for r in rows])), 4)}

@@ -1,0 +1,89 @@
+"""Differentiable evaluation of a scene field at packed ray samples (torch; CPU or CUDA).
+
+Samples are *packed*: one flat list over all rays, sorted by ray (``ray_idx`` ascending) and, within a ray,
+by ``t``. Training uses these functions with autograd; the reference renderer uses them without.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from ..render.kernels import SH_C0, SH_C1
+
+__all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "ALPHA_MAX"]
+
+#: Per-sample opacity is capped here so ``log(1 - alpha)`` stays finite (transmittance cannot underflow).
+ALPHA_MAX = 1.0 - 1e-6
+
+
+def trilinear(g: torch.Tensor, resolution: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Vertex coordinates ``(N, 3)`` → the 8 corner rows ``(N, 8)`` (flat, x-major) and weights ``(N, 8)``.
+
+    Corner ``c`` is offset by ``(c>>2 & 1, c>>1 & 1, c & 1)`` along (x, y, z), as in the compiled kernel.
+    """
+    res = resolution
+    cell = g.floor().clamp(0, res - 2)
+    f = g - cell
+    ci = cell.to(torch.int64)
+    base = (ci[:, 0] * res + ci[:, 1]) * res + ci[:, 2]
+    bits = torch.arange(8, device=g.device)
+    a, b, c = (bits >> 2) & 1, (bits >> 1) & 1, bits & 1
+    offsets = a * res * res + b * res + c
+    wx = torch.where(a.bool(), f[:, :1], 1.0 - f[:, :1])
+    wy = torch.where(b.bool(), f[:, 1:2], 1.0 - f[:, 1:2])
+    wz = torch.where(c.bool(), f[:, 2:3], 1.0 - f[:, 2:3])
+    return base[:, None] + offsets[None, :], wx * wy * wz
+
+
+def sh_basis(directions: torch.Tensor, sh_degree: int) -> torch.Tensor:
+    """Real SH basis ``(N, n_sh)`` at unit ``directions`` (N, 3), world axes."""
+    c0 = torch.full_like(directions[:, :1], SH_C0)
+    if sh_degree == 0:
+        return c0
+    x, y, z = directions.unbind(-1)
+    return torch.cat([c0, torch.stack([-SH_C1 * y, SH_C1 * z, -SH_C1 * x], dim=-1)], dim=-1)
+
+
+def interpolate(values: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """Trilinear interpolation ``(N, F)`` of ``values`` at the corner ``rows`` / ``weights`` of :func:`trilinear`."""
+    return torch.einsum("nk,nkf->nf", weights, values[rows])
+
+
+def shade(v: torch.Tensor, basis: torch.Tensor, density_shift: float, step_ratio: float
+          ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Interpolated values ``(N, F)`` → per-sample opacity ``(N,)`` over ``step_ratio`` voxels and colour
+    ``(N, 3)`` in [0, 1]."""
+    alpha = -torch.expm1(-F.softplus(v[:, 0] + density_shift) * step_ratio)
+    coeff = v[:, 1:].reshape(v.shape[0], basis.shape[1], 3)
+    rgb = torch.sigmoid(torch.einsum("nl,nlc->nc", basis, coeff))
+    return alpha, rgb
+
+
+def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: torch.Tensor,
+              offsets: torch.Tensor, n_rays: int, background: torch.Tensor, t_far: torch.Tensor | None = None
+              ) -> dict[str, torch.Tensor]:
+    """Alpha-composite packed samples front to back.
+
+    Returns per ray ``rgb`` (N, 3) over ``background``, ``opacity`` (the sum of weights, ≤ 1), ``weights``
+    per sample and, when ``t_far`` (N,) is given, ``depth``: the expected z-depth with the remaining
+    transmittance placed at ``t_far``. Transmittance is a float64 prefix sum of ``log(1 - alpha)``.
+    """
+    alpha = alpha.clamp(max=ALPHA_MAX)
+    log_t = torch.log1p(-alpha.double())
+    exclusive = torch.cumsum(log_t, 0) - log_t
+    start = exclusive[offsets[:-1].clamp(max=max(exclusive.numel() - 1, 0))] if exclusive.numel() else exclusive
+    trans = torch.exp(exclusive - start[ray_idx]).to(alpha.dtype)
+    weights = trans * alpha
+    zeros = torch.zeros(n_rays, device=alpha.device, dtype=alpha.dtype)
+    opacity = zeros.index_add(0, ray_idx, weights)
+    remaining = (1.0 - opacity).clamp(min=0.0)
+    out = {
+        "rgb": torch.zeros(n_rays, 3, device=alpha.device, dtype=alpha.dtype).index_add(0, ray_idx, weights[:, None] * rgb)
+        + remaining[:, None] * background,
+        "opacity": opacity.clamp(max=1.0),
+        "weights": weights,
+    }
+    if t_far is not None:
+        out["depth"] = zeros.index_add(0, ray_idx, weights * t) + remaining * t_far
+    return out

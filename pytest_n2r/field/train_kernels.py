@@ -1,0 +1,265 @@
+"""Compiled CPU kernels of a training step (numba): sample corners, unique rows, trilinear gather with its
+gradient, and the row-sparse Adam update.
+
+They replace the torch ops that dominate a CPU step (``torch.unique``, the serial scatter in the backward of
+an index, Adam over fancy-indexed rows) and agree with them (tests check against torch autograd).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from numba import njit, prange
+
+from ..render.kernels import _grid
+
+__all__ = ["sample_corners", "scatter_max", "RowIndex", "unique_rows", "Interpolate", "Composite", "adam_rows", "add_smoothness_grad"]
+
+
+@njit(cache=True, parallel=True)
+def _sample_corners(o, d, t, ray_idx, shell, res, rows, weights, cells):
+    rr = res * res
+    nc = res - 1
+    for i in prange(t.shape[0]):
+        r = ray_idx[i]
+        ti = np.float64(t[i])
+        gx, gy, gz = _grid(o[r, 0] + ti * d[r, 0], o[r, 1] + ti * d[r, 1], o[r, 2] + ti * d[r, 2], shell, res)
+        ci, cj, ck = min(int(gx), res - 2), min(int(gy), res - 2), min(int(gz), res - 2)
+        fx, fy, fz = gx - ci, gy - cj, gz - ck
+        base = (ci * res + cj) * res + ck
+        cells[i] = (ci * nc + cj) * nc + ck
+        for c in range(8):
+            rows[i, c] = base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)
+            weights[i, c] = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
+
+
+def sample_corners(o: np.ndarray, d: np.ndarray, t: np.ndarray, ray_idx: np.ndarray, shell: float,
+                   resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 8 corner rows ``(N, 8)`` int64 and trilinear weights ``(N, 8)`` float32 of packed samples (same
+    corner order as :func:`pytest_n2r.field.query.trilinear`), and each sample's flat cell index ``(N,)``."""
+    rows = np.empty((t.shape[0], 8), dtype=np.int64)
+    weights = np.empty((t.shape[0], 8), dtype=np.float32)
+    cells = np.empty(t.shape[0], dtype=np.int64)
+    _sample_corners(o, d, t, ray_idx, shell, resolution, rows, weights, cells)
+    return rows, weights, cells
+
+
+@njit(cache=True)
+def scatter_max(cells, values, out):
+    """``out[cells[i]] = max(out[cells[i]], values[i])`` (the largest compositing weight seen per cell)."""
+    for i in range(cells.shape[0]):
+        if values[i] > out[cells[i]]:
+            out[cells[i]] = values[i]
+
+
+@njit(cache=True)
+def _unique_rows(rows, slot, stamp, tag, unique, inverse):
+    n = 0
+    flat = rows.reshape(-1)
+    inv = inverse.reshape(-1)
+    for i in range(flat.shape[0]):
+        r = flat[i]
+        if stamp[r] != tag:
+            stamp[r] = tag
+            slot[r] = n
+            unique[n] = r
+            n += 1
+        inv[i] = slot[r]
+    return n
+
+
+class RowIndex:
+    """Scratch space to find the unique rows of a step in one pass (``stamp`` avoids clearing)."""
+
+    def __init__(self, n_rows: int):
+        self.slot = np.zeros(n_rows, dtype=np.int32)
+        self.stamp = np.zeros(n_rows, dtype=np.int32)
+        self.tag = 0
+
+    def unique(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(unique, inverse)``: the distinct rows in first-seen order, and ``rows`` as indices into them."""
+        self.tag += 1
+        unique = np.empty(rows.size, dtype=np.int64)
+        inverse = np.empty(rows.shape, dtype=np.int64)
+        n = _unique_rows(rows, self.slot, self.stamp, self.tag, unique, inverse)
+        return unique[:n], inverse
+
+
+def unique_rows(rows: np.ndarray, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """One-off :meth:`RowIndex.unique` (allocates the scratch space)."""
+    return RowIndex(n_rows).unique(rows)
+
+
+@njit(cache=True, parallel=True)
+def _interp_forward(sub, inverse, weights, out):
+    for i in prange(inverse.shape[0]):
+        for f in range(sub.shape[1]):
+            acc = 0.0
+            for c in range(8):
+                acc += weights[i, c] * sub[inverse[i, c], f]
+            out[i, f] = acc
+
+
+@njit(cache=True, parallel=True)
+def _interp_backward(grad_out, inverse, weights, grad_sub):
+    # One column per thread: no two threads write the same element, and the order of additions is fixed.
+    for f in prange(grad_sub.shape[1]):
+        for i in range(inverse.shape[0]):
+            g = grad_out[i, f]
+            for c in range(8):
+                grad_sub[inverse[i, c], f] += weights[i, c] * g
+
+
+class Interpolate(torch.autograd.Function):
+    """``out[i] = Σ_c weights[i, c] · sub[inverse[i, c]]`` with a compiled forward and backward (CPU)."""
+
+    @staticmethod
+    def forward(ctx, sub: torch.Tensor, inverse: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+        out = torch.empty(inverse.shape[0], sub.shape[1], dtype=sub.dtype)
+        _interp_forward(sub.detach().numpy(), inverse.numpy(), weights.numpy(), out.numpy())
+        ctx.save_for_backward(inverse, weights)
+        ctx.n_rows = sub.shape[0]
+        return out
+
+    @staticmethod
+    def backward(ctx, grad_out: torch.Tensor):
+        inverse, weights = ctx.saved_tensors
+        grad_sub = torch.zeros(ctx.n_rows, grad_out.shape[1], dtype=grad_out.dtype)
+        _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(), grad_sub.numpy())
+        return grad_sub, None, None
+
+
+@njit(cache=True, parallel=True)
+def adam_rows(values, m, v, rows, grad, lrs, b1, b2, eps, bias1, bias2):
+    """Adam on ``values[rows]`` in place (``bias1``/``bias2``: the bias corrections ``1 - β^t``)."""
+    for i in prange(rows.shape[0]):
+        r = rows[i]
+        for f in range(values.shape[1]):
+            g = grad[i, f]
+            mi = b1 * m[r, f] + (1.0 - b1) * g
+            vi = b2 * v[r, f] + (1.0 - b2) * g * g
+            m[r, f] = mi
+            v[r, f] = vi
+            values[r, f] -= lrs[f] * (mi / bias1) / (math.sqrt(vi / bias2) + eps)
+
+
+@njit(cache=True, inline="always")
+def _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col):
+    """Sample ``i``'s opacity (capped at ``alpha_max``) and its derivative by the raw density; its colour
+    goes to ``col``."""
+    x = v[i, 0] + density_shift
+    sigma = x if x > 20.0 else math.log1p(math.exp(x))
+    alpha = 1.0 - math.exp(-sigma * step_ratio)
+    d_alpha = step_ratio * (1.0 - alpha) / (1.0 + math.exp(-x))
+    if alpha > alpha_max:
+        alpha, d_alpha = alpha_max, 0.0
+    for ch in range(3):
+        acc = 0.0
+        for l in range(n_sh):
+            acc += basis[r, l] * v[i, 1 + l * 3 + ch]
+        col[ch] = 1.0 / (1.0 + math.exp(-acc))
+    return alpha, d_alpha
+
+
+@njit(cache=True, parallel=True)
+def _composite_forward(v, basis, offsets, density_shift, step_ratio, alpha_max, background, rgb, alpha_sum,
+                       sample_weight):
+    n_sh = basis.shape[1]
+    for r in prange(offsets.shape[0] - 1):
+        col = np.empty(3)
+        trans = 1.0
+        acc = np.zeros(3)
+        a_sum = 0.0
+        for i in range(offsets[r], offsets[r + 1]):
+            alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
+            w = trans * alpha
+            sample_weight[i] = w
+            for ch in range(3):
+                acc[ch] += w * col[ch]
+            a_sum += alpha
+            trans *= 1.0 - alpha
+        for ch in range(3):
+            rgb[r, ch] = acc[ch] + trans * background[ch]
+        alpha_sum[r] = a_sum
+
+
+@njit(cache=True, parallel=True)
+def _composite_backward(v, basis, offsets, density_shift, step_ratio, alpha_max, rgb, grad_rgb, grad_alpha, grad_v):
+    n_sh = basis.shape[1]
+    for r in prange(offsets.shape[0] - 1):
+        col = np.empty(3)
+        trans = 1.0
+        prefix = np.zeros(3)
+        g = grad_rgb[r]
+        for i in range(offsets[r], offsets[r + 1]):
+            alpha, d_raw = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
+            w = trans * alpha
+            d_alpha = grad_alpha[r]
+            for ch in range(3):
+                prefix[ch] += w * col[ch]
+                suffix = rgb[r, ch] - prefix[ch]          # what is behind this sample, background included
+                d_alpha += g[ch] * (trans * col[ch] - suffix / (1.0 - alpha))
+                d_logit = g[ch] * w * col[ch] * (1.0 - col[ch])
+                for l in range(n_sh):
+                    grad_v[i, 1 + l * 3 + ch] = d_logit * basis[r, l]
+            grad_v[i, 0] = d_alpha * d_raw
+            trans *= 1.0 - alpha
+
+
+class Composite(torch.autograd.Function):
+    """Shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
+
+    Inputs: interpolated values ``v (N, F)``, the SH basis of each ray's direction ``(B, n_sh)``, ``offsets
+    (B+1)``. Outputs: ``rgb (B, 3)`` over ``background``, the per-ray sum of sample opacities ``(B,)`` and,
+    not differentiable, each sample's compositing weight ``(N,)``.
+    Same formulas as :func:`pytest_n2r.field.query.shade` + :func:`~pytest_n2r.field.query.composite`.
+    """
+
+    @staticmethod
+    def forward(ctx, v, basis, offsets, density_shift, step_ratio, alpha_max, background):
+        n = offsets.shape[0] - 1
+        rgb = torch.empty(n, 3, dtype=torch.float64)
+        alpha_sum = torch.empty(n, dtype=torch.float64)
+        sample_weight = torch.empty(v.shape[0], dtype=torch.float32)
+        v_np, basis_np = v.detach().double().numpy(), basis.double().numpy()
+        _composite_forward(v_np, basis_np, offsets.numpy(), density_shift, step_ratio, alpha_max,
+                           background.double().numpy(), rgb.numpy(), alpha_sum.numpy(), sample_weight.numpy())
+        ctx.save_for_backward(v, basis, offsets, rgb)
+        ctx.params = (density_shift, step_ratio, alpha_max)
+        ctx.mark_non_differentiable(sample_weight)
+        return rgb.to(v.dtype), alpha_sum.to(v.dtype), sample_weight
+
+    @staticmethod
+    def backward(ctx, grad_rgb, grad_alpha_sum, _grad_weight):
+        v, basis, offsets, rgb = ctx.saved_tensors
+        grad_v = torch.empty(v.shape, dtype=torch.float64)
+        if grad_rgb is None:
+            grad_rgb = torch.zeros(rgb.shape)
+        if grad_alpha_sum is None:
+            grad_alpha_sum = torch.zeros(rgb.shape[0])
+        _composite_backward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), *ctx.params,
+                            rgb.numpy(), grad_rgb.double().contiguous().numpy(),
+                            grad_alpha_sum.double().contiguous().numpy(), grad_v.numpy())
+        return grad_v.to(v.dtype), None, None, None, None, None, None
+
+
+@njit(cache=True, parallel=True)
+def add_smoothness_grad(values, rows, grad, res, weight_density, weight_color):
+    """Add the gradient of a total-variation (squared-difference) penalty between each of ``rows`` and its six
+    grid neighbours to ``grad`` (``weight_density`` on column 0, ``weight_color`` on the colour columns)."""
+    rr = res * res
+    for n in prange(rows.shape[0]):
+        r = rows[n]
+        i, j, k = r // rr, (r // res) % res, r % res
+        for axis in range(3):
+            c = i if axis == 0 else (j if axis == 1 else k)
+            stride = rr if axis == 0 else (res if axis == 1 else 1)
+            for sign in (-1, 1):
+                if 0 <= c + sign < res:
+                    nb = r + sign * stride
+                    grad[n, 0] += weight_density * (values[r, 0] - values[nb, 0])
+                    if weight_color > 0.0:
+                        for f in range(1, values.shape[1]):
+                            grad[n, f] += weight_color * (values[r, f] - values[nb, f])

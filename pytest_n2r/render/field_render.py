@@ -1,0 +1,154 @@
+"""Rendering a scene field at a camera and pose: RGB, z-depth and opacity, deterministic and memory-bounded.
+
+Two backends render the same lattice (:mod:`pytest_n2r.render.lattice`):
+
+- ``"compiled"`` (CPU): one fused numba kernel per ray batch, with empty-space skipping and early ray
+  termination (a ray stops once its transmittance is below ``t_stop``);
+- ``"torch"`` (any device, the reference and the CUDA path): marches every lattice sample and composites
+  with :mod:`pytest_n2r.field.query`; it never terminates early.
+
+``backend="auto"`` takes ``compiled`` for a field on the CPU and ``torch`` on CUDA.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+import torch
+
+from ..errors import InvalidArgument
+from ..field.grid import SceneField
+from ..field.query import composite, interpolate, sh_basis, shade, trilinear
+from ..geometry import Camera, camera_rays
+from . import kernels
+from .lattice import grid_coords
+from .march import MarchGrid, march_dense
+
+__all__ = ["RenderSettings", "FieldRenderer", "BACKENDS"]
+
+BACKENDS = ("auto", "compiled", "torch")
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """The render knobs (see docs/performance.md for what each costs and buys).
+
+    - ``step_ratio``: sample spacing along a ray, in voxels of the field's grid;
+    - ``shell_samples``: samples in the contracted outer shell (``None``: one per ``step_ratio`` voxels);
+    - ``far``: how far beyond the unit cube rays go, in normalized units (the contracted shell reaches
+      ``1 + shell·(1 - 1/(1+far))`` of the way to infinity);
+    - ``t_stop``: early ray termination once transmittance is below this (compiled backend);
+    - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped;
+    - ``chunk_rays``: rays per batch (bounds memory at any image size);
+    - ``background``: RGB in [0, 1] behind the field.
+    """
+
+    step_ratio: float = 0.5
+    shell_samples: int | None = None
+    far: float = 100.0
+    t_stop: float = 1e-3
+    min_alpha: float = 1e-4
+    chunk_rays: int = 1 << 16
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    backend: str = "auto"
+
+    def __post_init__(self) -> None:
+        checks = {
+            "step_ratio": 0.01 <= self.step_ratio <= 8.0,
+            "far": math.isfinite(self.far) and 0.0 < self.far <= 1e6,
+            "t_stop": 0.0 <= self.t_stop < 1.0,
+            "min_alpha": 0.0 <= self.min_alpha < 1.0,
+            "chunk_rays": isinstance(self.chunk_rays, int) and self.chunk_rays >= 1,
+        }
+        for name, ok in checks.items():
+            if not ok:
+                raise InvalidArgument(f"RenderSettings.{name}={getattr(self, name)!r} is out of range")
+        if self.shell_samples is not None and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
+            raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
+        bg = tuple(float(v) for v in self.background)
+        if len(bg) != 3 or not all(0.0 <= v <= 1.0 for v in bg):
+            raise InvalidArgument(f"RenderSettings.background={self.background!r}: expected three values in [0, 1]")
+        object.__setattr__(self, "background", bg)
+        if self.backend not in BACKENDS:
+            raise InvalidArgument(f"RenderSettings.backend={self.backend!r}: expected one of {BACKENDS}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def replace(self, **changes) -> "RenderSettings":
+        return replace(self, **changes)
+
+
+class FieldRenderer:
+    """Renders one field with fixed settings (the marching grid is prepared once)."""
+
+    def __init__(self, field: SceneField, settings: RenderSettings | None = None):
+        self.field = field
+        self.settings = settings or RenderSettings()
+        s = self.settings
+        self.backend = s.backend if s.backend != "auto" else ("compiled" if field.device.type == "cpu" else "torch")
+        if self.backend == "compiled" and field.device.type != "cpu":
+            raise InvalidArgument("backend='compiled' renders fields on the CPU only; use backend='torch' on CUDA")
+        occupancy = field.occupancy
+        if s.min_alpha > 0:
+            with torch.no_grad():
+                occupancy = occupancy & (field.cell_alpha(s.step_ratio) >= s.min_alpha)
+        self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
+        self._values = np.ascontiguousarray(field.values.detach().cpu().numpy()) if self.backend == "compiled" else None
+
+    def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
+        ``rgb`` H×W×3 uint8, ``depth`` H×W float32 z-depth, ``opacity`` H×W float32 in [0, 1]."""
+        h, w = camera.height, camera.width
+        rgb = np.empty((h * w, 3), dtype=np.float32)
+        depth = np.empty(h * w, dtype=np.float32)
+        opacity = np.empty(h * w, dtype=np.float32)
+        rows = max(1, self.settings.chunk_rays // w)
+        for y0 in range(0, h, rows):
+            y1 = min(h, y0 + rows)
+            uv = np.stack(np.meshgrid(np.arange(w, dtype=np.float64), np.arange(y0, y1, dtype=np.float64)), -1)
+            o, d = self.field.space.normalize_rays(*camera_rays(camera, c2w, uv))
+            sl = slice(y0 * w, y1 * w)
+            self._render_rays(o.reshape(-1, 3), d.reshape(-1, 3), "depth" in outputs, rgb[sl], depth[sl], opacity[sl])
+        out: dict[str, np.ndarray] = {}
+        if "rgb" in outputs:
+            out["rgb"] = np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8).reshape(h, w, 3)
+        if "depth" in outputs:
+            out["depth"] = depth.reshape(h, w)
+        if "opacity" in outputs:
+            out["opacity"] = np.clip(opacity, 0.0, 1.0).reshape(h, w)
+        return out
+
+    def _render_rays(self, o: np.ndarray, d: np.ndarray, want_depth: bool, rgb: np.ndarray, depth: np.ndarray,
+                     opacity: np.ndarray) -> None:
+        s, g, f = self.settings, self.grid, self.field
+        if self.backend == "compiled":
+            cells, blocks = g.numpy()
+            kernels.render_rays(o, d, self._values, cells, blocks, g.resolution, g.shell, g.step, g.shell_samples,
+                                g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop, np.asarray(s.background),
+                                want_depth, rgb, depth, opacity)
+            return
+        with torch.no_grad():
+            ot = torch.from_numpy(o).to(f.device)
+            dt = torch.from_numpy(d).to(f.device)
+            out = render_rays_torch(f, g, ot, dt, torch.tensor(s.background, device=f.device), want_depth)
+        rgb[:] = out["rgb"].cpu().numpy()
+        opacity[:] = out["opacity"].cpu().numpy()
+        if want_depth:
+            depth[:] = out["depth"].cpu().numpy()
+
+
+def render_rays_torch(field: SceneField, grid: MarchGrid, o: torch.Tensor, d: torch.Tensor,
+                      background: torch.Tensor, want_depth: bool, marched=None) -> dict[str, torch.Tensor]:
+    """Render normalized rays with torch (differentiable in ``field.values``); ``marched`` may pass samples
+    already marched as ``(ray_idx, t, offsets)``."""
+    ray_idx, t, offsets = march_dense(o, d, grid) if marched is None else marched
+    p = o[ray_idx] + t[:, None] * d[ray_idx]
+    rows, weights = trilinear(grid_coords(p, grid.shell, field.resolution), field.resolution)
+    unit = d / d.norm(dim=-1, keepdim=True)
+    basis = sh_basis(unit[ray_idx], field.sh_degree)
+    alpha, rgb = shade(interpolate(field.values, rows, weights), basis, field.density_shift, grid.step_ratio)
+    return composite(alpha, rgb, t, ray_idx, offsets, o.shape[0], background,
+                     grid.t_far(o, d) if want_depth else None)
