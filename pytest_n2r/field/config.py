@@ -25,9 +25,7 @@ class FieldConfig:
         ``lr_density``, ``lr_color``: learning rates, decayed exponentially to ``lr_final_ratio`` of them.
     Initialization and regularization
         ``alpha_init``: opacity per sample of the empty field. ``sparsity``: weight of the mean sample
-        opacity in the loss (keeps empty space empty). ``tv_density``, ``tv_color``: weights of a total
-        variation penalty between the touched vertices and their neighbours (smooth fields generalize to
-        new poses). ``prune_alpha``: cells whose densest corner gives
+        opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
         that training rays sampled in that time without any sample reaching a compositing weight of
         ``prune_weight`` (one cell of dilation keeps surfaces free to grow).
@@ -43,13 +41,11 @@ class FieldConfig:
     lr_density: float = 0.2
     lr_color: float = 0.1
     lr_final_ratio: float = 0.1
-    alpha_init: float = 1e-3
-    sparsity: float = 1e-3
-    tv_density: float = 1e-5
-    tv_color: float = 1e-6
+    alpha_init: float = 1e-4
+    sparsity: float = 1e-2
     prune_alpha: float = 1e-3
     prune_weight: float = 1e-3
-    prune_every: int = 100
+    prune_every: int = 25
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -67,7 +63,7 @@ class FieldConfig:
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
         if not 0 < self.alpha_init < 1 or not 0 <= self.prune_alpha < 1 or not 0 <= self.prune_weight < 1:
             raise InvalidArgument(f"alpha_init={self.alpha_init!r} and prune_alpha={self.prune_alpha!r} must be in [0, 1)")
-        for name in ("sparsity", "tv_density", "tv_color"):
+        for name in ("sparsity",):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")

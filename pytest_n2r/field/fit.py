@@ -30,7 +30,7 @@ from .config import FieldConfig
 from .grid import SceneField
 from .optim import RowAdam, resolve_device
 from .query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
-from .train_kernels import Composite, Interpolate, RowIndex, add_smoothness_grad, sample_corners, scatter_max
+from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 from .space import SceneSpace
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
@@ -164,9 +164,6 @@ class _Trainer:
             grad = sub.grad
             if not torch.isfinite(grad.sum()):
                 raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
-            if self.device.type == "cpu" and (c.tv_density > 0 or c.tv_color > 0):
-                add_smoothness_grad(f.values.numpy(), unique.numpy(), grad.numpy(), f.resolution, c.tv_density,
-                                    c.tv_color)
             self.adam.step(unique, grad, lr_scale)
         self.steps += 1
         return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
@@ -262,7 +259,8 @@ def fit(
         if checkpoint is not None and now - last_checkpoint >= checkpoint_every_s:
             last_checkpoint = now
             checkpoint(snapshot())
-    trainer.prune()
+    if trainer.steps >= config.prune_every:  # a very short fit has not had time to grow anything yet
+        trainer.prune()
     final = trainer.field.quantized()
     e0 = time.perf_counter()
     rows = evaluate_views(final, heldout)

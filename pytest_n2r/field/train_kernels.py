@@ -15,7 +15,7 @@ from numba import njit, prange
 
 from ..render.kernels import _grid
 
-__all__ = ["sample_corners", "scatter_max", "RowIndex", "unique_rows", "Interpolate", "Composite", "adam_rows", "add_smoothness_grad"]
+__all__ = ["sample_corners", "scatter_max", "RowIndex", "unique_rows", "Interpolate", "Composite", "adam_rows"]
 
 
 @njit(cache=True, parallel=True)
@@ -243,23 +243,3 @@ class Composite(torch.autograd.Function):
                             rgb.numpy(), grad_rgb.double().contiguous().numpy(),
                             grad_alpha_sum.double().contiguous().numpy(), grad_v.numpy())
         return grad_v.to(v.dtype), None, None, None, None, None, None
-
-
-@njit(cache=True, parallel=True)
-def add_smoothness_grad(values, rows, grad, res, weight_density, weight_color):
-    """Add the gradient of a total-variation (squared-difference) penalty between each of ``rows`` and its six
-    grid neighbours to ``grad`` (``weight_density`` on column 0, ``weight_color`` on the colour columns)."""
-    rr = res * res
-    for n in prange(rows.shape[0]):
-        r = rows[n]
-        i, j, k = r // rr, (r // res) % res, r % res
-        for axis in range(3):
-            c = i if axis == 0 else (j if axis == 1 else k)
-            stride = rr if axis == 0 else (res if axis == 1 else 1)
-            for sign in (-1, 1):
-                if 0 <= c + sign < res:
-                    nb = r + sign * stride
-                    grad[n, 0] += weight_density * (values[r, 0] - values[nb, 0])
-                    if weight_color > 0.0:
-                        for f in range(1, values.shape[1]):
-                            grad[n, f] += weight_color * (values[r, f] - values[nb, f])
