@@ -67,8 +67,10 @@ def json_ready(value: Any) -> Any:
 
 
 def _image_member(name: str, index: int, taken: set[str]) -> str:
-    """``images/<name without extension>.jpg`` with unsafe characters replaced, unique within the archive."""
-    stem = _UNSAFE.sub("_", name.rsplit(".", 1)[0] if "." in name else name).strip("._") or f"frame{index}"
+    """``images/<file name without folder and extension>.jpg`` with unsafe characters replaced, unique within
+    the archive (a clash gets the frame index appended)."""
+    base = name.replace("\\", "/").rsplit("/", 1)[-1]
+    stem = _UNSAFE.sub("_", base.rsplit(".", 1)[0] if "." in base else base).strip("._") or f"frame{index}"
     member = f"{IMAGES_DIR}{stem}.jpg"
     if member in taken:
         member = f"{IMAGES_DIR}{stem}_{index}.jpg"

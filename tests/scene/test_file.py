@@ -220,3 +220,14 @@ def test_a_corrupt_member_is_named(tmp_path):
     bad.write_bytes(bytes(data))
     with pytest.raises(SceneFileError, match=r"'field.safetensors' is corrupt or truncated"):
         read_scene_file(bad)
+
+
+def test_photos_in_subfolders_with_the_same_name_keep_their_own_copy(tmp_path):
+    views = [type(v)(v.index, name, v.camera, v.c2w, v.split, v.image)
+             for v, name in zip(tiny_views(3), ["left/img 1.png", "right/img 1.png", "img_1"])]
+    path = write(tmp_path / "s.n2r", views=views)
+    assert [n for n in zipfile.ZipFile(path).namelist() if n.startswith("images/")] == \
+        ["images/img_1.jpg", "images/img_1_1.jpg", "images/img_1_2.jpg"]
+    for saved, loaded in zip(views, read_scene_file(path).views):
+        assert loaded.name == saved.name and np.abs(saved.image.astype(int) - loaded.image).mean() < 2.0, \
+            f"frame {saved.name!r} got another frame's photo"
