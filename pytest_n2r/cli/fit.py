@@ -83,7 +83,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
     p.add_argument("--config", type=parse_config_override, action="append", default=[], metavar="KEY=VALUE",
                    help="change a field setting (repeatable), e.g. --config resolutions=48,96 "
-                        "--config stage_fractions=0.2 (see docs/scene-field.md)")
+                        "--config stage_fractions=0.2 (the fields of pytest_n2r.field.config.FieldConfig)")
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
