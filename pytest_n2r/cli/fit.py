@@ -11,9 +11,10 @@ import ast
 import re
 import sys
 import time
+import warnings
 from pathlib import Path
 
-__all__ = ["add_parser", "run", "parse_duration", "parse_config_override"]
+__all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override"]
 
 _DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
 
@@ -26,13 +27,17 @@ def parse_duration(text: str) -> float:
     """
     m = _DURATION.fullmatch(text.strip().lower())
     if not text.strip() or m is None or not any(m.groups()):
-        raise argparse.ArgumentTypeError(f"--time-budget {text!r}: expected a duration such as 10m, 90s, 1h30m "
-                                         "or seconds (600)")
+        raise argparse.ArgumentTypeError(f"{text!r} is not a duration; expected e.g. 10m, 90s, 1h30m or seconds (600)")
     h, mins, s = (float(g) if g else 0.0 for g in m.groups())
     seconds = 3600.0 * h + 60.0 * mins + s
     if seconds <= 0:
-        raise argparse.ArgumentTypeError(f"--time-budget {text!r}: expected a duration > 0")
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a duration > 0")
     return seconds
+
+
+def parse_durations(text: str) -> tuple[float, ...]:
+    """Comma-separated durations (``"1m,3m,6m"``) → seconds, ascending."""
+    return tuple(sorted(parse_duration(part) for part in text.split(",")))
 
 
 def parse_config_override(text: str) -> tuple[str, object]:
@@ -88,6 +93,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
                    help="metres per scene unit when the capture's scale is known (enables --units metres)")
+    p.add_argument("--eval-at", type=parse_durations, default=(), metavar="DURATIONS",
+                   help="also score the held-out views at these training times, e.g. 1m,3m,6m (stored in the "
+                        "report's history; evaluation time is not training time)")
     p.add_argument("--checkpoint-every", type=float, default=60.0, metavar="SECONDS",
                    help="write a checkpoint to the output this often (default: 60)")
     p.set_defaults(func=run)
@@ -127,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from ..field import fit as fitting
     from ..scene.file import read_scene_file, save_scene
     from .info import format_info
+    from .poses import format_skipped
 
     if args.downscale < 1:
         raise InvalidArgument(f"--downscale {args.downscale}: expected a factor >= 1 (4: a quarter of the width)")
@@ -140,11 +149,14 @@ def run(args: argparse.Namespace) -> int:
     config = build_config(args.config)
     output: Path = args.output
     start = time.perf_counter()
-    capture = ingest(args.source, downscale=1.0 / args.downscale)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # every skipped file is listed below
+        capture = ingest(args.source, downscale=1.0 / args.downscale)
     ingest_s = time.perf_counter() - start
-    print(f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
-          f"held out, {capture.views[0].camera.width}x{capture.views[0].camera.height} ({ingest_s:.1f} s)",
-          file=sys.stderr)
+    lines = [f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
+             f"held out, {capture.views[0].camera.width}x{capture.views[0].camera.height} ({ingest_s:.1f} s)",
+             *format_skipped(capture.skipped)]
+    print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
     last: dict = {}
 
@@ -160,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
                              device=args.device, progress=progress, checkpoint=checkpoint,
-                             checkpoint_every_s=args.checkpoint_every)
+                             checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at)
     except KeyboardInterrupt:
         progress.close()
         print(f"n2r fit: interrupted; {_kept(output, last)}", file=sys.stderr)

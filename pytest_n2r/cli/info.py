@@ -91,6 +91,10 @@ def format_info(scene: SceneFile) -> str:
         lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
     elif state == "complete":
         lines.append("held out    no held-out view with a photo (nothing to score)")
+    for entry in report.get("history") or []:
+        scores = (f"PSNR {entry['psnr']:.2f} dB, SSIM {entry['ssim']:.4f}" if entry.get("psnr") is not None
+                  else "no held-out view with a photo")
+        lines.append(f"  after {entry['seconds']:g} s of training (step {entry['step']}): {scores}")
     versions = report.get("versions")
     if versions:
         lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))

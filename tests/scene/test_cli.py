@@ -6,13 +6,14 @@ import argparse
 import contextlib
 import io
 import json
+import shutil
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from pytest_n2r.cli.fit import parse_config_override, parse_duration
+from pytest_n2r.cli.fit import parse_config_override, parse_duration, parse_durations
 from pytest_n2r.cli.main import main
 from pytest_n2r.errors import FitError
 from pytest_n2r.geometry import Transform
@@ -40,7 +41,7 @@ def fitted(exported, tmp_path_factory) -> tuple[Path, str]:
     out = io.StringIO()  # capsys is function-scoped
     with contextlib.redirect_stdout(out):
         code = main(["fit", str(exported), "-o", str(path), "--downscale", "1", "--max-steps", "30", "--device", "cpu",
-                     "--metres-per-unit", "1", *TINY_FLAGS])
+                     "--metres-per-unit", "1", "--eval-at", "0.5s", *TINY_FLAGS])
     assert code == 0, out.getvalue()
     return path, out.getvalue()
 
@@ -55,6 +56,9 @@ def test_fit_writes_a_complete_scene_and_prints_its_report(fitted, exported):
     assert all(v.image is not None for v in scene.views), "the photos were not stored"
     assert f"held out    PSNR {report['psnr']:.2f} dB" in printed, printed
     assert "complete: 30 steps" in printed and "images/object_008.png" in printed, printed
+    [entry] = report["history"]
+    assert entry["seconds"] == 0.5 and 0 < entry["step"] < 30 and entry["psnr"] > 0, report["history"]
+    assert f"after 0.5 s of training (step {entry['step']}): PSNR {entry['psnr']:.2f} dB" in printed, printed
 
 
 def test_render_writes_rgb_depth_and_opacity_as_the_scene_renders_them(fitted, tmp_path, capsys):
@@ -152,13 +156,20 @@ def test_ctrl_c_keeps_the_last_checkpoint_loadable(exported, tmp_path, monkeypat
 
 
 def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_path, monkeypatch, capsys):
+    source = tmp_path / "capture"
+    shutil.copytree(exported.parent, source)
+    (source / "images" / "object_005.png").unlink()
     interrupting_fit(monkeypatch, KeyboardInterrupt(), after_checkpoints=0)
-    out = tmp_path / "object.n2r"
+    out = tmp_path / "scenes" / "object.n2r"
+    out.parent.mkdir()
     out.write_bytes(b"the previous scene")
-    assert run_fit(exported, out, "100000") == 130
-    assert f"no checkpoint was written yet, so {out} was not touched" in capsys.readouterr().err
+    assert run_fit(source / "transforms.json", out, "100000") == 130
+    err = capsys.readouterr().err
+    assert "  skipped   " in err and "object_005.png" in err, \
+        f"the missing photo is not listed:\n{err}"
+    assert f"no checkpoint was written yet, so {out} was not touched" in err
     assert out.read_bytes() == b"the previous scene"
-    assert [p.name for p in tmp_path.iterdir()] == ["object.n2r"], "temporary files were left behind"
+    assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
 def test_a_crash_keeps_the_last_checkpoint_and_exits_with_the_error(exported, tmp_path, monkeypatch, capsys):
@@ -180,8 +191,14 @@ def test_durations(text, seconds):
 
 @pytest.mark.parametrize("text", ["", "ten", "10x", "0", "m"])
 def test_bad_durations_say_what_is_expected(text):
-    with pytest.raises(argparse.ArgumentTypeError, match=r"--time-budget .*expected a duration"):
+    with pytest.raises(argparse.ArgumentTypeError, match=r"is not a duration; expected e\.g\. 10m|expected a duration > 0"):
         parse_duration(text)
+
+
+def test_eval_times_are_sorted_durations():
+    assert parse_durations("6m,1m,3m") == (60.0, 180.0, 360.0)
+    with pytest.raises(argparse.ArgumentTypeError, match=r"'' is not a duration"):
+        parse_durations("1m,,3m")
 
 
 def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path, capsys):
