@@ -13,6 +13,10 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..field.config import FieldConfig
 
 __all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override"]
 
@@ -53,7 +57,7 @@ def parse_config_override(text: str) -> tuple[str, object]:
                                          "list of numbers") from None
 
 
-def build_config(overrides: list[tuple[str, object]]):
+def build_config(overrides: list[tuple[str, object]]) -> FieldConfig:
     """The default :class:`~pytest_n2r.field.config.FieldConfig` with ``overrides`` applied (a scalar for a
     tuple setting becomes a one-element tuple); unknown keys and bad values raise naming them."""
     from ..errors import InvalidArgument
