@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import os
 import re
 import sys
 import time
@@ -152,6 +153,12 @@ def run(args: argparse.Namespace) -> int:
         time_budget = 600.0
     config = build_config(args.config)
     output: Path = args.output
+    if output.is_dir():
+        raise InvalidArgument(f"-o {output}: is a folder; expected the path of the scene file to write (scene.n2r)")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(output.parent, os.W_OK):
+        raise InvalidArgument(f"-o {output}: cannot write into {output.parent} (checked before fitting, so no "
+                              "fit is lost)")
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below

@@ -209,3 +209,10 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     out = tmp_path / "x.n2r"
     assert main(["fit", str(exported), "-o", str(out), "--max-steps", "1", "--config", "warp=2"]) == 2
     assert "unknown setting 'warp'" in capsys.readouterr().err and not out.exists()
+
+
+def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
+    assert main(["fit", str(exported), "-o", str(tmp_path), "--max-steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"-o {tmp_path}: is a folder; expected the path of the scene file" in err, err
+    assert "ingested" not in err, "the capture was ingested before the output was checked"
