@@ -132,24 +132,27 @@ def save_scene(
         "report": report,
     }
     text = json.dumps(schema.json_ready(data), indent=1, allow_nan=False)
-    entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED),
-               (schema.FIELD_FILE, safetensors.torch.save(field.tensors()), zipfile.ZIP_DEFLATED)]
+    # Deflate level 1 for the field: float16 values barely compress at any level (measured on a 160³ field,
+    # 1.36 M stored vertices: 33.5 MiB in 1.6 s at level 1, 33.2 MiB in 2.5 s at level 6); JPEGs are stored.
+    entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
+               (schema.FIELD_FILE, safetensors.torch.save(field.tensors()), zipfile.ZIP_DEFLATED, 1)]
     for view, member in zip(views, members):
         if member is not None:
-            entries.append((member, _encode_jpeg(view.image, image_quality, view.name), zipfile.ZIP_STORED))
+            entries.append((member, _encode_jpeg(view.image, image_quality, view.name), zipfile.ZIP_STORED, None))
     return atomic_write_bytes(path, _zip_bytes(entries))
 
 
-def _zip_bytes(entries: list[tuple[str, bytes, int]]) -> bytes:
-    """A zip archive of ``(name, data, compression)`` in the given order, with fixed timestamps and modes."""
+def _zip_bytes(entries: list[tuple[str, bytes, int, int | None]]) -> bytes:
+    """A zip archive of ``(name, data, compression, level)`` in the given order, with fixed timestamps and
+    modes."""
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w") as archive:
-        for name, payload, compression in entries:
+        for name, payload, compression, level in entries:
             info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
             info.compress_type = compression
             info.create_system = 3  # Unix, whatever the platform, so the bytes match everywhere
             info.external_attr = 0o644 << 16
-            archive.writestr(info, payload)
+            archive.writestr(info, payload, compresslevel=level)
     return buffer.getvalue()
 
 
