@@ -13,7 +13,7 @@ if TYPE_CHECKING:
 
     from ..data.poses import PoseSet
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "format_summary", "format_skipped"]
 
 _MAX_SKIPPED_SHOWN = 10
 
@@ -77,6 +77,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:
+    """Summary lines for the input images that were not used, ``(file, reason)`` each (the first ten)."""
+    lines = [f"  skipped   {name}: {reason}" for name, reason in skipped[:_MAX_SKIPPED_SHOWN]]
+    if len(skipped) > _MAX_SKIPPED_SHOWN:
+        lines.append(f"  skipped   ... and {len(skipped) - _MAX_SKIPPED_SHOWN} more")
+    return lines
+
+
 def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: float) -> str:
     """The plain-text summary ``n2r poses`` prints (``bounds`` and ``ref`` in scene units, time in seconds)."""
     frames = poses.frames
@@ -85,10 +93,7 @@ def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: floa
         f"source      {poses.source} ({poses.kind})",
         f"images      {listed} found, {len(frames)} registered, {len(poses.skipped)} skipped",
     ]
-    for name, reason in poses.skipped[:_MAX_SKIPPED_SHOWN]:
-        lines.append(f"  skipped   {name}: {reason}")
-    if len(poses.skipped) > _MAX_SKIPPED_SHOWN:
-        lines.append(f"  skipped   ... and {len(poses.skipped) - _MAX_SKIPPED_SHOWN} more")
+    lines += format_skipped(poses.skipped)
     cameras = list(dict.fromkeys(f.camera for f in frames))
     lines.append(f"cameras     {len(cameras)} (OpenCV pixel centres; COLMAP/nerfstudio cx = cx + 0.5)")
     for cam in cameras[:3]:

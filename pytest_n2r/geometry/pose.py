@@ -26,7 +26,7 @@ from enum import Enum
 import numpy as np
 
 from .._validation import check_array, check_range, check_real
-from ..errors import InvalidArgument
+from ..errors import InvalidArgument, InvalidType
 
 __all__ = [
     "Transform",
@@ -224,6 +224,42 @@ class Transform:
         roll, pitch, yaw = euler_from_rotation(T[:3, :3])
         x, y, z = (T[:3, 3] / length).tolist()
         return cls(roll, pitch, yaw, x, y, z)
+
+    @classmethod
+    def parse(cls, text: str, name: str = "transform") -> "Transform":
+        """A transform from its command-line form: ``name=value`` pairs separated by commas, e.g.
+        ``"yaw=10,x=0.1"`` (angles in degrees, translations in the caller's units); ``""`` or
+        ``"identity"`` is the identity. Errors name ``name`` (the option or argument being parsed).
+
+        >>> Transform.parse("yaw=10, x=0.1")
+        Transform(yaw=10.0, x=0.1)
+        >>> Transform.parse("identity").is_identity
+        True
+        """
+        if not isinstance(text, str):
+            raise InvalidType(f"{name}={text!r} must be a string such as 'yaw=10,x=0.1'")
+        known = [f.name for f in fields(cls)]
+        values: dict[str, float] = {}
+        stripped = text.strip()
+        if stripped in ("", "identity"):
+            return cls()
+        for part in stripped.split(","):
+            key, sep, value = (s.strip() for s in part.partition("="))
+            if not sep or not key or not value:
+                raise InvalidArgument(f"{name}={text!r}: {part.strip()!r} is not 'name=value'; expected e.g. "
+                                      f"'yaw=10,x=0.1' with names from {known}")
+            if key not in known:
+                raise InvalidArgument(f"{name}={text!r}: unknown component {key!r}; expected one of {known}")
+            if key in values:
+                raise InvalidArgument(f"{name}={text!r}: {key!r} is given twice")
+            try:
+                values[key] = float(value)
+            except ValueError:
+                raise InvalidArgument(f"{name}={text!r}: {key}={value!r} is not a number") from None
+        try:
+            return cls(**values)
+        except InvalidArgument as exc:
+            raise InvalidArgument(f"{name}={text!r}: {exc}") from None
 
     def apply(self, c2w: np.ndarray, length: float = 1.0) -> np.ndarray:
         """The follow-up pose ``c2w @ T(tau)`` (translation scaled by ``length``)."""

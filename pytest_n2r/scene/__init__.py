@@ -1,5 +1,37 @@
-"""Scenes: the renderable interface, scene files and loading."""
+"""Scenes: the renderable interface, scene files and loading.
+
+``Scene``, ``SceneView`` and ``normalize_outputs`` are light; ``load_scene``, ``save_scene``,
+``read_scene_file`` and ``FieldScene`` import torch and are loaded on first use (the pytest plugin imports
+this package at start-up).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
 
 from .base import Scene, SceneView, normalize_outputs
 
-__all__ = ["Scene", "SceneView", "normalize_outputs"]
+#: lazily exported name -> module of this package that defines it
+_LAZY = {
+    "load_scene": "loading",
+    "save_scene": "file",
+    "read_scene_file": "file",
+    "SceneFile": "file",
+    "FieldScene": "field_scene",
+}
+
+__all__ = ["Scene", "SceneView", "normalize_outputs", *_LAZY]
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'pytest_n2r.scene' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

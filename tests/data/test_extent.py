@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import stat
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -85,3 +87,16 @@ def test_atomic_write_leaves_the_old_file_when_writing_fails(tmp_path, monkeypat
         atomic_write_text(target, "new")
     assert target.read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.json"], "temporary file left behind"
+
+
+def test_atomic_write_gives_a_new_file_the_umask_mode_and_keeps_an_old_files_mode(tmp_path, monkeypatch):
+    monkeypatch.setattr("pytest_n2r.data.atomic._UMASK", 0o027)
+    fresh = atomic_write_text(tmp_path / "new.json", "{}")
+    mode = stat.S_IMODE(fresh.stat().st_mode)
+    assert mode == 0o640, f"a new file got mode {oct(mode)}, expected 0o640 under umask 027"
+    kept = tmp_path / "kept.json"
+    kept.write_text("old")
+    kept.chmod(0o604)
+    atomic_write_text(kept, "new")
+    mode = stat.S_IMODE(kept.stat().st_mode)
+    assert mode == 0o604, f"rewriting a file changed its mode to {oct(mode)}"

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import (
     Transform, check_pose, compose, euler_from_rotation, invert_pose, rotation_from_euler,
 )
@@ -156,3 +157,33 @@ def test_near_gimbal_lock_euler_rebuilds_rotation_to_round_off(p, roll, yaw):
     R = rotation_from_euler(roll, p, yaw)
     err = np.abs(rotation_from_euler(*euler_from_rotation(R)) - R).max()
     assert err < 1e-12, f"pitch={p}: rebuild error {err:.3g}"
+
+
+@settings(deadline=None)
+@given(transforms())
+def test_parse_reads_back_what_repr_lists(tau):
+    text = ",".join(f"{k}={v!r}" for k, v in tau.as_dict().items() if v != 0.0)
+    back = Transform.parse(text)
+    assert back == tau, f"Transform.parse({text!r}) gave {back!r}, expected {tau!r}"
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("yaw", r"'yaw' is not 'name=value'"),
+        ("yaw=10,,x=1", r"'' is not 'name=value'"),
+        ("spin=3", r"unknown component 'spin'; expected one of \['roll', 'pitch', 'yaw', 'x', 'y', 'z'\]"),
+        ("yaw=1,yaw=2", r"'yaw' is given twice"),
+        ("x=ten", r"x='ten' is not a number"),
+        ("yaw=400", r"yaw=400.0 is out of range"),
+        ("x=nan", r"x=nan must be finite"),
+    ],
+)
+def test_parse_errors_name_the_option_and_the_bad_part(text, message):
+    with pytest.raises(InvalidArgument, match=r"--transform=.*" + message):
+        Transform.parse(text, name="--transform")
+
+
+def test_parse_rejects_a_non_string():
+    with pytest.raises(InvalidType, match=r"transform=10 must be a string"):
+        Transform.parse(10)

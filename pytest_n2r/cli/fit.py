@@ -1,0 +1,205 @@
+"""``n2r fit SOURCE -o scene.n2r``: ingest a capture, fit a scene field, write the scene file and its report.
+
+Checkpoints are written (atomically) to the output path while fitting, so Ctrl-C or a crash leaves the last
+good scene there; the final file replaces them when the fit ends.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import os
+import re
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..field.config import FieldConfig
+
+__all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override"]
+
+_DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
+
+
+def parse_duration(text: str) -> float:
+    """``"10m"``, ``"90s"``, ``"1h30m"``, ``"1m30"`` or ``"600"`` (seconds) → seconds (> 0).
+
+    >>> parse_duration("10m"), parse_duration("1h30m"), parse_duration("45")
+    (600.0, 5400.0, 45.0)
+    """
+    m = _DURATION.fullmatch(text.strip().lower())
+    if not text.strip() or m is None or not any(m.groups()):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a duration; expected e.g. 10m, 90s, 1h30m or seconds (600)")
+    h, mins, s = (float(g) if g else 0.0 for g in m.groups())
+    seconds = 3600.0 * h + 60.0 * mins + s
+    if seconds <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a duration > 0")
+    return seconds
+
+
+def parse_durations(text: str) -> tuple[float, ...]:
+    """Comma-separated durations (``"1m,3m,6m"``) → seconds, ascending."""
+    return tuple(sorted(parse_duration(part) for part in text.split(",")))
+
+
+def parse_config_override(text: str) -> tuple[str, object]:
+    """``"key=value"`` of ``--config`` → ``(key, value)``; the value is a Python literal (``0.2``, ``1e-3``,
+    ``64,128`` for a tuple), read with :func:`ast.literal_eval` (no code runs)."""
+    key, sep, value = (s.strip() for s in text.partition("="))
+    if not sep or not key or not value:
+        raise argparse.ArgumentTypeError(f"--config {text!r}: expected key=value, e.g. resolutions=48,96,160")
+    try:
+        return key, ast.literal_eval(value)
+    except (ValueError, SyntaxError):
+        raise argparse.ArgumentTypeError(f"--config {text!r}: {value!r} is not a number or a comma-separated "
+                                         "list of numbers") from None
+
+
+def build_config(overrides: list[tuple[str, object]]) -> FieldConfig:
+    """The default :class:`~pytest_n2r.field.config.FieldConfig` with ``overrides`` applied (a scalar for a
+    tuple setting becomes a one-element tuple); unknown keys and bad values raise naming them."""
+    from ..errors import InvalidArgument
+    from ..field.config import FieldConfig
+
+    base = FieldConfig().to_dict()
+    changes = {}
+    for key, value in overrides:
+        if key not in base:
+            raise InvalidArgument(f"--config {key}=...: unknown setting {key!r}; known: {sorted(base)}")
+        changes[key] = (value,) if isinstance(base[key], list) and not isinstance(value, (tuple, list)) else value
+    return FieldConfig.from_dict({**base, **changes})
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "fit", help="fit a scene field to a capture and write a .n2r scene file",
+        description="Ingest SOURCE (a transforms.json, a COLMAP model folder, a folder of photos or a video), fit "
+                    "a scene field within the time budget, and write the scene file: field, cameras, poses, "
+                    "split, optional JPEG copies of the photos and the fit report (held-out PSNR/SSIM per "
+                    "view, time, device, versions), which is also printed. A checkpoint is written to the "
+                    "output about every minute, so Ctrl-C or a crash leaves the last good scene.",
+    )
+    p.add_argument("source", metavar="SOURCE", help="transforms.json, COLMAP model folder, images folder or video")
+    p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
+    p.add_argument("--downscale", type=float, default=4.0, metavar="F",
+                   help="divide the image width and height by F before fitting (default: 4)")
+    p.add_argument("--time-budget", type=parse_duration, default=None, metavar="DURATION",
+                   help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given)")
+    p.add_argument("--max-steps", type=int, default=None, metavar="N",
+                   help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")
+    p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
+    p.add_argument("--config", type=parse_config_override, action="append", default=[], metavar="KEY=VALUE",
+                   help="change a field setting (repeatable), e.g. --config resolutions=48,96 "
+                        "--config stage_fractions=0.2 (the fields of pytest_n2r.field.config.FieldConfig)")
+    p.add_argument("--no-images", dest="images", action="store_false",
+                   help="do not store JPEG copies of the photos in the scene file")
+    p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
+                   help="metres per scene unit when the capture's scale is known (enables --units metres)")
+    p.add_argument("--eval-at", type=parse_durations, default=(), metavar="DURATIONS",
+                   help="also score the held-out views at these training times, e.g. 1m,3m,6m (stored in the "
+                        "report's history; evaluation time is not training time)")
+    p.add_argument("--checkpoint-every", type=float, default=60.0, metavar="SECONDS",
+                   help="write a checkpoint to the output this often (default: 60)")
+    p.set_defaults(func=run)
+
+
+class _Progress:
+    """A tqdm bar over steps (``max_steps``) or training seconds (time budget) showing loss, PSNR and ETA."""
+
+    def __init__(self, max_steps: int | None, time_budget_s: float | None):
+        from tqdm import tqdm
+
+        self.by_steps = max_steps is not None
+        total = max_steps if self.by_steps else round(time_budget_s)
+        self.bar = tqdm(total=total, desc="starting", dynamic_ncols=True, file=sys.stderr,
+                        bar_format="fit {percentage:3.0f}%|{bar}| {desc}")
+
+    def __call__(self, info: dict) -> None:
+        done = info["step"] if self.by_steps else min(round(info["elapsed_s"]), self.bar.total)
+        self.bar.update(done - self.bar.n)
+        eta = info["eta_s"]
+        self.bar.set_description_str(
+            f"step {info['step']}, {info['resolution']}³ grid, loss {info['loss']:.4f}, PSNR {info['psnr']:.2f} dB, "
+            f"elapsed {_clock(info['elapsed_s'])}, ETA {_clock(eta) if eta == eta else '?'}", refresh=True)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _clock(seconds: float) -> str:
+    seconds = int(round(seconds))
+    return f"{seconds // 60}:{seconds % 60:02d}"
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..data import ingest
+    from ..errors import InvalidArgument
+    from ..field import fit as fitting
+    from ..scene.file import read_scene_file, save_scene
+    from .info import format_info
+    from .poses import format_skipped
+
+    if args.downscale < 1:
+        raise InvalidArgument(f"--downscale {args.downscale}: expected a factor >= 1 (4: a quarter of the width)")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise InvalidArgument(f"--max-steps {args.max_steps}: expected an integer >= 1")
+    if not args.checkpoint_every > 0:
+        raise InvalidArgument(f"--checkpoint-every {args.checkpoint_every}: expected seconds > 0")
+    time_budget = args.time_budget
+    if time_budget is None and args.max_steps is None:
+        time_budget = 600.0
+    config = build_config(args.config)
+    output: Path = args.output
+    if output.is_dir():
+        raise InvalidArgument(f"-o {output}: is a folder; expected the path of the scene file to write (scene.n2r)")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    if not os.access(output.parent, os.W_OK):
+        raise InvalidArgument(f"-o {output}: cannot write into {output.parent} (checked before fitting, so no "
+                              "fit is lost)")
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # every skipped file is listed below
+        capture = ingest(args.source, downscale=1.0 / args.downscale)
+    ingest_s = time.perf_counter() - start
+    lines = [f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
+             f"held out, {capture.views[0].camera.width}x{capture.views[0].camera.height} ({ingest_s:.1f} s)",
+             *format_skipped(capture.skipped)]
+    print("\n".join(lines), file=sys.stderr)
+    context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
+    last: dict = {}
+
+    def save(result: fitting.FitResult, report: dict) -> None:
+        save_scene(output, result.field, result.config, capture, {**context, **report}, images=args.images,
+                   metres_per_unit=args.metres_per_unit)
+
+    def checkpoint(result: fitting.FitResult) -> None:
+        save(result, {**result.report, "complete": False})
+        last.update(result.report)
+
+    progress = _Progress(args.max_steps, time_budget)
+    try:
+        result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
+                             device=args.device, progress=progress, checkpoint=checkpoint,
+                             checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at)
+    except KeyboardInterrupt:
+        progress.close()
+        print(f"n2r fit: interrupted; {_kept(output, last)}", file=sys.stderr)
+        return 130
+    except BaseException:
+        progress.close()
+        print(f"n2r fit: the fit failed; {_kept(output, last)}", file=sys.stderr)
+        raise
+    progress.close()
+    save(result, {**result.report, "complete": True})
+    print(format_info(read_scene_file(output, images=False)))
+    return 0
+
+
+def _kept(output: Path, last: dict) -> str:
+    if not last:
+        return f"no checkpoint was written yet, so {output} was not touched"
+    return (f"the last checkpoint (step {last['steps']}, {last['train_seconds']:.0f} s of training) is kept in "
+            f"{output}")

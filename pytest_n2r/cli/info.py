@@ -1,0 +1,111 @@
+"""``n2r info scene.n2r``: what a scene file holds (views, split, field size, fit report, file size)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..scene.file import SceneFile
+
+__all__ = ["add_parser", "run", "format_info", "info_dict"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "info", help="summarize a .n2r scene file",
+        description="Print what a scene file holds: views and split, cameras, scale, field size, and the fit "
+                    "report (held-out PSNR/SSIM per view, training time, device, versions).",
+    )
+    p.add_argument("scene", type=Path, metavar="SCENE", help="a .n2r scene file")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON instead")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..scene.file import read_scene_file
+
+    scene = read_scene_file(args.scene, images=False)
+    print(json.dumps(info_dict(scene), indent=2) if args.json else format_info(scene))
+    return 0
+
+
+def info_dict(scene: SceneFile) -> dict:
+    """The summary as plain JSON-ready values (sizes in bytes, lengths in scene units)."""
+    splits = [v.split for v in scene.views]
+    cameras = list(dict.fromkeys(v.camera for v in scene.views))
+    tensors = scene.field.tensors()
+    return {
+        "path": str(scene.path),
+        "file_bytes": scene.size_bytes,
+        "format_version": scene.version,
+        "views": len(scene.views),
+        "train_views": splits.count("train"),
+        "heldout_views": splits.count("heldout"),
+        "photos_stored": scene.images_stored,
+        "cameras": [c.to_dict() for c in cameras],
+        "reference_length": scene.reference_length,
+        "metres_per_unit": scene.metres_per_unit,
+        "bounds": scene.bounds.tolist(),
+        "field": {**scene.field.describe(),
+                  "tensor_bytes": sum(t.numel() * t.element_size() for t in tensors.values())},
+        "config": scene.config.to_dict(),
+        "report": scene.report,
+    }
+
+
+def format_info(scene: SceneFile) -> str:
+    """The plain-text summary ``n2r info`` (and ``n2r fit`` at the end) prints."""
+    info = info_dict(scene)
+    report, field = info["report"], info["field"]
+    lines = [
+        f"scene       {info['path']} ({_size(info['file_bytes'])}, format version {info['format_version']})",
+        f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
+        f"{info['photos_stored']} photos stored",
+    ]
+    for cam in info["cameras"][:3]:
+        lines.append(f"  camera    {cam['width']}x{cam['height']} fx={cam['fx']:.2f} fy={cam['fy']:.2f} "
+                     f"cx={cam['cx']:.2f} cy={cam['cy']:.2f}")
+    if len(info["cameras"]) > 3:
+        lines.append(f"  ... and {len(info['cameras']) - 3} more cameras")
+    mpu = info["metres_per_unit"]
+    lines.append(f"scale       reference length {info['reference_length']:.4g} scene units; "
+                 + (f"{mpu:.4g} m per scene unit" if mpu is not None else "metric scale unknown"))
+    lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
+                 f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
+                 f"stored ({_size(field['tensor_bytes'])})")
+    state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
+    where = f" on {report['device']}" if "device" in report else ""
+    threads = f" ({report['threads']} threads)" if "threads" in report else ""
+    lines.append(f"fit         {state}: {report.get('steps', '?')} steps, "
+                 f"{report.get('train_seconds', float('nan')):.1f} s of training{where}{threads}")
+    if "source" in report:
+        lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
+    rows = report.get("heldout") or []
+    if report.get("psnr") is not None:
+        lines.append(f"held out    PSNR {report['psnr']:.2f} dB, SSIM {report['ssim']:.4f} (mean of {len(rows)} views)")
+        width = max(len(r["view"]) for r in rows)
+        lines.append(f"  {'view':<{width}}  PSNR dB    SSIM")
+        lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
+    elif state == "complete":
+        lines.append("held out    no held-out view with a photo (nothing to score)")
+    for entry in report.get("history") or []:
+        scores = (f"PSNR {entry['psnr']:.2f} dB, SSIM {entry['ssim']:.4f}" if entry.get("psnr") is not None
+                  else "no held-out view with a photo")
+        lines.append(f"  after {entry['seconds']:g} s of training (step {entry['step']}): {scores}")
+    versions = report.get("versions")
+    if versions:
+        lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
+    return "\n".join(lines)
+
+
+def _num(value: float | None, width: int, digits: int) -> str:
+    return f"{value:{width}.{digits}f}" if value is not None else f"{'inf':>{width}}"
+
+
+def _size(n: int) -> str:
+    if n < 1024:
+        return f"{n} bytes"
+    return f"{n / 1024:.1f} KiB" if n < 1024 ** 2 else f"{n / 1024 ** 2:.1f} MiB"

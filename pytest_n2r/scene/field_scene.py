@@ -1,0 +1,80 @@
+"""A fitted scene: a scene file's field rendered at any camera and pose (the scenes users test on)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+import torch
+
+from ..field.optim import resolve_device
+from ..geometry import Camera
+from ..render.field_render import FieldRenderer, RenderSettings
+from .base import Scene
+from .file import SceneFile
+
+__all__ = ["FieldScene", "RENDER_VERSION"]
+
+#: Part of every :attr:`FieldScene.content_hash`: bump it when the renderer's output for the same field and
+#: settings changes, so render caches built by an older pytest-n2r are not reused.
+RENDER_VERSION = 1
+
+
+class FieldScene(Scene):
+    """The scene of a ``.n2r`` file (:func:`pytest_n2r.scene.load_scene` builds one).
+
+    Renders RGB, z-depth and opacity through one :class:`~pytest_n2r.render.field_render.FieldRenderer`
+    with ``settings``, on ``device`` (``"auto"``: CUDA when available). ``views`` are the captured views
+    (with their photos when the file stores them and they were loaded); ``report`` is the fit report.
+    """
+
+    is_exact = False
+
+    def __init__(self, file: SceneFile, *, device: str | torch.device = "auto",
+                 settings: RenderSettings | None = None, name: str | None = None) -> None:
+        self.file = file
+        self.name = name or file.path.stem
+        self.views = file.views
+        self.reference_length = file.reference_length
+        self.metres_per_unit = file.metres_per_unit
+        self.device = resolve_device(device)
+        self.field = file.field.to(self.device)
+        self.settings = settings or RenderSettings()
+        self._renderer = FieldRenderer(self.field, self.settings)
+        self._hash: str | None = None
+
+    @property
+    def report(self) -> dict:
+        """The fit report stored in the file (held-out PSNR/SSIM, time, device, versions)."""
+        return self.file.report
+
+    @property
+    def backend(self) -> str:
+        """The render backend in use (``"compiled"`` on the CPU, ``"torch"`` on CUDA)."""
+        return self._renderer.backend
+
+    @property
+    def content_hash(self) -> str:
+        """SHA-256 of the stored field bytes, the views, the render settings and backend, and
+        :data:`RENDER_VERSION`: anything that can change a rendered pixel."""
+        if self._hash is None:
+            h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{self.backend}/{self.file.field_digest}".encode())
+            h.update(json.dumps(self.settings.to_dict(), sort_keys=True).encode())
+            h.update(np.asarray([self.reference_length, self.metres_per_unit or 0.0]).tobytes())
+            for v in self.views:
+                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
+                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            self._hash = h.hexdigest()
+        return self._hash
+
+    def with_settings(self, settings: RenderSettings) -> "FieldScene":
+        """The same scene rendered with other ``settings`` (a new content hash; the field is shared)."""
+        return FieldScene(self.file, device=self.device, settings=settings, name=self.name)
+
+    def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        return self._renderer.render(c2w, camera, outputs)
+
+    def __repr__(self) -> str:
+        return (f"<FieldScene {self.name!r}: {len(self.views)} views, {self.field.resolution}³ grid on "
+                f"{self.device}, {self.backend} backend>")

@@ -1,0 +1,218 @@
+"""``n2r fit``, ``n2r render`` and ``n2r info`` end to end on a 32×24 export of the demo object scene."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from pytest_n2r.cli.fit import parse_config_override, parse_duration, parse_durations
+from pytest_n2r.cli.main import main
+from pytest_n2r.errors import FitError
+from pytest_n2r.geometry import Transform
+from pytest_n2r.scene import load_scene, read_scene_file
+
+from .conftest import TINY_CONFIG
+
+#: ``--config`` flags giving :data:`TINY_CONFIG` (the fit test checks that they do).
+TINY_FLAGS = ["--config", "resolutions=16,24", "--config", "stage_fractions=0.5", "--config", "batch_rays=256",
+              "--config", "prune_every=10"]
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory) -> Path:
+    """``n2r demo export object --size 32x24``: a transforms.json and its images."""
+    out = tmp_path_factory.mktemp("export")
+    assert main(["demo", "export", "object", "-o", str(out), "--size", "32x24"]) == 0
+    return out / "transforms.json"
+
+
+@pytest.fixture(scope="module")
+def fitted(exported, tmp_path_factory) -> tuple[Path, str]:
+    """``n2r fit`` of the export, 30 steps on the CPU; the scene file and what was printed."""
+    path = tmp_path_factory.mktemp("fit") / "object.n2r"
+    out = io.StringIO()  # capsys is function-scoped
+    with contextlib.redirect_stdout(out):
+        code = main(["fit", str(exported), "-o", str(path), "--downscale", "1", "--max-steps", "30", "--device", "cpu",
+                     "--metres-per-unit", "1", "--eval-at", "0.5s", *TINY_FLAGS])
+    assert code == 0, out.getvalue()
+    return path, out.getvalue()
+
+
+def test_fit_writes_a_complete_scene_and_prints_its_report(fitted, exported):
+    path, printed = fitted
+    scene = read_scene_file(path)
+    report = scene.report
+    assert report["complete"] is True and report["steps"] == 30 and report["device"] == "cpu"
+    assert report["source"] == str(exported) and scene.config == TINY_CONFIG and scene.metres_per_unit == 1.0
+    assert len(scene.views) == 48 and sum(v.split == "heldout" for v in scene.views) == 6
+    assert all(v.image is not None for v in scene.views), "the photos were not stored"
+    assert f"held out    PSNR {report['psnr']:.2f} dB" in printed, printed
+    assert "complete: 30 steps" in printed and "images/object_008.png" in printed, printed
+    [entry] = report["history"]
+    assert entry["seconds"] == 0.5 and 0 < entry["step"] < 30 and entry["psnr"] > 0, report["history"]
+    assert f"after 0.5 s of training (step {entry['step']}): PSNR {entry['psnr']:.2f} dB" in printed, printed
+
+
+def test_render_writes_rgb_depth_and_opacity_as_the_scene_renders_them(fitted, tmp_path, capsys):
+    path, _ = fitted
+    out = tmp_path / "views" / "moved.png"
+    code = main(["render", str(path), "--view", "images/object_003.png", "--transform", "yaw=10,x=0.1",
+                 "--size", "64x48", "--depth", "--opacity", "--device", "cpu", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    scene = load_scene(path, device="cpu", images=False)
+    view = scene.view(3)
+    camera = view.camera.resized(64, 48)
+    c2w = Transform(yaw=10, x=0.1).apply(view.c2w, scene.reference_length)
+    want = scene.render(c2w, camera, ("rgb", "depth", "opacity"))
+    rgb = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)[:, :, ::-1]
+    assert np.array_equal(rgb, want.rgb), "the PNG is not the scene's render (RGB order?)"
+    assert np.array_equal(np.load(tmp_path / "views" / "moved.depth.npy"), want.depth)
+    grey = cv2.imread(str(tmp_path / "views" / "moved.opacity.png"), cv2.IMREAD_UNCHANGED)
+    assert grey.shape == (48, 64) and np.abs(grey / 255.0 - want.opacity).max() <= 0.5 / 255 + 1e-6
+    assert cv2.imread(str(tmp_path / "views" / "moved.depth.png")).shape == (48, 64, 3)
+    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == \
+        ["moved.depth.npy", "moved.depth.png", "moved.opacity.png", "moved.png"]
+
+
+def test_render_errors_name_the_option(fitted, tmp_path, capsys):
+    path, _ = fitted
+    assert main(["render", str(path), "--transform", "spin=3", "-o", str(tmp_path / "x.png")]) == 2
+    assert "--transform='spin=3': unknown component 'spin'" in capsys.readouterr().err
+    assert main(["render", str(path), "--view", "99", "-o", str(tmp_path / "x.png")]) == 2
+    assert "view=99 is out of range; scene 'object' has 48 views" in capsys.readouterr().err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_info_prints_the_summary_and_json(fitted, capsys):
+    path, _ = fitted
+    assert main(["info", str(path)]) == 0
+    text = capsys.readouterr().out
+    for words in ("views       48: 42 train, 6 held out; 48 photos stored", "1 m per scene unit", "fit         complete: 30 steps"):
+        assert words in text, f"{words!r} missing from n2r info:\n{text}"
+    assert main(["info", str(path), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert (data["views"], data["heldout_views"], data["file_bytes"]) == (48, 6, path.stat().st_size)
+    assert data["report"]["steps"] == 30 and data["field"]["resolution"] == 24
+
+
+def test_info_on_a_bad_file_is_an_error_naming_it(tmp_path, capsys):
+    bad = tmp_path / "bad.n2r"
+    bad.write_bytes(b"nope")
+    assert main(["info", str(bad)]) == 2
+    assert f"n2r info: error: {bad}: not a zip archive" in capsys.readouterr().err
+
+
+# -- interruptions ------------------------------------------------------------------------------------------------
+def interrupting_fit(monkeypatch, error: BaseException, after_checkpoints: int) -> list[int]:
+    """Make ``fit`` raise ``error`` from its progress callback once ``after_checkpoints`` checkpoints were
+    written (as Ctrl-C or a crash would, mid-training); returns the steps of the checkpoints written."""
+    from pytest_n2r.field import fit as fitting
+
+    real_fit = fitting.fit
+    written: list[int] = []
+
+    def fit(*args, progress, checkpoint, **kwargs):
+        def save(result):
+            checkpoint(result)
+            written.append(result.report["steps"])
+
+        def report(info):
+            progress(info)
+            if len(written) >= after_checkpoints:
+                raise error
+
+        return real_fit(*args, progress=report, checkpoint=save, **kwargs)
+
+    monkeypatch.setattr(fitting, "fit", fit)
+    return written
+
+
+def run_fit(exported: Path, out: Path, every: str) -> int:
+    return main(["fit", str(exported), "-o", str(out), "--downscale", "1", "--max-steps", "100000", "--device",
+                 "cpu", "--checkpoint-every", every, *TINY_FLAGS])
+
+
+def test_ctrl_c_keeps_the_last_checkpoint_loadable(exported, tmp_path, monkeypatch, capsys):
+    written = interrupting_fit(monkeypatch, KeyboardInterrupt(), after_checkpoints=1)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "0.2") == 130
+    err = capsys.readouterr().err
+    assert written, "no checkpoint was written before the interrupt"
+    assert f"interrupted; the last checkpoint (step {written[-1]}," in err and str(out) in err, err
+    scene = load_scene(out, device="cpu")
+    assert scene.report["complete"] is False and scene.report["steps"] == written[-1]
+    view = scene.views[0]
+    assert scene.render(view.c2w, view.camera).rgb.shape == (24, 32, 3)
+    assert main(["info", str(out)]) == 0
+    assert "checkpoint (the fit did not finish)" in capsys.readouterr().out
+
+
+def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_path, monkeypatch, capsys):
+    source = tmp_path / "capture"
+    shutil.copytree(exported.parent, source)
+    (source / "images" / "object_005.png").unlink()
+    interrupting_fit(monkeypatch, KeyboardInterrupt(), after_checkpoints=0)
+    out = tmp_path / "scenes" / "object.n2r"
+    out.parent.mkdir()
+    out.write_bytes(b"the previous scene")
+    assert run_fit(source / "transforms.json", out, "100000") == 130
+    err = capsys.readouterr().err
+    assert "  skipped   " in err and "object_005.png" in err, \
+        f"the missing photo is not listed:\n{err}"
+    assert f"no checkpoint was written yet, so {out} was not touched" in err
+    assert out.read_bytes() == b"the previous scene"
+    assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
+
+
+def test_a_crash_keeps_the_last_checkpoint_and_exits_with_the_error(exported, tmp_path, monkeypatch, capsys):
+    written = interrupting_fit(monkeypatch, FitError("the fit diverged at step 7"), after_checkpoints=1)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "0.2") == 2
+    err = capsys.readouterr().err
+    assert f"the fit failed; the last checkpoint (step {written[-1]}," in err, err
+    assert "n2r fit: error: the fit diverged at step 7" in err, err
+    assert read_scene_file(out).report["steps"] == written[-1]
+
+
+# -- argument parsing ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("text", "seconds"), [("10m", 600.0), ("90s", 90.0), ("1h30m", 5400.0), ("1m30", 90.0),
+                                               ("45", 45.0), ("0.5m", 30.0)])
+def test_durations(text, seconds):
+    assert parse_duration(text) == seconds
+
+
+@pytest.mark.parametrize("text", ["", "ten", "10x", "0", "m"])
+def test_bad_durations_say_what_is_expected(text):
+    with pytest.raises(argparse.ArgumentTypeError, match=r"is not a duration; expected e\.g\. 10m|expected a duration > 0"):
+        parse_duration(text)
+
+
+def test_eval_times_are_sorted_durations():
+    assert parse_durations("6m,1m,3m") == (60.0, 180.0, 360.0)
+    with pytest.raises(argparse.ArgumentTypeError, match=r"'' is not a duration"):
+        parse_durations("1m,,3m")
+
+
+def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path, capsys):
+    assert parse_config_override("resolutions=16,24") == ("resolutions", (16, 24))
+    assert parse_config_override("lr_density=1e-2") == ("lr_density", 0.01)
+    with pytest.raises(argparse.ArgumentTypeError, match=r"--config 'seed=__import__\(\"os\"\)'"):
+        parse_config_override('seed=__import__("os")')
+    out = tmp_path / "x.n2r"
+    assert main(["fit", str(exported), "-o", str(out), "--max-steps", "1", "--config", "warp=2"]) == 2
+    assert "unknown setting 'warp'" in capsys.readouterr().err and not out.exists()
+
+
+def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
+    assert main(["fit", str(exported), "-o", str(tmp_path), "--max-steps", "1"]) == 2
+    err = capsys.readouterr().err
+    assert f"-o {tmp_path}: is a folder; expected the path of the scene file" in err, err
+    assert "ingested" not in err, "the capture was ingested before the output was checked"

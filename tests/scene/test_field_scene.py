@@ -1,0 +1,91 @@
+"""FieldScene and load_scene: what the plugin renders, its content hash, and the fitted tiny scene."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pytest_n2r
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import Transform
+from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
+from pytest_n2r.scene import FieldScene, load_scene, save_scene
+from pytest_n2r.session import SceneSpec, load_scene_spec
+
+from .conftest import TINY_STEPS, random_field, tiny_views
+
+
+@pytest.fixture
+def scene_path(tmp_path):
+    from pytest_n2r.field.config import FieldConfig
+
+    return save_scene(tmp_path / "orbit.n2r", random_field(), FieldConfig(), tiny_views(), {"psnr": 20.0},
+                      reference_length=3.0, metres_per_unit=0.5)
+
+
+def test_load_scene_gives_the_views_photos_scale_and_report(scene_path):
+    scene = load_scene(scene_path, device="cpu")
+    assert isinstance(scene, FieldScene) and scene.name == "orbit" and scene.backend == "compiled"
+    assert [v.name for v in scene.views] == [v.name for v in tiny_views()]
+    assert all(v.image is not None and v.image.shape == (16, 20, 3) for v in scene.views)
+    assert (scene.reference_length, scene.metres_per_unit, scene.report) == (3.0, 0.5, {"psnr": 20.0})
+    assert scene.view("frame_002.png").index == 2
+    assert all(v.image is None for v in load_scene(scene_path, device="cpu", images=False).views)
+
+
+def test_the_top_level_names_are_the_scene_package_ones():
+    assert (pytest_n2r.load_scene, pytest_n2r.save_scene, pytest_n2r.FieldScene) == (load_scene, save_scene, FieldScene)
+
+
+def test_render_goes_through_the_field_renderer_with_the_scene_settings(scene_path):
+    settings = RenderSettings(step_ratio=1.0, t_stop=1e-2)
+    scene = load_scene(scene_path, device="cpu", settings=settings)
+    view = scene.views[1]
+    got = scene.render(view.c2w, view.camera, ("depth", "opacity"))
+    want = FieldRenderer(scene.file.field, settings).render(view.c2w, view.camera, ("depth", "opacity"))
+    assert got.rgb is None, "rgb was rendered though not asked for"
+    assert np.array_equal(got.depth, want["depth"]) and np.array_equal(got.opacity, want["opacity"])
+
+
+def test_the_content_hash_follows_the_field_and_the_settings(scene_path, tmp_path):
+    from pytest_n2r.field.config import FieldConfig
+
+    scene = load_scene(scene_path, device="cpu")
+    assert load_scene(scene_path, device="cpu").content_hash == scene.content_hash, "same file, different hash"
+    coarser = scene.with_settings(RenderSettings(step_ratio=1.0))
+    assert coarser.settings.step_ratio == 1.0 and coarser.field is not None and coarser.name == scene.name
+    assert coarser.content_hash != scene.content_hash, "other render settings kept the hash"
+    assert scene.with_settings(RenderSettings()).content_hash == scene.content_hash
+    other = save_scene(tmp_path / "other.n2r", random_field(seed=3), FieldConfig(), tiny_views(), {"psnr": 20.0},
+                       reference_length=3.0, metres_per_unit=0.5)
+    assert load_scene(other, device="cpu").content_hash != scene.content_hash, "another field kept the hash"
+
+
+def test_pair_moves_by_metres_when_the_scale_is_known(scene_path):
+    scene = load_scene(scene_path, device="cpu")
+    source, follow = scene.pair(1, Transform(x=1.0), units="metres")
+    moved = np.linalg.inv(source.c2w) @ follow.c2w
+    np.testing.assert_allclose(moved[:3, 3], [2.0, 0.0, 0.0], atol=1e-12,
+                               err_msg="1 m at 0.5 m per scene unit must move 2 scene units along x")
+
+
+def test_a_bad_device_is_named(scene_path):
+    with pytest.raises(InvalidArgument, match=r"device='tpu'"):
+        load_scene(scene_path, device="tpu")
+
+
+def test_the_session_loads_a_scene_file_spec(scene_path):
+    scene = load_scene_spec(SceneSpec("orbit", "file", str(scene_path)), device="cpu")
+    assert isinstance(scene, FieldScene) and len(scene.views) == 4
+
+
+def test_the_tiny_fit_round_trips_with_its_report(tiny_scene_file, tiny_fit, tiny_capture):
+    scene = load_scene(tiny_scene_file, device="cpu")
+    assert scene.report["steps"] == TINY_STEPS and scene.report["heldout"] == tiny_fit.report["heldout"]
+    assert scene.reference_length == tiny_capture.reference_length and scene.metres_per_unit == 1.0
+    assert [v.split for v in scene.views] == [v.split for v in tiny_capture.views]
+    view = scene.views[0]
+    want = FieldRenderer(tiny_fit.field).render(view.c2w, view.camera, ("rgb", "opacity"))
+    got = scene.render(view.c2w, view.camera, ("rgb", "opacity"))
+    assert np.array_equal(got.rgb, want["rgb"]) and np.array_equal(got.opacity, want["opacity"]), \
+        "the fitted field renders differently after saving and loading"

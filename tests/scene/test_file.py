@@ -1,0 +1,233 @@
+"""Scene files: round trips, deterministic bytes, atomic writes, and a clear error for every kind of bad file."""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import safetensors.torch
+import torch
+
+from pytest_n2r.errors import InvalidArgument, SceneFileError
+from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.render.field_render import FieldRenderer
+from pytest_n2r.scene import read_scene_file, save_scene
+from pytest_n2r.scene.schema import FIELD_FILE, FORMAT_VERSION, SCENE_JSON
+
+from .conftest import random_field, tiny_views
+
+REPORT = {"psnr": 21.5, "ssim": float("nan"), "heldout": [{"view": "frame_000.png", "psnr": float("inf")}]}
+CONFIG = FieldConfig(resolutions=(8, 12), stage_fractions=(0.5,))
+
+
+def write(path: Path, field=None, views=None, **kwargs) -> Path:
+    """The test scene (random field, four views) saved at ``path``."""
+    return save_scene(path, field or random_field(), CONFIG, views or tiny_views(), REPORT, reference_length=3.0,
+                      **kwargs)
+
+
+def test_a_loaded_scene_renders_bit_identically_to_the_quantized_field(tmp_path):
+    field = random_field()
+    scene_file = read_scene_file(write(tmp_path / "s.n2r", field))
+    want, got = FieldRenderer(field.quantized()), FieldRenderer(scene_file.field)
+    for view in scene_file.views[:2]:
+        expected = want.render(view.c2w, view.camera, ("rgb", "depth", "opacity"))
+        actual = got.render(view.c2w, view.camera, ("rgb", "depth", "opacity"))
+        assert 0.05 < expected["opacity"].mean() < 0.95, "the test field should be neither empty nor solid"
+        for name, array in expected.items():
+            same = array.view(np.uint8) == actual[name].view(np.uint8)
+            assert same.all(), f"{name} of view {view.name}: {np.count_nonzero(~same)} bytes differ after a round trip"
+
+
+def test_views_scale_config_and_report_come_back(tmp_path):
+    views = tiny_views()
+    scene_file = read_scene_file(write(tmp_path / "s.n2r", views=views, metres_per_unit=0.25))
+    assert [(v.index, v.name, v.split, v.camera) for v in scene_file.views] == \
+        [(i, v.name, v.split, v.camera) for i, v in enumerate(views)]
+    for saved, loaded in zip(views, scene_file.views):
+        assert np.array_equal(saved.c2w, loaded.c2w), f"{saved.name}: pose changed in the round trip"
+        error = np.abs(saved.image.astype(int) - loaded.image).mean()
+        assert loaded.image.dtype == np.uint8 and error < 2.0, f"{saved.name}: JPEG copy is off by {error:.2f} levels"
+    assert (scene_file.reference_length, scene_file.metres_per_unit, scene_file.config) == (3.0, 0.25, CONFIG)
+    assert scene_file.report == {"psnr": 21.5, "ssim": None, "heldout": [{"view": "frame_000.png", "psnr": None}]}, \
+        "non-finite report values must be stored as null (strict JSON)"
+    assert scene_file.images_stored == 4 and scene_file.version == FORMAT_VERSION
+
+
+def test_images_false_skips_the_photos_and_no_images_stores_none(tmp_path):
+    assert all(v.image is None for v in read_scene_file(write(tmp_path / "a.n2r"), images=False).views)
+    stored = read_scene_file(write(tmp_path / "b.n2r", images=False))
+    assert stored.images_stored == 0 and all(v.image is None for v in stored.views)
+    assert not [n for n in zipfile.ZipFile(tmp_path / "b.n2r").namelist() if n.startswith("images/")]
+
+
+def test_the_bytes_depend_on_the_content_only(tmp_path, monkeypatch):
+    first = write(tmp_path / "a.n2r").read_bytes()
+    monkeypatch.setattr(time, "time", lambda: 2_000_000_000.0)  # a zip stamped with "now" would differ
+    monkeypatch.setattr(time, "localtime", lambda *a: time.struct_time((2033, 5, 18, 3, 33, 20, 2, 138, 0)))
+    second = write(tmp_path / "b.n2r").read_bytes()
+    assert first == second, "saving the same scene twice gave different bytes"
+    other = write(tmp_path / "c.n2r", random_field(seed=1)).read_bytes()
+    assert other != first, "a different field gave the same bytes"
+
+
+def test_a_failed_save_leaves_the_old_file_and_no_temporary(tmp_path):
+    path = write(tmp_path / "s.n2r")
+    before = path.read_bytes()
+    views = tiny_views()
+    views[2] = type(views[2])(2, "bad.png", views[2].camera, views[2].c2w, "train", np.zeros((16, 20), np.float32))
+    with pytest.raises(InvalidArgument, match=r"view 'bad.png': image is float32 \(16, 20\); expected H×W×3 uint8"):
+        write(path, views=views)
+    assert path.read_bytes() == before, "a failed save changed the existing file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.n2r"], "a failed save left files behind"
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"reference_length": None}, r"reference_length is required when views are passed without a Capture"),
+        ({"views": []}, r"holds no views"),
+        ({"image_quality": 0}, r"image_quality=0; expected an integer in 1..100"),
+        ({"bounds": np.zeros(3)}, r"bounds has shape \(3,\); expected a finite \(2, 3\) box"),
+    ],
+)
+def test_bad_save_arguments_are_named(tmp_path, kwargs, message):
+    views = kwargs.pop("views", tiny_views())
+    args = {"reference_length": 3.0, **kwargs}
+    with pytest.raises(InvalidArgument, match=message):
+        save_scene(tmp_path / "s.n2r", random_field(), CONFIG, views, {}, **args)
+
+
+# -- bad files ---------------------------------------------------------------------------------------------------
+def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes] | None = None,
+            drop: tuple[str, ...] = ()) -> Path:
+    """A copy of the scene file ``src`` with ``scene.json`` edited, members replaced or dropped."""
+    replace = dict(replace or {})
+    with zipfile.ZipFile(src) as archive, zipfile.ZipFile(dst, "w") as out:
+        for name in archive.namelist():
+            if name in drop:
+                continue
+            payload = replace.pop(name, archive.read(name))
+            if name == SCENE_JSON and edit_json is not None:
+                data = json.loads(payload)
+                edit_json(data)
+                payload = json.dumps(data).encode()
+            out.writestr(name, payload)
+        for name, payload in replace.items():
+            out.writestr(name, payload)
+    return dst
+
+
+def tensors_with(**changes) -> bytes:
+    tensors = random_field().tensors()
+    for name, value in changes.items():
+        if value is None:
+            del tensors[name]
+        else:
+            tensors[name] = value
+    return safetensors.torch.save(tensors)
+
+
+def pickled_field() -> bytes:
+    buffer = io.BytesIO()
+    torch.save(random_field().tensors(), buffer)
+    return buffer.getvalue()
+
+
+def _set(key, value):
+    return lambda data: data.__setitem__(key, value)
+
+
+def _frame(i, key, value=None):
+    def edit(data):
+        if value is None:
+            del data["frames"][i][key]
+        else:
+            data["frames"][i][key] = value
+    return edit
+
+
+BAD_FILES = {
+    "not a zip": (lambda good, bad: bad.write_bytes(b"PK but not really"), r"not a zip archive, or truncated"),
+    "truncated": (lambda good, bad: bad.write_bytes(good.read_bytes()[: good.stat().st_size // 2]),
+                  r"not a zip archive, or truncated"),
+    "missing": (lambda good, bad: None, r"no such scene file"),
+    "no scene.json": (lambda good, bad: rewrite(good, bad, drop=(SCENE_JSON,)), r"the archive has no 'scene.json'"),
+    "scene.json not JSON": (lambda good, bad: rewrite(good, bad, replace={SCENE_JSON: b"{oops"}),
+                            r"scene.json is not valid JSON"),
+    "other format": (lambda good, bad: rewrite(good, bad, edit_json=_set("format", "nerfstudio")),
+                     r"format='nerfstudio'; expected 'pytest-n2r scene' \(this is not a pytest-n2r scene file\)"),
+    "newer version": (lambda good, bad: rewrite(good, bad, edit_json=_set("version", FORMAT_VERSION + 1)),
+                      rf"format version {FORMAT_VERSION + 1}; this pytest-n2r reads version {FORMAT_VERSION} "
+                      r"\(it was written by a newer pytest-n2r; upgrade"),
+    "older version": (lambda good, bad: rewrite(good, bad, edit_json=_set("version", 0)),
+                      r"format version 0; .*refit the scene"),
+    "missing key": (lambda good, bad: rewrite(good, bad, edit_json=lambda d: d.pop("reference_length")),
+                    r"scene.json is missing the keys \['reference_length'\]"),
+    "frame without pose": (lambda good, bad: rewrite(good, bad, edit_json=_frame(1, "c2w")),
+                           r"frames\[1\] has no 'c2w' key"),
+    "frame with a bad pose": (lambda good, bad: rewrite(good, bad, edit_json=_frame(2, "c2w", [[1, 0], [0, 1]])),
+                              r"frames\[2\].c2w must have shape \(4 4\)"),
+    "bad split": (lambda good, bad: rewrite(good, bad, edit_json=_frame(0, "split", "test")),
+                  r"frames\[0\].split='test'; expected one of \('train', 'heldout'\)"),
+    "bad reference length": (lambda good, bad: rewrite(good, bad, edit_json=_set("reference_length", -1)),
+                             r"reference_length=-1; expected a finite number > 0"),
+    "bad config": (lambda good, bad: rewrite(good, bad, edit_json=lambda d: d["config"].update(warp=9)),
+                   r"'config' is not a valid FieldConfig \(.*unknown keys \['warp'\]"),
+    "no field": (lambda good, bad: rewrite(good, bad, drop=(FIELD_FILE,)), r"the archive has no 'field.safetensors'"),
+    "pickled field": (lambda good, bad: rewrite(good, bad, replace={FIELD_FILE: pickled_field()}),
+                      r"field.safetensors is not a valid safetensors file"),
+    "missing tensor": (lambda good, bad: rewrite(good, bad, replace={FIELD_FILE: tensors_with(vertex_values=None)}),
+                       r"field.safetensors: field tensors \['vertex_values'\] are missing"),
+    "mis-shaped tensor": (lambda good, bad: rewrite(
+        good, bad, replace={FIELD_FILE: tensors_with(occupancy=torch.ones((5, 5, 5), dtype=torch.uint8))}),
+        r"tensor 'occupancy' is torch.uint8 \(5, 5, 5\); expected torch.uint8 \(11, 11, 11\)"),
+    "image that does not decode": (lambda good, bad: rewrite(good, bad, replace={"images/frame_001.jpg": b"\xff\xd8junk"}),
+                                   r"images/frame_001.jpg \(the photo of frame 'frame_001.png'\) does not decode"),
+    "image of the wrong size": (lambda good, bad: rewrite(
+        good, bad, replace={"images/frame_003.jpg": zipfile.ZipFile(write(bad.with_name("small.n2r"), views=[
+            type(v)(v.index, v.name, v.camera.resized(10, 8), v.c2w, v.split, v.image[::2, ::2].copy())
+            for v in tiny_views()])).read("images/frame_003.jpg")}),
+        r"images/frame_003.jpg is 10x8 pixels; frame 'frame_003.png' has a 20x16 camera"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_FILES))
+def test_a_bad_file_is_a_scene_file_error_saying_what_is_wrong(tmp_path, case):
+    make, message = BAD_FILES[case]
+    good = write(tmp_path / "good.n2r")
+    bad = tmp_path / "bad.n2r"
+    make(good, bad)
+    with pytest.raises(SceneFileError, match=message) as info:
+        read_scene_file(bad)
+    assert str(bad) in str(info.value), f"the error does not name the file: {info.value}"
+
+
+def test_a_corrupt_member_is_named(tmp_path):
+    good = write(tmp_path / "good.n2r")
+    data = bytearray(good.read_bytes())
+    with zipfile.ZipFile(good) as archive:
+        info = archive.getinfo(FIELD_FILE)
+    start = info.header_offset + 30 + len(info.filename) + len(info.extra)
+    for i in range(start + 10, start + 60):
+        data[i] ^= 0x5A
+    bad = tmp_path / "bad.n2r"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(SceneFileError, match=r"'field.safetensors' is corrupt or truncated"):
+        read_scene_file(bad)
+
+
+def test_photos_in_subfolders_with_the_same_name_keep_their_own_copy(tmp_path):
+    views = [type(v)(v.index, name, v.camera, v.c2w, v.split, v.image)
+             for v, name in zip(tiny_views(3), ["left/img 1.png", "right/img 1.png", "img_1"])]
+    path = write(tmp_path / "s.n2r", views=views)
+    assert [n for n in zipfile.ZipFile(path).namelist() if n.startswith("images/")] == \
+        ["images/img_1.jpg", "images/img_1_1.jpg", "images/img_1_2.jpg"]
+    for saved, loaded in zip(views, read_scene_file(path).views):
+        assert loaded.name == saved.name and np.abs(saved.image.astype(int) - loaded.image).mean() < 2.0, \
+            f"frame {saved.name!r} got another frame's photo"
