@@ -1,0 +1,198 @@
+"""The compiled training kernels against torch autograd through the reference formulas of ``query``.
+
+Everything is compared in float64, where the two must agree to rounding (1e-10): the compiled composite
+multiplies transmittances while the reference sums ``log(1 - alpha)``, so they are not bit-identical.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from pytest_n2r.field.optim import RowAdam
+from pytest_n2r.field.query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
+from pytest_n2r.field.train_kernels import Composite, Interpolate, adam_rows, sample_corners, unique_rows
+from pytest_n2r.render.lattice import grid_coords
+
+TOL = 1e-10
+SHIFT, STEP_RATIO = -2.0, 0.5
+
+
+def packed(counts: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(ray_idx, offsets)`` of rays with ``counts`` samples each."""
+    counts_t = torch.tensor(counts, dtype=torch.int64)
+    offsets = torch.zeros(len(counts) + 1, dtype=torch.int64)
+    offsets[1:] = torch.cumsum(counts_t, 0)
+    return torch.repeat_interleave(torch.arange(len(counts)), counts_t), offsets
+
+
+def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None):
+    """Random interpolated values ``v (N, F)`` (float64, requiring grad), unit ray directions' SH basis
+    ``(B, n_sh)``, ``ray_idx`` and ``offsets``; sample ``capped`` gets a density whose opacity is capped."""
+    g = torch.Generator().manual_seed(seed)
+    ray_idx, offsets = packed(counts)
+    n_sh = (sh_degree + 1) ** 2
+    v = torch.randn(int(offsets[-1]), 1 + 3 * n_sh, generator=g, dtype=torch.float64) * 2.0
+    if capped is not None:
+        v[capped, 0] = 60.0  # softplus → 58: alpha = 1 - e⁻²⁹, above ALPHA_MAX
+    dirs = torch.randn(len(counts), 3, generator=g, dtype=torch.float64)
+    basis = sh_basis(dirs / dirs.norm(dim=-1, keepdim=True), sh_degree)
+    return v.requires_grad_(True), basis, ray_idx, offsets
+
+
+def reference(v, basis, ray_idx, offsets, background):
+    """rgb, the sum of capped opacities, and per-sample weights by ``query.shade`` + ``query.composite``."""
+    alpha, rgb = shade(v, basis[ray_idx], SHIFT, STEP_RATIO)
+    n_rays = len(offsets) - 1
+    out = composite(alpha, rgb, torch.zeros_like(alpha), ray_idx, offsets, n_rays, background)
+    alpha_sum = torch.zeros(n_rays, dtype=v.dtype).index_add(0, ray_idx, alpha.clamp(max=ALPHA_MAX))
+    return out["rgb"], alpha_sum, out["weights"]
+
+
+CASES = {
+    "mixed": [3, 0, 1, 7, 2, 0],
+    "capped_sample": [4, 5, 1],
+    "one_sample_each": [1, 1, 1, 1],
+    "all_empty": [0, 0, 0],
+    "long_ray": [300],
+}
+CAPPED = {"capped_sample": 5, "one_sample_each": 2, "long_ray": 150}
+
+
+@pytest.mark.parametrize("sh_degree", [0, 1])
+@pytest.mark.parametrize("case", list(CASES))
+def test_composite_forward_and_gradient_equal_autograd_through_the_reference(case, sh_degree):
+    v, basis, ray_idx, offsets = samples(CASES[case], sh_degree, seed=len(case), capped=CAPPED.get(case))
+    background = torch.tensor([0.3, 0.6, 0.1], dtype=torch.float64)
+    g = torch.Generator().manual_seed(1)
+    d_rgb = torch.randn(len(offsets) - 1, 3, generator=g, dtype=torch.float64)
+    d_alpha = torch.randn(len(offsets) - 1, generator=g, dtype=torch.float64)
+
+    def value_and_grad(fn):
+        v.grad = None
+        rgb, alpha_sum, weights = fn()
+        ((rgb * d_rgb).sum() + (alpha_sum * d_alpha).sum()).backward()
+        return rgb.detach(), alpha_sum.detach(), weights.detach(), v.grad
+
+    rgb, alpha_sum, weights, grad = value_and_grad(
+        lambda: Composite.apply(v, basis, offsets, SHIFT, STEP_RATIO, ALPHA_MAX, background))
+    rgb_ref, alpha_sum_ref, weights_ref, grad_ref = value_and_grad(
+        lambda: reference(v, basis, ray_idx, offsets, background))
+
+    what = f"case {case!r} (samples per ray {CASES[case]}), sh_degree={sh_degree}"
+    torch.testing.assert_close(rgb, rgb_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite rgb: {m}")
+    torch.testing.assert_close(alpha_sum, alpha_sum_ref, rtol=0, atol=TOL,
+                               msg=lambda m: f"{what}: Composite opacity sum: {m}")
+    torch.testing.assert_close(weights.double(), weights_ref, rtol=1e-6, atol=1e-7,
+                               msg=lambda m: f"{what}: Composite sample weights (float32): {m}")
+    torch.testing.assert_close(grad, grad_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite gradient: {m}")
+    if case in CAPPED:
+        i = CAPPED[case]
+        assert grad[i, 0] == 0.0, f"{what}: the capped sample's density has gradient {float(grad[i, 0])}; expected 0"
+        assert grad[i, 1:].abs().max() > 0, f"{what}: the capped sample's colour got no gradient"
+    if case == "all_empty":
+        torch.testing.assert_close(rgb, background.expand(3, 3), rtol=0, atol=0,
+                                   msg=lambda m: f"{what}: empty rays must show the background: {m}")
+
+
+def test_composite_gradient_in_float32_tracks_float64():
+    """Training runs in float32: the kernel computes in float64 inside, so the float32 gradient is the
+    float64 one rounded."""
+    v, basis, _, offsets = samples([5, 2, 9], 1, seed=3)
+    background = torch.zeros(3, dtype=torch.float64)
+    grads = []
+    for dtype in (torch.float64, torch.float32):
+        x = v.detach().to(dtype).requires_grad_(True)
+        rgb, alpha_sum, _ = Composite.apply(x, basis.to(dtype), offsets, SHIFT, STEP_RATIO, ALPHA_MAX,
+                                            background.to(dtype))
+        assert rgb.dtype == dtype, f"Composite returned {rgb.dtype} rgb for {dtype} values"
+        (rgb.sum() + alpha_sum.sum()).backward()
+        grads.append(x.grad.double())
+    torch.testing.assert_close(grads[1], grads[0], rtol=1e-6, atol=1e-7,
+                               msg=lambda m: f"float32 Composite gradient drifts from float64: {m}")
+
+
+@pytest.mark.parametrize("n_samples", [0, 1, 257])
+def test_interpolate_forward_and_gradient_equal_autograd(n_samples):
+    g = torch.Generator().manual_seed(n_samples)
+    rows = torch.randint(0, 40, (n_samples, 8), generator=g).numpy()
+    unique, inverse = unique_rows(rows, 40)
+    assert len(set(unique.tolist())) == len(unique), f"unique_rows returned repeated rows {unique.tolist()}"
+    np.testing.assert_array_equal(unique[inverse], rows, err_msg="unique_rows: unique[inverse] is not rows")
+    sub = torch.randn(len(unique), 7, generator=g, dtype=torch.float64, requires_grad=True)
+    weights = torch.rand(n_samples, 8, generator=g, dtype=torch.float64)
+    inverse_t = torch.from_numpy(inverse)
+    d_out = torch.randn(n_samples, 7, generator=g, dtype=torch.float64)
+
+    out = Interpolate.apply(sub, inverse_t, weights)
+    (out * d_out).sum().backward()
+    grad, sub.grad = sub.grad.clone(), None
+    out_ref = interpolate(sub, inverse_t, weights)
+    (out_ref * d_out).sum().backward()
+    torch.testing.assert_close(out, out_ref, rtol=0, atol=TOL, msg=lambda m: f"Interpolate forward: {m}")
+    torch.testing.assert_close(grad, sub.grad, rtol=0, atol=TOL, msg=lambda m: f"Interpolate gradient: {m}")
+
+
+def test_sample_corners_are_the_reference_trilinear_corners():
+    rng = np.random.default_rng(0)
+    n_rays, per_ray, res, shell = 50, 6, 17, 0.25
+    o = rng.uniform(-1.5, 1.5, (n_rays, 3)).astype(np.float32)
+    d = rng.normal(size=(n_rays, 3)).astype(np.float32)
+    ray_idx = np.repeat(np.arange(n_rays), per_ray)
+    t = rng.uniform(0.0, 4.0, n_rays * per_ray).astype(np.float32)  # also far into the contracted shell
+    rows, weights, cells = sample_corners(o, d, t, ray_idx, shell, res)
+    p = torch.from_numpy(o.astype(np.float64))[ray_idx] + torch.from_numpy(t.astype(np.float64))[:, None] \
+        * torch.from_numpy(d.astype(np.float64))[ray_idx]
+    rows_ref, weights_ref = trilinear(grid_coords(p, shell, res), res)
+    np.testing.assert_array_equal(rows, rows_ref.numpy(), err_msg="sample_corners rows differ from query.trilinear")
+    np.testing.assert_allclose(weights, weights_ref.numpy(), atol=1e-6, err_msg="sample_corners weights differ")
+    np.testing.assert_allclose(weights.sum(1), 1.0, atol=1e-5, err_msg="trilinear weights do not sum to 1")
+    base = rows[:, 0]
+    expected_cells = ((base // (res * res)) * (res - 1) + (base // res) % res) * (res - 1) + base % res
+    np.testing.assert_array_equal(cells, expected_cells, err_msg="sample_corners cell index is not corner 0's cell")
+
+
+def reference_adam(values, m, v, rows, grad, lrs, t, b1=0.9, b2=0.99, eps=1e-8):
+    """Textbook Adam (Kingma & Ba, bias-corrected) on ``values[rows]`` in float64, in place."""
+    m[rows] = b1 * m[rows] + (1 - b1) * grad
+    v[rows] = b2 * v[rows] + (1 - b2) * grad ** 2
+    m_hat, v_hat = m[rows] / (1 - b1 ** t), v[rows] / (1 - b2 ** t)
+    values[rows] -= lrs * m_hat / (np.sqrt(v_hat) + eps)
+
+
+def test_row_adam_on_cpu_is_adam_on_the_touched_rows_only():
+    rng = np.random.default_rng(0)
+    start = rng.normal(size=(30, 5)).astype(np.float32)
+    values = torch.from_numpy(start.copy())
+    lrs = torch.tensor([0.2, 0.1, 0.1, 0.05, 0.05])
+    adam = RowAdam(values, lrs)
+    ref_values, ref_m, ref_v = start.astype(np.float64), np.zeros((30, 5)), np.zeros((30, 5))
+    touched = np.zeros(30, dtype=bool)
+    for step, lr_scale in enumerate([1.0, 0.5, 1.0, 0.25], start=1):
+        rows = np.sort(rng.choice(24, size=9, replace=False))  # rows 24..29 are never touched
+        grad = rng.normal(size=(9, 5)).astype(np.float32) * 10.0 ** rng.uniform(-4, 2)
+        adam.step(torch.from_numpy(rows), torch.from_numpy(grad), lr_scale)
+        reference_adam(ref_values, ref_m, ref_v, rows, grad.astype(np.float64), lrs.numpy() * lr_scale, step)
+        touched[rows] = True
+        np.testing.assert_allclose(values.numpy(), ref_values, rtol=0, atol=1e-6,
+                                   err_msg=f"RowAdam values differ from textbook Adam after step {step}")
+        np.testing.assert_allclose(adam.m.numpy(), ref_m, rtol=1e-6, atol=1e-9,
+                                   err_msg=f"RowAdam first moments differ after step {step}")
+    assert 0 < touched.sum() < 30
+    np.testing.assert_array_equal(values.numpy()[~touched], start[~touched],
+                                  err_msg="RowAdam changed rows that no step touched")
+    assert not adam.m.numpy()[~touched].any() and not adam.v.numpy()[~touched].any(), \
+        "RowAdam moments of untouched rows are not zero"
+    assert np.abs(values.numpy()[touched] - start[touched]).min() > 0, "a touched row did not move"
+
+
+def test_adam_rows_with_a_zero_gradient_still_applies_momentum():
+    values = np.ones((3, 2), dtype=np.float32)
+    m = np.full((3, 2), 0.5, dtype=np.float32)
+    v = np.full((3, 2), 0.25, dtype=np.float32)
+    adam_rows(values, m, v, np.array([1]), np.zeros((1, 2), np.float32), np.array([0.1, 0.1], np.float32),
+              0.9, 0.99, 1e-8, 1.0, 1.0)
+    expected = 1.0 - 0.1 * 0.45 / (np.sqrt(0.2475) + 1e-8)
+    np.testing.assert_allclose(values[1], expected, rtol=1e-6, err_msg="adam_rows: momentum step with zero gradient")
+    np.testing.assert_array_equal(values[[0, 2]], 1.0, err_msg="adam_rows changed rows it was not given")
