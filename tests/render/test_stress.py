@@ -14,7 +14,8 @@ import tracemalloc
 import numpy as np
 import pytest
 import torch
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.space import SceneSpace

@@ -1,0 +1,32 @@
+"""A small exact capture and one short fit of it, shared by the fit tests of this session."""
+
+from __future__ import annotations
+
+import pytest
+
+from pytest_n2r.data.capture import Capture
+from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.field.fit import FitResult
+
+#: Two small grids, small batches and an initial opacity the first prune keeps (0.01 per sample).
+#: Measured on the 48×27 capture: 40 steps take 4 s on two loaded cores and reach 16.8 dB held-out PSNR.
+SHORT_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=20,
+                           alpha_init=0.01)
+SHORT_STEPS = 40
+
+
+@pytest.fixture(scope="session")
+def capture48() -> Capture:
+    """The demo ``object`` scene captured exactly at 48×27 (48 views, 6 held out; about 1 s)."""
+    from pytest_n2r.demo.rendered_capture import capture_scene
+    from pytest_n2r.demo.scenes import build_scene
+
+    return capture_scene(build_scene("object"), size=(48, 27))
+
+
+@pytest.fixture(scope="session")
+def short_fit(capture48: Capture) -> FitResult:
+    """:data:`SHORT_CONFIG` fitted for :data:`SHORT_STEPS` steps on the CPU."""
+    from pytest_n2r.field.fit import fit
+
+    return fit(capture48, SHORT_CONFIG, max_steps=SHORT_STEPS, device="cpu")
