@@ -157,7 +157,7 @@ class _Trainer:
         mse = F.mse_loss(rgb, target)
         loss = mse + c.sparsity * alpha_sum.sum() / n_samples
         if not torch.isfinite(loss):
-            raise FitError(f"the fit diverged at step {self.steps}: the loss is {float(loss)} "
+            raise FitError(f"the fit diverged at step {self.steps}: the loss is {float(loss.detach())} "
                            "(lower lr_density / lr_color; the last checkpoint is still good)")
         if t.numel():
             loss.backward()
