@@ -62,7 +62,7 @@ class FieldConfig:
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
         if not 0 < self.alpha_init < 1 or not 0 <= self.prune_alpha < 1 or not 0 <= self.prune_weight < 1:
-            raise InvalidArgument(f"alpha_init={self.alpha_init!r} and prune_alpha={self.prune_alpha!r} must be in [0, 1)")
+            raise InvalidArgument(f"alpha_init={self.alpha_init!r} must be in (0, 1), prune_alpha={self.prune_alpha!r} and prune_weight={self.prune_weight!r} in [0, 1)")
         for name in ("sparsity",):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
