@@ -90,7 +90,7 @@ class SceneSpace:
         """Normalized points ``(..., 3)`` → contracted points in ``[-(1+shell), 1+shell]³`` (NumPy, float64)."""
         p = np.asarray(p, dtype=np.float64)
         r = np.max(np.abs(p), axis=-1, keepdims=True)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             outer = (1.0 + self.shell * (1.0 - 1.0 / r)) * p / r
         return np.where(r <= 1.0, p, outer)
 
