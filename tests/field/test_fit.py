@@ -50,7 +50,7 @@ def test_a_fit_with_max_steps_is_reproducible_bit_for_bit(short_fit, capture48):
     assert again.report["heldout"] == short_fit.report["heldout"], "the two fits' held-out scores differ"
 
 
-@pytest.mark.filterwarnings("error")  # the error path itself must not warn
+@pytest.mark.filterwarnings("error::UserWarning")  # the error path itself must not warn
 def test_a_nan_in_a_step_raises_fit_error_naming_the_step(capture48, monkeypatch):
     real_apply = fit_module.Composite.apply
     calls = []
