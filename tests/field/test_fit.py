@@ -11,6 +11,7 @@ import torch
 
 from pytest_n2r.errors import FitError, InvalidArgument
 from pytest_n2r.field import fit as fit_module
+from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.fit import evaluate_views, fit
 from pytest_n2r.field.grid import SceneField
 
@@ -92,3 +93,17 @@ def test_bad_fit_arguments_are_named(capture48, kwargs, message):
 def test_cuda_without_cuda_is_named(capture48):
     with pytest.raises(InvalidArgument, match=r"device='cuda': CUDA is not available on this machine"):
         fit(capture48, SHORT_CONFIG, max_steps=1, device="cuda")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "the first prune drops every cell whose opacity per sample is below prune_alpha=1e-3, seen or not; from "
+    "alpha_init=1e-4 a cell needs about 12 Adam steps at lr_density=0.2 to get there, so prune_every=10 "
+    "empties the whole occupancy and the fit silently returns a black field (measured: occupied_fraction 0.0, "
+    "held-out 7.44 dB, the same as before fitting; tests/scene's TINY_CONFIG fits are such empty fields)"))
+def test_a_fit_with_a_short_prune_period_still_learns(capture48):
+    config = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=10)
+    result = fit(capture48, config, max_steps=30, device="cpu")
+    occupied = result.report["field"]["occupied_fraction"]
+    assert occupied > 0, f"the fit pruned every cell (prune_every=10, alpha_init={config.alpha_init})"
+    assert result.report["psnr"] > 7.44 + 3.0, f"held-out PSNR {result.report['psnr']} dB: the fit learned nothing"
