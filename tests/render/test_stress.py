@@ -23,7 +23,7 @@ from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
 from pytest_n2r.render.march import march_dense
 
-from ..field.fields import SPACE, pose, random_field
+from ..field.fields import CAMERA, SPACE, pose, random_field
 
 OUTPUTS = ("rgb", "depth", "opacity")
 
@@ -143,6 +143,23 @@ def test_transmittance_behind_hundreds_of_opaque_samples_is_not_garbage():
     assert abs(float(w[0]) - ALPHA_MAX) < 1e-6 and float(w[2:].max()) < 1e-11, f"weights {w[:4].tolist()}"
     assert float(out["opacity"][0]) <= 1.0 and abs(float(out["depth"][0])) < 1e-3, (
         f"opacity {float(out['opacity'][0])}, depth {float(out['depth'][0])}: expected ≤ 1 and ~0 (the first sample)")
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+@pytest.mark.parametrize("magnitude", [30.0, 1e4, 1e30])
+def test_extreme_field_values_give_a_valid_view(magnitude, backend):
+    """Raw densities and colour coefficients of ±magnitude: samples of opacity exactly 1 (transmittance 0)
+    and of exactly 0, saturated colours; no early termination, so rays go on behind opaque samples."""
+    field = random_field(resolution=12, occupied=0.7, seed=8)
+    field.values.copy_(torch.sign(field.values) * magnitude)
+    settings_ = RenderSettings(backend=backend, t_stop=0.0, min_alpha=0.0)
+    renderer = FieldRenderer(field, settings_)
+    for eye, target in (((0.1, 0.2, -0.3), (0.5, -0.4, 0.9)), ((2.5, 1.5, -2.0), (0.0, 0.0, 0.0))):
+        c2w = pose(eye, target)
+        out = renderer.render(c2w, CAMERA, OUTPUTS)
+        what = f"{backend}, field values ±{magnitude:g}, eye {eye}"
+        assert_valid_view(out, CAMERA, far_end(renderer, c2w, CAMERA), what)
+        assert (out["opacity"] == 1.0).any(), f"{what}: no ray became opaque"
 
 
 @pytest.mark.parametrize("scale", [1e-4, 1e4])
