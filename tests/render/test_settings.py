@@ -1,0 +1,40 @@
+"""RenderSettings and FieldRenderer arguments: bad values are refused naming the setting."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
+
+from ..field.fields import random_field
+
+
+@pytest.mark.parametrize("changes, name", [
+    ({"step_ratio": 0.0}, "step_ratio"),
+    ({"step_ratio": 9.0}, "step_ratio"),
+    ({"far": float("inf")}, "far"),
+    ({"far": 0.0}, "far"),
+    ({"t_stop": 1.0}, "t_stop"),
+    ({"min_alpha": -0.1}, "min_alpha"),
+    ({"chunk_rays": 0}, "chunk_rays"),
+    ({"chunk_rays": 1.5}, "chunk_rays"),
+    ({"shell_samples": 0}, "shell_samples"),
+    ({"background": (2.0, 0.0, 0.0)}, "background"),
+    ({"background": (0.0, 0.0)}, "background"),
+    ({"backend": "cuda"}, "backend"),
+])
+def test_bad_settings_are_named(changes, name):
+    ((_, value),) = changes.items()
+    with pytest.raises(InvalidArgument, match=re.escape(f"RenderSettings.{name}={value!r}")):
+        RenderSettings(**changes)
+
+
+def test_auto_picks_the_compiled_backend_on_the_cpu_and_settings_round_trip():
+    renderer = FieldRenderer(random_field(resolution=8), RenderSettings())
+    assert renderer.backend == "compiled", f"backend='auto' on a CPU field chose {renderer.backend!r}"
+    settings = RenderSettings(step_ratio=0.7, shell_samples=3, background=(1, 0.5, 0))
+    assert RenderSettings(**settings.to_dict()) == settings
+    assert settings.background == (1.0, 0.5, 0.0)
