@@ -9,14 +9,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 from pytest_n2r.render.kernels import BLOCK
 from pytest_n2r.render.march import MarchGrid, march_compiled, march_dense
 
-from ..field.fields import CAMERA, POSES, camera_for, named_pose, random_field
+from ..field.fields import CAMERA, POSES, camera_for, named_pose, pose, random_field
+from .strategies import cameras, poses
 
 OUTPUTS = ("rgb", "depth", "opacity")
+#: One random field per SH degree for the Hypothesis test (built once).
+FIELDS = {0: random_field(sh_degree=0, occupied=0.2, seed=3), 1: random_field(sh_degree=1)}
 EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0)
 
 
@@ -64,6 +69,15 @@ def test_the_compiled_renderer_skips_empty_blocks_without_losing_samples(pose_na
     compiled, reference = render_both(field, named_pose(pose_name), camera_for(pose_name))
     assert_same_render(compiled, reference, f"pose {pose_name!r}, 0.4% of cells occupied", RTOL[pose_name])
     assert (reference["opacity"] > 0.1).sum() >= 10, f"pose {pose_name!r} sees fewer than 10 occupied pixels"
+
+
+@settings(max_examples=30, deadline=None)
+@given(eye_target=poses(max_distance=30.0), camera=cameras(max_side=8), sh_degree=st.sampled_from([0, 1]))
+def test_the_backends_agree_from_any_pose_within_30_radii(eye_target, camera, sh_degree):
+    field = FIELDS[sh_degree]
+    compiled, reference = render_both(field, pose(*eye_target), camera)
+    assert_same_render(compiled, reference, f"eye {eye_target[0]} towards {eye_target[1]} (normalized), {camera}, "
+                                            f"sh_degree={sh_degree}")
 
 
 def test_agreement_holds_with_a_background_and_a_coarse_shell():

@@ -24,6 +24,7 @@ from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render
 from pytest_n2r.render.march import march_dense
 
 from ..field.fields import CAMERA, SPACE, pose, random_field
+from .strategies import cameras, poses
 
 OUTPUTS = ("rgb", "depth", "opacity")
 
@@ -38,35 +39,6 @@ def stress_field(space: SceneSpace = SPACE) -> SceneField:
 
 
 FIELD = stress_field()
-
-unit_vectors = st.tuples(*[st.floats(-1.0, 1.0)] * 3).filter(lambda v: np.linalg.norm(v) > 0.1)
-
-
-@st.composite
-def poses(draw) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """``(eye, target)`` in normalized units: the eye anywhere from the centre to 1000 radii away (log-uniform
-    distance), looking towards the centre, away from it or anywhere."""
-    direction = np.asarray(draw(unit_vectors))
-    distance = 10.0 ** draw(st.floats(-3.0, 3.0))
-    eye = direction / np.linalg.norm(direction) * distance
-    look = draw(st.sampled_from(["centre", "away", "anywhere"]))
-    if look == "centre":
-        forward = -eye
-    elif look == "away":
-        forward = eye
-    else:
-        forward = np.asarray(draw(unit_vectors))
-    target = eye + forward / np.linalg.norm(forward)
-    return tuple(float(v) for v in eye), tuple(float(v) for v in target)
-
-
-@st.composite
-def cameras(draw, max_side: int = 6) -> Camera:
-    """Tiny cameras (1..max_side pixels a side) with fields of view from ~1° to ~170°."""
-    w, h = draw(st.integers(1, max_side)), draw(st.integers(1, max_side))
-    f = max(w, h) * 10.0 ** draw(st.floats(-1.1, 1.7))
-    return Camera(w, h, f, f * draw(st.floats(0.8, 1.25)), (w - 1) / 2, (h - 1) / 2)
-
 
 def far_end(renderer: FieldRenderer, c2w: np.ndarray, camera: Camera) -> np.ndarray:
     """Per pixel, the far end of the ray's lattice in scene units (``t`` is z-depth at every scale)."""
