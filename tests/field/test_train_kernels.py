@@ -27,7 +27,8 @@ def packed(counts: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.repeat_interleave(torch.arange(len(counts)), counts_t), offsets
 
 
-def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None):
+def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None
+            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Random interpolated values ``v (N, F)`` (float64, requiring grad), unit ray directions' SH basis
     ``(B, n_sh)``, ``ray_idx`` and ``offsets``; sample ``capped`` gets a density whose opacity is capped."""
     g = torch.Generator().manual_seed(seed)
@@ -41,7 +42,8 @@ def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = N
     return v.requires_grad_(True), basis, ray_idx, offsets
 
 
-def reference(v, basis, ray_idx, offsets, background):
+def reference(v: torch.Tensor, basis: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor,
+              background: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """rgb, the sum of capped opacities, and per-sample weights by ``query.shade`` + ``query.composite``."""
     alpha, rgb = shade(v, basis[ray_idx], SHIFT, STEP_RATIO)
     n_rays = len(offsets) - 1
@@ -153,7 +155,8 @@ def test_sample_corners_are_the_reference_trilinear_corners():
     np.testing.assert_array_equal(cells, expected_cells, err_msg="sample_corners cell index is not corner 0's cell")
 
 
-def reference_adam(values, m, v, rows, grad, lrs, t, b1=0.9, b2=0.99, eps=1e-8):
+def reference_adam(values: np.ndarray, m: np.ndarray, v: np.ndarray, rows: np.ndarray, grad: np.ndarray,
+                   lrs: np.ndarray, t: int, b1: float = 0.9, b2: float = 0.99, eps: float = 1e-8) -> None:
     """Textbook Adam (Kingma & Ba, bias-corrected) on ``values[rows]`` in float64, in place."""
     m[rows] = b1 * m[rows] + (1 - b1) * grad
     v[rows] = b2 * v[rows] + (1 - b2) * grad ** 2

@@ -12,6 +12,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.field.grid import SceneField
+from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 from pytest_n2r.render.kernels import BLOCK
 from pytest_n2r.render.march import MarchGrid, march_compiled, march_dense
@@ -25,7 +27,8 @@ FIELDS = {0: random_field(sh_degree=0, occupied=0.2, seed=3), 1: random_field(sh
 EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0)
 
 
-def render_both(field, c2w, camera=CAMERA, settings=EXACT):
+def render_both(field: SceneField, c2w: np.ndarray, camera: Camera = CAMERA,
+                settings: RenderSettings = EXACT) -> tuple[dict, dict]:
     """``(compiled, torch)`` renders of every output."""
     compiled = FieldRenderer(field, settings.replace(backend="compiled")).render(c2w, camera, OUTPUTS)
     reference = FieldRenderer(field, settings.replace(backend="torch")).render(c2w, camera, OUTPUTS)
@@ -87,10 +90,8 @@ def test_agreement_holds_with_a_background_and_a_coarse_shell():
     assert_same_render(compiled, reference, "background (0.2, 0.9, 0.5), shell_samples=3, step_ratio=1.3, far=5")
 
 
-def rays_of(field, c2w, camera=CAMERA) -> tuple[torch.Tensor, torch.Tensor]:
+def rays_of(field: SceneField, c2w: np.ndarray, camera: Camera = CAMERA) -> tuple[torch.Tensor, torch.Tensor]:
     """The camera's rays in the field's normalized space (float32, flattened)."""
-    from pytest_n2r.geometry import camera_rays
-
     o, d = field.space.normalize_rays(*camera_rays(camera, c2w))
     return torch.from_numpy(o.reshape(-1, 3)), torch.from_numpy(d.reshape(-1, 3))
 
@@ -103,7 +104,7 @@ def random_rays(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.from_numpy(o.astype(np.float32)), torch.from_numpy(d.astype(np.float32))
 
 
-def assert_same_samples(o, d, grid: MarchGrid, what: str) -> int:
+def assert_same_samples(o: torch.Tensor, d: torch.Tensor, grid: MarchGrid, what: str) -> int:
     """``march_compiled`` and ``march_dense`` give the same packed samples; returns how many."""
     ray_c, t_c, off_c = march_compiled(o, d, grid)
     ray_d, t_d, off_d = march_dense(o, d, grid)
