@@ -107,3 +107,29 @@ def test_a_fit_with_a_short_prune_period_still_learns(capture48):
     occupied = result.report["field"]["occupied_fraction"]
     assert occupied > 0, f"the fit pruned every cell (prune_every=10, alpha_init={config.alpha_init})"
     assert result.report["psnr"] > 7.44 + 3.0, f"held-out PSNR {result.report['psnr']} dB: the fit learned nothing"
+
+
+def test_checkpoints_and_evaluations_come_when_asked(capture48):
+    checkpoints = []
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    result = fit(capture48, config, max_steps=5, device="cpu", checkpoint=checkpoints.append,
+                 checkpoint_every_s=0.0, eval_at_s=(0.0, 1e6))
+    steps = [c.report["steps"] for c in checkpoints]
+    assert steps == [1, 2, 3, 4, 5], f"checkpoint_every_s=0 gave checkpoints after steps {steps}; expected every step"
+    last = checkpoints[-1].field
+    assert last.values.numpy().tobytes() == result.field.values.numpy().tobytes(), \
+        "the last checkpoint is not the final (quantized) field of a fit without a final prune"
+    assert torch.equal(last.values, last.values.half().float()), "a checkpoint holds values float16 cannot store"
+    history = result.report["history"]
+    assert [h["seconds"] for h in history] == [0.0] and history[0]["step"] == 1, (
+        f"eval_at_s=(0, 1e6) recorded {history}; expected one evaluation after the first step")
+    assert np.isfinite(history[0]["psnr"]) and result.report["eval_seconds"] > 0
+
+
+@pytest.mark.slow
+def test_a_time_budget_stops_the_fit_after_the_step_that_spends_it(capture48):
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    result = fit(capture48, config, time_budget_s=1.0, device="cpu")
+    steps, seconds = result.report["steps"], result.report["train_seconds"]
+    assert steps >= 1 and seconds >= 1.0, f"a 1 s budget stopped after {steps} steps and {seconds} s"
+    assert seconds < 1.0 + max(10.0 * seconds / steps, 0.5), f"{steps} steps took {seconds} s: the budget overran"
