@@ -117,6 +117,31 @@ def test_transmittance_behind_hundreds_of_opaque_samples_is_not_garbage():
         f"opacity {float(out['opacity'][0])}, depth {float(out['depth'][0])}: expected ≤ 1 and ~0 (the first sample)")
 
 
+def test_compiled_renders_do_not_depend_on_the_thread_count():
+    """kernels.py: "each ray is independent and handled by one thread, so results do not depend on the
+    thread count"."""
+    import numba
+
+    threads = numba.get_num_threads()
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    c2w = pose((0.2, -0.1, 0.3), (-0.6, 0.5, 0.1))
+    renderer = FieldRenderer(FIELD, RenderSettings(backend="compiled"))
+    try:
+        numba.set_num_threads(1)
+        single = renderer.render(c2w, CAMERA, OUTPUTS)
+    finally:
+        numba.set_num_threads(threads)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    try:
+        many = renderer.render(c2w, CAMERA, OUTPUTS)
+    finally:
+        numba.set_num_threads(threads)
+    for name in OUTPUTS:
+        assert single[name].tobytes() == many[name].tobytes(), (
+            f"{name} rendered with 1 thread differs from {numba.config.NUMBA_NUM_THREADS} threads")
+
+
 @pytest.mark.parametrize("backend", ["compiled", "torch"])
 @pytest.mark.parametrize("magnitude", [30.0, 1e4, 1e30])
 def test_extreme_field_values_give_a_valid_view(magnitude, backend):
