@@ -70,6 +70,33 @@ def test_a_nan_in_a_step_raises_fit_error_naming_the_step(capture48, monkeypatch
     assert len(calls) == 4, f"the fit went on for {len(calls) - 4} steps after the NaN"
 
 
+class _NaNGradient(torch.autograd.Function):
+    """The identity whose gradient is NaN: a finite loss with a poisoned backward pass."""
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor) -> torch.Tensor:
+        return x.clone()
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> torch.Tensor:
+        return grad * float("nan")
+
+
+def test_non_finite_gradients_raise_fit_error_naming_the_step(capture48, monkeypatch):
+    real_apply = fit_module.Interpolate.apply
+    calls = []
+
+    def poisoned(*args):
+        calls.append(None)
+        out = real_apply(*args)
+        return _NaNGradient.apply(out) if len(calls) == 3 else out
+
+    monkeypatch.setattr(fit_module.Interpolate, "apply", poisoned)
+    with pytest.raises(FitError, match=r"diverged at step 2: non-finite gradients"):
+        fit(capture48, SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=()), max_steps=10, device="cpu")
+    assert len(calls) == 3, f"the fit went on for {len(calls) - 3} steps after the NaN gradient"
+
+
 def test_a_capture_without_training_images_is_a_fit_error(capture48):
     bare = dataclasses.replace(capture48, views=[dataclasses.replace(v, image=None) for v in capture48.views])
     with pytest.raises(FitError, match="no training view with an image"):
