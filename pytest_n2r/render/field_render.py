@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 import torch
 
+from .._validation import check_array
 from ..errors import InvalidArgument
 from ..field.grid import SceneField
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
@@ -101,6 +102,7 @@ class FieldRenderer:
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
         ``rgb`` H×W×3 uint8, ``depth`` H×W float32 z-depth, ``opacity`` H×W float32 in [0, 1]."""
+        c2w = check_array("c2w", c2w, "4 4", dtype=np.float64)  # NaN/Inf would crash the compiled kernel
         h, w = camera.height, camera.width
         rgb = np.empty((h * w, 3), dtype=np.float32)
         depth = np.empty(h * w, dtype=np.float32)
