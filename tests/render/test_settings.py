@@ -9,7 +9,7 @@ import pytest
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 
-from ..field.fields import random_field
+from ..field.fields import CAMERA, named_pose, random_field
 
 
 @pytest.mark.parametrize("changes, name", [
@@ -38,3 +38,15 @@ def test_auto_picks_the_compiled_backend_on_the_cpu_and_settings_round_trip():
     settings = RenderSettings(step_ratio=0.7, shell_samples=3, background=(1, 0.5, 0))
     assert RenderSettings(**settings.to_dict()) == settings
     assert settings.background == (1.0, 0.5, 0.0)
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+@pytest.mark.parametrize("bad", ["nan", "inf"])
+def test_a_non_finite_pose_is_refused_before_it_reaches_a_kernel(backend, bad):
+    """A NaN pose used to crash the process in the compiled kernel (segmentation fault) and give an
+    unrelated torch error in the reference."""
+    c2w = named_pose("inside")
+    c2w[0, 3] = float(bad)
+    renderer = FieldRenderer(random_field(resolution=8), RenderSettings(backend=backend))
+    with pytest.raises(InvalidArgument, match=r"c2w contains 1 non-finite value\(s\) \(NaN or Inf\)"):
+        renderer.render(c2w, CAMERA, ("rgb", "depth"))
