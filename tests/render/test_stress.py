@@ -31,7 +31,7 @@ OUTPUTS = ("rgb", "depth", "opacity")
 
 def stress_field(space: SceneSpace = SPACE) -> SceneField:
     """Dense, opaque random blobs in the middle of the cube (a camera there is inside geometry), scattered
-    cells elsewhere, and nothing in most of the shell (rays there see nothing: opacity exactly 0)."""
+    cells (15 %) elsewhere, so many rays see nothing at all (opacity exactly 0)."""
     field = random_field(resolution=16, occupied=0.15, seed=2, space=space, density_scale=4.0)
     field.values[:, 0] += 2.0
     field.occupancy[4:11, 4:11, 4:11] = True
@@ -39,6 +39,7 @@ def stress_field(space: SceneSpace = SPACE) -> SceneField:
 
 
 FIELD = stress_field()
+
 
 def far_end(renderer: FieldRenderer, c2w: np.ndarray, camera: Camera) -> np.ndarray:
     """Per pixel, the far end of the ray's lattice in scene units (``t`` is z-depth at every scale)."""
