@@ -26,9 +26,12 @@ from . import kernels
 from .lattice import grid_coords
 from .march import MarchGrid, march_dense
 
-__all__ = ["RenderSettings", "FieldRenderer", "BACKENDS"]
+__all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
 BACKENDS = ("auto", "compiled", "torch")
+#: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
+#: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
+RENDER_VERSION = 1
 
 
 @dataclass(frozen=True)
