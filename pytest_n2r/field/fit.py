@@ -240,7 +240,7 @@ def fit(
         if config.stage(frac) > trainer.stage:
             trainer.refine()
         loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
-        if trainer.steps % config.prune_every == 0:
+        if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
             trainer.prune()
         train_s += time.perf_counter() - t0
         while pending_evals and train_s >= pending_evals[0]:
@@ -259,7 +259,7 @@ def fit(
         if checkpoint is not None and now - last_checkpoint >= checkpoint_every_s:
             last_checkpoint = now
             checkpoint(snapshot())
-    if trainer.steps >= config.prune_every:  # a very short fit has not had time to grow anything yet
+    if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
     final = trainer.field.quantized()
     e0 = time.perf_counter()
