@@ -196,16 +196,18 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
-            col = [0.0, 0.0, 0.0]
+            lr = lg = lb = 0.0  # colour logits
             for c in range(8):
                 w = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
                 row = base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)
                 for l in range(n_sh):
-                    for ch in range(3):
-                        col[ch] += w * basis[l] * values[row, 1 + l * 3 + ch]
-            cr += weight / (1.0 + math.exp(-col[0]))
-            cg += weight / (1.0 + math.exp(-col[1]))
-            cb += weight / (1.0 + math.exp(-col[2]))
+                    wb = w * basis[l]
+                    lr += wb * values[row, 1 + l * 3]
+                    lg += wb * values[row, 2 + l * 3]
+                    lb += wb * values[row, 3 + l * 3]
+            cr += weight / (1.0 + math.exp(-lr))
+            cg += weight / (1.0 + math.exp(-lg))
+            cb += weight / (1.0 + math.exp(-lb))
             if want_depth:
                 zd += weight * t
             trans *= 1.0 - alpha
