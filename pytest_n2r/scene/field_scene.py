@@ -12,13 +12,10 @@ from ..field.optim import resolve_device
 from ..geometry import Camera
 from ..render.field_render import FieldRenderer, RenderSettings
 from .base import Scene
+from ..render.field_render import RENDER_VERSION
 from .file import SceneFile
 
 __all__ = ["FieldScene", "RENDER_VERSION"]
-
-#: Part of every :attr:`FieldScene.content_hash`: bump it when the renderer's output for the same field and
-#: settings changes, so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 1
 
 
 class FieldScene(Scene):

@@ -14,7 +14,12 @@ from pytest_n2r.geometry import (
 
 from .strategies import cameras
 
-unit = st.tuples(*[st.floats(-1, 1)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1)
+#: Plane normals that camera a (looking along +z) sees: |n_z| >= 0.3, drawn directly instead of filtered
+#: (filtering three quarters of the draws tripped Hypothesis's filter_too_much health check).
+facing_normals = st.builds(
+    lambda nz, phi, sign: np.array([np.sqrt(1 - nz**2) * np.cos(phi), np.sqrt(1 - nz**2) * np.sin(phi), sign * nz]),
+    st.floats(0.3, 1.0), st.floats(0.0, 2 * np.pi), st.sampled_from([-1.0, 1.0]),
+)
 small_tau = st.builds(
     Transform, roll=st.floats(-20, 20), pitch=st.floats(-20, 20), yaw=st.floats(-20, 20),
     x=st.floats(-0.5, 0.5), y=st.floats(-0.5, 0.5), z=st.floats(-0.5, 0.5),
@@ -22,12 +27,11 @@ small_tau = st.builds(
 
 
 @settings(deadline=None)
-@given(cameras(), cameras(), small_tau, unit, st.floats(2.0, 10.0))
+@given(cameras(), cameras(), small_tau, facing_normals, st.floats(2.0, 10.0))
 def test_plane_homography_equals_project_of_backproject_on_the_plane(cam_a, cam_b, tau, normal, dist):
     c2w_a = np.eye(4)
     c2w_b = tau.apply(c2w_a)
     n = normal / np.linalg.norm(normal)
-    assume(abs(n[2]) > 0.3)  # the plane is seen in front of camera a
     d = -dist * abs(n[2])  # plane n.X + d = 0 crosses the optical axis ahead of camera a
     uv = np.array([[cam_a.cx, cam_a.cy], [0.0, 0.0], [cam_a.width - 1.0, cam_a.height - 1.0]])
     origins, dirs = camera_rays(cam_a, c2w_a, uv)

@@ -1,0 +1,61 @@
+"""Fitting speed and quality on the fox capture: held-out PSNR / SSIM after 1, 3, 6 and 10 minutes.
+
+Run: ``python benchmarks/field_fit.py [--budget 10m] [--out /tmp/fox.n2r] [--config key=value ...]``.
+Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. Evaluation
+time is not counted as training time. The fitted scene is written to ``--out`` so that
+``benchmarks/render_speed.py`` can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only
+data, never copied into this repository). Results: docs/performance.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import torch
+
+from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration
+from pytest_n2r.data import ingest
+from pytest_n2r.field.fit import fit
+from pytest_n2r.scene import save_scene
+
+FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--budget", default="10m", help="training time (e.g. 90s, 10m)")
+    parser.add_argument("--out", default="/tmp/n2r-bench-fox.n2r", help="where to write the fitted scene")
+    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="FieldConfig overrides")
+    args = parser.parse_args(argv)
+    if not FOX.exists():
+        print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
+        return 0
+    budget = parse_duration(args.budget)
+    config = build_config([parse_config_override(text) for text in args.config])
+    torch.set_num_threads(2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
+        t0 = time.perf_counter()
+        capture = ingest(FOX, downscale=0.25)
+    print(f"ingest: {time.perf_counter() - t0:.1f} s, {len(capture.train_views)} train / "
+          f"{len(capture.heldout_views)} held-out views of {capture.views[0].image.shape[1]}×{capture.views[0].image.shape[0]}")
+    marks = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget]
+    result = fit(capture, config, time_budget_s=budget, eval_at_s=marks)
+    report = result.report
+    print(f"\n{'train time':>10} {'steps':>6} {'PSNR dB':>8} {'SSIM':>6}")
+    for row in report["history"] + [{"seconds": budget, "step": report["steps"], "psnr": report["psnr"], "ssim": report["ssim"]}]:
+        print(f"{row['seconds'] / 60:>8.1f} m {row['step']:>6} {row['psnr']:>8.2f} {row['ssim']:>6.3f}")
+    print(f"\nfield: {json.dumps(report['field'])}; {report['steps'] / report['train_seconds']:.2f} steps/s")
+    print("held-out views:", ", ".join(f"{r['view']} {r['psnr']:.2f} dB" for r in report["heldout"]))
+    save_scene(args.out, result.field, result.config, capture, report)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""Render speed of a fitted scene, and run time against error for every render knob.
+
+Run: ``python benchmarks/render_speed.py [SCENE.n2r]`` (default: the fox scene that
+``benchmarks/field_fit.py`` writes). Prints
+
+1. frames/s at 480×270, 960×540 and 1920×1080 pixels (portrait captures: the same pixel counts, turned),
+   RGB only, then RGB + depth + opacity;
+2. a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing, the opacity below which
+   cells are skipped, early ray termination, and render resolution — with frames/s at 480×270 and the PSNR
+   of each variant against the best-quality render (finest spacing, no skipping, no termination) and against
+   the real held-out photos. The default is marked.
+
+Times are the best of 3 renders after a warm-up, torch/numba on 2 threads. Results: docs/performance.md.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import cv2
+import numpy as np
+import torch
+
+from pytest_n2r.metrics.image_quality import psnr
+from pytest_n2r.render.field_render import RenderSettings
+from pytest_n2r.scene import load_scene
+
+DEFAULT = RenderSettings()
+BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0)
+
+
+def best_seconds(fn, repeats: int = 3) -> float:
+    fn()
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def sized(camera, pixels: int):
+    """``camera`` resized to about ``pixels`` pixels, same aspect ratio."""
+    scale = (pixels / (camera.width * camera.height)) ** 0.5
+    return camera.resized(round(camera.width * scale), round(camera.height * scale))
+
+
+def main(argv: list[str]) -> int:
+    path = argv[0] if argv else "/tmp/n2r-bench-fox.n2r"
+    torch.set_num_threads(2)
+    scene = load_scene(path, device="cpu")
+    views = [v for v in scene.views if v.split == "heldout" and v.image is not None][:3]
+    if not views:
+        print(f"{path}: no held-out view with a stored photo; nothing to compare against")
+        return 1
+    print(f"scene {path}: field {scene.report.get('field')}, fit PSNR {scene.report.get('psnr')} dB\n")
+
+    print(f"{'size':>12} {'outputs':>22} {'s/frame':>8} {'frames/s':>9}")
+    for w, h in ((480, 270), (960, 540), (1920, 1080)):
+        camera = sized(views[0].camera, w * h)
+        for outputs in (("rgb",), ("rgb", "depth", "opacity")):
+            s = best_seconds(lambda: scene.render(views[0].c2w, camera, outputs))
+            print(f"{camera.width:>5}×{camera.height:<6} {'+'.join(outputs):>22} {s:>8.3f} {1 / s:>9.2f}")
+
+    small = sized(views[0].camera, 480 * 270)
+    reference = [scene.with_settings(BEST).render(v.c2w, small, ("rgb",)).rgb for v in views]
+    photos = [cv2.resize(v.image, (small.width, small.height), interpolation=cv2.INTER_AREA) for v in views]
+
+    def row(label: str, settings: RenderSettings, size_scale: float = 1.0) -> None:
+        variant = scene.with_settings(settings)
+        camera = small if size_scale == 1.0 else small.resized(round(small.width * size_scale),
+                                                              round(small.height * size_scale))
+
+        def render_all():
+            out = []
+            for v in views:
+                rgb = variant.render(v.c2w, camera, ("rgb",)).rgb
+                if camera is not small:
+                    rgb = cv2.resize(rgb, (small.width, small.height), interpolation=cv2.INTER_LINEAR)
+                out.append(rgb)
+            return out
+
+        images = render_all()
+        s = best_seconds(lambda: variant.render(views[0].c2w, camera, ("rgb",)))
+        to_best = np.mean([psnr(r, i) if not np.array_equal(r, i) else np.inf for r, i in zip(reference, images)])
+        to_photo = np.mean([psnr(p, i) for p, i in zip(photos, images)])
+        mark = "  <- default" if settings == DEFAULT and size_scale == 1.0 else ""
+        print(f"{label:>34} {1 / s:>9.2f} {to_best:>12.2f} {to_photo:>12.2f}{mark}")
+
+    print(f"\nat {small.width}×{small.height}, mean over {len(views)} held-out views")
+    print(f"{'variant':>34} {'frames/s':>9} {'PSNR→best':>12} {'PSNR→photo':>12}")
+    row("best quality (reference)", BEST)
+    for step in (0.25, 0.5, 1.0, 2.0):
+        row(f"step_ratio={step}", DEFAULT.replace(step_ratio=step))
+    for min_alpha in (0.0, 1e-3, 1e-2, 5e-2):
+        row(f"min_alpha={min_alpha:g}", DEFAULT.replace(min_alpha=min_alpha))
+    for t_stop in (0.0, 1e-2, 1e-1):
+        row(f"t_stop={t_stop:g}", DEFAULT.replace(t_stop=t_stop))
+    for scale in (0.5, 0.75):
+        row(f"render at {scale:g}× size, upsampled", DEFAULT, scale)
+    row("default", DEFAULT)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
