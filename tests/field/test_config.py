@@ -27,6 +27,7 @@ from pytest_n2r.field.config import FieldConfig
     ({"sparsity": -0.1}, r"FieldConfig\.sparsity=-0\.1: expected a finite number >= 0"),
     ({"batch_rays": 0}, r"FieldConfig\.batch_rays=0: expected an integer >= 1"),
     ({"prune_every": 2.5}, r"FieldConfig\.prune_every=2\.5"),
+    ({"prune_after": 0}, r"FieldConfig\.prune_after=0: expected an integer >= 1"),
     ({"sh_degree": 2}, r"FieldConfig\.sh_degree=2: expected 0 or 1"),
 ])
 def test_bad_values_are_refused_naming_the_setting(changes, message):
