@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import torch
 
-from pytest_n2r.demo.rendered_capture import capture_scene
-from pytest_n2r.demo.scenes import build_scene
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.fit import _Trainer
 
@@ -20,9 +18,8 @@ def _train(capture, compiled: bool, steps: int = 30) -> _Trainer:
     return trainer
 
 
-def test_compiled_and_torch_training_paths_agree():
-    capture = capture_scene(build_scene("object"), (48, 27))
-    compiled, reference = _train(capture, True), _train(capture, False)
+def test_compiled_and_torch_training_paths_agree(capture48):
+    compiled, reference = _train(capture48, True), _train(capture48, False)
     diff = (compiled.field.values - reference.field.values).abs().max().item()
     assert diff < 1e-4, f"after 30 steps the compiled and torch paths' grid values differ by {diff}"
     assert torch.equal(compiled.field.occupancy, reference.field.occupancy), \
