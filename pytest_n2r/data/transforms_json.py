@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import IngestError, N2RError
-from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv
+from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
 from .images import read_image_size
 from .poses import PoseSet, SourceFrame
@@ -126,6 +126,9 @@ def _read_matrix(raw: dict, where: str) -> np.ndarray:
             f"{where}: field 'transform_matrix' is not a rigid camera-to-world transform "
             f"(|R^T R - I| = {err:.3g}, det(R) = {np.linalg.det(R):.4g}, last row {M[3].tolist()})"
         )
+    # Rotations rounded in the file (to ~4 decimals) are accepted, then made exactly orthonormal so every
+    # later check (scene files, check_pose at 1e-5) sees a proper rotation.
+    M[:3, :3] = orthonormalize(R)
     return opengl_to_opencv(M)
 
 

@@ -185,7 +185,10 @@ class _Trainer:
         keep &= (seen < 0) | (seen >= self.config.prune_weight)
         self._reset_visibility()
         keep = F.max_pool3d(keep[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
-        self.field.occupancy = self.field.occupancy & keep
+        occupancy = self.field.occupancy & keep
+        if not occupancy.any():  # nothing has formed yet (a very short fit): pruning would leave no field
+            return
+        self.field.occupancy = occupancy
         self._rebuild_grid()
 
     @torch.no_grad()
@@ -254,7 +257,7 @@ def fit(
         while pending_evals and train_s >= pending_evals[0]:
             e0 = time.perf_counter()
             rows = evaluate_views(trainer.field, heldout)
-            history.append({"seconds": round(pending_evals.pop(0), 1), "train_seconds": round(train_s, 2),
+            history.append({"seconds": round(pending_evals.pop(0), 3), "train_seconds": round(train_s, 2),
                             "step": trainer.steps, **_means(rows)})
             eval_s += time.perf_counter() - e0
         now = time.perf_counter() - start

@@ -82,6 +82,22 @@ def test_three_by_four_matrix_is_accepted(corner):
     np.testing.assert_allclose(read_transforms_json(path).frames[0].c2w, corner.c2ws[0], atol=1e-12)
 
 
+def test_rounded_rotations_become_exact_rotations(corner):
+    """A file with matrices rounded to 4 decimals is accepted, and its poses pass the strict pose check that
+    scene files and rendering apply (1e-5), so a fitted scene can be saved and loaded again."""
+    from pytest_n2r.geometry import check_pose
+
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    for frame in meta["frames"]:
+        frame["transform_matrix"] = np.round(np.asarray(frame["transform_matrix"]), 4).tolist()
+    path.write_text(json.dumps(meta))
+    for frame in read_transforms_json(path).frames:
+        R = frame.c2w[:3, :3]
+        assert np.abs(R.T @ R - np.eye(3)).max() < 1e-12, f"{frame.name}: rotation not made orthonormal"
+        check_pose(frame.c2w)
+
+
 def _break(corner, mutate) -> str:
     path = write_transforms(corner)
     meta = json.loads(path.read_text())

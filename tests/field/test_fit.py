@@ -123,12 +123,6 @@ def test_cuda_without_cuda_is_named(capture48):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason=(
-    "a 30-step two-stage fit ends with an empty occupancy: the prune at step 30 (prune_after=25) drops every "
-    "cell whose opacity per sample is below prune_alpha=1e-3, seen or not, and from alpha_init=1e-4, with "
-    "Adam restarted at the refinement at step 15, no cell has reached it; the fit silently returns a black "
-    "field (measured: occupied_fraction 0.0 and held-out 7.44 dB, as before fitting, with prune_every 10 or "
-    "25; tests/scene's TINY_CONFIG 30-step fits are such empty fields)"))
 def test_a_fit_with_a_short_prune_period_still_learns(capture48):
     config = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=10)
     result = fit(capture48, config, max_steps=30, device="cpu")

@@ -41,7 +41,7 @@ def fitted(exported, tmp_path_factory) -> tuple[Path, str]:
     out = io.StringIO()  # capsys is function-scoped
     with contextlib.redirect_stdout(out):
         code = main(["fit", str(exported), "-o", str(path), "--downscale", "1", "--max-steps", "30", "--device", "cpu",
-                     "--metres-per-unit", "1", "--eval-at", "0.5s", *TINY_FLAGS])
+                     "--metres-per-unit", "1", "--eval-at", "0.001s", *TINY_FLAGS])
     assert code == 0, out.getvalue()
     return path, out.getvalue()
 
@@ -57,8 +57,9 @@ def test_fit_writes_a_complete_scene_and_prints_its_report(fitted, exported):
     assert f"held out    PSNR {report['psnr']:.2f} dB" in printed, printed
     assert "complete: 30 steps" in printed and "images/object_008.png" in printed, printed
     [entry] = report["history"]
-    assert entry["seconds"] == 0.5 and 0 < entry["step"] < 30 and entry["psnr"] > 0, report["history"]
-    assert f"after 0.5 s of training (step {entry['step']}): PSNR {entry['psnr']:.2f} dB" in printed, printed
+    # 0.001 s: any 30-step fit trains longer than that, however fast the machine (0.5 s was not always reached)
+    assert entry["seconds"] == 0.001 and 0 < entry["step"] <= 30 and entry["psnr"] > 0, report["history"]
+    assert f"after 0.001 s of training (step {entry['step']}): PSNR {entry['psnr']:.2f} dB" in printed, printed
 
 
 def test_render_writes_rgb_depth_and_opacity_as_the_scene_renders_them(fitted, tmp_path, capsys):
