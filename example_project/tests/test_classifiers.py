@@ -11,6 +11,8 @@ from .conftest import load_classifier, skip_without_object
 
 CLASSIFIERS = ("mobilenet_v2", "efficientnet_lite0")
 
+pytestmark = pytest.mark.classifiers
+
 
 @pytest.fixture(params=CLASSIFIERS, scope="module")
 def net(request):

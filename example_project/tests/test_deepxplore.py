@@ -3,6 +3,7 @@ the lens) applied to the rendered source view, with the same metrics as the pose
 
 from __future__ import annotations
 
+import pytest
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import class_invariance, interest_point_spread, repeatability
 from pytest_n2r.mutations import black_patches, brightness, noise_patch
@@ -10,27 +11,32 @@ from pytest_n2r.mutations import black_patches, brightness, noise_patch
 from .conftest import load_classifier, skip_without_object
 
 
+@pytest.mark.detectors
 @metamorphic(repeatability(px=3), eps=0.5, transform=brightness(max_levels=64))
 def test_orb_repeatability_m1_brightness(n2r_scene, orb):
     return orb
 
 
+@pytest.mark.detectors
 @metamorphic(interest_point_spread(radius=8), eps=0.6, transform=noise_patch(max_size=0.3))
 def test_orb_spread_m2_noise_patch(n2r_scene, orb):
     return orb
 
 
+@pytest.mark.detectors
 @metamorphic(repeatability(px=3), eps=0.5, transform=black_patches(max_size=0.05, count=4))
 def test_orb_repeatability_m3_black_patches(n2r_scene, orb):
     return orb
 
 
+@pytest.mark.classifiers
 @metamorphic(class_invariance(), eps=0.0, transform=brightness(max_levels=32))
 def test_mobilenet_class_invariance_m1_brightness(n2r_scene):
     skip_without_object(n2r_scene)
     return load_classifier("mobilenet_v2")
 
 
+@pytest.mark.classifiers
 @metamorphic(class_invariance(), eps=0.0, transform=black_patches(max_size=0.05, count=4))
 def test_mobilenet_class_invariance_m3_black_patches(n2r_scene):
     skip_without_object(n2r_scene)

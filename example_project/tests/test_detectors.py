@@ -7,6 +7,7 @@ measured on the shipped ORB configuration with a margin, so a worse configuratio
 
 from __future__ import annotations
 
+import pytest
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import interest_point_spread, repeatability
 
@@ -14,6 +15,8 @@ from perception.detectors import detector
 
 REPEATABILITY = repeatability(px=3)
 SPREAD = interest_point_spread(radius=8)
+
+pytestmark = pytest.mark.detectors
 
 
 # -- ORB, the detector the robot runs (PERCEPTION_ORB selects a candidate configuration) ---------------------
