@@ -323,11 +323,15 @@ class _Engine:
     # -- one example ------------------------------------------------------------------------------------
 
     def reject(self, reason: str) -> None:
-        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid."""
+        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid.
+
+        Only while searching: once a failure is found, the shrinker's variations are often invalid, and
+        giving up then would reject the final replay of the minimal failure (a FlakyFailure)."""
         stats = self.stats
         stats.rejected[reason] += 1
         drawn = stats.examples + stats.n_rejected
-        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+        if (not self.failed and stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP
+                and stats.n_rejected / drawn > self.relation.validity.max_rejected):
             self.gave_up = True  # check_relation raises once Hypothesis stops
         assume(False)
 
