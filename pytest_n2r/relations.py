@@ -16,6 +16,7 @@ caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -417,8 +418,8 @@ class _Engine:
                      f"{_plural(s.shrink_examples, 'shrink step')}")
         if record.get("images"):
             images = record["images"]
-            lines.append(f"  images:     source   {images['source']}")
-            lines.append(f"              follow   {images['follow']}")
+            lines.append(f"  images:     source   {_shown_path(images['source'])}")
+            lines.append(f"              follow   {_shown_path(images['follow'])}")
             lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
                          f"{Path(images['follow_raw']).name})")
         return "\n".join(lines)
@@ -521,6 +522,15 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         stats.outcome = "error"
         raise InvalidArgument(_too_many_invalid(stats, relation))
     return stats
+
+
+def _shown_path(path: str | os.PathLike) -> str:
+    """``path`` relative to the current directory when it lies inside it (shorter, and what a reader can
+    open from where they ran pytest), else as it is."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _too_many_invalid(stats: RelationStats, relation: Relation) -> str:
