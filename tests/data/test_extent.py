@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import stat
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -85,3 +88,14 @@ def test_atomic_write_leaves_the_old_file_when_writing_fails(tmp_path, monkeypat
         atomic_write_text(target, "new")
     assert target.read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.json"], "temporary file left behind"
+
+
+def test_atomic_write_gives_the_mode_of_a_new_file_not_a_private_one(tmp_path):
+    """Failure pictures and reports are opened by other users and web servers (CI artifacts, a shared
+    docs host): the temporary file's private 0600 must not survive the rename."""
+    old = os.umask(0o022)
+    try:
+        path = atomic_write_text(tmp_path / "report.html", "<html></html>")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644, f"mode {oct(stat.S_IMODE(path.stat().st_mode))}, expected 0o644"
