@@ -64,6 +64,8 @@ def _check_installed(args: list[str], where: str) -> None:
 
 def _check_output(block: DocBlock, result: pytest.RunResult | None, command: str | None, project: Path,
                   where: str) -> None:
+    """The output ``block`` shows against the run ``result`` of ``command`` in ``project``: the same outcome
+    counts, every shown line in the real output in the same order, every shown picture written."""
     assert result is not None, f"{where}: an output block with no command before it"
     shown = [line for line in block.code.splitlines() if line.strip() and line.strip() != "..."]
     actual = result.outlines
