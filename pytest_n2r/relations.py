@@ -16,6 +16,7 @@ caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -323,11 +324,15 @@ class _Engine:
     # -- one example ------------------------------------------------------------------------------------
 
     def reject(self, reason: str) -> None:
-        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid."""
+        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid.
+
+        Only while searching: once a failure is found, the shrinker's variations are often invalid, and
+        giving up then would reject the final replay of the minimal failure (a FlakyFailure)."""
         stats = self.stats
         stats.rejected[reason] += 1
         drawn = stats.examples + stats.n_rejected
-        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+        if (not self.failed and stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP
+                and stats.n_rejected / drawn > self.relation.validity.max_rejected):
             self.gave_up = True  # check_relation raises once Hypothesis stops
         assume(False)
 
@@ -413,8 +418,8 @@ class _Engine:
                      f"{_plural(s.shrink_examples, 'shrink step')}")
         if record.get("images"):
             images = record["images"]
-            lines.append(f"  images:     source   {images['source']}")
-            lines.append(f"              follow   {images['follow']}")
+            lines.append(f"  images:     source   {_shown_path(images['source'])}")
+            lines.append(f"              follow   {_shown_path(images['follow'])}")
             lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
                          f"{Path(images['follow_raw']).name})")
         return "\n".join(lines)
@@ -517,6 +522,15 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         stats.outcome = "error"
         raise InvalidArgument(_too_many_invalid(stats, relation))
     return stats
+
+
+def _shown_path(path: str | os.PathLike) -> str:
+    """``path`` relative to the current directory when it lies inside it (shorter, and what a reader can
+    open from where they ran pytest), else as it is."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _too_many_invalid(stats: RelationStats, relation: Relation) -> str:

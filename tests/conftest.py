@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -18,3 +20,23 @@ def shared_scene(name: str) -> Path:
     if not path.is_dir():
         pytest.skip(f"shared scene {name!r} not found at {path} (research data lives beside the checkout)")
     return path
+
+
+@dataclass(frozen=True)
+class DocBlock:
+    """A fenced code block of a docs page: its language, its ``title="..."`` (a file name, or ``""``),
+    the line of the page it starts on (1-based) and its text."""
+
+    lang: str
+    title: str
+    line: int
+    code: str
+
+
+_FENCE = re.compile(r'^```(\w*)(?:[ \t]+title="([^"]*)")?[ \t]*\n(.*?)^```[ \t]*$', flags=re.S | re.M)
+
+
+def doc_blocks(page: str) -> list[DocBlock]:
+    """The fenced code blocks of ``docs/<page>``, in page order."""
+    text = (REPO_ROOT / "docs" / page).read_text(encoding="utf-8")
+    return [DocBlock(m[1], m[2] or "", text.count("\n", 0, m.start()) + 1, m[3]) for m in _FENCE.finditer(text)]

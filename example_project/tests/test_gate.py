@@ -27,6 +27,8 @@ TAUS = {
 #: How much lower the candidate's mean score may be (absolute) before the gate fails.
 TOLERANCE = 0.03
 
+pytestmark = pytest.mark.gate
+
 
 @pytest.mark.skipif("PERCEPTION_ORB" not in os.environ, reason="no candidate: set PERCEPTION_ORB=<config name>")
 def test_candidate_orb_is_not_worse_than_shipped(n2r_scene):

@@ -2,23 +2,16 @@
 
 from __future__ import annotations
 
-import re
-
 import pytest
 
-from ..conftest import REPO_ROOT
+from ..conftest import doc_blocks
 
 PAGES = ["metrics.md", "mutations.md"]
 
 
-def python_blocks(page: str) -> list[str]:
-    text = (REPO_ROOT / "docs" / page).read_text(encoding="utf-8")
-    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
-
-
 @pytest.mark.parametrize("page", PAGES)
 def test_page_examples_run(page, capsys):
-    blocks = python_blocks(page)
+    blocks = [b.code for b in doc_blocks(page) if b.lang == "python"]
     assert blocks, f"docs/{page} has no python examples"
     for i, code in enumerate(blocks):
         try:

@@ -38,6 +38,7 @@ def test_heading(n2r_scene):
         assert words in text, f"{words!r} missing from the failure:\n{text}"
     pictures = re.findall(r"(?:source|follow)\s+(\S+\.png)", text)
     assert len(pictures) == 2 and all((n2r_project.pytester.path / p).is_file() for p in pictures), pictures
+    assert all(p.startswith("n2r-artifacts/") for p in pictures), f"paths not relative to where pytest ran: {pictures}"
 
 
 def test_the_database_replays_the_last_failure_first(n2r_project):

@@ -15,6 +15,7 @@ from pytest_n2r import InvalidArgument, InvalidType, Transform
 from pytest_n2r._timeout import CallTimeout, time_limit
 from pytest_n2r.artifacts import artifact_dir, draw_output, save_png
 from pytest_n2r.cache import RenderCache
+from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.relations import Relation, RelationFailure, RunSettings, check_relation
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.strategies import transforms
@@ -224,3 +225,34 @@ def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
     with pytest.raises(InvalidArgument, match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
         check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
     assert scene.calls == 0
+
+
+class _BandedHeading(SameLabel):
+    """Heading classes of 10°: class 0 agrees, class 1 (yaw 5°..15°) is undefined, class 2+ disagrees."""
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        if abs(out_follow - out_source) == 1:
+            return MetricResult.undefined(self.name, "between two heading classes")
+        return super().compute(out_source, out_follow, source, follow)
+
+
+def _heading_class(rgb: np.ndarray) -> int:
+    h, w = rgb.shape[:2]
+    x = decode_ramp_x(rgb[(h - 1) // 2:h // 2 + 1, (w - 1) // 2:w // 2 + 1]).mean()
+    return int(round(np.degrees(np.arctan2(x, 2.0)) / 10))
+
+
+def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeypatch):
+    """Shrinking a failure toward yaw=14° walks through the undefined band (5°..15°): those rejections
+    must not count toward "almost every draw is invalid", or the final replay of the minimal failure is
+    itself rejected and Hypothesis reports a FlakyFailure instead of the failure."""
+    monkeypatch.setattr("pytest_n2r.relations._MIN_REJECTED_TO_GIVE_UP", 3)
+    relation = Relation.build(_BandedHeading(), 0.5, transforms(yaw=(14, 20)),
+                              validity=Validity(min_coverage=0, max_empty_increase=1))
+    with pytest.raises(RelationFailure) as exc:
+        check_relation(PlaneScene(name="ramp", texture="ramp"), _heading_class, relation,
+                       settings=RunSettings(examples=30, database=None, derandomize=True))
+    stats = exc.value.stats
+    assert stats.outcome == "failed" and stats.rejected["metric undefined"] >= 3, (stats.outcome, stats.rejected)
+    yaw = stats.minimal["transform"]["yaw"]
+    assert 15.0 <= abs(yaw) <= 15.5, f"shrunk to yaw={yaw}, expected just past the undefined band (15°)"
