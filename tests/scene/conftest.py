@@ -17,7 +17,8 @@ from pytest_n2r.geometry import Camera
 from pytest_n2r.scene import SceneView
 
 #: The config of the tiny fits: two small grids, small batches (a 30-step fit takes about two seconds).
-TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=10)
+TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=10,
+                          alpha_init=1e-2)  # the default 1e-4 shows nothing after 30 steps: a black field
 TINY_STEPS = 30
 
 

@@ -23,7 +23,7 @@ from .conftest import TINY_CONFIG
 
 #: ``--config`` flags giving :data:`TINY_CONFIG` (the fit test checks that they do).
 TINY_FLAGS = ["--config", "resolutions=16,24", "--config", "stage_fractions=0.5", "--config", "batch_rays=256",
-              "--config", "prune_every=10"]
+              "--config", "prune_every=10", "--config", "alpha_init=0.01"]
 
 
 @pytest.fixture(scope="module")
