@@ -28,7 +28,8 @@ class FieldConfig:
         opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
         that training rays sampled in that time without any sample reaching a compositing weight of
-        ``prune_weight`` (one cell of dilation keeps surfaces free to grow).
+        ``prune_weight`` (one cell of dilation keeps surfaces free to grow). Nothing is pruned before step
+        ``prune_after``: the field needs that long to show where its surfaces are.
     ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
     """
 
@@ -46,6 +47,7 @@ class FieldConfig:
     prune_alpha: float = 1e-3
     prune_weight: float = 1e-3
     prune_every: int = 25
+    prune_after: int = 25
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -67,7 +69,7 @@ class FieldConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")
-        for name in ("batch_rays", "prune_every"):
+        for name in ("batch_rays", "prune_every", "prune_after"):
             if not (isinstance(getattr(self, name), int) and getattr(self, name) >= 1):
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected an integer >= 1")
         if self.sh_degree not in (0, 1):

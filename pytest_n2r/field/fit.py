@@ -93,6 +93,8 @@ class _Trainer:
         if not train:
             raise FitError(f"capture {capture.source!r} has no training view with an image; load it with images")
         self.config, self.device = config, device
+        #: Compiled (numba) kernels on the CPU; the torch path on CUDA (tests also run it on the CPU).
+        self.compiled = device.type == "cpu"
         centers = np.stack([v.c2w[:3, 3] for v in capture.views])
         self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
         self.rays = _Rays(train, self.space, device)
@@ -109,20 +111,20 @@ class _Trainer:
         width = self.field.values.shape[1]
         lrs = torch.tensor([c.lr_density] + [c.lr_color] * (width - 1))
         self.adam = RowAdam(self.field.values, lrs)
-        self.row_index = RowIndex(self.field.values.shape[0]) if self.device.type == "cpu" else None
+        self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
         self._rebuild_grid()
         self._reset_visibility()
 
     def _reset_visibility(self) -> None:
         #: The largest compositing weight of any training sample in each cell since the last prune (-1: no
-        #: sample). Only the compiled CPU path records it; on CUDA pruning uses density alone.
-        self.cell_weight = np.full(self.field.occupancy.numel(), -1.0, dtype=np.float32)
+        #: sample), flat over the occupancy grid.
+        self.cell_weight = torch.full((self.field.occupancy.numel(),), -1.0, device=self.device)
 
     def _rebuild_grid(self) -> None:
         self.grid = MarchGrid(self.field.occupancy, self.space.shell, self.config.step_ratio, None, FIT_RENDER.far)
 
     def march(self, o: torch.Tensor, d: torch.Tensor):
-        if self.device.type == "cpu":
+        if self.compiled:
             return march_compiled(o, d, self.grid)
         return march_dense(o, d, self.grid)
 
@@ -135,7 +137,7 @@ class _Trainer:
         ray_idx, t, offsets = self.march(o, d)
         unit = d / d.norm(dim=-1, keepdim=True)
         n_samples = max(t.numel(), 1)
-        if self.device.type == "cpu":
+        if self.compiled:
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
                                                   self.space.shell, f.resolution)
             unique, inverse = self.row_index.unique(rows)
@@ -144,15 +146,21 @@ class _Trainer:
             v = Interpolate.apply(sub, inverse, weights)
             rgb, alpha_sum, sample_weight = Composite.apply(v, sh_basis(unit, f.sh_degree), offsets,
                                                             f.density_shift, c.step_ratio, ALPHA_MAX, self.background)
-            scatter_max(cells, sample_weight.numpy(), self.cell_weight)
+            scatter_max(cells, sample_weight.numpy(), self.cell_weight.numpy())
         else:
             p = o[ray_idx] + t[:, None] * d[ray_idx]
-            rows, weights = trilinear(grid_coords(p, self.space.shell, f.resolution), f.resolution)
+            g = grid_coords(p, self.space.shell, f.resolution)
+            rows, weights = trilinear(g, f.resolution)
             unique, inverse = torch.unique(rows, return_inverse=True)
             sub = f.values[unique].requires_grad_(True)
             alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
                                   f.density_shift, c.step_ratio)
-            rgb = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], self.background)["rgb"]
+            out = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], self.background)
+            rgb = out["rgb"]
+            n = f.resolution - 1
+            cell = g.detach().floor().to(torch.int64).clamp(0, n - 1)
+            flat = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
+            self.cell_weight.scatter_reduce_(0, flat, out["weights"].detach(), reduce="amax")
             alpha_sum = alpha.clamp(max=ALPHA_MAX).sum()[None]
         mse = F.mse_loss(rgb, target)
         loss = mse + c.sparsity * alpha_sum.sum() / n_samples
@@ -173,7 +181,7 @@ class _Trainer:
         """Drop cells the field left empty, and cells that training rays reached but that never contributed
         (hidden behind surfaces or clear air): one cell of dilation keeps what is left free to grow."""
         keep = self.field.cell_alpha(self.config.step_ratio) >= self.config.prune_alpha
-        seen = torch.from_numpy(self.cell_weight).reshape(keep.shape).to(keep.device)
+        seen = self.cell_weight.reshape(keep.shape)
         keep &= (seen < 0) | (seen >= self.config.prune_weight)
         self._reset_visibility()
         keep = F.max_pool3d(keep[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
@@ -240,7 +248,7 @@ def fit(
         if config.stage(frac) > trainer.stage:
             trainer.refine()
         loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
-        if trainer.steps % config.prune_every == 0:
+        if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
             trainer.prune()
         train_s += time.perf_counter() - t0
         while pending_evals and train_s >= pending_evals[0]:
@@ -259,7 +267,7 @@ def fit(
         if checkpoint is not None and now - last_checkpoint >= checkpoint_every_s:
             last_checkpoint = now
             checkpoint(snapshot())
-    if trainer.steps >= config.prune_every:  # a very short fit has not had time to grow anything yet
+    if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
     final = trainer.field.quantized()
     e0 = time.perf_counter()

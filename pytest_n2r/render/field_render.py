@@ -99,7 +99,9 @@ class FieldRenderer:
             with torch.no_grad():
                 occupancy = occupancy & (field.cell_alpha(s.step_ratio) >= s.min_alpha)
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
-        self._values = np.ascontiguousarray(field.values.detach().cpu().numpy()) if self.backend == "compiled" else None
+        if self.backend == "compiled":
+            self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
+            self._density = np.ascontiguousarray(self._values[:, 0])
 
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
@@ -129,9 +131,9 @@ class FieldRenderer:
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
-            kernels.render_rays(o, d, self._values, cells, blocks, g.resolution, g.shell, g.step, g.shell_samples,
-                                g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop, np.asarray(s.background),
-                                want_depth, rgb, depth, opacity)
+            kernels.render_rays(o, d, self._density, self._values, cells, blocks, g.resolution, g.shell, g.step,
+                                g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop,
+                                np.asarray(s.background), want_depth, rgb, depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

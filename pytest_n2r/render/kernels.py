@@ -146,12 +146,13 @@ def _softplus(x):
 
 
 @njit(cache=True, parallel=True)
-def render_rays(o, d, values, occ, blocks, res, shell, step, shell_samples, far, density_shift, sigma_step,
-                sh_degree, t_stop, background, want_depth, rgb, depth, opacity):
+def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samples, far, density_shift,
+                sigma_step, sh_degree, t_stop, background, want_depth, rgb, depth, opacity):
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
     ``values`` is ``(res³, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
-    (``[l·3 + channel]``). Density is per voxel: a sample's opacity is ``1 - exp(-σ·sigma_step)`` with
+    (``[l·3 + channel]``); ``density`` is a contiguous copy of its first column (read for every sample, so
+    kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's opacity is ``1 - exp(-σ·sigma_step)`` with
     ``sigma_step`` the sample spacing in voxels. Depth is the expected z-depth with the remaining transmittance placed at the far
     end of the ray, so it is finite everywhere (not to be trusted where opacity is ~0).
     """
@@ -190,21 +191,23 @@ def render_rays(o, d, values, occ, blocks, res, shell, step, shell_samples, far,
             sigma_raw = 0.0
             for c in range(8):
                 w = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
-                sigma_raw += w * values[base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1), 0]
+                sigma_raw += w * density[base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)]
             alpha = 1.0 - math.exp(-_softplus(sigma_raw + density_shift) * sigma_step)
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
-            col = [0.0, 0.0, 0.0]
+            lr = lg = lb = 0.0  # colour logits
             for c in range(8):
                 w = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
                 row = base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)
                 for l in range(n_sh):
-                    for ch in range(3):
-                        col[ch] += w * basis[l] * values[row, 1 + l * 3 + ch]
-            cr += weight / (1.0 + math.exp(-col[0]))
-            cg += weight / (1.0 + math.exp(-col[1]))
-            cb += weight / (1.0 + math.exp(-col[2]))
+                    wb = w * basis[l]
+                    lr += wb * values[row, 1 + l * 3]
+                    lg += wb * values[row, 2 + l * 3]
+                    lb += wb * values[row, 3 + l * 3]
+            cr += weight / (1.0 + math.exp(-lr))
+            cg += weight / (1.0 + math.exp(-lg))
+            cb += weight / (1.0 + math.exp(-lb))
             if want_depth:
                 zd += weight * t
             trans *= 1.0 - alpha
