@@ -19,8 +19,9 @@ def _size(text: str) -> int | tuple[int, int]:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        "demo", help="built-in demo scenes with exact ground truth",
-        description="Built-in procedural scenes (wall: AUV wall inspection; object: UAV vehicle inspection).",
+        "demo", help="built-in demo scenes with exact ground truth, and their fitted fields",
+        description="Built-in procedural scenes (wall: AUV wall inspection; object: UAV vehicle inspection) and "
+                    "the scene fields fitted to them (wall-field, object-field).",
     )
     sub = parser.add_subparsers(dest="demo_command", metavar="ACTION", required=True)
     p = sub.add_parser("list", help="list the demo scenes")
