@@ -44,6 +44,13 @@ def _spec_from_text(text: str, base: Path, origin: str) -> list[SceneSpec]:
     text = text.strip()
     if text.startswith(DEMO_PREFIX):
         name = text[len(DEMO_PREFIX):]
+        try:
+            from .demo import demo_spec_names
+        except ImportError:  # a build without demo scenes says so when the scene is loaded
+            return [SceneSpec(name, "demo", text)]
+        if name not in demo_spec_names():
+            raise InvalidArgument(f"{origin} {text!r}: no such demo scene; expected {DEMO_PREFIX} followed by one "
+                                  f"of {demo_spec_names()} (`n2r demo list` shows them)")
         return [SceneSpec(name, "demo", text)]
     path = Path(text).expanduser()
     path = path if path.is_absolute() else base / path
@@ -165,13 +172,14 @@ class N2RSession:
 
 
 def load_scene_spec(spec: SceneSpec, device: str = "auto") -> Scene:
-    """The scene a spec names: a demo scene, a Python callable's scene, or a loaded .n2r file."""
+    """The scene a spec names: a demo scene (exact, or its fitted field for ``demo:<name>-field``), a Python
+    callable's scene, or a loaded .n2r file."""
     if spec.kind == "demo":
         try:
-            from .demo import ground_truth
+            from .demo import load_demo
         except ImportError:
             raise InvalidArgument(f"scene {spec.source!r}: this build of pytest-n2r has no demo scenes") from None
-        return ground_truth(spec.name)
+        return load_demo(spec.name, device)
     if spec.kind == "python":
         module_name, attr = spec.source.rsplit(":", 1)
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def _size(text: str) -> int | tuple[int, int]:
@@ -18,8 +19,9 @@ def _size(text: str) -> int | tuple[int, int]:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        "demo", help="built-in demo scenes with exact ground truth",
-        description="Built-in procedural scenes (wall: AUV wall inspection; object: UAV vehicle inspection).",
+        "demo", help="built-in demo scenes with exact ground truth, and their fitted fields",
+        description="Built-in procedural scenes (wall: AUV wall inspection; object: UAV vehicle inspection) and "
+                    "the scene fields fitted to them (wall-field, object-field).",
     )
     sub = parser.add_subparsers(dest="demo_command", metavar="ACTION", required=True)
     p = sub.add_parser("list", help="list the demo scenes")
@@ -30,17 +32,40 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--size", type=_size, default=(480, 270), metavar="WxH",
                    help="image size, WIDTHxHEIGHT or the longer side (default: 480x270)")
     p.set_defaults(func=run_export)
+    p = sub.add_parser(
+        "build", help="fit the fitted demo scenes by their recipes (package data, or a folder)",
+        description="Fit each named demo scene (default: all) by its fixed recipe (capture size, field settings, "
+                    "steps, seed, CPU threads) and write NAME.n2r. Two builds on the same machine and library "
+                    "versions give byte-identical files.",
+    )
+    p.add_argument("names", nargs="*", metavar="NAME", help="exact scene names (default: every demo scene)")
+    p.add_argument("-o", "--out", type=Path, default=None, metavar="DIR",
+                   help="output folder (default: the package's own pytest_n2r/demo/data, shipped with it)")
+    p.set_defaults(func=run_build)
 
 
 def run_list(args: argparse.Namespace) -> int:
     from ..demo import demo_scene_names, ground_truth
+    from ..demo.fitted import DATA_DIR, FIELD_SUFFIX, RECIPES, find_fitted
 
+    print("exact scenes (ground truth at any pose), --n2r-scene demo:NAME")
     for name in demo_scene_names():
         scene = ground_truth(name)
         n_held = sum(v.split == "heldout" for v in scene.views)
         cam = scene.views[0].camera
-        print(f"{name:8s} {len(scene.views)} views ({n_held} held out), {cam.width}x{cam.height}, "
+        print(f"  {name:14s} {len(scene.views)} views ({n_held} held out), {cam.width}x{cam.height}, "
               f"reference length {scene.reference_length:.3f} m, hash {scene.content_hash[:12]}")
+    print("fitted scene fields of them, --n2r-scene demo:NAME")
+    for name in demo_scene_names():
+        recipe = RECIPES[name]
+        found, cached = find_fitted(name)
+        if found is None:
+            where = f"not built: fitted into {cached} on first use (`n2r demo build` ships it)"
+        else:
+            where = f"{'shipped' if found.parent == DATA_DIR else 'cached'} {found} ({found.stat().st_size / 2**20:.1f} MiB)"
+        w, h = recipe.size
+        print(f"  {name + FIELD_SUFFIX:14s} {w}x{h}, {recipe.max_steps} steps, grid "
+              f"{'/'.join(map(str, recipe.config.resolutions))}, recipe {recipe.digest[:12]}: {where}")
     return 0
 
 
@@ -49,4 +74,28 @@ def run_export(args: argparse.Namespace) -> int:
 
     path = export(args.name, args.out, args.size)
     print(f"wrote {path} and {path.parent / 'images'}")
+    return 0
+
+
+def run_build(args: argparse.Namespace) -> int:
+    from ..demo import demo_scene_names
+    from ..demo.fitted import DATA_DIR, RECIPES, build_fitted
+    from ..errors import InvalidArgument
+    from ..scene.file import read_scene_file
+    from .fit import _Progress
+
+    names = args.names or list(demo_scene_names())
+    unknown = [n for n in names if n not in RECIPES]
+    if unknown:
+        raise InvalidArgument(f"no fitted recipe for {unknown}; expected scene names from {tuple(RECIPES)}")
+    out = args.out if args.out is not None else DATA_DIR
+    for name in names:
+        bar = _Progress(RECIPES[name].max_steps, None)
+        try:
+            path, timings = build_fitted(name, out / f"{name}.n2r", progress=bar)
+        finally:
+            bar.close()
+        report = read_scene_file(path, images=False).report
+        print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB): held-out PSNR {report['psnr']:.2f} dB, "
+              f"SSIM {report['ssim']:.4f}; fit {timings['fit_s']:.1f} s, total {timings['total_s']:.1f} s")
     return 0

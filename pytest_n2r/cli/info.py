@@ -79,8 +79,10 @@ def format_info(scene: SceneFile) -> str:
     state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
     where = f" on {report['device']}" if "device" in report else ""
     threads = f" ({report['threads']} threads)" if "threads" in report else ""
-    lines.append(f"fit         {state}: {report.get('steps', '?')} steps, "
-                 f"{report.get('train_seconds', float('nan')):.1f} s of training{where}{threads}")
+    # a fitted demo scene stores no timings (its file is rebuilt byte for byte)
+    seconds = report.get("train_seconds")
+    duration = f"{seconds:.1f} s of training" if seconds is not None else "training time not recorded"
+    lines.append(f"fit         {state}: {report.get('steps', '?')} steps, {duration}{where}{threads}")
     if "source" in report:
         lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
     rows = report.get("heldout") or []

@@ -1,5 +1,5 @@
 """Built-in demo scenes with exact ground truth: ``wall`` (AUV wall inspection) and ``object`` (UAV vehicle
-inspection).
+inspection), and their fitted scene fields ``wall-field`` and ``object-field`` (:mod:`.fitted`).
 
 >>> demo_scene_names()
 ('wall', 'object')
@@ -17,9 +17,12 @@ from pathlib import Path
 
 from ..data.capture import Capture
 from ..errors import InvalidArgument
+from ..scene.base import Scene
 from .exact import GroundTruthScene
+from .fitted import FIELD_SUFFIX, build_fitted, fitted_scene
 
-__all__ = ["demo_scene_names", "ground_truth", "capture", "export", "GroundTruthScene", "DEFAULT_SIZE"]
+__all__ = ["demo_scene_names", "demo_spec_names", "ground_truth", "fitted_scene", "build_fitted", "load_demo",
+           "capture", "export", "GroundTruthScene", "DEFAULT_SIZE"]
 
 #: The capture size (width, height) in pixels of the demo trajectories.
 DEFAULT_SIZE = (480, 270)
@@ -30,6 +33,27 @@ def demo_scene_names() -> tuple[str, ...]:
     from .scenes import SCENES
 
     return tuple(SCENES)
+
+
+def demo_spec_names() -> tuple[str, ...]:
+    """Every name ``demo:<name>`` accepts: the exact scenes, then their fitted fields (``<name>-field``).
+
+    >>> demo_spec_names()
+    ('wall', 'object', 'wall-field', 'object-field')
+    """
+    names = demo_scene_names()
+    return names + tuple(n + FIELD_SUFFIX for n in names)
+
+
+def load_demo(spec_name: str, device: str = "auto") -> Scene:
+    """The scene ``demo:<spec_name>`` names: the exact scene ``<name>``, or the fitted field of it for
+    ``<name>-field`` (rendered on ``device``; the exact scenes render with numpy on the CPU)."""
+    if spec_name in demo_scene_names():
+        return ground_truth(spec_name)
+    if spec_name.endswith(FIELD_SUFFIX) and spec_name[: -len(FIELD_SUFFIX)] in demo_scene_names():
+        return fitted_scene(spec_name[: -len(FIELD_SUFFIX)], device=device)
+    raise InvalidArgument(f"demo scene 'demo:{spec_name}' does not exist; expected demo: followed by one of "
+                          f"{demo_spec_names()}")
 
 
 def _check_name(name: str) -> str:

@@ -1,0 +1,252 @@
+"""Fitted demo scenes: the exact demo scenes as a scene field would see them, fitted by a fixed recipe.
+
+A fitted demo scene is what a user's own scene is (a :class:`~pytest_n2r.scene.FieldScene` rendered from
+a ``.n2r`` file), but its true image at any pose is known, so the field's own error can be measured
+(``benchmarks/demo_accuracy.py``, docs/demo-scenes.md).
+
+Where the file comes from (:func:`fitted_path`)
+    1. The file shipped with the package, ``pytest_n2r/demo/data/<name>.n2r``, when its stored recipe digest
+       is the current recipe's (no wait, no download).
+    2. Otherwise the user cache, ``<cache dir>/<name>-<digest[:16]>.n2r``, fitted there on first use (a few
+       minutes on a laptop CPU; a warning says so). The cache dir is ``$N2R_CACHE_DIR`` when set, else the
+       platform's user cache dir (``~/.cache/pytest-n2r`` on Linux). A file lock makes concurrent pytest-xdist
+       workers fit once.
+
+Reproducibility
+    A recipe fixes the capture size, the :class:`~pytest_n2r.field.config.FieldConfig` (seed included), the
+    number of steps and the CPU thread count; the fit runs on the CPU. The report stored in the file holds no
+    timings, so two builds on the same machine and library versions give byte-identical files
+    (``n2r demo build``; tested). Another CPU or library version may round differently: the bytes can
+    differ, the recipe digest and the fit's quality do not.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .. import __version__
+from ..errors import InvalidArgument, SceneFileError
+from ..field.config import FieldConfig
+from .scenes import SCENES
+
+if TYPE_CHECKING:
+    from ..scene.field_scene import FieldScene
+
+__all__ = [
+    "FittedRecipe", "RECIPES", "DEMO_CONFIG", "FIELD_SUFFIX", "build_fitted", "fitted_scene", "fitted_path",
+    "packaged_path", "cache_dir", "read_recipe_digest", "find_fitted",
+]
+
+#: A fitted scene's spec name is the exact scene's name plus this suffix (``demo:object-field``).
+FIELD_SUFFIX = "-field"
+
+#: The folder of the shipped fitted scenes (package data).
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+#: Field settings for the demo scenes. Their colours are view-independent (Lambertian shading under one
+#: light), so spherical harmonics of degree 0 lose nothing and store a quarter of the values; a 96³ grid
+#: keeps each file a few MB. Chosen by measurement (docs/demo-scenes.md).
+DEMO_CONFIG = FieldConfig(resolutions=(32, 64, 96), stage_fractions=(0.15, 0.4), sh_degree=0, batch_rays=4096,
+                          seed=0)
+
+
+@dataclass(frozen=True)
+class FittedRecipe:
+    """Everything that determines a fitted demo scene's file.
+
+    ``scene``: the exact demo scene fitted; ``size``: the capture's ``(width, height)`` in pixels (the
+    fitted scene's views, and so its default render size, have this size); ``config``: the field settings,
+    seed included; ``max_steps``: optimization steps (no time budget, so the fit is reproducible);
+    ``threads``: CPU threads of the fit (a thread count can change the rounding of parallel sums).
+    """
+
+    scene: str
+    size: tuple[int, int]
+    config: FieldConfig = DEMO_CONFIG
+    max_steps: int = 800
+    threads: int = 2
+
+    def __post_init__(self) -> None:
+        if self.scene not in SCENES:
+            raise InvalidArgument(f"FittedRecipe.scene={self.scene!r}: expected one of {tuple(SCENES)}")
+        try:
+            w, h = (int(v) for v in self.size)
+        except (TypeError, ValueError):
+            raise InvalidArgument(f"FittedRecipe.size={self.size!r}: expected a (width, height) pair in pixels") from None
+        if w < 8 or h < 8:
+            raise InvalidArgument(f"FittedRecipe.size={self.size!r}: expected at least 8x8 pixels")
+        object.__setattr__(self, "size", (w, h))
+        for name in ("max_steps", "threads"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise InvalidArgument(f"FittedRecipe.{name}={value!r}: expected an integer >= 1")
+        if not isinstance(self.config, FieldConfig):
+            raise InvalidArgument(f"FittedRecipe.config must be a FieldConfig, got {type(self.config).__name__}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The recipe as plain JSON values (stored in the fitted file's report as ``demo_recipe``)."""
+        return {"scene": self.scene, "size": list(self.size), "config": self.config.to_dict(),
+                "max_steps": self.max_steps, "threads": self.threads}
+
+    @property
+    def digest(self) -> str:
+        """Hex SHA-256 of the recipe, the exact scene's content hash and the pytest-n2r version: a file built
+        with another digest is stale."""
+        from . import ground_truth
+
+        spec = {"recipe": self.to_dict(), "scene_hash": ground_truth(self.scene).content_hash,
+                "pytest_n2r": __version__}
+        return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+
+    def replace(self, **changes: Any) -> FittedRecipe:
+        """A copy with ``changes`` (e.g. a tiny variant for a test: ``replace(size=(48, 27), max_steps=30)``)."""
+        return replace(self, **changes)
+
+
+#: The recipe of each fitted demo scene, by exact scene name.
+RECIPES: dict[str, FittedRecipe] = {
+    "wall": FittedRecipe("wall", (240, 135)),
+    "object": FittedRecipe("object", (240, 135)),
+}
+
+
+def _recipe(name: str) -> FittedRecipe:
+    if name not in RECIPES:
+        raise InvalidArgument(f"fitted demo scene {name!r} does not exist; expected one of {tuple(RECIPES)}")
+    return RECIPES[name]
+
+
+@contextlib.contextmanager
+def _torch_threads(n: int) -> Iterator[None]:
+    """Run the block with ``n`` torch and numba threads (numba: at most its configured maximum), then
+    restore both."""
+    import numba
+    import torch
+
+    before_torch, before_numba = torch.get_num_threads(), numba.get_num_threads()
+    torch.set_num_threads(n)
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before_torch)
+        numba.set_num_threads(before_numba)
+
+
+#: Report keys that hold timings: left out of a fitted demo file so that rebuilding it gives the same bytes.
+_TIMING_KEYS = ("train_seconds", "eval_seconds", "history", "time_budget_s")
+
+
+def build_fitted(
+    name: str, out_path: str | os.PathLike, *, recipe: FittedRecipe | None = None,
+    progress: Callable[[dict], None] | None = None,
+) -> tuple[Path, dict]:
+    """Fit the demo scene ``name`` by ``recipe`` (default :data:`RECIPES` ``[name]``) and write the scene
+    file ``out_path`` atomically; return the path and the build's timings (seconds: ``capture_s``, ``fit_s``
+    of training, ``eval_s``, ``total_s``).
+
+    The stored report is the fit report without timings, plus ``demo_recipe`` (:meth:`FittedRecipe.to_dict`)
+    and ``recipe_digest``; no photos are stored (the exact scene renders them). ``progress`` receives the
+    fit's progress dicts (see :func:`pytest_n2r.field.fit.fit`).
+    """
+    from ..field.fit import fit
+    from ..scene.file import save_scene
+    from . import capture
+
+    recipe = recipe or _recipe(name)
+    if recipe.scene != name:
+        raise InvalidArgument(f"build_fitted: recipe is for scene {recipe.scene!r}, not {name!r}")
+    t0 = time.perf_counter()
+    cap = capture(name, recipe.size)
+    capture_s = time.perf_counter() - t0
+    with _torch_threads(recipe.threads):
+        result = fit(cap, recipe.config, max_steps=recipe.max_steps, device="cpu", progress=progress)
+    report = {k: v for k, v in result.report.items() if k not in _TIMING_KEYS}
+    report.update(source=f"demo:{name}", demo_recipe=recipe.to_dict(), recipe_digest=recipe.digest)
+    path = save_scene(out_path, result.field, result.config, cap, report, images=False,
+                      metres_per_unit=1.0)
+    timings = {"capture_s": round(capture_s, 2), "fit_s": result.report["train_seconds"],
+               "eval_s": result.report["eval_seconds"], "total_s": round(time.perf_counter() - t0, 2)}
+    return path, timings
+
+
+def read_recipe_digest(path: str | os.PathLike) -> str | None:
+    """The ``recipe_digest`` stored in the scene file ``path`` (``None`` when it has none); reads only
+    ``scene.json``."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            report = json.loads(archive.read("scene.json")).get("report") or {}
+    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        raise SceneFileError(f"{path}: cannot read its scene.json ({exc})") from None
+    digest = report.get("recipe_digest")
+    return digest if isinstance(digest, str) else None
+
+
+def packaged_path(name: str) -> Path:
+    """Where the shipped fitted file of demo scene ``name`` lives (it may be absent in a source checkout)."""
+    _recipe(name)
+    return DATA_DIR / f"{name}.n2r"
+
+
+def cache_dir() -> Path:
+    """The user cache folder of fitted demo scenes: ``$N2R_CACHE_DIR`` when set, else the platform's user
+    cache dir for ``pytest-n2r`` (``~/.cache/pytest-n2r`` on Linux)."""
+    env = os.environ.get("N2R_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("pytest-n2r", appauthor=False))
+
+
+def find_fitted(name: str) -> tuple[Path | None, Path]:
+    """``(found, cached)``: the file holding the current recipe's fit of demo scene ``name`` (the shipped one
+    first, then the cached one; ``None`` when neither exists) and the cache path a build on first use writes."""
+    digest = _recipe(name).digest
+    shipped = packaged_path(name)
+    cached = cache_dir() / f"{name}-{digest[:16]}.n2r"
+    if shipped.is_file() and read_recipe_digest(shipped) == digest:
+        return shipped, cached
+    return (cached if cached.is_file() else None), cached
+
+
+def fitted_path(name: str, *, build: bool = True) -> Path:
+    """The fitted scene file of demo scene ``name``: the shipped one when it matches the current recipe,
+    else the cached one, fitted on first use when ``build`` (otherwise :class:`SceneFileError` when absent)."""
+    found, cached = find_fitted(name)
+    if found is not None:
+        return found
+    recipe, shipped = _recipe(name), packaged_path(name)
+    if not build:
+        raise SceneFileError(f"fitted demo scene {name!r}: neither {shipped} nor {cached} holds the current "
+                             f"recipe's fit; `n2r demo build {name}` writes it")
+    import filelock
+
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    with filelock.FileLock(str(cached) + ".lock"):
+        if not cached.is_file():  # another process may have built it while this one waited
+            reason = "is stale (another recipe or pytest-n2r version)" if shipped.is_file() else "is not installed"
+            warnings.warn(f"fitted demo scene {name!r}: the shipped {shipped.name} {reason}; fitting it into "
+                          f"{cached} ({recipe.max_steps} steps, minutes on a CPU; once)", stacklevel=2)
+            build_fitted(name, cached, recipe=recipe)
+    return cached
+
+
+def fitted_scene(name: str, device: str = "auto") -> FieldScene:
+    """The fitted demo scene ``name`` (``"wall"`` or ``"object"``) as a :class:`~pytest_n2r.scene.FieldScene`
+    named ``<name>-field``, rendered on ``device`` (see :func:`fitted_path` for where the file comes from)."""
+    from ..scene.field_scene import FieldScene
+    from ..scene.file import read_scene_file
+
+    return FieldScene(read_scene_file(fitted_path(name)), device=device, name=name + FIELD_SUFFIX)

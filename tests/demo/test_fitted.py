@@ -1,0 +1,193 @@
+"""Fitted demo scenes: recipes, byte-identical rebuilds, the shipped files, the user cache, scene specs, CLI."""
+
+from __future__ import annotations
+
+import warnings
+
+import pytest
+
+# pytester drops the modules an inner run imported first; importing them here keeps one copy of each (see
+# tests/plugin/conftest.py).
+import pytest_n2r.marker
+import pytest_n2r.strategies  # noqa: F401
+from pytest_n2r.cli.main import main
+from pytest_n2r.demo import demo_scene_names, load_demo
+from pytest_n2r.demo.fitted import RECIPES, FittedRecipe, build_fitted, fitted_path, packaged_path
+from pytest_n2r.errors import InvalidArgument, SceneFileError
+from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.scene.file import read_scene_file
+from pytest_n2r.session import parse_scene_specs
+
+#: A recipe small enough to fit in seconds: enough steps for two prunes and one refinement.
+TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), sh_degree=0, batch_rays=512)
+
+
+def tiny(name: str) -> FittedRecipe:
+    return RECIPES[name].replace(size=(48, 27), config=TINY_CONFIG, max_steps=50)
+
+
+@pytest.fixture
+def tiny_recipes(monkeypatch, tmp_path):
+    """Every fitted recipe replaced by its tiny variant, and an empty user cache in ``tmp_path/cache``."""
+    for name in demo_scene_names():
+        monkeypatch.setitem(RECIPES, name, tiny(name))
+    monkeypatch.setenv("N2R_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+@pytest.mark.parametrize("changes, field", [
+    ({"scene": "moon"}, "FittedRecipe.scene"),
+    ({"size": (4, 4)}, "FittedRecipe.size"),
+    ({"size": "big"}, "FittedRecipe.size"),
+    ({"max_steps": 0}, "FittedRecipe.max_steps"),
+    ({"threads": 1.5}, "FittedRecipe.threads"),
+    ({"config": {"seed": 0}}, "FittedRecipe.config"),
+])
+def test_a_bad_recipe_names_the_field(changes, field):
+    with pytest.raises(InvalidArgument, match=field):
+        RECIPES["wall"].replace(**changes)
+
+
+def test_the_digest_follows_every_part_of_the_recipe():
+    base = RECIPES["object"]
+    assert base.digest == FittedRecipe("object", base.size).digest, "equal recipes must share a digest"
+    variants = [base.replace(size=(200, 112)), base.replace(max_steps=base.max_steps + 1), base.replace(threads=3),
+                base.replace(config=base.config.replace(seed=1)), base.replace(scene="wall")]
+    digests = {v.digest for v in variants} | {base.digest}
+    assert len(digests) == len(variants) + 1, "a recipe change left the digest unchanged (a stale file would load)"
+
+
+@pytest.mark.slow
+def test_a_rebuild_is_byte_identical_and_records_its_recipe(tmp_path):
+    recipe = tiny("object")
+    first, timings = build_fitted("object", tmp_path / "a.n2r", recipe=recipe)
+    second, _ = build_fitted("object", tmp_path / "b.n2r", recipe=recipe)
+    a, b = first.read_bytes(), second.read_bytes()
+    assert a == b, f"two builds of one recipe differ ({len(a)} vs {len(b)} bytes)"
+    assert timings["fit_s"] > 0 and timings["total_s"] >= timings["fit_s"], timings
+    scene = read_scene_file(first, images=False)
+    assert scene.report["demo_recipe"] == recipe.to_dict()
+    assert scene.report["recipe_digest"] == recipe.digest
+    assert scene.report["steps"] == recipe.max_steps and scene.config == recipe.config
+    assert "train_seconds" not in scene.report, "a timing in the report makes every rebuild's bytes differ"
+    assert scene.images_stored == 0 and {(v.camera.width, v.camera.height) for v in scene.views} == {(48, 27)}
+    assert scene.report["psnr"] is not None and len(scene.report["heldout"]) == 6
+    with pytest.raises(InvalidArgument, match="recipe is for scene 'object', not 'wall'"):
+        build_fitted("wall", tmp_path / "c.n2r", recipe=recipe)
+
+
+@pytest.mark.parametrize("name", demo_scene_names())
+def test_the_shipped_file_is_the_current_recipe(name):
+    path = packaged_path(name)
+    assert path.is_file(), f"{path} is not shipped; `n2r demo build {name}` writes it"
+    scene = read_scene_file(path, images=False)
+    recipe = RECIPES[name]
+    assert scene.report["demo_recipe"] == recipe.to_dict(), (
+        f"{path.name} was built by {scene.report['demo_recipe']}, the recipe is now {recipe.to_dict()}: "
+        f"rebuild it with `n2r demo build {name}`")
+    assert scene.report["recipe_digest"] == recipe.digest, (
+        f"{path.name} is stale (the scene, recipe or pytest-n2r version changed): `n2r demo build {name}`")
+    assert scene.config == recipe.config and scene.report["steps"] == recipe.max_steps
+    assert {(v.camera.width, v.camera.height) for v in scene.views} == {recipe.size}
+    assert scene.images_stored == 0 and scene.size_bytes < 8 * 2**20, f"{path.name}: {scene.size_bytes} bytes"
+    assert fitted_path(name, build=False) == path
+
+
+@pytest.mark.slow
+def test_without_a_current_shipped_file_the_fit_is_cached_on_first_use(tiny_recipes):
+    with pytest.raises(SceneFileError, match="n2r demo build wall"):
+        fitted_path("wall", build=False)
+    with pytest.warns(UserWarning, match="fitted demo scene 'wall'.*stale.*fitting it into"):
+        path = fitted_path("wall")
+    assert path.parent == tiny_recipes and path.name.startswith("wall-") and path.is_file()
+    built = path.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the second use loads the cached file: no fit, no warning
+        scene = load_demo("wall-field", device="cpu")
+    assert path.read_bytes() == built
+    assert scene.name == "wall-field" and not scene.is_exact and scene.file.path == path
+    view = scene.views[0]
+    rgb = scene.render(view.c2w, view.camera, "rgb").rgb
+    assert rgb.shape == (27, 48, 3) and rgb.std() > 1, "the cached fit renders a blank image"
+
+
+def test_demo_specs_name_exact_and_fitted_scenes(tmp_path):
+    specs = parse_scene_specs(["demo:object", "demo:object-field", "demo:wall-field"], tmp_path, "--n2r-scene")
+    assert [(s.name, s.kind) for s in specs] == [("object", "demo"), ("object-field", "demo"), ("wall-field", "demo")]
+    with pytest.raises(InvalidArgument, match=r"--n2r-scene 'demo:objects'.*'object-field'"):
+        parse_scene_specs(["demo:objects"], tmp_path, "--n2r-scene")
+    with pytest.raises(InvalidArgument, match="demo:car-field"):
+        load_demo("car-field")
+
+
+def test_the_fitted_object_scene_is_close_to_the_exact_one():
+    """The shipped field renders its held-out views near the ground truth (a broken file would not)."""
+    from pytest_n2r.demo import ground_truth
+    from pytest_n2r.metrics.image_quality import psnr
+
+    exact, field = ground_truth("object"), load_demo("object-field", device="cpu")
+    assert field.name == "object-field" and field.reference_length == pytest.approx(exact.reference_length)
+    view = next(v for v in field.views if v.split == "heldout")
+    got = field.render(view.c2w, view.camera, "rgb").rgb
+    want = exact.render(view.c2w, view.camera, "rgb").rgb
+    score = psnr(want, got)
+    assert score >= field.report["heldout"][0]["psnr"] - 0.01, (
+        f"{view.name}: {score:.2f} dB now, {field.report['heldout'][0]['psnr']:.2f} dB when fitted")
+
+
+def test_cli_lists_both_kinds_and_builds_named_scenes(tmp_path, capsys, tiny_recipes):
+    assert main(["demo", "list"]) == 0
+    out = capsys.readouterr().out
+    for name in demo_scene_names():
+        assert f"  {name} " in out and f"  {name}-field " in out, out
+    assert "fitted into" in out, "with tiny recipes nothing is shipped or cached: the list must say so"
+    assert main(["demo", "build", "car", "-o", str(tmp_path)]) == 2
+    assert "'car'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_cli_build_writes_the_named_scene(tmp_path, capsys, tiny_recipes):
+    assert main(["demo", "build", "object", "-o", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    path = tmp_path / "out" / "object.n2r"
+    assert f"wrote {path}" in out and "held-out PSNR" in out, out
+    assert not (tmp_path / "out" / "wall.n2r").exists(), "only the named scene is built"
+    assert read_scene_file(path, images=False).report["recipe_digest"] == RECIPES["object"].digest
+    assert main(["info", str(path)]) == 0
+    assert "training time not recorded" in capsys.readouterr().out
+
+
+def test_fitted_module_imports_no_torch():
+    """`import pytest_n2r.demo` stays light: torch is imported when a fitted scene is built or loaded."""
+    import subprocess
+    import sys
+
+    code = "import sys, pytest_n2r.demo, pytest_n2r.plugin; print('torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False", "importing pytest_n2r.demo imported torch"
+
+
+def test_every_demo_scene_has_a_fitted_recipe():
+    missing = [n for n in demo_scene_names() if n not in RECIPES or RECIPES[n].scene != n]
+    assert not missing, f"demo scenes without a fitted recipe of their own: {missing}"
+
+
+INNER = """
+from pytest_n2r import FieldScene
+
+
+def test_the_fixture_is_the_fitted_demo_scene(n2r_scene):
+    assert isinstance(n2r_scene, FieldScene), type(n2r_scene)
+    assert n2r_scene.name == "object-field" and len(n2r_scene.views) == 48, n2r_scene
+"""
+
+
+def test_the_plugin_runs_on_a_fitted_demo_scene_and_rejects_unknown_names(pytester: pytest.Pytester):
+    pytester.makepyfile(test_inner=INNER)
+    result = pytester.runpytest("-p", "no:cacheprovider", "-v", "--n2r-scene", "demo:object-field",
+                                "--n2r-device", "cpu")
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines(["*test_the_fixture_is_the_fitted_demo_scene[[]object-field[]] PASSED*"])
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", "demo:object-fields")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, result.ret
+    result.stderr.fnmatch_lines(["*demo:object-fields*no such demo scene*'object-field'*"])
