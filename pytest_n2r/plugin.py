@@ -252,11 +252,11 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
         )
     session = _session(pyfuncitem.config)
-    failure = stats = None
+    failure = None
     try:
-        stats = session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid)
+        session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid)
     except RelationFailure as exc:
-        failure, stats = str(exc), exc.stats
+        failure = str(exc)
     finally:
         if session.stats and session.stats[-1].test_id == pyfuncitem.nodeid:  # kept whatever happened
             pyfuncitem.stash[_STATS] = _plain(session.stats[-1])

@@ -16,8 +16,7 @@ SUT that breaks beyond 5° of yaw is reported at ``yaw=5.01``, not at the neares
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +24,7 @@ from hypothesis import strategies as st
 
 from ._validation import check_real
 from .errors import InvalidArgument, InvalidType
-from .geometry import Transform, Units, invert_pose
+from .geometry import Transform, Units
 from .scene.base import Scene, SceneView
 
 __all__ = [

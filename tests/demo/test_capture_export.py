@@ -11,7 +11,7 @@ import pytest
 from pytest_n2r.cli.main import main
 from pytest_n2r.demo import capture, demo_scene_names, export, ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
-from pytest_n2r.geometry import Camera, opengl_to_opencv, project
+from pytest_n2r.geometry import opengl_to_opencv, project
 
 
 def test_capture_has_images_poses_points_and_bounds():
