@@ -140,7 +140,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                     if family.startswith("tau"):
                         tau = sample_transform(family, rng)
                         follow = scene.render(tau.apply(view.c2w, scene.length_scale()), camera, outputs)
-                        valid = validity.check(follow, scene).valid
+                        valid = validity.check(follow, scene, source).valid
                         drawn = tau.describe()
                     else:
                         mutation = sample_mutation(family, rng)
