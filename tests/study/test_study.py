@@ -103,6 +103,20 @@ def test_cli_rejects_bad_eps(capsys):
     assert "--eps 'a,b'" in capsys.readouterr().err
 
 
+def test_missing_lpips_is_explained_once_in_the_notes(monkeypatch):
+    import pytest_n2r.study.run as study_run
+
+    monkeypatch.setattr(study_run, "lpips", lambda *_a, **_k: None)
+    monkeypatch.setattr(study_run, "lpips_unavailable_reason", lambda: "the 'lpips' package is not installed")
+    config = StudyConfig(examples=1, max_views=2, size=48, fps_frames=1, fps_sizes=((48, 27),),
+                         families=("m1",))
+    result = run_study([ground_truth("wall")], [resolve_sut("orb", None)], config)
+    assert result.realness and all(r["lpips"] is None for r in result.realness)
+    notes = [n for n in result.notes if n.startswith("LPIPS skipped")]
+    assert notes == ["LPIPS skipped (column empty): the 'lpips' package is not installed"], \
+        f"expected one note saying why the LPIPS column is empty, got notes {result.notes}"
+
+
 class _HalfEmptyScene:
     """The exact wall scene with the left 30 % of every render's columns empty (opacity 0): like an object
     in the open, every view — the source too — shows some empty space."""
