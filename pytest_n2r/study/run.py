@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import InvalidArgument, MetricUndefined, N2RError
 from ..geometry import Camera
-from ..metrics.image_quality import lpips, psnr, ssim
+from ..metrics.image_quality import lpips, lpips_unavailable_reason, psnr, ssim
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
 from ..validity import Validity
@@ -140,7 +140,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                     if family.startswith("tau"):
                         tau = sample_transform(family, rng)
                         follow = scene.render(tau.apply(view.c2w, scene.length_scale()), camera, outputs)
-                        valid = validity.check(follow, scene).valid
+                        valid = validity.check(follow, scene, source).valid
                         drawn = tau.describe()
                     else:
                         mutation = sample_mutation(family, rng)
@@ -165,9 +165,12 @@ def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedVie
     images = {"tau0": source.rgb}
     images.update({f: sample_mutation(f, rng).apply(real) for f in MUTATION_FAMILIES})
     for name, img in images.items():
+        perceptual = lpips(real, img)
+        if perceptual is None and not any(n.startswith("LPIPS skipped") for n in result.notes):
+            result.notes.append(f"LPIPS skipped (column empty): {lpips_unavailable_reason()}")
         result.realness.append({
             "scene": scene.name, "view": view.name, "source": name, "psnr": psnr(real, img),
-            "ssim": ssim(real, img), "lpips": lpips(real, img),
+            "ssim": ssim(real, img), "lpips": perceptual,
         })
     real_view = RenderedView(source.camera, source.c2w, rgb=real, depth=source.depth, opacity=source.opacity)
     for sut in suts:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 
 import numpy as np
@@ -100,3 +101,46 @@ def test_cli_rejects_bad_eps(capsys):
     with pytest.raises(SystemExit):
         main(["study", "demo:wall", "--sut", "orb", "-o", "x", "--eps", "a,b"])
     assert "--eps 'a,b'" in capsys.readouterr().err
+
+
+def test_missing_lpips_is_explained_once_in_the_notes(monkeypatch):
+    import pytest_n2r.study.run as study_run
+
+    monkeypatch.setattr(study_run, "lpips", lambda *_a, **_k: None)
+    monkeypatch.setattr(study_run, "lpips_unavailable_reason", lambda: "the 'lpips' package is not installed")
+    config = StudyConfig(examples=1, max_views=2, size=48, fps_frames=1, fps_sizes=((48, 27),),
+                         families=("m1",))
+    result = run_study([ground_truth("wall")], [resolve_sut("orb", None)], config)
+    assert result.realness and all(r["lpips"] is None for r in result.realness)
+    notes = [n for n in result.notes if n.startswith("LPIPS skipped")]
+    assert notes == ["LPIPS skipped (column empty): the 'lpips' package is not installed"], \
+        f"expected one note saying why the LPIPS column is empty, got notes {result.notes}"
+
+
+class _HalfEmptyScene:
+    """The exact wall scene with the left 30 % of every render's columns empty (opacity 0): like an object
+    in the open, every view — the source too — shows some empty space."""
+
+    def __init__(self) -> None:
+        self._scene = ground_truth("wall")
+
+    def __getattr__(self, name: str):
+        return getattr(self._scene, name)
+
+    def render(self, c2w, camera, outputs=("rgb",)):
+        view = self._scene.render(c2w, camera, outputs)
+        if view.opacity is None:
+            return view
+        opacity = view.opacity.copy()
+        opacity[:, : int(0.3 * opacity.shape[1])] = 0.0
+        return dataclasses.replace(view, opacity=opacity)
+
+
+def test_follow_ups_are_judged_against_their_source_view():
+    config = StudyConfig(examples=2, max_views=1, size=64, fps_frames=1, fps_sizes=((64, 36),),
+                         families=("tau1",))
+    result = run_study([_HalfEmptyScene()], [resolve_sut("orb", None)], config)
+    valid = [r["valid"] for r in result.examples]
+    assert valid and all(valid), (
+        f"τ1 follow-ups of a view that is itself 30 % empty were rejected ({valid}): the validity check must "
+        "compare the follow-up's empty share with the source view's, not with a full view")
