@@ -28,7 +28,8 @@ from ..render.lattice import grid_coords
 from ..render.march import MarchGrid, march_compiled, march_dense
 from .config import FieldConfig
 from .grid import SceneField
-from .optim import RowAdam, resolve_device
+from .device import resolve_device
+from .optim import RowAdam
 from .query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
 from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 from .space import SceneSpace

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["RowAdam", "resolve_device"]
+__all__ = ["RowAdam"]
 
 
 class RowAdam:
@@ -39,19 +39,3 @@ class RowAdam:
         denom = (v / (1.0 - b2 ** self.t)).sqrt_().add_(self.eps)
         self.values[rows] -= (self.lrs * (lr_scale / (1.0 - b1 ** self.t))) * m / denom
 
-
-def resolve_device(device: str | torch.device) -> torch.device:
-    """``"auto"`` → CUDA when available, else CPU; otherwise the device named (checked to exist)."""
-    from ..errors import InvalidArgument
-
-    if str(device) == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise InvalidArgument(f"device={device!r}: expected 'auto', 'cpu' or 'cuda[:N]'") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise InvalidArgument(f"device={device!r}: CUDA is not available on this machine; use 'auto' or 'cpu'")
-    if dev.type not in ("cpu", "cuda"):
-        raise InvalidArgument(f"device={device!r}: expected 'auto', 'cpu' or 'cuda[:N]'")
-    return dev

@@ -15,7 +15,7 @@ from numba import njit, prange
 
 from ..render.kernels import _grid
 
-__all__ = ["sample_corners", "scatter_max", "RowIndex", "unique_rows", "Interpolate", "Composite", "adam_rows"]
+__all__ = ["sample_corners", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
 
 
 @njit(cache=True, parallel=True)
@@ -85,11 +85,6 @@ class RowIndex:
         inverse = np.empty(rows.shape, dtype=np.int64)
         n = _unique_rows(rows, self.slot, self.stamp, self.tag, unique, inverse)
         return unique[:n], inverse
-
-
-def unique_rows(rows: np.ndarray, n_rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """One-off :meth:`RowIndex.unique` (allocates the scratch space)."""
-    return RowIndex(n_rows).unique(rows)
 
 
 @njit(cache=True, parallel=True)

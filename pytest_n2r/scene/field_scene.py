@@ -8,7 +8,7 @@ import json
 import numpy as np
 import torch
 
-from ..field.optim import resolve_device
+from ..field.device import resolve_device
 from ..geometry import Camera
 from ..render.field_render import FieldRenderer, RenderSettings
 from .base import Scene

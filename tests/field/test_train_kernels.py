@@ -12,7 +12,7 @@ import torch
 
 from pytest_n2r.field.optim import RowAdam
 from pytest_n2r.field.query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
-from pytest_n2r.field.train_kernels import Composite, Interpolate, adam_rows, sample_corners, unique_rows
+from pytest_n2r.field.train_kernels import Composite, Interpolate, RowIndex, adam_rows, sample_corners
 from pytest_n2r.render.lattice import grid_coords
 
 TOL = 1e-10
@@ -119,9 +119,9 @@ def test_composite_gradient_in_float32_tracks_float64():
 def test_interpolate_forward_and_gradient_equal_autograd(n_samples):
     g = torch.Generator().manual_seed(n_samples)
     rows = torch.randint(0, 40, (n_samples, 8), generator=g).numpy()
-    unique, inverse = unique_rows(rows, 40)
-    assert len(set(unique.tolist())) == len(unique), f"unique_rows returned repeated rows {unique.tolist()}"
-    np.testing.assert_array_equal(unique[inverse], rows, err_msg="unique_rows: unique[inverse] is not rows")
+    unique, inverse = RowIndex(40).unique(rows)
+    assert len(set(unique.tolist())) == len(unique), f"RowIndex.unique returned repeated rows {unique.tolist()}"
+    np.testing.assert_array_equal(unique[inverse], rows, err_msg="RowIndex.unique: unique[inverse] is not rows")
     sub = torch.randn(len(unique), 7, generator=g, dtype=torch.float64, requires_grad=True)
     weights = torch.rand(n_samples, 8, generator=g, dtype=torch.float64)
     inverse_t = torch.from_numpy(inverse)
