@@ -24,6 +24,12 @@ class FieldConfig:
     Optimizer (Adam on the rows a step touches)
         ``lr_density``, ``lr_color``: learning rates, decayed exponentially to ``lr_final_ratio`` of them.
     Initialization and regularization
+        ``random_background``: every training ray is composited over its own random colour, so the field
+        cannot let a constant background stand in for dark or distant parts of the scene: each ray must
+        become opaque inside the field (photos show the scene in every pixel; sky and far walls go to the
+        contracted shell). Opaque surfaces also stop rays early when rendering. ``distortion``: weight of
+        mip-NeRF 360's distortion loss (mean over rays, positions in contracted units): it gathers each
+        ray's compositing weight into one short interval, turning fog and floaters into surfaces.
         ``alpha_init``: opacity per sample of the empty field. ``sparsity``: weight of the mean sample
         opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
@@ -42,6 +48,8 @@ class FieldConfig:
     lr_density: float = 0.2
     lr_color: float = 0.1
     lr_final_ratio: float = 0.1
+    random_background: bool = True
+    distortion: float = 1e-3
     alpha_init: float = 1e-4
     sparsity: float = 1e-2
     prune_alpha: float = 1e-3
@@ -65,13 +73,15 @@ class FieldConfig:
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
         if not 0 < self.alpha_init < 1 or not 0 <= self.prune_alpha < 1 or not 0 <= self.prune_weight < 1:
             raise InvalidArgument(f"alpha_init={self.alpha_init!r} must be in (0, 1), prune_alpha={self.prune_alpha!r} and prune_weight={self.prune_weight!r} in [0, 1)")
-        for name in ("sparsity",):
+        for name in ("sparsity", "distortion"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")
         for name in ("batch_rays", "prune_every", "prune_after"):
             if not (isinstance(getattr(self, name), int) and getattr(self, name) >= 1):
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected an integer >= 1")
+        if not isinstance(self.random_background, bool):
+            raise InvalidArgument(f"FieldConfig.random_background={self.random_background!r}: expected True or False")
         if self.sh_degree not in (0, 1):
             raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0 or 1")
 

@@ -24,13 +24,13 @@ from ..data.capture import Capture, CapturedView
 from ..errors import FitError, InvalidArgument
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
-from ..render.lattice import grid_coords
+from ..render.lattice import grid_coords, lattice_position
 from ..render.march import MarchGrid, march_compiled, march_dense
 from .config import FieldConfig
 from .grid import SceneField
 from .device import resolve_device
 from .optim import RowAdam
-from .query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
+from .query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 from .space import SceneSpace
 
@@ -100,7 +100,6 @@ class _Trainer:
         self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
         self.rays = _Rays(train, self.space, device)
         self.generator = torch.Generator().manual_seed(config.seed)
-        self.background = torch.zeros(3, device=device)
         self.field = SceneField.empty(self.space, config.resolutions[0], config.sh_degree, config.alpha_init,
                                       config.step_ratio, device)
         self.stage = 0
@@ -135,9 +134,15 @@ class _Trainer:
         pick = torch.randint(self.rays.n, (c.batch_rays,), generator=self.generator).to(self.device)
         o, d = self.rays.o[pick], self.rays.d[pick]
         target = self.rays.rgb[pick].float() / 255.0
+        if c.random_background:
+            background = torch.rand(c.batch_rays, 3, generator=self.generator).to(self.device)
+        else:
+            background = torch.zeros(3, device=self.device)
         ray_idx, t, offsets = self.march(o, d)
         unit = d / d.norm(dim=-1, keepdim=True)
         n_samples = max(t.numel(), 1)
+        g = self.grid
+        s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
         if self.compiled:
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
                                                   self.space.shell, f.resolution)
@@ -145,26 +150,28 @@ class _Trainer:
             unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
             sub = f.values[unique].requires_grad_(True)
             v = Interpolate.apply(sub, inverse, weights)
-            rgb, alpha_sum, sample_weight = Composite.apply(v, sh_basis(unit, f.sh_degree), offsets,
-                                                            f.density_shift, c.step_ratio, ALPHA_MAX, self.background)
+            rgb, alpha_sum, dist, sample_weight = Composite.apply(
+                v, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift, c.step_ratio, ALPHA_MAX,
+                background)
             scatter_max(cells, sample_weight.numpy(), self.cell_weight.numpy())
         else:
             p = o[ray_idx] + t[:, None] * d[ray_idx]
-            g = grid_coords(p, self.space.shell, f.resolution)
-            rows, weights = trilinear(g, f.resolution)
+            coords = grid_coords(p, self.space.shell, f.resolution)
+            rows, weights = trilinear(coords, f.resolution)
             unique, inverse = torch.unique(rows, return_inverse=True)
             sub = f.values[unique].requires_grad_(True)
             alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
                                   f.density_shift, c.step_ratio)
-            out = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], self.background)
+            out = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], background)
             rgb = out["rgb"]
             n = f.resolution - 1
-            cell = g.detach().floor().to(torch.int64).clamp(0, n - 1)
+            cell = coords.detach().floor().to(torch.int64).clamp(0, n - 1)
             flat = (cell[:, 0] * n + cell[:, 1]) * n + cell[:, 2]
             self.cell_weight.scatter_reduce_(0, flat, out["weights"].detach(), reduce="amax")
             alpha_sum = alpha.clamp(max=ALPHA_MAX).sum()[None]
+            dist = distortion(out["weights"], s, ray_idx, offsets, o.shape[0], g.step)
         mse = F.mse_loss(rgb, target)
-        loss = mse + c.sparsity * alpha_sum.sum() / n_samples
+        loss = mse + c.sparsity * alpha_sum.sum() / n_samples + c.distortion * dist.mean()
         if not torch.isfinite(loss):
             raise FitError(f"the fit diverged at step {self.steps}: the loss is {float(loss.detach())} "
                            "(lower lr_density / lr_color; the last checkpoint is still good)")

@@ -11,7 +11,7 @@ import torch.nn.functional as F
 
 from ..render.kernels import SH_C0, SH_C1
 
-__all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "ALPHA_MAX"]
+__all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "distortion", "ALPHA_MAX"]
 
 #: Per-sample opacity is capped here so ``log(1 - alpha)`` stays finite (transmittance cannot underflow).
 ALPHA_MAX = 1.0 - 1e-6
@@ -87,3 +87,25 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
     if t_far is not None:
         out["depth"] = zeros.index_add(0, ray_idx, weights * t) + remaining * t_far
     return out
+
+
+def _exclusive_per_ray(x: torch.Tensor, offsets: torch.Tensor, ray_idx: torch.Tensor) -> torch.Tensor:
+    """The sum of ``x`` over the earlier samples of the same ray (packed samples)."""
+    exclusive = torch.cumsum(x, 0) - x
+    if not x.numel():
+        return exclusive
+    return exclusive - exclusive[offsets[:-1].clamp(max=x.numel() - 1)][ray_idx]
+
+
+def distortion(weights: torch.Tensor, s: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor,
+               n_rays: int, delta: float) -> torch.Tensor:
+    """The distortion loss of mip-NeRF 360 per ray ``(N,)``: ``Σᵢ Σⱼ wᵢ wⱼ |sᵢ - sⱼ| + ⅓ Σᵢ wᵢ² δ``.
+
+    ``s`` is each packed sample's position along its ray and ``delta`` the length every sample stands for
+    (the same units; the field uses contracted units). It is small when a ray's weight sits in one short
+    interval (a surface) and large for weight smeared along the ray (fog, floaters).
+    """
+    w, s = weights.double(), s.double()
+    pairs = w * (s * _exclusive_per_ray(w, offsets, ray_idx) - _exclusive_per_ray(w * s, offsets, ray_idx))
+    per_sample = 2.0 * pairs + w * w * (delta / 3.0)
+    return torch.zeros(n_rays, dtype=torch.float64, device=w.device).index_add(0, ray_idx, per_sample).to(weights.dtype)

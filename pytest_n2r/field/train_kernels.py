@@ -159,14 +159,15 @@ def _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col):
 
 
 @njit(cache=True, parallel=True)
-def _composite_forward(v, basis, offsets, density_shift, step_ratio, alpha_max, background, rgb, alpha_sum,
-                       sample_weight):
+def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, background, rgb,
+                       alpha_sum, dist, sample_weight):
     n_sh = basis.shape[1]
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
         trans = 1.0
         acc = np.zeros(3)
         a_sum = 0.0
+        w_before = s_before = pairs = squares = 0.0  # running sums of weights and of weight · position
         for i in range(offsets[r], offsets[r + 1]):
             alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
@@ -174,24 +175,57 @@ def _composite_forward(v, basis, offsets, density_shift, step_ratio, alpha_max, 
             for ch in range(3):
                 acc[ch] += w * col[ch]
             a_sum += alpha
+            pairs += w * (s[i] * w_before - s_before)
+            squares += w * w
+            w_before += w
+            s_before += w * s[i]
             trans *= 1.0 - alpha
         for ch in range(3):
-            rgb[r, ch] = acc[ch] + trans * background[ch]
+            rgb[r, ch] = acc[ch] + trans * background[r, ch]
         alpha_sum[r] = a_sum
+        dist[r] = 2.0 * pairs + squares * delta / 3.0
 
 
 @njit(cache=True, parallel=True)
-def _composite_backward(v, basis, offsets, density_shift, step_ratio, alpha_max, rgb, grad_rgb, grad_alpha, grad_v):
+def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, rgb, grad_rgb,
+                        grad_alpha, grad_dist, weight, grad_weight, grad_v):
     n_sh = basis.shape[1]
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
+        first, last = offsets[r], offsets[r + 1]
+        # The distortion's gradient by each sample's weight, h_i = ∂dist/∂w_i, and Σ h_i w_i (two passes:
+        # h_i needs the ray's totals).
+        h_total = 0.0
+        gd = grad_dist[r]
+        if gd != 0.0:
+            trans = 1.0
+            w_total = s_total = 0.0
+            for i in range(first, last):
+                alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
+                weight[i] = trans * alpha
+                w_total += weight[i]
+                s_total += weight[i] * s[i]
+                trans *= 1.0 - alpha
+            w_before = s_before = 0.0
+            for i in range(first, last):
+                w = weight[i]
+                w_after, s_after = w_total - w_before - w, s_total - s_before - w * s[i]
+                spread = s[i] * w_before - s_before + s_after - s[i] * w_after  # Σ_j w_j |s_i - s_j|
+                grad_weight[i] = gd * (2.0 * spread + 2.0 * w * delta / 3.0)
+                h_total += grad_weight[i] * w
+                w_before += w
+                s_before += w * s[i]
         trans = 1.0
         prefix = np.zeros(3)
+        h_prefix = 0.0
         g = grad_rgb[r]
-        for i in range(offsets[r], offsets[r + 1]):
+        for i in range(first, last):
             alpha, d_raw = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
             d_alpha = grad_alpha[r]
+            if gd != 0.0:  # ∂w_i/∂alpha_k: T_k for i = k, -w_i / (1 - alpha_k) for i > k
+                h_prefix += grad_weight[i] * w
+                d_alpha += grad_weight[i] * trans - (h_total - h_prefix) / (1.0 - alpha)
             for ch in range(3):
                 prefix[ch] += w * col[ch]
                 suffix = rgb[r, ch] - prefix[ch]          # what is behind this sample, background included
@@ -207,34 +241,39 @@ class Composite(torch.autograd.Function):
     """Shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
 
     Inputs: interpolated values ``v (N, F)``, the SH basis of each ray's direction ``(B, n_sh)``, ``offsets
-    (B+1)``. Outputs: ``rgb (B, 3)`` over ``background``, the per-ray sum of sample opacities ``(B,)`` and,
-    not differentiable, each sample's compositing weight ``(N,)``.
-    Same formulas as :func:`pytest_n2r.field.query.shade` + :func:`~pytest_n2r.field.query.composite`.
+    (B+1)``, each sample's position ``s (N,)`` along its ray and the length ``delta`` a sample stands for
+    (both in contracted units), and ``background`` ``(3,)`` or one colour per ray ``(B, 3)``.
+    Outputs: ``rgb (B, 3)`` over the background, the per-ray sum of sample opacities ``(B,)``, the per-ray
+    distortion ``(B,)`` and, not differentiable, each sample's compositing weight ``(N,)``.
+    Same formulas as :func:`pytest_n2r.field.query.shade`, :func:`~pytest_n2r.field.query.composite` and
+    :func:`~pytest_n2r.field.query.distortion`.
     """
 
     @staticmethod
-    def forward(ctx, v, basis, offsets, density_shift, step_ratio, alpha_max, background):
+    def forward(ctx, v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, background):
         n = offsets.shape[0] - 1
         rgb = torch.empty(n, 3, dtype=torch.float64)
         alpha_sum = torch.empty(n, dtype=torch.float64)
+        dist = torch.empty(n, dtype=torch.float64)
         sample_weight = torch.empty(v.shape[0], dtype=torch.float32)
-        v_np, basis_np = v.detach().double().numpy(), basis.double().numpy()
-        _composite_forward(v_np, basis_np, offsets.numpy(), density_shift, step_ratio, alpha_max,
-                           background.double().numpy(), rgb.numpy(), alpha_sum.numpy(), sample_weight.numpy())
-        ctx.save_for_backward(v, basis, offsets, rgb)
-        ctx.params = (density_shift, step_ratio, alpha_max)
+        s = s.double().contiguous()
+        _composite_forward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(), delta,
+                           density_shift, step_ratio, alpha_max,
+                           background.double().expand(n, 3).contiguous().numpy(), rgb.numpy(), alpha_sum.numpy(),
+                           dist.numpy(), sample_weight.numpy())
+        ctx.save_for_backward(v, basis, offsets, s, rgb)
+        ctx.params = (delta, density_shift, step_ratio, alpha_max)
         ctx.mark_non_differentiable(sample_weight)
-        return rgb.to(v.dtype), alpha_sum.to(v.dtype), sample_weight
+        return rgb.to(v.dtype), alpha_sum.to(v.dtype), dist.to(v.dtype), sample_weight
 
     @staticmethod
-    def backward(ctx, grad_rgb, grad_alpha_sum, _grad_weight):
-        v, basis, offsets, rgb = ctx.saved_tensors
+    def backward(ctx, grad_rgb, grad_alpha_sum, grad_dist, _grad_weight):
+        v, basis, offsets, s, rgb = ctx.saved_tensors
+        n = rgb.shape[0]
+        grads = [g.double().contiguous() if g is not None else torch.zeros(shape, dtype=torch.float64)
+                 for g, shape in ((grad_rgb, (n, 3)), (grad_alpha_sum, (n,)), (grad_dist, (n,)))]
         grad_v = torch.empty(v.shape, dtype=torch.float64)
-        if grad_rgb is None:
-            grad_rgb = torch.zeros(rgb.shape)
-        if grad_alpha_sum is None:
-            grad_alpha_sum = torch.zeros(rgb.shape[0])
-        _composite_backward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), *ctx.params,
-                            rgb.numpy(), grad_rgb.double().contiguous().numpy(),
-                            grad_alpha_sum.double().contiguous().numpy(), grad_v.numpy())
-        return grad_v.to(v.dtype), None, None, None, None, None, None
+        scratch = [np.empty(v.shape[0]) for _ in range(2)]  # per-sample weights and ∂dist/∂weight
+        _composite_backward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(),
+                            *ctx.params, rgb.numpy(), *(g.numpy() for g in grads), *scratch, grad_v.numpy())
+        return grad_v.to(v.dtype), None, None, None, None, None, None, None, None

@@ -24,7 +24,7 @@ import math
 
 import torch
 
-__all__ = ["ray_box", "lattice_counts", "lattice_t", "contract", "grid_coords"]
+__all__ = ["ray_box", "lattice_counts", "lattice_t", "lattice_position", "contract", "grid_coords"]
 
 
 def ray_box(o: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -62,6 +62,17 @@ def lattice_t(o: torch.Tensor, d: torch.Tensor, step: float, shell_samples: int,
     j = torch.arange(shell_samples, dtype=o.dtype, device=o.device)
     shell = 1.0 / (1.0 / ts[:, None] - (j[None, :] + 0.5) * du[:, None])
     return torch.cat([inner, shell], dim=1)
+
+
+def lattice_position(o: torch.Tensor, d: torch.Tensor, t: torch.Tensor, ray_idx: torch.Tensor, step: float,
+                     shell_samples: int, far: float) -> torch.Tensor:
+    """Where packed samples ``t`` (of rays ``ray_idx``) lie along their rays, in contracted units from the
+    start of the lattice: ``step`` times the lattice index, so every sample stands for a length ``step``
+    (float64). Inner and shell samples are one continuous scale."""
+    t0, dt, n_inner, ts, du = (x[ray_idx] for x in lattice_counts(o.double(), d.double(), step, shell_samples, far))
+    t = t.double()
+    index = torch.where(t < ts, (t - t0) / dt, n_inner + (1.0 / ts - 1.0 / t) / du)
+    return step * index
 
 
 def contract(p: torch.Tensor, shell: float) -> torch.Tensor:

@@ -18,7 +18,7 @@ from pytest_n2r.field.grid import SceneField
 from .conftest import SHORT_CONFIG, SHORT_STEPS
 
 #: Held-out PSNR of the short fit, measured (bit-reproducible on one machine); the test allows 1.5 dB less.
-MEASURED_PSNR = 16.8
+MEASURED_PSNR = 18.0
 #: The field before any step (opacity 0.01 per sample, grey) scores 9.6 dB; a black image 7.4 dB.
 MIN_GAIN_DB = 5.0
 

@@ -11,12 +11,12 @@ import pytest
 import torch
 
 from pytest_n2r.field.optim import RowAdam
-from pytest_n2r.field.query import ALPHA_MAX, composite, interpolate, sh_basis, shade, trilinear
+from pytest_n2r.field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from pytest_n2r.field.train_kernels import Composite, Interpolate, RowIndex, adam_rows, sample_corners
 from pytest_n2r.render.lattice import grid_coords
 
 TOL = 1e-10
-SHIFT, STEP_RATIO = -2.0, 0.5
+SHIFT, STEP_RATIO, DELTA = -2.0, 0.5, 0.03
 
 
 def packed(counts: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -28,9 +28,10 @@ def packed(counts: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None
-            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Random interpolated values ``v (N, F)`` (float64, requiring grad), unit ray directions' SH basis
-    ``(B, n_sh)``, ``ray_idx`` and ``offsets``; sample ``capped`` gets a density whose opacity is capped."""
+    ``(B, n_sh)``, ``ray_idx``, ``offsets`` and increasing sample positions ``s (N,)`` along each ray (gaps
+    of at least ``DELTA``, as on the lattice); sample ``capped`` gets a density whose opacity is capped."""
     g = torch.Generator().manual_seed(seed)
     ray_idx, offsets = packed(counts)
     n_sh = (sh_degree + 1) ** 2
@@ -39,17 +40,21 @@ def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = N
         v[capped, 0] = 60.0  # softplus → 58: alpha = 1 - e⁻²⁹, above ALPHA_MAX
     dirs = torch.randn(len(counts), 3, generator=g, dtype=torch.float64)
     basis = sh_basis(dirs / dirs.norm(dim=-1, keepdim=True), sh_degree)
-    return v.requires_grad_(True), basis, ray_idx, offsets
+    gaps = DELTA * (1.0 + 3.0 * torch.rand(int(offsets[-1]), generator=g, dtype=torch.float64))
+    s = torch.cat([torch.cumsum(gaps[a:b], 0) for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())])
+    return v.requires_grad_(True), basis, ray_idx, offsets, s
 
 
-def reference(v: torch.Tensor, basis: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor,
-              background: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """rgb, the sum of capped opacities, and per-sample weights by ``query.shade`` + ``query.composite``."""
+def reference(v: torch.Tensor, basis: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor, s: torch.Tensor,
+              background: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """rgb, the sum of capped opacities, the distortion and per-sample weights by ``query.shade``,
+    ``query.composite`` and ``query.distortion``."""
     alpha, rgb = shade(v, basis[ray_idx], SHIFT, STEP_RATIO)
     n_rays = len(offsets) - 1
     out = composite(alpha, rgb, torch.zeros_like(alpha), ray_idx, offsets, n_rays, background)
     alpha_sum = torch.zeros(n_rays, dtype=v.dtype).index_add(0, ray_idx, alpha.clamp(max=ALPHA_MAX))
-    return out["rgb"], alpha_sum, out["weights"]
+    dist = distortion(out["weights"], s, ray_idx, offsets, n_rays, DELTA)
+    return out["rgb"], alpha_sum, dist, out["weights"]
 
 
 CASES = {
@@ -62,30 +67,36 @@ CASES = {
 CAPPED = {"capped_sample": 5, "one_sample_each": 2, "long_ray": 150}
 
 
+@pytest.mark.parametrize("per_ray_background", [False, True], ids=["one_background", "background_per_ray"])
 @pytest.mark.parametrize("sh_degree", [0, 1])
 @pytest.mark.parametrize("case", list(CASES))
-def test_composite_forward_and_gradient_equal_autograd_through_the_reference(case, sh_degree):
-    v, basis, ray_idx, offsets = samples(CASES[case], sh_degree, seed=len(case), capped=CAPPED.get(case))
-    background = torch.tensor([0.3, 0.6, 0.1], dtype=torch.float64)
+def test_composite_forward_and_gradient_equal_autograd_through_the_reference(case, sh_degree, per_ray_background):
+    v, basis, ray_idx, offsets, s = samples(CASES[case], sh_degree, seed=len(case), capped=CAPPED.get(case))
     g = torch.Generator().manual_seed(1)
+    if per_ray_background:  # training composites each ray over its own random colour
+        background = torch.rand(len(offsets) - 1, 3, generator=g, dtype=torch.float64)
+    else:
+        background = torch.tensor([0.3, 0.6, 0.1], dtype=torch.float64)
     d_rgb = torch.randn(len(offsets) - 1, 3, generator=g, dtype=torch.float64)
     d_alpha = torch.randn(len(offsets) - 1, generator=g, dtype=torch.float64)
+    d_dist = torch.randn(len(offsets) - 1, generator=g, dtype=torch.float64)
 
     def value_and_grad(fn):
         v.grad = None
-        rgb, alpha_sum, weights = fn()
-        ((rgb * d_rgb).sum() + (alpha_sum * d_alpha).sum()).backward()
-        return rgb.detach(), alpha_sum.detach(), weights.detach(), v.grad
+        rgb, alpha_sum, dist, weights = fn()
+        ((rgb * d_rgb).sum() + (alpha_sum * d_alpha).sum() + (dist * d_dist).sum()).backward()
+        return rgb.detach(), alpha_sum.detach(), dist.detach(), weights.detach(), v.grad
 
-    rgb, alpha_sum, weights, grad = value_and_grad(
-        lambda: Composite.apply(v, basis, offsets, SHIFT, STEP_RATIO, ALPHA_MAX, background))
-    rgb_ref, alpha_sum_ref, weights_ref, grad_ref = value_and_grad(
-        lambda: reference(v, basis, ray_idx, offsets, background))
+    rgb, alpha_sum, dist, weights, grad = value_and_grad(
+        lambda: Composite.apply(v, basis, offsets, s, DELTA, SHIFT, STEP_RATIO, ALPHA_MAX, background))
+    rgb_ref, alpha_sum_ref, dist_ref, weights_ref, grad_ref = value_and_grad(
+        lambda: reference(v, basis, ray_idx, offsets, s, background))
 
-    what = f"case {case!r} (samples per ray {CASES[case]}), sh_degree={sh_degree}"
+    what = f"case {case!r} (samples per ray {CASES[case]}), sh_degree={sh_degree}, background {tuple(background.shape)}"
     torch.testing.assert_close(rgb, rgb_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite rgb: {m}")
     torch.testing.assert_close(alpha_sum, alpha_sum_ref, rtol=0, atol=TOL,
                                msg=lambda m: f"{what}: Composite opacity sum: {m}")
+    torch.testing.assert_close(dist, dist_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite distortion: {m}")
     torch.testing.assert_close(weights.double(), weights_ref, rtol=1e-6, atol=1e-7,
                                msg=lambda m: f"{what}: Composite sample weights (float32): {m}")
     torch.testing.assert_close(grad, grad_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite gradient: {m}")
@@ -94,22 +105,22 @@ def test_composite_forward_and_gradient_equal_autograd_through_the_reference(cas
         assert grad[i, 0] == 0.0, f"{what}: the capped sample's density has gradient {float(grad[i, 0])}; expected 0"
         assert grad[i, 1:].abs().max() > 0, f"{what}: the capped sample's colour got no gradient"
     if case == "all_empty":
-        torch.testing.assert_close(rgb, background.expand(3, 3), rtol=0, atol=0,
+        torch.testing.assert_close(rgb, background.expand(len(offsets) - 1, 3), rtol=0, atol=0,
                                    msg=lambda m: f"{what}: empty rays must show the background: {m}")
 
 
 def test_composite_gradient_in_float32_tracks_float64():
     """Training runs in float32: the kernel computes in float64 inside, so the float32 gradient is the
     float64 one rounded."""
-    v, basis, _, offsets = samples([5, 2, 9], 1, seed=3)
+    v, basis, _, offsets, s = samples([5, 2, 9], 1, seed=3)
     background = torch.zeros(3, dtype=torch.float64)
     grads = []
     for dtype in (torch.float64, torch.float32):
         x = v.detach().to(dtype).requires_grad_(True)
-        rgb, alpha_sum, _ = Composite.apply(x, basis.to(dtype), offsets, SHIFT, STEP_RATIO, ALPHA_MAX,
-                                            background.to(dtype))
+        rgb, alpha_sum, dist, _ = Composite.apply(x, basis.to(dtype), offsets, s.to(dtype), DELTA, SHIFT,
+                                                  STEP_RATIO, ALPHA_MAX, background.to(dtype))
         assert rgb.dtype == dtype, f"Composite returned {rgb.dtype} rgb for {dtype} values"
-        (rgb.sum() + alpha_sum.sum()).backward()
+        (rgb.sum() + alpha_sum.sum() + dist.sum()).backward()
         grads.append(x.grad.double())
     torch.testing.assert_close(grads[1], grads[0], rtol=1e-6, atol=1e-7,
                                msg=lambda m: f"float32 Composite gradient drifts from float64: {m}")
