@@ -34,8 +34,11 @@ class FieldConfig:
         opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
         that training rays sampled in that time without any sample reaching a compositing weight of
-        ``prune_weight`` (one cell of dilation keeps surfaces free to grow). Nothing is pruned before step
-        ``prune_after``: the field needs that long to show where its surfaces are.
+        ``prune_weight`` (one cell of dilation keeps surfaces free to grow). On the finest grid the opacity
+        threshold is ``final_prune_alpha`` instead: thin haze in front of surfaces is dropped while the
+        fit can still adapt to its absence, so rays reach surfaces in fewer samples (faster steps and
+        renders). Nothing is pruned before step ``prune_after``: the field needs that long to show where
+        its surfaces are.
     ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
     """
 
@@ -53,6 +56,7 @@ class FieldConfig:
     alpha_init: float = 1e-4
     sparsity: float = 1e-2
     prune_alpha: float = 1e-3
+    final_prune_alpha: float = 5e-2
     prune_weight: float = 1e-3
     prune_every: int = 25
     prune_after: int = 25
@@ -71,8 +75,9 @@ class FieldConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
-        if not 0 < self.alpha_init < 1 or not 0 <= self.prune_alpha < 1 or not 0 <= self.prune_weight < 1:
-            raise InvalidArgument(f"alpha_init={self.alpha_init!r} must be in (0, 1), prune_alpha={self.prune_alpha!r} and prune_weight={self.prune_weight!r} in [0, 1)")
+        if not 0 < self.alpha_init < 1 or not all(0 <= x < 1 for x in (self.prune_alpha, self.final_prune_alpha, self.prune_weight)):
+            raise InvalidArgument(f"alpha_init={self.alpha_init!r} must be in (0, 1), prune_alpha={self.prune_alpha!r}, "
+                                  f"final_prune_alpha={self.final_prune_alpha!r} and prune_weight={self.prune_weight!r} in [0, 1)")
         for name in ("sparsity", "distortion"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):

@@ -188,7 +188,9 @@ class _Trainer:
     def prune(self) -> None:
         """Drop cells the field left empty, and cells that training rays reached but that never contributed
         (hidden behind surfaces or clear air): one cell of dilation keeps what is left free to grow."""
-        keep = self.field.cell_alpha(self.config.step_ratio) >= self.config.prune_alpha
+        c = self.config
+        threshold = c.final_prune_alpha if self.stage == len(c.resolutions) - 1 else c.prune_alpha
+        keep = self.field.cell_alpha(c.step_ratio) >= threshold
         seen = self.cell_weight.reshape(keep.shape)
         keep &= (seen < 0) | (seen >= self.config.prune_weight)
         self._reset_visibility()
