@@ -56,7 +56,7 @@ class FieldConfig:
     alpha_init: float = 1e-4
     sparsity: float = 1e-2
     prune_alpha: float = 1e-3
-    final_prune_alpha: float = 5e-2
+    final_prune_alpha: float = 8e-2
     prune_weight: float = 1e-3
     prune_every: int = 25
     prune_after: int = 25

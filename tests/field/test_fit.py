@@ -136,8 +136,8 @@ def test_a_fit_with_a_short_prune_period_still_learns(capture48):
 
 @pytest.mark.slow
 def test_the_final_prune_threshold_thins_the_finest_grid_without_losing_the_fit(short_fit, capture48):
-    """On the finest grid cells below ``final_prune_alpha`` are dropped (measured: 61 % of cells stay
-    occupied at 0.05, all of them at the coarse threshold), and the fit scores no worse for it."""
+    """On the finest grid cells below ``final_prune_alpha`` are dropped (measured: 51 % of cells stay
+    occupied at the default 0.08, all of them at the coarse threshold), and the fit scores no worse for it."""
     coarse_only = fit(capture48, SHORT_CONFIG.replace(final_prune_alpha=SHORT_CONFIG.prune_alpha),
                       max_steps=SHORT_STEPS, device="cpu")
     thinned, kept = short_fit.report["field"]["occupied_fraction"], coarse_only.report["field"]["occupied_fraction"]
