@@ -160,7 +160,7 @@ def _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col):
 
 @njit(cache=True, parallel=True)
 def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, background, rgb,
-                       alpha_sum, dist, sample_weight):
+                       alpha_sum, dist, weight):
     n_sh = basis.shape[1]
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
@@ -171,7 +171,7 @@ def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, a
         for i in range(offsets[r], offsets[r + 1]):
             alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
-            sample_weight[i] = w
+            weight[i] = w
             for ch in range(3):
                 acc[ch] += w * col[ch]
             a_sum += alpha
@@ -187,25 +187,21 @@ def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, a
 
 
 @njit(cache=True, parallel=True)
-def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, rgb, grad_rgb,
-                        grad_alpha, grad_dist, weight, grad_weight, grad_v):
+def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, rgb, weight,
+                        grad_rgb, grad_alpha, grad_dist, grad_weight, grad_v):
     n_sh = basis.shape[1]
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
         first, last = offsets[r], offsets[r + 1]
-        # The distortion's gradient by each sample's weight, h_i = ∂dist/∂w_i, and Σ h_i w_i (two passes:
-        # h_i needs the ray's totals).
+        # The distortion's gradient by each sample's weight (the forward pass's), h_i = ∂dist/∂w_i, and
+        # Σ h_i w_i (two passes: h_i needs the ray's totals).
         h_total = 0.0
         gd = grad_dist[r]
         if gd != 0.0:
-            trans = 1.0
             w_total = s_total = 0.0
             for i in range(first, last):
-                alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
-                weight[i] = trans * alpha
                 w_total += weight[i]
                 s_total += weight[i] * s[i]
-                trans *= 1.0 - alpha
             w_before = s_before = 0.0
             for i in range(first, last):
                 w = weight[i]
@@ -244,7 +240,8 @@ class Composite(torch.autograd.Function):
     (B+1)``, each sample's position ``s (N,)`` along its ray and the length ``delta`` a sample stands for
     (both in contracted units), and ``background`` ``(3,)`` or one colour per ray ``(B, 3)``.
     Outputs: ``rgb (B, 3)`` over the background, the per-ray sum of sample opacities ``(B,)``, the per-ray
-    distortion ``(B,)`` and, not differentiable, each sample's compositing weight ``(N,)``.
+    distortion ``(B,)`` and, not differentiable, each sample's compositing weight ``(N,)`` (float32; the
+    backward pass reuses them in float64).
     Same formulas as :func:`pytest_n2r.field.query.shade`, :func:`~pytest_n2r.field.query.composite` and
     :func:`~pytest_n2r.field.query.distortion`.
     """
@@ -255,25 +252,27 @@ class Composite(torch.autograd.Function):
         rgb = torch.empty(n, 3, dtype=torch.float64)
         alpha_sum = torch.empty(n, dtype=torch.float64)
         dist = torch.empty(n, dtype=torch.float64)
-        sample_weight = torch.empty(v.shape[0], dtype=torch.float32)
+        weight = torch.empty(v.shape[0], dtype=torch.float64)
         s = s.double().contiguous()
         _composite_forward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(), delta,
                            density_shift, step_ratio, alpha_max,
                            background.double().expand(n, 3).contiguous().numpy(), rgb.numpy(), alpha_sum.numpy(),
-                           dist.numpy(), sample_weight.numpy())
-        ctx.save_for_backward(v, basis, offsets, s, rgb)
+                           dist.numpy(), weight.numpy())
+        ctx.save_for_backward(v, basis, offsets, s, rgb, weight)
         ctx.params = (delta, density_shift, step_ratio, alpha_max)
+        sample_weight = weight.float()
         ctx.mark_non_differentiable(sample_weight)
         return rgb.to(v.dtype), alpha_sum.to(v.dtype), dist.to(v.dtype), sample_weight
 
     @staticmethod
     def backward(ctx, grad_rgb, grad_alpha_sum, grad_dist, _grad_weight):
-        v, basis, offsets, s, rgb = ctx.saved_tensors
+        v, basis, offsets, s, rgb, weight = ctx.saved_tensors
         n = rgb.shape[0]
         grads = [g.double().contiguous() if g is not None else torch.zeros(shape, dtype=torch.float64)
                  for g, shape in ((grad_rgb, (n, 3)), (grad_alpha_sum, (n,)), (grad_dist, (n,)))]
         grad_v = torch.empty(v.shape, dtype=torch.float64)
-        scratch = [np.empty(v.shape[0]) for _ in range(2)]  # per-sample weights and ∂dist/∂weight
+        grad_weight = np.empty(v.shape[0])  # scratch: ∂dist/∂weight per sample
         _composite_backward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(),
-                            *ctx.params, rgb.numpy(), *(g.numpy() for g in grads), *scratch, grad_v.numpy())
+                            *ctx.params, rgb.numpy(), weight.numpy(), *(g.numpy() for g in grads), grad_weight,
+                            grad_v.numpy())
         return grad_v.to(v.dtype), None, None, None, None, None, None, None, None
