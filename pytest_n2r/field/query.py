@@ -60,6 +60,14 @@ def shade(v: torch.Tensor, basis: torch.Tensor, density_shift: float, step_ratio
     return alpha, rgb
 
 
+def _exclusive_per_ray(x: torch.Tensor, offsets: torch.Tensor, ray_idx: torch.Tensor) -> torch.Tensor:
+    """The sum of ``x`` over the earlier samples of the same ray (packed samples)."""
+    exclusive = torch.cumsum(x, 0) - x
+    if not x.numel():
+        return exclusive
+    return exclusive - exclusive[offsets[:-1].clamp(max=x.numel() - 1)][ray_idx]
+
+
 def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: torch.Tensor,
               offsets: torch.Tensor, n_rays: int, background: torch.Tensor, t_far: torch.Tensor | None = None
               ) -> dict[str, torch.Tensor]:
@@ -70,10 +78,7 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
     transmittance placed at ``t_far``. Transmittance is a float64 prefix sum of ``log(1 - alpha)``.
     """
     alpha = alpha.clamp(max=ALPHA_MAX)
-    log_t = torch.log1p(-alpha.double())
-    exclusive = torch.cumsum(log_t, 0) - log_t
-    start = exclusive[offsets[:-1].clamp(max=max(exclusive.numel() - 1, 0))] if exclusive.numel() else exclusive
-    trans = torch.exp(exclusive - start[ray_idx]).to(alpha.dtype)
+    trans = torch.exp(_exclusive_per_ray(torch.log1p(-alpha.double()), offsets, ray_idx)).to(alpha.dtype)
     weights = trans * alpha
     zeros = torch.zeros(n_rays, device=alpha.device, dtype=alpha.dtype)
     opacity = zeros.index_add(0, ray_idx, weights)
@@ -87,14 +92,6 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
     if t_far is not None:
         out["depth"] = zeros.index_add(0, ray_idx, weights * t) + remaining * t_far
     return out
-
-
-def _exclusive_per_ray(x: torch.Tensor, offsets: torch.Tensor, ray_idx: torch.Tensor) -> torch.Tensor:
-    """The sum of ``x`` over the earlier samples of the same ray (packed samples)."""
-    exclusive = torch.cumsum(x, 0) - x
-    if not x.numel():
-        return exclusive
-    return exclusive - exclusive[offsets[:-1].clamp(max=x.numel() - 1)][ray_idx]
 
 
 def distortion(weights: torch.Tensor, s: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor,
