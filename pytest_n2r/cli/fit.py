@@ -54,8 +54,8 @@ def parse_config_override(text: str) -> tuple[str, object]:
     try:
         return key, ast.literal_eval(value)
     except (ValueError, SyntaxError):
-        raise argparse.ArgumentTypeError(f"--config {text!r}: {value!r} is not a number or a comma-separated "
-                                         "list of numbers") from None
+        raise argparse.ArgumentTypeError(f"--config {text!r}: {value!r} is not a number, True/False or a "
+                                         "comma-separated list of numbers") from None
 
 
 def build_config(overrides: list[tuple[str, object]]) -> FieldConfig:

@@ -75,9 +75,11 @@ class FieldConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
-        if not 0 < self.alpha_init < 1 or not all(0 <= x < 1 for x in (self.prune_alpha, self.final_prune_alpha, self.prune_weight)):
-            raise InvalidArgument(f"alpha_init={self.alpha_init!r} must be in (0, 1), prune_alpha={self.prune_alpha!r}, "
-                                  f"final_prune_alpha={self.final_prune_alpha!r} and prune_weight={self.prune_weight!r} in [0, 1)")
+        if not 0 < self.alpha_init < 1:
+            raise InvalidArgument(f"FieldConfig.alpha_init={self.alpha_init!r}: expected an opacity in (0, 1)")
+        for name in ("prune_alpha", "final_prune_alpha", "prune_weight"):
+            if not 0 <= getattr(self, name) < 1:
+                raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected a threshold in [0, 1)")
         for name in ("sparsity", "distortion"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
