@@ -145,6 +145,18 @@ def _softplus(x):
     return x if x > 20.0 else math.log1p(math.exp(x))
 
 
+@njit(cache=True, inline="always")
+def _alpha(x, sigma_step):
+    """Opacity ``1 - exp(-softplus(x)·sigma_step)`` of a sample with raw density ``x`` (float64).
+
+    At the default spacing of half a voxel it is ``1 - (1 + e^x)^-½``: one exponential and a square root
+    instead of three transcendental functions (the same value to rounding).
+    """
+    if sigma_step == 0.5:
+        return 1.0 - 1.0 / math.sqrt(1.0 + math.exp(x)) if x < 40.0 else 1.0
+    return -math.expm1(-_softplus(x) * sigma_step)
+
+
 @njit(cache=True, parallel=True)
 def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samples, far, density_shift,
                 sigma_step, sh_degree, t_stop, background, want_depth, rgb, depth, opacity):
@@ -152,19 +164,22 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
 
     ``values`` is ``(res³, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
     (``[l·3 + channel]``); ``density`` is a contiguous copy of its first column (read for every sample, so
-    kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's opacity is ``1 - exp(-σ·sigma_step)`` with
-    ``sigma_step`` the sample spacing in voxels. Depth is the expected z-depth with the remaining transmittance placed at the far
-    end of the ray, so it is finite everywhere (not to be trusted where opacity is ~0).
+    kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's
+    opacity is ``1 - exp(-σ·sigma_step)`` with ``sigma_step`` the sample spacing in voxels. The transmittance
+    left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the expected
+    z-depth with that transmittance placed at the far end of the ray, so it is finite everywhere (not to be
+    trusted where opacity is ~0).
     """
-    n_sh = 4 if sh_degree == 1 else 1
+    n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
     for r in prange(o.shape[0]):
         ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
         t0, dt, n_inner, ts, du = _setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        ux, uy, uz = dx / dn, dy / dn, dz / dn
-        basis = (SH_C0, -SH_C1 * uy, SH_C1 * uz, -SH_C1 * ux)
+        # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
+        b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
+        coef = np.empty(12)
         trans = 1.0
         cr = cg = cb = 0.0
         zd = 0.0
@@ -186,25 +201,31 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
             k += 1
             if not occ[ci, cj, ck]:
                 continue
+            # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
             fx, fy, fz = gx - ci, gy - cj, gz - ck
-            base = (ci * res + cj) * res + ck
-            sigma_raw = 0.0
-            for c in range(8):
-                w = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
-                sigma_raw += w * density[base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)]
-            alpha = 1.0 - math.exp(-_softplus(sigma_raw + density_shift) * sigma_step)
+            ex, ey, ez = 1.0 - fx, 1.0 - fy, 1.0 - fz
+            a00, a01, a10, a11 = ex * ey, ex * fy, fx * ey, fx * fy
+            w0, w1, w2, w3 = a00 * ez, a00 * fz, a01 * ez, a01 * fz
+            w4, w5, w6, w7 = a10 * ez, a10 * fz, a11 * ez, a11 * fz
+            v0 = (ci * res + cj) * res + ck
+            v2 = v0 + res
+            v4 = v0 + rr
+            v6 = v4 + res
+            sigma_raw = (w0 * density[v0] + w1 * density[v0 + 1] + w2 * density[v2] + w3 * density[v2 + 1]
+                         + w4 * density[v4] + w5 * density[v4 + 1] + w6 * density[v6] + w7 * density[v6 + 1])
+            alpha = _alpha(sigma_raw + density_shift, sigma_step)
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
-            lr = lg = lb = 0.0  # colour logits
-            for c in range(8):
-                w = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
-                row = base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)
-                for l in range(n_sh):
-                    wb = w * basis[l]
-                    lr += wb * values[row, 1 + l * 3]
-                    lg += wb * values[row, 2 + l * 3]
-                    lb += wb * values[row, 3 + l * 3]
+            for j in range(1, n_coef + 1):
+                coef[j - 1] = (w0 * values[v0, j] + w1 * values[v0 + 1, j] + w2 * values[v2, j]
+                               + w3 * values[v2 + 1, j] + w4 * values[v4, j] + w5 * values[v4 + 1, j]
+                               + w6 * values[v6, j] + w7 * values[v6 + 1, j])
+            lr, lg, lb = SH_C0 * coef[0], SH_C0 * coef[1], SH_C0 * coef[2]  # colour logits
+            if n_coef == 12:
+                lr += b1 * coef[3] + b2 * coef[6] + b3 * coef[9]
+                lg += b1 * coef[4] + b2 * coef[7] + b3 * coef[10]
+                lb += b1 * coef[5] + b2 * coef[8] + b3 * coef[11]
             cr += weight / (1.0 + math.exp(-lr))
             cg += weight / (1.0 + math.exp(-lg))
             cb += weight / (1.0 + math.exp(-lb))
