@@ -100,8 +100,10 @@ class _Trainer:
         self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
         self.rays = _Rays(train, self.space, device)
         self.generator = torch.Generator().manual_seed(config.seed)
+        # the field renders over the mean of the backgrounds its training rays are composited over
+        background = (0.5, 0.5, 0.5) if config.random_background else (0.0, 0.0, 0.0)
         self.field = SceneField.empty(self.space, config.resolutions[0], config.sh_degree, config.alpha_init,
-                                      config.step_ratio, device)
+                                      config.step_ratio, device, background)
         self.stage = 0
         self.steps = 0
         self._reset_optimizer()

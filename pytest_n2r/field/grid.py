@@ -14,7 +14,7 @@ samples only in occupied cells. A scene file stores only the vertices of occupie
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 import torch.nn.functional as F
@@ -50,13 +50,19 @@ def inverse_softplus(y: torch.Tensor) -> torch.Tensor:
 @dataclass(eq=False)
 class SceneField:
     """A fitted (or fitting) scene field; ``values`` ``(resolution³, 1 + 3·n_sh)`` float32 and ``occupancy``
-    ``(resolution-1,)*3`` bool live on the same device."""
+    ``(resolution-1,)*3`` bool live on the same device.
+
+    ``background`` (RGB in [0, 1]) is what the transmittance a ray has left stands for: the colour the fit
+    composited its rays over, in expectation (mid-grey for a fit over random backgrounds). Rendering over
+    it is the prediction the fit's loss was minimized for.
+    """
 
     space: SceneSpace
     values: torch.Tensor
     occupancy: torch.Tensor
     density_shift: float
     sh_degree: int
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         n = self.values.shape[0]
@@ -69,15 +75,20 @@ class SceneField:
                                   f"for sh_degree={self.sh_degree}")
         if tuple(self.occupancy.shape) != (res - 1,) * 3:
             raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected {(res - 1,) * 3}")
+        background = tuple(float(c) for c in self.background)
+        if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
+            raise InvalidArgument(f"background={self.background!r}: expected three values in [0, 1]")
+        self.background = background
 
     @classmethod
     def empty(cls, space: SceneSpace, resolution: int, sh_degree: int, alpha: float, step_ratio: float,
-              device: torch.device | str = "cpu") -> "SceneField":
+              device: torch.device | str = "cpu",
+              background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> "SceneField":
         """A field with opacity ``alpha`` per sample everywhere, grey colour, every cell occupied."""
         width = 1 + 3 * n_sh_coefficients(sh_degree)
         return cls(space, torch.zeros(resolution ** 3, width, device=device),
                    torch.ones((resolution - 1,) * 3, dtype=torch.bool, device=device),
-                   density_shift_for(alpha, step_ratio), sh_degree)
+                   density_shift_for(alpha, step_ratio), sh_degree, background)
 
     @property
     def resolution(self) -> int:
@@ -88,8 +99,7 @@ class SceneField:
         return self.values.device
 
     def to(self, device: torch.device | str) -> "SceneField":
-        return SceneField(self.space, self.values.to(device), self.occupancy.to(device), self.density_shift,
-                          self.sh_degree)
+        return replace(self, values=self.values.to(device), occupancy=self.occupancy.to(device))
 
     def vertex_grid(self) -> torch.Tensor:
         """The values as a ``(channels, R, R, R)`` view."""
@@ -113,7 +123,7 @@ class SceneField:
         values[:, 0] = inverse_softplus(sigma) - self.density_shift
         occ = F.interpolate(self.occupancy[None, None].float(), size=(resolution - 1,) * 3, mode="nearest")
         occ = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
-        return SceneField(self.space, values, occ, self.density_shift, self.sh_degree)
+        return replace(self, values=values, occupancy=occ)
 
     def used_vertices(self) -> torch.Tensor:
         """``R³`` bool: the vertices of occupied cells (the only ones a render reads)."""
@@ -125,13 +135,13 @@ class SceneField:
         used = self.used_vertices()
         values = torch.zeros_like(self.values)
         values[used] = self.values[used].half().float()
-        return SceneField(self.space, values, self.occupancy.clone(), self.density_shift, self.sh_degree)
+        return replace(self, values=values, occupancy=self.occupancy.clone())
 
     # -- serialization (the scene file module wraps these in a zip) -----------------------------------------
     def metadata(self) -> dict:
         """JSON-ready description of the field (everything but the tensors)."""
         return {"space": self.space.to_dict(), "resolution": self.resolution, "sh_degree": self.sh_degree,
-                "density_shift": self.density_shift}
+                "density_shift": self.density_shift, "background": list(self.background)}
 
     def tensors(self) -> dict[str, torch.Tensor]:
         """The field's tensors as a scene file stores them (CPU, contiguous; see :data:`FIELD_TENSORS`)."""
@@ -150,10 +160,14 @@ class SceneField:
             space = SceneSpace.from_dict(metadata["space"])
             res, sh_degree = int(metadata["resolution"]), int(metadata["sh_degree"])
             shift = float(metadata["density_shift"])
+            # files written before the key existed were fitted over black
+            background = tuple(float(c) for c in metadata.get("background", (0.0, 0.0, 0.0)))
         except (KeyError, TypeError, ValueError, InvalidArgument) as exc:
             raise SceneFileError(f"{source}: field metadata is incomplete or invalid ({exc})") from None
         if not 4 <= res <= 2048 or not math.isfinite(shift):
             raise SceneFileError(f"{source}: field resolution {res} / density_shift {shift} out of range")
+        if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
+            raise SceneFileError(f"{source}: field background {list(background)} is not three values in [0, 1]")
         try:
             width = 1 + 3 * n_sh_coefficients(sh_degree)
         except InvalidArgument as exc:
@@ -177,7 +191,7 @@ class SceneField:
             raise SceneFileError(f"{source}: tensor 'vertex_values' holds NaN or Inf")
         values = torch.zeros(res ** 3, width)
         values[index] = vals.float()
-        field = cls(space, values, occ.bool(), shift, sh_degree)
+        field = cls(space, values, occ.bool(), shift, sh_degree, background)
         if not torch.equal(field.used_vertices().nonzero().reshape(-1), index):
             raise SceneFileError(f"{source}: 'vertex_index' does not list exactly the vertices of occupied cells")
         return field

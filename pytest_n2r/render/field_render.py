@@ -32,7 +32,7 @@ __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 BACKENDS = ("auto", "compiled", "torch")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 1
+RENDER_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,8 @@ class RenderSettings:
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend);
     - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped;
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
-    - ``background``: RGB in [0, 1] behind the field.
+    - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
+      :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
     """
 
     step_ratio: float = 0.5
@@ -56,7 +57,7 @@ class RenderSettings:
     t_stop: float = 1e-3
     min_alpha: float = 1e-4
     chunk_rays: int = 1 << 16
-    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    background: tuple[float, float, float] | None = None
     backend: str = "auto"
 
     def __post_init__(self) -> None:
@@ -72,10 +73,12 @@ class RenderSettings:
                 raise InvalidArgument(f"RenderSettings.{name}={getattr(self, name)!r} is out of range")
         if self.shell_samples is not None and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
-        bg = tuple(float(v) for v in self.background)
-        if len(bg) != 3 or not all(0.0 <= v <= 1.0 for v in bg):
-            raise InvalidArgument(f"RenderSettings.background={self.background!r}: expected three values in [0, 1]")
-        object.__setattr__(self, "background", bg)
+        if self.background is not None:
+            bg = tuple(float(v) for v in self.background)
+            if len(bg) != 3 or not all(0.0 <= v <= 1.0 for v in bg):
+                raise InvalidArgument(f"RenderSettings.background={self.background!r}: expected None or three "
+                                      "values in [0, 1]")
+            object.__setattr__(self, "background", bg)
         if self.backend not in BACKENDS:
             raise InvalidArgument(f"RenderSettings.backend={self.backend!r}: expected one of {BACKENDS}")
 
@@ -101,6 +104,8 @@ class FieldRenderer:
             with torch.no_grad():
                 occupancy = occupancy & (field.cell_alpha(s.step_ratio) >= s.min_alpha)
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
+        #: The background actually rendered over (the settings', else the field's).
+        self.background = s.background if s.background is not None else field.background
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
@@ -136,12 +141,12 @@ class FieldRenderer:
             cells, blocks = g.numpy()
             kernels.render_rays(o, d, self._density, self._values, cells, blocks, g.resolution, g.shell, g.step,
                                 g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop,
-                                np.asarray(s.background), want_depth, rgb, depth, opacity)
+                                np.asarray(self.background), want_depth, rgb, depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)
             dt = torch.from_numpy(d).to(f.device)
-            out = render_rays_torch(f, g, ot, dt, torch.tensor(s.background, device=f.device), want_depth)
+            out = render_rays_torch(f, g, ot, dt, torch.tensor(self.background, device=f.device), want_depth)
         rgb[:] = out["rgb"].cpu().numpy()
         opacity[:] = out["opacity"].cpu().numpy()
         if want_depth:

@@ -57,7 +57,8 @@ class FieldScene(Scene):
         :data:`RENDER_VERSION`: anything that can change a rendered pixel."""
         if self._hash is None:
             h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{self.backend}/{self.file.field_digest}".encode())
-            h.update(json.dumps(self.settings.to_dict(), sort_keys=True).encode())
+            settings = {**self.settings.to_dict(), "background": list(self._renderer.background)}
+            h.update(json.dumps(settings, sort_keys=True).encode())
             h.update(np.asarray([self.reference_length, self.metres_per_unit or 0.0]).tobytes())
             for v in self.views:
                 h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())

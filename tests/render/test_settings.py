@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
+import numpy as np
 import pytest
 
 from pytest_n2r.errors import InvalidArgument
@@ -50,3 +52,16 @@ def test_a_non_finite_pose_is_refused_before_it_reaches_a_kernel(backend, bad):
     renderer = FieldRenderer(random_field(resolution=8), RenderSettings(backend=backend))
     with pytest.raises(InvalidArgument, match=r"c2w contains 1 non-finite value\(s\) \(NaN or Inf\)"):
         renderer.render(c2w, CAMERA, ("rgb", "depth"))
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_leftover_transmittance_shows_the_fields_background_unless_settings_name_one(backend):
+    """In a field with no occupied cell no sample is taken: every pixel is the background."""
+    field = dataclasses.replace(random_field(resolution=8), background=(0.2, 0.4, 0.6))
+    field.occupancy[:] = False
+    c2w = named_pose("inside")
+    own = FieldRenderer(field, RenderSettings(backend=backend)).render(c2w, CAMERA, ("rgb", "opacity"))
+    assert own["opacity"].max() == 0.0, "an empty field rendered some opacity"
+    assert (own["rgb"] == [51, 102, 153]).all(), f"expected the field's background, got {np.unique(own['rgb'])}"
+    named = FieldRenderer(field, RenderSettings(backend=backend, background=(1, 0, 0))).render(c2w, CAMERA, ("rgb",))
+    assert (named["rgb"] == [255, 0, 0]).all(), f"expected the settings' background, got {np.unique(named['rgb'])}"
