@@ -74,8 +74,8 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
     """Alpha-composite packed samples front to back.
 
     Returns per ray ``rgb`` (N, 3) over ``background``, ``opacity`` (the sum of weights, ≤ 1), ``weights``
-    per sample and, when ``t_far`` (N,) is given, ``depth``: the expected z-depth with the remaining
-    transmittance placed at ``t_far``. Transmittance is a float64 prefix sum of ``log(1 - alpha)``.
+    per sample and, when ``t_far`` (N,) is given, ``depth``: the z-depth of the ray's weight, ``Σ w·t / Σ w``
+    (``t_far`` where the ray has no weight at all). Transmittance is a float64 prefix sum of ``log(1 - alpha)``.
     """
     alpha = alpha.clamp(max=ALPHA_MAX)
     trans = torch.exp(_exclusive_per_ray(torch.log1p(-alpha.double()), offsets, ray_idx)).to(alpha.dtype)
@@ -90,7 +90,9 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
         "weights": weights,
     }
     if t_far is not None:
-        out["depth"] = zeros.index_add(0, ray_idx, weights * t) + remaining * t_far
+        weighted = zeros.double().index_add(0, ray_idx, weights.double() * t.double())
+        total = zeros.double().index_add(0, ray_idx, weights.double())
+        out["depth"] = torch.where(total > 0, weighted / total.clamp(min=1e-300), t_far.double()).to(alpha.dtype)
     return out
 
 

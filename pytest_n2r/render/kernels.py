@@ -166,9 +166,9 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
     (``[l·3 + channel]``); ``density`` is a contiguous copy of its first column (read for every sample, so
     kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's
     opacity is ``1 - exp(-σ·sigma_step)`` with ``sigma_step`` the sample spacing in voxels. The transmittance
-    left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the expected
-    z-depth with that transmittance placed at the far end of the ray, so it is finite everywhere (not to be
-    trusted where opacity is ~0).
+    left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the z-depth
+    of the ray's compositing weight, ``Σ w·t / Σ w``, and the far end of the ray where it has no weight at
+    all: finite everywhere, not to be trusted where opacity is ~0.
     """
     n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
@@ -182,7 +182,7 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
         coef = np.empty(12)
         trans = 1.0
         cr = cg = cb = 0.0
-        zd = 0.0
+        zd = wsum = 0.0
         u0 = 1.0 / ts
         k = 0
         total = n_inner + shell_samples
@@ -231,10 +231,11 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
             cb += weight / (1.0 + math.exp(-lb))
             if want_depth:
                 zd += weight * t
+                wsum += weight
             trans *= 1.0 - alpha
         rgb[r, 0] = cr + trans * background[0]
         rgb[r, 1] = cg + trans * background[1]
         rgb[r, 2] = cb + trans * background[2]
         opacity[r] = 1.0 - trans
         if want_depth:
-            depth[r] = zd + trans * (ts + far / dn)
+            depth[r] = zd / wsum if trans < 1.0 else ts + far / dn

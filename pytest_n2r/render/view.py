@@ -19,8 +19,9 @@ class RenderedView:
     """A rendered view: only the outputs asked for are set, the others are ``None``.
 
     - ``rgb``: H×W×3 ``uint8``, **RGB** order (convert before handing to OpenCV functions that expect BGR).
-    - ``depth``: H×W ``float32`` **z-depth** (along the optical axis) in scene units. Where ``opacity`` is
-      ~0 the field has nothing; depth there is the far bound of the ray, not to be trusted.
+    - ``depth``: H×W ``float32`` **z-depth** (along the optical axis) in scene units: of a field, the depth
+      of the ray's compositing weight (its weighted mean). Where ``opacity`` is ~0 the field has nothing and
+      depth is not to be trusted; where it is 0 depth is the far bound of the ray.
     - ``opacity``: H×W ``float32`` in [0, 1], the accumulated weight along the ray.
     - ``camera`` and ``c2w`` (camera-to-world 4x4, OpenCV axes): the view's geometry, so metrics can
       map pixels between two views.

@@ -2,9 +2,9 @@
 image size — finite outputs, opacity in [0, 1], weights summing to at most 1, a documented depth where
 nothing is seen, and the same bytes for the same input.
 
-Rule checked for depth (``RenderedView``: "where opacity is ~0 … depth there is the far bound of the ray"):
-depth is the expected z-depth with the remaining transmittance placed at the far end of the ray's lattice
-(``MarchGrid.t_far``), so it lies in ``[0, t_far]`` and equals ``t_far`` where opacity is 0.
+Rule checked for depth (``RenderedView``): depth is the z-depth of a ray's compositing weight, ``Σ w·t / Σ w``,
+so it lies in ``[0, t_far]`` (``MarchGrid.t_far``, the far end of the ray's lattice), and it is ``t_far``
+where opacity is 0.
 """
 
 from __future__ import annotations
@@ -63,9 +63,6 @@ def assert_valid_view(out: dict, camera: Camera, t_far: np.ndarray, what: str) -
     empty = opacity == 0.0
     np.testing.assert_allclose(depth[empty], t_far[empty], rtol=1e-5,
                                err_msg=f"{what}: where opacity is 0, depth is not the far end of the ray")
-    faint = opacity < 1e-6
-    np.testing.assert_allclose(depth[faint], t_far[faint], rtol=1e-5,
-                               err_msg=f"{what}: where opacity is below 1e-6, depth is not the far end of the ray")
 
 
 @settings(max_examples=30, deadline=None)
@@ -220,3 +217,22 @@ def test_a_1080p_render_is_memory_bounded_and_its_chunks_line_up():
     for name in OUTPUTS:
         assert small[name].tobytes() == out[name][y0:y0 + h, x0:x0 + w].tobytes(), (
             f"the 1080p {name} at rows {y0}..{y0 + h} differs from a render of that crop alone")
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+def test_depth_is_where_the_weight_is_even_where_transmittance_is_left(backend):
+    """A translucent wall (opacity about 0.85) across the x axis: the depth of the rays that cross it is the
+    wall's, within a quarter voxel, and does not drift towards the far end with the 15 % the wall lets
+    through (it did: the remaining transmittance used to be placed at the far end)."""
+    field = SceneField.empty(SPACE, 17, sh_degree=0, alpha=0.5, step_ratio=0.5)
+    field.values[:, 0] = -12.0
+    field.values[8 * 17 ** 2:9 * 17 ** 2, 0] = 4.0  # the vertices i = 8: the plane x = 0 (normalized)
+    renderer = FieldRenderer(field, RenderSettings(backend=backend))
+    eye = (-0.6, 0.0, 0.0)
+    out = renderer.render(pose(eye, (1.0, 0.0, 0.0)), CAMERA, ("depth", "opacity"))
+    centre = out["opacity"][8:16, 12:20]
+    assert 0.7 < centre.min() and centre.max() < 0.95, f"the wall's opacity is {centre.min()}..{centre.max()}"
+    expected = 0.6 * SPACE.radius  # z-depth of the plane x = 0 from x = -0.6, scene units
+    voxel = SPACE.voxel_size(17) * SPACE.radius
+    error = np.abs(out["depth"][8:16, 12:20] - expected).max()
+    assert error < voxel / 4, f"{backend}: depth is up to {error:.3f} off the wall at {expected}; a voxel is {voxel:.3f}"
