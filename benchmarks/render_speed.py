@@ -95,7 +95,7 @@ def main(argv: list[str]) -> int:
         row(f"step_ratio={step}", DEFAULT.replace(step_ratio=step))
     for min_alpha in (0.0, 1e-3, 1e-2, 5e-2):
         row(f"min_alpha={min_alpha:g}", DEFAULT.replace(min_alpha=min_alpha))
-    for t_stop in (0.0, 1e-2, 1e-1):
+    for t_stop in (0.0, 1e-3, 1e-2, 3e-2, 1e-1):
         row(f"t_stop={t_stop:g}", DEFAULT.replace(t_stop=t_stop))
     for scale in (0.5, 0.75):
         row(f"render at {scale:g}× size, upsampled", DEFAULT, scale)

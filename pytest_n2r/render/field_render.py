@@ -44,7 +44,9 @@ class RenderSettings:
     - ``shell_samples``: samples in the contracted outer shell (``None``: one per ``step_ratio`` voxels);
     - ``far``: how far beyond the unit cube rays go, in normalized units (the contracted shell reaches
       ``1 + shell·(1 - 1/(1+far))`` of the way to infinity);
-    - ``t_stop``: early ray termination once transmittance is below this (compiled backend);
+    - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
+      transmittance left shows the background, as at the far end (0.03 measured on fox 1.3× faster than
+      1e-3 for 0.03 dB less PSNR against the real photos);
     - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped;
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
@@ -54,7 +56,7 @@ class RenderSettings:
     step_ratio: float = 0.5
     shell_samples: int | None = None
     far: float = 100.0
-    t_stop: float = 1e-3
+    t_stop: float = 3e-2
     min_alpha: float = 1e-4
     chunk_rays: int = 1 << 16
     background: tuple[float, float, float] | None = None

@@ -186,7 +186,7 @@ def test_one_and_two_pixel_images(size, backend):
     renderer = FieldRenderer(FIELD, RenderSettings(backend=backend))
     out = renderer.render(c2w, camera, OUTPUTS)
     assert_valid_view(out, camera, far_end(renderer, c2w, camera), f"{backend} {w}×{h} image")
-    assert out["opacity"].min() > 0.99, f"the centre ray of a {w}×{h} image misses the opaque blob: opacity {out['opacity']}"
+    assert out["opacity"].min() > 0.95, f"the centre ray of a {w}×{h} image misses the opaque blob: opacity {out['opacity']}"
 
 
 @pytest.mark.slow
