@@ -153,7 +153,7 @@ def _alpha(x, sigma_step):
     instead of three transcendental functions (the same value to rounding).
     """
     if sigma_step == 0.5:
-        return 1.0 - 1.0 / math.sqrt(1.0 + math.exp(x)) if x < 40.0 else 1.0
+        return 1.0 - 1.0 / math.sqrt(1.0 + math.exp(x)) if x < 40.0 else -math.expm1(-0.5 * x)
     return -math.expm1(-_softplus(x) * sigma_step)
 
 
