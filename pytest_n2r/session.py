@@ -122,6 +122,8 @@ class N2RSession:
     settings: RunSettings = field(default_factory=RunSettings)
     scenes: list[SceneSpec] = field(default_factory=list)
     device: str = "auto"
+    #: Scene fields render at this fraction of the size asked for, upsampled (``RenderSettings.scale``).
+    render_scale: float = 1.0
     cache_dir: Path | None = None
     cache_bytes: int = DEFAULT_DISK_BYTES
     stats: list[RelationStats] = field(default_factory=list)
@@ -161,6 +163,10 @@ class N2RSession:
         scene = self._loaded.get(spec.source)
         if scene is None:
             scene = load_scene_spec(spec, self.device)
+            from .scene.field_scene import FieldScene  # loading a scene has imported torch already
+
+            if self.render_scale != 1.0 and isinstance(scene, FieldScene):
+                scene = scene.with_settings(scene.settings.replace(scale=self.render_scale))
             self._loaded[spec.source] = scene
         return scene
 

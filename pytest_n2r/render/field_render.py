@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, replace
 
+import cv2
 import numpy as np
 import torch
 
@@ -48,6 +49,10 @@ class RenderSettings:
       transmittance left shows the background, as at the far end (0.03 measured on fox 1.3× faster than
       1e-3 for 0.03 dB less PSNR against the real photos);
     - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped;
+    - ``scale``: render at this fraction of the camera's width and height, then resize to the camera
+      (bilinear; depth takes the nearest rendered pixel, so it never invents a depth between a surface and
+      what is behind it). A fitted field has no more detail than its grid: on the fox, 0.5 renders 3.6×
+      faster for 0.26 dB less PSNR against the real photos (docs/performance.md);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
@@ -58,6 +63,7 @@ class RenderSettings:
     far: float = 100.0
     t_stop: float = 3e-2
     min_alpha: float = 1e-4
+    scale: float = 1.0
     chunk_rays: int = 1 << 16
     background: tuple[float, float, float] | None = None
     backend: str = "auto"
@@ -68,6 +74,7 @@ class RenderSettings:
             "far": math.isfinite(self.far) and 0.0 < self.far <= 1e6,
             "t_stop": 0.0 <= self.t_stop < 1.0,
             "min_alpha": 0.0 <= self.min_alpha < 1.0,
+            "scale": 0.1 <= self.scale <= 1.0,
             "chunk_rays": isinstance(self.chunk_rays, int) and self.chunk_rays >= 1,
         }
         for name, ok in checks.items():
@@ -116,6 +123,15 @@ class FieldRenderer:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
         ``rgb`` H×W×3 uint8, ``depth`` H×W float32 z-depth, ``opacity`` H×W float32 in [0, 1]."""
         c2w = check_array("c2w", c2w, "4 4", dtype=np.float64)  # NaN/Inf would crash the compiled kernel
+        scale = self.settings.scale
+        if scale == 1.0:
+            return self._render(c2w, camera, outputs)
+        small = camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
+        size = (camera.width, camera.height)
+        return {name: cv2.resize(image, size, interpolation=cv2.INTER_NEAREST if name == "depth" else cv2.INTER_LINEAR)
+                for name, image in self._render(c2w, small, outputs).items()}
+
+    def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         h, w = camera.height, camera.width
         rgb = np.empty((h * w, 3), dtype=np.float32)
         depth = np.empty(h * w, dtype=np.float32)

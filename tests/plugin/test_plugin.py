@@ -98,6 +98,8 @@ def test_bad(n2r_scene):
         (["--n2r-scene", RAMP, "--n2r-examples", "0"], "--n2r-examples / ini n2r_examples: '0' is not a whole number"),
         (["--n2r-scene", RAMP, "--n2r-timeout", "-1"], "--n2r-timeout / ini n2r_timeout"),
         (["--n2r-scene", RAMP, "--n2r-cache-size", "lots"], "n2r_cache_size='lots' is not a size"),
+        (["--n2r-scene", RAMP, "--n2r-render-scale", "2"],
+         "--n2r-render-scale / ini n2r_render_scale: '2' is not a fraction in [0.1, 1]"),
     ],
 )
 def test_bad_options_are_usage_errors(n2r_project, args, message):

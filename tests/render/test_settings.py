@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import re
 
+import cv2
 import numpy as np
 import pytest
 
@@ -21,6 +22,8 @@ from ..field.fields import CAMERA, named_pose, random_field
     ({"far": 0.0}, "far"),
     ({"t_stop": 1.0}, "t_stop"),
     ({"min_alpha": -0.1}, "min_alpha"),
+    ({"scale": 0.05}, "scale"),
+    ({"scale": 1.5}, "scale"),
     ({"chunk_rays": 0}, "chunk_rays"),
     ({"chunk_rays": 1.5}, "chunk_rays"),
     ({"shell_samples": 0}, "shell_samples"),
@@ -65,3 +68,17 @@ def test_leftover_transmittance_shows_the_fields_background_unless_settings_name
     assert (own["rgb"] == [51, 102, 153]).all(), f"expected the field's background, got {np.unique(own['rgb'])}"
     named = FieldRenderer(field, RenderSettings(backend=backend, background=(1, 0, 0))).render(c2w, CAMERA, ("rgb",))
     assert (named["rgb"] == [255, 0, 0]).all(), f"expected the settings' background, got {np.unique(named['rgb'])}"
+
+
+def test_a_scaled_render_is_the_small_render_resized_and_depth_is_never_blended():
+    field = random_field(resolution=12, occupied=0.4, seed=5)
+    c2w = named_pose("inside")
+    out = FieldRenderer(field, RenderSettings(scale=0.5)).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
+    small = FieldRenderer(field).render(c2w, CAMERA.resized(16, 12), ("rgb", "depth", "opacity"))
+    for name, image in out.items():
+        assert image.shape[:2] == (CAMERA.height, CAMERA.width), f"scaled {name} is {image.shape}, not the camera's"
+        assert image.dtype == small[name].dtype, f"scaled {name} is {image.dtype}, not {small[name].dtype}"
+    rendered = set(np.unique(small["depth"]).tolist())
+    assert set(np.unique(out["depth"]).tolist()) <= rendered, "the upsampled depth holds depths no pixel rendered"
+    assert np.array_equal(out["rgb"], cv2.resize(small["rgb"], (CAMERA.width, CAMERA.height))), \
+        "scaled rgb is not the small render resized bilinearly"

@@ -37,3 +37,26 @@ def test_the_plugin_loads_a_scene_file(pytester: pytest.Pytester, tiny_scene_fil
                                 "--n2r-device", "cpu")
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines(["*test_mean_colour[[]object[]]*3 examples*"])
+
+
+def test_render_scale_makes_the_scene_render_smaller_and_upsample(pytester: pytest.Pytester, tiny_scene_file,
+                                                                   monkeypatch):
+    monkeypatch.delenv("CI", raising=False)
+    pytester.makepyfile(test_inner="""
+from pytest_n2r import metamorphic, transforms, l2_norm, Validity
+
+
+def test_the_scene_renders_at_half_size(n2r_scene):
+    assert n2r_scene.settings.scale == 0.5, n2r_scene.settings
+
+
+@metamorphic(l2_norm(), eps=1.0, transform=transforms(yaw=2), examples=2, validity=Validity(min_coverage=0))
+def test_full_size_images_reach_the_sut(n2r_scene):
+    def sut(rgb):
+        assert max(rgb.shape[:2]) == 48, rgb.shape  # --n2r-size 48, not the 24 pixels rendered
+        return [float(rgb.mean()) / 255.0]
+    return sut
+""")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(tiny_scene_file), "--n2r-size", "48",
+                                "--n2r-device", "cpu", "--n2r-render-scale", "0.5")
+    result.assert_outcomes(passed=2)
