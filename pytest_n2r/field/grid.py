@@ -160,8 +160,7 @@ class SceneField:
             space = SceneSpace.from_dict(metadata["space"])
             res, sh_degree = int(metadata["resolution"]), int(metadata["sh_degree"])
             shift = float(metadata["density_shift"])
-            # files written before the key existed were fitted over black
-            background = tuple(float(c) for c in metadata.get("background", (0.0, 0.0, 0.0)))
+            background = tuple(float(c) for c in metadata["background"])
         except (KeyError, TypeError, ValueError, InvalidArgument) as exc:
             raise SceneFileError(f"{source}: field metadata is incomplete or invalid ({exc})") from None
         if not 4 <= res <= 2048 or not math.isfinite(shift):

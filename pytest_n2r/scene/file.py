@@ -238,6 +238,11 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
             tensors = safetensors.torch.load(payload)
         except safetensors.SafetensorError as exc:
             raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
+        if "background" not in field_meta:
+            # written before fields stored their background: a fit whose config has random_background on was
+            # composited over random colours (mid-grey in expectation), an older one over black
+            grey = data["config"].get("random_background") is True
+            field_meta = {**field_meta, "background": [0.5 if grey else 0.0] * 3}
         field = SceneField.from_tensors({**field_meta, "space": data["normalization"]}, tensors,
                                         f"{source}: {schema.FIELD_FILE}")
         views = []

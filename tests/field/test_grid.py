@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 import torch
@@ -110,15 +108,6 @@ def test_tensors_round_trip_to_the_quantized_field(sh_degree):
         assert a.tobytes() == b.tobytes(), f"the reloaded field renders {name} differently from quantized()"
 
 
-def test_the_background_is_stored_and_older_files_were_fitted_over_black():
-    field = dataclasses.replace(random_field(resolution=8, occupied=0.5, seed=1), background=(0.5, 0.25, 1.0))
-    meta = field.metadata()
-    assert SceneField.from_tensors(meta, field.tensors()).background == (0.5, 0.25, 1.0)
-    del meta["background"]
-    assert SceneField.from_tensors(meta, field.tensors()).background == (0.0, 0.0, 0.0), (
-        "a file written before fields stored their background must render over black, as it was fitted")
-
-
 def _broken(change: str) -> tuple[dict, dict]:
     field = random_field(resolution=8, occupied=0.5, seed=1)
     meta, tensors = field.metadata(), field.tensors()
@@ -134,6 +123,8 @@ def _broken(change: str) -> tuple[dict, dict]:
         del meta["density_shift"]
     elif change == "background":
         meta["background"] = [0.5, 2.0, 0.5]
+    elif change == "no background":
+        del meta["background"]
     return meta, tensors
 
 
@@ -144,6 +135,7 @@ def _broken(change: str) -> tuple[dict, dict]:
     ("sh_degree", r"sh_degree=3: expected 0 \(view-independent colour\) or 1"),
     ("metadata", r"field metadata is incomplete or invalid \('density_shift'\)"),
     ("background", r"field background \[0.5, 2.0, 0.5\] is not three values in \[0, 1\]"),
+    ("no background", r"field metadata is incomplete or invalid \('background'\)"),
 ])
 def test_bad_field_tensors_are_scene_file_errors_naming_the_problem(change, message):
     meta, tensors = _broken(change)

@@ -59,6 +59,21 @@ def test_views_scale_config_and_report_come_back(tmp_path):
     assert scene_file.images_stored == 4 and scene_file.version == FORMAT_VERSION
 
 
+@pytest.mark.parametrize("random_background, expected", [(True, 0.5), (False, 0.0), (None, 0.0)])
+def test_a_file_without_a_field_background_gets_the_one_it_was_fitted_over(tmp_path, random_background, expected):
+    """Files written before fields stored their background: a fit with ``random_background`` on renders
+    over mid-grey, an older one (no such setting: it was fitted over black) over black."""
+    def edit(data):
+        del data["field"]["background"]
+        if random_background is None:
+            del data["config"]["random_background"]
+        else:
+            data["config"]["random_background"] = random_background
+
+    old = rewrite(write(tmp_path / "new.n2r"), tmp_path / "old.n2r", edit_json=edit)
+    assert read_scene_file(old).field.background == (expected,) * 3
+
+
 def test_images_false_skips_the_photos_and_no_images_stores_none(tmp_path):
     assert all(v.image is None for v in read_scene_file(write(tmp_path / "a.n2r"), images=False).views)
     stored = read_scene_file(write(tmp_path / "b.n2r", images=False))
