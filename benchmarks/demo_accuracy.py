@@ -54,7 +54,8 @@ def compare(exact, field, c2w: np.ndarray, camera) -> dict:
     as_field = dataclasses.replace(truth, rgb=got.rgb)  # the field's image with the exact geometry
     rep = REPEATABILITY.compute(orb_points(truth.rgb), orb_points(got.rgb), truth, as_field)
     hit = truth.opacity > 0.5
-    depth_error = np.median(np.abs(got.depth[hit] - truth.depth[hit]) / truth.depth[hit]) if hit.any() else np.nan
+    relative = np.abs(got.depth[hit] - truth.depth[hit]) / truth.depth[hit]
+    depth_error = np.median(relative) if hit.any() else np.nan
     return {"psnr": psnr(truth.rgb, got.rgb), "ssim": ssim(truth.rgb, got.rgb),
             "opacity": float(got.opacity.mean()), "depth_error": float(depth_error),
             "repeatability": rep.score if rep.valid else float("nan")}
@@ -84,7 +85,8 @@ def summary(rows: list[dict]) -> dict:
     col = {k: np.array([r[k] for r in rows], dtype=np.float64) for k in keys}
     return {"n": len(rows), "psnr": float(col["psnr"].mean()), "psnr_min": float(col["psnr"].min()),
             "ssim": float(col["ssim"].mean()), "opacity": float(col["opacity"].mean()),
-            "depth_error": float(np.nanmean(col["depth_error"])), "repeatability": float(np.nanmean(col["repeatability"]))}
+            "depth_error": float(np.nanmean(col["depth_error"])),
+            "repeatability": float(np.nanmean(col["repeatability"]))}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -67,7 +67,8 @@ def main(argv: list[str]) -> int:
         camera = sized(views[0].camera, w * h)
         for variant, label, outputs in variants:
             s = best_seconds(lambda: variant.render(views[0].c2w, camera, outputs))
-            print(f"{camera.width:>5}×{camera.height:<6} {'+'.join(outputs):>18} {label:>24} {s:>8.3f} {1 / s:>9.2f}")
+            print(f"{camera.width:>5}×{camera.height:<6} {'+'.join(outputs):>18} {label:>24} {s:>8.3f} "
+                  f"{1 / s:>9.2f}")
 
     small = sized(views[0].camera, 480 * 270)
     reference = [scene.with_settings(BEST).render(v.c2w, small, ("rgb",)).rgb for v in views]

@@ -39,6 +39,17 @@ def check_positive(name: str, value: Any) -> float:
     return value
 
 
+def as_unit_rgb(value: Any) -> tuple[float, float, float] | None:
+    """``value`` as an RGB triple of floats in [0, 1], or ``None`` when it is not one (callers name it)."""
+    try:
+        rgb = tuple(float(c) for c in value)
+    except (TypeError, ValueError):
+        return None
+    if len(rgb) != 3 or not all(0.0 <= c <= 1.0 for c in rgb):
+        return None
+    return rgb[0], rgb[1], rgb[2]
+
+
 def check_array(
     name: str, value: Any, shape: str, *, dtype: type | None = None, finite: bool = True
 ) -> np.ndarray:

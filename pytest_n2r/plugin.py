@@ -44,8 +44,8 @@ OPTIONS: tuple[tuple[str, str, str, str], ...] = (
      "(default: auto)"),
 )
 DEFAULTS = {
-    "n2r_examples": "50", "n2r_size": "480", "n2r_render_scale": "1", "n2r_device": "auto", "n2r_cache_dir": ".n2r-cache",
-    "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300", "n2r_derandomize": "auto",
+    "n2r_examples": "50", "n2r_size": "480", "n2r_render_scale": "1", "n2r_device": "auto",
+    "n2r_cache_dir": ".n2r-cache", "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300", "n2r_derandomize": "auto",
 }
 SCENE_MARKER = "n2r_scene"
 #: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.marker).

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 import torch
 import torch.nn.functional as F
 
+from .._validation import as_unit_rgb
 from ..errors import InvalidArgument, SceneFileError
 from .space import SceneSpace
 
@@ -75,8 +76,8 @@ class SceneField:
                                   f"for sh_degree={self.sh_degree}")
         if tuple(self.occupancy.shape) != (res - 1,) * 3:
             raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected {(res - 1,) * 3}")
-        background = tuple(float(c) for c in self.background)
-        if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
+        background = as_unit_rgb(self.background)
+        if background is None:
             raise InvalidArgument(f"background={self.background!r}: expected three values in [0, 1]")
         self.background = background
 
@@ -160,13 +161,13 @@ class SceneField:
             space = SceneSpace.from_dict(metadata["space"])
             res, sh_degree = int(metadata["resolution"]), int(metadata["sh_degree"])
             shift = float(metadata["density_shift"])
-            background = tuple(float(c) for c in metadata["background"])
+            background = metadata["background"]
         except (KeyError, TypeError, ValueError, InvalidArgument) as exc:
             raise SceneFileError(f"{source}: field metadata is incomplete or invalid ({exc})") from None
         if not 4 <= res <= 2048 or not math.isfinite(shift):
             raise SceneFileError(f"{source}: field resolution {res} / density_shift {shift} out of range")
-        if len(background) != 3 or not all(0.0 <= c <= 1.0 for c in background):
-            raise SceneFileError(f"{source}: field background {list(background)} is not three values in [0, 1]")
+        if as_unit_rgb(background) is None:
+            raise SceneFileError(f"{source}: field background {background!r} is not three values in [0, 1]")
         try:
             width = 1 + 3 * n_sh_coefficients(sh_degree)
         except InvalidArgument as exc:

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 import torch
 
-from .._validation import check_array
+from .._validation import as_unit_rgb, check_array
 from ..errors import InvalidArgument
 from ..field.grid import SceneField
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
@@ -83,8 +83,8 @@ class RenderSettings:
         if self.shell_samples is not None and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
         if self.background is not None:
-            bg = tuple(float(v) for v in self.background)
-            if len(bg) != 3 or not all(0.0 <= v <= 1.0 for v in bg):
+            bg = as_unit_rgb(self.background)
+            if bg is None:
                 raise InvalidArgument(f"RenderSettings.background={self.background!r}: expected None or three "
                                       "values in [0, 1]")
             object.__setattr__(self, "background", bg)
@@ -128,7 +128,8 @@ class FieldRenderer:
             return self._render(c2w, camera, outputs)
         small = camera.resized(max(1, round(camera.width * scale)), max(1, round(camera.height * scale)))
         size = (camera.width, camera.height)
-        return {name: cv2.resize(image, size, interpolation=cv2.INTER_NEAREST if name == "depth" else cv2.INTER_LINEAR)
+        interpolation = {"rgb": cv2.INTER_LINEAR, "opacity": cv2.INTER_LINEAR, "depth": cv2.INTER_NEAREST}
+        return {name: cv2.resize(image, size, interpolation=interpolation[name])
                 for name, image in self._render(c2w, small, outputs).items()}
 
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
