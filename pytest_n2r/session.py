@@ -163,10 +163,13 @@ class N2RSession:
         scene = self._loaded.get(spec.source)
         if scene is None:
             scene = load_scene_spec(spec, self.device)
-            from .scene.field_scene import FieldScene  # loading a scene has imported torch already
+            if self.render_scale != 1.0:
+                # imported only here: a session on exact scenes alone must not load the field machinery
+                # (importing it changed which examples a derandomized run of the example project drew)
+                from .scene.field_scene import FieldScene
 
-            if self.render_scale != 1.0 and isinstance(scene, FieldScene):
-                scene = scene.with_settings(scene.settings.replace(scale=self.render_scale))
+                if isinstance(scene, FieldScene):
+                    scene = scene.with_settings(scene.settings.replace(scale=self.render_scale))
             self._loaded[spec.source] = scene
         return scene
 
