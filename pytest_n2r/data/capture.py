@@ -7,6 +7,7 @@ from typing import Literal
 
 import numpy as np
 
+from ..errors import InvalidArgument
 from ..geometry import Camera
 
 __all__ = ["CapturedView", "Capture", "heldout_split"]
@@ -71,10 +72,15 @@ class Capture:
         return [v for v in self.views if v.split == "heldout"]
 
 
-def heldout_split(n: int, every: int = 8) -> list[Split]:
-    """The NeRF custom: every ``every``-th image (0, 8, 16, ...) is held out, the rest train.
+def heldout_split(n: int, every: int = 8, first: int = 0) -> list[Split]:
+    """The NeRF custom: every ``every``-th image from ``first`` (0, 8, 16, ... by default) is held out, the
+    rest train.
 
     >>> heldout_split(10)
     ['heldout', 'train', 'train', 'train', 'train', 'train', 'train', 'train', 'heldout', 'train']
+    >>> heldout_split(10, first=4)
+    ['train', 'train', 'train', 'train', 'heldout', 'train', 'train', 'train', 'train', 'train']
     """
-    return ["heldout" if every > 0 and i % every == 0 else "train" for i in range(n)]
+    if not 0 <= first < max(every, 1):
+        raise InvalidArgument(f"first={first!r}: expected an index in [0, every={every})")
+    return ["heldout" if every > 0 and i % every == first else "train" for i in range(n)]

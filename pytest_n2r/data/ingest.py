@@ -105,8 +105,8 @@ def load_poses(
 
 def ingest(
     source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
-    load_images: bool = True, heldout_every: int = 8, sfm_max_size: int = 960, matcher: str = "auto",
-    max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
+    load_images: bool = True, heldout_every: int | None = None, sfm_max_size: int = 960,
+    matcher: str = "auto", max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
 ) -> Capture:
     """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
 
@@ -124,6 +124,7 @@ def ingest(
         images once at low resolution to triangulate points).
     heldout_every:
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
+        ``None``: the source's own split where it has one (a transforms.json's ``val_filenames``), else 8.
     sfm_max_size, matcher, max_frames, frames_dir:
         Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
@@ -144,15 +145,16 @@ def ingest(
             raise InvalidType(f"max_size={max_size!r} must be an int (pixels) or None")
         if max_size < 16:
             raise InvalidArgument(f"max_size={max_size!r} is too small; expected at least 16 pixels")
-    if isinstance(heldout_every, bool) or not isinstance(heldout_every, (int, np.integer)) or heldout_every < 0:
-        raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0")
+    every_ok = isinstance(heldout_every, (int, np.integer)) and not isinstance(heldout_every, bool)
+    if heldout_every is not None and not (every_ok and heldout_every >= 0):
+        raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0 or None")
 
     poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
                        frames_dir=frames_dir)
     images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
     frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
-    splits = heldout_split(len(frames), heldout_every)
+    splits = _splits(poses, heldout_every)
     views = [
         CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
         for f, cam, split, img in zip(frames, out_cameras, splits, images)
@@ -176,13 +178,22 @@ def complete_points(poses: PoseSet) -> PoseSet:
     return poses
 
 
-def extent(poses: PoseSet, heldout_every: int = 8) -> tuple[np.ndarray, float]:
+def _splits(poses: PoseSet, heldout_every: int | None) -> list[str]:
+    """Each frame's split: every ``heldout_every``-th held out, or the source's own split when that is
+    ``None`` and the source has one (else every 8th)."""
+    if heldout_every is None and poses.heldout is not None:
+        return ["heldout" if f.name in poses.heldout else "train" for f in poses.frames]
+    return heldout_split(len(poses.frames), 8 if heldout_every is None else heldout_every)
+
+
+def extent(poses: PoseSet, heldout_every: int | None = None) -> tuple[np.ndarray, float]:
     """``(bounds, reference_length)`` of a pose set with points: the box of the points seen by all
-    cameras and the median z-depth of the points seen by the training cameras (scene units)."""
+    cameras and the median z-depth of the points seen by the training cameras (scene units; the split
+    as :func:`ingest` makes it)."""
     frames = poses.frames
     if len(frames) < 3:
         raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
-    splits = heldout_split(len(frames), heldout_every)
+    splits = _splits(poses, heldout_every)
     train = [f for f, s in zip(frames, splits) if s == "train"] or frames
     ref = reference_length(poses.points, [f.camera for f in train], [f.c2w for f in train])
     bounds = scene_bounds(poses.points, [f.camera for f in frames], [f.c2w for f in frames])

@@ -56,6 +56,9 @@ class PoseSet:
         ``(file, reason)`` for every listed or found image that is not among ``frames``.
     report:
         Plain JSON-ready facts: timings in seconds per stage, counts, the method used for points.
+    heldout:
+        Names of the frames the source itself holds out (a transforms.json's ``val_filenames``); ``None``
+        when the source has no split.
     """
 
     frames: list[SourceFrame]
@@ -64,6 +67,7 @@ class PoseSet:
     kind: str = ""
     skipped: list[tuple[str, str]] = field(default_factory=list)
     report: dict = field(default_factory=dict)
+    heldout: frozenset[str] | None = None
 
     @property
     def centres(self) -> np.ndarray:

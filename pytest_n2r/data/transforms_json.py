@@ -50,7 +50,8 @@ def find_transforms_json(source: str | os.PathLike) -> Path | None:
 def read_transforms_json(path: str | os.PathLike) -> PoseSet:
     """Read the frames of a transforms.json whose image files exist (no pixels are decoded).
 
-    Frames whose image file is missing are skipped with a warning naming the file. Raises
+    Frames whose image file is missing are skipped with a warning naming the file. A ``val_filenames``
+    list (nerfstudio's split) becomes :attr:`PoseSet.heldout`. Raises
     :class:`IngestError` naming the file, the frame index and the field when a field is missing or
     malformed, a matrix is not a finite rigid transform, or no frame has its image.
     """
@@ -91,8 +92,13 @@ def read_transforms_json(path: str | os.PathLike) -> PoseSet:
         frames.append(SourceFrame(name=name, path=image, camera=camera, c2w=c2w))
     if not frames:
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
+    heldout = meta.get("val_filenames")
+    if heldout is not None:
+        if not isinstance(heldout, list) or not all(isinstance(n, str) for n in heldout):
+            raise IngestError(f"{path}: field 'val_filenames' must be a list of frame file paths")
+        heldout = frozenset(heldout)
     return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped,
-                   report={"listed": len(raw_frames)})
+                   report={"listed": len(raw_frames)}, heldout=heldout)
 
 
 def _resolve_image(root: Path, name: str) -> Path | None:

@@ -34,6 +34,21 @@ def test_transforms_json_capture(corner, capture_json):
     assert cap.report["kind"] == "transforms.json" and "SIFT" in cap.report["points_method"]
 
 
+def test_a_split_in_the_file_is_kept_unless_one_is_asked_for(capture_json):
+    meta = json.loads(capture_json.read_text())
+    names = [f["file_path"] for f in meta["frames"]]
+    meta["val_filenames"] = [names[2]]
+    capture_json.write_text(json.dumps(meta))
+    own = ingest(capture_json, load_images=False)
+    assert [v.split for v in own.views] == ["heldout" if n == names[2] else "train" for n in names]
+    asked = ingest(capture_json, load_images=False, heldout_every=4)
+    assert [v.split for v in asked.views] == ["heldout", "train", "train", "train", "heldout", "train"]
+    meta["val_filenames"] = "all"
+    capture_json.write_text(json.dumps(meta))
+    with pytest.raises(IngestError, match="'val_filenames' must be a list"):
+        ingest(capture_json, load_images=False)
+
+
 def test_triangulated_points_lie_on_the_scene(corner, capture_json):
     cap = ingest(capture_json, load_images=False)
     assert all(v.image is None for v in cap.views)
