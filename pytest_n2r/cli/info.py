@@ -50,7 +50,8 @@ def info_dict(scene: SceneFile) -> dict:
         "metres_per_unit": scene.metres_per_unit,
         "bounds": scene.bounds.tolist(),
         "field": {**scene.field.describe(),
-                  "tensor_bytes": sum(t.numel() * t.element_size() for t in tensors.values())},
+                  "tensor_bytes": sum(t.numel() * t.element_size() for t in tensors.values()),
+                  "memory_bytes": scene.field.memory_bytes()},
         "config": scene.config.to_dict(),
         "report": scene.report,
     }
@@ -75,7 +76,7 @@ def format_info(scene: SceneFile) -> str:
                  + (f"{mpu:.4g} m per scene unit" if mpu is not None else "metric scale unknown"))
     lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
                  f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
-                 f"stored ({_size(field['tensor_bytes'])})")
+                 f"stored ({_size(field['tensor_bytes'])}; {_size(field['memory_bytes'])} in memory)")
     state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
     where = f" on {report['device']}" if "device" in report else ""
     threads = f" ({report['threads']} threads)" if "threads" in report else ""

@@ -38,7 +38,10 @@ class FieldConfig:
         threshold is ``final_prune_alpha`` instead: thin haze in front of surfaces is dropped while the
         fit can still adapt to its absence, so rays reach surfaces in fewer samples (faster steps and
         renders). Nothing is pruned before step ``prune_after``: the field needs that long to show where
-        its surfaces are.
+        its surfaces are. ``tv``: weight of a total-variation prior on the vertices a step touches (the mean
+        over them of the squared differences to their stored grid neighbours, all columns): on fine grids,
+        where a vertex is seen by few rays, it fills in what the rays leave free from the neighbourhood
+        instead of from noise.
     ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
     """
 
@@ -60,6 +63,7 @@ class FieldConfig:
     prune_weight: float = 1e-3
     prune_every: int = 25
     prune_after: int = 25
+    tv: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -80,7 +84,7 @@ class FieldConfig:
         for name in ("prune_alpha", "final_prune_alpha", "prune_weight"):
             if not 0 <= getattr(self, name) < 1:
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected a threshold in [0, 1)")
-        for name in ("sparsity", "distortion"):
+        for name in ("sparsity", "distortion", "tv"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")

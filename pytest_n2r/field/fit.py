@@ -114,6 +114,13 @@ class _Trainer:
         lrs = torch.tensor([c.lr_density] + [c.lr_color] * (width - 1))
         self.adam = RowAdam(self.field.values, lrs)
         self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
+        rows = self.field.rows
+        self.vertex_rows = np.zeros(0, dtype=np.int32) if rows is None else rows.cpu().numpy()
+        #: The flat vertex index of each row.
+        self.flat_of_row = torch.arange(self.field.values.shape[0], device=self.device)
+        if rows is not None:
+            stored = torch.nonzero(rows >= 0).reshape(-1)
+            self.flat_of_row[rows[stored].to(torch.int64)] = stored
         self._rebuild_grid()
         self._reset_visibility()
 
@@ -147,7 +154,7 @@ class _Trainer:
         s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
         if self.compiled:
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
-                                                  self.space.shell, f.resolution)
+                                                  self.space.shell, f.resolution, self.vertex_rows)
             unique, inverse = self.row_index.unique(rows)
             unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
             sub = f.values[unique].requires_grad_(True)
@@ -159,8 +166,8 @@ class _Trainer:
         else:
             p = o[ray_idx] + t[:, None] * d[ray_idx]
             coords = grid_coords(p, self.space.shell, f.resolution)
-            rows, weights = trilinear(coords, f.resolution)
-            unique, inverse = torch.unique(rows, return_inverse=True)
+            corners, weights = trilinear(coords, f.resolution)
+            unique, inverse = torch.unique(f.vertex_rows(corners), return_inverse=True)
             sub = f.values[unique].requires_grad_(True)
             alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
                                   f.density_shift, c.step_ratio)
@@ -180,11 +187,30 @@ class _Trainer:
         if t.numel():
             loss.backward()
             grad = sub.grad
+            if c.tv > 0:
+                grad += c.tv * self._tv_gradient(unique)
             if not torch.isfinite(grad.sum()):
                 raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
             self.adam.step(unique, grad, lr_scale)
         self.steps += 1
         return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
+
+    @torch.no_grad()
+    def _tv_gradient(self, unique: torch.Tensor) -> torch.Tensor:
+        """The gradient by the ``unique`` rows of ``mean_rows Σ_neighbours (v_row - v_neighbour)²`` (the
+        neighbours held fixed): a pull of each row towards its stored neighbours along x, y and z."""
+        f, res = self.field, self.field.resolution
+        flat = self.flat_of_row[unique]
+        ijk = torch.stack([flat // (res * res), (flat // res) % res, flat % res], dim=-1)
+        grad = torch.zeros(unique.numel(), f.values.shape[1], device=f.device)
+        mine = f.values[unique]
+        for axis, stride in enumerate((res * res, res, 1)):
+            for sign in (-1, 1):
+                inside = (ijk[:, axis] + sign >= 0) & (ijk[:, axis] + sign < res)
+                rows = f.vertex_rows(torch.where(inside, flat + sign * stride, flat))
+                stored = inside & (rows >= 0)
+                grad += torch.where(stored[:, None], mine - f.values[rows.clamp(min=0)], 0.0)
+        return grad * (2.0 / max(unique.numel(), 1))
 
     @torch.no_grad()
     def prune(self) -> None:

@@ -8,7 +8,13 @@ Values live on grid vertices (trilinear interpolation between them):
   coefficients per channel), stored ``[l·3 + channel]``; the colour is ``sigmoid(Σ_l Y_l(dir)·k_l)``.
 
 An occupancy grid over the ``(resolution - 1)³`` cells marks where the field has something; rays take
-samples only in occupied cells. A scene file stores only the vertices of occupied cells (float16).
+samples only in occupied cells, so only the vertices of occupied cells are ever read.
+
+Storage: a *dense* field holds one row of ``values`` per vertex, x-major (flat index ``(i·R + j)·R + k``). A
+*sparse* field holds rows for the vertices of occupied cells only, and ``rows`` (``R³`` int32) maps a flat
+vertex index to its row (-1: not stored). A fit refines to sparse fields and scene files load as sparse
+fields, so memory follows the surfaces, not the cube: a 384³ grid of four values per vertex takes 0.9 GB
+dense and a tenth of that sparse. A scene file stores only the vertices of occupied cells (float16).
 """
 
 from __future__ import annotations
@@ -21,9 +27,10 @@ import torch.nn.functional as F
 
 from .._validation import as_unit_rgb
 from ..errors import InvalidArgument, SceneFileError
+from .query import trilinear
 from .space import SceneSpace
 
-__all__ = ["SceneField", "n_sh_coefficients", "FIELD_TENSORS"]
+__all__ = ["SceneField", "n_sh_coefficients", "used_vertex_index", "FIELD_TENSORS"]
 
 #: Names of the tensors a scene file stores for the field.
 FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
@@ -50,8 +57,9 @@ def inverse_softplus(y: torch.Tensor) -> torch.Tensor:
 
 @dataclass(eq=False)
 class SceneField:
-    """A fitted (or fitting) scene field; ``values`` ``(resolution³, 1 + 3·n_sh)`` float32 and ``occupancy``
-    ``(resolution-1,)*3`` bool live on the same device.
+    """A fitted (or fitting) scene field on one device: ``values`` ``(rows, 1 + 3·n_sh)`` float32, the
+    ``occupancy`` ``(resolution-1,)*3`` bool and, for a sparse field, ``rows`` ``(resolution³,)`` int32 (see
+    the module docstring; ``None``: dense, one row per vertex).
 
     ``background`` (RGB in [0, 1]) is what the transmittance a ray has left stands for: the colour the fit
     composited its rays over, in expectation (mid-grey for a fit over random backgrounds). Rendering over
@@ -64,18 +72,24 @@ class SceneField:
     density_shift: float
     sh_degree: int
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rows: torch.Tensor | None = None
 
     def __post_init__(self) -> None:
+        if self.occupancy.ndim != 3 or len(set(self.occupancy.shape)) != 1 or self.occupancy.shape[0] < 3:
+            raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected (R-1, R-1, R-1) "
+                                  "with R ≥ 4 vertices per axis")
+        res = self.occupancy.shape[0] + 1
         n = self.values.shape[0]
-        res = round(n ** (1.0 / 3.0))
-        if res ** 3 != n or res < 4:
-            raise InvalidArgument(f"values has {n} rows; expected resolution³ rows with resolution ≥ 4")
         width = 1 + 3 * n_sh_coefficients(self.sh_degree)
         if self.values.ndim != 2 or self.values.shape[1] != width:
             raise InvalidArgument(f"values has shape {tuple(self.values.shape)}; expected ({n}, {width}) "
                                   f"for sh_degree={self.sh_degree}")
-        if tuple(self.occupancy.shape) != (res - 1,) * 3:
-            raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected {(res - 1,) * 3}")
+        if self.rows is None and n != res ** 3:
+            raise InvalidArgument(f"values has {n} rows; a dense field of occupancy {tuple(self.occupancy.shape)} "
+                                  f"has resolution³ = {res ** 3}")
+        if self.rows is not None and (self.rows.dtype != torch.int32 or tuple(self.rows.shape) != (res ** 3,)):
+            raise InvalidArgument(f"rows is {self.rows.dtype} {tuple(self.rows.shape)}; expected int32 "
+                                  f"({res ** 3},), a row per vertex of the {res}³ grid")
         background = as_unit_rgb(self.background)
         if background is None:
             raise InvalidArgument(f"background={self.background!r}: expected three values in [0, 1]")
@@ -85,7 +99,7 @@ class SceneField:
     def empty(cls, space: SceneSpace, resolution: int, sh_degree: int, alpha: float, step_ratio: float,
               device: torch.device | str = "cpu",
               background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> "SceneField":
-        """A field with opacity ``alpha`` per sample everywhere, grey colour, every cell occupied."""
+        """A dense field with opacity ``alpha`` per sample everywhere, grey colour, every cell occupied."""
         width = 1 + 3 * n_sh_coefficients(sh_degree)
         return cls(space, torch.zeros(resolution ** 3, width, device=device),
                    torch.ones((resolution - 1,) * 3, dtype=torch.bool, device=device),
@@ -99,44 +113,88 @@ class SceneField:
     def device(self) -> torch.device:
         return self.values.device
 
-    def to(self, device: torch.device | str) -> "SceneField":
-        return replace(self, values=self.values.to(device), occupancy=self.occupancy.to(device))
+    @property
+    def is_sparse(self) -> bool:
+        return self.rows is not None
 
-    def vertex_grid(self) -> torch.Tensor:
-        """The values as a ``(channels, R, R, R)`` view."""
+    def to(self, device: torch.device | str) -> "SceneField":
+        rows = None if self.rows is None else self.rows.to(device)
+        return replace(self, values=self.values.to(device), occupancy=self.occupancy.to(device), rows=rows)
+
+    def vertex_rows(self, flat: torch.Tensor) -> torch.Tensor:
+        """The rows of ``values`` holding the vertices with flat indices ``flat`` (int64; -1 where a sparse
+        field does not store the vertex)."""
+        return flat if self.rows is None else self.rows[flat].to(torch.int64)
+
+    def density_grid(self) -> torch.Tensor:
+        """The raw density as a dense ``(R, R, R)`` grid; ``-inf`` at vertices a sparse field does not store."""
         res = self.resolution
-        return self.values.T.reshape(-1, res, res, res)
+        if self.rows is None:
+            return self.values[:, 0].reshape(res, res, res)
+        grid = torch.full((res ** 3,), -math.inf, device=self.device)
+        stored = self.rows >= 0
+        grid[stored] = self.values[self.rows[stored].to(torch.int64), 0]
+        return grid.reshape(res, res, res)
 
     def cell_alpha(self, step_ratio: float) -> torch.Tensor:
-        """``(R-1)³`` opacity over one sample of ``step_ratio`` voxels at each cell's densest corner."""
-        raw = self.vertex_grid()[:1][None]
-        corner_max = F.max_pool3d(raw, kernel_size=2, stride=1)[0, 0]
+        """``(R-1)³`` opacity over one sample of ``step_ratio`` voxels at each cell's densest (stored) corner."""
+        corner_max = F.max_pool3d(self.density_grid()[None, None], kernel_size=2, stride=1)[0, 0]
+        return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
+
+    def occupied_cell_alpha(self, step_ratio: float) -> torch.Tensor:
+        """:meth:`cell_alpha` of the occupied cells only, in ``occupancy.nonzero()`` order (the same values,
+        without a dense grid of them: a render needs no more)."""
+        res = self.resolution
+        cells = self.occupancy.nonzero()
+        corners = (cells[:, None, :] + _CORNERS.to(cells.device)[None]).reshape(-1, 3)
+        flat = (corners[:, 0] * res + corners[:, 1]) * res + corners[:, 2]
+        rows = self.vertex_rows(flat)
+        if self.rows is not None and bool((rows < 0).any()):
+            raise InvalidArgument("the field does not store every vertex of its occupied cells")
+        corner_max = self.values[rows, 0].reshape(-1, 8).amax(dim=1)
         return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
 
     def upsampled(self, resolution: int) -> "SceneField":
-        """The same field on a finer grid: vertex values resampled trilinearly, densities rescaled to the
-        smaller voxel (same opacity per unit length), occupancy carried over with one cell of dilation."""
-        grid = F.interpolate(self.vertex_grid()[None], size=(resolution,) * 3, mode="trilinear",
-                             align_corners=True)[0]
-        values = grid.reshape(grid.shape[0], -1).T.contiguous()
+        """The same field on a finer grid, sparse: occupancy carried over with one cell of dilation, values
+        resampled trilinearly at the vertices of the occupied cells (a vertex the coarse field does not store
+        counts as zeros), densities rescaled to the smaller voxel (same opacity per unit length)."""
+        occ = F.interpolate(self.occupancy[None, None].float(), size=(resolution - 1,) * 3, mode="nearest")
+        occ = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
+        flat = used_vertex_index(occ)
+        ijk = torch.stack(_unflatten(flat, resolution), dim=-1).to(self.values.dtype)
+        coarse = ijk * ((self.resolution - 1) / (resolution - 1))
+        corners, weights = trilinear(coarse, self.resolution)
+        corner_rows = self.vertex_rows(corners)
+        gathered = torch.where((corner_rows >= 0)[..., None], self.values[corner_rows.clamp(min=0)], 0.0)
+        values = torch.einsum("nk,nkf->nf", weights, gathered)
         ratio = (resolution - 1) / (self.resolution - 1)
         sigma = F.softplus(values[:, 0] + self.density_shift) / ratio
         values[:, 0] = inverse_softplus(sigma) - self.density_shift
-        occ = F.interpolate(self.occupancy[None, None].float(), size=(resolution - 1,) * 3, mode="nearest")
-        occ = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
-        return replace(self, values=values, occupancy=occ)
+        return replace(self, values=values.contiguous(), occupancy=occ, rows=_row_map(flat, resolution))
+
+    def used_vertex_index(self) -> torch.Tensor:
+        """The flat indices of the vertices of occupied cells (the only ones a render reads), ascending."""
+        return used_vertex_index(self.occupancy)
 
     def used_vertices(self) -> torch.Tensor:
-        """``R³`` bool: the vertices of occupied cells (the only ones a render reads)."""
-        occ = F.pad(self.occupancy[None, None].float(), (1, 1, 1, 1, 1, 1))
-        return (F.max_pool3d(occ, kernel_size=2, stride=1)[0, 0] > 0).reshape(-1)
+        """``R³`` bool: the vertices of occupied cells."""
+        used = torch.zeros(self.resolution ** 3, dtype=torch.bool, device=self.device)
+        used[self.used_vertex_index()] = True
+        return used
+
+    def compact(self) -> "SceneField":
+        """The field as a sparse one that stores exactly the vertices of its occupied cells."""
+        flat = self.used_vertex_index()
+        if not bool((self.vertex_rows(flat) >= 0).all()):
+            raise InvalidArgument("the field does not store every vertex of its occupied cells")
+        return replace(self, values=self.values[self.vertex_rows(flat)].contiguous(),
+                       occupancy=self.occupancy.clone(), rows=_row_map(flat, self.resolution))
 
     def quantized(self) -> "SceneField":
-        """The field as a scene file stores it: float16 values at used vertices, zeros elsewhere."""
-        used = self.used_vertices()
-        values = torch.zeros_like(self.values)
-        values[used] = self.values[used].half().float()
-        return replace(self, values=values, occupancy=self.occupancy.clone())
+        """The field as a scene file stores it: sparse, its values rounded to float16."""
+        field = self.compact()
+        field.values = field.values.half().float()
+        return field
 
     # -- serialization (the scene file module wraps these in a zip) -----------------------------------------
     def metadata(self) -> dict:
@@ -146,17 +204,17 @@ class SceneField:
 
     def tensors(self) -> dict[str, torch.Tensor]:
         """The field's tensors as a scene file stores them (CPU, contiguous; see :data:`FIELD_TENSORS`)."""
-        used = self.used_vertices().cpu()
-        index = torch.nonzero(used).reshape(-1).to(torch.int64)
+        index = self.used_vertex_index()
         return {
             "occupancy": self.occupancy.cpu().to(torch.uint8).contiguous(),
-            "vertex_index": index.contiguous(),
-            "vertex_values": self.values.cpu()[index].half().contiguous(),
+            "vertex_index": index.cpu().contiguous(),
+            "vertex_values": self.values[self.vertex_rows(index)].cpu().half().contiguous(),
         }
 
     @classmethod
     def from_tensors(cls, metadata: dict, tensors: dict[str, torch.Tensor], source: str = "scene file") -> "SceneField":
-        """Rebuild a field from :meth:`metadata` and :meth:`tensors`, checking names, dtypes and shapes."""
+        """Rebuild a (sparse) field from :meth:`metadata` and :meth:`tensors`, checking names, dtypes and
+        shapes."""
         try:
             space = SceneSpace.from_dict(metadata["space"])
             res, sh_degree = int(metadata["resolution"]), int(metadata["sh_degree"])
@@ -189,16 +247,41 @@ class SceneField:
             raise SceneFileError(f"{source}: tensor 'vertex_index' points outside the {res}³ grid")
         if not torch.isfinite(vals).all():
             raise SceneFileError(f"{source}: tensor 'vertex_values' holds NaN or Inf")
-        values = torch.zeros(res ** 3, width)
-        values[index] = vals.float()
-        field = cls(space, values, occ.bool(), shift, sh_degree, background)
-        if not torch.equal(field.used_vertices().nonzero().reshape(-1), index):
+        occupancy = occ.bool()
+        if not torch.equal(used_vertex_index(occupancy), index):
             raise SceneFileError(f"{source}: 'vertex_index' does not list exactly the vertices of occupied cells")
-        return field
+        return cls(space, vals.float(), occupancy, shift, sh_degree, background, _row_map(index, res))
 
     def describe(self) -> dict:
         """Size figures for reports: resolution, occupied fraction, stored vertices."""
-        used = int(self.used_vertices().sum())
+        used = int(self.used_vertex_index().numel())
         return {"resolution": self.resolution, "sh_degree": self.sh_degree,
                 "occupied_fraction": float(self.occupancy.float().mean()), "stored_vertices": used}
+
+    def memory_bytes(self) -> int:
+        """The bytes the field's tensors take (values, occupancy and a sparse field's row map)."""
+        tensors = [self.values, self.occupancy] + ([] if self.rows is None else [self.rows])
+        return sum(t.numel() * t.element_size() for t in tensors)
+
+_CORNERS = torch.tensor([[(c >> 2) & 1, (c >> 1) & 1, c & 1] for c in range(8)])
+
+
+def _unflatten(flat: torch.Tensor, resolution: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    return flat // (resolution * resolution), (flat // resolution) % resolution, flat % resolution
+
+
+def used_vertex_index(occupancy: torch.Tensor) -> torch.Tensor:
+    """The flat indices (int64, ascending) of the ``(R-1)³`` ``occupancy``'s cells' corner vertices in the
+    ``R³`` vertex grid."""
+    res = occupancy.shape[0] + 1
+    cells = occupancy.nonzero()
+    corners = (cells[:, None, :] + _CORNERS.to(cells.device)[None]).reshape(-1, 3)
+    return torch.unique((corners[:, 0] * res + corners[:, 1]) * res + corners[:, 2])
+
+
+def _row_map(flat: torch.Tensor, resolution: int) -> torch.Tensor:
+    """``R³`` int32: row ``n`` for the vertex ``flat[n]``, -1 elsewhere."""
+    rows = torch.full((resolution ** 3,), -1, dtype=torch.int32, device=flat.device)
+    rows[flat] = torch.arange(flat.numel(), dtype=torch.int32, device=flat.device)
+    return rows
 

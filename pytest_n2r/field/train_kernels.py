@@ -13,13 +13,13 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from ..render.kernels import _grid
+from ..render.kernels import _grid, vertex_row
 
 __all__ = ["sample_corners", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
 
 
 @njit(cache=True, parallel=True)
-def _sample_corners(o, d, t, ray_idx, shell, res, rows, weights, cells):
+def _sample_corners(o, d, t, ray_idx, shell, res, vertex_rows, rows, weights, cells):
     rr = res * res
     nc = res - 1
     for i in prange(t.shape[0]):
@@ -31,18 +31,19 @@ def _sample_corners(o, d, t, ray_idx, shell, res, rows, weights, cells):
         base = (ci * res + cj) * res + ck
         cells[i] = (ci * nc + cj) * nc + ck
         for c in range(8):
-            rows[i, c] = base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1)
+            rows[i, c] = vertex_row(vertex_rows, base + (c >> 2) * rr + ((c >> 1) & 1) * res + (c & 1))
             weights[i, c] = (fx if c & 4 else 1.0 - fx) * (fy if c & 2 else 1.0 - fy) * (fz if c & 1 else 1.0 - fz)
 
 
 def sample_corners(o: np.ndarray, d: np.ndarray, t: np.ndarray, ray_idx: np.ndarray, shell: float,
-                   resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   resolution: int, vertex_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The 8 corner rows ``(N, 8)`` int64 and trilinear weights ``(N, 8)`` float32 of packed samples (same
-    corner order as :func:`pytest_n2r.field.query.trilinear`), and each sample's flat cell index ``(N,)``."""
+    corner order as :func:`pytest_n2r.field.query.trilinear`), and each sample's flat cell index ``(N,)``.
+    ``vertex_rows`` maps a flat vertex index to its row (empty: a dense field, the row is the index)."""
     rows = np.empty((t.shape[0], 8), dtype=np.int64)
     weights = np.empty((t.shape[0], 8), dtype=np.float32)
     cells = np.empty(t.shape[0], dtype=np.int64)
-    _sample_corners(o, d, t, ray_idx, shell, resolution, rows, weights, cells)
+    _sample_corners(o, d, t, ray_idx, shell, resolution, vertex_rows, rows, weights, cells)
     return rows, weights, cells
 
 

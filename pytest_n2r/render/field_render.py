@@ -111,13 +111,16 @@ class FieldRenderer:
         occupancy = field.occupancy
         if s.min_alpha > 0:
             with torch.no_grad():
-                occupancy = occupancy & (field.cell_alpha(s.step_ratio) >= s.min_alpha)
+                occupancy = occupancy.clone()
+                occupancy[occupancy.nonzero(as_tuple=True)] = field.occupied_cell_alpha(s.step_ratio) >= s.min_alpha
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background if s.background is not None else field.background
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
+            self._rows = (np.zeros(0, dtype=np.int32) if field.rows is None
+                          else np.ascontiguousarray(field.rows.cpu().numpy()))
 
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
@@ -158,7 +161,7 @@ class FieldRenderer:
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
-            kernels.render_rays(o, d, self._density, self._values, cells, blocks, g.resolution, g.shell, g.step,
+            kernels.render_rays(o, d, self._density, self._values, self._rows, cells, blocks, g.resolution, g.shell, g.step,
                                 g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop,
                                 np.asarray(self.background), want_depth, rgb, depth, opacity)
             return
@@ -178,7 +181,8 @@ def render_rays_torch(field: SceneField, grid: MarchGrid, o: torch.Tensor, d: to
     already marched as ``(ray_idx, t, offsets)``."""
     ray_idx, t, offsets = march_dense(o, d, grid) if marched is None else marched
     p = o[ray_idx] + t[:, None] * d[ray_idx]
-    rows, weights = trilinear(grid_coords(p, grid.shell, field.resolution), field.resolution)
+    corners, weights = trilinear(grid_coords(p, grid.shell, field.resolution), field.resolution)
+    rows = field.vertex_rows(corners)
     unit = d / d.norm(dim=-1, keepdim=True)
     basis = sh_basis(unit[ray_idx], field.sh_degree)
     alpha, rgb = shade(interpolate(field.values, rows, weights), basis, field.density_shift, grid.step_ratio)

@@ -157,14 +157,22 @@ def _alpha(x, sigma_step):
     return -math.expm1(-_softplus(x) * sigma_step)
 
 
+@njit(cache=True, inline="always")
+def vertex_row(rows, v):
+    """The values row of flat vertex ``v``: ``rows[v]`` for a sparse field, ``v`` itself when ``rows`` is
+    empty (a dense field)."""
+    return v if rows.shape[0] == 0 else np.int64(rows[v])
+
+
 @njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samples, far, density_shift,
+def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shell_samples, far, density_shift,
                 sigma_step, sh_degree, t_stop, background, want_depth, rgb, depth, opacity):
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
-    ``values`` is ``(res³, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
-    (``[l·3 + channel]``); ``density`` is a contiguous copy of its first column (read for every sample, so
-    kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's
+    ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
+    (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a flat
+    vertex index to its row (empty for a dense field); ``density`` is a contiguous copy of the first column
+    (read for every sample, so kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's
     opacity is ``1 - exp(-σ·sigma_step)`` with ``sigma_step`` the sample spacing in voxels. The transmittance
     left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the z-depth
     of the ray's compositing weight, ``Σ w·t / Σ w``, and the far end of the ray where it has no weight at
@@ -207,20 +215,21 @@ def render_rays(o, d, density, values, occ, blocks, res, shell, step, shell_samp
             a00, a01, a10, a11 = ex * ey, ex * fy, fx * ey, fx * fy
             w0, w1, w2, w3 = a00 * ez, a00 * fz, a01 * ez, a01 * fz
             w4, w5, w6, w7 = a10 * ez, a10 * fz, a11 * ez, a11 * fz
-            v0 = (ci * res + cj) * res + ck
-            v2 = v0 + res
-            v4 = v0 + rr
-            v6 = v4 + res
-            sigma_raw = (w0 * density[v0] + w1 * density[v0 + 1] + w2 * density[v2] + w3 * density[v2 + 1]
-                         + w4 * density[v4] + w5 * density[v4 + 1] + w6 * density[v6] + w7 * density[v6 + 1])
+            v = (ci * res + cj) * res + ck
+            v0, v1 = vertex_row(rows, v), vertex_row(rows, v + 1)
+            v2, v3 = vertex_row(rows, v + res), vertex_row(rows, v + res + 1)
+            v4, v5 = vertex_row(rows, v + rr), vertex_row(rows, v + rr + 1)
+            v6, v7 = vertex_row(rows, v + rr + res), vertex_row(rows, v + rr + res + 1)
+            sigma_raw = (w0 * density[v0] + w1 * density[v1] + w2 * density[v2] + w3 * density[v3]
+                         + w4 * density[v4] + w5 * density[v5] + w6 * density[v6] + w7 * density[v7])
             alpha = _alpha(sigma_raw + density_shift, sigma_step)
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
             for j in range(1, n_coef + 1):
-                coef[j - 1] = (w0 * values[v0, j] + w1 * values[v0 + 1, j] + w2 * values[v2, j]
-                               + w3 * values[v2 + 1, j] + w4 * values[v4, j] + w5 * values[v4 + 1, j]
-                               + w6 * values[v6, j] + w7 * values[v6 + 1, j])
+                coef[j - 1] = (w0 * values[v0, j] + w1 * values[v1, j] + w2 * values[v2, j]
+                               + w3 * values[v3, j] + w4 * values[v4, j] + w5 * values[v5, j]
+                               + w6 * values[v6, j] + w7 * values[v7, j])
             lr, lg, lb = SH_C0 * coef[0], SH_C0 * coef[1], SH_C0 * coef[2]  # colour logits
             if n_coef == 12:
                 lr += b1 * coef[3] + b2 * coef[6] + b3 * coef[9]

@@ -57,8 +57,8 @@ def test_upsampling_keeps_opacity_per_unit_length():
     field = smooth_field()
     fine = field.upsampled(31)  # vertex 2i of the fine grid is vertex i of the coarse one
     ratio = 2.0
-    coarse_sigma = F.softplus(field.vertex_grid()[0] + field.density_shift)
-    fine_sigma = F.softplus(fine.vertex_grid()[0, ::2, ::2, ::2] + fine.density_shift) * ratio
+    coarse_sigma = F.softplus(field.density_grid() + field.density_shift)
+    fine_sigma = F.softplus(fine.density_grid()[::2, ::2, ::2] + fine.density_shift) * ratio
     torch.testing.assert_close(fine_sigma, coarse_sigma, rtol=1e-4, atol=1e-6,
                                msg=lambda m: f"density per unit length at shared vertices changed: {m}")
     flat = SceneField.empty(SPACE, 16, sh_degree=0, alpha=0.2, step_ratio=0.5)
@@ -96,16 +96,62 @@ def test_tensors_round_trip_to_the_quantized_field(sh_degree):
         "from_tensors(tensors()) values differ from quantized()"
     assert torch.equal(back.occupancy, field.occupancy), "occupancy changed through tensors()"
     assert back.metadata() == field.metadata(), f"metadata {back.metadata()} != {field.metadata()}"
-    unused = ~field.used_vertices()
-    assert unused.any() and not back.values[unused].any(), "vertices of no occupied cell must be stored as zeros"
-    used = ~unused
-    err = float((field.values[used] - back.values[used]).abs().max())
+    used = field.used_vertex_index()
+    assert back.is_sparse and back.values.shape[0] == used.numel() < 12 ** 3, (
+        f"the reloaded field stores {back.values.shape[0]} rows; expected one per used vertex ({used.numel()})")
+    assert torch.equal(back.rows >= 0, field.used_vertices()), "the stored vertices are not the used ones"
+    err = float((field.values[used] - back.values[back.vertex_rows(used)]).abs().max())
     assert err <= 1e-3 * float(field.values.abs().max()), f"float16 storage changed used values by {err}"
     c2w = named_pose("outside")
     for name in ("rgb", "depth", "opacity"):
         a = FieldRenderer(back).render(c2w, CAMERA, (name,))[name]
         b = FieldRenderer(quantized).render(c2w, CAMERA, (name,))[name]
         assert a.tobytes() == b.tobytes(), f"the reloaded field renders {name} differently from quantized()"
+
+
+@pytest.mark.parametrize("backend", ["compiled", "torch"])
+@pytest.mark.parametrize("pose_name", ["outside", "inside"])
+def test_a_sparse_field_renders_exactly_like_the_dense_one(backend, pose_name):
+    """``compact()`` keeps the vertices of occupied cells, the only ones a render reads: same bytes."""
+    dense = random_field(resolution=14, occupied=0.05, seed=3)
+    sparse = dense.compact()
+    assert sparse.is_sparse and sparse.values.shape[0] < dense.values.shape[0] / 2, (
+        f"compact() kept {sparse.values.shape[0]} of {dense.values.shape[0]} rows at 5 % occupancy")
+    c2w = named_pose(pose_name)
+    settings = RenderSettings(backend=backend)
+    a = FieldRenderer(dense, settings).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
+    b = FieldRenderer(sparse, settings).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
+    for name in a:
+        assert a[name].tobytes() == b[name].tobytes(), f"{backend}, {pose_name}: sparse {name} differs from dense"
+    expected = dense.cell_alpha(0.5)[dense.occupancy]
+    for name, got in (("sparse cell_alpha", sparse.cell_alpha(0.5)[dense.occupancy]),
+                      ("dense occupied_cell_alpha", dense.occupied_cell_alpha(0.5)),
+                      ("sparse occupied_cell_alpha", sparse.occupied_cell_alpha(0.5))):
+        assert torch.equal(got, expected), f"{name} differs from the dense cell_alpha of the occupied cells"
+
+
+def test_upsampling_a_sparse_field_keeps_its_stored_values():
+    """A sparse field refines like a dense one: at the vertices the grids share, every vertex the coarse field
+    stores is stored by the fine one with the same density per unit length and the same colour."""
+    field = smooth_field()
+    field.occupancy[:, :, 8:] = False  # half the cube empty: the refined fields store only the other half
+    once = field.upsampled(31)
+    twice = once.upsampled(61)  # vertex 2i of `twice` is vertex i of `once`
+    assert twice.is_sparse and twice.values.shape[0] < 0.6 * 61 ** 3, (
+        f"the refined field stores {twice.values.shape[0]} of {61 ** 3} vertices; expected about half")
+    coarse, fine = once.density_grid(), twice.density_grid()[::2, ::2, ::2]
+    stored = torch.isfinite(coarse)
+    assert stored.any() and torch.isfinite(fine[stored]).all(), "a vertex stored by the coarse field was dropped"
+    torch.testing.assert_close(F.softplus(fine[stored] + twice.density_shift) * 2.0,
+                               F.softplus(coarse[stored] + once.density_shift), rtol=1e-4, atol=1e-6,
+                               msg=lambda m: f"density per unit length at shared stored vertices changed: {m}")
+    i, j, k = (c.reshape(-1) for c in torch.meshgrid(*(torch.arange(31),) * 3, indexing="ij"))
+    coarse_flat = (i * 31 + j) * 31 + k
+    fine_flat = (2 * i * 61 + 2 * j) * 61 + 2 * k
+    keep = once.vertex_rows(coarse_flat) >= 0
+    torch.testing.assert_close(twice.values[twice.vertex_rows(fine_flat[keep]), 1:],
+                               once.values[once.vertex_rows(coarse_flat[keep]), 1:],
+                               msg=lambda m: f"colour at shared stored vertices changed: {m}")
 
 
 def _broken(change: str) -> tuple[dict, dict]:
@@ -144,12 +190,15 @@ def test_bad_field_tensors_are_scene_file_errors_naming_the_problem(change, mess
 
 
 @pytest.mark.parametrize("rows, width, occupancy, message", [
-    (100, 13, (3, 3, 3), r"values has 100 rows; expected resolution³ rows"),
+    (100, 4, (3, 3, 3), r"values has 100 rows; a dense field of occupancy \(3, 3, 3\) has resolution³ = 64"),
     (64, 13, (3, 3, 3), r"values has shape \(64, 13\); expected \(64, 4\) for sh_degree=0"),
-    (64, 4, (4, 4, 4), r"occupancy has shape \(4, 4, 4\); expected \(3, 3, 3\)"),
+    (64, 4, (4, 4, 3), r"occupancy has shape \(4, 4, 3\); expected \(R-1, R-1, R-1\)"),
 ])
 def test_inconsistent_field_arrays_are_named(rows, width, occupancy, message):
     with pytest.raises(InvalidArgument, match=message):
         SceneField(SPACE, torch.zeros(rows, width), torch.ones(occupancy, dtype=torch.bool), 0.0, 0)
+    with pytest.raises(InvalidArgument, match=r"rows is torch.int64 \(64,\); expected int32 \(64,\)"):
+        SceneField(SPACE, torch.zeros(10, 4), torch.ones((3, 3, 3), dtype=torch.bool), 0.0, 0,
+                   rows=torch.zeros(64, dtype=torch.int64))
     with pytest.raises(InvalidArgument, match=r"sh_degree=2: expected 0"):
         n_sh_coefficients(2)

@@ -154,7 +154,7 @@ def test_sample_corners_are_the_reference_trilinear_corners():
     d = rng.normal(size=(n_rays, 3)).astype(np.float32)
     ray_idx = np.repeat(np.arange(n_rays), per_ray)
     t = rng.uniform(0.0, 4.0, n_rays * per_ray).astype(np.float32)  # also far into the contracted shell
-    rows, weights, cells = sample_corners(o, d, t, ray_idx, shell, res)
+    rows, weights, cells = sample_corners(o, d, t, ray_idx, shell, res, np.zeros(0, dtype=np.int32))
     p = torch.from_numpy(o.astype(np.float64))[ray_idx] + torch.from_numpy(t.astype(np.float64))[:, None] \
         * torch.from_numpy(d.astype(np.float64))[ray_idx]
     rows_ref, weights_ref = trilinear(grid_coords(p, shell, res), res)
