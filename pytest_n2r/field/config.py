@@ -38,10 +38,11 @@ class FieldConfig:
         threshold is ``final_prune_alpha`` instead: thin haze in front of surfaces is dropped while the
         fit can still adapt to its absence, so rays reach surfaces in fewer samples (faster steps and
         renders). Nothing is pruned before step ``prune_after``: the field needs that long to show where
-        its surfaces are. ``tv``: weight of a total-variation prior on the vertices a step touches (the mean
-        over them of the squared differences to their stored grid neighbours, all columns): on fine grids,
-        where a vertex is seen by few rays, it fills in what the rays leave free from the neighbourhood
-        instead of from noise.
+        its surfaces are. ``tv`` and ``tv_density``: weights of a total-variation prior on the colour and on
+        the density of the vertices a step touches (the mean over them of the squared differences to their
+        stored grid neighbours): on fine grids, where a vertex is seen by few rays, it fills in what the
+        rays leave free from the neighbourhood instead of from noise. On the density it also thins surfaces
+        seen only at grazing angles, which haze pruning can then cut open.
     ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
     """
 
@@ -64,6 +65,7 @@ class FieldConfig:
     prune_every: int = 25
     prune_after: int = 25
     tv: float = 0.0
+    tv_density: float = 0.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -84,7 +86,7 @@ class FieldConfig:
         for name in ("prune_alpha", "final_prune_alpha", "prune_weight"):
             if not 0 <= getattr(self, name) < 1:
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected a threshold in [0, 1)")
-        for name in ("sparsity", "distortion", "tv"):
+        for name in ("sparsity", "distortion", "tv", "tv_density"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number >= 0")

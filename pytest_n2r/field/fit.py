@@ -112,6 +112,7 @@ class _Trainer:
         c = self.config
         width = self.field.values.shape[1]
         lrs = torch.tensor([c.lr_density] + [c.lr_color] * (width - 1))
+        self.tv_weights = torch.tensor([c.tv_density] + [c.tv] * (width - 1), device=self.device)
         self.adam = RowAdam(self.field.values, lrs)
         self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
         rows = self.field.rows
@@ -187,8 +188,8 @@ class _Trainer:
         if t.numel():
             loss.backward()
             grad = sub.grad
-            if c.tv > 0:
-                grad += c.tv * self._tv_gradient(unique)
+            if c.tv > 0 or c.tv_density > 0:
+                grad += self.tv_weights * self._tv_gradient(unique)
             if not torch.isfinite(grad.sum()):
                 raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
             self.adam.step(unique, grad, lr_scale)

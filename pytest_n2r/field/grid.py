@@ -13,8 +13,9 @@ samples only in occupied cells, so only the vertices of occupied cells are ever 
 Storage: a *dense* field holds one row of ``values`` per vertex, x-major (flat index ``(i·R + j)·R + k``). A
 *sparse* field holds rows for the vertices of occupied cells only, and ``rows`` (``R³`` int32) maps a flat
 vertex index to its row (-1: not stored). A fit refines to sparse fields and scene files load as sparse
-fields, so memory follows the surfaces, not the cube: a 384³ grid of four values per vertex takes 0.9 GB
-dense and a tenth of that sparse. A scene file stores only the vertices of occupied cells (float16).
+fields, so memory follows the surfaces, not the cube: the demo wall's 384³ grid of four values per vertex
+takes 0.9 GB dense and 0.28 GB sparse, most of it the row map. A scene file stores only the vertices of
+occupied cells (float16).
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ class SceneField:
     @classmethod
     def empty(cls, space: SceneSpace, resolution: int, sh_degree: int, alpha: float, step_ratio: float,
               device: torch.device | str = "cpu",
-              background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> "SceneField":
+              background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> SceneField:
         """A dense field with opacity ``alpha`` per sample everywhere, grey colour, every cell occupied."""
         width = 1 + 3 * n_sh_coefficients(sh_degree)
         return cls(space, torch.zeros(resolution ** 3, width, device=device),
@@ -117,7 +118,7 @@ class SceneField:
     def is_sparse(self) -> bool:
         return self.rows is not None
 
-    def to(self, device: torch.device | str) -> "SceneField":
+    def to(self, device: torch.device | str) -> SceneField:
         rows = None if self.rows is None else self.rows.to(device)
         return replace(self, values=self.values.to(device), occupancy=self.occupancy.to(device), rows=rows)
 
@@ -154,7 +155,7 @@ class SceneField:
         corner_max = self.values[rows, 0].reshape(-1, 8).amax(dim=1)
         return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
 
-    def upsampled(self, resolution: int) -> "SceneField":
+    def upsampled(self, resolution: int) -> SceneField:
         """The same field on a finer grid, sparse: occupancy carried over with one cell of dilation, values
         resampled trilinearly at the vertices of the occupied cells (a vertex the coarse field does not store
         counts as zeros), densities rescaled to the smaller voxel (same opacity per unit length)."""
@@ -182,7 +183,7 @@ class SceneField:
         used[self.used_vertex_index()] = True
         return used
 
-    def compact(self) -> "SceneField":
+    def compact(self) -> SceneField:
         """The field as a sparse one that stores exactly the vertices of its occupied cells."""
         flat = self.used_vertex_index()
         if not bool((self.vertex_rows(flat) >= 0).all()):
@@ -190,7 +191,7 @@ class SceneField:
         return replace(self, values=self.values[self.vertex_rows(flat)].contiguous(),
                        occupancy=self.occupancy.clone(), rows=_row_map(flat, self.resolution))
 
-    def quantized(self) -> "SceneField":
+    def quantized(self) -> SceneField:
         """The field as a scene file stores it: sparse, its values rounded to float16."""
         field = self.compact()
         field.values = field.values.half().float()
@@ -212,7 +213,7 @@ class SceneField:
         }
 
     @classmethod
-    def from_tensors(cls, metadata: dict, tensors: dict[str, torch.Tensor], source: str = "scene file") -> "SceneField":
+    def from_tensors(cls, metadata: dict, tensors: dict[str, torch.Tensor], source: str = "scene file") -> SceneField:
         """Rebuild a (sparse) field from :meth:`metadata` and :meth:`tensors`, checking names, dtypes and
         shapes."""
         try:

@@ -54,15 +54,20 @@ def test_the_tv_gradient_is_the_gradient_of_the_tv_prior(capture48):
 
 
 def test_a_tv_prior_smooths_the_field(capture48):
-    """With ``tv`` the fitted grid varies less between neighbouring vertices (measured over the same steps)."""
+    """With ``tv`` the fitted colour, with ``tv_density`` the density, varies less between neighbouring
+    vertices (measured over the same steps)."""
 
-    def roughness(tv: float) -> float:
-        config = FieldConfig(resolutions=(24,), stage_fractions=(), batch_rays=256, tv=tv)
+    def roughness(**weights: float) -> tuple[float, float]:
+        config = FieldConfig(resolutions=(24,), stage_fractions=(), batch_rays=256, **weights)
         trainer = _Trainer(capture48, config, torch.device("cpu"))
         for _ in range(30):
             trainer.step(1.0)
-        colour = trainer.field.values[:, 1:].reshape(24, 24, 24, -1)
-        return float(sum((colour.diff(dim=axis) ** 2).mean() for axis in range(3)))
+        grid = trainer.field.values.reshape(24, 24, 24, -1)
+        return tuple(float(sum((part.diff(dim=axis) ** 2).mean() for axis in range(3)))
+                     for part in (grid[..., 1:], grid[..., :1]))
 
-    plain, smooth = roughness(0.0), roughness(0.05)
-    assert smooth < 0.5 * plain, f"tv=0.05 left the colour as rough as without it: {smooth:.3g} vs {plain:.3g}"
+    plain, colour_only, density_only = roughness(), roughness(tv=0.05), roughness(tv_density=0.05)
+    assert colour_only[0] < 0.5 * plain[0], (
+        f"tv=0.05 left the colour as rough as without it: {colour_only[0]:.3g} vs {plain[0]:.3g}")
+    assert density_only[1] < 0.5 * plain[1], (
+        f"tv_density=0.05 left the density as rough as without it: {density_only[1]:.3g} vs {plain[1]:.3g}")
