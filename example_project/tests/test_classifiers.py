@@ -1,8 +1,12 @@
 """Image classifiers under the pose transforms on the object scene (UAV vehicle inspection): the
 probability vectors should stay similar (cosine similarity, ideal 1).
 
-``eps`` is the worst deviation of the two networks over 20 derandomized examples (demo ``object`` scene,
-320×180) rounded up with a margin of about 0.1. What the measurements ruled out:
+``eps`` is the worst deviation of the two networks seen (demo ``object`` scene, 320×180) rounded up with a
+margin of about 0.1. The first values came from 20 derandomized examples, and τ1/τ2/τ5 sat too close to
+what other draws reach: the derandomized examples change when the suite's imports do (a cause not found
+yet), and MobileNetV2 then failed τ2 at 0.474 and 0.488. They were measured again over those runs and a
+60-example search of each relation: worst MobileNetV2 / EfficientNet-Lite0 deviations 0.53 / 0.29 (τ1),
+0.49 / 0.41 (τ2), 0.54 / 0.35 (τ5), 0.29 / 0.25 (τ6). What the measurements ruled out:
 
 - **class invariance under τ1/τ2** does not hold on the demo van for either network, not even as "the
   source's top-1 class stays in the follow-up's top 5": both networks are unsure what the van is (top-1
@@ -32,19 +36,19 @@ def net(request):
     return load_classifier(request.param)
 
 
-@metamorphic(cosine_similarity(), eps=0.6, transform="tau1")
+@metamorphic(cosine_similarity(), eps=0.65, transform="tau1")
 def test_cosine_similarity_tau1(n2r_scene, net):
     skip_without_object(n2r_scene)
     return net
 
 
-@metamorphic(cosine_similarity(), eps=0.45, transform="tau2")
+@metamorphic(cosine_similarity(), eps=0.6, transform="tau2")
 def test_cosine_similarity_tau2(n2r_scene, net):
     skip_without_object(n2r_scene)
     return net
 
 
-@metamorphic(cosine_similarity(), eps=0.55, transform="tau5")
+@metamorphic(cosine_similarity(), eps=0.65, transform="tau5")
 def test_cosine_similarity_tau5(n2r_scene, net):
     skip_without_object(n2r_scene)
     return net
