@@ -116,7 +116,8 @@ class _Trainer:
         self.adam = RowAdam(self.field.values, lrs)
         self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
         rows = self.field.rows
-        self.vertex_rows = np.zeros(0, dtype=np.int32) if rows is None else rows.cpu().numpy()
+        #: The field's vertex → row map for the compiled kernels (empty: a dense field).
+        self.row_map = np.zeros(0, dtype=np.int32) if rows is None else rows.cpu().numpy()
         #: The flat vertex index of each row.
         self.flat_of_row = torch.arange(self.field.values.shape[0], device=self.device)
         if rows is not None:
@@ -155,7 +156,7 @@ class _Trainer:
         s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
         if self.compiled:
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
-                                                  self.space.shell, f.resolution, self.vertex_rows)
+                                                  self.space.shell, f.resolution, self.row_map)
             unique, inverse = self.row_index.unique(rows)
             unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
             sub = f.values[unique].requires_grad_(True)

@@ -77,8 +77,8 @@ class SceneField:
 
     def __post_init__(self) -> None:
         if self.occupancy.ndim != 3 or len(set(self.occupancy.shape)) != 1 or self.occupancy.shape[0] < 3:
-            raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected (R-1, R-1, R-1) "
-                                  "with R ≥ 4 vertices per axis")
+            raise InvalidArgument(f"occupancy has shape {tuple(self.occupancy.shape)}; expected "
+                                  "(R-1, R-1, R-1) with R ≥ 4 vertices per axis")
         res = self.occupancy.shape[0] + 1
         n = self.values.shape[0]
         width = 1 + 3 * n_sh_coefficients(self.sh_degree)
@@ -86,9 +86,10 @@ class SceneField:
             raise InvalidArgument(f"values has shape {tuple(self.values.shape)}; expected ({n}, {width}) "
                                   f"for sh_degree={self.sh_degree}")
         if self.rows is None and n != res ** 3:
-            raise InvalidArgument(f"values has {n} rows; a dense field of occupancy {tuple(self.occupancy.shape)} "
-                                  f"has resolution³ = {res ** 3}")
-        if self.rows is not None and (self.rows.dtype != torch.int32 or tuple(self.rows.shape) != (res ** 3,)):
+            raise InvalidArgument(f"values has {n} rows; a dense field of occupancy "
+                                  f"{tuple(self.occupancy.shape)} has resolution³ = {res ** 3}")
+        if self.rows is not None and (self.rows.dtype != torch.int32
+                                      or tuple(self.rows.shape) != (res ** 3,)):
             raise InvalidArgument(f"rows is {self.rows.dtype} {tuple(self.rows.shape)}; expected int32 "
                                   f"({res ** 3},), a row per vertex of the {res}³ grid")
         background = as_unit_rgb(self.background)
@@ -128,7 +129,8 @@ class SceneField:
         return flat if self.rows is None else self.rows[flat].to(torch.int64)
 
     def density_grid(self) -> torch.Tensor:
-        """The raw density as a dense ``(R, R, R)`` grid; ``-inf`` at vertices a sparse field does not store."""
+        """The raw density as a dense ``(R, R, R)`` grid; ``-inf`` at vertices a sparse field does not
+        store."""
         res = self.resolution
         if self.rows is None:
             return self.values[:, 0].reshape(res, res, res)
@@ -138,7 +140,8 @@ class SceneField:
         return grid.reshape(res, res, res)
 
     def cell_alpha(self, step_ratio: float) -> torch.Tensor:
-        """``(R-1)³`` opacity over one sample of ``step_ratio`` voxels at each cell's densest (stored) corner."""
+        """``(R-1)³`` opacity over one sample of ``step_ratio`` voxels at each cell's densest (stored)
+        corner."""
         corner_max = F.max_pool3d(self.density_grid()[None, None], kernel_size=2, stride=1)[0, 0]
         return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
 

@@ -111,8 +111,9 @@ class FieldRenderer:
         occupancy = field.occupancy
         if s.min_alpha > 0:
             with torch.no_grad():
+                visible = field.occupied_cell_alpha(s.step_ratio) >= s.min_alpha
                 occupancy = occupancy.clone()
-                occupancy[occupancy.nonzero(as_tuple=True)] = field.occupied_cell_alpha(s.step_ratio) >= s.min_alpha
+                occupancy[occupancy.nonzero(as_tuple=True)] = visible
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background if s.background is not None else field.background
@@ -161,9 +162,10 @@ class FieldRenderer:
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
-            kernels.render_rays(o, d, self._density, self._values, self._rows, cells, blocks, g.resolution, g.shell, g.step,
-                                g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree, s.t_stop,
-                                np.asarray(self.background), want_depth, rgb, depth, opacity)
+            kernels.render_rays(o, d, self._density, self._values, self._rows, cells, blocks, g.resolution,
+                                g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
+                                f.sh_degree, s.t_stop, np.asarray(self.background), want_depth, rgb, depth,
+                                opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

@@ -170,9 +170,10 @@ def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shel
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
-    (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a flat
-    vertex index to its row (empty for a dense field); ``density`` is a contiguous copy of the first column
-    (read for every sample, so kept dense in cache; colours are read only where a sample is visible). Density is per voxel: a sample's
+    (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a
+    flat vertex index to its row (empty for a dense field); ``density`` is a contiguous copy of the first
+    column (read for every sample, so kept dense in cache; colours are read only where a sample is
+    visible). Density is per voxel: a sample's
     opacity is ``1 - exp(-σ·sigma_step)`` with ``sigma_step`` the sample spacing in voxels. The transmittance
     left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the z-depth
     of the ray's compositing weight, ``Σ w·t / Σ w``, and the far end of the ray where it has no weight at

@@ -59,7 +59,7 @@ def test_the_digest_follows_every_part_of_the_recipe():
 
 @pytest.mark.slow
 def test_a_rebuild_is_byte_identical_and_records_its_recipe(tmp_path):
-    recipe = tiny("object").replace(config=TINY_CONFIG.replace(tv=1e-5, tv_density=1e-5))  # the shipped priors
+    recipe = tiny("object").replace(config=TINY_CONFIG.replace(tv=1e-5, tv_density=1e-5))  # with the priors
     first, timings = build_fitted("object", tmp_path / "a.n2r", recipe=recipe)
     second, _ = build_fitted("object", tmp_path / "b.n2r", recipe=recipe)
     a, b = first.read_bytes(), second.read_bytes()
@@ -90,7 +90,7 @@ def test_the_shipped_file_is_the_current_recipe(name):
     assert scene.config == recipe.config and scene.report["steps"] == recipe.max_steps
     assert {(v.camera.width, v.camera.height) for v in scene.views} == {recipe.size}
     # 384³ fields: 4.1 and 12.7 MiB (docs/demo-scenes.md); a much larger file would weigh on every install
-    assert scene.images_stored == 0 and scene.size_bytes < 16 * 2**20, f"{path.name}: {scene.size_bytes} bytes"
+    assert scene.images_stored == 0 and scene.size_bytes < 16 * 2**20, f"{path.name}: {scene.size_bytes} B"
     assert fitted_path(name, build=False) == path
 
 

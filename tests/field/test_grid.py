@@ -98,7 +98,8 @@ def test_tensors_round_trip_to_the_quantized_field(sh_degree):
     assert back.metadata() == field.metadata(), f"metadata {back.metadata()} != {field.metadata()}"
     used = field.used_vertex_index()
     assert back.is_sparse and back.values.shape[0] == used.numel() < 12 ** 3, (
-        f"the reloaded field stores {back.values.shape[0]} rows; expected one per used vertex ({used.numel()})")
+        f"the reloaded field stores {back.values.shape[0]} rows; expected one per used vertex "
+        f"({used.numel()})")
     assert torch.equal(back.rows >= 0, field.used_vertices()), "the stored vertices are not the used ones"
     err = float((field.values[used] - back.values[back.vertex_rows(used)]).abs().max())
     assert err <= 1e-3 * float(field.values.abs().max()), f"float16 storage changed used values by {err}"
@@ -122,7 +123,8 @@ def test_a_sparse_field_renders_exactly_like_the_dense_one(backend, pose_name):
     a = FieldRenderer(dense, settings).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
     b = FieldRenderer(sparse, settings).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
     for name in a:
-        assert a[name].tobytes() == b[name].tobytes(), f"{backend}, {pose_name}: sparse {name} differs from dense"
+        assert a[name].tobytes() == b[name].tobytes(), (
+            f"{backend}, {pose_name}: sparse {name} differs from dense")
     expected = dense.cell_alpha(0.5)[dense.occupancy]
     for name, got in (("sparse cell_alpha", sparse.cell_alpha(0.5)[dense.occupancy]),
                       ("dense occupied_cell_alpha", dense.occupied_cell_alpha(0.5)),
@@ -141,10 +143,11 @@ def test_upsampling_a_sparse_field_keeps_its_stored_values():
         f"the refined field stores {twice.values.shape[0]} of {61 ** 3} vertices; expected about half")
     coarse, fine = once.density_grid(), twice.density_grid()[::2, ::2, ::2]
     stored = torch.isfinite(coarse)
-    assert stored.any() and torch.isfinite(fine[stored]).all(), "a vertex stored by the coarse field was dropped"
+    assert stored.any() and torch.isfinite(fine[stored]).all(), (
+        "a vertex stored by the coarse field was dropped")
     torch.testing.assert_close(F.softplus(fine[stored] + twice.density_shift) * 2.0,
                                F.softplus(coarse[stored] + once.density_shift), rtol=1e-4, atol=1e-6,
-                               msg=lambda m: f"density per unit length at shared stored vertices changed: {m}")
+                               msg=lambda m: f"density per unit length at shared vertices changed: {m}")
     i, j, k = (c.reshape(-1) for c in torch.meshgrid(*(torch.arange(31),) * 3, indexing="ij"))
     coarse_flat = (i * 31 + j) * 31 + k
     fine_flat = (2 * i * 61 + 2 * j) * 61 + 2 * k

@@ -33,7 +33,8 @@ def test_the_tv_gradient_is_the_gradient_of_the_tv_prior(capture48):
     config = FieldConfig(resolutions=(12, 20), stage_fractions=(0.5,), batch_rays=256, tv=1.0)
     trainer = _Trainer(capture48, config, torch.device("cpu"))
     trainer.field.occupancy[:, :, 6:] = False
-    trainer.field.values.copy_(torch.randn(trainer.field.values.shape, generator=torch.Generator().manual_seed(0)))
+    noise = torch.randn(trainer.field.values.shape, generator=torch.Generator().manual_seed(0))
+    trainer.field.values.copy_(noise)
     trainer.refine()
     f, res = trainer.field, trainer.field.resolution
     assert f.is_sparse and (f.rows < 0).any(), "the refined field should leave some vertices unstored"
