@@ -50,7 +50,7 @@ def test_a_bad_recipe_names_the_field(changes, field):
 
 def test_the_digest_follows_every_part_of_the_recipe():
     base = RECIPES["object"]
-    assert base.digest == FittedRecipe("object", base.size).digest, "equal recipes must share a digest"
+    assert base.digest == FittedRecipe("object", base.size, base.config).digest, "equal recipes must share a digest"
     variants = [base.replace(size=(200, 112)), base.replace(max_steps=base.max_steps + 1), base.replace(threads=3),
                 base.replace(config=base.config.replace(seed=1)), base.replace(scene="wall")]
     digests = {v.digest for v in variants} | {base.digest}
