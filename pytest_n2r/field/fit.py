@@ -27,7 +27,7 @@ from ..render.field_render import FieldRenderer, RenderSettings
 from ..render.lattice import grid_coords, lattice_position
 from ..render.march import MarchGrid, march_compiled, march_dense
 from .config import FieldConfig
-from .grid import SceneField
+from .grid import SceneField, vertex_ijk
 from .device import resolve_device
 from .optim import RowAdam
 from .query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
@@ -117,7 +117,7 @@ class _Trainer:
         self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
         rows = self.field.rows
         #: The field's vertex → row map for the compiled kernels (empty: a dense field).
-        self.row_map = np.zeros(0, dtype=np.int32) if rows is None else rows.cpu().numpy()
+        self.row_map = self.field.kernel_rows()
         #: The flat vertex index of each row.
         self.flat_of_row = torch.arange(self.field.values.shape[0], device=self.device)
         if rows is not None:
@@ -203,7 +203,7 @@ class _Trainer:
         neighbours held fixed): a pull of each row towards its stored neighbours along x, y and z."""
         f, res = self.field, self.field.resolution
         flat = self.flat_of_row[unique]
-        ijk = torch.stack([flat // (res * res), (flat // res) % res, flat % res], dim=-1)
+        ijk = vertex_ijk(flat, res)
         grad = torch.zeros(unique.numel(), f.values.shape[1], device=f.device)
         mine = f.values[unique]
         for axis, stride in enumerate((res * res, res, 1)):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -31,7 +32,7 @@ from ..errors import InvalidArgument, SceneFileError
 from .query import trilinear
 from .space import SceneSpace
 
-__all__ = ["SceneField", "n_sh_coefficients", "used_vertex_index", "FIELD_TENSORS"]
+__all__ = ["SceneField", "n_sh_coefficients", "used_vertex_index", "vertex_ijk", "FIELD_TENSORS"]
 
 #: Names of the tensors a scene file stores for the field.
 FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
@@ -128,6 +129,19 @@ class SceneField:
         field does not store the vertex)."""
         return flat if self.rows is None else self.rows[flat].to(torch.int64)
 
+    def kernel_rows(self) -> np.ndarray:
+        """The row map as the compiled kernels take it: int32 ``R³``, empty for a dense field."""
+        if self.rows is None:
+            return np.zeros(0, dtype=np.int32)
+        return np.ascontiguousarray(self.rows.cpu().numpy())
+
+    def _stored_rows(self, flat: torch.Tensor) -> torch.Tensor:
+        """:meth:`vertex_rows` of vertices the field must store (those of occupied cells)."""
+        rows = self.vertex_rows(flat)
+        if self.rows is not None and bool((rows < 0).any()):
+            raise InvalidArgument("the field does not store every vertex of its occupied cells")
+        return rows
+
     def density_grid(self) -> torch.Tensor:
         """The raw density as a dense ``(R, R, R)`` grid; ``-inf`` at vertices a sparse field does not
         store."""
@@ -148,13 +162,7 @@ class SceneField:
     def occupied_cell_alpha(self, step_ratio: float) -> torch.Tensor:
         """:meth:`cell_alpha` of the occupied cells only, in ``occupancy.nonzero()`` order (the same values,
         without a dense grid of them: a render needs no more)."""
-        res = self.resolution
-        cells = self.occupancy.nonzero()
-        corners = (cells[:, None, :] + _CORNERS.to(cells.device)[None]).reshape(-1, 3)
-        flat = (corners[:, 0] * res + corners[:, 1]) * res + corners[:, 2]
-        rows = self.vertex_rows(flat)
-        if self.rows is not None and bool((rows < 0).any()):
-            raise InvalidArgument("the field does not store every vertex of its occupied cells")
+        rows = self._stored_rows(_cell_corners(self.occupancy))
         corner_max = self.values[rows, 0].reshape(-1, 8).amax(dim=1)
         return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
 
@@ -165,7 +173,7 @@ class SceneField:
         occ = F.interpolate(self.occupancy[None, None].float(), size=(resolution - 1,) * 3, mode="nearest")
         occ = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
         flat = used_vertex_index(occ)
-        ijk = torch.stack(_unflatten(flat, resolution), dim=-1).to(self.values.dtype)
+        ijk = vertex_ijk(flat, resolution).to(self.values.dtype)
         coarse = ijk * ((self.resolution - 1) / (resolution - 1))
         corners, weights = trilinear(coarse, self.resolution)
         corner_rows = self.vertex_rows(corners)
@@ -189,9 +197,7 @@ class SceneField:
     def compact(self) -> SceneField:
         """The field as a sparse one that stores exactly the vertices of its occupied cells."""
         flat = self.used_vertex_index()
-        if not bool((self.vertex_rows(flat) >= 0).all()):
-            raise InvalidArgument("the field does not store every vertex of its occupied cells")
-        return replace(self, values=self.values[self.vertex_rows(flat)].contiguous(),
+        return replace(self, values=self.values[self._stored_rows(flat)].contiguous(),
                        occupancy=self.occupancy.clone(), rows=_row_map(flat, self.resolution))
 
     def quantized(self) -> SceneField:
@@ -270,17 +276,25 @@ class SceneField:
 _CORNERS = torch.tensor([[(c >> 2) & 1, (c >> 1) & 1, c & 1] for c in range(8)])
 
 
-def _unflatten(flat: torch.Tensor, resolution: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    return flat // (resolution * resolution), (flat // resolution) % resolution, flat % resolution
+def vertex_ijk(flat: torch.Tensor, resolution: int) -> torch.Tensor:
+    """Flat vertex indices (x-major) → their ``(N, 3)`` grid indices ``(i, j, k)``."""
+    res = resolution
+    return torch.stack([flat // (res * res), (flat // res) % res, flat % res], dim=-1)
+
+
+def _cell_corners(occupancy: torch.Tensor) -> torch.Tensor:
+    """The flat indices of the 8 corner vertices of each occupied cell, ``(cells · 8,)`` in
+    ``occupancy.nonzero()`` order (corner order as :func:`~pytest_n2r.field.query.trilinear`)."""
+    res = occupancy.shape[0] + 1
+    cells = occupancy.nonzero()
+    corners = (cells[:, None, :] + _CORNERS.to(cells.device)[None]).reshape(-1, 3)
+    return (corners[:, 0] * res + corners[:, 1]) * res + corners[:, 2]
 
 
 def used_vertex_index(occupancy: torch.Tensor) -> torch.Tensor:
     """The flat indices (int64, ascending) of the ``(R-1)³`` ``occupancy``'s cells' corner vertices in the
     ``R³`` vertex grid."""
-    res = occupancy.shape[0] + 1
-    cells = occupancy.nonzero()
-    corners = (cells[:, None, :] + _CORNERS.to(cells.device)[None]).reshape(-1, 3)
-    return torch.unique((corners[:, 0] * res + corners[:, 1]) * res + corners[:, 2])
+    return torch.unique(_cell_corners(occupancy))
 
 
 def _row_map(flat: torch.Tensor, resolution: int) -> torch.Tensor:

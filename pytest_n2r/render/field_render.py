@@ -113,15 +113,14 @@ class FieldRenderer:
             with torch.no_grad():
                 visible = field.occupied_cell_alpha(s.step_ratio) >= s.min_alpha
                 occupancy = occupancy.clone()
-                occupancy[occupancy.nonzero(as_tuple=True)] = visible
+                occupancy[field.occupancy] = visible  # a mask takes its cells in nonzero() order
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background if s.background is not None else field.background
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
-            self._rows = (np.zeros(0, dtype=np.int32) if field.rows is None
-                          else np.ascontiguousarray(field.rows.cpu().numpy()))
+            self._rows = field.kernel_rows()
 
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
