@@ -11,7 +11,9 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
 - ``fps``: per scene and render size: frames per second of RGB renders (RQ3).
 
 "Real photo" is the view's stored image (``SceneView.image``); for an exact demo scene without stored
-images it is the exact render at the captured pose. Scenes with neither skip RQ1.
+images it is the exact render at the captured pose, and for a fitted demo scene the exact twin's render
+(:mod:`pytest_n2r.floor` measures the same shift for the plugin's field floor). Scenes with neither skip
+RQ1.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidArgument, MetricUndefined, N2RError
+from ..floor import exact_twin, reference_image, shift_sample
 from ..geometry import Camera
 from ..metrics.image_quality import lpips, lpips_unavailable_reason, psnr, ssim
 from ..render.view import RenderedView
@@ -90,15 +93,12 @@ class StudyResult:
 
 
 def _reference_image(scene: Scene, view: SceneView, camera: Camera) -> np.ndarray | None:
-    import cv2
-
+    """The view's stored photo, else the exact render (an exact scene, or a fitted demo scene's exact twin)."""
     if view.image is not None:
-        img = view.image
-        if img.shape[:2] != (camera.height, camera.width):
-            img = cv2.resize(img, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
-        return img
-    exact = getattr(scene, "is_exact", False)
-    return scene.render(view.c2w, camera, ("rgb",)).rgb if exact else None
+        return reference_image(scene, view, camera, "photo")
+    if getattr(scene, "is_exact", False) or exact_twin(scene) is not None:
+        return reference_image(scene, view, camera, "exact")
+    return None
 
 
 def _source_views(scene: Scene, max_views: int) -> list[SceneView]:
@@ -176,9 +176,10 @@ def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedVie
     for sut in suts:
         out_real, out_field = sut.fn(real), sut.fn(source.rgb)
         for name, metric in sut.metrics().items():
-            score, dev, ok = _score(metric, out_real, out_field, real_view, source)
+            sample = shift_sample(metric, out_real, out_field, real_view, source, view.name)
             result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name, "metric": name,
-                                        "score": score, "deviation": dev, "valid": ok})
+                                        "score": sample.score, "deviation": sample.deviation,
+                                        "valid": sample.valid})
 
 
 def _rq3(result: StudyResult, scene: Scene, config: StudyConfig, say: Callable[[str], None]) -> None:

@@ -1,0 +1,109 @@
+"""The field floor (pytest_n2r.floor): the SUT on the real photo vs on the render at the same pose."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from pytest_n2r.demo import ground_truth, load_demo
+from pytest_n2r.floor import FieldFloor, FloorStore, measure_floor, reference_kind
+from pytest_n2r.metrics import repeatability
+from pytest_n2r.render.size import RenderSize
+from pytest_n2r.study import StudyConfig, resolve_sut, run_study
+
+from .fakefield import BlurredPlane, corners
+
+
+class Counting:
+    """A SUT wrapper that counts its calls."""
+
+    def __init__(self, fn):
+        self.fn, self.calls = fn, 0
+
+    def __call__(self, rgb):
+        self.calls += 1
+        return self.fn(rgb)
+
+
+def test_render_equal_to_photo_gives_a_zero_floor():
+    floor = measure_floor(BlurredPlane(blur=0.0, width=160, height=120), corners, repeatability(px=2))
+    assert floor.reference == "photo" and floor.n == 2, floor
+    assert floor.value == 0.0 and not floor.above(0.0)
+
+
+def test_a_soft_field_raises_the_floor_and_eps_below_it_warns():
+    mild = measure_floor(BlurredPlane(blur=1.5, width=160, height=120), corners, repeatability(px=2))
+    strong = measure_floor(BlurredPlane(blur=2.5, width=160, height=120), corners, repeatability(px=2))
+    assert 0.05 < mild.value < strong.value, (mild.value, strong.value)
+    assert mild.above(0.05) and not mild.above(0.5)
+    assert "WARNING: eps 0.05 is below the field floor" in mild.describe(0.05)
+    assert "WARNING" not in mild.describe(0.5) and "mean of 2 held-out views" in mild.describe(0.5)
+
+
+def test_no_photos_means_no_floor_never_a_perfect_one():
+    floor = measure_floor(BlurredPlane(photos=False), corners, repeatability(px=2))
+    assert not floor.available and math.isnan(floor.value) and floor.reference == "none"
+    assert floor.describe(0.1).startswith("field floor n/a:") and "stores no photos" in floor.describe(0.1)
+    assert not floor.above(0.0), "an unknown floor must not claim eps is below it"
+
+
+def test_an_exact_scene_has_no_field_floor():
+    kind, reason = reference_kind(ground_truth("wall"))
+    assert kind == "none" and "no field" in reason
+
+
+def test_a_sut_whose_metric_is_undefined_everywhere_has_no_floor():
+    def undefined(*_args):
+        from pytest_n2r.errors import MetricUndefined
+
+        raise MetricUndefined("nothing visible")
+
+    metric = repeatability(px=2)
+    metric.compute = undefined
+    floor = measure_floor(BlurredPlane(blur=1.0, width=160, height=120), corners, metric)
+    assert not floor.available and len(floor.samples) == 2
+    assert "undefined on all 2 held-out views (nothing visible)" in floor.describe()
+
+
+def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    first = Counting(corners)
+    a = measure_floor(scene, first, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert first.calls == 4, "photo and render of each of the 2 held-out views"
+    again = Counting(corners)
+    b = measure_floor(scene, again, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert again.calls == 1 and b == a, "a new store on the same folder reads the floor back (1 probe call)"
+    assert len(list(tmp_path.glob("*.json"))) == 1
+
+    edited = Counting(lambda rgb: corners(rgb)[::2])  # same name, other output: measured again
+    c = measure_floor(scene, edited, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert edited.calls == 4 and c.key != a.key
+    other_size = measure_floor(scene, corners, repeatability(px=2), size=RenderSize.parse(80),
+                               store=FloorStore(tmp_path), name="corners")
+    assert other_size.key not in (a.key, c.key) and other_size.size == "80"
+
+
+def test_floor_round_trips_through_json():
+    floor = measure_floor(BlurredPlane(blur=1.5, width=160, height=120), corners, repeatability(px=2))
+    back = FieldFloor.from_dict(floor.to_dict())
+    assert back == floor and floor.to_dict()["value"] == pytest.approx(floor.value)
+
+
+def test_a_fitted_demo_scene_is_measured_against_its_exact_twin():
+    scene = load_demo("wall-field", "cpu")
+    assert reference_kind(scene) == ("exact", "")
+    orb = resolve_sut("orb", None).fn
+    floor = measure_floor(scene, orb, repeatability(px=2), size=RenderSize.parse(96))
+    assert floor.reference == "exact" and len(floor.samples) == len([v for v in scene.views
+                                                                      if v.split == "heldout"])
+    assert floor.available and 0.0 <= floor.value <= 1.0, floor
+
+
+def test_study_measures_a_fitted_demo_scene_against_its_exact_twin():
+    """`n2r study demo:wall-field` gets RQ1 rows (it has no photos, but an exact twin)."""
+    config = StudyConfig(examples=1, max_views=1, size=48, families=("m1",), fps_frames=1, fps_sizes=((48, 27),))
+    result = run_study([load_demo("wall-field", "cpu")], [resolve_sut("orb", None)], config)
+    assert {r["metric"] for r in result.domain_shift} == {"repeatability", "ip_spread"}
+    assert {r["source"] for r in result.realness} == {"tau0", "m1", "m2", "m3"}
+    assert all(r["psnr"] < math.inf for r in result.realness if r["source"] == "tau0")
