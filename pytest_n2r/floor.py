@@ -50,9 +50,13 @@ from .render.view import RenderedView
 from .scene.base import Scene, SceneView, normalize_outputs
 
 __all__ = [
+    "ExactComparison",
     "FieldFloor",
     "FloorStore",
     "ShiftSample",
+    "annotate_relation",
+    "annotation_lines",
+    "compare_exact",
     "exact_twin",
     "floor_views",
     "measure_floor",
@@ -348,3 +352,131 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         store.put(floor)
     return floor
 
+
+
+# -- exact vs fitted (demo scenes) ----------------------------------------------------------------------
+
+#: How many of a relation's examples are replayed on the exact twin (the first ones, in draw order): each
+#: costs an exact render (about 1-2 s at 480x270 on a laptop CPU, then cached) and two SUT calls.
+EXACT_REPLAY_EXAMPLES = 10
+
+
+@dataclass(frozen=True)
+class ExactComparison:
+    """A relation's examples on a fitted demo scene replayed at the same poses on its exact twin:
+    ``pairs`` of ``(fitted deviation, exact deviation)`` where both are defined; ``undefined`` examples
+    whose metric was undefined on the exact renders; ``skipped`` ones that cannot be replayed (mutations,
+    interpolated source views)."""
+
+    pairs: tuple[tuple[float, float], ...]
+    undefined: int = 0
+    skipped: int = 0
+
+    @property
+    def n(self) -> int:
+        return len(self.pairs)
+
+    def means(self) -> tuple[float, float]:
+        """Mean deviation ``(fitted, exact)`` over the pairs (NaN when there is none)."""
+        if not self.pairs:
+            return math.nan, math.nan
+        fitted, exact = np.asarray(self.pairs).T
+        return float(fitted.mean()), float(exact.mean())
+
+    def describe(self) -> str:
+        extra = "".join(f", {k} {n}" for k, n in (("undefined on exact renders", self.undefined),
+                                                    ("not replayable", self.skipped)) if n)
+        if not self.pairs:
+            return f"exact vs fitted: no example replayed{extra}"
+        fitted, exact = self.means()
+        return (f"same poses on exact renders: mean deviation {exact:.3g} exact vs {fitted:.3g} fitted "
+                f"(the field adds {fitted - exact:+.3g}; {self.n} example{'s' if self.n != 1 else ''}{extra})")
+
+    def to_dict(self) -> dict[str, Any]:
+        fitted, exact = self.means()
+        return {"pairs": [list(p) for p in self.pairs], "undefined": self.undefined, "skipped": self.skipped,
+                "n": self.n, "fitted_mean": _json_num(fitted), "exact_mean": _json_num(exact)}
+
+
+def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, records: list[dict[str, Any]],
+                  camera_of: Callable[[SceneView], Camera], length_scale: float, *,
+                  cache: RenderCache | None = None, limit: int = EXACT_REPLAY_EXAMPLES) -> ExactComparison | None:
+    """Replay the first ``limit`` ``records`` of a relation on ``scene`` (``view`` name, ``transform`` fields,
+    ``deviation``) on the scene's exact twin; ``None`` when ``scene`` has none. ``length_scale`` converts the
+    transforms' translations to scene units, ``camera_of`` gives the render camera of a source view."""
+    from .geometry import Transform
+
+    twin = exact_twin(scene)
+    if twin is None:
+        return None
+    render_cache = cache if cache is not None else RenderCache(None)
+    outputs = normalize_outputs(("rgb", *(getattr(metric, "needs", ()) or ())))
+    by_name = {v.name: v for v in scene.views}
+    sources: dict[str, tuple[RenderedView, Any]] = {}
+    pairs, undefined, skipped = [], 0, 0
+    for record in records[:limit]:
+        view = by_name.get(record["view"])
+        transform = record["transform"]
+        if view is None or "mutation" in transform:
+            skipped += 1
+            continue
+        if view.name not in sources:
+            rendered = render_cache.render(twin, view.c2w, camera_of(view), outputs)
+            sources[view.name] = (rendered, sut(rendered.rgb))
+        source, out_source = sources[view.name]
+        follow_c2w = Transform(**transform).apply(view.c2w, length_scale)
+        follow = render_cache.render(twin, follow_c2w, camera_of(view), outputs)
+        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name)
+        if sample.valid:
+            pairs.append((float(record["deviation"]), sample.deviation))
+        else:
+            undefined += 1
+    return ExactComparison(tuple(pairs), undefined, skipped)
+
+
+# -- beside a relation's result (the plugin) ------------------------------------------------------------
+
+_STORES: dict[Path | None, FloorStore] = {}
+
+
+def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Any, records: list[dict[str, Any]],
+                      *, size: RenderSize | None, cache: RenderCache | None,
+                      cache_dir: Path | None) -> dict[str, Any] | None:
+    """What the plugin shows beside a relation's result on ``scene`` (``None`` on an exact scene): the field
+    floor of the relation's SUT, metric and render size, whether ``eps`` is below it, and on a fitted demo
+    scene the relation's examples replayed on exact renders. Plain JSON-ready data; a floor that cannot be
+    measured (the SUT raises on a photo, ...) is reported with the reason, never raised."""
+    if getattr(scene, "is_exact", False):
+        return None
+    from .strategies import transform_units
+
+    directory = None if cache_dir is None else Path(cache_dir) / "floors"
+    store = _STORES.setdefault(directory, FloorStore(directory))
+    eps = float(relation.eps)
+    try:
+        floor = measure_floor(scene, sut, relation.metric, size=size, cache=cache, store=store)
+    except Exception as exc:  # noqa: BLE001 -- an annotation: what went wrong is said, the verdict stands
+        floor = FieldFloor(scene.name, sut_name(sut), repr(relation.metric), str(size), "none",
+                           reason=f"measuring it failed: {type(exc).__name__}: {exc}")
+    out: dict[str, Any] = {"floor": floor.to_dict(), "line": floor.describe(eps), "below_floor": floor.above(eps)}
+    try:
+        length = scene.length_scale(transform_units(relation.transform))
+        comparison = compare_exact(scene, sut, relation.metric, records,
+                                   lambda v: v.camera if size is None else size.apply(v.camera), length,
+                                   cache=cache)
+    except Exception as exc:  # noqa: BLE001 -- as above
+        out["exact_line"] = f"exact vs fitted: replay failed: {type(exc).__name__}: {exc}"
+    else:
+        if comparison is not None:
+            out["exact"], out["exact_line"] = comparison.to_dict(), comparison.describe()
+    return out
+
+
+def annotation_lines(annotation: dict[str, Any] | None) -> list[tuple[str, bool]]:
+    """``(line, is_warning)`` pairs to print under a relation's summary line."""
+    if not annotation:
+        return []
+    lines = [(annotation["line"], bool(annotation["below_floor"]))]
+    if annotation.get("exact_line"):
+        lines.append((annotation["exact_line"], False))
+    return lines

@@ -268,10 +268,22 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         failure = str(exc)
     finally:
         if session.stats and session.stats[-1].test_id == pyfuncitem.nodeid:  # kept whatever happened
-            pyfuncitem.stash[_STATS] = _plain(session.stats[-1])
+            plain = pyfuncitem.stash[_STATS] = _plain(session.stats[-1])
+            plain["floor"] = plain["record"]["floor"] = _floor(session, funcargs["n2r_scene"], sut, relation,
+                                                                session.stats[-1].records)
     if failure is not None:  # outside the except block, so the report shows the message once
-        pytest.fail(failure, pytrace=False)
+        floor = pyfuncitem.stash.get(_STATS, {}).get("floor") or {}
+        pytest.fail(failure + (f"\n  floor:      {floor['line']}" if floor.get("below_floor") else ""),
+                    pytrace=False)
     return True
+
+
+def _floor(session: Any, scene: Any, sut: Any, relation: Any, records: list) -> dict | None:
+    """The field floor beside a relation's result (:func:`pytest_n2r.floor.annotate_relation`)."""
+    from .floor import annotate_relation
+
+    return annotate_relation(scene, sut, relation, records, size=relation.size or session.settings.size,
+                             cache=session.cache, cache_dir=session.cache_dir)
 
 
 def _plain(stats: Any) -> dict:
@@ -322,8 +334,12 @@ class _Summary:
         if not runs:
             return
         terminalreporter.section("pytest-n2r")
+        from .floor import annotation_lines
+
         for stats in runs:
             terminalreporter.write_line(stats["summary"])
+            for line, warn in annotation_lines(stats.get("floor")):
+                terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
         total = {k: sum(s[k] for s in runs)
                  for k in ("examples", "inconsistencies", "render_s", "sut_s", "metric_s", "renders")}
         rejected = sum(sum(s["rejected"].values()) for s in runs)

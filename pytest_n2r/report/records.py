@@ -48,6 +48,8 @@ class RelationRecord:
     message: str = ""
     timings: dict[str, float] = field(default_factory=dict)
     minimal: ExampleRecord | None = None
+    #: The field floor beside the result (:func:`pytest_n2r.floor.annotate_relation`; ``None`` on exact scenes).
+    floor: dict[str, Any] | None = None
 
     @property
     def valid_examples(self) -> list[ExampleRecord]:
@@ -82,7 +84,7 @@ class RelationRecord:
             examples=[ExampleRecord.from_dict(e) for e in data.get("examples", [])],
             outcome=data.get("outcome", "passed"), message=data.get("message", ""),
             timings=dict(data.get("timings", {})),
-            minimal=ExampleRecord.from_dict(minimal) if minimal else None,
+            minimal=ExampleRecord.from_dict(minimal) if minimal else None, floor=data.get("floor"),
         )
 
 
