@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from ..scene.file import SceneFile
+    from ..study.fidelity import FidelityReport
 
 __all__ = ["add_parser", "run", "format_info", "info_dict"]
 
@@ -21,15 +22,34 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("scene", type=Path, metavar="SCENE", help="a .n2r scene file")
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead")
+    p.add_argument("--shift", action="store_true",
+                   help="also measure the reality-to-field shift of ORB, SIFT and AKAZE (repeatability and spread, "
+                        "stored photo vs render at each held-out pose; renders, so seconds to minutes; cached)")
+    p.add_argument("--size", default="480", metavar="PX",
+                   help="render size of --shift: the longer side in pixels or WxH (default: 480)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from ..scene.file import read_scene_file
 
-    scene = read_scene_file(args.scene, images=False)
-    print(json.dumps(info_dict(scene), indent=2) if args.json else format_info(scene))
+    scene = read_scene_file(args.scene, images=args.shift)
+    shift = _shift(scene, args.size) if args.shift else None
+    if args.json:
+        print(json.dumps({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}, indent=2))
+    else:
+        print(format_info(scene) + (f"\n{shift.format()}" if shift else ""))
     return 0
+
+
+def _shift(scene: SceneFile, size: str) -> FidelityReport:
+    """The detector shift of the scene file (floors cached in the user cache folder)."""
+    from ..demo.fitted import cache_dir
+    from ..floor import FloorStore
+    from ..scene.field_scene import FieldScene
+    from ..study.fidelity import measure_fidelity
+
+    return measure_fidelity(FieldScene(scene, device="cpu"), size=size, store=FloorStore(cache_dir() / "floors"))
 
 
 def info_dict(scene: SceneFile) -> dict:

@@ -1,0 +1,97 @@
+"""Fidelity measured the way tests use a scene: held-out PSNR / SSIM beside the reality-to-field shift of
+the built-in detectors (ORB, SIFT, AKAZE: repeatability and interest-point spread, reference image vs field
+render at the same held-out pose). ``n2r info --shift`` and ``benchmarks/fidelity.py`` print it.
+
+The reference image is the stored photo, or the exact render for a fitted demo scene
+(:func:`pytest_n2r.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
+``1 - score`` is the field floor a relation with that detector and metric inherits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cache import RenderCache
+from ..floor import FieldFloor, FloorStore, floor_views, measure_floor, reference_image, reference_kind
+from ..metrics.image_quality import psnr, ssim
+from ..render.size import RenderSize
+from ..scene.base import Scene
+from .suts import resolve_sut
+
+__all__ = ["DETECTORS", "FidelityReport", "measure_fidelity"]
+
+#: The detectors the fidelity report measures (built-in SUTs of ``n2r study``).
+DETECTORS = ("orb", "sift", "akaze")
+
+
+@dataclass(frozen=True)
+class FidelityReport:
+    """``images``: per held-out view, PSNR (dB) and SSIM of the render against the reference image;
+    ``floors``: a :class:`~pytest_n2r.floor.FieldFloor` per detector and metric name (``("orb",
+    "repeatability")``, ...); ``reference``: the
+    reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``)."""
+
+    scene: str
+    size: str
+    reference: str
+    reason: str
+    images: tuple[dict, ...]
+    floors: dict[tuple[str, str], FieldFloor]
+
+    def mean(self, key: str) -> float:
+        values = [row[key] for row in self.images if np.isfinite(row[key])]
+        return float(np.mean(values)) if values else float("nan")
+
+    def score(self, detector: str, metric: str) -> float:
+        """Mean score of ``detector`` under ``metric`` (``"repeatability"`` or ``"ip_spread"``)."""
+        floor = self.floors.get((detector, metric))
+        scores = [s.score for s in floor.samples if s.valid] if floor is not None else []
+        return float(np.mean(scores)) if scores else float("nan")
+
+    def to_dict(self) -> dict:
+        return {"scene": self.scene, "size": self.size, "reference": self.reference, "reason": self.reason,
+                "images": list(self.images), "psnr": self.mean("psnr"), "ssim": self.mean("ssim"),
+                "detectors": {d: {m: self.score(d, m) for m in ("repeatability", "ip_spread")}
+                              for d in DETECTORS},
+                "floors": [{"detector": d, "metric": m, **f.to_dict()} for (d, m), f in self.floors.items()]}
+
+    def format(self) -> str:
+        """Plain-text table (what ``n2r info --shift`` prints)."""
+        if self.reference == "none":
+            return f"reality-to-field shift n/a: {self.reason}"
+        against = "the stored photo" if self.reference == "photo" else "the exact render"
+        n = len(self.images)
+        lines = [(f"reality-to-field shift: each detector on {against} vs on the render at the same held-out "
+                 f"pose ({self.size} px, mean of {n} view{'s' if n != 1 else ''}; 1 is ideal)"),
+                 f"  render vs reference   PSNR {self.mean('psnr'):.2f} dB, SSIM {self.mean('ssim'):.4f}",
+                 f"  {'detector':<10}{'repeatability':>15}{'spread':>9}"]
+        for d in DETECTORS:
+            lines.append(f"  {d:<10}{self.score(d, 'repeatability'):>15.3f}{self.score(d, 'ip_spread'):>9.3f}")
+        return "\n".join(lines)
+
+
+def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: int | None = None,
+                     store: FloorStore | None = None, cache: RenderCache | None = None) -> FidelityReport:
+    """PSNR / SSIM and the detector shift of ``scene`` on its held-out views (at most ``max_views``), rendered
+    ``size`` pixels on the longer side (``None``: each view's camera)."""
+    render_size = None if size is None else RenderSize.parse(size)
+    kind, reason = reference_kind(scene)
+    size_text = "view size" if render_size is None else str(render_size)
+    if kind == "none":
+        return FidelityReport(scene.name, size_text, kind, reason, (), {})
+    cache = cache if cache is not None else RenderCache(None)
+    images = []
+    for view in floor_views(scene, max_views):
+        camera = view.camera if render_size is None else render_size.apply(view.camera)
+        render = cache.render(scene, view.c2w, camera, ("rgb",)).rgb
+        reference = reference_image(scene, view, camera, kind, lambda s, c2w, cam: cache.render(s, c2w, cam))
+        images.append({"view": view.name, "psnr": psnr(reference, render), "ssim": ssim(reference, render)})
+    floors = {}
+    for name in DETECTORS:
+        sut = resolve_sut(name, None)
+        for key, metric in sut.metrics().items():
+            floors[name, key] = measure_floor(scene, sut.fn, metric, size=render_size, cache=cache, store=store,
+                                              name=name, max_views=max_views)
+    return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors)

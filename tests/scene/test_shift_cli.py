@@ -1,0 +1,57 @@
+"""`n2r info --shift` and benchmarks/fidelity.py: PSNR / SSIM beside the detectors' reality-to-field shift."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+
+import pytest
+
+from pytest_n2r.cli.main import main
+from pytest_n2r.scene import save_scene
+
+from ..conftest import REPO_ROOT
+
+
+def test_info_shift_prints_psnr_and_each_detectors_shift(tiny_scene_file, capsys, monkeypatch, tmp_path):
+    monkeypatch.setenv("N2R_CACHE_DIR", str(tmp_path / "cache"))
+    assert main(["info", str(tiny_scene_file), "--shift", "--size", "64"]) == 0
+    out = capsys.readouterr().out
+    assert "reality-to-field shift: each detector on the stored photo vs on the render" in out
+    assert "mean of 6 views" in out and "render vs reference   PSNR" in out
+    for detector in ("orb", "sift", "akaze"):
+        assert any(line.split()[:1] == [detector] for line in out.splitlines()), out
+    assert list((tmp_path / "cache" / "floors").glob("*.json")), "the floors are cached"
+
+    assert main(["info", str(tiny_scene_file), "--shift", "--size", "64", "--json"]) == 0
+    shift = json.loads(capsys.readouterr().out)["shift"]
+    assert shift["reference"] == "photo" and len(shift["images"]) == 6
+    assert set(shift["detectors"]) == {"orb", "sift", "akaze"}
+    assert math.isfinite(shift["psnr"]) and 0 < shift["ssim"] <= 1
+
+
+def test_info_shift_without_photos_says_why(tiny_capture, tiny_fit, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("N2R_CACHE_DIR", str(tmp_path / "cache"))
+    path = save_scene(tmp_path / "bare.n2r", tiny_fit.field, tiny_fit.config, tiny_capture, tiny_fit.report,
+                      images=False)
+    assert main(["info", str(path), "--shift"]) == 0
+    assert "reality-to-field shift n/a: scene 'bare' stores no photos of its held-out views" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def fidelity_benchmark():
+    spec = importlib.util.spec_from_file_location("fidelity_benchmark", REPO_ROOT / "benchmarks" / "fidelity.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_fidelity_benchmark_runs_on_a_fitted_demo_scene(fidelity_benchmark, tmp_path, capsys):
+    out = tmp_path / "fidelity.json"
+    assert fidelity_benchmark.main(["demo:wall-field", "--size", "96", "--views", "2", "--targets",
+                                    "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "| demo:wall-field | exact | 2 |" in text and "targets: held-out PSNR >= 28 dB" in text
+    (report,) = json.loads(out.read_text())
+    assert report["reference"] == "exact" and report["psnr"] > 20
