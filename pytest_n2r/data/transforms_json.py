@@ -47,10 +47,12 @@ def find_transforms_json(source: str | os.PathLike) -> Path | None:
     return candidate if candidate.is_file() else None
 
 
-def read_transforms_json(path: str | os.PathLike) -> PoseSet:
+def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> PoseSet:
     """Read the frames of a transforms.json whose image files exist (no pixels are decoded).
 
-    Frames whose image file is missing are skipped with a warning naming the file. A ``val_filenames``
+    Frames whose image file is missing are skipped with a warning naming the file; with ``images=False``
+    (cameras only, e.g. of a splat scene trained elsewhere) they are kept with ``path=None`` and their
+    size must be in the json (``w`` and ``h``). A ``val_filenames``
     list (nerfstudio's split) becomes :attr:`PoseSet.heldout`. Raises
     :class:`IngestError` naming the file, the frame index and the field when a field is missing or
     malformed, a matrix is not a finite rigid transform, or no frame has its image.
@@ -83,6 +85,9 @@ def read_transforms_json(path: str | os.PathLike) -> PoseSet:
             raise IngestError(f"{where}: field 'file_path' is missing or not a string")
         image = _resolve_image(root, name)
         c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
+        if image is None and not images:
+            frames.append(SourceFrame(name=name, path=None, camera=_read_camera(meta, raw, where, None), c2w=c2w))
+            continue
         if image is None:
             reason = f"image file {str(root / name)!r} listed in {path.name} frames[{i}] does not exist"
             warnings.warn(f"skipping frame: {reason}", stacklevel=2)
@@ -147,8 +152,10 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _read_camera(meta: dict, raw: dict, where: str, image: Path) -> Camera:
+def _read_camera(meta: dict, raw: dict, where: str, image: Path | None) -> Camera:
     w, h = _number(meta, raw, "w", where), _number(meta, raw, "h", where)
+    if (w is None or h is None) and image is None:
+        raise IngestError(f"{where}: no image size; expected fields 'w' and 'h' (the image is not there to read it)")
     if w is None or h is None:
         w, h = read_image_size(image)
     fx, fy = _number(meta, raw, "fl_x", where), _number(meta, raw, "fl_y", where)

@@ -1,0 +1,118 @@
+"""Read and write the ``cameras.json`` that 3D Gaussian Splatting's reference code writes beside its output.
+
+Convention
+----------
+A JSON list, one object per camera: ``id``, ``img_name`` (the image file name without its extension),
+``width``, ``height`` (pixels, at the training resolution), ``position`` (the camera centre, world units),
+``rotation`` (the camera-to-world rotation as 3 rows, **OpenCV camera axes**: x right, y down, z forward;
+the reference converts Blender / NeRF-synthetic OpenGL matrices before writing) and ``fx``, ``fy``
+(focal lengths in pixels). There is no principal point: the reference renders with it at the image
+centre, ``cx = width / 2`` in COLMAP's pixel convention, so ``cx_ours = (width - 1) / 2`` (OpenCV pixel
+centres). No lens distortion. The reference lists held-out cameras first, then training cameras, and
+records no split.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import IngestError, N2RError
+from ..geometry import Camera, orthonormalize
+from .atomic import atomic_write_text
+from .poses import PoseSet, SourceFrame
+
+__all__ = ["read_gs_cameras", "write_gs_cameras", "is_gs_cameras"]
+
+
+def is_gs_cameras(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a JSON file holding a list of camera objects with ``position`` and ``rotation``."""
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(data, list) and bool(data) and isinstance(data[0], dict) and "rotation" in data[0] \
+        and "position" in data[0]
+
+
+def _number(record: dict, key: str, where: str, positive: bool = True) -> float:
+    value = record.get(key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+            or (positive and value <= 0):
+        raise IngestError(f"{where}: field {key!r}={value!r}; expected a finite number{' > 0' if positive else ''}")
+    return float(value)
+
+
+def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
+    """The cameras of a 3DGS ``cameras.json`` (see the module *Convention*), in file order, without images.
+
+    Raises :class:`IngestError` naming the file, the entry and the field when a field is missing or
+    malformed or a rotation is not a rotation.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise IngestError(f"cameras file {str(path)!r} does not exist")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise IngestError(f"{path}: not a readable JSON file ({exc})") from None
+    if not isinstance(data, list) or not data:
+        raise IngestError(f"{path}: expected a non-empty JSON list of cameras (3DGS cameras.json)")
+    frames = []
+    for i, record in enumerate(data):
+        where = f"{path}: [{i}]"
+        if not isinstance(record, dict):
+            raise IngestError(f"{where}: expected an object, found {type(record).__name__}")
+        name = record.get("img_name", f"camera_{i:05d}")
+        if not isinstance(name, str) or not name:
+            raise IngestError(f"{where}: field 'img_name'={name!r}; expected a non-empty string")
+        width, height = (_number(record, k, where) for k in ("width", "height"))
+        if width != int(width) or height != int(height):
+            raise IngestError(f"{where}: width x height = {width} x {height}; expected whole pixels")
+        fx, fy = _number(record, "fx", where), _number(record, "fy", where)
+        try:
+            position = np.asarray(record.get("position"), dtype=np.float64)
+            rotation = np.asarray(record.get("rotation"), dtype=np.float64)
+        except (TypeError, ValueError):
+            raise IngestError(f"{where}: fields 'position' and 'rotation' must be numeric (3,) and (3, 3)") from None
+        if position.shape != (3,) or rotation.shape != (3, 3):
+            raise IngestError(f"{where}: 'position' has shape {position.shape} and 'rotation' {rotation.shape}; "
+                              "expected (3,) and (3, 3)")
+        if not (np.isfinite(position).all() and np.isfinite(rotation).all()):
+            raise IngestError(f"{where}: 'position' or 'rotation' contains NaN or Inf")
+        err = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
+        if err > 1e-3 or np.linalg.det(rotation) <= 0:
+            raise IngestError(f"{where}: field 'rotation' is not a rotation (|RᵀR - I| = {err:.3g}, det = "
+                              f"{np.linalg.det(rotation):.4g})")
+        c2w = np.eye(4)
+        c2w[:3, :3] = orthonormalize(rotation)
+        c2w[:3, 3] = position
+        try:
+            camera = Camera(int(width), int(height), fx, fy, (width - 1) / 2, (height - 1) / 2)
+        except N2RError as exc:
+            raise IngestError(f"{where}: bad intrinsics: {exc}") from None
+        frames.append(SourceFrame(name=name, path=None, camera=camera, c2w=c2w))
+    return PoseSet(frames=frames, source=str(path), kind="cameras.json", report={"listed": len(data)})
+
+
+def write_gs_cameras(path: str | os.PathLike, frames: list[SourceFrame] | PoseSet) -> Path:
+    """Write frames as a 3DGS ``cameras.json`` (atomically); ``img_name`` is each name without its extension.
+
+    Raises :class:`IngestError` for a camera whose principal point is not the image centre or that has lens
+    distortion (the format has no field for either).
+    """
+    frames = frames.frames if isinstance(frames, PoseSet) else list(frames)
+    records = []
+    for i, frame in enumerate(frames):
+        cam = frame.camera
+        if cam.distortion or abs(cam.cx - (cam.width - 1) / 2) > 1e-9 or abs(cam.cy - (cam.height - 1) / 2) > 1e-9:
+            raise IngestError(f"cannot write {path}: camera of {frame.name!r} has its principal point off the image "
+                              "centre or lens distortion, which a 3DGS cameras.json cannot hold")
+        records.append({"id": i, "img_name": Path(frame.name).stem, "width": cam.width, "height": cam.height,
+                        "position": frame.c2w[:3, 3].tolist(), "rotation": frame.c2w[:3, :3].tolist(),
+                        "fy": cam.fy, "fx": cam.fx})
+    return atomic_write_text(path, json.dumps(records) + "\n")

@@ -1,0 +1,289 @@
+"""Compiled CPU kernels (numba) of the splat rasterizer: projection, depth sort, tile binning, compositing.
+
+The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
+
+1. :func:`project` (parallel over Gaussians): EWA projection of each 3-D covariance to a 2-D one with the
+   3DGS low-pass dilation, its conic (inverse), the pixel rectangle where it can reach ``ALPHA_MIN``, its
+   tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`).
+2. :func:`depth_order`: the visible Gaussians sorted by camera z-depth rounded to float32 (a stable LSD
+   radix sort; equal keys keep index order), and :func:`gather`: their records in that order.
+3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists, each in depth order.
+4. :func:`composite_tiles` (parallel over tiles): front-to-back alpha compositing, pixel by pixel, with
+   early termination; each pixel's state (transmittance, colour, depth) carries over between runs, so
+   compositing a long list in several runs gives the same bits as in one.
+
+Each pixel's result depends only on the depth-ordered Gaussians that reach it, never on the tile size, the
+run boundaries or the thread count, so renders are deterministic to the bit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from ..splats.sh import colour_of
+
+__all__ = ["ALPHA_MAX", "ALPHA_MIN", "DILATION", "RECORD", "project", "depth_order", "gather", "bin_tiles",
+           "composite_tiles", "finish", "exp_neg"]
+
+#: Opacity of one Gaussian at one pixel is capped here (3DGS reference), so transmittance never hits 0.
+ALPHA_MAX = 0.99
+#: Contributions below this opacity are skipped (3DGS reference: 1/255).
+ALPHA_MIN = 1.0 / 255.0
+#: Added to the 2-D covariance's diagonal (pixels²): the reference's low-pass filter, so every Gaussian
+#: covers at least about a pixel.
+DILATION = 0.3
+#: How far beyond the image edges (as a fraction of the image width or height, on each side) the
+#: projection's Jacobian is evaluated at most (3DGS reference: 1.3 × the half field of view).
+_GUARD = 0.15
+#: Fields of a projected Gaussian's record (float64): pixel position, conic, peak opacity, colour, z-depth,
+#: and the pixel rectangle ``x0 <= x < x1, y0 <= y < y1`` where it can reach ``ALPHA_MIN``.
+RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1")
+_U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1 = range(len(RECORD))
+#: exp(-k / 4) for k = 0 .. 27, the table of :func:`exp_neg`.
+_EXP_TABLE = np.exp(-np.arange(28) / 4.0)
+
+
+@njit(cache=True, inline="always")
+def exp_neg(x):
+    """``exp(x)`` for ``x <= 0``: a table of ``exp(-k/4)`` times a degree-8 Taylor polynomial on the remainder
+    in ``(-1/4, 0]`` (relative error below 1e-11, 4× faster than libm); libm below ``-6.75``."""
+    k = int(-x * 4.0)
+    if k >= 27:
+        return math.exp(x)
+    r = x + 0.25 * k
+    p = 1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0 + r * (
+        1.0 / 720.0 + r * (1.0 / 5040.0 + r * (1.0 / 40320.0))))))))
+    return _EXP_TABLE[k] * p
+
+
+@njit(cache=True, parallel=True)
+def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
+            records, tiles):
+    """Project every Gaussian for the camera ``w2c`` (world → camera 4×4, OpenCV axes) into ``records``
+    (:data:`RECORD`) and ``tiles`` (tiles its rectangle touches; 0: culled).
+
+    Culled: peak opacity below ``ALPHA_MIN``, mean at or in front of the ``near`` plane, a non-finite or
+    singular 2-D covariance, or a rectangle outside the image.
+    """
+    lim_x0 = (-0.5 - cx) / fx - _GUARD * width / fx
+    lim_x1 = (width - 0.5 - cx) / fx + _GUARD * width / fx
+    lim_y0 = (-0.5 - cy) / fy - _GUARD * height / fy
+    lim_y1 = (height - 0.5 - cy) / fy + _GUARD * height / fy
+    for i in prange(means.shape[0]):
+        tiles[i] = 0
+        o = opacity[i]
+        if not o >= ALPHA_MIN:
+            continue
+        mx, my, mz = means[i, 0], means[i, 1], means[i, 2]
+        x = w2c[0, 0] * mx + w2c[0, 1] * my + w2c[0, 2] * mz + w2c[0, 3]
+        y = w2c[1, 0] * mx + w2c[1, 1] * my + w2c[1, 2] * mz + w2c[1, 3]
+        z = w2c[2, 0] * mx + w2c[2, 1] * my + w2c[2, 2] * mz + w2c[2, 3]
+        if not z > near:
+            continue
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        # Jacobian of the projection at the mean (clamped to a guard band, as the reference does)
+        tx = min(max(x / z, lim_x0), lim_x1)
+        ty = min(max(y / z, lim_y0), lim_y1)
+        j00, j02 = fx / z, -fx * tx / z
+        j11, j12 = fy / z, -fy * ty / z
+        # M = J · W (2×3), W the world → camera rotation; then the 2-D covariance M Σ Mᵀ
+        m00 = j00 * w2c[0, 0] + j02 * w2c[2, 0]
+        m01 = j00 * w2c[0, 1] + j02 * w2c[2, 1]
+        m02 = j00 * w2c[0, 2] + j02 * w2c[2, 2]
+        m10 = j11 * w2c[1, 0] + j12 * w2c[2, 0]
+        m11 = j11 * w2c[1, 1] + j12 * w2c[2, 1]
+        m12 = j11 * w2c[1, 2] + j12 * w2c[2, 2]
+        sxx, sxy, sxz = cov3d[i, 0], cov3d[i, 1], cov3d[i, 2]
+        syy, syz, szz = cov3d[i, 3], cov3d[i, 4], cov3d[i, 5]
+        p0 = sxx * m00 + sxy * m01 + sxz * m02
+        p1 = sxy * m00 + syy * m01 + syz * m02
+        p2 = sxz * m00 + syz * m01 + szz * m02
+        q0 = sxx * m10 + sxy * m11 + sxz * m12
+        q1 = sxy * m10 + syy * m11 + syz * m12
+        q2 = sxz * m10 + syz * m11 + szz * m12
+        a = m00 * p0 + m01 * p1 + m02 * p2 + DILATION
+        b = m00 * q0 + m01 * q1 + m02 * q2
+        c = m10 * q0 + m11 * q1 + m12 * q2 + DILATION
+        det = a * c - b * b
+        if not (det > 0.0 and math.isfinite(det) and math.isfinite(u) and math.isfinite(v)):
+            continue
+        # opacity reaches ALPHA_MIN where the Mahalanobis distance² is at most r2; its bounding box, widened
+        # a little so that rounding never drops a pixel the per-pixel test would keep
+        r2 = 2.0 * math.log(o / ALPHA_MIN) + 1e-6
+        ex = math.sqrt(r2 * a) * (1.0 + 1e-6) + 1e-4
+        ey = math.sqrt(r2 * c) * (1.0 + 1e-6) + 1e-4
+        x0 = max(math.ceil(u - ex), 0.0)
+        x1 = min(math.floor(u + ex) + 1.0, float(width))
+        y0 = max(math.ceil(v - ey), 0.0)
+        y1 = min(math.floor(v + ey) + 1.0, float(height))
+        if not (x0 < x1 and y0 < y1):
+            continue
+        tiles[i] = ((int(x1) - 1) // tile - int(x0) // tile + 1) * ((int(y1) - 1) // tile - int(y0) // tile + 1)
+        rec = records[i]
+        rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O], rec[_Z] = u, v, c / det, -b / det, a / det, o, z
+        rec[_X0], rec[_X1], rec[_Y0], rec[_Y1] = x0, x1, y0, y1
+        dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if n > 0.0:
+            dx, dy, dz = dx / n, dy / n, dz / n
+        for ch in range(3):
+            rec[_R + ch] = colour_of(sh, i, degree, dx, dy, dz, ch)
+
+
+@njit(cache=True)
+def depth_order(tiles, records):
+    """Indices of the Gaussians with ``tiles > 0`` sorted front to back by their z-depth rounded to float32
+    (> 0, so its bit pattern orders it); equal keys keep index order (stable LSD radix sort, 16 bits a
+    pass)."""
+    n = 0
+    for i in range(tiles.shape[0]):
+        if tiles[i] > 0:
+            n += 1
+    ids = np.empty(n, np.int64)
+    keys = np.empty(n, np.float32)
+    k = 0
+    for i in range(tiles.shape[0]):
+        if tiles[i] > 0:
+            ids[k] = i
+            keys[k] = np.float32(records[i, _Z])
+            k += 1
+    bits = keys.view(np.uint32)
+    ids2 = np.empty(n, np.int64)
+    bits2 = np.empty(n, np.uint32)
+    count = np.empty(65537, np.int64)
+    for shift in (0, 16):
+        count[:] = 0
+        for j in range(n):
+            count[((bits[j] >> shift) & 0xFFFF) + 1] += 1
+        if n == 0 or count.max() == n:
+            continue  # every key has the same digit here: this pass changes nothing
+        for d in range(65536):
+            count[d + 1] += count[d]
+        for j in range(n):
+            d = (bits[j] >> shift) & 0xFFFF
+            pos = count[d]
+            count[d] = pos + 1
+            ids2[pos] = ids[j]
+            bits2[pos] = bits[j]
+        ids, ids2 = ids2, ids
+        bits, bits2 = bits2, bits
+    return ids
+
+
+@njit(cache=True, parallel=True)
+def gather(order, records, sorted_records):
+    """``sorted_records[j] = records[order[j]]``, so that binning and compositing read memory in order."""
+    for j in prange(order.shape[0]):
+        sorted_records[j] = records[order[j]]
+
+
+@njit(cache=True)
+def bin_tiles(start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` into the tiles whose pixels are not all done
+    (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s, in depth order."""
+    n_tiles = live.shape[0]
+    tile_start[:] = 0
+    for j in range(start, stop):
+        rec = records[j]
+        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
+            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
+                t = ty * tiles_x + tx
+                if live[t] > 0:
+                    tile_start[t + 1] += 1
+    for t in range(n_tiles):
+        tile_start[t + 1] += tile_start[t]
+    fill = tile_start[:n_tiles].copy()
+    for j in range(start, stop):
+        rec = records[j]
+        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
+            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
+                t = ty * tiles_x + tx
+                if live[t] > 0:
+                    tile_ids[fill[t]] = j
+                    fill[t] += 1
+
+
+@njit(cache=True, parallel=True)
+def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop, live, trans, acc_rgb, acc_depth,
+                    done):
+    """Composite each tile's Gaussians (depth-ordered records) front to back into the pixel state
+    (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``: terminated), updating
+    ``live`` (pixels of the tile not yet done).
+
+    Per pixel and Gaussian (3DGS reference): ``alpha = min(ALPHA_MAX, opacity · exp(-½ dᵀ conic d))``,
+    skipped below ``ALPHA_MIN``; if the transmittance after it would fall below ``t_stop`` the pixel is done
+    without it; else it adds ``alpha · T`` times its colour and depth and ``T *= 1 - alpha``. Pixels outside
+    the ellipse where ``alpha`` can reach ``ALPHA_MIN`` (with a margin) are not evaluated.
+    """
+    n_tiles = live.shape[0]
+    height = trans.shape[0] // width
+    for t in prange(n_tiles):
+        s, e = tile_start[t], tile_start[t + 1]
+        if s == e or live[t] == 0:
+            continue
+        tx0 = (t % tiles_x) * tile
+        ty0 = (t // tiles_x) * tile
+        tx1 = min(tx0 + tile, width)
+        ty1 = min(ty0 + tile, height)
+        left = live[t]
+        for k in range(s, e):
+            rec = records[tile_ids[k]]
+            gx0, gx1 = max(int(rec[_X0]), tx0), min(int(rec[_X1]), tx1)
+            gy0, gy1 = max(int(rec[_Y0]), ty0), min(int(rec[_Y1]), ty1)
+            u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
+            r, gr, bl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
+            # q(dx, dy) = ca dx² + 2 cb dx dy + cc dy² <= r2 is where alpha can reach ALPHA_MIN; per row, the
+            # span of pixels inside it (widened so that rounding never drops a pixel the exact test keeps)
+            r2 = 2.0 * math.log(o / ALPHA_MIN) * (1.0 + 1e-6) + 1e-6
+            for py in range(gy0, gy1):
+                dy = v - py
+                disc = cb * cb * dy * dy - ca * (cc * dy * dy - r2)
+                if disc < 0.0:
+                    continue
+                half = math.sqrt(disc) / ca
+                mid = u + cb * dy / ca  # the span's centre: dx = u - px = -cb dy / ca
+                x0 = int(max(float(gx0), math.ceil(mid - half - 1e-3)))
+                x1 = int(min(float(gx1), math.floor(mid + half + 1e-3) + 1.0))
+                row = py * width
+                for px in range(x0, x1):
+                    p = row + px
+                    if done[p]:
+                        continue
+                    dx = u - px
+                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                    alpha = min(ALPHA_MAX, o * exp_neg(min(power, 0.0)))
+                    if alpha < ALPHA_MIN:
+                        continue
+                    tp = trans[p]
+                    after = tp * (1.0 - alpha)
+                    if after < t_stop:
+                        done[p] = 1
+                        left -= 1
+                        continue
+                    w = alpha * tp
+                    acc_rgb[p, 0] += w * r
+                    acc_rgb[p, 1] += w * gr
+                    acc_rgb[p, 2] += w * bl
+                    acc_depth[p] += w * z
+                    trans[p] = after
+            if left == 0:
+                break
+        live[t] = left
+
+
+@njit(cache=True, parallel=True)
+def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
+    """Pixel state → ``rgb`` uint8 (over ``background``, rounded half to even like ``np.rint``), ``depth``
+    (the weighted mean z-depth; 0 where nothing contributed) and ``opacity`` (``1 - T``), flat over pixels."""
+    for p in prange(trans.shape[0]):
+        tp = trans[p]
+        for ch in range(3):
+            value = acc_rgb[p, ch] + tp * background[ch]
+            rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
+        weight = 1.0 - tp
+        depth_out[p] = acc_depth[p] / weight if weight > 0.0 else 0.0
+        opacity_out[p] = weight

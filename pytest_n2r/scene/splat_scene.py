@@ -1,0 +1,185 @@
+"""A splat scene: 3-D Gaussians trained elsewhere (a 3DGS ``.ply``), rendered on the CPU at any camera and pose.
+
+With the capture's cameras (a 3DGS ``cameras.json``, a ``transforms.json`` or a COLMAP model) it has
+views, a train / held-out split, a reference length and the validity checks like a fitted scene. Without
+them it still renders at poses the caller gives, and every use that needs them says so.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .._validation import as_unit_rgb
+from ..data.capture import heldout_split
+from ..data.poses import PoseSet
+from ..errors import IngestError, InvalidArgument, InvalidType
+from ..geometry import Camera, Units
+from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSettings
+from ..splats.gaussians import Gaussians
+from .base import Scene, SceneView
+
+__all__ = ["SplatScene", "load_splat_scene", "splat_views", "measure_reference_length"]
+
+#: Training views rendered (at most) to measure the reference length, and their longer side in pixels.
+REFERENCE_VIEWS, REFERENCE_SIZE = 16, 64
+
+
+class SplatScene(Scene):
+    """Gaussians rendered by :class:`~pytest_n2r.render.splat_render.SplatRenderer` (see the module docstring).
+
+    Parameters
+    ----------
+    gaussians:
+        The scene, in the world frame of ``views``.
+    views:
+        The captured views (cameras and poses; no photos), or none.
+    name:
+        Short name for test ids and reports.
+    reference_length:
+        The median z-depth of the surface seen from the training views (scene units); ``None`` measures it
+        (:func:`measure_reference_length`) when there are views.
+    background:
+        RGB in [0, 1] shown where the Gaussians leave transmittance (the colour the scene was trained over;
+        3DGS's default is black).
+    settings:
+        Render settings (:class:`~pytest_n2r.render.splat_render.SplatSettings`).
+    metres_per_unit:
+        Metres per scene unit when the capture's scale is known.
+    no_cameras:
+        Why there are no views (``None`` when there are).
+    """
+
+    is_exact = False
+    device = "cpu"
+    backend = "compiled"
+
+    def __init__(self, gaussians: Gaussians, views: Sequence[SceneView] = (), *, name: str = "splats",
+                 reference_length: float | None = None, background: Sequence[float] = (0.0, 0.0, 0.0),
+                 settings: SplatSettings | None = None, metres_per_unit: float | None = None,
+                 no_cameras: str | None = None) -> None:
+        if not isinstance(gaussians, Gaussians):
+            raise InvalidType(f"gaussians must be a pytest_n2r.splats.Gaussians, got {type(gaussians).__name__}")
+        if settings is not None and not isinstance(settings, SplatSettings):
+            raise InvalidType(f"settings must be a SplatSettings for a splat scene, got {type(settings).__name__}")
+        bg = as_unit_rgb(background)
+        if bg is None:
+            raise InvalidArgument(f"background={background!r}; expected three values in [0, 1]")
+        self.gaussians = gaussians
+        self.views = tuple(views)
+        self.name = name
+        self.background = bg
+        self.settings = settings or SplatSettings()
+        self.metres_per_unit = metres_per_unit
+        self.no_views_reason = no_cameras if not self.views else None
+        self._renderer = SplatRenderer(gaussians, self.settings, bg)
+        if reference_length is None and self.views:
+            reference_length = measure_reference_length(self, self.views)
+        self._reference_length = None if reference_length is None else float(reference_length)
+        self._hash: str | None = None
+
+    @property
+    def reference_length(self) -> float:  # type: ignore[override]
+        """The median z-depth of the surface seen from the training views (scene units)."""
+        if self._reference_length is None:
+            raise InvalidArgument(f"splat scene {self.name!r} has no reference length: {self.no_views_reason} "
+                                  "Translate in units='scene' instead.")
+        return self._reference_length
+
+    def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
+        if Units(units) is Units.REFERENCE:
+            return self.reference_length
+        return super().length_scale(units)
+
+    @property
+    def content_hash(self) -> str:
+        """SHA-256 of the Gaussians, the render settings and background, the views, the reference length and
+        :data:`~pytest_n2r.render.splat_render.SPLAT_RENDER_VERSION`."""
+        if self._hash is None:
+            h = hashlib.sha256(f"SplatScene/{SPLAT_RENDER_VERSION}/{self.gaussians.digest()}".encode())
+            h.update(json.dumps({**self.settings.to_dict(), "background": list(self._renderer.background)},
+                                sort_keys=True).encode())
+            h.update(np.asarray([self._reference_length or 0.0, self.metres_per_unit or 0.0]).tobytes())
+            for v in self.views:
+                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
+                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            self._hash = h.hexdigest()
+        return self._hash
+
+    def with_settings(self, settings: SplatSettings) -> "SplatScene":
+        """The same scene rendered with other ``settings`` (a new content hash)."""
+        return SplatScene(self.gaussians, self.views, name=self.name, reference_length=self._reference_length,
+                          background=self.background, settings=settings, metres_per_unit=self.metres_per_unit,
+                          no_cameras=self.no_views_reason)
+
+    def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        return self._renderer.render(c2w, camera, outputs)
+
+    def __repr__(self) -> str:
+        cams = f"{len(self.views)} views" if self.views else "no cameras"
+        return f"<SplatScene {self.name!r}: {len(self.gaussians)} Gaussians (SH degree {self.gaussians.sh_degree}), {cams}>"
+
+
+def measure_reference_length(scene: Scene, views: Sequence[SceneView]) -> float:
+    """The median z-depth of the surface (opacity >= 0.5) that up to :data:`REFERENCE_VIEWS` training
+    views (evenly spread; all views when none is marked ``train``) see, rendered :data:`REFERENCE_SIZE`
+    pixels on the longer side (scene units)."""
+    train = [v for v in views if v.split == "train"] or list(views)
+    picked = [train[i] for i in np.linspace(0, len(train) - 1, min(REFERENCE_VIEWS, len(train))).round().astype(int)]
+    depths = []
+    for view in picked:
+        out = scene.render(view.c2w, view.camera.fit_within(REFERENCE_SIZE), ("depth", "opacity"))
+        depths.append(out.depth[out.opacity >= 0.5])
+    seen = np.concatenate(depths)
+    if not seen.size:
+        raise IngestError(f"scene {scene.name!r}: none of {len(picked)} training views sees a surface (opacity >= 0.5) "
+                          "at its camera; the cameras do not look at these Gaussians (a different world frame?)")
+    return float(np.median(seen))
+
+
+def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneView]:
+    """Views of a pose set, sorted by name, with ideal pinhole cameras (distortion dropped: splats are trained
+    on undistorted images). Held out: the source's own split (a transforms.json's ``val_filenames``) when
+    ``heldout_every`` is ``None`` and it has one, else every ``heldout_every``-th (default 8, from the first:
+    the ``--eval`` split of 3DGS and nerfstudio); 0 holds none out."""
+    frames = sorted(poses.frames, key=lambda f: f.name)
+    if heldout_every is None and poses.heldout is not None:
+        splits = ["heldout" if f.name in poses.heldout else "train" for f in frames]
+    else:
+        splits = heldout_split(len(frames), 8 if heldout_every is None else heldout_every)
+    return [SceneView(i, f.name, f.camera.undistorted(), f.c2w, split)
+            for i, (f, split) in enumerate(zip(frames, splits))]
+
+
+def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | None = None,
+                     heldout_every: int | None = None, background: Sequence[float] = (0.0, 0.0, 0.0),
+                     settings: SplatSettings | None = None, name: str | None = None) -> SplatScene:
+    """The splat scene of the 3DGS ``.ply`` file ``path``.
+
+    ``cameras`` is a 3DGS ``cameras.json``, a ``transforms.json`` or a COLMAP model (folder); ``None`` looks
+    for one beside the ply (:func:`~pytest_n2r.data.camera_sources.find_cameras`), and without one the scene
+    has no views. ``heldout_every`` chooses the split (:func:`splat_views`); ``background`` is the colour the
+    scene was trained over (3DGS: black unless trained with ``--white_background``).
+    """
+    from ..data.camera_sources import find_cameras, read_cameras
+    from ..splats.ply import read_ply
+
+    path = Path(path)
+    gaussians = read_ply(path)
+    found = Path(cameras) if cameras is not None else find_cameras(path)
+    views: list[SceneView] = []
+    reason = None
+    if found is None:
+        reason = (f"no cameras were given and none were found beside {path} (a cameras.json, transforms.json or "
+                  "COLMAP model in its folder or up to three folders above), so it has no captured views, no "
+                  "train / held-out split, no reference length and no validity checks; it renders at the poses "
+                  "you give. Pass cameras=... to load_scene (or `n2r import --cameras`) to have them.")
+    else:
+        views = splat_views(read_cameras(found), heldout_every)
+    return SplatScene(gaussians, views, name=name or path.stem, background=background, settings=settings,
+                      no_cameras=reason)
