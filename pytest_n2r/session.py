@@ -67,9 +67,11 @@ def _spec_from_text(text: str, base: Path, origin: str) -> list[SceneSpec]:
 def _file_spec(path: Path, origin: str, text: str) -> SceneSpec:
     if not path.exists():
         raise InvalidArgument(
-            f"{origin} {text!r}: no such file ({path}); expected a .n2r scene file (`n2r fit` writes one), "
+            f"{origin} {text!r}: no such file ({path}); expected a .n2r scene file (`n2r fit` writes one), a 3DGS .ply, "
             f"'{DEMO_PREFIX}<name>' for a built-in demo scene, or 'module:function' returning a Scene"
         )
+    if path.is_file() and path.suffix.lower() == ".ply":  # a 3DGS splat scene; its cameras are found beside it
+        return SceneSpec(path.stem, "file", str(path))
     if path.is_dir() or not zipfile.is_zipfile(path):
         raise InvalidArgument(
             f"{origin} {text!r}: {path} is not a scene file (a .n2r scene file is a zip archive written by "
@@ -148,7 +150,7 @@ class N2RSession:
         for pin in pins:
             if pin in by_name:
                 chosen.append(by_name[pin])
-            elif pin.startswith(DEMO_PREFIX) or ":" in pin or "/" in pin or pin.endswith(".n2r"):
+            elif pin.startswith(DEMO_PREFIX) or ":" in pin or "/" in pin or pin.endswith((".n2r", ".ply")):
                 chosen.extend(parse_scene_specs([pin], base, "n2r_scene marker"))
             else:
                 known = ", ".join(by_name) or "none"

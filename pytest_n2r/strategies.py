@@ -228,7 +228,8 @@ def scene_views(scene: Scene, split: str = "heldout") -> list[SceneView]:
         raise InvalidArgument(f"split={split!r} is not a split; expected one of {SPLITS}")
     views = list(scene.views)
     if not views:
-        raise InvalidArgument(f"scene {scene.name!r} has no views to use as sources")
+        reason = getattr(scene, "no_views_reason", None)
+        raise InvalidArgument(f"scene {scene.name!r} has no views to use as sources" + (f": {reason}" if reason else ""))
     if split == "all":
         return views
     chosen = [v for v in views if v.split == split]

@@ -1,7 +1,8 @@
 """Scenes: the renderable interface, scene files and loading.
 
 ``Scene``, ``SceneView`` and ``normalize_outputs`` are light; ``load_scene``, ``save_scene``,
-``read_scene_file`` and ``FieldScene`` import torch and are loaded on first use (the pytest plugin imports
+``read_scene_file``, ``FieldScene`` and the splat scenes (``SplatScene``, ``load_splat_scene``,
+``save_splat_scene``, ``read_splat_file``) are loaded on first use (the pytest plugin imports
 this package at start-up).
 """
 
@@ -19,6 +20,10 @@ _LAZY = {
     "read_scene_file": "file",
     "SceneFile": "file",
     "FieldScene": "field_scene",
+    "SplatScene": "splat_scene",
+    "load_splat_scene": "splat_scene",
+    "save_splat_scene": "splat_file",
+    "read_splat_file": "splat_file",
 }
 
 __all__ = ["Scene", "SceneView", "normalize_outputs", *_LAZY]

@@ -59,6 +59,8 @@ class Scene(ABC):
     metres_per_unit: float | None = None
     #: True when renders are the exact truth (procedural demo scenes), not a fitted approximation.
     is_exact: bool = False
+    #: Why the scene has no captured views, when it has none (a splat scene without cameras); said in errors.
+    no_views_reason: str | None = None
 
     @property
     @abstractmethod

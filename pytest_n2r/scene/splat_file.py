@@ -1,0 +1,135 @@
+"""A splat scene packed into a ``.n2r`` scene file: the Gaussians and their cameras in one zip.
+
+The zip holds ``scene.json`` (the same header, ``cameras``, ``frames``, ``bounds``, ``reference_length``
+and ``metres_per_unit`` as a fitted scene's, see :mod:`pytest_n2r.scene.schema`, plus
+``"representation": "splats"``, a ``splats`` object with the count, SH degree and background, and the
+``report`` of the import) and ``splats.safetensors`` with the Gaussians' float32 arrays
+(:data:`pytest_n2r.splats.gaussians.TENSORS`), exactly as read from the ``.ply``, so a packed scene renders
+the same bits as its ply. No pickle anywhere: a scene file never runs code. Writing is atomic and
+deterministic.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+
+from .._validation import as_unit_rgb
+from ..data.atomic import atomic_write_bytes
+from ..data.extent import scene_bounds
+from ..errors import SceneFileError
+from ..render.splat_render import SplatSettings
+from ..splats.gaussians import TENSORS, Gaussians
+from . import schema
+from .base import SceneView
+from .file import _member, _zip_bytes
+from .splat_scene import SplatScene
+
+__all__ = ["save_splat_scene", "read_splat_file", "is_splat_file", "SPLATS_FILE", "REPRESENTATION"]
+
+#: The archive member holding the Gaussians.
+SPLATS_FILE = "splats.safetensors"
+#: The ``representation`` value of a splat scene file.
+REPRESENTATION = "splats"
+_KEYS = ("format", "version", "representation", "cameras", "frames", "bounds", "reference_length",
+         "metres_per_unit", "splats", "report")
+
+
+def is_splat_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a zip whose ``scene.json`` says ``"representation": "splats"``."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            data = json.loads(archive.read(schema.SCENE_JSON))
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError):
+        return False
+    return isinstance(data, dict) and data.get("representation") == REPRESENTATION
+
+
+def save_splat_scene(path: str | os.PathLike, scene: SplatScene, report: dict | None = None) -> Path:
+    """Write ``scene`` (with its views) as the ``.n2r`` file ``path``, atomically; return the path.
+
+    ``report`` (JSON-ready) records where it came from. ``bounds`` are the box of the Gaussians' means seen
+    by the views (:func:`~pytest_n2r.data.extent.scene_bounds`).
+    """
+    import safetensors.numpy
+
+    if not scene.views:
+        raise SceneFileError(f"cannot write {path}: splat scene {scene.name!r} has no cameras; a scene file holds "
+                             f"its views ({scene.no_views_reason})")
+    views = scene.views
+    bounds = scene_bounds(scene.gaussians.means, [v.camera for v in views], [v.c2w for v in views])
+    cameras, frames, _ = schema.frames_to_json(views, with_images=False)
+    data = {
+        "format": schema.FORMAT_NAME, "version": schema.FORMAT_VERSION, "representation": REPRESENTATION,
+        "cameras": cameras, "frames": frames, "bounds": bounds.tolist(),
+        "reference_length": scene.reference_length, "metres_per_unit": scene.metres_per_unit,
+        "splats": {"count": len(scene.gaussians), "sh_degree": scene.gaussians.sh_degree,
+                   "background": list(scene.background)},
+        "report": report or {},
+    }
+    text = json.dumps(schema.json_ready(data), indent=1, allow_nan=False)
+    payload = safetensors.numpy.save(scene.gaussians.tensors())
+    entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
+               (SPLATS_FILE, payload, zipfile.ZIP_DEFLATED, 1)]
+    return atomic_write_bytes(path, _zip_bytes(entries))
+
+
+def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None = None,
+                    name: str | None = None) -> SplatScene:
+    """The splat scene of the ``.n2r`` file ``path`` (written by :func:`save_splat_scene` / ``n2r import``).
+
+    Raises :class:`~pytest_n2r.errors.SceneFileError` naming the file and what is wrong: not a zip, another
+    format or version, missing keys, a malformed frame, missing or mis-shaped tensors, non-finite values.
+    """
+    import safetensors
+    import safetensors.numpy
+
+    path = Path(path)
+    source = str(path)
+    if not path.is_file():
+        raise SceneFileError(f"{source}: no such scene file (`n2r import SCENE.ply -o {path.name}` writes one)")
+    try:
+        archive = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc})") from None
+    with archive:
+        try:
+            data = json.loads(_member(archive, schema.SCENE_JSON, source))
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
+        if not isinstance(data, dict) or data.get("format") != schema.FORMAT_NAME:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not a pytest-n2r scene header")
+        if data.get("version") != schema.FORMAT_VERSION:
+            raise SceneFileError(f"{source}: scene file format version {data.get('version')!r}; this pytest-n2r "
+                                 f"reads version {schema.FORMAT_VERSION}")
+        missing = [key for key in _KEYS if key not in data]
+        if missing:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is missing the keys {missing}")
+        frames = schema.read_frames(data, source)
+        reference_length = schema.read_number(data, "reference_length", source)
+        metres_per_unit = schema.read_number(data, "metres_per_unit", source, optional=True)
+        meta = data["splats"]
+        background = as_unit_rgb(meta.get("background")) if isinstance(meta, dict) else None
+        if background is None:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats.background={meta!r}; expected three values "
+                                 "in [0, 1]")
+        payload = _member(archive, SPLATS_FILE, source)
+    try:
+        tensors = safetensors.numpy.load(payload)
+    except safetensors.SafetensorError as exc:
+        raise SceneFileError(f"{source}: {SPLATS_FILE} is not a valid safetensors file ({exc})") from None
+    if set(tensors) != set(TENSORS):
+        raise SceneFileError(f"{source}: {SPLATS_FILE} holds the tensors {sorted(tensors)}; expected {sorted(TENSORS)}")
+    try:
+        gaussians = Gaussians(**tensors)
+    except (ValueError, TypeError) as exc:
+        raise SceneFileError(f"{source}: {SPLATS_FILE}: {exc}") from None
+    if len(gaussians) != meta.get("count"):
+        raise SceneFileError(f"{source}: {SPLATS_FILE} holds {len(gaussians)} Gaussians; {schema.SCENE_JSON} says "
+                             f"{meta.get('count')!r}")
+    views = [SceneView(i, name_, camera, c2w, split) for i, (name_, camera, c2w, split, _) in enumerate(frames)]
+    return SplatScene(gaussians, views, name=name or path.stem, reference_length=reference_length,
+                      background=background, settings=settings, metres_per_unit=metres_per_unit)
