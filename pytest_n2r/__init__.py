@@ -19,6 +19,7 @@ _EXPORTS: dict[str, str] = {
     "Scene": "pytest_n2r.scene",
     "SceneView": "pytest_n2r.scene",
     "FieldScene": "pytest_n2r.scene",
+    "SplatScene": "pytest_n2r.scene",
     "load_scene": "pytest_n2r.scene",
     "save_scene": "pytest_n2r.scene",
     "RenderedView": "pytest_n2r.render",

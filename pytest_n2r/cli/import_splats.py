@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["add_parser", "run", "parse_rgb"]
+__all__ = ["add_parser", "parse_rgb", "run"]
 
 
 def parse_rgb(text: str) -> tuple[float, float, float]:

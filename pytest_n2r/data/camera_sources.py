@@ -17,7 +17,7 @@ from .gs_cameras import is_gs_cameras, read_gs_cameras
 from .poses import PoseSet
 from .transforms_json import read_transforms_json
 
-__all__ = ["read_cameras", "find_cameras", "CAMERA_FILES"]
+__all__ = ["CAMERA_FILES", "find_cameras", "read_cameras"]
 
 #: Camera files looked for beside a .ply, in this order (then a COLMAP model).
 CAMERA_FILES = ("cameras.json", "transforms.json")

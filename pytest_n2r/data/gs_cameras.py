@@ -26,7 +26,7 @@ from ..geometry import Camera, orthonormalize
 from .atomic import atomic_write_text
 from .poses import PoseSet, SourceFrame
 
-__all__ = ["read_gs_cameras", "write_gs_cameras", "is_gs_cameras"]
+__all__ = ["is_gs_cameras", "read_gs_cameras", "write_gs_cameras"]
 
 
 def is_gs_cameras(path: str | os.PathLike) -> bool:

@@ -25,8 +25,19 @@ from numba import njit, prange
 
 from ..splats.sh import colour_of
 
-__all__ = ["ALPHA_MAX", "ALPHA_MIN", "DILATION", "RECORD", "project", "depth_order", "gather", "bin_tiles",
-           "composite_tiles", "finish", "exp_neg"]
+__all__ = [
+    "ALPHA_MAX",
+    "ALPHA_MIN",
+    "DILATION",
+    "RECORD",
+    "bin_tiles",
+    "composite_tiles",
+    "depth_order",
+    "exp_neg",
+    "finish",
+    "gather",
+    "project",
+]
 
 #: Opacity of one Gaussian at one pixel is capped here (3DGS reference), so transmittance never hits 0.
 ALPHA_MAX = 0.99

@@ -25,7 +25,7 @@ from ..geometry import Camera, invert_pose
 from ..splats.gaussians import Gaussians
 from . import splat_kernels as k
 
-__all__ = ["SplatSettings", "SplatRenderer", "SPLAT_RENDER_VERSION"]
+__all__ = ["SPLAT_RENDER_VERSION", "SplatRenderer", "SplatSettings"]
 
 #: Part of every splat scene's content hash: bump it whenever the output for the same Gaussians and settings
 #: changes, so render caches built by an older pytest-n2r are not reused.
@@ -74,7 +74,7 @@ class SplatSettings:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def replace(self, **changes) -> "SplatSettings":
+    def replace(self, **changes) -> SplatSettings:
         return replace(self, **changes)
 
 

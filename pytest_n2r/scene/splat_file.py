@@ -16,7 +16,6 @@ import os
 import zipfile
 from pathlib import Path
 
-
 from .._validation import as_unit_rgb
 from ..data.atomic import atomic_write_bytes
 from ..data.extent import scene_bounds
@@ -28,7 +27,7 @@ from .base import SceneView
 from .file import _member, _zip_bytes
 from .splat_scene import SplatScene
 
-__all__ = ["save_splat_scene", "read_splat_file", "is_splat_file", "SPLATS_FILE", "REPRESENTATION"]
+__all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene"]
 
 #: The archive member holding the Gaussians.
 SPLATS_FILE = "splats.safetensors"

@@ -24,7 +24,7 @@ from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSett
 from ..splats.gaussians import Gaussians
 from .base import Scene, SceneView
 
-__all__ = ["SplatScene", "load_splat_scene", "splat_views", "measure_reference_length"]
+__all__ = ["SplatScene", "load_splat_scene", "measure_reference_length", "splat_views"]
 
 #: Training views rendered (at most) to measure the reference length, and their longer side in pixels.
 REFERENCE_VIEWS, REFERENCE_SIZE = 16, 64
@@ -86,12 +86,14 @@ class SplatScene(Scene):
     @property
     def reference_length(self) -> float:  # type: ignore[override]
         """The median z-depth of the surface seen from the training views (scene units)."""
+        __tracebackhide__ = True
         if self._reference_length is None:
             raise InvalidArgument(f"splat scene {self.name!r} has no reference length: {self.no_views_reason} "
                                   "Translate in units='scene' instead.")
         return self._reference_length
 
     def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
+        __tracebackhide__ = True
         if Units(units) is Units.REFERENCE:
             return self.reference_length
         return super().length_scale(units)
@@ -111,7 +113,7 @@ class SplatScene(Scene):
             self._hash = h.hexdigest()
         return self._hash
 
-    def with_settings(self, settings: SplatSettings) -> "SplatScene":
+    def with_settings(self, settings: SplatSettings) -> SplatScene:
         """The same scene rendered with other ``settings`` (a new content hash)."""
         return SplatScene(self.gaussians, self.views, name=self.name, reference_length=self._reference_length,
                           background=self.background, settings=settings, metres_per_unit=self.metres_per_unit,

@@ -8,5 +8,15 @@ from .gaussians import TENSORS, Gaussians
 from .ply import ply_properties, read_ply, write_ply
 from .sh import SH_C0, rgb_to_sh, sh_count, sh_to_rgb, view_colours
 
-__all__ = ["Gaussians", "TENSORS", "read_ply", "write_ply", "ply_properties", "SH_C0", "rgb_to_sh", "sh_to_rgb",
-           "sh_count", "view_colours"]
+__all__ = [
+           "SH_C0",
+           "TENSORS",
+           "Gaussians",
+           "ply_properties",
+           "read_ply",
+           "rgb_to_sh",
+           "sh_count",
+           "sh_to_rgb",
+           "view_colours",
+           "write_ply",
+]

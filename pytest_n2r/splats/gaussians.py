@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import InvalidArgument, InvalidType
 from .sh import sh_degree_of
 
-__all__ = ["Gaussians", "TENSORS"]
+__all__ = ["TENSORS", "Gaussians"]
 
 #: The arrays of a Gaussian set, by name, with their shapes after the count ``N``.
 TENSORS = {"means": (3,), "quats": (4,), "log_scales": (3,), "opacity_logits": (), "sh": (None, 3)}
@@ -116,7 +116,7 @@ class Gaussians:
             h.update(array.tobytes())
         return h.hexdigest()
 
-    def subset(self, index: np.ndarray) -> "Gaussians":
+    def subset(self, index: np.ndarray) -> Gaussians:
         """The Gaussians selected by ``index`` (a boolean mask or indices)."""
         return Gaussians(**{name: array[index] for name, array in self.tensors().items()})
 

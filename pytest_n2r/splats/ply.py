@@ -32,7 +32,7 @@ from ..errors import SceneFileError
 from .gaussians import Gaussians
 from .sh import sh_count, sh_degree_of
 
-__all__ = ["read_ply", "write_ply", "ply_properties"]
+__all__ = ["ply_properties", "read_ply", "write_ply"]
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -153,7 +153,7 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
             first = int(np.argmax(bad))
             raise SceneFileError(f"{source}: vertex property {name!r} of vertex {first} is {float(columns[name][first])} "
                                  f"({int(bad.sum())} vertices have a NaN or infinite {name})")
-    stack = lambda names: np.stack([columns[n] for n in names], axis=1)  # noqa: E731
+    stack = lambda names: np.stack([columns[n] for n in names], axis=1)
     k = sh_count(degree)
     sh = np.empty((count, k, 3), dtype=np.float32)
     sh[:, 0, :] = stack(["f_dc_0", "f_dc_1", "f_dc_2"])

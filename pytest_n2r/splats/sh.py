@@ -22,8 +22,18 @@ from numba import njit
 from .._validation import check_array
 from ..errors import InvalidArgument
 
-__all__ = ["SH_C0", "SH_C1", "SH_C2", "SH_C3", "MAX_DEGREE", "sh_count", "sh_degree_of", "rgb_to_sh",
-           "sh_to_rgb", "view_colours"]
+__all__ = [
+    "MAX_DEGREE",
+    "SH_C0",
+    "SH_C1",
+    "SH_C2",
+    "SH_C3",
+    "rgb_to_sh",
+    "sh_count",
+    "sh_degree_of",
+    "sh_to_rgb",
+    "view_colours",
+]
 
 #: Highest SH degree the .ply format (and the renderer) carries.
 MAX_DEGREE = 3
