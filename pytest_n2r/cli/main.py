@@ -16,7 +16,7 @@ from .. import __version__
 from ..errors import N2RError
 
 #: Subcommand modules, in the order ``n2r --help`` lists them.
-COMMANDS: tuple[str, ...] = ("poses", "fit", "import_splats", "render", "info", "demo", "study")
+COMMANDS: tuple[str, ...] = ("poses", "fit", "import", "render", "info", "demo", "study")
 
 
 def build_parser() -> argparse.ArgumentParser:
