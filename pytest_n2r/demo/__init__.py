@@ -47,7 +47,7 @@ def demo_spec_names() -> tuple[str, ...]:
 
 def load_demo(spec_name: str, device: str = "auto") -> Scene:
     """The scene ``demo:<spec_name>`` names: the exact scene ``<name>``, or the fitted field of it for
-    ``<name>-field`` (rendered on ``device``; the exact scenes render with numpy on the CPU)."""
+    ``<name>-field`` (rendered on ``device``; the exact scenes render with a compiled kernel on the CPU)."""
     if spec_name in demo_scene_names():
         return ground_truth(spec_name)
     if spec_name.endswith(FIELD_SUFFIX) and spec_name[: -len(FIELD_SUFFIX)] in demo_scene_names():

@@ -11,6 +11,15 @@ Convention
   depth is the scene's ``far`` distance.
 - ``opacity`` is the fraction of the pixel's supersampling rays that hit a surface (1 inside a surface,
   between 0 and 1 on silhouettes, 0 for open water or sky).
+
+- Where two surfaces coincide (the object scene's wheel caps lie in the van's sides), which one a ray sees
+  depends on rounding.
+
+Two implementations of these definitions: the compiled kernel of :mod:`.raycast` renders (``render``,
+``cast``); the vectorized numpy code of :mod:`.primitives`, :mod:`.materials` and :mod:`.textures`
+(``render_reference``, ``cast_reference``) is the readable definition it is tested against. They agree to
+one grey level, bit for bit in almost every pixel, except where surfaces coincide
+(``tests/demo/test_raycast.py``, ``benchmarks/demo_render_speed.py``).
 """
 
 from __future__ import annotations
@@ -23,10 +32,12 @@ import numpy as np
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView
 from .primitives import T_MIN, Group, Primitive, slab_hits
+from .raycast import CompiledScene, compile_scene
 
 __all__ = ["GroundTruthScene"]
 
-#: Bump when the renderer's output changes for the same scene description (part of the content hash).
+#: Bump when the renderer's output changes for the same scene description (part of the content hash). The
+#: compiled kernel kept "1": its images are those of the numpy renderer it replaced, to one grey level.
 RENDERER_VERSION = "1"
 
 
@@ -62,6 +73,7 @@ class GroundTruthScene(Scene):
         supersample: int = 2, metres_per_unit: float | None = 1.0,
     ) -> None:
         self.name = name
+        self._items = tuple(primitives)
         flat: list[Primitive] = []
         self._groups: list[tuple[np.ndarray, np.ndarray, list[int]]] = []
         for item in primitives:
@@ -83,6 +95,7 @@ class GroundTruthScene(Scene):
         self.supersample = int(supersample)
         self.metres_per_unit = metres_per_unit
         self._hash: str | None = None
+        self._compiled: CompiledScene | None = None
         self.reference_length = self._median_train_depth()
 
     # -- Scene interface -------------------------------------------------------------------------------
@@ -101,7 +114,26 @@ class GroundTruthScene(Scene):
             self._hash = h.hexdigest()
         return self._hash
 
+    @property
+    def compiled(self) -> CompiledScene:
+        """The scene's tables for the compiled kernel (built on first use)."""
+        if self._compiled is None:
+            self._compiled = compile_scene(list(self._items), self.light, self.ambient, self.background)
+        return self._compiled
+
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        return self.compiled.render(c2w, camera.fx, camera.fy, camera.cx, camera.cy, camera.height, camera.width,
+                                    self.supersample, self.far, outputs)
+
+    def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest hit of rays ``o + t d`` (``(N, 3)`` each): ``t`` (``inf`` on a miss) and the primitive index."""
+        return self.compiled.cast(o, d)
+
+    # -- the vectorized reference ------------------------------------------------------------------------
+    def render_reference(self, c2w: np.ndarray, camera: Camera,
+                         outputs: tuple[str, ...] = ("rgb", "depth", "opacity")) -> dict[str, np.ndarray]:
+        """``outputs`` by the vectorized numpy definition (slow: the reference the compiled kernel is tested
+        against)."""
         out: dict[str, np.ndarray] = {}
         h, w = camera.height, camera.width
         if "rgb" in outputs or "opacity" in outputs:
@@ -112,7 +144,7 @@ class GroundTruthScene(Scene):
                 [grid + np.array([du, dv]) for dv in offsets for du in offsets], axis=2
             )  # H W S 2
             o, d = camera_rays(camera, c2w, uv.reshape(-1, 2))
-            t, which = self.cast(o, d)
+            t, which = self.cast_reference(o, d)
             hit = np.isfinite(t)
             if "rgb" in outputs:
                 footprint = t / (0.5 * (camera.fx + camera.fy) * n)
@@ -123,13 +155,12 @@ class GroundTruthScene(Scene):
                 out["opacity"] = hit.reshape(h, w, n * n).mean(axis=2).astype(np.float32)
         if "depth" in outputs:
             o, d = camera_rays(camera, c2w)
-            t, _ = self.cast(o.reshape(-1, 3), d.reshape(-1, 3))
+            t, _ = self.cast_reference(o.reshape(-1, 3), d.reshape(-1, 3))
             out["depth"] = np.where(np.isfinite(t), t, self.far).reshape(h, w).astype(np.float32)
         return out
 
-    # -- ray casting -------------------------------------------------------------------------------------
-    def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Nearest hit of rays ``o + t d`` (``(N, 3)`` each): ``t`` (``inf`` on a miss) and the primitive index."""
+    def cast_reference(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`cast` by the vectorized numpy definition."""
         ts = np.full((len(self.primitives), len(o)), np.inf)
         for lo, hi, members in self._groups:
             if lo is None:
@@ -168,6 +199,20 @@ class GroundTruthScene(Scene):
             light = (self.ambient + (1.0 - self.ambient) * lambert).astype(np.float32)
             colour[idx] = albedo * light[:, None]
         return colour
+
+    def coincident_pixels(self, c2w: np.ndarray, camera: Camera) -> np.ndarray:
+        """``H x W`` bool: pixels with a supersampling ray whose two nearest surfaces lie at the same distance
+        (to 1e-9, relative), where which one is seen depends on rounding (the object scene's wheel caps lie in
+        the van's sides): there the compiled and the reference renders may differ by more than a grey level."""
+        n = self.supersample
+        offsets = (np.arange(n) + 0.5) / n - 0.5
+        grid = pixel_grid(camera)
+        uv = np.stack([grid + np.array([du, dv]) for dv in offsets for du in offsets], axis=2)
+        o, d = camera_rays(camera, c2w, uv.reshape(-1, 2))
+        ts = np.sort(np.stack([p.intersect(o, d) for p in self.primitives]), axis=0)
+        with np.errstate(invalid="ignore"):  # inf - inf where a ray misses both
+            tie = np.isfinite(ts[0]) & (np.abs(ts[1] - ts[0]) <= 1e-9 * ts[0])
+        return tie.reshape(camera.height, camera.width, n * n).any(axis=2)
 
     # -- helpers -----------------------------------------------------------------------------------------
     def _median_train_depth(self, size: int = 64) -> float:

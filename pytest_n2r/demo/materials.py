@@ -87,7 +87,11 @@ class Poster(Material):
 
 @dataclass(frozen=True, eq=False)
 class Blend(Material):
-    """``mask * top + (1 - mask) * bottom`` with ``mask(a, b)`` in ``[0, 1]`` (e.g. marine growth on stone)."""
+    """``mask * top + (1 - mask) * bottom`` with ``mask(a, b)`` in ``[0, 1]`` (e.g. marine growth on stone).
+
+    ``mask`` takes numpy arrays here and floats in the compiled renderer (:mod:`.raycast` compiles it): write
+    it with numpy ufuncs, ``math`` and compiled helpers only.
+    """
 
     bottom: Material
     top: Material

@@ -17,6 +17,7 @@ import math
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
 from ..data.capture import heldout_split
 from ..geometry import Camera
@@ -50,8 +51,10 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0,
     return c2w
 
 
+@njit(cache=True)
 def _smoothstep(lo: float, hi: float, x: np.ndarray) -> np.ndarray:
-    s = np.clip((x - lo) / (hi - lo), 0.0, 1.0)
+    """Smooth 0 → 1 between ``lo`` and ``hi`` (numpy ufuncs only: masks also run compiled, on floats)."""
+    s = np.minimum(np.maximum((x - lo) / (hi - lo), 0.0), 1.0)
     return s * s * (3 - 2 * s)
 
 

@@ -1,0 +1,636 @@
+"""Compiled ray casting of the exact demo scenes (numba): every pixel's rays, hits, shading and outputs in one
+parallel kernel.
+
+The scene's primitives, materials and textures are flattened into arrays once (:func:`compile_scene`); the
+kernel then follows the vectorized definitions of :mod:`.primitives`, :mod:`.materials` and
+:mod:`.textures` operation for operation (the same float64 geometry, the same float32 colour arithmetic, the
+bilinear lookup of OpenCV's ``remap`` with its 1/32-texel steps), so its images match theirs to within
+rounding (tested against them, ``tests/demo/test_raycast.py``). Each image row is one parallel task and
+each pixel depends on its own rays only: results do not depend on the thread count.
+
+Convention
+----------
+- Rays, hits and surface coordinates as in :mod:`.primitives`; colours as in :mod:`.exact` (the mean of
+  ``supersample²`` rays per pixel, rows of sub-pixel offsets outer, columns inner).
+- A :class:`~.materials.Blend` mask is a function of scalars ``(a, b)`` written with numpy ufuncs, so the
+  same function serves numpy arrays and the compiled kernel (which calls it through a compiled copy).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numba import njit, prange
+from numba.core.errors import NumbaError, NumbaExperimentalFeatureWarning
+
+from ..errors import InvalidArgument
+from .materials import Blend, Flat, Material, Poster, Radial, Textured
+from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
+from .textures import Texture
+
+__all__ = ["CompiledScene", "compile_scene"]
+
+# primitive kinds
+_DISC, _BOX, _CYLINDER, _RELIEF = 0, 1, 2, 3
+# material kinds
+_FLAT, _TEXTURED, _POSTER, _BLEND, _RADIAL = 0, 1, 2, 3, 4
+_F0, _F1 = np.float32(0.0), np.float32(1.0)
+_MASK_SIGNATURE = "float64(float64, float64)"
+_compiled_masks: dict[Any, Any] = {}
+
+
+@njit(_MASK_SIGNATURE, cache=True)
+def _no_mask(a, b):  # pragma: no cover - compiled; only pads an empty tuple of masks (never called)
+    return 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledScene:
+    """A scene's primitives, materials and textures as flat arrays for the kernels (see :func:`compile_scene`).
+
+    ``groups`` rows: ``first, end`` primitive indices and ``has_box``; ``group_box`` rows ``lo, hi``.
+    ``prims`` rows hold each primitive's parameters, ``prim_mat`` its material node per face slot.
+    """
+
+    groups: np.ndarray
+    group_box: np.ndarray
+    kinds: np.ndarray
+    prims: np.ndarray
+    waves: np.ndarray
+    prim_mat: np.ndarray
+    node_kind: np.ndarray
+    node_par: np.ndarray
+    node_child: np.ndarray
+    rings: np.ndarray
+    masks: tuple
+    tex_meta: np.ndarray
+    texels: np.ndarray
+    shading: np.ndarray
+    background: np.ndarray
+
+    def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest hit of rays ``o + t d`` (``(N, 3)`` float64 each): ``t`` (``inf`` on a miss) and the index
+        of the primitive hit (0 on a miss)."""
+        o = np.ascontiguousarray(o, dtype=np.float64)
+        d = np.ascontiguousarray(d, dtype=np.float64)
+        t = np.empty(len(o))
+        which = np.empty(len(o), dtype=np.int64)
+        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, t, which)
+        return t, which
+
+    def render(self, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float, height: int, width: int,
+               supersample: int, far: float, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
+        """The ``outputs`` (``rgb``, ``depth``, ``opacity``) of the pinhole view at pose ``c2w`` (see
+        :mod:`.exact` for their definitions)."""
+        want_rgb, want_depth, want_opacity = ("rgb" in outputs), ("depth" in outputs), ("opacity" in outputs)
+        rgb = np.empty((height, width, 3) if want_rgb else (0, 0, 3), dtype=np.uint8)
+        depth = np.empty((height, width) if want_depth else (0, 0), dtype=np.float32)
+        opacity = np.empty((height, width) if want_opacity else (0, 0), dtype=np.float32)
+        camera = np.array([fx, fy, cx, cy, far])
+        with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
+            warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
+            _render_kernel(np.ascontiguousarray(c2w, dtype=np.float64), camera, int(supersample),
+                           self.groups, self.group_box, self.kinds, self.prims, self.waves, self.prim_mat,
+                           self.node_kind, self.node_par, self.node_child, self.rings, self.masks, self.tex_meta,
+                           self.texels, self.shading, self.background, rgb, depth, opacity)
+        out = {}
+        if want_rgb:
+            out["rgb"] = rgb
+        if want_depth:
+            out["depth"] = depth
+        if want_opacity:
+            out["opacity"] = opacity
+        return out
+
+
+# -- building the tables -------------------------------------------------------------------------------------
+
+
+class _Builder:
+    """Collects material nodes, rings, masks and texture mip levels while primitives are flattened."""
+
+    def __init__(self) -> None:
+        self.node_kind: list[int] = []
+        self.node_par: list[list[float]] = []
+        self.node_child: list[tuple[int, int]] = []
+        self.rings: list[tuple[float, float, float, float]] = []
+        self.masks: list[Any] = []
+        self.textures: dict[int, int] = {}
+        self.texture_list: list[Texture] = []
+        self.nodes: dict[int, int] = {}
+
+    def texture(self, tex: Texture) -> int:
+        if id(tex) not in self.textures:
+            self.textures[id(tex)] = len(self.texture_list)
+            self.texture_list.append(tex)
+        return self.textures[id(tex)]
+
+    def mask(self, fn: Any) -> int:
+        compiled = _compiled_masks.get(fn)
+        if compiled is None:
+            try:
+                compiled = _compiled_masks[fn] = njit(_MASK_SIGNATURE, cache=True)(fn)
+            except NumbaError as exc:
+                raise InvalidArgument(
+                    f"Blend mask {getattr(fn, '__name__', fn)!r} cannot be compiled ({type(exc).__name__}); a "
+                    "mask must be a plain function of two floats written with numpy ufuncs and math") from None
+        self.masks.append(compiled)
+        return len(self.masks) - 1
+
+    def material(self, mat: Material, top: bool = True) -> int:
+        key = id(mat)
+        if key in self.nodes:
+            return self.nodes[key]
+        par: list[float] = [0.0] * 6
+        child = (-1, -1)
+        if isinstance(mat, Flat):
+            kind = _FLAT
+            par[:3] = [float(np.float32(c)) for c in mat.colour]
+        elif isinstance(mat, Textured):
+            kind = _TEXTURED
+            par[:4] = [self.texture(mat.texture), mat.texels_per_unit, *mat.offset]
+        elif isinstance(mat, Poster):
+            kind = _POSTER
+            par[:5] = [self.texture(mat.picture), *mat.rect]
+            child = (self.material(mat.base, top=False), -1)
+        elif isinstance(mat, Blend):
+            if not top:
+                raise InvalidArgument("a Blend material must be a surface's own material, not inside another one "
+                                      "(the compiled renderer blends once per hit)")
+            kind = _BLEND
+            par[0] = self.mask(mat.mask)
+            child = (self.material(mat.bottom, top=False), self.material(mat.top, top=False))
+        elif isinstance(mat, Radial):
+            kind = _RADIAL
+            rings = sorted(zip(mat.radii, mat.colours), reverse=True)  # as Radial.albedo: the last match wins
+            par[:2] = [len(self.rings), len(rings)]
+            self.rings.extend((r, *(float(np.float32(c)) for c in colour)) for r, colour in rings)
+            child = (self.material(mat.outer, top=False), -1)
+        else:
+            raise InvalidArgument(f"material {type(mat).__name__} has no compiled form; expected one of Flat, "
+                                  "Textured, Poster, Blend, Radial")
+        self.node_kind.append(kind)
+        self.node_par.append(par)
+        self.node_child.append(child)
+        self.nodes[key] = len(self.node_kind) - 1
+        return self.nodes[key]
+
+    def texture_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``tex_meta (T, L, 4)``: per texture and mip level the texel offset, height, width and (in level 0's
+        row, column 3) the wrap (0 mirror, 1 clamp); column 3 of level 1 holds the level count."""
+        levels = max((len(t.levels) for t in self.texture_list), default=1)
+        meta = np.zeros((max(len(self.texture_list), 1), max(levels, 2), 4), dtype=np.int64)
+        chunks, offset = [], 0
+        for i, tex in enumerate(self.texture_list):
+            for j, img in enumerate(tex.levels):
+                meta[i, j, :3] = offset, img.shape[0], img.shape[1]
+                chunks.append(img.reshape(-1))
+                offset += img.size
+            meta[i, 0, 3] = 0 if tex.wrap == "mirror" else 1
+            meta[i, 1, 3] = len(tex.levels)
+        texels = np.concatenate(chunks) if chunks else np.zeros(3, np.float32)
+        return meta, np.ascontiguousarray(texels, dtype=np.float32)
+
+
+def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list[float], list[int]]:
+    """Kind, parameters and face materials of one primitive."""
+    par = [0.0] * 16
+    if isinstance(prim, Disc):
+        par[:4] = [prim.height, prim.radius, *prim.centre]
+        return _DISC, par, [b.material(prim.material)] * 6
+    if isinstance(prim, Box):
+        par[:6] = [*prim.lo, *prim.hi]
+        faces = [b.material(prim._material(name)) for name in ("-x", "-y", "-z", "+x", "+y", "+z")]
+        return _BOX, par, faces
+    if isinstance(prim, Cylinder):
+        par[:6] = [*prim.centre, "xyz".index(prim.axis), prim.radius, prim.half_length]
+        return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
+    if isinstance(prim, ReliefWall):
+        par[:12] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w), prim.newton,
+                    prim.steps, prim.bisections]
+        waves.extend(prim._w.astype(np.float32).tolist())
+        return _RELIEF, par, [b.material(prim.material)] * 6
+    raise InvalidArgument(f"primitive {type(prim).__name__} has no compiled form; expected one of Disc, Box, "
+                          "Cylinder, ReliefWall")
+
+
+def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: float,
+                  background: np.ndarray) -> CompiledScene:
+    """Flatten a scene's primitives (groups keep their box), materials and textures into kernel tables."""
+    b = _Builder()
+    groups, boxes, kinds, prims, prim_mat, waves = [], [], [], [], [], []
+    for item in items:
+        children = item.children if isinstance(item, Group) else (item,)
+        first = len(kinds)
+        for prim in children:
+            kind, par, faces = _primitive_row(prim, b, waves)
+            kinds.append(kind)
+            prims.append(par)
+            prim_mat.append(faces)
+        boxed = isinstance(item, Group)
+        groups.append((first, len(kinds), int(boxed)))
+        boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
+    tex_meta, texels = b.texture_tables()
+    masks = tuple(b.masks) or (_no_mask,)
+    return CompiledScene(
+        groups=np.asarray(groups, np.int64), group_box=np.asarray(boxes, np.float64),
+        kinds=np.asarray(kinds, np.int64), prims=np.asarray(prims, np.float64),
+        waves=np.asarray(waves or [[0.0] * 5], np.float32).reshape(-1, 5),
+        prim_mat=np.asarray(prim_mat, np.int64), node_kind=np.asarray(b.node_kind or [0], np.int64),
+        node_par=np.asarray(b.node_par or [[0.0] * 6], np.float64),
+        node_child=np.asarray(b.node_child or [(-1, -1)], np.int64),
+        rings=np.asarray(b.rings or [(0.0,) * 4], np.float64).reshape(-1, 4), masks=masks,
+        tex_meta=tex_meta, texels=texels,
+        shading=np.array([*np.asarray(light, np.float64), float(ambient)]),
+        background=np.asarray(background, np.float32),
+    )
+
+
+# -- geometry ------------------------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _slab(ox, oy, oz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2):
+    """Entry and exit ``t`` of a ray through a box, NaN-safe like ``np.fmin`` / ``np.fmax``."""
+    t_near, t_far = -math.inf, math.inf
+    for o, d, lo, hi in ((ox, dx, lo0, hi0), (oy, dy, lo1, hi1), (oz, dz, lo2, hi2)):
+        inv = 1.0 / d
+        t0, t1 = (lo - o) * inv, (hi - o) * inv
+        lo_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else min(t0, t1))
+        hi_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else max(t0, t1))
+        if not math.isnan(lo_t):
+            t_near = max(t_near, lo_t)
+        if not math.isnan(hi_t):
+            t_far = min(t_far, hi_t)
+    return t_near, t_far
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _relief(waves, first, count, depth, x, z):
+    """``h``, ``dh/dx``, ``dh/dz`` of a relief at ``(x, z)``, in float32 like :meth:`ReliefWall.height_and_gradient`."""
+    x32, z32 = np.float32(x), np.float32(z)
+    h = np.float32(0.5)
+    gx = np.float32(0.0)
+    gz = np.float32(0.0)
+    for k in range(first, first + count):
+        amp, fx, px, fz, pz = waves[k, 0], waves[k, 1], waves[k, 2], waves[k, 3], waves[k, 4]
+        ax = fx * x32 + px
+        az = fz * z32 + pz
+        sx, cx, sz, cz = math.sin(ax), math.cos(ax), math.sin(az), math.cos(az)
+        h += amp * sx * sz
+        gx += amp * fx * cx * sz
+        gz += amp * fz * sx * cz
+    return depth * np.float64(h), depth * np.float64(gx), depth * np.float64(gz)
+
+
+@njit(cache=True, error_model="numpy")
+def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
+    """First hit of a :class:`ReliefWall` (``p``: its parameter row), ``inf`` on a miss."""
+    y0, x0, x1, z0, z1, depth, slope = prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5], prims[row, 6]
+    first, count, newton, steps, bisections = int(prims[row, 7]), int(prims[row, 8]), int(prims[row, 9]), int(prims[row, 10]), int(prims[row, 11])
+    t_in = (y0 - depth - oy) / dy
+    t_out = (y0 - oy) / dy
+    if not (dy > 0 and t_out > T_MIN):
+        return math.inf
+    lo, hi = max(t_in, T_MIN), t_out
+    if dy > 1.05 * slope * math.hypot(dx, dz):  # monotonic residual: safeguarded Newton
+        a, b = lo, hi
+        t = guess if (guess > a and guess < b) else 0.5 * (a + b)
+        for _ in range(newton):
+            h, gx, gz = _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)
+            f = oy + t * dy - y0 + h
+            if abs(f) <= 1e-7:
+                break
+            df = dy + gx * dx + gz * dz
+            if f < 0:
+                a = t
+            else:
+                b = t
+            step = t - f / df
+            t = step if (step > a and step < b) else 0.5 * (a + b)
+    else:  # grazing: march to the first sign change, then bisect
+        t_prev = lo
+        found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
+        a = b = lo
+        if not found:
+            for s in range(1, steps + 1):
+                t = lo + (hi - lo) * (s / steps)
+                if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
+                    a, b, found = t_prev, t, True
+                    break
+                t_prev = t
+        if not found:
+            return math.inf
+        for _ in range(bisections):
+            m = 0.5 * (a + b)
+            if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
+                b = m
+            else:
+                a = m
+        t = 0.5 * (a + b)
+    px, pz = ox + t * dx, oz + t * dz
+    if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
+        return t
+    return math.inf
+
+
+@njit(cache=True, error_model="numpy")
+def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
+    """First hit of a capped :class:`Cylinder`, ``inf`` on a miss."""
+    q = (ox - prims[row, 0], oy - prims[row, 1], oz - prims[row, 2])
+    d = (dx, dy, dz)
+    k = int(prims[row, 3])
+    i, j = (1, 2) if k == 0 else ((0, 2) if k == 1 else (0, 1))
+    radius, half = prims[row, 4], prims[row, 5]
+    A = d[i] * d[i] + d[j] * d[j]
+    B = 2 * (q[i] * d[i] + q[j] * d[j])
+    C = q[i] * q[i] + q[j] * q[j] - radius ** 2
+    disc = B * B - 4 * A * C
+    best = math.inf
+    if disc >= 0:
+        root = math.sqrt(disc)
+        for t in ((-B - root) / (2 * A), (-B + root) / (2 * A)):
+            along = q[k] + t * d[k]
+            if t > T_MIN and abs(along) <= half and t < best:
+                best = t
+    for sign in (-1.0, 1.0):
+        t = (sign * half - q[k]) / d[k]
+        pi, pj = q[i] + t * d[i], q[j] + t * d[j]
+        if t > T_MIN and pi * pi + pj * pj <= radius ** 2 and t < best:
+            best = t
+    return best
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
+    """``t`` of the first hit of one primitive (``inf`` on a miss)."""
+    if kind == _DISC:
+        t = (prims[row, 0] - oz) / dz
+        qx, qy = ox + t * dx - prims[row, 2], oy + t * dy - prims[row, 3]
+        return t if (t > T_MIN and qx ** 2 + qy ** 2 <= prims[row, 1] ** 2) else math.inf
+    if kind == _BOX:
+        t_near, t_far = _slab(ox, oy, oz, dx, dy, dz, prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5])
+        if not (t_near <= t_far and t_far > T_MIN):
+            return math.inf
+        return t_near if t_near > T_MIN else t_far  # from inside, the exit face
+    if kind == _CYLINDER:
+        return _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz)
+    return _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess)
+
+
+@njit(cache=True, error_model="numpy")
+def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess):
+    """Nearest hit ``(t, primitive)`` of a ray over all groups (``(inf, 0)`` on a miss)."""
+    best, which = math.inf, 0
+    for g in range(groups.shape[0]):
+        if groups[g, 2]:
+            t_near, t_far = _slab(ox, oy, oz, dx, dy, dz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
+                                  group_box[g, 3], group_box[g, 4], group_box[g, 5])
+            if not (t_near <= t_far and t_far > T_MIN):
+                continue
+        for k in range(groups[g, 0], groups[g, 1]):
+            t = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, guess)
+            if t < best:
+                best, which = t, k
+    return best, which
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _cast_rays(o, d, groups, group_box, kinds, prims, waves, t_out, which_out):
+    for r in prange(o.shape[0]):
+        t_out[r], which_out[r] = _cast(groups, group_box, kinds, prims, waves, o[r, 0], o[r, 1], o[r, 2],
+                                       d[r, 0], d[r, 1], d[r, 2], math.nan)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _surface(kind, prims, row, waves, x, y, z):
+    """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
+    :meth:`Primitive.surface`)."""
+    if kind == _DISC:
+        return 0.0, 0.0, 1.0, x, y, 0
+    if kind == _BOX:
+        best, face = abs(x - prims[row, 0]), 0
+        for f, dist in ((1, abs(y - prims[row, 1])), (2, abs(z - prims[row, 2])), (3, abs(x - prims[row, 3])), (4, abs(y - prims[row, 4])),
+                        (5, abs(z - prims[row, 5]))):
+            if dist < best:
+                best, face = dist, f
+        sign = 1.0 if face >= 3 else -1.0
+        axis = face % 3
+        if axis == 2:
+            return 0.0, 0.0, sign, x, y, face
+        if axis == 0:  # right = (-n_y, n_x, 0) seen from outside
+            return sign, 0.0, 0.0, y * sign, -z, face
+        return 0.0, sign, 0.0, -x * sign, -z, face
+    if kind == _CYLINDER:
+        q = (x - prims[row, 0], y - prims[row, 1], z - prims[row, 2])
+        k = int(prims[row, 3])
+        i, j = (1, 2) if k == 0 else ((0, 2) if k == 1 else (0, 1))
+        radius, half = prims[row, 4], prims[row, 5]
+        radial = math.hypot(q[i], q[j])
+        n = [0.0, 0.0, 0.0]
+        if abs(abs(q[k]) - half) < 1e-7 * max(1.0, half) and radial < radius * (1 - 1e-9):
+            n[k] = 1.0 if q[k] > 0 else (-1.0 if q[k] < 0 else 0.0)
+            return n[0], n[1], n[2], q[i], q[j], 1
+        n[i] = q[i] / radius
+        n[j] = q[j] / radius
+        return n[0], n[1], n[2], math.atan2(q[j], q[i]) * radius, q[k], 0
+    _, gx, gz = _relief(waves, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
+    norm = math.sqrt(gx * gx + 1.0 + gz * gz)
+    return -gx / norm, -1.0 / norm, -gz / norm, x, -z, 0
+
+
+# -- materials and textures ----------------------------------------------------------------------------------
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _reflect(p, n):
+    """OpenCV's ``borderInterpolate`` for ``BORDER_REFLECT`` (``fedcba|abcdefgh|hgfedcb``)."""
+    if n == 1:
+        return 0
+    while p < 0 or p >= n:
+        p = -p - 1 if p < 0 else n - 1 - (p - n)
+    return p
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _mirror_period(x, period):
+    """``x mod period`` in ``[0, period]`` like ``np.mod`` (whose float ``fmod`` is several times slower)."""
+    r = x - period * math.floor(x / period)
+    return r + period if r < 0 else (r - period if r > period else r)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _fma32(a, b, c):
+    """``a * b + c`` rounded once to float32, as the fused multiply-add of OpenCV's vector code (the float32
+    product is exact in float64)."""
+    return np.float32(np.float64(a) * np.float64(b) + np.float64(c))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _bilinear(tex_meta, texels, tex, level, s, t):
+    """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
+    level-0 texel coordinates."""
+    offset, h, w = tex_meta[tex, level, 0], tex_meta[tex, level, 1], tex_meta[tex, level, 2]
+    scale = 1.0 / (1 << level)
+    s = (s + 0.5) * scale - 0.5
+    t = (t + 0.5) * scale - 0.5
+    clamp = tex_meta[tex, 0, 3] == 1
+    if clamp:
+        s, t = min(max(s, -1.0), float(w)), min(max(t, -1.0), float(h))
+    else:
+        s, t = _mirror_period(s, 2.0 * w), _mirror_period(t, 2.0 * h)
+    s32, t32 = np.float32(s), np.float32(t)
+    x0 = int(np.float64(s32) + 1.0) - 1  # floor: both are >= -1 here, and +1 is exact in float64
+    y0 = int(np.float64(t32) + 1.0) - 1
+    alpha, beta = s32 - np.float32(x0), t32 - np.float32(y0)
+    x1, y1 = x0 + 1, y0 + 1
+    if clamp:
+        x0, x1 = min(max(x0, 0), w - 1), min(max(x1, 0), w - 1)
+        y0, y1 = min(max(y0, 0), h - 1), min(max(y1, 0), h - 1)
+    else:
+        x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
+    r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
+    r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
+    return (_lerp2(texels, r00, r01, r10, r11, alpha, beta), _lerp2(texels, r00 + 1, r01 + 1, r10 + 1, r11 + 1, alpha, beta),
+            _lerp2(texels, r00 + 2, r01 + 2, r10 + 2, r11 + 2, alpha, beta))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _lerp2(texels, i00, i01, i10, i11, alpha, beta):
+    """One channel of the bilinear blend of four texels."""
+    v0 = _fma32(alpha, texels[i01] - texels[i00], texels[i00])
+    v1 = _fma32(alpha, texels[i11] - texels[i10], texels[i10])
+    return _fma32(beta, v1 - v0, v0)
+
+
+@njit(cache=True, error_model="numpy")
+def _sample(tex_meta, texels, tex, s, t, footprint):
+    """Trilinear mip-mapped colour at texel coordinates ``(s, t)`` (see :meth:`Texture.sample`)."""
+    n_levels = tex_meta[tex, 1, 3]
+    lod = min(math.log2(max(footprint, 1.0)), n_levels - 1)
+    lo = math.floor(lod)
+    r, g, b = _bilinear(tex_meta, texels, tex, lo, s, t)
+    if lo + 1 < n_levels:
+        f = np.float32(lod - lo)
+        r2, g2, b2 = _bilinear(tex_meta, texels, tex, lo + 1, s, t)
+        r, g, b = r * (_F1 - f) + r2 * f, g * (_F1 - f) + g2 * f, b * (_F1 - f) + b2 * f
+    return r, g, b
+
+
+@njit(cache=True, error_model="numpy")
+def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp):
+    """Albedo of a material without a blend (Flat, Textured, Poster, Radial), float32 RGB."""
+    while True:
+        kind = node_kind[node]
+        if kind == _FLAT:
+            return np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2])
+        if kind == _TEXTURED:
+            k = node_par[node, 1]
+            return _sample(tex_meta, texels, int(node_par[node, 0]), (a - node_par[node, 2]) * k, (b - node_par[node, 3]) * k, fp * k)
+        if kind == _POSTER:
+            a0, b0, a1, b1 = node_par[node, 1], node_par[node, 2], node_par[node, 3], node_par[node, 4]
+            if a >= a0 and a <= a1 and b >= b0 and b <= b1:
+                tex = int(node_par[node, 0])
+                h, w = tex_meta[tex, 0, 1], tex_meta[tex, 0, 2]
+                k = w / (a1 - a0)
+                return _sample(tex_meta, texels, tex, (a - a0) * k - 0.5, (b - b0) * (h / (b1 - b0)) - 0.5, fp * k)
+            node = node_child[node, 0]
+            continue
+        # radial: the smallest ring that holds the point, else the outer material
+        r = math.hypot(a, b)
+        ring = -1
+        for i in range(int(node_par[node, 0]), int(node_par[node, 0]) + int(node_par[node, 1])):
+            if r <= rings[i, 0]:
+                ring = i
+        if ring >= 0:
+            return np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3])
+        node = node_child[node, 0]
+
+
+@njit(cache=True, error_model="numpy")
+def _albedo(node, node_kind, node_par, node_child, rings, masks, tex_meta, texels, a, b, fp):
+    """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB."""
+    if node_kind[node] != _BLEND:
+        return _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+    m = np.float32(min(max(masks[int(node_par[node, 0])](a, b), 0.0), 1.0))
+    bottom, top = node_child[node, 0], node_child[node, 1]
+    if m == _F0:  # bottom * 1 + top * 0: exactly the bottom colour
+        return _leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+    if m == _F1:
+        return _leaf(top, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+    r0, g0, b0 = _leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+    r1, g1, b1 = _leaf(top, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+    keep = _F1 - m
+    return r0 * keep + r1 * m, g0 * keep + g1 * m, b0 * keep + b1 * m
+
+
+# -- the image kernel ----------------------------------------------------------------------------------------
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par,
+                   node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
+    fx, fy, cx, cy, far = camera[0], camera[1], camera[2], camera[3], camera[4]
+    height = max(rgb.shape[0], depth.shape[0], opacity.shape[0])
+    width = max(rgb.shape[1], depth.shape[1], opacity.shape[1])
+    want_colour = rgb.shape[0] > 0
+    want_hits = want_colour or opacity.shape[0] > 0
+    ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
+    lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
+    scale_fp = 0.5 * (fx + fy) * n
+    inv_count = np.float32(n * n)
+    for v in prange(height):
+        guess = math.nan  # a relief's root is searched from the last one found in this row (Newton converges fast)
+        for u in range(width):
+            if depth.shape[0] > 0:
+                xc, yc = (u - cx) / fx, (v - cy) / fy
+                dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+                dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+                dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
+                t, k = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
+                if kinds[k] == _RELIEF and math.isfinite(t):
+                    guess = t
+                depth[v, u] = np.float32(t if math.isfinite(t) else far)
+            if not want_hits:
+                continue
+            hits = 0
+            acc_r, acc_g, acc_b = _F0, _F0, _F0
+            for sv in range(n):
+                for su in range(n):
+                    xc = (u + ((su + 0.5) / n - 0.5) - cx) / fx
+                    yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
+                    dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+                    dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+                    dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
+                    t, k = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
+                    if kinds[k] == _RELIEF and math.isfinite(t):
+                        guess = t
+                    if not math.isfinite(t):
+                        cr, cg, cb = background[0], background[1], background[2]
+                    else:
+                        hits += 1
+                        if not want_colour:
+                            continue
+                        x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
+                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z)
+                        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
+                        fp = t / scale_fp / max(cos, 0.2)
+                        cr, cg, cb = _albedo(prim_mat[k, face], node_kind, node_par, node_child, rings, masks,
+                                             tex_meta, texels, a, b, fp)
+                        lambert = min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
+                        light = np.float32(ambient + (1.0 - ambient) * lambert)
+                        cr, cg, cb = cr * light, cg * light, cb * light
+                    acc_r += cr
+                    acc_g += cg
+                    acc_b += cb
+            if opacity.shape[0] > 0:
+                opacity[v, u] = np.float32(hits / (n * n))
+            if want_colour:
+                for c, value in ((0, acc_r), (1, acc_g), (2, acc_b)):
+                    level = np.rint(value / inv_count * np.float32(255.0))
+                    rgb[v, u, c] = np.uint8(min(max(level, _F0), np.float32(255.0)))

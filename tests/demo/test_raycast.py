@@ -1,0 +1,120 @@
+"""The compiled renderer of the exact demo scenes agrees with their vectorized numpy definition."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r.demo import demo_scene_names, ground_truth
+from pytest_n2r.demo.exact import GroundTruthScene
+from pytest_n2r.demo.materials import Material
+from pytest_n2r.demo.raycast import _bilinear, _Builder
+from pytest_n2r.demo.textures import Texture
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import Transform, camera_rays
+
+OUTPUTS = ("rgb", "depth", "opacity")
+
+
+def assert_agrees(scene: GroundTruthScene, c2w: np.ndarray, camera, where: str) -> None:
+    got = scene.render(c2w, camera, OUTPUTS)
+    want = scene.render_reference(c2w, camera, OUTPUTS)
+    np.testing.assert_array_equal(got.opacity, want["opacity"], err_msg=f"{where}: opacity differs")
+    depth_err = np.abs(got.depth.astype(float) - want["depth"]) / want["depth"]
+    # the relief is evaluated in float32 (sin within an ulp of numpy's): its roots agree to ~1e-7
+    assert depth_err.max() <= 1e-6, f"{where}: z-depth off by {depth_err.max():.2g} (relative)"
+    diff = np.abs(got.rgb.astype(int) - want["rgb"].astype(int)).max(axis=2)
+    off = diff > 1
+    tied = scene.coincident_pixels(c2w, camera)
+    assert not np.any(off & ~tied), (
+        f"{where}: {np.sum(off & ~tied)} pixels differ by more than 1 grey level (up to {diff[off & ~tied].max()}) "
+        "away from coincident surfaces")
+    assert tied.mean() < 0.01, f"{where}: {tied.mean():.1%} of pixels see two surfaces at one distance"
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    name=st.sampled_from(demo_scene_names()),
+    index=st.integers(0, 47),
+    tau=st.builds(Transform, roll=st.floats(-20, 20), pitch=st.floats(-20, 20), yaw=st.floats(-30, 30),
+                  x=st.floats(-0.5, 0.5), y=st.floats(-0.5, 0.5), z=st.floats(-0.5, 0.5)),
+)
+def test_compiled_render_matches_the_vectorized_definition(name, index, tau):
+    scene = ground_truth(name)
+    camera = scene.views[0].camera.resized(80, 45)
+    c2w = tau.apply(scene.views[index].c2w, scene.reference_length)
+    assert_agrees(scene, c2w, camera, f"{name} view {index} {tau.describe()}")
+
+
+@pytest.mark.parametrize("name", demo_scene_names())
+def test_compiled_render_matches_at_capture_size(name):
+    """Full 480x270 views, where sub-pixel texture detail and the mip levels of capture use count."""
+    scene = ground_truth(name)
+    for view in scene.views[7::20]:
+        assert_agrees(scene, view.c2w, view.camera, f"{name}/{view.name}")
+
+
+@pytest.mark.parametrize("name", demo_scene_names())
+def test_compiled_cast_matches_the_vectorized_cast(name):
+    scene = ground_truth(name)
+    view = scene.views[11]
+    o, d = camera_rays(view.camera.resized(96, 54), view.c2w)
+    o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+    t, which = scene.cast(o, d)
+    t_ref, which_ref = scene.cast_reference(o, d)
+    hit = np.isfinite(t_ref)
+    assert np.array_equal(np.isfinite(t), hit)
+    np.testing.assert_allclose(t[hit], t_ref[hit], rtol=1e-6)  # float32 relief: see assert_agrees
+    assert np.mean(which[hit] == which_ref[hit]) > 0.999
+
+
+@pytest.mark.parametrize("wrap", ["mirror", "clamp"])
+def test_texture_lookups_equal_opencv_remap_bit_for_bit(wrap):
+    texture = Texture.photo("coffee" if wrap == "clamp" else "brick", wrap=wrap)
+    builder = _Builder()
+    index = builder.texture(texture)
+    meta, texels = builder.texture_tables()
+    rng = np.random.default_rng(3)
+    s, t = rng.uniform(-900, 1700, 3000), rng.uniform(-900, 1700, 3000)
+    for level in range(3):
+        want = texture._bilinear(level, s, t)
+        got = np.array([_bilinear(meta, texels, index, level, a, b) for a, b in zip(s, t)], np.float32)
+        np.testing.assert_array_equal(got, want, err_msg=f"{wrap} level {level}")
+
+
+def test_output_does_not_depend_on_the_thread_count():
+    import numba
+
+    scene = ground_truth("wall")
+    view = scene.views[20]
+    camera = view.camera.resized(120, 68)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = scene.render(view.c2w, camera, OUTPUTS)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        many = scene.render(view.c2w, camera, OUTPUTS)
+    finally:
+        numba.set_num_threads(before)
+    for out in OUTPUTS:
+        assert getattr(one, out).tobytes() == getattr(many, out).tobytes(), f"{out} depends on the thread count"
+
+
+def test_an_unknown_material_is_named():
+    class Glow(Material):
+        def albedo(self, a, b, footprint):
+            return np.ones((np.size(a), 3), np.float32)
+
+        def describe(self) -> str:
+            return "Glow"
+
+    wall = ground_truth("wall")
+    pipe = wall.primitives[1]
+
+    with pytest.raises(InvalidArgument, match="material Glow has no compiled form"):
+        GroundTruthScene("glow", [dataclasses.replace(pipe, side=Glow())], wall.views[:2], light=(0, 0, 1),
+                         ambient=0.5, background=(0, 0, 0), far=10.0)
