@@ -34,7 +34,7 @@ from pytest_n2r.cache import RenderCache  # noqa: E402
 from pytest_n2r.metrics import repeatability  # noqa: E402
 from pytest_n2r.relations import Relation, RunSettings, check_relation  # noqa: E402
 from pytest_n2r.render.size import RenderSize  # noqa: E402
-from pytest_n2r.session import _load, default_scene_specs, parse_scene_specs  # noqa: E402
+from pytest_n2r.session import default_scene_specs, load_scene_spec, parse_scene_specs  # noqa: E402
 from pytest_n2r.strategies import transforms  # noqa: E402
 
 ORB = cv2.ORB_create(500)
@@ -61,16 +61,16 @@ def run(scene, relation, settings, cache, label: str) -> list[str]:
             str(stats.renders), str(stats.examples), str(stats.n_rejected)]
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", help="scene spec (default: the first demo scene)")
     parser.add_argument("--examples", type=int, default=100)
     parser.add_argument("--size", default="480x270")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
 
     spec = scene_spec(args.scene)
     t0 = time.perf_counter()
-    scene = _load(spec, "auto")
+    scene = load_scene_spec(spec, "auto")
     load_s = time.perf_counter() - t0
     relation = Relation.build(repeatability(px=2), 1.0, transforms(yaw=10, x=0.1), examples=args.examples)
     settings = RunSettings(examples=args.examples, size=RenderSize.parse(args.size), derandomize=True,
@@ -90,7 +90,8 @@ def main() -> None:
         print("  ".join(c.rjust(w) if i else c.ljust(w) for i, (c, w) in enumerate(zip(row, widths))))
     cold, warm = float(rows[1][1]), float(rows[2][1])
     print(f"warm (disk) / cold = {warm / cold:.3f}; cache on disk {disk / 2**20:.1f} MiB")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

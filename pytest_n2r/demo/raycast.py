@@ -254,11 +254,11 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _slab(ox, oy, oz, dx, dy, dz, lo0, lo1, lo2, hi0, hi1, hi2):
-    """Entry and exit ``t`` of a ray through a box, NaN-safe like ``np.fmin`` / ``np.fmax``."""
+def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
+    """Entry and exit ``t`` of a ray (inverse direction ``1 / d``) through a box, NaN-safe like ``np.fmin`` /
+    ``np.fmax``."""
     t_near, t_far = -math.inf, math.inf
-    for o, d, lo, hi in ((ox, dx, lo0, hi0), (oy, dy, lo1, hi1), (oz, dz, lo2, hi2)):
-        inv = 1.0 / d
+    for o, inv, lo, hi in ((ox, ix, lo0, hi0), (oy, iy, lo1, hi1), (oz, iz, lo2, hi2)):
         t0, t1 = (lo - o) * inv, (hi - o) * inv
         lo_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else min(t0, t1))
         hi_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else max(t0, t1))
@@ -365,15 +365,15 @@ def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
     return best
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
+@njit(cache=True, error_model="numpy")
+def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
     """``t`` of the first hit of one primitive (``inf`` on a miss)."""
     if kind == _DISC:
         t = (prims[row, 0] - oz) / dz
         qx, qy = ox + t * dx - prims[row, 2], oy + t * dy - prims[row, 3]
         return t if (t > T_MIN and qx ** 2 + qy ** 2 <= prims[row, 1] ** 2) else math.inf
     if kind == _BOX:
-        t_near, t_far = _slab(ox, oy, oz, dx, dy, dz, prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5])
+        t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5])
         if not (t_near <= t_far and t_far > T_MIN):
             return math.inf
         return t_near if t_near > T_MIN else t_far  # from inside, the exit face
@@ -386,14 +386,15 @@ def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
 def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess):
     """Nearest hit ``(t, primitive)`` of a ray over all groups (``(inf, 0)`` on a miss)."""
     best, which = math.inf, 0
+    ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     for g in range(groups.shape[0]):
         if groups[g, 2]:
-            t_near, t_far = _slab(ox, oy, oz, dx, dy, dz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
+            t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
                                   group_box[g, 3], group_box[g, 4], group_box[g, 5])
             if not (t_near <= t_far and t_far > T_MIN):
                 continue
         for k in range(groups[g, 0], groups[g, 1]):
-            t = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, guess)
+            t = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
                 best, which = t, k
     return best, which
@@ -406,7 +407,7 @@ def _cast_rays(o, d, groups, group_box, kinds, prims, waves, t_out, which_out):
                                        d[r, 0], d[r, 1], d[r, 2], math.nan)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _surface(kind, prims, row, waves, x, y, z):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
     :meth:`Primitive.surface`)."""
@@ -470,7 +471,7 @@ def _fma32(a, b, c):
     return np.float32(np.float64(a) * np.float64(b) + np.float64(c))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _bilinear(tex_meta, texels, tex, level, s, t):
     """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
     level-0 texel coordinates."""
@@ -514,8 +515,8 @@ def _sample(tex_meta, texels, tex, s, t, footprint):
     lod = min(math.log2(max(footprint, 1.0)), n_levels - 1)
     lo = math.floor(lod)
     r, g, b = _bilinear(tex_meta, texels, tex, lo, s, t)
-    if lo + 1 < n_levels:
-        f = np.float32(lod - lo)
+    f = np.float32(lod - lo)
+    if lo + 1 < n_levels and f != _F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
         r2, g2, b2 = _bilinear(tex_meta, texels, tex, lo + 1, s, t)
         r, g, b = r * (_F1 - f) + r2 * f, g * (_F1 - f) + g2 * f, b * (_F1 - f) + b2 * f
     return r, g, b
