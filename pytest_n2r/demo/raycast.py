@@ -289,13 +289,58 @@ def _relief(waves, first, count, depth, x, z):
 
 @njit(cache=True, error_model="numpy")
 def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
-    """First hit of a :class:`ReliefWall` (``p``: its parameter row), ``inf`` on a miss."""
-    y0, x0, x1, z0, z1, depth, slope = prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5], prims[row, 6]
-    first, count, newton, steps, bisections = int(prims[row, 7]), int(prims[row, 8]), int(prims[row, 9]), int(prims[row, 10]), int(prims[row, 11])
+    """First hit ``t`` of a :class:`ReliefWall` (``inf`` on a miss), with ``dh/dx``, ``dh/dz`` there when the
+    root search ended on an evaluation at ``t`` (``have``), so the normal needs no second one."""
+    y0, x0, x1, z0, z1 = prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4]
+    depth, slope, first, count = prims[row, 5], prims[row, 6], int(prims[row, 7]), int(prims[row, 8])
+    newton, steps, bisections = int(prims[row, 9]), int(prims[row, 10]), int(prims[row, 11])
     t_in = (y0 - depth - oy) / dy
     t_out = (y0 - oy) / dy
+    gx = gz = 0.0
+    have = False
     if not (dy > 0 and t_out > T_MIN):
-        return math.inf
+        return math.inf, gx, gz, have
+    lo, hi = max(t_in, T_MIN), t_out
+    if dy > 1.05 * slope * math.hypot(dx, dz):  # monotonic residual: safeguarded Newton
+        a, b = lo, hi
+        t = guess if (guess > a and guess < b) else 0.5 * (a + b)
+        for _ in range(newton):
+            h, gx, gz = _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)
+            f = oy + t * dy - y0 + h
+            if abs(f) <= 1e-7:
+                have = True
+                break
+            df = dy + gx * dx + gz * dz
+            if f < 0:
+                a = t
+            else:
+                b = t
+            step = t - f / df
+            t = step if (step > a and step < b) else 0.5 * (a + b)
+    else:  # grazing: march to the first sign change, then bisect
+        t_prev = lo
+        found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
+        a = b = lo
+        if not found:
+            for s in range(1, steps + 1):
+                t = lo + (hi - lo) * (s / steps)
+                if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
+                    a, b, found = t_prev, t, True
+                    break
+                t_prev = t
+        if not found:
+            return math.inf, gx, gz, have
+        for _ in range(bisections):
+            m = 0.5 * (a + b)
+            if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
+                b = m
+            else:
+                a = m
+        t = 0.5 * (a + b)
+    px, pz = ox + t * dx, oz + t * dz
+    if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
+        return t, gx, gz, have
+    return math.inf, gx, gz, have
     lo, hi = max(t_in, T_MIN), t_out
     if dy > 1.05 * slope * math.hypot(dx, dz):  # monotonic residual: safeguarded Newton
         a, b = lo, hi
@@ -367,25 +412,31 @@ def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
 
 @njit(cache=True, error_model="numpy")
 def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
-    """``t`` of the first hit of one primitive (``inf`` on a miss)."""
+    """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there (see
+    :func:`_relief_hit`)."""
+    if kind == _RELIEF:
+        return _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess)
+    t = math.inf
     if kind == _DISC:
         t = (prims[row, 0] - oz) / dz
         qx, qy = ox + t * dx - prims[row, 2], oy + t * dy - prims[row, 3]
-        return t if (t > T_MIN and qx ** 2 + qy ** 2 <= prims[row, 1] ** 2) else math.inf
-    if kind == _BOX:
-        t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4], prims[row, 5])
-        if not (t_near <= t_far and t_far > T_MIN):
-            return math.inf
-        return t_near if t_near > T_MIN else t_far  # from inside, the exit face
-    if kind == _CYLINDER:
-        return _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz)
-    return _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess)
+        if not (t > T_MIN and qx ** 2 + qy ** 2 <= prims[row, 1] ** 2):
+            t = math.inf
+    elif kind == _BOX:
+        t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, prims[row, 0], prims[row, 1], prims[row, 2],
+                              prims[row, 3], prims[row, 4], prims[row, 5])
+        if t_near <= t_far and t_far > T_MIN:
+            t = t_near if t_near > T_MIN else t_far  # from inside, the exit face
+    else:
+        t = _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz)
+    return t, 0.0, 0.0, False
 
 
 @njit(cache=True, error_model="numpy")
 def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess):
-    """Nearest hit ``(t, primitive)`` of a ray over all groups (``(inf, 0)`` on a miss)."""
-    best, which = math.inf, 0
+    """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of a ray over all groups (``t = inf`` and primitive
+    0 on a miss; the gradient as :func:`_relief_hit` gives it)."""
+    best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     for g in range(groups.shape[0]):
         if groups[g, 2]:
@@ -394,23 +445,23 @@ def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
             if not (t_near <= t_far and t_far > T_MIN):
                 continue
         for k in range(groups[g, 0], groups[g, 1]):
-            t = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
+            t, gx, gz, have = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
-                best, which = t, k
-    return best, which
+                best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
+    return best, which, best_gx, best_gz, best_have
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
 def _cast_rays(o, d, groups, group_box, kinds, prims, waves, t_out, which_out):
     for r in prange(o.shape[0]):
-        t_out[r], which_out[r] = _cast(groups, group_box, kinds, prims, waves, o[r, 0], o[r, 1], o[r, 2],
+        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, o[r, 0], o[r, 1], o[r, 2],
                                        d[r, 0], d[r, 1], d[r, 2], math.nan)
 
 
 @njit(cache=True, error_model="numpy")
-def _surface(kind, prims, row, waves, x, y, z):
+def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
-    :meth:`Primitive.surface`)."""
+    :meth:`Primitive.surface`); a relief uses the gradient ``gx, gz`` its hit gave when it ``have`` one."""
     if kind == _DISC:
         return 0.0, 0.0, 1.0, x, y, 0
     if kind == _BOX:
@@ -439,7 +490,8 @@ def _surface(kind, prims, row, waves, x, y, z):
         n[i] = q[i] / radius
         n[j] = q[j] / radius
         return n[0], n[1], n[2], math.atan2(q[j], q[i]) * radius, q[k], 0
-    _, gx, gz = _relief(waves, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
+    if not have:
+        _, gx, gz = _relief(waves, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
     norm = math.sqrt(gx * gx + 1.0 + gz * gz)
     return -gx / norm, -1.0 / norm, -gz / norm, x, -z, 0
 
@@ -592,7 +644,7 @@ def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_
                 dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
                 dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
                 dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                t, k = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
+                t, k, _, _, _ = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
                 if kinds[k] == _RELIEF and math.isfinite(t):
                     guess = t
                 depth[v, u] = np.float32(t if math.isfinite(t) else far)
@@ -607,7 +659,8 @@ def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_
                     dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
                     dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
                     dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                    t, k = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
+                    t, k, gx, gz, have = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz,
+                                               guess)
                     if kinds[k] == _RELIEF and math.isfinite(t):
                         guess = t
                     if not math.isfinite(t):
@@ -617,7 +670,7 @@ def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_
                         if not want_colour:
                             continue
                         x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
-                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z)
+                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z, gx, gz, have)
                         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
                         cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
                         fp = t / scale_fp / max(cos, 0.2)
