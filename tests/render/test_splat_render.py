@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -125,12 +126,18 @@ def test_nearer_gaussians_hide_farther_ones():
     assert out["depth"][15, 19] == pytest.approx(expected, abs=1e-3), "depth is the weighted mean of the discs"
 
 
-def test_renders_are_bit_identical_whatever_the_tiles_runs_and_threads():
-    import numba
+def _bit_scene():
+    return random_scene(3, n=400), random_pose(np.random.default_rng(5)), Camera(70, 50, 60.0, 60.0, 34.5, 24.5)
 
-    g = random_scene(3, n=400)
-    c2w = random_pose(np.random.default_rng(5))
-    camera = Camera(70, 50, 60.0, 60.0, 34.5, 24.5)
+
+def _digest(out: dict) -> str:
+    import hashlib
+
+    return hashlib.sha256(b"".join(out[name].tobytes() for name in OUTPUTS)).hexdigest()
+
+
+def test_renders_are_bit_identical_whatever_the_tiles_and_runs():
+    g, c2w, camera = _bit_scene()
     base = SplatRenderer(g).render(c2w, camera)
     variants = {"again": SplatSettings(), "tile 8": SplatSettings(tile=8), "tile 1": SplatSettings(tile=1),
                 "tile 64": SplatSettings(tile=64), "runs of 7 pairs": SplatSettings(max_pairs=7),
@@ -139,14 +146,22 @@ def test_renders_are_bit_identical_whatever_the_tiles_runs_and_threads():
         out = SplatRenderer(g, s).render(c2w, camera)
         for name in OUTPUTS:
             assert out[name].tobytes() == base[name].tobytes(), f"{name} differs with {what}"
-    threads = numba.get_num_threads()
-    try:
-        numba.set_num_threads(1)
-        single = SplatRenderer(g).render(c2w, camera)
-    finally:
-        numba.set_num_threads(threads)
-    for name in OUTPUTS:
-        assert single[name].tobytes() == base[name].tobytes(), f"{name} differs on one thread"
+
+
+def test_renders_are_bit_identical_on_one_thread():
+    """In a fresh process with NUMBA_NUM_THREADS=1 (switching numba's thread count in this process would
+    slow every later parallel region of the OpenMP layer)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("from tests.render.test_splat_render import _bit_scene, _digest; from pytest_n2r.render.splat_render "
+            "import SplatRenderer; g, c2w, camera = _bit_scene(); print(_digest(SplatRenderer(g).render(c2w, camera)))")
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    single = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True,
+                            cwd=Path(__file__).resolve().parents[2]).stdout.strip()
+    g, c2w, camera = _bit_scene()
+    assert single == _digest(SplatRenderer(g).render(c2w, camera)), "the render on one thread differs"
 
 
 @pytest.mark.parametrize("field, value, expected", [
