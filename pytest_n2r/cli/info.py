@@ -32,7 +32,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..scene.file import read_scene_file
+    from ..scene.splat_file import is_splat_file, splat_info
 
+    if is_splat_file(args.scene):  # splats packed by `n2r import`
+        info = splat_info(args.scene)
+        lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
+        print(json.dumps(info, indent=2) if args.json else "\n".join(lines))
+        return 0
     scene = read_scene_file(args.scene, images=args.shift)
     shift = _shift(scene, args.size) if args.shift else None
     if args.json:

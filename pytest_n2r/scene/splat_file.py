@@ -27,7 +27,8 @@ from .base import SceneView
 from .file import _member, _zip_bytes
 from .splat_scene import SplatScene
 
-__all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene"]
+__all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene",
+           "splat_info"]
 
 #: The archive member holding the Gaussians.
 SPLATS_FILE = "splats.safetensors"
@@ -132,3 +133,17 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
     views = [SceneView(i, name_, camera, c2w, split) for i, (name_, camera, c2w, split, _) in enumerate(frames)]
     return SplatScene(gaussians, views, name=name or path.stem, reference_length=reference_length,
                       background=background, settings=settings, metres_per_unit=metres_per_unit)
+
+
+def splat_info(path: str | os.PathLike) -> dict:
+    """What ``n2r info`` shows of a splat scene file: views and split, cameras, scale, the Gaussians and the
+    import report (plain JSON-ready values; lengths in scene units)."""
+    scene = read_splat_file(path)
+    with zipfile.ZipFile(path) as archive:
+        data = json.loads(archive.read(schema.SCENE_JSON))
+    splits = [v.split for v in scene.views]
+    return {"path": str(path), "file_bytes": Path(path).stat().st_size, "representation": REPRESENTATION,
+            "views": len(scene.views), "train_views": splits.count("train"), "heldout_views": splits.count("heldout"),
+            "cameras": data["cameras"], "reference_length": scene.reference_length,
+            "metres_per_unit": scene.metres_per_unit, "bounds": data["bounds"], "splats": data["splats"],
+            "report": data["report"]}
