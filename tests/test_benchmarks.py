@@ -22,6 +22,7 @@ SMOKE = {
     "plugin_relation.py": (["--scene", "demo:object", "--examples", "3", "--size", "48x27"], "warm (disk) / cold"),
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
+    "splat_speed.py": (["--smoke"], "| 64×36 |"),
 }
 
 
