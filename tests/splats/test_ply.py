@@ -188,12 +188,20 @@ def test_gaussians_check_their_arrays(change, expected):
 
 
 def test_the_shipped_files_are_what_make_data_builds(tmp_path):
-    """tests/splats/data is rebuilt byte for byte by make_data.build (deterministic, documented provenance)."""
+    """tests/splats/data is what make_data.build writes: the cameras byte for byte, the Gaussians to 1e-5 (the
+    exact demo renderer they are sampled from may change in the last bits: its relief solver changed the
+    wall's by 5e-7)."""
     from .make_data import build
 
     for path in build(tmp_path):
         shipped = DATA / path.relative_to(tmp_path)
-        assert shipped.read_bytes() == path.read_bytes(), f"{shipped} differs from what make_data builds"
+        if path.suffix != ".ply":
+            assert shipped.read_bytes() == path.read_bytes(), f"{shipped} differs from what make_data builds"
+            continue
+        built, kept = read_ply(path), read_ply(shipped)
+        for name in TENSORS:
+            np.testing.assert_allclose(getattr(kept, name), getattr(built, name), rtol=0, atol=1e-5,
+                                       err_msg=f"{shipped}: {name} differs from what make_data builds")
 
 
 @pytest.mark.parametrize("name, count, degree", [("object-sh0", 4000, 0), ("wall-sh3", 1500, 3),
