@@ -49,9 +49,10 @@ DILATION = 0.3
 #: projection's Jacobian is evaluated at most (3DGS reference: 1.3 × the half field of view).
 _GUARD = 0.15
 #: Fields of a projected Gaussian's record (float64): pixel position, conic, peak opacity, colour, z-depth,
-#: and the pixel rectangle ``x0 <= x < x1, y0 <= y < y1`` where it can reach ``ALPHA_MIN``.
-RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1")
-_U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1 = range(len(RECORD))
+#: the pixel rectangle ``x0 <= x < x1, y0 <= y < y1`` where it can reach ``ALPHA_MIN``, and the squared
+#: Mahalanobis radius of that region (widened by a margin, see :func:`composite_tiles`).
+RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1", "r2")
+_U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1, _R2 = range(len(RECORD))
 @njit(cache=True, parallel=True)
 def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
             records, tiles):
@@ -119,6 +120,7 @@ def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, widt
         rec = records[i]
         rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O], rec[_Z] = u, v, c / det, -b / det, a / det, o, z
         rec[_X0], rec[_X1], rec[_Y0], rec[_Y1] = x0, x1, y0, y1
+        rec[_R2] = r2 * (1.0 + 1e-6)
         dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
         n = math.sqrt(dx * dx + dy * dy + dz * dz)
         if n > 0.0:
@@ -230,17 +232,20 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
             u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
             r, gr, bl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
             # q(dx, dy) = ca dx² + 2 cb dx dy + cc dy² <= r2 is where alpha can reach ALPHA_MIN; per row, the
-            # span of pixels inside it (widened so that rounding never drops a pixel the exact test keeps)
-            r2 = 2.0 * math.log(o / ALPHA_MIN) * (1.0 + 1e-6) + 1e-6
+            # span of pixels inside it (r2 and the span widened so that rounding never drops a pixel the exact
+            # test keeps)
+            r2 = rec[_R2]
+            inv_ca = 1.0 / ca
+            slope = cb * inv_ca
             for py in range(gy0, gy1):
                 dy = v - py
                 disc = cb * cb * dy * dy - ca * (cc * dy * dy - r2)
                 if disc < 0.0:
                     continue
-                half = math.sqrt(disc) / ca
-                mid = u + cb * dy / ca  # the span's centre: dx = u - px = -cb dy / ca
-                x0 = int(max(float(gx0), math.ceil(mid - half - 1e-3)))
-                x1 = int(min(float(gx1), math.floor(mid + half + 1e-3) + 1.0))
+                half = math.sqrt(disc) * inv_ca + 1e-3
+                mid = u + slope * dy  # the span's centre: dx = u - px = -cb dy / ca
+                x0 = int(max(float(gx0), math.ceil(mid - half)))
+                x1 = int(min(float(gx1), math.floor(mid + half) + 1.0))
                 row = py * width
                 for px in range(x0, x1):
                     p = row + px
