@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+import timeit
 
 import numba
 import numpy as np
@@ -31,20 +32,14 @@ from pytest_n2r.scene import SplatScene
 OUTPUTS = ("rgb", "depth", "opacity")
 
 
-def best_seconds(fn, repeats: int = 3) -> float:
-    fn()
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def frames_per_second(scene, views, size: tuple[int, int], repeats: int) -> float:
-    """The median over ``views`` of 1 / (best render time) at ``size``."""
-    return statistics.median(1.0 / best_seconds(lambda v=v: scene.render(v.c2w, v.camera.resized(*size), OUTPUTS),
-                                                repeats) for v in views)
+    """The median over ``views`` of 1 / (best of ``repeats`` render times after a warm-up) at ``size``."""
+    rates = []
+    for view in views:
+        render = lambda v=view: scene.render(v.c2w, v.camera.resized(*size), OUTPUTS)
+        render()
+        rates.append(1.0 / min(timeit.repeat(render, number=1, repeat=repeats)))
+    return statistics.median(rates)
 
 
 def main(argv: list[str] | None = None) -> int:
