@@ -2,17 +2,20 @@
 
 Pipeline
 --------
-1. Read every image (EXIF orientation applied; unreadable files skipped with a warning; fewer than 3
-   readable images is an error; images of different sizes are an error, since one camera is shared).
-2. Write upright copies downscaled to at most ``max_size`` pixels into a temporary folder.
-3. SIFT feature extraction (one shared ``SIMPLE_RADIAL`` camera, CPU).
+1. Read every image (EXIF orientation applied, so a phone's portrait photo is portrait; unreadable files
+   skipped with a warning; fewer than 3 readable images is an error).
+2. Write upright copies downscaled to at most ``max_size`` pixels into a temporary folder, one subfolder
+   per upright image size: a phone capture mixing portrait and landscape photos (or two cameras) gets one
+   camera per size and orientation.
+3. SIFT feature extraction (one ``SIMPLE_RADIAL`` camera per subfolder, CPU).
 4. Matching: exhaustive for up to :data:`EXHAUSTIVE_MAX_IMAGES` images, otherwise sequential (ordered
    video frames; each image with the next 10 and quadratically spaced ones).
 5. Incremental mapping; the model with the most registered images is kept; images it did not register
    are reported in ``skipped``.
 
-The camera is scaled back to the full-resolution image with :meth:`Camera.resized` (radial distortion
-coefficients act on normalized coordinates, so they do not change).
+Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
+coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
+cameras: upright size, number of photos, and how many of them registered.
 """
 
 from __future__ import annotations
@@ -67,29 +70,24 @@ def run_sfm(
     with tempfile.TemporaryDirectory(prefix="n2r-sfm-") as tmp:
         work = Path(tmp)
         (work / "images").mkdir()
-        names: dict[str, Path] = {}  # work file name -> original file
+        names: dict[str, Path] = {}  # work file name (size folder / index) -> original file
+        full_size: dict[str, tuple[int, int]] = {}  # work file name -> upright (width, height)
         for k, (file, image) in enumerate(iter_readable(files, skipped)):
             h, w = image.shape[:2]
             sizes.setdefault((w, h), []).append(file.name)
             scale = min(1.0, max_size / max(w, h))
             small = resize_image(image, max(1, round(w * scale)), max(1, round(h * scale)))
-            work_name = f"{k:06d}.png"
+            (work / "images" / f"{w}x{h}").mkdir(exist_ok=True)
+            work_name = f"{w}x{h}/{k:06d}.png"
             if not cv2.imwrite(str(work / "images" / work_name), cv2.cvtColor(small, cv2.COLOR_RGB2BGR)):
                 raise IngestError(f"cannot write a downscaled copy of {str(file)!r} to the temporary folder {tmp!r}")
             names[work_name] = file
+            full_size[work_name] = (w, h)
         if len(names) < 3:
             raise IngestError(
                 f"images folder {str(images_dir)!r}: only {len(names)} of {len(files)} images are readable; "
                 "structure from motion needs at least 3"
             )
-        if len(sizes) > 1:
-            listing = "; ".join(f"{w}x{h}: {', '.join(n[:3])}{' ...' if len(n) > 3 else ''}"
-                                for (w, h), n in sorted(sizes.items(), key=lambda kv: -len(kv[1])))
-            raise IngestError(
-                f"images folder {str(images_dir)!r} mixes image sizes ({listing}); all photos must share one "
-                "camera and size"
-            )
-        (full_w, full_h), = sizes
         times["read"] = time.perf_counter() - start
 
         db = work / "database.db"
@@ -101,7 +99,7 @@ def run_sfm(
         extraction.sift.first_octave = 0  # no 2x upsampling: 3-4x faster, enough features at <= 960 px
         with _stage("features", images_dir, times):
             pycolmap.extract_features(
-                db, work / "images", camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
+                db, work / "images", camera_mode=pycolmap.CameraMode.PER_FOLDER, reader_options=reader,
                 extraction_options=extraction, device=pycolmap.Device.cpu,
             )
 
@@ -139,11 +137,16 @@ def run_sfm(
         w2c[:3, :3] = orthonormalize(w2c[:3, :3])
         original = names[image.name]
         frames.append(SourceFrame(
-            name=original.name, path=original, camera=camera.resized(full_w, full_h), c2w=invert_pose(w2c)
+            name=original.name, path=original, camera=camera.resized(*full_size[image.name]), c2w=invert_pose(w2c)
         ))
     frames.sort(key=lambda f: f.name)
     registered = {f.name for f in frames}
-    skipped += [(f.name, "not registered by structure from motion")
+    elsewhere = {names[image.name].name: other.num_reg_images() for other in models.values() if other is not rec
+                 for image in other.images.values() if image.has_pose}
+    skipped += [(f.name, "not registered by structure from motion" + (
+                 f" (it formed a separate model of {elsewhere[f.name]} images that shares too few matches with "
+                 f"the kept one of {len(frames)}; more photos bridging the two would join them)"
+                 if f.name in elsewhere else " (too few features matched with the other photos)"))
                 for f in names.values() if f.name not in registered]
     if len(frames) < 3:
         raise IngestError(
@@ -151,8 +154,11 @@ def run_sfm(
             "at least 3 are needed (more overlap between photos helps)"
         )
     points = np.array([p.xyz for _, p in sorted(rec.points3D.items())], dtype=np.float64).reshape(-1, 3)
+    registered_sizes = [full_size[image.name] for image in rec.images.values() if image.has_pose]
+    cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
+               for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
     report = {
-        "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size,
+        "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
         "time_s": times, "points_method": "structure from motion",
     }
     return PoseSet(frames=frames, points=points, source=str(images_dir), kind="images", skipped=skipped,

@@ -39,7 +39,8 @@ def test_sfm_recovers_the_rendered_poses(tmp_path, matcher):
     took = time.perf_counter() - start
     assert took < 30, f"SfM of 11 small images took {took:.1f} s"
     assert [v.name for v in result.views] == cap.names, f"registered: {[v.name for v in result.views]}"
-    assert result.skipped == [("zz_noise.png", "not registered by structure from motion")]
+    assert result.skipped == [("zz_noise.png", "not registered by structure from motion (too few features "
+                                               "matched with the other photos)")]
     assert result.report["matcher"] == matcher and result.views[0].image.shape == (120, 160, 3)
     rot, centre = _errors(result.views, dict(zip(cap.names, cap.c2ws)))
     assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"
@@ -54,10 +55,42 @@ def _folder_of(tmp_path, sizes):
     return tmp_path
 
 
-def test_mixed_image_sizes_are_refused_naming_them(tmp_path):
-    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48), (48, 64), (64, 48)])
-    with pytest.raises(IngestError, match=r"mixes image sizes \(64x48: 0.png, 1.png, 3.png; 48x64: 2.png\)"):
-        run_sfm(folder)
+@pytest.mark.slow
+def test_a_phone_capture_mixing_portrait_and_landscape_gets_one_camera_per_orientation(tmp_path):
+    """Every third photo taken in portrait (the camera rolled 90°), half of those stored as phones store them
+    (landscape pixels + EXIF orientation 6), JPEG: all register, each with its upright camera."""
+    from pytest_n2r.demo.phone_capture import ROTATE_90_CW, portrait_pose
+
+    from .synthetic import orbit_poses, render, texture
+
+    landscape = Camera(320, 240, 280.0, 280.0, 159.5, 119.5)
+    portrait = Camera(240, 320, 280.0, 280.0, 119.5, 159.5)
+    textures = [texture(k) for k in range(3)]
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    truth = {}
+    for k, c2w in enumerate(orbit_poses(10)):
+        turned = k % 3 == 2
+        camera, pose = (portrait, portrait_pose(c2w)) if turned else (landscape, c2w)
+        rgb, _ = render(camera, pose, textures)
+        exif = Image.Exif()
+        if turned and k % 2 == 0:
+            exif[0x0112] = ROTATE_90_CW
+            rgb = np.rot90(rgb, k=1)
+        name = f"IMG_{k:04d}.jpg"
+        Image.fromarray(np.ascontiguousarray(rgb)).save(folder / name, quality=92, exif=exif)
+        truth[name] = (pose, camera)
+    result = ingest(folder, matcher="exhaustive")
+    assert sorted(v.name for v in result.views) == sorted(truth), f"not registered: {result.skipped}"
+    for v in result.views:
+        assert (v.camera.width, v.camera.height) == (truth[v.name][1].width, truth[v.name][1].height), v.name
+        assert v.image.shape[:2] == (v.camera.height, v.camera.width)
+        assert v.camera.fx == pytest.approx(280.0, rel=0.03), (v.name, v.camera)
+    cameras = {(c["width"], c["height"]): c for c in result.report["cameras"]}
+    assert cameras[320, 240]["photos"] == 7 and cameras[240, 320]["photos"] == 3
+    assert cameras[240, 320]["registered"] == 3
+    rot, centre = _errors(result.views, {n: p for n, (p, _) in truth.items()})
+    assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"
 
 
 def test_too_few_readable_images(tmp_path):

@@ -1,0 +1,162 @@
+"""A demo scene photographed the way a phone does it: a folder of JPEG photos to ingest like a real capture.
+
+What a phone capture does that :mod:`.rendered_capture` does not, each drawn per photo from a seeded
+generator (:class:`PhoneSettings`):
+
+- **orientation**: every ``portrait_every``-th photo is taken in portrait (the camera rolled 90° about its
+  optical axis, the sensor's width and height swapped); of those, every other one is stored as the phone
+  stores it, landscape pixels with the EXIF orientation tag 6 ("rotate 90° clockwise to view"), the others
+  already upright;
+- **exposure and white balance**: a gain of ``2 ** u`` stops, ``u`` uniform in ``±exposure_stops``, and a
+  per-channel gain uniform in ``1 ± white_balance``, applied to linear light (sRGB decoded with gamma 2.2);
+- **slight blur**: a Gaussian of sigma uniform in ``[0, blur_px]`` pixels (hand shake, focus);
+- **JPEG** at ``jpeg_quality``.
+
+The ground truth of every photo (its camera-to-world pose, OpenCV axes, world frame of the demo scene; its
+upright camera; the drawn degradations) is returned with the folder, so a test can align what structure from
+motion recovers to the truth and score a fitted field against the exact scene.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InvalidArgument
+from ..geometry import Camera
+from .rendered_capture import check_size
+
+__all__ = ["PhonePhoto", "PhoneSettings", "portrait_pose", "write_phone_capture"]
+
+#: EXIF tag number of the orientation, and the value meaning "rotate 90° clockwise to view".
+EXIF_ORIENTATION = 0x0112
+ROTATE_90_CW = 6
+
+
+@dataclass(frozen=True)
+class PhoneSettings:
+    """How the phone photographs (see the module docstring); ``size`` is the longer side in pixels."""
+
+    size: int = 480
+    portrait_every: int = 3
+    exposure_stops: float = 0.5
+    white_balance: float = 0.08
+    blur_px: float = 0.8
+    jpeg_quality: int = 90
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.jpeg_quality <= 100:
+            raise InvalidArgument(f"PhoneSettings.jpeg_quality={self.jpeg_quality!r}: expected 1..100")
+        for name in ("exposure_stops", "white_balance", "blur_px"):
+            if not getattr(self, name) >= 0:
+                raise InvalidArgument(f"PhoneSettings.{name}={getattr(self, name)!r}: expected a number >= 0")
+        if self.white_balance >= 1:
+            raise InvalidArgument(f"PhoneSettings.white_balance={self.white_balance!r}: expected less than 1")
+        if self.portrait_every < 0:
+            raise InvalidArgument(f"PhoneSettings.portrait_every={self.portrait_every!r}: expected >= 0 (0: none)")
+
+
+@dataclass(frozen=True)
+class PhonePhoto:
+    """One photo of a phone capture and its truth: the file, the upright camera and camera-to-world pose
+    (OpenCV axes, the demo scene's world frame), whether it was taken in portrait and stored with an EXIF
+    rotation, and the drawn exposure gain, white-balance gains (R, G, B) and blur sigma (pixels)."""
+
+    path: Path
+    camera: Camera
+    c2w: np.ndarray
+    portrait: bool
+    exif_rotated: bool
+    gain: float
+    white_balance: tuple[float, float, float]
+    blur_px: float
+
+
+def portrait_pose(c2w: np.ndarray) -> np.ndarray:
+    """The pose of a camera rolled 90° about its optical axis so its image x axis points where the landscape
+    camera's "up" (−y) pointed: a phone turned to portrait.
+
+    >>> p = portrait_pose(np.eye(4))
+    >>> p[:3, 0].tolist(), p[:3, 1].tolist(), p[:3, 2].tolist()
+    ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+    """
+    out = np.array(c2w, dtype=np.float64, copy=True)
+    out[:3, 0], out[:3, 1] = -c2w[:3, 1], c2w[:3, 0]
+    return out
+
+
+def _portrait_camera(camera: Camera) -> Camera:
+    """The landscape ``camera`` turned to portrait: width and height swapped, square pixels kept."""
+    return Camera(camera.height, camera.width, camera.fy, camera.fx, camera.height - 1 - camera.cy, camera.cx)
+
+
+def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float) -> np.ndarray:
+    import cv2
+
+    linear = (rgb.astype(np.float32) / 255.0) ** 2.2 * (gain * wb.astype(np.float32))
+    out = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
+    if sigma > 0.05:
+        out = cv2.GaussianBlur(out, (0, 0), sigma)
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+
+
+def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSettings = PhoneSettings(), *,
+                        views: Sequence[int] | None = None, poses: bool = True) -> list[PhonePhoto]:
+    """Photograph the exact demo scene ``name`` at its trajectory's poses (``views``: indices, default all)
+    into ``out_dir`` as ``photo_<index>.jpg`` files; return each photo's truth.
+
+    With ``poses``, also write ``out_dir/transforms.json`` (nerfstudio; one camera per photo, as the photo
+    is viewed upright; the demo trajectory's train / held-out split), so ``n2r fit out_dir`` fits it
+    without structure from motion, in the demo scene's world frame. Without it, ``n2r fit`` runs
+    structure from motion on the folder.
+    """
+    from PIL import Image
+
+    from ..data.poses import SourceFrame
+    from ..data.transforms_json import write_transforms_json
+    from . import ground_truth
+
+    scene = ground_truth(name)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(settings.seed)
+    indices = list(range(len(scene.views))) if views is None else [int(i) for i in views]
+    photos: list[PhonePhoto] = []
+    train: list[str] = []
+    heldout: list[str] = []
+    for k, index in enumerate(indices):
+        view = scene.views[index]
+        camera = check_size(settings.size, view.camera)
+        portrait = settings.portrait_every > 0 and k % settings.portrait_every == settings.portrait_every - 1
+        exif_rotated = portrait and (k // settings.portrait_every) % 2 == 0
+        c2w = portrait_pose(view.c2w) if portrait else view.c2w.copy()
+        camera = _portrait_camera(camera) if portrait else camera
+        gain = float(2.0 ** rng.uniform(-settings.exposure_stops, settings.exposure_stops))
+        wb = rng.uniform(1 - settings.white_balance, 1 + settings.white_balance, 3)
+        sigma = float(rng.uniform(0.0, settings.blur_px))
+        upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma)
+        path = out / f"photo_{index:03d}.jpg"
+        exif = Image.Exif()
+        if exif_rotated:  # the phone keeps the sensor's landscape pixels and says how to turn them
+            exif[EXIF_ORIENTATION] = ROTATE_90_CW
+            stored = np.rot90(upright, k=1)  # 90° counter-clockwise; the viewer turns it back clockwise
+        else:
+            stored = upright
+        tmp = path.with_suffix(".tmp")
+        Image.fromarray(np.ascontiguousarray(stored)).save(tmp, format="JPEG", quality=settings.jpeg_quality,
+                                                           exif=exif)
+        os.replace(tmp, path)
+        photos.append(PhonePhoto(path, camera, c2w, portrait, exif_rotated, gain,
+                                 (float(wb[0]), float(wb[1]), float(wb[2])), sigma))
+        (train if view.split == "train" else heldout).append(path.name)
+    if poses:
+        frames = [SourceFrame(name=p.path.name, path=p.path, camera=p.camera, c2w=p.c2w) for p in photos]
+        write_transforms_json(out / "transforms.json", frames, extra={
+            "train_filenames": train, "val_filenames": heldout, "n2r_scene": name,
+            "n2r_content_hash": scene.content_hash, "n2r_reference_length": scene.reference_length})
+    return photos
