@@ -135,6 +135,8 @@ def _clock(seconds: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from collections import Counter
+
     from ..data import ingest
     from ..errors import InvalidArgument
     from ..field import fit as fitting
@@ -164,8 +166,10 @@ def run(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore")  # every skipped file is listed below
         capture = ingest(args.source, downscale=1.0 / args.downscale)
     ingest_s = time.perf_counter() - start
+    sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)
+    shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))
     lines = [f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
-             f"held out, {capture.views[0].camera.width}x{capture.views[0].camera.height} ({ingest_s:.1f} s)",
+             f"held out, {shown} ({ingest_s:.1f} s)",
              *format_skipped(capture.skipped)]
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
