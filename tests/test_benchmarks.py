@@ -48,7 +48,7 @@ def test_every_benchmark_imports_without_running(script: Path):
 def test_cheap_benchmarks_run_on_tiny_inputs(script: str):
     args, expected = SMOKE[script]
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *args], cwd=ROOT,
-                            env=_environment(), capture_output=True, text=True, timeout=300)
+                            env=_environment(), capture_output=True, text=True, timeout=300, check=False)
     assert result.returncode == 0, f"{script} {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}"
     assert expected in result.stdout, f"{script} printed no {expected!r}:\n{result.stdout}"
 

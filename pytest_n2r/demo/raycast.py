@@ -5,8 +5,9 @@ The scene's primitives, materials and textures are flattened into arrays once (:
 kernel then follows the vectorized definitions of :mod:`.primitives`, :mod:`.materials` and
 :mod:`.textures` operation for operation (the same float64 geometry, the same float32 colour arithmetic, the
 bilinear lookup of OpenCV's ``remap`` with its 1/32-texel steps), so its images match theirs to within
-rounding (tested against them, ``tests/demo/test_raycast.py``). Each image row is one parallel task and
-each pixel depends on its own rays only: results do not depend on the thread count.
+rounding (tested against them, ``tests/demo/test_raycast.py``). Threads take every n-th image row (the kernel runs without
+the GIL), and each pixel depends only on its own rays and on its row: results do not depend on the thread
+count.
 
 Convention
 ----------
@@ -20,11 +21,13 @@ from __future__ import annotations
 
 import math
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numba.core.errors import NumbaError, NumbaExperimentalFeatureWarning
 
 from ..errors import InvalidArgument
@@ -91,12 +94,17 @@ class CompiledScene:
         depth = np.empty((height, width) if want_depth else (0, 0), dtype=np.float32)
         opacity = np.empty((height, width) if want_opacity else (0, 0), dtype=np.float32)
         camera = np.array([fx, fy, cx, cy, far])
+        args = (np.ascontiguousarray(c2w, dtype=np.float64), camera, int(supersample), self.groups,
+                self.group_box, self.kinds, self.prims, self.waves, self.prim_mat, self.node_kind, self.node_par,
+                self.node_child, self.rings, self.masks, self.tex_meta, self.texels, self.shading,
+                self.background, rgb, depth, opacity)
+        threads = min(numba.get_num_threads(), height)
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
-            _render_kernel(np.ascontiguousarray(c2w, dtype=np.float64), camera, int(supersample),
-                           self.groups, self.group_box, self.kinds, self.prims, self.waves, self.prim_mat,
-                           self.node_kind, self.node_par, self.node_child, self.rings, self.masks, self.tex_meta,
-                           self.texels, self.shading, self.background, rgb, depth, opacity)
+            if threads <= 1:
+                _render_kernel(0, 1, *args)
+            else:  # every thread-th row per thread: rows of sky and of wall interleave (the kernel drops the GIL)
+                list(_pool().map(lambda first: _render_kernel(first, threads, *args), range(threads)))
         out = {}
         if want_rgb:
             out["rgb"] = rgb
@@ -105,6 +113,17 @@ class CompiledScene:
         if want_opacity:
             out["opacity"] = opacity
         return out
+
+
+_POOL: ThreadPoolExecutor | None = None
+
+
+def _pool() -> ThreadPoolExecutor:
+    """The render threads (as many as numba may use; a render uses ``numba.get_num_threads()`` of them)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-raycast")
+    return _POOL
 
 
 # -- building the tables -------------------------------------------------------------------------------------
@@ -451,9 +470,9 @@ def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
     return best, which, best_gx, best_gz, best_have
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _cast_rays(o, d, groups, group_box, kinds, prims, waves, t_out, which_out):
-    for r in prange(o.shape[0]):
+    for r in range(o.shape[0]):  # serial: used for small batches, and a parallel loop compiles slowly
         t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, o[r, 0], o[r, 1], o[r, 2],
                                        d[r, 0], d[r, 1], d[r, 2], math.nan)
 
@@ -624,8 +643,8 @@ def _albedo(node, node_kind, node_par, node_child, rings, masks, tex_meta, texel
 # -- the image kernel ----------------------------------------------------------------------------------------
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par,
+@njit(cache=True, nogil=True, error_model="numpy")
+def _render_kernel(first, step, c2w, camera, n, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par,
                    node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
     fx, fy, cx, cy, far = camera[0], camera[1], camera[2], camera[3], camera[4]
     height = max(rgb.shape[0], depth.shape[0], opacity.shape[0])
@@ -636,7 +655,7 @@ def _render_kernel(c2w, camera, n, groups, group_box, kinds, prims, waves, prim_
     lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
     scale_fp = 0.5 * (fx + fy) * n
     inv_count = np.float32(n * n)
-    for v in prange(height):
+    for v in range(first, height, step):
         guess = math.nan  # a relief's root is searched from the last one found in this row (Newton converges fast)
         for u in range(width):
             if depth.shape[0] > 0:
