@@ -94,6 +94,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=parse_config_override, action="append", default=[], metavar="KEY=VALUE",
                    help="change a field setting (repeatable), e.g. --config resolutions=48,96 "
                         "--config stage_fractions=0.2 (the fields of pytest_n2r.field.config.FieldConfig)")
+    p.add_argument("--appearance", action="store_true",
+                   help="fit a colour gain per photo (exposure, white balance) for captures whose exposure varies, "
+                        "as a phone's does; renders keep the capture's average (see docs/scene-field.md)")
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
@@ -187,7 +190,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
                              device=args.device, progress=progress, checkpoint=checkpoint,
-                             checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at)
+                             checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
+                             appearance=args.appearance)
     except KeyboardInterrupt:
         progress.close()
         print(f"n2r fit: interrupted; {_kept(output, last)}", file=sys.stderr)

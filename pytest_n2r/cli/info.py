@@ -120,6 +120,11 @@ def format_info(scene: SceneFile) -> str:
         lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
     elif state == "complete":
         lines.append("held out    no held-out view with a photo (nothing to score)")
+    gains = report.get("appearance")
+    if gains:
+        values = [g for rgb in gains.values() for g in rgb]
+        lines.append(f"appearance  a colour gain per training photo ({len(gains)} photos, {min(values):.3f} to "
+                     f"{max(values):.3f}); renders use none")
     for entry in report.get("history") or []:
         scores = (f"PSNR {entry['psnr']:.2f} dB, SSIM {entry['ssim']:.4f}" if entry.get("psnr") is not None
                   else "no held-out view with a photo")

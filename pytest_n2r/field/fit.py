@@ -76,20 +76,52 @@ class _Rays:
     """Every training pixel as a normalized ray and its colour (float32, on the fitting device)."""
 
     def __init__(self, views: Sequence[CapturedView], space: SceneSpace, device: torch.device):
-        origins, directions, colors = [], [], []
-        for view in views:
+        origins, directions, colors, owners = [], [], [], []
+        for k, view in enumerate(views):
             o, d = space.normalize_rays(*camera_rays(view.camera, view.c2w))
             origins.append(o.reshape(-1, 3))
             directions.append(d.reshape(-1, 3))
             colors.append(view.image.reshape(-1, 3))
+            owners.append(np.full(len(colors[-1]), k, dtype=np.int64))
+        #: The index (into the training views) of the photo each ray comes from.
+        self.view = torch.from_numpy(np.concatenate(owners)).to(device)
         self.o = torch.from_numpy(np.concatenate(origins)).to(device)
         self.d = torch.from_numpy(np.concatenate(directions)).to(device)
         self.rgb = torch.from_numpy(np.concatenate(colors)).to(device)
         self.n = self.o.shape[0]
 
 
+#: Adam learning rate of the per-photo log colour gains (``appearance=True``).
+APPEARANCE_LR = 0.01
+
+
+class _Appearance:
+    """Per training photo, a colour gain per channel (exposure and white balance) that multiplies the field's
+    colour in the loss only. The gains are ``exp(a - mean(a))`` over the photos, so the field keeps the
+    capture's average exposure and white balance, which is what it renders at every pose (a render never
+    applies a gain: the correction cannot leak into new views)."""
+
+    def __init__(self, names: Sequence[str], device: torch.device):
+        self.names = list(names)
+        self.log_gain = torch.zeros(len(self.names), 3, device=device, requires_grad=True)
+        self.adam = torch.optim.Adam([self.log_gain], lr=APPEARANCE_LR)
+
+    def gains(self) -> torch.Tensor:
+        return torch.exp(self.log_gain - self.log_gain.mean(dim=0, keepdim=True))
+
+    def step(self, lr_scale: float) -> None:
+        for group in self.adam.param_groups:
+            group["lr"] = APPEARANCE_LR * lr_scale
+        self.adam.step()
+        self.adam.zero_grad(set_to_none=True)
+
+    def report(self) -> dict:
+        gains = self.gains().detach().cpu().numpy()
+        return {name: [round(float(x), 4) for x in g] for name, g in zip(self.names, gains)}
+
+
 class _Trainer:
-    def __init__(self, capture: Capture, config: FieldConfig, device: torch.device):
+    def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False):
         train = [v for v in capture.train_views if v.image is not None]
         if not train:
             raise FitError(f"capture {capture.source!r} has no training view with an image; load it with images")
@@ -99,6 +131,7 @@ class _Trainer:
         centers = np.stack([v.c2w[:3, 3] for v in capture.views])
         self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
         self.rays = _Rays(train, self.space, device)
+        self.appearance = _Appearance([v.name for v in train], device) if appearance else None
         self.generator = torch.Generator().manual_seed(config.seed)
         # the field renders over the mean of the backgrounds its training rays are composited over
         background = (0.5, 0.5, 0.5) if config.random_background else (0.0, 0.0, 0.0)
@@ -181,6 +214,8 @@ class _Trainer:
             self.cell_weight.scatter_reduce_(0, flat, out["weights"].detach(), reduce="amax")
             alpha_sum = alpha.clamp(max=ALPHA_MAX).sum()[None]
             dist = distortion(out["weights"], s, ray_idx, offsets, o.shape[0], g.step)
+        if self.appearance is not None:
+            rgb = rgb * self.appearance.gains()[self.rays.view[pick]]
         mse = F.mse_loss(rgb, target)
         loss = mse + c.sparsity * alpha_sum.sum() / n_samples + c.distortion * dist.mean()
         if not torch.isfinite(loss):
@@ -194,6 +229,8 @@ class _Trainer:
             if not torch.isfinite(grad.sum()):
                 raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
             self.adam.step(unique, grad, lr_scale)
+            if self.appearance is not None:
+                self.appearance.step(lr_scale)
         self.steps += 1
         return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
 
@@ -250,6 +287,7 @@ def fit(
     checkpoint: Callable[[FitResult], None] | None = None,
     checkpoint_every_s: float = 60.0,
     eval_at_s: Sequence[float] = (),
+    appearance: bool = False,
 ) -> FitResult:
     """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
     ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
@@ -259,6 +297,10 @@ def fit(
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
     a scene file stores it); ``eval_at_s`` lists training times at which held-out PSNR/SSIM are recorded
     in ``report["history"]`` (evaluation time is not counted as training time).
+
+    ``appearance`` fits a colour gain per training photo and channel alongside the field, for captures whose
+    exposure and white balance vary (a phone's automatic exposure); the field keeps their average and renders
+    no gain at any pose. ``report["appearance"]`` holds the fitted gains by photo.
     """
     config = config or FieldConfig()
     if time_budget_s is None and max_steps is None:
@@ -268,7 +310,7 @@ def fit(
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
-    trainer = _Trainer(capture, config, dev)
+    trainer = _Trainer(capture, config, dev, appearance=appearance)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
     pending_evals = sorted(float(s) for s in eval_at_s)
@@ -331,6 +373,8 @@ def fit(
         "history": history,
         "versions": _versions(),
     }
+    if trainer.appearance is not None:
+        report["appearance"] = trainer.appearance.report()
     return FitResult(final, config, report)
 
 

@@ -3,6 +3,8 @@ JPEG), ingested and fitted without manual steps, and scored against the exact sc
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -87,3 +89,28 @@ def test_a_mixed_orientation_phone_capture_fits_without_manual_steps(tmp_path, c
             gains.append(field_db - flat_db)
     # measured (150 steps): 2.3 dB on average, 0.4 dB at the end of the trajectory (photo_044), 3.4 dB at best
     assert np.mean(gains) > 1.5, f"the field beats the mean colour by only {np.mean(gains):.2f} dB on average"
+
+
+def test_n2r_fit_appearance_fits_a_gain_per_photo_and_info_says_so(tmp_path, capsys):
+    write_phone_capture("object", tmp_path / "photos", PhoneSettings(size=64), views=range(0, 48, 4))
+    out = tmp_path / "object-phone.n2r"
+    assert main(["fit", str(tmp_path / "photos"), "-o", str(out), "--appearance", "--downscale", "1",
+                 "--max-steps", "20", "--config", "resolutions=16,24", "--config", "stage_fractions=0.5",
+                 "--config", "batch_rays=256", "--config", "alpha_init=0.01"]) == 0
+    assert "appearance  a colour gain per training photo (6 photos," in capsys.readouterr().out
+
+
+def test_the_phone_capture_benchmark_runs(tmp_path, capsys):
+    import importlib.util
+
+    from ..conftest import REPO_ROOT
+
+    spec = importlib.util.spec_from_file_location("phone_benchmark", REPO_ROOT / "benchmarks" / "phone_capture.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = tmp_path / "phone.json"
+    assert module.main(["--scenes", "wall", "--size", "96", "--steps", "10", "--resolutions", "16,24",
+                        "--json", str(out)]) == 0
+    assert "| wall | corrected | held out (6) |" in capsys.readouterr().out
+    result = json.loads(out.read_text())["wall"]
+    assert set(result) == {"plain", "corrected"} and len(result["corrected"]["gain_range"]) == 2
