@@ -20,6 +20,7 @@ Convention
 from __future__ import annotations
 
 import math
+import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -115,15 +116,16 @@ class CompiledScene:
         return out
 
 
-_POOL: ThreadPoolExecutor | None = None
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
 
 
 def _pool() -> ThreadPoolExecutor:
-    """The render threads (as many as numba may use; a render uses ``numba.get_num_threads()`` of them)."""
+    """The render threads (as many as numba may use; a render uses ``numba.get_num_threads()`` of them),
+    one pool per process: a forked child gets its own (the parent's threads do not exist in it)."""
     global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-raycast")
-    return _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-raycast"))
+    return _POOL[1]
 
 
 # -- building the tables -------------------------------------------------------------------------------------

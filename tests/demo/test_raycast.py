@@ -118,3 +118,22 @@ def test_an_unknown_material_is_named():
     with pytest.raises(InvalidArgument, match="material Glow has no compiled form"):
         GroundTruthScene("glow", [dataclasses.replace(pipe, side=Glow())], wall.views[:2], light=(0, 0, 1),
                          ambient=0.5, background=(0, 0, 0), far=10.0)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="needs os.fork")
+def test_a_forked_child_renders_with_its_own_threads():
+    """The render threads are per process: a child forked after a render must not wait on its parent's."""
+    import multiprocessing
+
+    scene = ground_truth("object")
+    view = scene.views[2]
+    camera = view.camera.resized(40, 22)
+    want = scene.render(view.c2w, camera, "rgb").rgb  # the parent's pool exists now
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        got = pool.apply_async(_render_rgb, (view.index, camera)).get(timeout=120)
+    np.testing.assert_array_equal(got, want)
+
+
+def _render_rgb(index: int, camera) -> np.ndarray:
+    scene = ground_truth("object")
+    return scene.render(scene.views[index].c2w, camera, "rgb").rgb
