@@ -407,25 +407,29 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
 @njit(cache=True, error_model="numpy")
 def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
     """First hit of a capped :class:`Cylinder`, ``inf`` on a miss."""
-    q = (ox - prims[row, 0], oy - prims[row, 1], oz - prims[row, 2])
-    d = (dx, dy, dz)
+    qx, qy, qz = ox - prims[row, 0], oy - prims[row, 1], oz - prims[row, 2]
     k = int(prims[row, 3])
-    i, j = (1, 2) if k == 0 else ((0, 2) if k == 1 else (0, 1))
+    if k == 0:  # (i, j, k) = the two cross axes and the axis, without indexing a tuple at run time
+        qi, qj, qk, di, dj, dk = qy, qz, qx, dy, dz, dx
+    elif k == 1:
+        qi, qj, qk, di, dj, dk = qx, qz, qy, dx, dz, dy
+    else:
+        qi, qj, qk, di, dj, dk = qx, qy, qz, dx, dy, dz
     radius, half = prims[row, 4], prims[row, 5]
-    A = d[i] * d[i] + d[j] * d[j]
-    B = 2 * (q[i] * d[i] + q[j] * d[j])
-    C = q[i] * q[i] + q[j] * q[j] - radius ** 2
+    A = di * di + dj * dj
+    B = 2 * (qi * di + qj * dj)
+    C = qi * qi + qj * qj - radius ** 2
     disc = B * B - 4 * A * C
     best = math.inf
     if disc >= 0:
         root = math.sqrt(disc)
         for t in ((-B - root) / (2 * A), (-B + root) / (2 * A)):
-            along = q[k] + t * d[k]
+            along = qk + t * dk
             if t > T_MIN and abs(along) <= half and t < best:
                 best = t
     for sign in (-1.0, 1.0):
-        t = (sign * half - q[k]) / d[k]
-        pi, pj = q[i] + t * d[i], q[j] + t * d[j]
+        t = (sign * half - qk) / dk
+        pi, pj = qi + t * di, qj + t * dj
         if t > T_MIN and pi * pi + pj * pj <= radius ** 2 and t < best:
             best = t
     return best
