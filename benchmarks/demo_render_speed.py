@@ -17,24 +17,14 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 import numpy as np
+from _timing import best_seconds
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
 from pytest_n2r.geometry import Transform
 
 OUTPUTS = ("rgb", "depth", "opacity")
-
-
-def best_seconds(fn, repeats: int = 3) -> float:
-    fn()
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def frames_per_second(scene, camera, c2w) -> tuple[dict[tuple[str, ...], float], float]:

@@ -17,11 +17,11 @@ Times are the best of 3 renders after a warm-up, torch/numba on 2 threads. Resul
 from __future__ import annotations
 
 import sys
-import time
 
 import cv2
 import numpy as np
 import torch
+from _timing import best_seconds
 
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import RenderSettings
@@ -31,16 +31,6 @@ DEFAULT = RenderSettings()
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
-
-
-def best_seconds(fn, repeats: int = 3) -> float:
-    fn()
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def sized(camera, pixels: int):

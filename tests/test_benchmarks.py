@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = sorted((ROOT / "benchmarks").glob("*.py"))
+SCRIPTS = sorted(p for p in (ROOT / "benchmarks").glob("*.py") if not p.name.startswith("_"))
 
 #: Script -> (arguments for a run of a few seconds, a line fragment its output must contain).
 SMOKE = {
@@ -36,11 +36,13 @@ def _environment() -> dict[str, str]:
 def test_every_benchmark_imports_without_running(script: Path):
     spec = importlib.util.spec_from_file_location(f"_benchmark_{script.stem}", script)
     module = importlib.util.module_from_spec(spec)
-    sys.path.insert(0, str(ROOT))
+    paths = [str(ROOT), str(ROOT / "benchmarks")]  # as when run: the package, and the script's own folder
+    sys.path[:0] = paths
     try:
         spec.loader.exec_module(module)  # a script runs its work under `if __name__ == "__main__"` only
     finally:
-        sys.path.remove(str(ROOT))
+        for path in paths:
+            sys.path.remove(path)
     assert callable(getattr(module, "main", None)), f"{script.name} has no main()"
 
 

@@ -362,46 +362,6 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
     if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
         return t, gx, gz, have
     return math.inf, gx, gz, have
-    lo, hi = max(t_in, T_MIN), t_out
-    if dy > 1.05 * slope * math.hypot(dx, dz):  # monotonic residual: safeguarded Newton
-        a, b = lo, hi
-        t = guess if (guess > a and guess < b) else 0.5 * (a + b)
-        for _ in range(newton):
-            h, gx, gz = _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)
-            f = oy + t * dy - y0 + h
-            if abs(f) <= 1e-7:
-                break
-            df = dy + gx * dx + gz * dz
-            if f < 0:
-                a = t
-            else:
-                b = t
-            step = t - f / df
-            t = step if (step > a and step < b) else 0.5 * (a + b)
-    else:  # grazing: march to the first sign change, then bisect
-        t_prev = lo
-        found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
-        a = b = lo
-        if not found:
-            for s in range(1, steps + 1):
-                t = lo + (hi - lo) * (s / steps)
-                if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
-                    a, b, found = t_prev, t, True
-                    break
-                t_prev = t
-        if not found:
-            return math.inf
-        for _ in range(bisections):
-            m = 0.5 * (a + b)
-            if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
-                b = m
-            else:
-                a = m
-        t = 0.5 * (a + b)
-    px, pz = ox + t * dx, oz + t * dz
-    if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
-        return t
-    return math.inf
 
 
 @njit(cache=True, error_model="numpy")
