@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
 from pytest_n2r.demo.primitives import Box, Cylinder, Disc, ReliefWall
 from pytest_n2r.demo.scenes import build_scene
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import Transform, backproject, camera_rays, pixel_grid, project
+
+from .strategies import moved_views
 
 SMALL = (96, 54)
 
@@ -146,14 +147,10 @@ def test_trajectory_and_reference_length(name):
 
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    name=st.sampled_from(demo_scene_names()),
-    index=st.integers(0, 47),
-    tau=st.builds(Transform, roll=st.floats(-20, 20), pitch=st.floats(-20, 20), yaw=st.floats(-30, 30),
-                  x=st.floats(-0.3, 0.3), y=st.floats(-0.3, 0.3), z=st.floats(-0.3, 0.3)),
-)
-def test_outputs_are_well_formed_at_any_pose(name, index, tau):
+@given(moved=moved_views(shift=0.3))
+def test_outputs_are_well_formed_at_any_pose(moved):
     """At any transformed pose: opacity in [0, 1], depth positive and finite, rgb uint8, depth consistent."""
+    name, index, tau = moved
     scene = ground_truth(name)
     cam = scene.views[0].camera.resized(32, 18)
     c2w = tau.apply(scene.views[index].c2w, scene.reference_length)

@@ -7,7 +7,6 @@ import dataclasses
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
 from pytest_n2r.demo.exact import GroundTruthScene
@@ -15,7 +14,9 @@ from pytest_n2r.demo.materials import Material
 from pytest_n2r.demo.raycast import _bilinear, _Builder
 from pytest_n2r.demo.textures import Texture
 from pytest_n2r.errors import InvalidArgument
-from pytest_n2r.geometry import Transform, camera_rays
+from pytest_n2r.geometry import camera_rays
+
+from .strategies import moved_views
 
 OUTPUTS = ("rgb", "depth", "opacity")
 
@@ -37,13 +38,9 @@ def assert_agrees(scene: GroundTruthScene, c2w: np.ndarray, camera, where: str) 
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    name=st.sampled_from(demo_scene_names()),
-    index=st.integers(0, 47),
-    tau=st.builds(Transform, roll=st.floats(-20, 20), pitch=st.floats(-20, 20), yaw=st.floats(-30, 30),
-                  x=st.floats(-0.5, 0.5), y=st.floats(-0.5, 0.5), z=st.floats(-0.5, 0.5)),
-)
-def test_compiled_render_matches_the_vectorized_definition(name, index, tau):
+@given(moved=moved_views(shift=0.5))
+def test_compiled_render_matches_the_vectorized_definition(moved):
+    name, index, tau = moved
     scene = ground_truth(name)
     camera = scene.views[0].camera.resized(80, 45)
     c2w = tau.apply(scene.views[index].c2w, scene.reference_length)
