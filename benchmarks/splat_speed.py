@@ -5,8 +5,9 @@ Run: ``python benchmarks/splat_speed.py`` (``--gaussians N`` for the speed table
 surfaces (:func:`pytest_n2r.demo.splats.sample_splats`, deterministic) and prints
 
 1. frames/s of its six held-out views at 480×270 and 1920×1080 (RGB + depth + opacity; best of 3 renders
-   per view after a warm-up, the median over views), on 2 numba threads and on 1, and the fitted demo
-   field ``demo:object-field`` at 480×270 on the same views in the same run;
+   per view after a warm-up, the median over views), on 2 numba threads and on 1, the CPU time of a frame
+   on 1 thread (what an idle core takes, even on a loaded machine), and the fitted demo field
+   ``demo:object-field`` at 480×270 on the same views in the same run;
 2. the held-out PSNR against the exact renders (480×270, over the exact scene's background) for 4 000,
    50 000 and 300 000 Gaussians, and for the fitted field on the same views.
 
@@ -42,6 +43,22 @@ def frames_per_second(scene, views, size: tuple[int, int], repeats: int) -> floa
     return statistics.median(rates)
 
 
+def cpu_seconds(scene, views, size: tuple[int, int], repeats: int) -> float:
+    """The median over ``views`` of the least CPU time (this process, all threads) of a render at ``size``: on
+    one thread, what an idle core would take, however loaded the machine is."""
+    spent = []
+    for view in views:
+        camera = view.camera.resized(*size)
+        scene.render(view.c2w, camera, OUTPUTS)
+        best = np.inf
+        for _ in range(repeats):
+            start = time.process_time()
+            scene.render(view.c2w, camera, OUTPUTS)
+            best = min(best, time.process_time() - start)
+        spent.append(best)
+    return statistics.median(spent)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--gaussians", type=int, default=300_000)
@@ -61,17 +78,19 @@ def main(argv: list[str] | None = None) -> int:
     scene = SplatScene(sample_splats(exact, counts[-1]), exact.views, settings=settings,
                        reference_length=exact.reference_length)
     print(f"## speed: {len(scene.gaussians)} Gaussians (sampled in {time.perf_counter() - start:.1f} s)\n")
-    print(f"| size | frames/s, {threads} threads | frames/s, 1 thread |")
-    print("|---|---|---|")
+    print(f"| size | frames/s, {threads} threads | frames/s, 1 thread | CPU ms per frame, 1 thread |")
+    print("|---|---|---|---|")
     rates = {size: frames_per_second(scene, views, size, repeats) for size in sizes}
     field_rate = None if args.smoke else frames_per_second(fitted_scene("object", device="cpu"), views, sizes[0],
                                                            repeats)
     numba.set_num_threads(1)  # last: with OpenMP, going back to more threads makes every parallel region slow
     for size in sizes:
-        print(f"| {size[0]}×{size[1]} | {rates[size]:.1f} | {frames_per_second(scene, views, size, repeats):.1f} |")
+        one = frames_per_second(scene, views, size, repeats)
+        cpu = 1e3 * cpu_seconds(scene, views, size, repeats)
+        print(f"| {size[0]}×{size[1]} | {rates[size]:.1f} | {one:.1f} | {cpu:.0f} |")
     numba.set_num_threads(threads)
     if field_rate is not None:
-        print(f"| 480×270, fitted field demo:object-field (same views, same run) | {field_rate:.1f} | |")
+        print(f"| 480×270, fitted field demo:object-field (same views, same run) | {field_rate:.1f} | | |")
     print("\n## accuracy against the exact renders (held out, 480×270)\n")
     print("| Gaussians | PSNR dB (mean) | per view |")
     print("|---|---|---|")
