@@ -88,9 +88,15 @@ def main(argv: list[str] | None = None) -> int:
         one = frames_per_second(scene, views, size, repeats)
         cpu = 1e3 * cpu_seconds(scene, views, size, repeats)
         print(f"| {size[0]}×{size[1]} | {rates[size]:.1f} | {one:.1f} | {cpu:.0f} |")
+    stages = []
+    for view in views:  # where a frame's time goes, on one thread
+        scene.render(view.c2w, view.camera.resized(*sizes[0]), OUTPUTS)
+        stages.append(scene.renderer.stage_seconds)
     numba.set_num_threads(threads)
     if field_rate is not None:
         print(f"| 480×270, fitted field demo:object-field (same views, same run) | {field_rate:.1f} | | |")
+    print(f"\nstages at {sizes[0][0]}×{sizes[0][1]}, 1 thread, ms (median over views): " + ", ".join(
+        f"{name} {1e3 * statistics.median(s[name] for s in stages):.1f}" for name in stages[0]))
     print("\n## accuracy against the exact renders (held out, 480×270)\n")
     print("| Gaussians | PSNR dB (mean) | per view |")
     print("|---|---|---|")

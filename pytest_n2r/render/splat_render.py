@@ -14,6 +14,7 @@ all in how work is organised, none in what a pixel means:
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -96,6 +97,9 @@ class SplatRenderer:
         self._opacity = gaussians.opacities
         self._sh = gaussians.sh
         self._degree = gaussians.sh_degree
+        #: Seconds the last render spent in each stage (``project``, ``sort``, ``bin``, ``composite``,
+        #: ``finish``), for benchmarks.
+        self.stage_seconds: dict[str, float] = {}
 
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...] = ("rgb", "depth", "opacity")
                ) -> dict[str, np.ndarray]:
@@ -107,15 +111,18 @@ class SplatRenderer:
         w, h = camera.width, camera.height
         n = len(self._means)
         w2c = np.ascontiguousarray(invert_pose(c2w))
+        clock = _Stages()
         records = np.empty((n, len(k.RECORD)))
         tiles = np.empty(n, np.int64)
         k.project(self._means, self._cov, self._opacity, self._sh, self._degree, w2c,
                   np.ascontiguousarray(c2w[:3, 3]), camera.fx, camera.fy, camera.cx, camera.cy, w, h, s.near, s.tile,
                   records, tiles)
+        clock.lap("project")
         order = k.depth_order(tiles, records)
         ordered = np.empty((len(order), len(k.RECORD)))
         k.gather(order, records, ordered)
         del records
+        clock.lap("sort")
         tiles_x = -(-w // s.tile)
         live = _tile_pixels(w, h, s.tile)
         trans = np.ones(w * h)
@@ -130,17 +137,34 @@ class SplatRenderer:
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
             k.bin_tiles(start, stop, ordered, s.tile, tiles_x, live, tile_start, tile_ids)
+            clock.lap("bin")
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
                 k.composite_tiles(tile_start, tile_ids, ordered, w, s.tile, tiles_x, s.t_stop, live, trans,
                                   acc_rgb, acc_depth, done)
+            clock.lap("composite")
             start = stop
         out_rgb = np.empty((h * w, 3), np.uint8)
         out_depth = np.empty(h * w, np.float32)
         out_opacity = np.empty(h * w, np.float32)
         k.finish(trans, acc_rgb, acc_depth, np.asarray(self.background), out_rgb, out_depth, out_opacity)
+        clock.lap("finish")
+        self.stage_seconds = clock.seconds
         result = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),
                   "opacity": out_opacity.reshape(h, w)}
         return {name: result[name] for name in outputs}
+
+
+class _Stages:
+    """Wall-clock seconds per named stage, summed over laps."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.seconds[name] = self.seconds.get(name, 0.0) + now - self._last
+        self._last = now
 
 
 def _tile_pixels(width: int, height: int, tile: int) -> np.ndarray:

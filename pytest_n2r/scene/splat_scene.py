@@ -99,6 +99,11 @@ class SplatScene(Scene):
         return super().length_scale(units)
 
     @property
+    def renderer(self) -> SplatRenderer:
+        """The renderer (its ``stage_seconds`` time the last render's stages)."""
+        return self._renderer
+
+    @property
     def content_hash(self) -> str:
         """SHA-256 of the Gaussians, the render settings and background, the views, the reference length and
         :data:`~pytest_n2r.render.splat_render.SPLAT_RENDER_VERSION`."""
