@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SUTOutputError
+from ..errors import MetricUndefined, SUTOutputError
 
 __all__ = ["as_numeric", "as_vector", "as_keypoints"]
 
@@ -47,9 +47,18 @@ def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
 
 
 def as_vector(value: Any, which: str) -> np.ndarray:
-    """A classifier output as a 1-D float64 vector; a batch of one (``(1, C)``, Keras style) is accepted."""
+    """A classifier output as a 1-D float64 vector; a batch of one (``(1, C)``, Keras style) is accepted.
+
+    An empty or all-NaN vector is the SUT saying nothing: :class:`MetricUndefined` (the pair tests
+    nothing), not an error; a vector with *some* NaN values is a :class:`SUTOutputError`.
+    """
     expected = "a 1-D vector of class scores of shape (C,) or a batch of one (1, C)"
-    arr = as_numeric(value, which, expected)
+    raw = _to_numpy(value)
+    if (isinstance(raw, (list, tuple)) and len(raw) == 0) or (isinstance(raw, np.ndarray) and raw.size == 0):
+        raise MetricUndefined(f"the {which} output is empty (nothing to compare)")
+    if isinstance(raw, np.ndarray) and raw.dtype.kind == "f" and np.isnan(raw).all():
+        raise MetricUndefined(f"the {which} output is all NaN (nothing to compare)")
+    arr = as_numeric(raw, which, expected)
     if arr.ndim == 2 and arr.shape[0] == 1:
         arr = arr[0]
     if arr.ndim != 1:

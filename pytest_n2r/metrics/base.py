@@ -58,6 +58,9 @@ class Metric(ABC):
     #: metrics that map pixels between the two views). An instance may override it when its parameters
     #: decide (``repeatability(mapping="homography")`` needs no depth).
     needs: tuple[str, ...] = ()
+    #: True when an output that is entirely NaN means "the SUT gave no answer" (the pair is undefined)
+    #: rather than a bug (a :class:`~pytest_n2r.errors.SUTOutputError`).
+    nan_means_no_output: ClassVar[bool] = False
 
     @abstractmethod
     def compute(

@@ -18,11 +18,12 @@ Class invariance only looks at the ranking of classes, which the softmax does no
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import InvalidArgument, InvalidType, SUTOutputError
+from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
 from ._outputs import as_vector
 from .base import Metric, MetricResult
 
@@ -62,6 +63,7 @@ class _VectorMetric(Metric):
     """Parse the two outputs, check their lengths, convert them as ``inputs`` says."""
 
     allowed_inputs: tuple[str, ...] = _INPUTS
+    nan_means_no_output = True
 
     def __init__(self, inputs: Inputs = "auto") -> None:
         if inputs not in self.allowed_inputs:
@@ -91,6 +93,17 @@ class _VectorMetric(Metric):
             a, b = softmax(a), softmax(b)
         return a, b, mode
 
+    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
+        try:
+            a, b, mode = self.vectors(out_source, out_follow)
+        except MetricUndefined as exc:
+            return MetricResult.undefined(self.name, str(exc))
+        return self._score(a, b, mode)
+
+    @abstractmethod
+    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
+        """Score two comparable vectors (read as ``mode``)."""
+
     def _repr_inputs(self) -> str:
         return "" if self.inputs == "auto" else f"inputs={self.inputs!r}"
 
@@ -98,18 +111,22 @@ class _VectorMetric(Metric):
 class CosineSimilarity(_VectorMetric):
     """``a·b / (|a| |b|)``. Range [-1, 1] ([0, 1] for probabilities), ideal 1, deviation ``1 - score``.
 
-    A zero vector has no direction: two zero vectors score 1 (identical outputs), a zero vector against a
-    non-zero one scores 0 (they share nothing). Only ``inputs="raw"`` can produce zero vectors.
+    A zero vector has no direction: two zero vectors are *undefined* (the SUT said nothing either time,
+    which is not agreement), a zero vector against a non-zero one scores 0 (they share nothing). Only
+    ``inputs="raw"`` can produce zero vectors. Empty or all-NaN outputs are undefined for every vector
+    metric (see :func:`~pytest_n2r.metrics._outputs.as_vector`).
     """
 
     name = "cosine_similarity"
     ideal = 1.0
 
-    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        a, b, mode = self.vectors(out_source, out_follow)
+    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
         na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
+        if na == 0.0 and nb == 0.0:
+            return MetricResult.undefined(self.name, "both outputs are zero vectors (nothing to compare)",
+                                          inputs=mode, classes=int(a.size))
         if na == 0.0 or nb == 0.0:
-            score = 1.0 if na == nb else 0.0
+            score = 0.0
         else:
             score = float(np.clip(np.dot(a / na, b / nb), -1.0, 1.0))
         return self.result(score, inputs=mode, classes=int(a.size))
@@ -125,8 +142,7 @@ class L2Norm(_VectorMetric):
     name = "l2_norm"
     ideal = 0.0
 
-    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        a, b, mode = self.vectors(out_source, out_follow)
+    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
         return self.result(float(np.linalg.norm(a - b)), inputs=mode, classes=int(a.size))
 
     def __repr__(self) -> str:
@@ -152,8 +168,7 @@ class ClassInvariance(_VectorMetric):
         self.top_k = int(top_k)
         super().__init__(inputs)
 
-    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        a, b, mode = self.vectors(out_source, out_follow)
+    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
         if self.top_k > b.size:
             raise InvalidArgument(f"top_k={self.top_k} exceeds the {b.size} classes the classifier returns")
         source_class = int(np.argmax(a))

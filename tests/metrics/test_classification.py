@@ -78,9 +78,23 @@ def test_auto_treats_both_sides_alike():
     assert l2_norm()(probabilities, probabilities[::-1]).details["inputs"] == "probabilities"
 
 
+@pytest.mark.parametrize("empty", [[], np.zeros(0), np.full(5, np.nan), np.full((1, 3), np.nan)],
+                         ids=["list", "array", "all-nan", "all-nan-batch"])
+@pytest.mark.parametrize("metric", ALL, ids=repr)
+def test_empty_or_all_nan_outputs_are_undefined_never_ideal(metric, empty):
+    """Nothing to compare is never a perfect score: the pair is undefined, with the reason."""
+    for a, b, which in ((empty, [0.5, 0.5], "source"), ([0.5, 0.5], empty, "follow-up")):
+        result = metric(a, b)
+        assert not result.valid and math.isnan(result.deviation), (metric, a, b, result)
+        assert result.details["reason"].startswith(f"the {which} output is "), result.details
+    with pytest.raises(SUTOutputError, match="contains 1 NaN"):  # a partly NaN vector is a bug, not silence
+        metric([np.nan, 0.5], [0.5, 0.5])
+
+
 def test_zero_vectors_in_raw_mode():
     zero = np.zeros(4)
-    assert cosine_similarity(inputs="raw")(zero, zero).score == 1.0
+    both_zero = cosine_similarity(inputs="raw")(zero, zero)  # the SUT said nothing twice: not agreement
+    assert not both_zero.valid and "both outputs are zero vectors" in both_zero.details["reason"]
     assert cosine_similarity(inputs="raw")(zero, np.ones(4)).score == 0.0
     assert cosine_similarity(inputs="logits")(zero, zero).score == pytest.approx(1.0)  # uniform distributions
     with pytest.raises(SUTOutputError, match="source output is not a probability vector"):
@@ -103,7 +117,6 @@ def test_accepts_keras_batches_and_tensors():
         ([np.inf, 0.5], [0.5, 0.5], SUTOutputError, "source output contains 1 infinite values"),
         (None, [0.5, 0.5], SUTOutputError, "source output is None; expected a 1-D vector"),
         (np.zeros((2, 3)), [0.5, 0.5], SUTOutputError, r"source output has shape \(2, 3\); expected a 1-D vector"),
-        ([], [0.5, 0.5], SUTOutputError, "source output is empty"),
         ([0.5, 0.5], {"cat": 1}, SUTOutputError, "follow-up output of type dict is not numeric"),
         ([0.5, 0.5], np.array([0.5 + 1j, 0.5]), SUTOutputError, "follow-up output is complex"),
         ([0.5, 0.5], [[0.5], [0.5, 0.2]], SUTOutputError, "follow-up output of type list is not numeric"),
