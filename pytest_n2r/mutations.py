@@ -46,6 +46,7 @@ __all__ = [
     "noise_patch",
     "black_patches",
     "any_mutation",
+    "mutation_from_dict",
 ]
 
 _MAX_SEED = 2**32 - 1
@@ -215,6 +216,23 @@ class BlackPatches(Mutation):
 
     def describe(self) -> str:
         return f"{self.count} black patches of {self.size * 100:.1f}%×{self.size * 100:.1f}%, seed {self.seed}"
+
+
+def mutation_from_dict(data: dict[str, Any]) -> Mutation:
+    """The mutation of :meth:`Mutation.as_dict` (``{"name": "brightness", "levels": 30}``), validated.
+
+    >>> mutation_from_dict({"name": "brightness", "levels": 30})
+    Brightness(levels=30)
+    """
+    kinds = {cls.name: cls for cls in (Brightness, NoisePatch, BlackPatches)}
+    if not isinstance(data, dict) or data.get("name") not in kinds:
+        raise InvalidArgument(f"mutation={data!r}: expected a dict with 'name' one of {sorted(kinds)}")
+    cls = kinds[data["name"]]
+    params = {k: v for k, v in data.items() if k != "name"}
+    unknown = sorted(set(params) - {f.name for f in fields(cls)})
+    if unknown:
+        raise InvalidArgument(f"mutation={data!r}: {cls.__name__} has no parameter(s) {unknown}")
+    return cls(**params)
 
 
 # --- Hypothesis strategies: validate eagerly, draw lazily (private composites whose repr is the call) --

@@ -261,9 +261,12 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
         )
     session = _session(pyfuncitem.config)
+    from .plugin_report import baseline_examples
+
+    replay = baseline_examples(pyfuncitem.config, pyfuncitem.nodeid, funcargs["n2r_scene"], relation)
     failure = None
     try:
-        session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid)
+        session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid, replay=replay)
     except RelationFailure as exc:
         failure = str(exc)
     finally:
@@ -291,7 +294,7 @@ def _plain(stats: Any) -> dict:
     return {
         "test_id": stats.test_id, "scene": stats.scene, "metric": stats.metric, "eps": stats.eps,
         "outcome": stats.outcome, "examples": stats.examples, "rejected": dict(stats.rejected),
-        "inconsistencies": stats.inconsistencies, "shrink_examples": stats.shrink_examples,
+        "undefined": dict(stats.undefined), "inconsistencies": stats.inconsistencies, "shrink_examples": stats.shrink_examples,
         "worst_deviation": stats.worst_deviation, "render_s": stats.render_s, "sut_s": stats.sut_s,
         "metric_s": stats.metric_s, "renders": stats.renders, "summary": stats.summary_line(),
         "images": (stats.minimal or {}).get("images", {}),

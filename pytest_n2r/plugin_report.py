@@ -19,13 +19,18 @@ _RESULT = pytest.StashKey["dict"]()
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("n2r")
     group.addoption("--n2r-save-baseline", metavar="PATH", default=None,
-                    help="write every relation's examples (scene, view, transform, score) to PATH as JSON")
+                    help="write every relation's drawn examples (all a replay needs, and their deviations) to PATH")
     group.addoption("--n2r-compare", metavar="PATH", default=None,
-                    help="compare each relation's deviations with the baseline at PATH and fail on regressions")
-    group.addoption("--n2r-compare-fail", metavar="STAT:LIMIT", action="append", default=None,
-                    help="regression rule for --n2r-compare (repeatable, comma-separated): STAT is mean, "
-                         "median, p10, p90, max or rate (inconsistency rate); LIMIT an absolute growth of "
-                         "the deviation, or a percentage with '%%' (default: mean:0.05)")
+                    help="replay the baseline's examples at PATH, pair them with this run's and fail on regressions")
+    group.addoption("--n2r-compare-fail", metavar="mean:MARGIN", action="append", default=None,
+                    help="regression rule for --n2r-compare: fail a relation when the lower confidence bound of "
+                         "the mean increase of the deviation over its paired examples exceeds MARGIN "
+                         "(default: mean:0.02)")
+    group.addoption("--n2r-compare-confidence", metavar="P", default=None,
+                    help="confidence of that one-sided bound, in (0.5, 1) (default: 0.95)")
+    group.addoption("--n2r-compare-fail-on", metavar="OUTCOMES", action="append", default=None,
+                    help="comma-separated comparison outcomes that fail the run (default: worse, lost, no-pairs, "
+                         "changed-scene, changed-metric, missing; also possible: new, changed-eps)")
     group.addoption("--n2r-report", metavar="PATH", default=None,
                     help="write a self-contained HTML report of every relation to PATH")
     group.addoption("--n2r-json", metavar="PATH", default=None,
@@ -37,24 +42,46 @@ def _is_worker(config: pytest.Config) -> bool:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Check the reporting options up front: a bad rule or a missing baseline is a usage error."""
-    if _is_worker(config):
-        return
-    rules = config.getoption("n2r_compare_fail")
+    """Check the reporting options up front: a bad rule or a missing or malformed baseline is a usage
+    error. The baseline is loaded in pytest-xdist workers too: they replay its examples."""
     compare = config.getoption("n2r_compare")
-    if rules and not compare:
-        raise pytest.UsageError("pytest-n2r: --n2r-compare-fail needs --n2r-compare PATH (the baseline to compare with)")
-    if compare:
-        from .errors import N2RError
-        from .report import load_baseline, parse_compare_rules
+    extra = [flag for flag, dest in (("--n2r-compare-fail", "n2r_compare_fail"),
+                                     ("--n2r-compare-confidence", "n2r_compare_confidence"),
+                                     ("--n2r-compare-fail-on", "n2r_compare_fail_on")) if config.getoption(dest)]
+    if extra and not compare:
+        raise pytest.UsageError(f"pytest-n2r: {extra[0]} needs --n2r-compare PATH (the baseline to compare with)")
+    if not compare:
+        return
+    from .errors import N2RError
+    from .report import load_baseline, parse_margin, parse_outcomes
 
-        try:
-            config.stash[_RESULT] = {
-                "rules": parse_compare_rules(rules or ["mean:0.05"]),
-                "baseline": load_baseline(compare),
-            }
-        except N2RError as exc:
-            raise pytest.UsageError(f"pytest-n2r: {exc}") from None
+    try:
+        confidence = float(config.getoption("n2r_compare_confidence") or 0.95)
+        if not 0.5 < confidence < 1.0:
+            raise ValueError
+    except ValueError:
+        raise pytest.UsageError(f"pytest-n2r: --n2r-compare-confidence={config.getoption('n2r_compare_confidence')!r}"
+                                " is not a probability in (0.5, 1), e.g. 0.95") from None
+    try:
+        config.stash[_RESULT] = {
+            "margin": parse_margin(config.getoption("n2r_compare_fail")), "confidence": confidence,
+            "fail_on": parse_outcomes(config.getoption("n2r_compare_fail_on")), "baseline": load_baseline(compare),
+        }
+    except N2RError as exc:
+        raise pytest.UsageError(f"pytest-n2r: {exc}") from None
+
+
+def baseline_examples(config: pytest.Config, nodeid: str, scene: Any, relation: Any) -> list | None:
+    """The baseline examples a relation test replays before its search: ``None`` without ``--n2r-compare``,
+    for a relation the baseline lacks, or one whose scene content or metric changed (the comparison reports
+    those)."""
+    baseline = config.stash.get(_RESULT, {}).get("baseline")
+    base = baseline.get(nodeid) if baseline else None
+    if base is None or base.scene_hash != scene.content_hash or base.metric != repr(relation.metric):
+        return None
+    from .report import replay_candidates
+
+    return replay_candidates(base)
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -86,7 +113,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 
     from .data.atomic import atomic_write_text
     from .plugin import relation_records
-    from .report import compare_runs, save_baseline
+    from .report import compare_paired, save_baseline
     from .report.html import write_html
 
     records = relation_records(config)
@@ -102,8 +129,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     result["written"] = written
     config.stash[_RESULT] = result
     if options["n2r_compare"]:
-        result["comparisons"] = compare_runs(result["baseline"], records, result["rules"])
-        if any(c.failed for c in result["comparisons"]) and session.exitstatus == pytest.ExitCode.OK:
+        result["comparisons"] = compare_paired(result["baseline"], records, margin=result["margin"],
+                                               confidence=result["confidence"], fail_on=result["fail_on"])
+        if any(c.fails for c in result["comparisons"]) and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
@@ -117,19 +145,21 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
 
         terminalreporter.section("pytest-n2r baseline comparison")
         terminalreporter.write_line(
-            f"baseline {config.getoption('n2r_compare')}, rules: {', '.join(map(str, result['rules']))} "
-            "(deviations from each metric's ideal; larger is worse)"
+            f"baseline {config.getoption('n2r_compare')}: the same examples replayed and paired; a relation is "
+            f"worse when the {result['confidence']:.0%} lower bound of the mean increase of the deviation exceeds "
+            f"{result['margin']:g}; failing outcomes: {', '.join(result['fail_on'])}"
         )
         if comparisons:
-            terminalreporter.write_line(format_comparison_table(comparisons))
+            terminalreporter.write_line(format_comparison_table(comparisons, result["confidence"]))
         else:
             terminalreporter.write_line("no relation ran, nothing compared")
-        worse = [c.nodeid for c in comparisons if c.failed]
-        if worse:
-            terminalreporter.write_line(f"{len(worse)} relation(s) regressed against the baseline: {', '.join(worse)}",
-                                        red=True, bold=True)
-        missing = sorted(set(result["baseline"]) - {c.nodeid for c in comparisons})
-        if missing:
-            terminalreporter.write_line(f"in the baseline but not run: {', '.join(missing)}")
+        for c in comparisons:
+            if c.message and c.outcome != "ok":
+                terminalreporter.write_line(f"{c.nodeid}: {c.outcome}: {c.message}", red=c.fails)
+        failed = [c for c in comparisons if c.fails]
+        if failed:
+            terminalreporter.write_line(
+                f"{len(failed)} relation(s) fail the baseline comparison: "
+                + ", ".join(f"{c.nodeid} ({c.outcome})" for c in failed), red=True, bold=True)
     for path in result.get("written", []):
         terminalreporter.write_line(f"pytest-n2r wrote {path}")

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import time
 from collections import Counter
 from dataclasses import dataclass, field
@@ -25,8 +26,10 @@ from typing import Any, Callable
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, assume, given, target
+from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
+from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Unsatisfiable
 
 from ._timeout import time_limit
@@ -34,7 +37,7 @@ from ._validation import check_range
 from .artifacts import artifact_dir, save_pair
 from .cache import RenderCache
 from .errors import InvalidArgument, InvalidType, MetricUndefined, N2RError, SUTOutputError
-from .geometry import Transform, Units
+from .geometry import Camera, Transform, Units
 from .metrics.base import Metric, MetricResult
 from .render.size import RenderSize
 from .render.view import RenderedView
@@ -43,7 +46,7 @@ from .strategies import PRESETS, SPLITS, interpolate_view, scene_views, transfor
 from .validity import Validity
 
 __all__ = ["Relation", "RunSettings", "RelationStats", "RelationFailure", "SUTError", "check_relation",
-           "resolve_metric", "SEARCHES"]
+           "resolve_metric", "SEARCHES", "MAX_UNDEFINED"]
 
 SEARCHES = ("random", "targeted")
 
@@ -169,23 +172,32 @@ class RunSettings:
 
 # -- statistics -----------------------------------------------------------------------------------------
 
+#: A relation fails as "the SUT produced nothing to test" when more than this share of the draws it could
+#: evaluate (valid follow-up views) had an undefined metric (no keypoints, empty or all-NaN outputs, ...).
+MAX_UNDEFINED = 0.5
+
 
 @dataclass
 class RelationStats:
     """What one relation run did: counts, the worst and the minimal failing example, the time split.
 
-    ``examples`` counts valid examples before shrinking began; ``shrink_examples`` those Hypothesis ran
-    while shrinking a failure. Times are seconds of wall clock spent rendering (including cache lookups),
-    in the SUT and in the metric.
+    ``examples`` counts accepted examples (valid view, defined metric) of the search; ``rejected`` the draws
+    whose follow-up view was invalid, ``undefined`` those where the metric had no value (by reason);
+    ``shrink_examples`` the examples Hypothesis ran while shrinking a failure. ``records`` holds one plain
+    record per drawn example of the search (accepted, rejected and undefined, also after the first failure;
+    see :class:`pytest_n2r.report.records.ExampleRecord`), ``replayed`` one per baseline example replayed
+    before the search. Times are seconds of wall clock spent rendering (including cache lookups), in the SUT
+    and in the metric.
     """
 
     test_id: str
     scene: str
     metric: str
     eps: float
+    scene_hash: str = ""
     examples: int = 0
     rejected: Counter = field(default_factory=Counter)
-    undefined: int = 0
+    undefined: Counter = field(default_factory=Counter)
     inconsistencies: int = 0
     shrink_examples: int = 0
     worst_deviation: float = float("nan")
@@ -198,19 +210,24 @@ class RelationStats:
     outcome: str = "passed"
     message: str = ""
     records: list[dict[str, Any]] = field(default_factory=list)
+    replayed: list[dict[str, Any]] | None = None
 
     @property
     def n_rejected(self) -> int:
         return sum(self.rejected.values())
 
+    @property
+    def n_undefined(self) -> int:
+        return sum(self.undefined.values())
+
     def summary_line(self) -> str:
         worst = "n/a" if math.isnan(self.worst_deviation) else f"{self.worst_deviation:.3g}"
-        rejected = f"{self.n_rejected} rejected as invalid"
-        if self.rejected:
-            rejected += " (" + ", ".join(f"{n} {r}" for r, n in self.rejected.most_common()) + ")"
+        rejected = f"{self.n_rejected} rejected as invalid" + _reasons(self.rejected)
+        undefined = f"{self.n_undefined} undefined" + _reasons(self.undefined)
+        replayed = "" if self.replayed is None else f"{len(self.replayed)} baseline examples replayed, "
         return (
-            f"{self.outcome.upper():6s} {self.test_id}: {_plural(self.examples, 'example')}, {rejected}, "
-            f"{self.inconsistencies} inconsistent, worst deviation {worst} (eps {self.eps:g}); "
+            f"{self.outcome.upper():6s} {self.test_id}: {replayed}{_plural(self.examples, 'example')}, {rejected}, "
+            f"{undefined}, {self.inconsistencies} inconsistent, worst deviation {worst} (eps {self.eps:g}); "
             f"time render {self.render_s:.2f} s / SUT {self.sut_s:.2f} s / metric {self.metric_s:.2f} s"
         )
 
@@ -218,21 +235,21 @@ class RelationStats:
         """The plain-data :class:`pytest_n2r.report.records.RelationRecord` of this run."""
         from .report.records import ExampleRecord, RelationRecord
 
-        def example(d: dict[str, Any]) -> ExampleRecord:
-            return ExampleRecord(scene=self.scene, view=d["view"], transform=d["transform"], score=d["score"],
-                                 deviation=d["deviation"], passed=d["passed"], valid=d["valid"],
-                                 images=d.get("images", {}))
-
         return RelationRecord(
-            nodeid=self.test_id, metric=self.metric, eps=self.eps,
-            examples=[example(r) for r in self.records], outcome=self.outcome, message=self.message,
-            timings={"render": self.render_s, "sut": self.sut_s, "metric": self.metric_s},
-            minimal=example(self.minimal) if self.minimal else None,
+            nodeid=self.test_id, metric=self.metric, eps=self.eps, scene=self.scene, scene_hash=self.scene_hash,
+            examples=[ExampleRecord.from_dict(r) for r in self.records], outcome=self.outcome,
+            message=self.message, timings={"render": self.render_s, "sut": self.sut_s, "metric": self.metric_s},
+            minimal=ExampleRecord.from_dict(self.minimal) if self.minimal else None,
+            replayed=None if self.replayed is None else [ExampleRecord.from_dict(r) for r in self.replayed],
         )
 
 
 def _plural(n: int, noun: str) -> str:
     return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _reasons(counts: Counter) -> str:
+    return " (" + ", ".join(f"{n} {r}" for r, n in counts.most_common()) + ")" if counts else ""
 
 
 # -- the engine -----------------------------------------------------------------------------------------
@@ -253,8 +270,24 @@ def _mutation_like(value: Any) -> bool:
         and callable(getattr(value, "describe", None))
 
 
+@dataclass
+class _Evaluation:
+    """One drawn example evaluated: its plain record and what a failure report needs."""
+
+    record: dict[str, Any]
+    result: MetricResult | None = None
+    source: RenderedView | None = None
+    follow: RenderedView | None = None
+    outputs: tuple[Any, Any] = (None, None)
+
+
 class _Engine:
-    """One relation on one scene with one SUT: the body of each Hypothesis example."""
+    """One relation on one scene with one SUT: evaluates drawn (or replayed) examples.
+
+    The search runs in two passes that draw the same examples (same seed): the *survey* records every
+    draw and never raises, so a relation's records cover all its examples, not just those up to the first
+    failure; only when the survey saw a failure does the *shrink* pass run, raising at the first failure so
+    Hypothesis shrinks it to the smallest transform."""
 
     def __init__(self, scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation,
                  settings: RunSettings, cache: RenderCache, stats: RelationStats):
@@ -267,19 +300,24 @@ class _Engine:
         self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
         self.source_outputs_cache: dict[str, Any] = {}
+        render_settings = getattr(scene, "settings", None)
+        self.render_settings = render_settings.to_dict() if callable(getattr(render_settings, "to_dict", None)) \
+            else {}
+        self.shrinking = False  # False: the survey pass; True: the shrink pass
         self.failed = False
-        self.gave_up = False
+        self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
 
     # -- pieces -----------------------------------------------------------------------------------------
 
     def camera_for(self, view: SceneView):
         return view.camera if self.size is None else self.size.apply(view.camera)
 
-    def render(self, c2w: np.ndarray, view: SceneView, outputs: tuple[str, ...], role: str) -> RenderedView:
+    def render(self, c2w: np.ndarray, camera: Any, view: SceneView, outputs: tuple[str, ...],
+               role: str) -> RenderedView:
         start = time.perf_counter()
         renders = self.cache.stats.renders
         with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}"):
-            rendered = self.cache.render(self.scene, c2w, self.camera_for(view), outputs)
+            rendered = self.cache.render(self.scene, c2w, camera, outputs)
         self.stats.render_s += time.perf_counter() - start
         self.stats.renders += self.cache.stats.renders - renders
         return rendered
@@ -323,88 +361,124 @@ class _Engine:
 
     # -- one example ------------------------------------------------------------------------------------
 
-    def reject(self, reason: str) -> None:
-        """Count an invalid example and skip it; give up on the relation when almost every draw is invalid.
+    def follow_up(self, tau: Any, units: Units) -> dict[str, Any]:
+        """The follow-up of a record: a pose transform's fields and units, or a mutation's parameters."""
+        if not _mutation_like(tau):
+            return {"transform": tau.as_dict(), "units": units.value}
+        as_dict = getattr(tau, "as_dict", None)
+        return {"transform": None, "mutation": as_dict() if callable(as_dict) else {"description": tau.describe()}}
 
-        Only while searching: once a failure is found, the shrinker's variations are often invalid, and
-        giving up then would reject the final replay of the minimal failure (a FlakyFailure)."""
-        stats = self.stats
-        stats.rejected[reason] += 1
-        drawn = stats.examples + stats.n_rejected
-        if (not self.failed and stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP
-                and stats.n_rejected / drawn > self.relation.validity.max_rejected):
-            self.gave_up = True  # check_relation raises once Hypothesis stops
-        assume(False)
+    def evaluate(self, view: SceneView, tau: Any, camera: Any = None, units: Units | None = None) -> _Evaluation:
+        """Render, check validity, run the SUT and the metric on one example; never raises on a verdict.
 
-    def example(self, view: SceneView, tau: Any) -> None:
-        __tracebackhide__ = True
-        if self.gave_up:  # reject the rest of the draws without rendering them
-            assume(False)
-        stats = self.stats
+        ``camera`` and ``units`` (a replayed example's recorded ones) override the run's render size and the
+        relation's translation units."""
+        camera = camera if camera is not None else self.camera_for(view)
+        units = units or self.units
         mutation = _mutation_like(tau)
         describe = tau.describe() if mutation else self.describe_transform(tau)
         where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
-        source = self.render(view.c2w, view, self.outputs, "source")
+        record: dict[str, Any] = {
+            "scene": self.scene.name, "scene_hash": self.scene.content_hash, "view": view.name,
+            "source_c2w": np.asarray(view.c2w, dtype=np.float64).ravel().tolist(), "camera": camera.to_dict(),
+            "settings": self.render_settings, **self.follow_up(tau, units), "status": "accepted", "reason": "",
+            "score": math.nan, "deviation": math.nan, "passed": False,
+        }
+        source = self.render(view.c2w, camera, view, self.outputs, "source")
         if mutation:  # the follow-up is the mutated source render, same pose
             apply_to_view = getattr(tau, "apply_to_view", None)
             follow = apply_to_view(source) if callable(apply_to_view) else RenderedView(
                 camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb), depth=source.depth,
                 opacity=source.opacity)
         else:
-            follow_c2w = tau.apply(view.c2w, self.scene.length_scale(self.units))
-            follow = self.render(follow_c2w, view, self.follow_outputs, "follow-up")
+            follow_c2w = tau.apply(view.c2w, self.scene.length_scale(units))
+            follow = self.render(follow_c2w, camera, view, self.follow_outputs, "follow-up")
             verdict = self.relation.validity.check(follow, self.scene, source)
             if not verdict.valid:
-                self.reject(verdict.reason)
-        key = f"{view.name}|{source.camera.width}x{source.camera.height}"
+                record.update(status="rejected", reason=verdict.reason)
+                return _Evaluation(record)
+        key = f"{view.name}|{camera.width}x{camera.height}|{record['source_c2w']}"
         if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
             self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
         out_source = self.source_outputs_cache[key]
         out_follow = self.run_sut(follow.rgb, "follow-up", where)
         result = self.compute(out_source, out_follow, source, follow, where)
         if not getattr(result, "valid", True):
-            self.reject("metric undefined")
-        deviation = float(result.deviation)
-        if self.relation.search == "targeted":
-            target(deviation, label="deviation")
-        transform = tau.as_dict() if not mutation else {"mutation": tau.describe()}
-        record = {"view": view.name, "transform": transform, "score": float(result.score),
-                  "deviation": deviation, "passed": deviation <= self.relation.eps, "valid": True}
-        if self.failed:
-            stats.shrink_examples += 1
+            record.update(status="undefined", reason=str(result.details.get("reason", "metric undefined")))
+        else:
+            deviation = float(result.deviation)
+            record.update(score=float(result.score), deviation=deviation, passed=deviation <= self.relation.eps)
+        return _Evaluation(record, result, source, follow, (out_source, out_follow))
+
+    def count(self, record: dict[str, Any]) -> None:
+        """Count a survey record and stop drawing when almost every draw is invalid or undefined."""
+        stats = self.stats
+        stats.records.append(record)
+        if record["status"] == "rejected":
+            stats.rejected[record["reason"]] += 1
+        elif record["status"] == "undefined":
+            stats.undefined[record["reason"]] += 1
         else:
             stats.examples += 1
-            stats.records.append(record)
-            if not deviation <= stats.worst_deviation:  # also true for the first (NaN)
-                stats.worst_deviation, stats.worst = deviation, record
-        if deviation <= self.relation.eps:
+            if not record["deviation"] <= stats.worst_deviation:  # also true for the first (NaN)
+                stats.worst_deviation, stats.worst = record["deviation"], record
+            if not record["passed"]:
+                stats.inconsistencies += 1
+        drawn = stats.examples + stats.n_rejected + stats.n_undefined
+        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+            self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
+        evaluated = stats.examples + stats.n_undefined
+        if stats.n_undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
+                and stats.n_undefined / evaluated > MAX_UNDEFINED:
+            self.gave_up = "undefined"
+
+    def example(self, view: SceneView, tau: Any) -> None:
+        """The body of one Hypothesis example (survey or shrink pass)."""
+        __tracebackhide__ = True
+        if self.gave_up:  # reject the rest of the draws without rendering them
+            assume(False)
+        evaluation = self.evaluate(view, tau)
+        record = evaluation.record
+        if not self.shrinking:
+            self.count(record)
+        elif self.failed:
+            self.stats.shrink_examples += 1
+        if record["status"] != "accepted":
+            assume(False)  # not a test: Hypothesis draws another
+        if self.relation.search == "targeted":
+            target(record["deviation"], label="deviation")
+        if record["passed"] or not self.shrinking:
             return
-        if not self.failed:
-            stats.inconsistencies += 1
         self.failed = True
         if not _is_final_example():
             raise RelationFailure("inconsistent (shrinking)")
+        self.fail(view, tau, evaluation)
+
+    def fail(self, view: SceneView, tau: Any, evaluation: _Evaluation, note: str = "") -> None:
+        """Save the failure pictures and raise the :class:`RelationFailure` of ``evaluation``."""
+        __tracebackhide__ = True
+        record, stats = dict(evaluation.record), self.stats
         if self.settings.artifacts is not None:
-            record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id), source.rgb,
-                                         follow.rgb, out_source, out_follow)
+            record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id),
+                                         evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
         stats.minimal = record
-        raise RelationFailure(self.failure_message(view, tau, result, record), stats)
+        raise RelationFailure(self.failure_message(view, tau, evaluation.result, record, note), stats)
 
     def describe_transform(self, tau: Transform) -> str:
         return tau.describe("ref" if self.units is Units.REFERENCE else self.units.value)
 
-    def failure_message(self, view: SceneView, tau: Any, result: MetricResult, record: dict) -> str:
+    def failure_message(self, view: SceneView, tau: Any, result: MetricResult, record: dict, note: str) -> str:
+        camera = record["camera"]
         lines = [
             f"metamorphic relation violated: {self.metric!r} deviates {result.deviation:.4g} from its ideal "
             f"{self.metric.ideal:g}, more than eps={self.relation.eps:g}",
             f"  scene:      {self.scene.name} (content {self.scene.content_hash[:12]})",
-            f"  source:     view {view.name!r} ({view.split}), rendered at "
-            f"{self.camera_for(view).width}x{self.camera_for(view).height}",
+            f"  source:     view {view.name!r} ({view.split}), rendered at {camera['width']}x{camera['height']}",
         ]
         if _mutation_like(tau):
             lines.append(f"  follow-up:  the source render mutated by {tau.describe()}")
         else:
-            lines.append(f"  transform:  {self.describe_transform(tau)}  (minimal after shrinking)")
+            lines.append(f"  transform:  {self.describe_transform(tau)}  ({note or 'minimal after shrinking'})")
             if any((tau.x, tau.y, tau.z)):
                 scale = self.scene.length_scale(self.units)
                 lines.append("              = " + ", ".join(
@@ -414,7 +488,8 @@ class _Engine:
         lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
                      f"{self.relation.eps:g}" + (f" ({details})" if details else ""))
         s = self.stats
-        lines.append(f"  search:     {_plural(s.examples, 'example')}, {s.n_rejected} rejected as invalid, "
+        lines.append(f"  search:     {_plural(s.examples, 'example')}, {s.inconsistencies} inconsistent, "
+                     f"{s.n_rejected} rejected as invalid, {s.n_undefined} undefined, "
                      f"{_plural(s.shrink_examples, 'shrink step')}")
         if record.get("images"):
             images = record["images"]
@@ -431,9 +506,23 @@ class _Engine:
         parts = [f"{n}={getattr(tau, n) * scale * mpu:+.3g}" for n in ("x", "y", "z") if getattr(tau, n)]
         return " = " + ", ".join(parts) + " m"
 
+    # -- replaying recorded examples --------------------------------------------------------------------
+
+    def replay(self, records: list[Any]) -> list[dict[str, Any]]:
+        """Evaluate each recorded example again, exactly: the recorded source pose, camera and follow-up."""
+        out = []
+        for rec in records:
+            view = SceneView(index=-1, name=rec.view, camera=Camera.from_dict(rec.camera),
+                             c2w=np.asarray(rec.source_c2w, dtype=np.float64).reshape(4, 4), split="replayed")
+            out.append(self.evaluate(view, rec.follow_up(), camera=view.camera, units=Units(rec.units)).record)
+        return out
+
 
 def _check_output(output: Any, role: str, where: str, metric: Metric) -> None:
-    """Reject outputs no metric can use: None and non-finite numbers (with the metric's expectation)."""
+    """Reject outputs no metric can use: None and non-finite numbers (with the metric's expectation).
+
+    An array that is *entirely* NaN goes to a metric whose ``nan_means_no_output`` is set (the vector
+    metrics), which reads it as "no output" (undefined)."""
     expects = getattr(metric, "expects", None) or f"what {metric.name} compares"
     if output is None:
         raise SUTOutputError(
@@ -442,7 +531,8 @@ def _check_output(output: Any, role: str, where: str, metric: Metric) -> None:
         )
     if isinstance(output, (float, np.floating)) and not math.isfinite(output):
         raise SUTOutputError(f"the system under test returned {output} on the {role} view ({where}); expected {expects}")
-    if isinstance(output, np.ndarray) and output.dtype.kind in "fc" and not np.isfinite(output).all():
+    if isinstance(output, np.ndarray) and output.dtype.kind in "fc" and not np.isfinite(output).all() \
+            and not (getattr(metric, "nan_means_no_output", False) and output.size and np.isnan(output).all()):
         bad = int(output.size - np.isfinite(output).sum())
         raise SUTOutputError(
             f"the system under test returned an array of shape {output.shape} with {bad} NaN/Inf value(s) on "
@@ -462,16 +552,19 @@ def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[Scene
 
 def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
                    settings: RunSettings | None = None, cache: RenderCache | None = None,
-                   test_id: str = "relation",
+                   test_id: str = "relation", replay: list[Any] | None = None,
                    on_start: Callable[[RelationStats], None] | None = None) -> RelationStats:
     """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
 
     Returns the run's :class:`RelationStats` when the relation held on every valid example; raises
-    :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform otherwise, or
+    :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform, or saying that the
+    SUT produced nothing to test (more than :data:`MAX_UNDEFINED` of the evaluated draws undefined);
     :class:`~pytest_n2r.errors.InvalidArgument` when almost every drawn follow-up view was invalid.
-    ``test_id`` names the run in reports and keys its Hypothesis database entries and seed;
-    ``on_start`` receives the (still empty) stats before the search starts, so a caller keeps them even
-    when the run raises.
+    ``replay``: recorded examples (:class:`~pytest_n2r.report.records.ExampleRecord`, e.g. a baseline's)
+    evaluated exactly, before the search, into ``stats.replayed`` (their verdicts do not fail the run: a
+    baseline comparison judges them). ``test_id`` names the run in reports and keys its Hypothesis database
+    entries and seed; ``on_start`` receives the (still empty) stats before anything runs, so a caller keeps
+    them even when the run raises.
     """
     __tracebackhide__ = True
     if not isinstance(scene, Scene):
@@ -484,11 +577,28 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     settings = settings or RunSettings()
     scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
     cache = cache if cache is not None else RenderCache(None)
-    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps)
+    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
     if on_start is not None:
         on_start(stats)
     engine = _Engine(scene, sut, relation, settings, cache, stats)
-    examples = relation.examples or settings.examples
+    try:
+        if replay is not None:
+            stats.replayed = engine.replay(replay)
+        _search(engine, scene, relation, settings, test_id)
+    except RelationFailure as exc:
+        stats.outcome, stats.message = "failed", str(exc)
+        exc.stats = stats
+        raise
+    except BaseException as exc:
+        stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
+        raise
+    return stats
+
+
+def _search(engine: _Engine, scene: Scene, relation: Relation, settings: RunSettings, test_id: str) -> None:
+    """The survey pass, then (after a failure) the shrink pass; raise the relation's verdict."""
+    __tracebackhide__ = True
+    stats = engine.stats
 
     def example(view: SceneView, tau: Any) -> None:
         __tracebackhide__ = True
@@ -497,31 +607,49 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     # key this run's database entries and (with derandomize) its seed to the test, scene and relation
     example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
     options: dict[str, Any] = {
-        "max_examples": examples, "deadline": None, "derandomize": settings.derandomize,
+        "max_examples": relation.examples or settings.examples, "deadline": None,
+        "derandomize": settings.derandomize,
         "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large],
         # no "explain" phase: it re-runs variations of the failure (renders) to annotate source lines
         "phases": [Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink],
     }
-    if settings.database != "default":
-        options["database"] = settings.database
-    run = hsettings(**options)(given(view=_views_strategy(scene, relation), tau=relation.transform)(example))
-    try:
-        run()
+    database = None if settings.derandomize else (
+        hsettings().database if settings.database == "default" else settings.database)
+    seed = None if settings.derandomize else random.getrandbits(64)  # both passes draw the same examples
+
+    def run(db: Any) -> None:
+        test = given(view=_views_strategy(scene, relation), tau=relation.transform)(example)
+        if seed is not None:
+            test = hypothesis_seed(seed)(test)
+        hsettings(**options, database=db)(test)()
+
+    try:  # the survey: records every draw, never fails (and leaves the example database as it was)
+        run(None if database is None else ReadOnlyDatabase(database))
     except Unsatisfiable:
-        stats.outcome = "error"
-        raise InvalidArgument(_too_many_invalid(stats, relation)) from None
-    except RelationFailure as exc:
-        stats.outcome, stats.message = "failed", str(exc)
-        exc.stats = stats
-        raise
-    except BaseException as exc:
-        stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
-        raise
-    drawn = stats.examples + stats.n_rejected
-    if engine.gave_up or (drawn and stats.n_rejected / drawn > relation.validity.max_rejected):
-        stats.outcome = "error"
+        pass
+    drawn = stats.examples + stats.n_rejected + stats.n_undefined
+    evaluated = stats.examples + stats.n_undefined
+    if stats.n_undefined and stats.n_undefined / evaluated > MAX_UNDEFINED:
+        raise RelationFailure(_nothing_to_test(stats, relation), stats)
+    if engine.gave_up == "invalid" or not drawn or stats.n_rejected / drawn > relation.validity.max_rejected:
         raise InvalidArgument(_too_many_invalid(stats, relation))
-    return stats
+    if not stats.inconsistencies:
+        return
+    engine.shrinking = True
+    try:
+        run(database)
+    except Unsatisfiable:
+        pass
+    # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic): report the
+    # survey's worst failing example as it was drawn
+    worst = stats.worst
+    view = SceneView(index=-1, name=worst["view"], camera=Camera.from_dict(worst["camera"]),
+                     c2w=np.asarray(worst["source_c2w"]).reshape(4, 4), split="drawn")
+    from .report.records import ExampleRecord
+
+    tau = ExampleRecord.from_dict(worst).follow_up()
+    engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
+                note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
 
 
 def _shown_path(path: str | os.PathLike) -> str:
@@ -533,8 +661,19 @@ def _shown_path(path: str | os.PathLike) -> str:
         return str(path)
 
 
+def _nothing_to_test(stats: RelationStats, relation: Relation) -> str:
+    evaluated = stats.examples + stats.n_undefined
+    reasons = "; ".join(f"{n}x {r}" for r, n in stats.undefined.most_common(3))
+    return (
+        f"the SUT produced nothing to test: {relation.metric!r} was undefined on {stats.n_undefined} of "
+        f"{evaluated} evaluated draws ({stats.n_undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
+        f"{stats.scene!r}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
+        "never passes a relation"
+    )
+
+
 def _too_many_invalid(stats: RelationStats, relation: Relation) -> str:
-    drawn = stats.examples + stats.n_rejected
+    drawn = stats.examples + stats.n_rejected + stats.n_undefined
     share = stats.n_rejected / drawn if drawn else 1.0
     reasons = ", ".join(f"{r}: {n}" for r, n in stats.rejected.most_common()) or "no valid example"
     return (
@@ -542,4 +681,3 @@ def _too_many_invalid(stats: RelationStats, relation: Relation) -> str:
         f"{drawn} draws ({reasons}); narrow the bounds (or use look_at=True) so most follow-up views stay "
         "in the captured region"
     )
-

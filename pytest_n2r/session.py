@@ -175,11 +175,13 @@ class N2RSession:
             self._loaded[spec.source] = scene
         return scene
 
-    def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str) -> RelationStats:
-        """Check ``relation`` for ``sut`` on ``scene``; the stats are kept whatever the outcome."""
+    def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
+            replay: list[Any] | None = None) -> RelationStats:
+        """Check ``relation`` for ``sut`` on ``scene`` (replaying ``replay``, a baseline's examples, first);
+        the stats are kept whatever the outcome."""
         __tracebackhide__ = True
         return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
-                              on_start=self.stats.append)
+                              replay=replay, on_start=self.stats.append)
 
 
 def load_scene_spec(spec: SceneSpec, device: str = "auto") -> Scene:

@@ -1,8 +1,17 @@
-"""Baselines: save a run's examples and scores, compare a later run against them.
+"""Baselines: save every example of a run, replay exactly those examples later and compare them in pairs.
 
-A baseline is JSON with stable ordering (sorted keys, relations by test id) so it diffs well in review.
-Comparison works on **deviations** (0 = ideal, larger = worse), whatever the metric's direction, so one
-rule means the same for repeatability and for an L2 distance.
+A baseline is JSON with stable ordering (sorted keys, relations by test id) so it diffs well in review. It
+holds, per relation, one record per drawn example with all a replay needs (see
+:class:`~pytest_n2r.report.records.ExampleRecord`). ``--n2r-compare`` replays the baseline's accepted
+examples on the current code, pairs each with its baseline record and judges the per-example changes of
+the **deviation** (0 = ideal, larger = worse, whatever the metric's direction): the relation regressed when
+a one-sided bootstrap lower confidence bound of the mean increase exceeds the margin the user sets
+(:func:`compare_paired`). Unchanged code gives identical deviations (renders and SUTs are deterministic),
+so its bound is exactly 0.
+
+Every number of a baseline is checked on load (:func:`load_baseline`): a baseline that could silently pass
+a regression (no relations, a NaN deviation, a malformed example) is a :class:`BaselineError` naming the
+file, the relation, the example and the field.
 """
 
 from __future__ import annotations
@@ -11,161 +20,361 @@ import json
 import math
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
-from .records import STATS, RelationRecord
+from .records import STATUSES, ExampleRecord, RelationRecord
 
-__all__ = ["FORMAT", "save_baseline", "load_baseline", "CompareRule", "parse_compare_rules", "Comparison",
-           "compare_runs", "format_comparison_table"]
+__all__ = ["FORMAT", "VERSION", "BaselineError", "save_baseline", "load_baseline", "OUTCOMES", "DEFAULT_FAIL_ON",
+           "PairedComparison", "parse_margin", "parse_outcomes", "compare_paired", "paired_bound",
+           "format_comparison_table", "replay_candidates"]
 
 FORMAT = "pytest-n2r-baseline"
-VERSION = 1
+VERSION = 2
+
+#: What comparing one relation with its baseline can give, and what each means.
+OUTCOMES = {
+    "ok": "paired examples replayed; the mean increase of the deviation is within the margin",
+    "worse": "the lower confidence bound of the mean increase of the deviation exceeds the margin",
+    "lost": "more than 10% of the baseline's examples are no longer tests (the metric is undefined now)",
+    "no-pairs": "nothing could be paired (the relation errored, or no example was replayed)",
+    "changed-scene": "the baseline was recorded on different scene content (content hash)",
+    "changed-metric": "the relation's metric changed, so deviations cannot be compared",
+    "changed-eps": "paired examples are within the margin, but the relation's eps changed",
+    "missing": "in the baseline but not run (deselected, renamed or deleted)",
+    "new": "run but not in the baseline (nothing to compare with)",
+}
+#: Outcomes that fail the run unless ``--n2r-compare-fail-on`` says otherwise.
+DEFAULT_FAIL_ON = ("worse", "lost", "no-pairs", "changed-scene", "changed-metric", "missing")
+#: Share of a baseline's accepted examples that may become undefined before a relation is "lost".
+MAX_LOST = 0.1
+#: Bootstrap resamples of the paired bound (a fixed seed: the same pairs always give the same verdict).
+BOOTSTRAP_RESAMPLES = 4000
+
+
+class BaselineError(N2RError):
+    """A baseline file that cannot be used: missing, unreadable, from another version, or malformed."""
+
+
+# -- writing --------------------------------------------------------------------------------------------
+
+
+def _plain_number(value: float) -> float | None:
+    """JSON has no NaN: a non-finite number (the score of a rejected or undefined example) is written null."""
+    return value if isinstance(value, (int, float)) and math.isfinite(value) else None
 
 
 def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta: dict | None = None) -> Path:
-    """Write every relation's examples (scene, view, transform, score, deviation) to ``path`` atomically."""
+    """Write every relation's drawn examples (all statuses, replay data included) to ``path`` atomically."""
     data = {
         "format": FORMAT,
         "version": VERSION,
         "meta": meta or {},
         "relations": {
             r.nodeid: {
-                "metric": r.metric,
-                "eps": r.eps,
-                "stats": r.stats(),
+                "metric": r.metric, "eps": r.eps, "scene": r.scene, "scene_hash": r.scene_hash,
+                "outcome": r.outcome,
                 "examples": [
-                    {k: getattr(e, k) for k in ("scene", "view", "transform", "score", "deviation", "passed", "valid")}
+                    {**{k: v for k, v in e.to_dict().items() if k != "images"},
+                     "score": _plain_number(e.score), "deviation": _plain_number(e.deviation)}
                     for e in r.examples
                 ],
             }
             for r in sorted(relations, key=lambda r: r.nodeid)
         },
     }
-    return atomic_write_text(path, json.dumps(data, indent=1, sort_keys=True, allow_nan=True) + "\n")
+    return atomic_write_text(path, json.dumps(data, indent=1, sort_keys=True, allow_nan=False) + "\n")
+
+
+# -- reading and validating -----------------------------------------------------------------------------
 
 
 def load_baseline(path: str | os.PathLike) -> dict[str, RelationRecord]:
-    """Read a baseline written by :func:`save_baseline`; raise :class:`N2RError` naming what is wrong."""
+    """Read and validate a baseline written by :func:`save_baseline`; :class:`BaselineError` names what
+    is wrong (file, relation, example, field) and how to fix it."""
     path = Path(path)
+    regenerate = f"regenerate it with --n2r-save-baseline {path}"
     if not path.is_file():
-        raise N2RError(f"baseline {path} does not exist; create it with --n2r-save-baseline {path}")
+        raise BaselineError(f"baseline {path} does not exist; create it with --n2r-save-baseline {path}")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise N2RError(f"baseline {path} is not readable JSON: {exc}") from None
+        data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
+        raise BaselineError(f"baseline {path} is not readable JSON: {exc}; {regenerate}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise N2RError(f"baseline {path} is not a pytest-n2r baseline (missing \"format\": \"{FORMAT}\")")
+        raise BaselineError(f"baseline {path} is not a pytest-n2r baseline (missing \"format\": \"{FORMAT}\")")
     if data.get("version") != VERSION:
-        raise N2RError(
+        raise BaselineError(
             f"baseline {path} has format version {data.get('version')!r}; this pytest-n2r reads version "
-            f"{VERSION}. Regenerate it with --n2r-save-baseline"
+            f"{VERSION} (paired replay); {regenerate}"
+        )
+    relations = data.get("relations")
+    if not isinstance(relations, dict) or not relations:
+        raise BaselineError(
+            f"baseline {path} has no relations: it would let every relation pass as new; {regenerate} "
+            "on a run that has relation tests"
         )
     out = {}
-    for nodeid, rel in data.get("relations", {}).items():
+    for nodeid, rel in relations.items():
         try:
-            out[nodeid] = RelationRecord.from_dict({"nodeid": nodeid, **rel})
-        except (KeyError, TypeError, ValueError) as exc:
-            raise N2RError(f"baseline {path}: relation {nodeid!r} is malformed ({exc!r})") from None
+            out[nodeid] = _relation(nodeid, rel)
+        except _Bad as exc:
+            raise BaselineError(f"baseline {path}: relation {nodeid!r}: {exc}; {regenerate}") from None
     return out
 
 
-@dataclass(frozen=True)
-class CompareRule:
-    """Fail when statistic ``stat`` of the deviations grows by more than ``limit`` (absolute), or by more
-    than ``limit`` percent of the baseline value when ``percent`` is set."""
-
-    stat: str
-    limit: float
-    percent: bool = False
-
-    def __str__(self) -> str:
-        return f"{self.stat}:{self.limit:g}{'%' if self.percent else ''}"
-
-    def worse_by(self, baseline: float, candidate: float) -> float:
-        """How much worse ``candidate`` is, in the rule's unit (absolute or percent)."""
-        diff = candidate - baseline
-        if not self.percent:
-            return diff
-        return math.inf if baseline == 0 and diff > 0 else (0.0 if baseline == 0 else 100.0 * diff / abs(baseline))
-
-    def fails(self, baseline: float, candidate: float) -> bool:
-        if math.isnan(baseline) or math.isnan(candidate):
-            return False
-        return self.worse_by(baseline, candidate) > self.limit
+class _Bad(Exception):
+    """A field of a baseline that fails validation (the message names it)."""
 
 
-_RULE = re.compile(r"^\s*(?P<stat>[a-z0-9]+)\s*:\s*(?P<value>[0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s*(?P<pct>%?)\s*$")
+def _reject_constant(name: str) -> float:
+    raise ValueError(f"{name} is not a number JSON allows (pytest-n2r writes null for 'no value')")
 
 
-def parse_compare_rules(spec: str | list[str]) -> list[CompareRule]:
-    """Parse ``"mean:0.05"``, ``"p90:0.1,rate:10%"`` (or a list of such) into rules.
+def _number(value: Any, where: str, *, minimum: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise _Bad(f"{where}={value!r}; expected a finite number")
+    if minimum is not None and value < minimum:
+        raise _Bad(f"{where}={value!r}; expected a number >= {minimum:g}")
+    return float(value)
 
-    >>> parse_compare_rules("mean:0.05,p90:10%")
-    [CompareRule(stat='mean', limit=0.05, percent=False), CompareRule(stat='p90', limit=10.0, percent=True)]
+
+def _text(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise _Bad(f"{where}={value!r}; expected a string")
+    return value
+
+
+def _relation(nodeid: str, rel: Any) -> RelationRecord:
+    if not isinstance(rel, dict):
+        raise _Bad(f"expected an object, got {type(rel).__name__}")
+    for key in ("metric", "eps", "scene_hash", "examples"):
+        if key not in rel:
+            raise _Bad(f"missing field {key!r}")
+    examples = rel["examples"]
+    if not isinstance(examples, list):
+        raise _Bad(f"examples={type(examples).__name__}; expected a list of example records")
+    return RelationRecord(
+        nodeid=nodeid, metric=_text(rel["metric"], "metric"), eps=_number(rel["eps"], "eps", minimum=0),
+        scene=_text(rel.get("scene", ""), "scene"), scene_hash=_text(rel["scene_hash"], "scene_hash"),
+        outcome=_text(rel.get("outcome", "passed"), "outcome"),
+        examples=[_example(e, f"examples[{i}]") for i, e in enumerate(examples)],
+    )
+
+
+_CAMERA_INTS = ("width", "height")
+_CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
+_TRANSFORM_FIELDS = ("roll", "pitch", "yaw", "x", "y", "z")
+
+
+def _example(e: Any, where: str) -> ExampleRecord:
+    if not isinstance(e, dict):
+        raise _Bad(f"{where} is {type(e).__name__}; expected an example object")
+    status = e.get("status")
+    if status not in STATUSES:
+        raise _Bad(f"{where}.status={status!r}; expected one of {STATUSES}")
+    _text(e.get("view"), f"{where}.view")
+    _text(e.get("scene_hash", ""), f"{where}.scene_hash")
+    c2w = e.get("source_c2w")
+    if not isinstance(c2w, list) or len(c2w) != 16:
+        raise _Bad(f"{where}.source_c2w must be 16 numbers (a row-major 4x4 camera-to-world pose)")
+    for k, v in enumerate(c2w):
+        _number(v, f"{where}.source_c2w[{k}]")
+    camera = e.get("camera")
+    if not isinstance(camera, dict):
+        raise _Bad(f"{where}.camera must be an object with width, height, fx, fy, cx, cy")
+    for key in _CAMERA_INTS:
+        value = camera.get(key)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise _Bad(f"{where}.camera.{key}={value!r}; expected a whole number of pixels >= 1")
+    for key in _CAMERA_FLOATS:
+        _number(camera.get(key), f"{where}.camera.{key}", minimum=1e-9 if key in ("fx", "fy") else None)
+    transform, mutation = e.get("transform"), e.get("mutation")
+    if transform is None and not isinstance(mutation, dict):
+        raise _Bad(f"{where} has neither a transform nor a mutation")
+    if transform is not None:
+        if not isinstance(transform, dict) or set(transform) - set(_TRANSFORM_FIELDS):
+            raise _Bad(f"{where}.transform={transform!r}; expected an object with fields of {_TRANSFORM_FIELDS}")
+        for key, value in transform.items():
+            _number(value, f"{where}.transform.{key}")
+    if isinstance(mutation, dict) and "name" in mutation:
+        from ..mutations import mutation_from_dict
+
+        try:
+            mutation_from_dict(mutation)
+        except N2RError as exc:
+            raise _Bad(f"{where}.mutation: {exc}") from None
+    if e.get("units", "reference") not in ("reference", "scene", "metres"):
+        raise _Bad(f"{where}.units={e.get('units')!r}; expected 'reference', 'scene' or 'metres'")
+    score, deviation = e.get("score"), e.get("deviation")
+    if status == "accepted":
+        score = _number(score, f"{where}.score")
+        deviation = _number(deviation, f"{where}.deviation (an accepted example)", minimum=0)
+        if not isinstance(e.get("passed"), bool):
+            raise _Bad(f"{where}.passed={e.get('passed')!r}; expected true or false")
+    else:
+        if score is not None or deviation is not None:
+            raise _Bad(f"{where} is {status} but has a score or deviation (expected null)")
+        score = deviation = math.nan
+    return ExampleRecord.from_dict({**e, "score": score, "deviation": deviation, "passed": bool(e.get("passed"))})
+
+
+# -- comparing ------------------------------------------------------------------------------------------
+
+
+def replay_candidates(baseline: RelationRecord) -> list[ExampleRecord]:
+    """The baseline examples a comparison replays: the accepted ones (the others tested nothing)."""
+    return [e for e in baseline.examples if e.valid and e.replayable]
+
+
+def paired_bound(changes: list[float], confidence: float = 0.95) -> float:
+    """One-sided lower confidence bound of the mean of paired ``changes`` (percentile bootstrap,
+    :data:`BOOTSTRAP_RESAMPLES` resamples, fixed seed). NaN for no changes.
+
+    >>> paired_bound([0.0] * 20)
+    0.0
+    >>> round(paired_bound([0.1] * 10 + [0.0] * 10), 2)
+    0.03
     """
-    parts = [spec] if isinstance(spec, str) else list(spec)
-    rules = []
-    for part in (p for chunk in parts for p in chunk.split(",") if p.strip()):
-        m = _RULE.match(part)
-        if not m or m["stat"] not in STATS:
-            raise InvalidArgument(
-                f"--n2r-compare-fail={part!r}: expected STAT:LIMIT or STAT:LIMIT% with STAT one of "
-                f"{', '.join(STATS)} (e.g. mean:0.05 or p90:10%)"
-            )
-        rules.append(CompareRule(m["stat"], float(m["value"]), bool(m["pct"])))
-    return rules
+    x = np.asarray(changes, dtype=np.float64)
+    if x.size == 0 or not np.isfinite(x).all():
+        return math.nan
+    if np.all(x == x[0]):
+        return float(x[0])
+    rng = np.random.default_rng(0)
+    means = x[rng.integers(0, x.size, size=(BOOTSTRAP_RESAMPLES, x.size))].mean(axis=1)
+    return float(np.quantile(means, 1.0 - confidence))
 
 
 @dataclass
-class Comparison:
-    """A relation compared with its baseline: the statistics side by side and the rules it broke."""
+class PairedComparison:
+    """One relation against its baseline: ``n`` paired examples, the mean change of the deviation
+    (candidate − baseline; positive is worse), its lower confidence ``bound``, ``lost`` examples (a test
+    in the baseline, undefined or rejected now), the ``outcome`` (a key of :data:`OUTCOMES`) with its
+    ``message``, and whether it ``fails`` the run."""
 
     nodeid: str
-    baseline: dict[str, float]
-    candidate: dict[str, float]
-    failed_rules: list[str]
-    status: str  # "ok", "worse", "new" (no baseline), "stale" (metric or eps changed)
+    outcome: str
+    n: int = 0
+    mean_change: float = math.nan
+    bound: float = math.nan
+    lost: int = 0
+    message: str = ""
+    fails: bool = False
+    notes: list[str] = field(default_factory=list)
 
-    @property
-    def failed(self) -> bool:
-        return self.status == "worse"
+
+_MARGIN = re.compile(r"^\s*mean\s*:\s*(?P<value>[0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s*$")
 
 
-def compare_runs(
-    baseline: dict[str, RelationRecord], current: list[RelationRecord], rules: list[CompareRule]
-) -> list[Comparison]:
-    """Compare each current relation with the baseline relation of the same test id."""
-    out = []
-    for rel in sorted(current, key=lambda r: r.nodeid):
-        cand = rel.stats()
-        base_rel = baseline.get(rel.nodeid)
-        if base_rel is None:
-            out.append(Comparison(rel.nodeid, {}, cand, [], "new"))
-            continue
-        base = base_rel.stats()
-        if base_rel.metric != rel.metric or base_rel.eps != rel.eps:
-            out.append(Comparison(rel.nodeid, base, cand, [], "stale"))
-            continue
-        broken = [
-            f"{r} (baseline {base[r.stat]:.4f} -> {cand[r.stat]:.4f})" for r in rules if r.fails(base[r.stat], cand[r.stat])
-        ]
-        out.append(Comparison(rel.nodeid, base, cand, broken, "worse" if broken else "ok"))
+def parse_margin(spec: str | list[str] | None) -> float:
+    """The margin of ``--n2r-compare-fail mean:MARGIN`` (absolute deviation units, default 0.02).
+
+    >>> parse_margin("mean:0.05")
+    0.05
+    """
+    parts = [p for chunk in ([spec] if isinstance(spec, str) else spec or []) for p in chunk.split(",") if p.strip()]
+    if not parts:
+        return 0.02
+    if len(parts) > 1:
+        raise InvalidArgument(f"--n2r-compare-fail={','.join(parts)!r}: give one rule, mean:MARGIN")
+    m = _MARGIN.match(parts[0])
+    if not m:
+        raise InvalidArgument(
+            f"--n2r-compare-fail={parts[0]!r}: expected mean:MARGIN, the largest allowed mean increase of the "
+            "deviation per paired example (e.g. mean:0.02); the gate compares the same examples in pairs"
+        )
+    return float(m["value"])
+
+
+def parse_outcomes(spec: str | list[str] | None) -> tuple[str, ...]:
+    """Outcomes that fail the run, from ``--n2r-compare-fail-on`` (comma-separated), default
+    :data:`DEFAULT_FAIL_ON`."""
+    parts = [p.strip() for chunk in ([spec] if isinstance(spec, str) else spec or []) for p in chunk.split(",")
+             if p.strip()]
+    if not parts:
+        return DEFAULT_FAIL_ON
+    unknown = [p for p in parts if p not in OUTCOMES or p == "ok"]
+    if unknown:
+        raise InvalidArgument(f"--n2r-compare-fail-on={','.join(parts)!r}: unknown outcome(s) {unknown}; expected "
+                              f"some of {', '.join(o for o in OUTCOMES if o != 'ok')}")
+    return tuple(parts)
+
+
+def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRecord], *, margin: float = 0.02,
+                   confidence: float = 0.95, fail_on: tuple[str, ...] = DEFAULT_FAIL_ON) -> list[PairedComparison]:
+    """Compare every current relation with the same test id's baseline on the replayed examples, in pairs;
+    baseline relations that did not run are ``missing``."""
+    out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence) for rel in sorted(current, key=lambda r: r.nodeid)]
+    ran = {rel.nodeid for rel in current}
+    out += [PairedComparison(nodeid, "missing", message="in the baseline but not run in this session (deselected, "
+                             "renamed or deleted); run it, or pass --n2r-compare-fail-on without 'missing'")
+            for nodeid in sorted(set(baseline) - ran)]
+    for c in out:
+        c.fails = c.outcome in fail_on
     return out
 
 
-def format_comparison_table(comparisons: list[Comparison], stats: tuple[str, ...] = ("mean", "p90", "rate")) -> str:
-    """A plain-text table of baseline vs candidate per relation, for the terminal summary."""
-    header = ["relation", *[f"{s} base→cand" for s in stats], "status"]
+def _compare_one(base: RelationRecord | None, cur: RelationRecord, margin: float, confidence: float) -> PairedComparison:
+    nodeid = cur.nodeid
+    if base is None:
+        return PairedComparison(nodeid, "new", message="not in the baseline: nothing to compare with (save a new "
+                                "baseline to include it)")
+    if base.metric != cur.metric:
+        return PairedComparison(nodeid, "changed-metric", message=f"metric changed from {base.metric} to "
+                                f"{cur.metric}: deviations are not comparable; save a new baseline")
+    if base.scene_hash != cur.scene_hash:
+        return PairedComparison(
+            nodeid, "changed-scene", message=f"recorded on scene content {base.scene_hash[:12]}, run on "
+            f"{cur.scene_hash[:12]} (the scene file, its render settings or pytest-n2r's renderer changed): the "
+            "examples cannot be replayed as they were; save a new baseline on the new scene")
+    base_examples = replay_candidates(base)
+    replayed = cur.replayed or []
+    if not replayed or len(replayed) != len(base_examples):
+        why = f"the relation ended in {cur.outcome}" if cur.outcome == "error" else "no example was replayed"
+        return PairedComparison(nodeid, "no-pairs", message=f"{why}: nothing to pair with the baseline's "
+                                f"{len(base_examples)} examples")
+    changes, lost = [], 0
+    for b, c in zip(base_examples, replayed):
+        if c.valid:
+            changes.append(c.deviation - b.deviation)
+        else:
+            lost += 1
+    n = len(changes)
+    mean = math.fsum(changes) / n if n else math.nan
+    bound = paired_bound(changes, confidence)
+    result = PairedComparison(nodeid, "ok", n, mean, bound, lost)
+    if base.eps != cur.eps:
+        result.notes.append(f"eps changed {base.eps:g} -> {cur.eps:g}")
+    if math.isnan(bound):
+        result.outcome = "no-pairs"
+        result.message = f"no paired example is a test now ({lost} of {len(base_examples)} undefined or rejected)"
+    elif lost > MAX_LOST * len(base_examples):
+        result.outcome = "lost"
+        result.message = (f"{lost} of {len(base_examples)} baseline examples are no longer tests (the metric is "
+                          "undefined on them now: the SUT produced nothing to compare)")
+    elif bound > margin:
+        result.outcome = "worse"
+        result.message = (f"the deviation grew by {mean:+.4f} on average over {n} paired examples; its "
+                          f"{confidence:.0%} lower bound {bound:+.4f} exceeds the margin {margin:g}")
+    elif base.eps != cur.eps:
+        result.outcome = "changed-eps"
+        result.message = f"within the margin, but eps changed from {base.eps:g} to {cur.eps:g}"
+    return result
+
+
+def format_comparison_table(comparisons: list[PairedComparison], confidence: float = 0.95) -> str:
+    """A plain-text table per relation: n, mean change, its lower confidence bound, verdict."""
+    header = ["relation", "n", "mean change", f"{confidence:.0%} lower bound", "verdict"]
     rows = [header]
     for c in comparisons:
-        cells = [c.nodeid]
-        for s in stats:
-            b, k = c.baseline.get(s, math.nan), c.candidate.get(s, math.nan)
-            cells.append("—" if math.isnan(b) else f"{b:.3f}→{k:.3f}")
-        cells.append(c.status + (": " + "; ".join(c.failed_rules) if c.failed_rules else ""))
-        rows.append(cells)
+        verdict = c.outcome + (" (fails)" if c.fails else "") + (f" [{'; '.join(c.notes)}]" if c.notes else "")
+        rows.append([c.nodeid, str(c.n) if c.n or c.outcome in ("ok", "worse", "lost") else "—",
+                     "—" if math.isnan(c.mean_change) else f"{c.mean_change:+.4f}",
+                     "—" if math.isnan(c.bound) else f"{c.bound:+.4f}", verdict])
     widths = [max(len(r[i]) for r in rows) for i in range(len(header))]
     return "\n".join("  ".join(cell.ljust(w) for cell, w in zip(r, widths)).rstrip() for r in rows)

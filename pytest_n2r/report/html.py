@@ -78,6 +78,12 @@ def _example_block(title: str, ex: ExampleRecord) -> str:
     )
 
 
+def _floor(rel: RelationRecord) -> str:
+    """The relation's field floor line (what the scene field alone costs, :mod:`pytest_n2r.floor`), or a dash."""
+    line = (rel.floor or {}).get("line")
+    return html.escape(line) if line else "—"
+
+
 def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report") -> str:
     """The report as one HTML string."""
     summary_rows = []
@@ -89,9 +95,10 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
         anchor = f"rel{i}"
         summary_rows.append(
             f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{rel.outcome}">'
-            f"{rel.outcome}</td><td>{len(rel.examples)}</td><td>{rel.rejected}</td><td>{rel.inconsistencies}</td>"
-            f"<td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
-            f"<td>{'—' if worst is None else f'{worst.deviation:.4f}'}</td><td>{rel.eps:g}</td></tr>"
+            f"{rel.outcome}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
+            f"<td>{rel.inconsistencies}</td><td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
+            f"<td>{'—' if worst is None else f'{worst.deviation:.4f}'}</td><td>{rel.eps:g}</td>"
+            f"<td>{_floor(rel)}</td></tr>"
         )
         timings = ", ".join(f"{k} {v:.2f} s" for k, v in rel.timings.items())
         body = [
@@ -110,8 +117,9 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
     return (
         f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
         f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
-        "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th>"
-        "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th></tr></thead><tbody>"
+        "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
+        "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr></thead>"
+        "<tbody>"
         + "".join(summary_rows) + "</tbody></table>" + "\n".join(sections) + "</body></html>\n"
     )
 

@@ -1,4 +1,12 @@
-"""Plain-data records of relation runs (JSON-ready; no pytest, no numpy objects)."""
+"""Plain-data records of relation runs (JSON-ready; no pytest, no numpy objects).
+
+One :class:`ExampleRecord` per drawn example -- accepted, rejected (invalid follow-up view) or undefined
+(the metric had no value, e.g. the SUT found no keypoint) -- with everything needed to replay it bit for
+bit: the scene's content hash, the source view's name, pose and camera (render size), the render
+settings, and the follow-up (a pose transform with its units, or a mutation with its parameters).
+A :class:`RelationRecord` holds every example of one relation run plus its verdict and, on fitted scenes,
+its ``floor`` (the deviation the scene field alone causes, :mod:`pytest_n2r.floor`).
+"""
 
 from __future__ import annotations
 
@@ -6,39 +14,98 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS"]
+from ..errors import InvalidArgument
+
+__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES"]
+
+#: What happened to a drawn example.
+STATUSES = ("accepted", "rejected", "undefined")
 
 
 @dataclass
 class ExampleRecord:
-    """One example of a relation: which view and transform, the metric's score and deviation.
+    """One drawn example of a relation.
 
-    ``transform`` is the transform's fields (``{"yaw": 5.0, "x": 0.1, ...}``, degrees and reference lengths)
-    or a mutation's description (``{"mutation": "brightness(delta=30)"}``). ``valid`` is False for an
-    example rejected because the follow-up view was outside what the field can render faithfully.
+    ``transform`` is a pose transform's fields (``{"yaw": 5.0, "x": 0.1, ...}``, degrees, translations in
+    ``units``), or ``None`` when the follow-up is a ``mutation`` (``{"name": "brightness", "levels": 30}``).
+    ``status`` is ``"accepted"`` (a test: ``score``, ``deviation`` and ``passed`` are set), ``"rejected"``
+    (the follow-up view was outside what the scene renders faithfully) or ``"undefined"`` (the metric had
+    no value); ``reason`` says why for the last two (score and deviation are then NaN). ``scene_hash``,
+    ``source_c2w`` (16 floats, row-major camera-to-world, OpenCV axes), ``camera``
+    (:meth:`~pytest_n2r.geometry.Camera.to_dict`, the render size included) and ``settings`` (the scene's
+    render settings) make the example replayable exactly.
     """
 
     scene: str
     view: str
-    transform: dict[str, Any]
+    transform: dict[str, Any] | None
     score: float
     deviation: float
     passed: bool
-    valid: bool = True
+    status: str = "accepted"
+    reason: str = ""
+    scene_hash: str = ""
+    source_c2w: list[float] = field(default_factory=list)
+    camera: dict[str, Any] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    units: str = "reference"
+    mutation: dict[str, Any] | None = None
     images: dict[str, str] = field(default_factory=dict)
 
+    @property
+    def valid(self) -> bool:
+        """True for an accepted example (one that tested the SUT)."""
+        return self.status == "accepted"
+
     def key(self) -> tuple:
-        """Identity of the example (scene, view, transform): what a baseline comparison pairs on."""
-        return (self.scene, self.view, tuple(sorted((k, _round(v)) for k, v in self.transform.items())))
+        """Identity of the example: scene content, source pose and camera, follow-up."""
+        follow = self.transform if self.mutation is None else self.mutation
+        return (self.scene_hash, self.view, tuple(_round(v) for v in self.source_c2w),
+                tuple(sorted((k, _round(v)) for k, v in self.camera.items() if k != "distortion")), self.units,
+                tuple(sorted((k, _round(v)) for k, v in (follow or {}).items())))
+
+    @property
+    def replayable(self) -> bool:
+        """Whether the record holds all a replay needs (a source pose, a camera and a rebuildable follow-up)."""
+        return len(self.source_c2w) == 16 and bool(self.camera) and (
+            self.transform is not None or (self.mutation is not None and "name" in self.mutation))
+
+    def follow_up(self) -> Any:
+        """The follow-up as an object: a :class:`~pytest_n2r.geometry.Transform` or a mutation."""
+        if self.mutation is not None:
+            from ..mutations import mutation_from_dict
+
+            return mutation_from_dict(self.mutation)
+        from ..geometry import Transform
+
+        return Transform(**(self.transform or {}))
+
+    def describe(self) -> str:
+        """``view 'v3', yaw=5, x=0.1`` (or the mutation's parameters), for messages."""
+        follow = self.mutation if self.mutation is not None else self.transform or {}
+        parts = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in follow.items() if v)
+        return f"view {self.view!r}, {parts or 'identity'}"
 
     @classmethod
     def from_dict(cls, data: dict) -> "ExampleRecord":
+        """The record of a plain dict (unknown keys ignored); ``valid=False`` in old data means rejected."""
+        data = dict(data)
+        if "status" not in data and data.get("valid") is False:
+            data["status"] = "rejected"
         return cls(**{k: data[k] for k in cls.__dataclass_fields__ if k in data})
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 
 @dataclass
 class RelationRecord:
-    """Every example of one relation (one test id) plus its verdict and timing split (seconds)."""
+    """Every example of one relation (one test id) plus its verdict and timing split (seconds).
+
+    ``replayed`` holds the baseline examples replayed before the search (``None`` when none were asked
+    for). ``floor`` is the plain dict of the field-floor measurement beside the result (``None`` when none
+    was made); reports show its ``line`` beside the relation's deviations.
+    """
 
     nodeid: str
     metric: str
@@ -48,6 +115,9 @@ class RelationRecord:
     message: str = ""
     timings: dict[str, float] = field(default_factory=dict)
     minimal: ExampleRecord | None = None
+    scene: str = ""
+    scene_hash: str = ""
+    replayed: list[ExampleRecord] | None = None
     #: The field floor beside the result (:func:`pytest_n2r.floor.annotate_relation`; ``None`` on exact scenes).
     floor: dict[str, Any] | None = None
 
@@ -57,7 +127,11 @@ class RelationRecord:
 
     @property
     def rejected(self) -> int:
-        return sum(not e.valid for e in self.examples)
+        return sum(e.status == "rejected" for e in self.examples)
+
+    @property
+    def undefined(self) -> int:
+        return sum(e.status == "undefined" for e in self.examples)
 
     @property
     def inconsistencies(self) -> int:
@@ -78,17 +152,20 @@ class RelationRecord:
 
     @classmethod
     def from_dict(cls, data: dict) -> "RelationRecord":
-        minimal = data.get("minimal")
+        minimal, replayed = data.get("minimal"), data.get("replayed")
         return cls(
             nodeid=data["nodeid"], metric=data["metric"], eps=float(data["eps"]),
             examples=[ExampleRecord.from_dict(e) for e in data.get("examples", [])],
             outcome=data.get("outcome", "passed"), message=data.get("message", ""),
             timings=dict(data.get("timings", {})),
-            minimal=ExampleRecord.from_dict(minimal) if minimal else None, floor=data.get("floor"),
+            minimal=ExampleRecord.from_dict(minimal) if minimal else None,
+            scene=data.get("scene", ""), scene_hash=data.get("scene_hash", ""),
+            replayed=None if replayed is None else [ExampleRecord.from_dict(e) for e in replayed],
+            floor=data.get("floor"),
         )
 
 
-#: Statistics of a relation's deviations (0 = ideal, larger = worse) that baselines compare.
+#: Statistics of a relation's deviations (0 = ideal, larger = worse) that reports show.
 STATS = ("mean", "median", "p10", "p90", "max", "rate")
 
 
@@ -120,3 +197,10 @@ def deviation_stats(deviations: list[float], eps: float) -> dict[str, float]:
 
 def _round(value: Any) -> Any:
     return round(value, 9) if isinstance(value, float) else value
+
+
+def check_status(status: Any, where: str) -> str:
+    """``status`` if it is one of :data:`STATUSES`, else :class:`InvalidArgument` naming ``where``."""
+    if status not in STATUSES:
+        raise InvalidArgument(f"{where}: status={status!r}; expected one of {STATUSES}")
+    return status

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 
 import pytest
@@ -47,11 +48,13 @@ def test_the_database_replays_the_last_failure_first(n2r_project):
 def test_heading(n2r_scene):
     return heading_class
 """)
-    first = n2r_project.run("--n2r-scene", RAMP)
-    second = n2r_project.run("--n2r-scene", RAMP)
+    first = n2r_project.run("--n2r-scene", RAMP, "--n2r-json", "first.json")
+    second = n2r_project.run("--n2r-scene", RAMP, "--n2r-json", "second.json")
     second.assert_outcomes(failed=1)
-    line = n2r_project.summary(second, "test_heading[ramp]")
-    assert line.startswith("FAILED") and ": 1 example," in line, f"the replay should fail at once: {line}"
+    (before,) = json.loads((n2r_project.pytester.path / "first.json").read_text())["relations"]
+    (after,) = json.loads((n2r_project.pytester.path / "second.json").read_text())["relations"]
+    replayed = after["examples"][0]  # the second run's first draw is the saved failure
+    assert replayed["transform"] == before["minimal"]["transform"] and not replayed["passed"], replayed
     minimal = re.compile(r"transform:\s+(.*)\(minimal")
     assert minimal.search(first.stdout.str()).group(1) == minimal.search(second.stdout.str()).group(1)
 

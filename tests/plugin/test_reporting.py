@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -26,33 +27,135 @@ def test_brightness(n2r_scene):
 DERANDOMIZED = ("--n2r-scene", PLANE, "--n2r-derandomize", "yes")
 
 
-def _row(result: pytest.RunResult, test: str) -> str:
-    """The comparison table's row of ``test``."""
+def _row(result: pytest.RunResult, test: str) -> list[str]:
+    """The comparison table's row of ``test``, split into its columns (relation, n, mean change, bound, verdict)."""
     rows = [line for line in result.outlines if line.startswith("test_relations.py::" + test + " ")]
     assert len(rows) == 1, f"no comparison row for {test}:\n{result.stdout.str()}"
-    return rows[0]
+    return rows[0].split(None, 4)
 
 
-def test_baseline_then_compare_passes_unchanged_and_fails_a_regression(n2r_project, monkeypatch):
+def _json(project, name: str) -> dict:
+    return {r["nodeid"].split("::")[-1]: r for r in json.loads((project.pytester.path / name).read_text())["relations"]}
+
+
+def test_baseline_then_paired_replay_passes_unchanged_and_fails_a_regression(n2r_project, monkeypatch):
     n2r_project.write(GATED)
     base = n2r_project.pytester.path / "baseline.json"
     saved = n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base))
     saved.assert_outcomes(passed=1)
-    data = json.loads(base.read_text())
-    (relation,) = data["relations"].values()
-    assert len(relation["examples"]) == 12 and relation["eps"] == 1000
+    (relation,) = json.loads(base.read_text())["relations"].values()
+    accepted = [e for e in relation["examples"] if e["status"] == "accepted"]
+    assert len(accepted) == 12 and relation["eps"] == 1000 and relation["scene_hash"]
+    assert all(len(e["source_c2w"]) == 16 and e["camera"]["width"] == 96 for e in relation["examples"])
 
-    same = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
+    same = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base), "--n2r-json", "same.json")
     assert same.ret == 0, same.stdout.str()
-    row = _row(same, "test_brightness[plane]")
-    assert row.endswith(" ok"), row
+    assert _row(same, "test_brightness[plane]")[1:] == ["12", "+0.0000", "+0.0000", "ok"]
+    replayed = _json(n2r_project, "same.json")["test_brightness[plane]"]["replayed"]
+    assert [(e["view"], e["transform"], e["deviation"]) for e in replayed] == \
+        [(e["view"], e["transform"], e["deviation"]) for e in accepted], "exactly the baseline's examples, bit for bit"
 
     monkeypatch.setenv("N2R_CANDIDATE", "1")
     worse = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base), "--n2r-compare-fail", "mean:0.02")
     worse.assert_outcomes(passed=1)  # the relation itself holds (eps is huge) ...
     assert worse.ret == pytest.ExitCode.TESTS_FAILED, "... but the gate must fail the run"
-    assert "worse: mean:0.02 (baseline" in _row(worse, "test_brightness[plane]")
-    assert "1 relation(s) regressed against the baseline" in worse.stdout.str()
+    row = _row(worse, "test_brightness[plane]")
+    assert row[1] == "12" and float(row[3]) > 0.02 and row[4] == "worse (fails)", row
+    worse.stdout.fnmatch_lines(["*1 relation(s) fail the baseline comparison: *test_brightness[[]plane[]] (worse)*"])
+
+
+def test_the_replay_does_not_depend_on_the_search(n2r_project):
+    """A baseline recorded with derandomized search is replayed exactly by a randomized run, and a run at
+    another render size (the recorded camera is used)."""
+    n2r_project.write(GATED)
+    base = n2r_project.pytester.path / "baseline.json"
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
+    other = n2r_project.run("--n2r-scene", PLANE, "--n2r-derandomize", "no", "--n2r-size", "64",
+                            "--n2r-compare", str(base))
+    assert other.ret == 0, other.stdout.str()
+    assert _row(other, "test_brightness[plane]")[1:] == ["12", "+0.0000", "+0.0000", "ok"]
+
+
+EMPTY = """
+from pytest_n2r.metrics import repeatability
+
+
+@metamorphic(repeatability(px=2), eps=1.0, transform=transforms(yaw=3), examples=8)
+def test_keypoints(n2r_scene):
+    if os.environ.get("N2R_CANDIDATE"):
+        return lambda rgb: np.zeros((0, 2))  # the candidate detector finds nothing
+    return grid
+"""
+
+
+def test_outcomes_of_the_comparison_and_their_rules(n2r_project, monkeypatch):
+    n2r_project.write(GATED + EMPTY + """
+
+def grid(rgb):
+    h, w = rgb.shape[:2]
+    u, v = np.meshgrid(np.arange(6, w, 16.0), np.arange(6, h, 16.0))
+    return np.stack([u.ravel(), v.ravel()], axis=1)
+""")
+    base = str(n2r_project.pytester.path / "baseline.json")
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", base).assert_outcomes(passed=2)
+
+    monkeypatch.setenv("N2R_CANDIDATE", "1")  # the empty detector fails its relation AND the gate
+    empty = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base)
+    empty.assert_outcomes(failed=1, passed=1)
+    assert _row(empty, "test_keypoints[plane]")[-1] == "no-pairs (fails)"
+    empty.stdout.fnmatch_lines(["*test_keypoints[[]plane[]]: no-pairs: no paired example is a test now (8 of 8*"])
+    monkeypatch.delenv("N2R_CANDIDATE")
+
+    missing = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "-k", "brightness")
+    assert missing.ret == pytest.ExitCode.TESTS_FAILED
+    missing.stdout.fnmatch_lines(["*test_keypoints[[]plane[]]: missing: in the baseline but not run*"])
+    allowed = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "-k", "brightness",
+                              "--n2r-compare-fail-on", "worse,changed-scene")
+    assert allowed.ret == 0, allowed.stdout.str()
+
+    other_scene = n2r_project.run("--n2r-scene", "tests.plugin.fakescene:ramp", "--n2r-derandomize", "yes",
+                                  "--n2r-compare", base)
+    assert other_scene.ret == pytest.ExitCode.TESTS_FAILED
+    other_scene.stdout.fnmatch_lines(["*test_brightness[[]ramp[]] *new*", "*test_brightness[[]plane[]] *missing (fails)*"])
+
+    n2r_project.write((GATED + EMPTY).replace("eps=1000", "eps=900") + """
+
+def grid(rgb):
+    h, w = rgb.shape[:2]
+    u, v = np.meshgrid(np.arange(6, w, 16.0), np.arange(6, h, 16.0))
+    return np.stack([u.ravel(), v.ravel()], axis=1)
+""")
+    eps = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base)
+    assert eps.ret == 0 and _row(eps, "test_brightness[plane]")[-1].startswith("changed-eps [eps changed 1000 -> 900]")
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda d: d.update(relations={}), "has no relations: it would let every relation pass as new"),
+    (lambda d: next(iter(d["relations"].values()))["examples"][0].update(deviation=None),
+     "examples[[]0[]].deviation (an accepted example)=None; expected a finite number"),
+    (lambda d: next(iter(d["relations"].values())).pop("examples"), "missing field 'examples'"),
+    (lambda d: d.update(version=1), "format version 1"),
+])
+def test_bad_baselines_are_usage_errors_not_tracebacks(n2r_project, edit, message):
+    n2r_project.write(GATED)
+    base = n2r_project.pytester.path / "baseline.json"
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
+    data = json.loads(base.read_text())
+    edit(data)
+    base.write_text(json.dumps(data))
+    result = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"*pytest-n2r: baseline {base}*{message}*"])
+    assert "Traceback" not in result.stderr.str() + result.stdout.str()
+
+
+def test_the_gate_replays_under_xdist(n2r_project):
+    pytest.importorskip("xdist")
+    n2r_project.write(GATED)
+    base = str(n2r_project.pytester.path / "baseline.json")
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", base).assert_outcomes(passed=1)
+    result = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "-n", "2", "-p", "no:benchmark")
+    assert result.ret == 0 and _row(result, "test_brightness[plane]")[1:] == ["12", "+0.0000", "+0.0000", "ok"]
 
 
 def test_missing_baseline_and_bad_rules_are_usage_errors(n2r_project):
@@ -60,9 +163,11 @@ def test_missing_baseline_and_bad_rules_are_usage_errors(n2r_project):
     missing = n2r_project.run("--n2r-scene", PLANE, "--n2r-compare", "nope.json")
     assert missing.ret == pytest.ExitCode.USAGE_ERROR
     missing.stderr.fnmatch_lines(["*baseline nope.json does not exist; create it with --n2r-save-baseline*"])
-    alone = n2r_project.run("--n2r-scene", PLANE, "--n2r-compare-fail", "mean:0.1")
-    assert alone.ret == pytest.ExitCode.USAGE_ERROR
-    alone.stderr.fnmatch_lines(["*--n2r-compare-fail needs --n2r-compare*"])
+    for flag, value in (("--n2r-compare-fail", "mean:0.1"), ("--n2r-compare-confidence", "0.9"),
+                        ("--n2r-compare-fail-on", "new")):
+        alone = n2r_project.run("--n2r-scene", PLANE, flag, value)
+        assert alone.ret == pytest.ExitCode.USAGE_ERROR
+        alone.stderr.fnmatch_lines([f"*{flag} needs --n2r-compare*"])
 
 
 def test_html_json_and_junit_reports(n2r_project):
@@ -87,6 +192,10 @@ def test_heading(n2r_scene):
         for case in ET.parse(tmp / "j.xml").iter("testcase") for p in case.iter("property")
     }
     brightness = records["test_brightness[ramp]"]
-    assert props[("test_brightness[ramp]", "n2r_examples")] == str(len(brightness["examples"]) - sum(
-        not e["valid"] for e in brightness["examples"]))
+    assert props[("test_brightness[ramp]", "n2r_examples")] == str(sum(
+        e["status"] == "accepted" for e in brightness["examples"]))
+    rejected = sum(e["status"] == "rejected" for e in records["test_heading[ramp]"]["examples"])
+    assert rejected > 0 and props[("test_heading[ramp]", "n2r_rejected")] == str(rejected)
+    row = re.search(r"test_heading\[ramp\]</a></td>(.*?)</tr>", page).group(1)
+    assert re.findall(r"<td[^>]*>(.*?)</td>", row)[2] == str(rejected), "the HTML rejected column counts them"
     assert props[("test_heading[ramp]", "n2r_inconsistencies")] != "0"

@@ -1,7 +1,9 @@
-"""Baselines round-trip, compare by rules on deviations, and fail clearly on bad files."""
+"""Baselines round-trip with everything a replay needs, are validated on load (every field, every number),
+and compare the same examples in pairs with an explicit outcome for every case."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 
@@ -9,29 +11,61 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pytest_n2r.errors import InvalidArgument, N2RError
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.report import (
-    CompareRule, ExampleRecord, RelationRecord, compare_runs, load_baseline, parse_compare_rules, save_baseline,
+    BaselineError,
+    ExampleRecord,
+    RelationRecord,
+    compare_paired,
+    load_baseline,
+    parse_margin,
+    parse_outcomes,
+    replay_candidates,
+    save_baseline,
 )
-from pytest_n2r.report.baseline import format_comparison_table
+from pytest_n2r.report.baseline import DEFAULT_FAIL_ON, format_comparison_table, paired_bound
 from pytest_n2r.report.records import deviation_stats
 
-
-def _relation(nodeid: str, deviations: list[float], eps: float = 0.2, metric: str = "repeatability(px=2.0)"):
-    examples = [
-        ExampleRecord("wall", f"view{i}", {"yaw": float(i)}, 1.0 - d, d, d <= eps) for i, d in enumerate(deviations)
-    ]
-    return RelationRecord(nodeid, metric, eps, examples)
+CAMERA = {"width": 320, "height": 180, "fx": 250.0, "fy": 250.0, "cx": 159.5, "cy": 89.5, "distortion": []}
+POSE = [1.0, 0, 0, 0.5, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
 
 
-def test_round_trip_keeps_every_example(tmp_path):
-    rel = _relation("t.py::test_orb", [0.0, 0.1, 0.3])
+def _example(i: int, deviation: float, eps: float = 0.2, status: str = "accepted") -> ExampleRecord:
+    ok = status == "accepted"
+    return ExampleRecord("wall", f"view{i % 3}", {"roll": 0.0, "pitch": 0.0, "yaw": float(i), "x": 0.0, "y": 0.0,
+                                                  "z": 0.0},
+                         1.0 - deviation if ok else math.nan, deviation if ok else math.nan, ok and deviation <= eps,
+                         status=status, reason="" if ok else "no keypoint", scene_hash="abc",
+                         source_c2w=list(POSE), camera=dict(CAMERA))
+
+
+def _relation(nodeid: str, deviations: list[float], eps: float = 0.2, metric: str = "repeatability(px=2.0)",
+              scene_hash: str = "abc", statuses: list[str] | None = None) -> RelationRecord:
+    statuses = statuses or ["accepted"] * len(deviations)
+    examples = [_example(i, d, eps, s) for i, (d, s) in enumerate(zip(deviations, statuses))]
+    return RelationRecord(nodeid, metric, eps, examples, scene="wall", scene_hash=scene_hash)
+
+
+def _replayed(base: RelationRecord, deviations: list[float], statuses: list[str] | None = None,
+              **changes) -> RelationRecord:
+    """The current run of ``base``: its replayed examples got ``deviations``."""
+    cur = _relation(base.nodeid, [e.deviation for e in base.examples], **changes)
+    statuses = statuses or ["accepted"] * len(deviations)
+    cur.replayed = [_example(i, d, cur.eps, s) for i, (d, s) in enumerate(zip(deviations, statuses))]
+    return cur
+
+
+def test_round_trip_keeps_every_example_and_its_replay_data(tmp_path):
+    rel = _relation("t.py::test_orb", [0.0, 0.1, 0.3, 0.0], statuses=["accepted", "accepted", "accepted", "undefined"])
     path = save_baseline(tmp_path / "base.json", [rel], meta={"scene": "wall"})
-    loaded = load_baseline(path)
-    assert list(loaded) == ["t.py::test_orb"]
-    got = loaded["t.py::test_orb"]
-    assert [e.key() for e in got.examples] == [e.key() for e in rel.examples]
-    assert [e.deviation for e in got.examples] == [0.0, 0.1, 0.3]
+    loaded = load_baseline(path)["t.py::test_orb"]
+    assert [e.key() for e in loaded.examples] == [e.key() for e in rel.examples]
+    assert [e.status for e in loaded.examples] == ["accepted", "accepted", "accepted", "undefined"]
+    assert [e.deviation for e in loaded.examples[:3]] == [0.0, 0.1, 0.3] and math.isnan(loaded.examples[3].deviation)
+    assert loaded.examples[0].source_c2w == POSE and loaded.examples[0].camera == CAMERA
+    assert loaded.scene_hash == "abc" and loaded.eps == 0.2
+    assert "NaN" not in path.read_text(), "a baseline is strict JSON: no value is written null"
+    assert [e.view for e in replay_candidates(loaded)] == ["view0", "view1", "view2"], "only tests are replayed"
 
 
 def test_baseline_file_is_stable_and_sorted(tmp_path):
@@ -40,67 +74,169 @@ def test_baseline_file_is_stable_and_sorted(tmp_path):
     second = save_baseline(tmp_path / "2.json", list(reversed(rels))).read_text()
     assert first == second, "the baseline must not depend on the order relations ran in"
     assert list(json.loads(first)["relations"]) == ["a::t", "b::t"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["1.json", "2.json"], "no temporary file left behind"
 
 
-def test_no_temporary_file_is_left_behind(tmp_path):
-    save_baseline(tmp_path / "base.json", [_relation("a::t", [0.1])])
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["base.json"]
+def _valid_data(tmp_path) -> dict:
+    return json.loads(save_baseline(tmp_path / "good.json", [_relation("a::t", [0.1, 0.2])]).read_text())
 
 
-@pytest.mark.parametrize(
-    ("content", "expected"),
-    [
-        (None, "does not exist; create it with --n2r-save-baseline"),
-        ("{not json", "not readable JSON"),
-        ('{"format": "other"}', "is not a pytest-n2r baseline"),
-        ('{"format": "pytest-n2r-baseline", "version": 99}', "format version 99"),
-        ('{"format": "pytest-n2r-baseline", "version": 1, "relations": {"a": {"eps": 1}}}', "relation 'a' is malformed"),
-    ],
-)
-def test_bad_baseline_files_say_what_is_wrong(tmp_path, content, expected):
+def _set(data: dict, path: str, value) -> dict:
+    data = copy.deepcopy(data)
+    *parents, last = path.split("/")
+    node = data
+    for key in parents:
+        node = node[int(key)] if key.isdigit() else node[key]
+    if value is _DELETE:
+        del node[last]
+    else:
+        node[int(last) if last.isdigit() else last] = value
+    return data
+
+
+_DELETE = object()
+_EX = "relations/a::t/examples/0"
+
+
+@pytest.mark.parametrize(("path", "value", "expected"), [
+    ("relations", {}, "has no relations: it would let every relation pass as new"),
+    ("relations", [], "has no relations"),
+    ("version", 1, "format version 1; this pytest-n2r reads version 2 \\(paired replay\\)"),
+    ("relations/a::t/eps", -1, "relation 'a::t': eps=-1; expected a number >= 0"),
+    ("relations/a::t/eps", "0.2", "eps='0.2'; expected a finite number"),
+    ("relations/a::t/scene_hash", _DELETE, "missing field 'scene_hash'"),
+    ("relations/a::t/examples", {}, "examples=dict; expected a list"),
+    (f"{_EX}/deviation", None, r"examples\[0\].deviation \(an accepted example\)=None; expected a finite number"),
+    (f"{_EX}/deviation", -0.5, r"deviation \(an accepted example\)=-0.5; expected a number >= 0"),
+    (f"{_EX}/score", 1e999, r"not readable JSON: Infinity is not a number JSON allows"),
+    (f"{_EX}/score", True, r"examples\[0\].score=True; expected a finite number"),
+    (f"{_EX}/status", "maybe", r"examples\[0\].status='maybe'; expected one of"),
+    (f"{_EX}/source_c2w", [1, 2], r"examples\[0\].source_c2w must be 16 numbers"),
+    (f"{_EX}/camera/width", 0, r"examples\[0\].camera.width=0; expected a whole number of pixels"),
+    (f"{_EX}/camera/fx", "x", r"examples\[0\].camera.fx='x'"),
+    (f"{_EX}/transform", {"yaw": 1, "spin": 2}, r"examples\[0\].transform=.*expected an object with fields"),
+    (f"{_EX}/transform", None, r"examples\[0\] has neither a transform nor a mutation"),
+    (f"{_EX}/passed", "yes", r"examples\[0\].passed='yes'; expected true or false"),
+    (f"{_EX}/units", "feet", r"units='feet'"),
+    (f"{_EX}/mutation", {"name": "blur"}, r"examples\[0\].mutation: mutation=.*expected a dict with 'name'"),
+    ("relations/a::t/examples/0", 3, r"examples\[0\] is int; expected an example object"),
+])
+def test_every_field_of_a_baseline_is_validated_on_load(tmp_path, path, value, expected):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(_set(_valid_data(tmp_path), path, value)))
+    with pytest.raises(BaselineError, match=expected) as info:
+        load_baseline(bad)
+    assert str(bad) in str(info.value) and f"regenerate it with --n2r-save-baseline {bad}" in str(info.value)
+
+
+@pytest.mark.parametrize(("content", "expected"), [
+    (None, "does not exist; create it with --n2r-save-baseline"),
+    ("{not json", "not readable JSON"),
+    ('{"format": "pytest-n2r-baseline", "version": 2, "relations": {"a": {"eps": NaN}}}',
+     "NaN is not a number JSON allows"),
+    ('{"format": "other"}', "is not a pytest-n2r baseline"),
+    ("[1, 2]", "is not a pytest-n2r baseline"),
+])
+def test_unreadable_baseline_files_say_what_is_wrong(tmp_path, content, expected):
     path = tmp_path / "base.json"
     if content is not None:
         path.write_text(content)
-    with pytest.raises(N2RError, match=expected):
+    with pytest.raises(BaselineError, match=expected):
         load_baseline(path)
 
 
-def test_compare_flags_worse_relation_and_passes_equal_one():
-    base = {r.nodeid: r for r in [_relation("a::t", [0.1, 0.1]), _relation("b::t", [0.1, 0.1])]}
-    current = [_relation("a::t", [0.1, 0.1]), _relation("b::t", [0.3, 0.3])]
-    result = {c.nodeid: c for c in compare_runs(base, current, parse_compare_rules("mean:0.05"))}
-    assert result["a::t"].status == "ok"
-    assert result["b::t"].status == "worse"
-    assert "mean:0.05" in result["b::t"].failed_rules[0]
+def test_identical_replays_are_ok_with_a_bound_of_exactly_zero():
+    base = _relation("a::t", [0.1, 0.3, 0.0, 0.25] * 5)
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [e.deviation for e in base.examples])])
+    assert (c.outcome, c.n, c.mean_change, c.bound, c.fails) == ("ok", 20, 0.0, 0.0, False)
+
+
+def test_a_paired_increase_beyond_the_margin_is_worse_and_fails():
+    base = _relation("a::t", [0.1, 0.3, 0.0, 0.25] * 5)
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [e.deviation + 0.08 for e in base.examples])], margin=0.02)
+    assert c.outcome == "worse" and c.fails and c.bound == pytest.approx(0.08) and c.n == 20
+    assert "lower bound +0.0800 exceeds the margin 0.02" in c.message
+
+
+def test_pairing_sees_a_shift_that_summary_statistics_cannot():
+    """Each example gets 0.05 worse while the spread of deviations hides it from unpaired statistics."""
+    devs = [0.05 * i for i in range(20)]
+    base = _relation("a::t", devs)
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [d + 0.05 for d in devs])], margin=0.02)
+    assert c.outcome == "worse"
+    (noisy,) = compare_paired({"a::t": base}, [_replayed(base, [d + (0.05 if i % 2 else -0.05)
+                                                                for i, d in enumerate(devs)])], margin=0.02)
+    assert noisy.outcome == "ok", "changes that cancel out in pairs are no regression"
+
+
+@pytest.mark.parametrize(("base_kw", "cur_kw", "outcome", "fails", "message"), [
+    ({}, {"metric": "repeatability(px=3.0)"}, "changed-metric", True, "metric changed from"),
+    ({}, {"scene_hash": "def"}, "changed-scene", True, "recorded on scene content abc, run on def"),
+    ({}, {"eps": 0.3}, "changed-eps", False, "eps changed from 0.2 to 0.3"),
+])
+def test_changed_metric_scene_and_eps_are_explicit_outcomes(base_kw, cur_kw, outcome, fails, message):
+    base = _relation("a::t", [0.1] * 10, **base_kw)
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [0.1] * 10, **cur_kw)])
+    assert (c.outcome, c.fails) == (outcome, fails) and message in c.message, c
+
+
+def test_missing_new_and_unreplayed_relations_are_explicit_outcomes():
+    base = {"a::t": _relation("a::t", [0.1] * 5), "gone::t": _relation("gone::t", [0.1] * 5)}
+    errored = _relation("a::t", [])
+    errored.outcome = "error"
+    result = {c.nodeid: c for c in compare_paired(base, [errored, _relation("new::t", [0.1])])}
+    assert (result["gone::t"].outcome, result["gone::t"].fails) == ("missing", True)
+    assert (result["new::t"].outcome, result["new::t"].fails) == ("new", False)
+    assert (result["a::t"].outcome, result["a::t"].fails) == ("no-pairs", True)
+    assert "the relation ended in error" in result["a::t"].message
     table = format_comparison_table(list(result.values()))
-    assert "0.100→0.300" in table and "worse" in table
+    assert "missing (fails)" in table and "no-pairs (fails)" in table
 
 
-def test_compare_reports_new_and_stale_relations():
-    base = {"a::t": _relation("a::t", [0.1], eps=0.2)}
-    current = [_relation("a::t", [0.1], eps=0.5), _relation("c::t", [0.1])]
-    status = {c.nodeid: c.status for c in compare_runs(base, current, [CompareRule("mean", 0.0)])}
-    assert status == {"a::t": "stale", "c::t": "new"}
+def test_examples_that_became_undefined_are_lost_and_fail():
+    """An empty detector makes every example undefined: the gate fails, it does not pass as 'new' or 'ok'."""
+    base = _relation("a::t", [0.1] * 10)
+    (empty,) = compare_paired({"a::t": base}, [_replayed(base, [0.0] * 10, statuses=["undefined"] * 10)])
+    assert (empty.outcome, empty.fails) == ("no-pairs", True) and "0 paired" not in empty.message
+    (some,) = compare_paired({"a::t": base}, [_replayed(base, [0.1] * 10, statuses=["undefined"] * 2
+                                                        + ["accepted"] * 8)])
+    assert (some.outcome, some.lost, some.fails) == ("lost", 2, True)
 
 
-def test_percent_rules():
-    rule = CompareRule("p90", 10.0, percent=True)
-    assert rule.fails(0.2, 0.23) and not rule.fails(0.2, 0.21)
-    assert rule.fails(0.0, 0.01), "any growth from a zero baseline is infinitely many percent"
+def test_fail_on_chooses_which_outcomes_fail():
+    base = {"gone::t": _relation("gone::t", [0.1])}
+    (c,) = compare_paired(base, [], fail_on=("worse",))
+    assert c.outcome == "missing" and not c.fails
+    assert parse_outcomes(None) == DEFAULT_FAIL_ON and parse_outcomes("new,changed-eps") == ("new", "changed-eps")
+    with pytest.raises(InvalidArgument, match="unknown outcome"):
+        parse_outcomes("worse,bad")
 
 
-@pytest.mark.parametrize("spec", ["mean", "mean:", "avg:0.1", "mean:-1", "p90:abc"])
-def test_bad_rule_specs_name_the_option(spec):
+@pytest.mark.parametrize("spec", ["p90:0.1", "mean", "mean:x", "mean:0.1,mean:0.2"])
+def test_bad_margin_specs_name_the_option(spec):
     with pytest.raises(InvalidArgument, match="--n2r-compare-fail"):
-        parse_compare_rules(spec)
+        parse_margin(spec)
 
 
-@given(st.lists(st.floats(0, 10, allow_nan=False), min_size=1, max_size=50), st.floats(0, 10))
+def test_margin_default_and_value():
+    assert parse_margin(None) == 0.02 and parse_margin(["mean:0.05"]) == 0.05
+
+
+@given(st.lists(st.floats(-1, 1), min_size=2, max_size=60))
+def test_the_bound_is_below_the_mean_and_deterministic(changes):
+    bound = paired_bound(changes)
+    assert bound <= sum(changes) / len(changes) + 1e-12 and bound == paired_bound(changes)
+
+
+def test_the_bound_of_nothing_is_nan():
+    assert math.isnan(paired_bound([])) and math.isnan(paired_bound([math.nan, 0.1]))
+
+
+@given(st.lists(st.floats(0, 10), min_size=1, max_size=50), st.floats(0, 10))
 def test_stats_are_ordered_and_bounded(devs, eps):
     s = deviation_stats(devs, eps)
-    assert min(devs) <= s["p10"] <= s["median"] <= s["p90"] <= s["max"] == max(devs)
-    assert min(devs) - 1e-9 <= s["mean"] <= max(devs) + 1e-9
-    assert 0.0 <= s["rate"] <= 1.0
+    assert s["p10"] <= s["median"] <= s["p90"] <= s["max"] == max(devs)
+    assert min(devs) <= s["mean"] <= max(devs) and 0 <= s["rate"] <= 1
 
 
 def test_stats_of_nothing_are_nan():

@@ -16,8 +16,11 @@ def _failing_relation(tmp_path):
     cv2.imwrite(str(img), np.full((8, 8, 3), 200, np.uint8))
     minimal = ExampleRecord("wall", "view3", {"yaw": 5.25}, 0.7, 0.3, False, images={"follow-up": str(img)})
     ok = ExampleRecord("wall", "view3", {"yaw": 1.0}, 0.95, 0.05, True)
-    rejected = ExampleRecord("wall", "view3", {"yaw": 80.0}, float("nan"), float("nan"), False, valid=False)
-    return RelationRecord("test_x.py::test_orb[wall]", "repeatability(px=2.0)", 0.2, [ok, minimal, rejected],
+    rejected = ExampleRecord("wall", "view3", {"yaw": 80.0}, float("nan"), float("nan"), False, status="rejected",
+                             reason="outside the field")
+    undefined = ExampleRecord("wall", "view1", {"yaw": 2.0}, float("nan"), float("nan"), False, status="undefined",
+                              reason="the SUT found no keypoint in either view")
+    return RelationRecord("test_x.py::test_orb[wall]", "repeatability(px=2.0)", 0.2, [ok, minimal, rejected, undefined],
                           outcome="failed", message="boom <b>", timings={"render": 1.5}, minimal=minimal)
 
 
@@ -25,7 +28,12 @@ def test_report_shows_counts_histogram_and_embedded_images(tmp_path):
     page = render_html([_failing_relation(tmp_path)])
     row = re.search(r"<tr><td><a href=\"#rel0\">.*?</tr>", page).group(0)
     cells = re.findall(r"<td[^>]*>(.*?)</td>", row)
-    assert cells[1:] == ["failed", "3", "1", "1", "50.0%", "0.3000", "0.2"], cells
+    # examples (accepted), rejected, undefined, inconsistencies, rate, worst, eps, field floor (none measured)
+    assert cells[1:] == ["failed", "2", "1", "1", "1", "50.0%", "0.3000", "0.2", "—"], cells
+    rel = _failing_relation(tmp_path)
+    rel.floor = {"line": "field floor 0.125 (photo vs field render)", "below_floor": False}
+    assert "<td>field floor 0.125 (photo vs field render)</td></tr>" in render_html([rel]), \
+        "a measured field floor is shown beside the relation"
     assert "<svg" in page and 'aria-label="histogram of deviations"' in page
     assert "data:image/png;base64," in page, "artifact images must be embedded, not linked"
     assert "boom &lt;b&gt;" in page, "messages must be escaped"
