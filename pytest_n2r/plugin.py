@@ -294,7 +294,8 @@ def _plain(stats: Any) -> dict:
     return {
         "test_id": stats.test_id, "scene": stats.scene, "metric": stats.metric, "eps": stats.eps,
         "outcome": stats.outcome, "examples": stats.examples, "rejected": dict(stats.rejected),
-        "undefined": dict(stats.undefined), "inconsistencies": stats.inconsistencies, "shrink_examples": stats.shrink_examples,
+        "undefined": dict(stats.undefined), "inconsistencies": stats.inconsistencies,
+        "shrink_examples": stats.shrink_examples,
         "worst_deviation": stats.worst_deviation, "render_s": stats.render_s, "sut_s": stats.sut_s,
         "metric_s": stats.metric_s, "renders": stats.renders, "summary": stats.summary_line(),
         "images": (stats.minimal or {}).get("images", {}),
@@ -346,9 +347,10 @@ class _Summary:
         total = {k: sum(s[k] for s in runs)
                  for k in ("examples", "inconsistencies", "render_s", "sut_s", "metric_s", "renders")}
         rejected = sum(sum(s["rejected"].values()) for s in runs)
+        undefined = sum(sum(s.get("undefined", {}).values()) for s in runs)
         terminalreporter.write_line(
             f"{len(runs)} relation{'s' if len(runs) != 1 else ''}: {total['examples']} example"
-            f"{'s' if total['examples'] != 1 else ''}, {rejected} rejected as invalid, "
+            f"{'s' if total['examples'] != 1 else ''}, {rejected} rejected as invalid, {undefined} undefined, "
             f"{total['inconsistencies']} inconsistent; {total['renders']} renders (the rest from the cache); "
             f"time render {total['render_s']:.2f} s / SUT {total['sut_s']:.2f} s / metric "
             f"{total['metric_s']:.2f} s"

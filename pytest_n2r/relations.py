@@ -46,7 +46,7 @@ from .strategies import PRESETS, SPLITS, interpolate_view, scene_views, transfor
 from .validity import Validity
 
 __all__ = ["Relation", "RunSettings", "RelationStats", "RelationFailure", "SUTError", "check_relation",
-           "resolve_metric", "SEARCHES", "MAX_UNDEFINED"]
+           "resolve_metric", "SEARCHES", "MAX_UNDEFINED", "replay_relation"]
 
 SEARCHES = ("random", "targeted")
 
@@ -592,6 +592,24 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     except BaseException as exc:
         stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
         raise
+    return stats
+
+
+def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, examples: list[Any], *,
+                    settings: RunSettings | None = None, cache: RenderCache | None = None,
+                    test_id: str = "relation") -> RelationStats:
+    """Evaluate exactly the recorded ``examples`` (e.g. a baseline's, see
+    :func:`pytest_n2r.report.replay_candidates`) for ``sut`` on ``scene``, without a search: their records
+    are ``stats.replayed``, in order. A verdict never raises; only the SUT's own errors do. Pair them with
+    :func:`pytest_n2r.report.compare_paired`."""
+    if not isinstance(scene, Scene):
+        raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
+    if not isinstance(relation, Relation):
+        raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
+    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
+    engine = _Engine(scene, sut, relation, settings or RunSettings(), cache if cache is not None else RenderCache(None),
+                     stats)
+    stats.replayed = engine.replay(examples)
     return stats
 
 

@@ -70,25 +70,24 @@ def _plain_number(value: float) -> float | None:
 
 
 def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta: dict | None = None) -> Path:
-    """Write every relation's drawn examples (all statuses, replay data included) to ``path`` atomically."""
-    data = {
-        "format": FORMAT,
-        "version": VERSION,
-        "meta": meta or {},
-        "relations": {
-            r.nodeid: {
-                "metric": r.metric, "eps": r.eps, "scene": r.scene, "scene_hash": r.scene_hash,
-                "outcome": r.outcome,
-                "examples": [
-                    {**{k: v for k, v in e.to_dict().items() if k != "images"},
-                     "score": _plain_number(e.score), "deviation": _plain_number(e.deviation)}
-                    for e in r.examples
-                ],
-            }
-            for r in sorted(relations, key=lambda r: r.nodeid)
-        },
-    }
-    return atomic_write_text(path, json.dumps(data, indent=1, sort_keys=True, allow_nan=False) + "\n")
+    """Write every relation's drawn examples (all statuses, replay data included) to ``path`` atomically:
+    strict JSON, relations sorted by test id, one line per example (so a review diff shows which changed)."""
+    def line(value: Any) -> str:
+        return json.dumps(value, sort_keys=True, allow_nan=False)
+
+    parts = []
+    for r in sorted(relations, key=lambda r: r.nodeid):
+        head = {"metric": r.metric, "eps": r.eps, "scene": r.scene, "scene_hash": r.scene_hash, "outcome": r.outcome}
+        examples = ",\n".join(
+            "    " + line({**{k: v for k, v in e.to_dict().items() if k != "images"},
+                          "score": _plain_number(e.score), "deviation": _plain_number(e.deviation)})
+            for e in r.examples)
+        fields = ",\n".join(f"   {json.dumps(k)}: {line(v)}" for k, v in sorted(head.items()))
+        parts.append(f"  {json.dumps(r.nodeid)}: {{\n{fields},\n   \"examples\": [\n{examples}\n   ]\n  }}")
+    text = (f'{{\n "format": "{FORMAT}",\n "meta": {line(meta or {})},\n "relations": {{\n' + ",\n".join(parts)
+            + f"\n }},\n \"version\": {VERSION}\n}}\n")
+    json.loads(text)  # what is written must read back
+    return atomic_write_text(path, text)
 
 
 # -- reading and validating -----------------------------------------------------------------------------
