@@ -86,10 +86,16 @@ def _readme_commands() -> dict[str, str]:
     return commands
 
 
-def test_ci_runs_the_readme_test_command_verbatim():
-    suite = _readme_commands()["2"]
+def test_ci_runs_both_readme_commands_verbatim_after_installing_chromium():
     lines = [line.strip() for line in (REPO_ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()]
-    assert suite in lines, f".ci/run does not run README.md's test command {suite!r} as a line of its own"
+    for number, command in sorted(_readme_commands().items()):
+        assert command in lines, f".ci/run does not run README.md's command {number} {command!r} as a line of its own"
+    chromium = next((i for i, line in enumerate(lines) if "apt-get install" in line and "chromium" in line), None)
+    assert chromium is not None, ".ci/run must install Debian's chromium (the HTML report's browser test needs it)"
+    assert "apt-get update" in lines[chromium], ".ci/run must update the package lists before installing chromium"
+    first = min(lines.index(command) for command in _readme_commands().values())
+    assert chromium < first, ".ci/run must install chromium before running the tests"
+    assert lines[0] == "#!/usr/bin/env bash" and "set -euo pipefail" in lines, ".ci/run must stop at the first error"
 
 
 def test_example_project_declares_pytest_n2r_and_its_settings():
