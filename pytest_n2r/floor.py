@@ -414,10 +414,11 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     by_name = {v.name: v for v in scene.views}
     sources: dict[str, tuple[RenderedView, Any]] = {}
     pairs, undefined, skipped = [], 0, 0
-    for record in records[:limit]:
+    accepted = [r for r in records if r.get("status", "accepted") == "accepted"]  # the draws that were tests
+    for record in accepted[:limit]:
         view = by_name.get(record["view"])
         transform = record["transform"]
-        if view is None or "mutation" in transform:
+        if view is None or transform is None or "mutation" in transform:
             skipped += 1
             continue
         if view.name not in sources:

@@ -94,7 +94,8 @@ def test_a_fitted_demo_scene_is_measured_against_its_exact_twin():
     scene = load_demo("wall-field", "cpu")
     assert reference_kind(scene) == ("exact", "")
     orb = resolve_sut("orb", None).fn
-    floor = measure_floor(scene, orb, repeatability(px=2), size=RenderSize.parse(96))
+    # at 96 px ORB (31-px borders) finds no keypoint: that pair is undefined, not the ideal 1, so 160 px
+    floor = measure_floor(scene, orb, repeatability(px=2), size=RenderSize.parse(160))
     assert floor.reference == "exact" and len(floor.samples) == len([v for v in scene.views
                                                                       if v.split == "heldout"])
     assert floor.available and 0.0 <= floor.value <= 1.0, floor
