@@ -262,3 +262,21 @@ def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeyp
     assert stats.outcome == "failed" and stats.n_undefined < stats.examples, (stats.outcome, stats.undefined)
     yaw = stats.minimal["transform"]["yaw"]
     assert 15.0 <= abs(yaw) <= 15.5, f"shrunk to yaw={yaw}, expected just past the undefined band (15°)"
+
+
+def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_search():
+    from pytest_n2r.relations import replay_relation
+    from pytest_n2r.report import ExampleRecord
+
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=15)
+    sut = lambda rgb: float(decode_ramp_x(rgb)[36, 48])  # noqa: E731
+    with pytest.raises(RelationFailure) as info:
+        check_relation(scene, sut, relation, settings=RunSettings(database=None))
+    recorded = [ExampleRecord.from_dict(r) for r in info.value.stats.records if r["status"] == "accepted"]
+    calls = []
+    stats = replay_relation(scene, lambda rgb: calls.append(1) or sut(rgb), relation, recorded)
+    assert [r["deviation"] for r in stats.replayed] == [e.deviation for e in recorded], "bit for bit"
+    assert [r["transform"] for r in stats.replayed] == [e.transform for e in recorded]
+    assert stats.records == [] and stats.outcome == "passed", "a replay searches nothing and judges nothing"
+    assert len(calls) == len(recorded) + len({e.view for e in recorded})
