@@ -270,7 +270,9 @@ def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_searc
 
     scene = PlaneScene(texture="ramp")
     relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=15)
-    sut = lambda rgb: float(decode_ramp_x(rgb)[36, 48])  # noqa: E731
+    def sut(rgb):
+        return float(decode_ramp_x(rgb)[36, 48])
+
     with pytest.raises(RelationFailure) as info:
         check_relation(scene, sut, relation, settings=RunSettings(database=None))
     recorded = [ExampleRecord.from_dict(r) for r in info.value.stats.records if r["status"] == "accepted"]
