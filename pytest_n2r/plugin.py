@@ -261,12 +261,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
         )
     session = _session(pyfuncitem.config)
-    # Every module a relation test may load, loaded before its search: Hypothesis draws constants from the
-    # source of loaded local modules, so a module first imported after one relation (the report, the
-    # floor) would change which examples a derandomized run draws from then on, and a rerun draws others.
-    from . import floor, report  # noqa: F401
     from .plugin_report import baseline_examples
-    from .report import html  # noqa: F401
 
     replay = baseline_examples(pyfuncitem.config, pyfuncitem.nodeid, funcargs["n2r_scene"], relation)
     failure = None

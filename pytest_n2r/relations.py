@@ -20,6 +20,8 @@ import os
 import random
 import time
 from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -642,7 +644,8 @@ def _search(engine: _Engine, scene: Scene, relation: Relation, settings: RunSett
         hsettings(**options, database=db)(test)()
 
     try:  # the survey: records every draw, never fails (and leaves the example database as it was)
-        run(None if database is None else ReadOnlyDatabase(database))
+        with _without_local_constants():
+            run(None if database is None else ReadOnlyDatabase(database))
     except Unsatisfiable:
         pass
     drawn = stats.examples + stats.n_rejected + stats.n_undefined
@@ -655,7 +658,8 @@ def _search(engine: _Engine, scene: Scene, relation: Relation, settings: RunSett
         return
     engine.shrinking = True
     try:
-        run(database)
+        with _without_local_constants():
+            run(database)
     except Unsatisfiable:
         pass
     # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic): report the
@@ -668,6 +672,29 @@ def _search(engine: _Engine, scene: Scene, relation: Relation, settings: RunSett
     tau = ExampleRecord.from_dict(worst).follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
                 note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
+
+
+@contextmanager
+def _without_local_constants() -> Iterator[None]:
+    """Hypothesis mixes numbers it finds in the source of the loaded local modules into its draws, so which
+    modules happen to be imported changed the examples of a derandomized search (a rerun in one process, a
+    pytest-xdist worker, a run that loads the report modules earlier). The engine's draws (views,
+    transforms) gain nothing from them, so they are off while it searches. This patches Hypothesis's
+    internal ``providers`` module; if that moves, nothing is patched."""
+    try:
+        from hypothesis.internal.conjecture import providers
+
+        empty, original, cache = providers.Constants(), providers._get_local_constants, providers.CONSTANTS_CACHE
+        cache.cache.clear()
+    except (ImportError, AttributeError):
+        yield
+        return
+    providers._get_local_constants = lambda: empty
+    try:
+        yield
+    finally:
+        providers._get_local_constants = original
+        cache.cache.clear()
 
 
 def _shown_path(path: str | os.PathLike) -> str:
