@@ -337,6 +337,9 @@ def _compare_one(base: RelationRecord | None, cur: RelationRecord, margin: float
         why = f"the relation ended in {cur.outcome}" if cur.outcome == "error" else "no example was replayed"
         return PairedComparison(nodeid, "no-pairs", message=f"{why}: nothing to pair with the baseline's "
                                 f"{len(base_examples)} examples")
+    if [b.key() for b in base_examples] != [c.key() for c in replayed]:
+        return PairedComparison(nodeid, "no-pairs", message="the replayed examples are not the baseline's (scene "
+                                "content, pose, camera or follow-up differ); save a new baseline")
     changes, lost = [], 0
     for b, c in zip(base_examples, replayed):
         if c.valid:

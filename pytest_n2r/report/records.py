@@ -14,8 +14,6 @@ import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from ..errors import InvalidArgument
-
 __all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES"]
 
 #: What happened to a drawn example.
@@ -79,12 +77,6 @@ class ExampleRecord:
         from ..geometry import Transform
 
         return Transform(**(self.transform or {}))
-
-    def describe(self) -> str:
-        """``view 'v3', yaw=5, x=0.1`` (or the mutation's parameters), for messages."""
-        follow = self.mutation if self.mutation is not None else self.transform or {}
-        parts = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in follow.items() if v)
-        return f"view {self.view!r}, {parts or 'identity'}"
 
     @classmethod
     def from_dict(cls, data: dict) -> "ExampleRecord":
@@ -198,9 +190,3 @@ def deviation_stats(deviations: list[float], eps: float) -> dict[str, float]:
 def _round(value: Any) -> Any:
     return round(value, 9) if isinstance(value, float) else value
 
-
-def check_status(status: Any, where: str) -> str:
-    """``status`` if it is one of :data:`STATUSES`, else :class:`InvalidArgument` naming ``where``."""
-    if status not in STATUSES:
-        raise InvalidArgument(f"{where}: status={status!r}; expected one of {STATUSES}")
-    return status

@@ -241,3 +241,11 @@ def test_stats_are_ordered_and_bounded(devs, eps):
 
 def test_stats_of_nothing_are_nan():
     assert all(math.isnan(v) for v in deviation_stats([], 0.1).values())
+
+
+def test_replayed_examples_that_are_not_the_baselines_are_not_paired():
+    base = _relation("a::t", [0.1] * 5)
+    cur = _replayed(base, [0.1] * 5)
+    cur.replayed[2].transform = {**cur.replayed[2].transform, "yaw": 33.0}
+    (c,) = compare_paired({"a::t": base}, [cur])
+    assert (c.outcome, c.fails) == ("no-pairs", True) and "are not the baseline's" in c.message
