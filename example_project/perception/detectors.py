@@ -61,10 +61,15 @@ DETECTORS: dict[str, Detector] = {
 }
 
 
-def detector(name: str | None = None) -> Detector:
+def detector(name: str | None = None) -> Any:
     """A shipped detector by name; ``None`` reads ``PERCEPTION_ORB`` (default ``"orb"``), which is how CI
-    swaps in a candidate configuration without editing the tests."""
+    swaps in a candidate configuration without editing the tests. The names of
+    :data:`perception.regressions.REGRESSIONS` are accepted too, to run the suite on a known regression."""
     name = name or os.environ.get("PERCEPTION_ORB", "orb")
-    if name not in DETECTORS:
-        raise KeyError(f"detector {name!r} is not configured; expected one of {sorted(DETECTORS)}")
-    return DETECTORS[name]
+    if name in DETECTORS:
+        return DETECTORS[name]
+    from .regressions import REGRESSIONS
+
+    if name not in REGRESSIONS:
+        raise KeyError(f"detector {name!r} is not configured; expected one of {sorted({*DETECTORS, *REGRESSIONS})}")
+    return REGRESSIONS[name]

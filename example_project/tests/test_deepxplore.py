@@ -3,7 +3,9 @@ the lens) applied to the rendered source view, with the same metrics as the pose
 
 ``eps`` as in test_detectors.py: the measured worst deviation rounded up. A noise patch over up to 30 % of
 the image draws ORB's 500-keypoint budget into the noise: up to 69 % of the source keypoints were not found
-again (measured on both demo scenes), a weakness the pose transforms τ1/τ2 do not show.
+again (measured on both demo scenes), a weakness the pose transforms τ1/τ2 do not show. On the examples drawn
+since pytest-n2r's derandomized search stopped depending on the loaded modules (issue 15), up to 83 % (wall;
+eps 0.8 -> 0.95 to keep the 0.08 margin of test_detectors.py).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ def test_orb_repeatability_m1_brightness(n2r_scene, orb):
 
 
 @pytest.mark.detectors
-@metamorphic(repeatability(px=3), eps=0.8, transform=noise_patch(max_size=0.3))
+@metamorphic(repeatability(px=3), eps=0.95, transform=noise_patch(max_size=0.3))
 def test_orb_repeatability_m2_noise_patch(n2r_scene, orb):
     return orb
 

@@ -9,6 +9,12 @@ the baseline gate's job (README.md). One early cold run, made while another run 
 cache and example database, drew other examples on the object scene than later ones (spread under τ6:
 worst 0.534 there, 0.57 later); the two clean cold runs since gave identical results. eps keeps at least
 0.08 above the worst deviation seen in any of them.
+
+Re-measured when pytest-n2r's derandomized search stopped drawing Hypothesis's constants from the source of
+the loaded modules (the drawn examples changed; issue 15): on the new draws four relations broke the 0.08
+rule, and their eps went up to keep it, not to hide a regression (that is the gate's job, test_gate.py):
+ORB repeatability τ4 worst 0.825 (object; eps 0.9 -> 0.95), τ6 worst 0.654 (object; 0.65 -> 0.75), ORB
+spread τ1 worst 0.415 (object; 0.45 -> 0.5), AKAZE τ4 worst 0.750 (object; 0.8 -> 0.85).
 """
 
 from __future__ import annotations
@@ -41,7 +47,7 @@ def test_orb_repeatability_tau3(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.9, transform="tau4")
+@metamorphic(REPEATABILITY, eps=0.95, transform="tau4")
 def test_orb_repeatability_tau4(n2r_scene, orb):
     return orb
 
@@ -51,12 +57,12 @@ def test_orb_repeatability_tau5(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.65, transform="tau6")
+@metamorphic(REPEATABILITY, eps=0.75, transform="tau6")
 def test_orb_repeatability_tau6(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.45, transform="tau1")
+@metamorphic(SPREAD, eps=0.5, transform="tau1")
 def test_orb_spread_tau1(n2r_scene, orb):
     return orb
 
@@ -102,6 +108,6 @@ def test_akaze_repeatability_tau1(n2r_scene):
     return detector("akaze")
 
 
-@metamorphic(REPEATABILITY, eps=0.8, transform="tau4")
+@metamorphic(REPEATABILITY, eps=0.85, transform="tau4")
 def test_akaze_repeatability_tau4(n2r_scene):
     return detector("akaze")

@@ -1,57 +1,124 @@
-"""The regression gate, side by side: a candidate ORB configuration (``PERCEPTION_ORB=<name>``) against the
-shipped one, on the same rendered views under fixed transforms τ1–τ6.
+"""The regression gate: every shipped detector replays the examples of the committed baseline
+(``tests/gate-baseline.json``, recorded from ``tests/test_detectors.py`` on the demo scenes) and is judged
+per example against its own recorded deviations.
 
-The @metamorphic tests judge each configuration against fixed ``eps``; this test judges the candidate
-against the shipped configuration directly, so a change that makes keypoints measurably less stable is
-caught even when it still clears the absolute thresholds. It is skipped when no candidate is named.
+No environment variable is needed: the shipped configuration in ``perception/detectors.py`` is what runs,
+so a pull request that edits it (or OpenCV, or the image pipeline) is judged here. ``PERCEPTION_ORB=<name>``
+puts a candidate (or one of ``perception/regressions.py``) in the place of ORB.
+
+The judgement is pytest-n2r's paired comparison (the same as ``--n2r-compare``): for each relation, the
+per-example increase of the deviation over its baseline examples, and a one-sided 95 % bootstrap lower bound
+of its mean; a relation fails when that bound exceeds ``MARGIN``, when examples stop being tests (the
+detector finds nothing), or when the baseline no longer matches the scene or the metric. An unchanged
+detector replays bit for bit (bound exactly 0). Re-record the baseline after an intended change with the
+command in README.md ("The regression gate").
 """
 
 from __future__ import annotations
 
-import os
+import functools
+from pathlib import Path
+from typing import Any
 
-import numpy as np
 import pytest
-from pytest_n2r import Transform
-from pytest_n2r.metrics import interest_point_spread, repeatability
-
 from perception.detectors import detector
+from perception.regressions import REGRESSIONS
 
-#: Fixed transforms at the size of the paper's τ1–τ6 (degrees; translations in reference lengths). Moving
-#: right, the camera turns left (and moving down, it tilts up) to keep the scene in view.
-TAUS = {
-    "tau1": Transform(x=0.05, yaw=-3), "tau2": Transform(y=0.05, pitch=3),
-    "tau3": Transform(x=0.25, yaw=-10), "tau4": Transform(y=0.25, pitch=10),
-    "tau5": Transform(x=0.05, yaw=-3, roll=5), "tau6": Transform(y=0.05, pitch=3, roll=5),
-}
-#: How much lower the candidate's mean score may be (absolute) before the gate fails.
-TOLERANCE = 0.03
+from pytest_n2r import Transform
+from pytest_n2r.cache import RenderCache
+from pytest_n2r.relations import Relation, RelationStats, RunSettings, replay_relation
+from pytest_n2r.report import (
+    PairedComparison,
+    RelationRecord,
+    compare_paired,
+    load_baseline,
+    replay_candidates,
+)
+from pytest_n2r.report.baseline import format_comparison_table
+
+from .test_detectors import REPEATABILITY, SPREAD  # the metrics the baseline's relations used
+
+BASELINE = Path(__file__).with_name("gate-baseline.json")
+#: The largest mean increase of the deviation per paired example the gate accepts (deviations are
+#: 1 - repeatability and 1 - spread). An unchanged detector gives exactly 0; README.md gives the measured
+#: increases of the regressions it must catch.
+MARGIN = 0.02
+#: Which detector each baseline relation tested (by test function name prefix); None: the ORB under test.
+DETECTOR_OF = {"test_orb_": None, "test_sift_": "sift", "test_akaze_": "akaze"}
+METRICS = {repr(m): m for m in (REPEATABILITY, SPREAD)}
 
 pytestmark = pytest.mark.gate
 
 
-@pytest.mark.skipif("PERCEPTION_ORB" not in os.environ, reason="no candidate: set PERCEPTION_ORB=<config name>")
-def test_candidate_orb_is_not_worse_than_shipped(n2r_scene):
-    shipped, candidate = detector("orb"), detector()
-    metrics = {"repeatability": repeatability(px=3), "spread": interest_point_spread(radius=8)}
-    scores = {name: {"shipped": [], "candidate": []} for name in metrics}
-    views = [v for v in n2r_scene.views if v.split == "heldout"][:3]
-    for view in views:
-        for tau in TAUS.values():
-            source, follow = n2r_scene.pair(view, tau, outputs=("rgb", "depth", "opacity"))
-            for who, sut in (("shipped", shipped), ("candidate", candidate)):
-                a, b = sut(source.rgb), sut(follow.rgb)
-                for name, metric in metrics.items():
-                    scores[name][who].append(metric(a, b, source, follow).score)
-    lines, worse = [], []
-    for name, by in scores.items():
-        s, c = float(np.mean(by["shipped"])), float(np.mean(by["candidate"]))
-        lines.append(f"{name:14s} shipped {s:.3f}  candidate {c:.3f}  ({c - s:+.3f})")
-        if c < s - TOLERANCE:
-            worse.append(name)
-    report = "\n".join(lines)
-    print(f"{candidate!r} vs {shipped!r} on {n2r_scene.name}, {len(views)} views x {len(TAUS)} transforms:\n{report}")
-    assert not worse, (
-        f"candidate {candidate!r} is worse than the shipped ORB by more than {TOLERANCE} in {worse} "
-        f"on scene {n2r_scene.name!r}:\n{report}"
-    )
+@functools.cache
+def baseline() -> dict[str, RelationRecord]:
+    return load_baseline(BASELINE)
+
+
+def relations_of(prefix: str, scene_name: str) -> list[RelationRecord]:
+    """The baseline relations of the tests named ``prefix*`` on ``scene_name``."""
+    return [r for nodeid, r in sorted(baseline().items())
+            if nodeid.split("::")[-1].startswith(prefix) and r.scene == scene_name]
+
+
+def replay(scene: Any, sut: Any, base: RelationRecord, cache: RenderCache) -> RelationRecord:
+    """``sut`` on exactly the baseline's examples of one relation (nothing replayed when the scene's content
+    or the metric changed: the comparison says so)."""
+    metric = METRICS.get(base.metric)
+    if metric is None or base.scene_hash != scene.content_hash:
+        stats = RelationStats(base.nodeid, scene.name, base.metric if metric is None else repr(metric), base.eps,
+                              scene.content_hash)
+        return stats.to_record()
+    relation = Relation.build(metric, base.eps, Transform())
+    return replay_relation(scene, sut, relation, replay_candidates(base), settings=RunSettings(timeout=None),
+                           cache=cache, test_id=base.nodeid).to_record()
+
+
+def gate(scene: Any, sut: Any, prefix: str, cache: RenderCache, margin: float = MARGIN) -> list[PairedComparison]:
+    """Replay every baseline relation of ``prefix`` on ``scene`` for ``sut`` and compare in pairs."""
+    bases = relations_of(prefix, scene.name)
+    records = [replay(scene, sut, base, cache) for base in bases]
+    return compare_paired({b.nodeid: b for b in bases}, records, margin=margin)
+
+
+@pytest.fixture(scope="session")
+def cache(request) -> RenderCache:
+    """The suite's render cache (pytest-n2r's default folder), so the replay renders nothing twice."""
+    return RenderCache(Path(request.config.rootpath) / ".n2r-cache")
+
+
+def _skip_unknown_scene(scene: Any) -> None:
+    if not any(r.scene == scene.name for r in baseline().values()):
+        pytest.skip(f"the committed baseline has no relation on scene {scene.name!r} (it covers the demo scenes)")
+
+
+@pytest.mark.parametrize("prefix", DETECTOR_OF)
+def test_shipped_detector_is_not_worse_than_its_baseline(n2r_scene, prefix, cache):
+    _skip_unknown_scene(n2r_scene)
+    name = DETECTOR_OF[prefix]
+    sut = detector(name)
+    comparisons = gate(n2r_scene, sut, prefix, cache)
+    assert comparisons, f"no baseline relation of {prefix}* on {n2r_scene.name}"
+    table = format_comparison_table(comparisons)
+    print(f"{sut!r} on {n2r_scene.name} against {BASELINE.name}:\n{table}")
+    failed = [c for c in comparisons if c.fails]
+    assert not failed, f"{sut!r} regressed against the committed baseline on {n2r_scene.name}:\n{table}\n" + \
+        "\n".join(f"{c.nodeid}: {c.outcome}: {c.message}" for c in failed)
+
+
+@pytest.mark.parametrize("name", REGRESSIONS)
+def test_the_gate_catches_a_realistic_regression(name, cache):
+    """Each regression of perception/regressions.py clears every eps of test_detectors.py but fails the gate:
+    on the demo scenes the committed baseline covers, at least one ORB relation is worse (README.md gives
+    which, and with how many examples)."""
+    from pytest_n2r.demo import load_demo
+
+    tables, caught = [], []
+    for scene_name in sorted({r.scene for r in baseline().values()}):
+        comparisons = gate(load_demo(scene_name), REGRESSIONS[name], "test_orb_", cache)
+        tables.append(f"{scene_name}:\n{format_comparison_table(comparisons)}")
+        caught += [c for c in comparisons if c.fails]
+    report = "\n".join(tables)
+    print(f"{name}:\n{report}")
+    assert caught, f"{name} passed the gate:\n{report}"
+    assert all(c.outcome in ("worse", "lost") for c in caught), report
