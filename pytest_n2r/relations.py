@@ -27,9 +27,10 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, assume, given, target
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
-from hypothesis.errors import Unsatisfiable
+from hypothesis.errors import Flaky, Unsatisfiable
 
-from ._timeout import time_limit
+from ._determinism import NotDeterministic, SUTNotDeterministic, same_output, show_output
+from ._timeout import TimeLimitReached, time_limit
 from ._validation import check_range
 from .artifacts import artifact_dir, save_pair
 from .cache import RenderCache
@@ -269,6 +270,7 @@ class _Engine:
         self.source_outputs_cache: dict[str, Any] = {}
         self.failed = False
         self.gave_up = False
+        self.images_error: str | None = None
 
     # -- pieces -----------------------------------------------------------------------------------------
 
@@ -278,7 +280,7 @@ class _Engine:
     def render(self, c2w: np.ndarray, view: SceneView, outputs: tuple[str, ...], role: str) -> RenderedView:
         start = time.perf_counter()
         renders = self.cache.stats.renders
-        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}"):
+        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}", escape=True):
             rendered = self.cache.render(self.scene, c2w, self.camera_for(view), outputs)
         self.stats.render_s += time.perf_counter() - start
         self.stats.renders += self.cache.stats.renders - renders
@@ -287,7 +289,8 @@ class _Engine:
     def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
         start = time.perf_counter()
         try:
-            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})"):
+            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})",
+                            escape=True):
                 output = self.sut(rgb)
         except Exception as exc:
             raise SUTError(
@@ -380,15 +383,33 @@ class _Engine:
         if deviation <= self.relation.eps:
             return
         if not self.failed:
+            self.check_deterministic(source.rgb, follow.rgb, out_source, out_follow, where)
             stats.inconsistencies += 1
         self.failed = True
         if not _is_final_example():
             raise RelationFailure("inconsistent (shrinking)")
         if self.settings.artifacts is not None:
-            record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id), source.rgb,
-                                         follow.rgb, out_source, out_follow)
+            try:
+                record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id), source.rgb,
+                                             follow.rgb, out_source, out_follow)
+            except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
+                self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
         stats.minimal = record
         raise RelationFailure(self.failure_message(view, tau, result, record), stats)
+
+    def check_deterministic(self, source_rgb: np.ndarray, follow_rgb: np.ndarray, out_source: Any,
+                            out_follow: Any, where: str) -> None:
+        """Before the first failure counts: the SUT must give the same outputs again on the same two images
+        (else the failure is its noise, and Hypothesis's replay would fail at random)."""
+        for role, rgb, first in (("source", source_rgb, out_source), ("follow-up", follow_rgb, out_follow)):
+            again = self.run_sut(rgb, role, where)
+            if not same_output(first, again):
+                raise NotDeterministic(
+                    f"the system under test is not deterministic: called twice on the same {role} image "
+                    f"({where}) it returned\n  first:  {show_output(first, again)}\n  second: "
+                    f"{show_output(again, first)}\nA relation cannot tell its noise from an inconsistency: seed "
+                    "its random generators (and fix its thread count) inside the SUT, or raise eps above the "
+                    "noise")
 
     def describe_transform(self, tau: Transform) -> str:
         return tau.describe("ref" if self.units is Units.REFERENCE else self.units.value)
@@ -422,6 +443,8 @@ class _Engine:
             lines.append(f"              follow   {_shown_path(images['follow'])}")
             lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
                          f"{Path(images['follow_raw']).name})")
+        elif self.images_error:
+            lines.append(f"  images:     {self.images_error}")
         return "\n".join(lines)
 
     def metres(self, tau: Transform, scale: float) -> str:
@@ -514,6 +537,16 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         stats.outcome, stats.message = "failed", str(exc)
         exc.stats = stats
         raise
+    except (TimeLimitReached, NotDeterministic) as exc:  # escaped Hypothesis: the example ran once
+        stats.outcome, stats.message = "error", str(exc)
+        raise exc.error() from None
+    except Flaky:  # a failure that passed on replay without the SUT changing its outputs: the scene's render
+        stats.outcome = "error"
+        stats.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
+                         "is not deterministic. The system under test gave the same outputs twice on the first "
+                         "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
+                         "with randomness?) or the metric vary")
+        raise SUTNotDeterministic(stats.message) from None
     except BaseException as exc:
         stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
         raise

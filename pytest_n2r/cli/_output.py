@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..data.atomic import unwritable_reason
 from ..errors import InvalidArgument
 
 __all__ = [
@@ -94,20 +94,10 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _check_folder(folder: Path, option: str, shown: Path) -> None:
     """The folder an output goes into must be a folder we can write into, or be creatable."""
-    existing = folder
-    while not existing.exists():
-        if existing.parent == existing:
-            break
-        existing = existing.parent
-    if existing.exists() and not existing.is_dir():
-        raise InvalidArgument(f"{option} {shown}: {existing} is a file, not a folder; choose a path in a folder")
-    try:  # permissions alone do not tell (root, read-only mounts, /proc): try it
-        fd, probe = tempfile.mkstemp(prefix=".n2r-write-check.", dir=existing)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise InvalidArgument(f"{option} {shown}: cannot write into the folder {existing} ({exc.strerror or exc}); "
-                              "choose a writable folder (checked before any work, so nothing is lost)") from None
+    reason = unwritable_reason(folder)
+    if reason is not None:
+        raise InvalidArgument(f"{option} {shown}: {reason}; choose a writable folder (checked before any work, so "
+                              "nothing is lost)")
 
 
 def check_output(path: Path, kind: OutputKind, *, option: str = "-o", inputs: Iterable[Path] = (),

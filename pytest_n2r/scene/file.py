@@ -31,7 +31,7 @@ from ..field.grid import SceneField
 from . import schema
 from .base import SceneView
 
-__all__ = ["save_scene", "read_scene_file", "SceneFile"]
+__all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 
 #: Every member's timestamp (the earliest a zip can hold), so the bytes do not depend on when they were written.
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
@@ -349,6 +349,39 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
     return frames, reference_length, metres_per_unit, bounds, config, field_meta
 
 
+def _open(path: Path) -> zipfile.ZipFile:
+    source = str(path)
+    if path.is_dir():
+        raise SceneFileError(f"{source}: is a folder; expected a .n2r scene file (`n2r fit SOURCE -o scene.n2r` "
+                             "writes one)")
+    if not path.is_file():
+        raise SceneFileError(f"{source}: no such scene file (`n2r fit SOURCE -o {path.name}` writes one)")
+    try:
+        return zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc}); a .n2r scene file is the zip "
+                             "archive `n2r fit` writes") from None
+
+
+def _read_json(archive: zipfile.ZipFile, source: str) -> Any:
+    try:
+        return json.loads(_member(archive, schema.SCENE_JSON, source, MAX_JSON_BYTES,
+                                  f"the cap on {schema.SCENE_JSON}"))
+    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
+
+
+def check_scene_file(path: str | os.PathLike) -> None:
+    """The checks of :func:`read_scene_file` that need no inflating of the field or the photos (its
+    ``scene.json`` and the field's declared tensors), in a fraction of the time; raises
+    :class:`~pytest_n2r.errors.SceneFileError` the same way."""
+    path = Path(path)
+    with _open(path) as archive:
+        data = _read_json(archive, str(path))
+        field_meta = _check_json(data, str(path))[-1]
+        _field_limit(archive, field_meta, str(path))
+
+
 def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFile:
     """Read and check the scene file ``path``; ``images=False`` skips decoding the stored photos.
 
@@ -361,23 +394,10 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
 
     path = Path(path)
     source = str(path)
-    if path.is_dir():
-        raise SceneFileError(f"{source}: is a folder; expected a .n2r scene file (`n2r fit SOURCE -o scene.n2r` "
-                             "writes one)")
-    if not path.is_file():
-        raise SceneFileError(f"{source}: no such scene file (`n2r fit SOURCE -o {path.name}` writes one)")
+    archive = _open(path)
     size = path.stat().st_size
-    try:
-        archive = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc}); a .n2r scene file is the zip "
-                             "archive `n2r fit` writes") from None
     with archive:
-        try:
-            data = json.loads(_member(archive, schema.SCENE_JSON, source, MAX_JSON_BYTES,
-                                      f"the cap on {schema.SCENE_JSON}"))
-        except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
+        data = _read_json(archive, source)
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
         payload = _member(archive, schema.FIELD_FILE, source, _field_limit(archive, field_meta, source),
                           "its safetensors header")
