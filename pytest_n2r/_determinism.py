@@ -14,7 +14,7 @@ import numpy as np
 
 from .errors import N2RError
 
-__all__ = ["SUTNotDeterministic", "NotDeterministic", "same_output", "show_output"]
+__all__ = ["NotDeterministic", "SUTNotDeterministic", "same_output", "show_output"]
 
 _SHOWN_ITEMS = 6
 

@@ -30,8 +30,8 @@ def test_hang(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-timeout", "2")
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines(["*the system under test on the source view (*) did not finish within 2 s "
-                                 "(--n2r-timeout / ini n2r_timeout)*"])
+    result.stdout.fnmatch_lines([("*the system under test on the source view (*) did not finish within 2 s "
+                                  "(--n2r-timeout / ini n2r_timeout)*")])
     text = result.stdout.str()
     assert "Traceback" not in text and "FlakyFailure" not in text, text
     # one time-out of 2 s; Hypothesis retrying and shrinking the failing example took several (27 s for 5 s)
