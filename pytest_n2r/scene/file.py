@@ -29,7 +29,7 @@ from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
 from ..field.grid import SceneField
 from . import schema
-from .base import SceneView
+from .base import MAX_CAMERA_DISTANCE, SceneView
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 
@@ -325,6 +325,13 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} bounds={data['bounds']!r}; expected [[min x, y, z], "
                              "[max x, y, z]] (scene units)")
     _check_normalization(data["normalization"], reference_length, bounds, source)
+    limit = MAX_CAMERA_DISTANCE * reference_length
+    for i, (_, _, c2w, _, _) in enumerate(frames):
+        offset = float(np.abs(c2w[:3, 3] - bounds.mean(axis=0)).max())
+        if not offset <= limit:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} frames[{i}].c2w puts the camera {offset:.3g} scene "
+                                 f"units from the bounds' centre; expected within {MAX_CAMERA_DISTANCE:g} reference "
+                                 f"lengths ({limit:.4g} scene units), where renders are defined")
     try:
         config = FieldConfig.from_dict(data["config"])
     except (InvalidArgument, TypeError) as exc:
@@ -351,21 +358,30 @@ def _open(path: Path) -> zipfile.ZipFile:
                              "archive `n2r fit` writes") from None
 
 
+def _not_strict_json(token: str) -> Any:
+    raise ValueError(f"{token} is not a number in strict JSON; scene files store null for it")
+
+
 def _read_json(archive: zipfile.ZipFile, source: str) -> Any:
     try:
         return json.loads(_member(archive, schema.SCENE_JSON, source, MAX_JSON_BYTES,
-                                  f"the cap on {schema.SCENE_JSON}"))
-    except (json.JSONDecodeError, UnicodeDecodeError, RecursionError) as exc:
+                                  f"the cap on {schema.SCENE_JSON}"), parse_constant=_not_strict_json)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
 
 
 def check_scene_file(path: str | os.PathLike) -> None:
     """The checks of :func:`read_scene_file` that need no inflating of the field or the photos (its
     ``scene.json`` and the field's declared tensors), in a fraction of the time; raises
-    :class:`~pytest_n2r.errors.SceneFileError` the same way."""
+    :class:`~pytest_n2r.errors.SceneFileError` the same way. Splat scenes (a ``.ply``, or a scene file
+    ``n2r import`` wrote) are left to their own reader, past the cap on ``scene.json``."""
     path = Path(path)
+    if path.suffix.lower() == ".ply":  # a 3DGS splat scene: its reader checks it
+        return
     with _open(path) as archive:
         data = _read_json(archive, str(path))
+        if isinstance(data, dict) and data.get("representation") == "splats":  # `n2r import`: its reader checks it
+            return
         field_meta = _check_json(data, str(path))[-1]
         _field_limit(archive, field_meta, str(path))
 

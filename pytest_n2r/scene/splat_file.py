@@ -40,10 +40,14 @@ _KEYS = ("format", "version", "representation", "cameras", "frames", "bounds", "
 
 def is_splat_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a zip whose ``scene.json`` says ``"representation": "splats"``."""
+    from .file import MAX_JSON_BYTES
+
     try:
         with zipfile.ZipFile(path) as archive:
+            if archive.getinfo(schema.SCENE_JSON).file_size > MAX_JSON_BYTES:
+                return False  # the field reader names the oversized member
             data = json.loads(archive.read(schema.SCENE_JSON))
-    except (OSError, KeyError, zipfile.BadZipFile, ValueError):
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError, RecursionError):
         return False
     return isinstance(data, dict) and data.get("representation") == REPRESENTATION
 

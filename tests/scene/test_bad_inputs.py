@@ -178,6 +178,17 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("poses --frames-dir is a file", "poses {capture} --frames-dir {notes_txt}",
      r"--frames-dir .*notes\.txt: is a file; expected a folder for the video's frames"),
     ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
+    # -- n2r import
+    ("import a missing ply", "import {tmp}/nowhere.ply -o {new_n2r}", r"PLY .*nowhere\.ply: does not exist"),
+    ("import with missing cameras", "import {notes_txt} --cameras {tmp}/nowhere.json -o {new_n2r}",
+     r"--cameras .*nowhere\.json: does not exist"),
+    ("import over a text file", "import {notes_txt} -o {fake_n2r}", r"fake\.n2r: exists and is not a \.n2r scene file"),
+    ("import to .txt", "import {notes_txt} -o {tmp}/out.txt", r"expected a \.n2r scene file, a name ending in \.n2r"),
+    ("import over its own ply", "import {scene} -o {scene}", r"is this command's input"),
+    ("import --heldout-every -1", "import {notes_txt} -o {new_n2r} --heldout-every=-1",
+     r"--heldout-every -1: expected an int >= 0"),
+    ("import --background 2,2,2", "import {notes_txt} -o {new_n2r} --background 2,2,2",
+     r"'2,2,2': expected three comma-separated values in \[0, 1\]"),
     # -- n2r demo
     ("demo export of an unknown scene", "demo export castle -o {tmp}/export",
      r"NAME 'castle': no such demo scene; expected one of"),
@@ -370,7 +381,10 @@ SCENE_FILE_CASES = [
     ("version from the future", {"edit": _set("version", 99)}, r"format version 99.*upgrade pytest-n2r"),
     ("another format", {"edit": _set("format", "zip")}, r"format='zip'.*not a pytest-n2r scene file"),
     ("no frames", {"edit": _set("frames", [])}, r"'frames' must be a non-empty list"),
-    ("a pose with NaN", {"edit": _set("frames.0.c2w.0.3", float("nan"))}, r"frames\[0\]\.c2w"),
+    ("a pose with NaN", {"edit": _set("frames.0.c2w.0.3", float("nan"))},
+     r"scene\.json is not valid JSON \(NaN is not a number in strict JSON"),
+    ("a pose at 1e300", {"edit": _set("frames.0.c2w.0.3", 1e300)},
+     r"frames\[0\]\.c2w puts the camera 1e\+300 scene units from the bounds' centre; expected within 10000"),
     ("a pose that is no rotation", {"edit": _set("frames.0.c2w.0.0", 5.0)},
      r"frames\[0\]\.c2w rotation block is not a rotation"),
     ("an unknown split", {"edit": _set("frames.0.split", "test")}, r"frames\[0\]\.split='test'"),
@@ -452,3 +466,12 @@ def test_a_render_far_beyond_the_scene_is_an_error_not_a_black_picture(good_scen
     far[:3, 3] += np.array([0.0, 0.0, 1e12])
     with pytest.raises(ValueError, match=r"is 1e\+12 scene units from the captured cameras of scene 'good'"):
         scene.render(far, view.camera)
+
+
+def test_the_reliability_page_counts_this_catalogue():
+    from ..plugin.test_bad_options import OPTION_CASES
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "reliability.md").read_text(encoding="utf-8")
+    for label, cases in (("commands, total", COMMAND_CASES), ("scene files, total", SCENE_FILE_CASES)):
+        assert f"| **{label}** | **{len(cases)}** |" in page, f"docs/reliability.md: {label} is not {len(cases)}"
+    assert re.search(rf"\| plugin options: .* \| {len(OPTION_CASES)} \|", page), "the plugin options' count"
