@@ -26,6 +26,7 @@ from pytest_n2r.scene import read_scene_file, save_scene
 from pytest_n2r.scene.schema import FIELD_FILE, SCENE_JSON
 
 from .conftest import random_field, tiny_views
+from .test_file import rewrite
 
 #: (id, command line with {placeholders} of the workspace, regex the error message must match)
 COMMAND_CASES: list[tuple[str, str, str]] = [
@@ -319,25 +320,6 @@ def test_render_depth_beside_a_depth_named_image_keeps_both(workspace, tmp_path,
 # -- scene files: what a reader refuses, and with how much memory ----------------------------------------------
 
 
-def _rewrite(good: Path, bad: Path, *, edit=None, replace: dict[str, bytes | int] | None = None) -> Path:
-    """A copy of ``good`` with ``scene.json`` edited and members replaced (an int: that many zero bytes)."""
-    replace = dict(replace or {})
-    with zipfile.ZipFile(good) as archive, zipfile.ZipFile(bad, "w", zipfile.ZIP_DEFLATED) as out:
-        for name in archive.namelist():
-            payload = replace.pop(name, archive.read(name))
-            if name == SCENE_JSON and edit is not None:
-                data = json.loads(payload)
-                edit(data)
-                payload = json.dumps(data).encode()
-            if isinstance(payload, int):
-                with out.open(name, "w", force_zip64=True) as member:
-                    for _ in range(payload // 2**20):
-                        member.write(bytes(2**20))
-            else:
-                out.writestr(name, payload)
-    return bad
-
-
 def _set(path: str, value):
     """An edit of ``scene.json`` setting the dotted ``path`` (``frames.0.c2w``) to ``value``."""
     def edit(data):
@@ -430,7 +412,7 @@ def good_scene(tmp_path_factory) -> Path:
 def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected, good_scene, tmp_path):
     built = {"huge jpeg": lambda: _huge_jpeg(good_scene), "inf values": lambda: _field_values(float("inf"))}
     how = {**how, "replace": {k: built[v]() if isinstance(v, str) else v for k, v in how.get("replace", {}).items()}}
-    bad = _rewrite(good_scene, tmp_path / "bad.n2r", **how)
+    bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=how.get("edit"), replace=how["replace"])
     tracemalloc.start()
     try:
         with pytest.raises(SceneFileError) as info:
