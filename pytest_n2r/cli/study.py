@@ -21,8 +21,8 @@ def _wxh(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"size {text!r}: expected WIDTHxHEIGHT, e.g. 480x270") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be >= 1")
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be 1..8192 pixels")
     return w, h
 
 

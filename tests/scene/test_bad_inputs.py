@@ -218,7 +218,7 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--eps '-1': expected one or more numbers >= 0"),
     ("study --eps abc", "study {scene} --sut orb -o {tmp}/study --eps abc", r"--eps 'abc': expected numbers"),
     ("study --fps-size 0x10", "study {scene} --sut orb -o {tmp}/study --fps-size 0x10",
-     r"width and height must be >= 1"),
+     r"width and height must be 1\.\.8192 pixels"),
     ("study into a file", "study {scene} --sut orb -o {notes_txt}",
      r"notes\.txt: is a file; expected a folder"),
     ("study among other files", "study {scene} --sut orb -o {capture}", r"the folder holds other files"),
