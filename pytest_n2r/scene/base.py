@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidArgument, InvalidType
+from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
 from ..render.view import OUTPUTS, RenderedView
 
@@ -98,13 +98,15 @@ class Scene(ABC):
 
     def check_camera_position(self, c2w: np.ndarray) -> np.ndarray:
         """``c2w`` if its camera lies within :data:`MAX_CAMERA_DISTANCE` reference lengths of the captured
-        cameras' mean position; else an :class:`InvalidArgument` naming the position and the limit."""
-        anchor = getattr(self, "_camera_anchor", None)
-        if anchor is None:
-            anchor = np.mean([np.asarray(v.c2w, dtype=np.float64)[:3, 3] for v in self.views], axis=0) \
-                if len(self.views) else np.zeros(3)
-            self._camera_anchor = anchor
-        limit = MAX_CAMERA_DISTANCE * float(self.reference_length)
+        cameras' mean position; else an :class:`InvalidArgument` naming the position and the limit. A scene
+        without captured views or a reference length (yet) has no such limit."""
+        try:
+            limit = MAX_CAMERA_DISTANCE * float(self.reference_length)
+        except (AttributeError, N2RError):  # being built, or without cameras: nothing to measure against
+            return c2w
+        if not self.views:
+            return c2w
+        anchor = np.mean([np.asarray(v.c2w, dtype=np.float64)[:3, 3] for v in self.views], axis=0)
         offset = np.abs(np.asarray(c2w, dtype=np.float64)[:3, 3] - anchor)
         if not (np.isfinite(offset).all() and offset.max() <= limit):
             position = ", ".join(f"{v:.4g}" for v in np.asarray(c2w)[:3, 3])
