@@ -1,3 +1,4 @@
+# ruff: noqa: N999  (the module is named after its subcommand, as cli/main.py COMMANDS requires)
 """``n2r import scene.ply -o scene.n2r``: pack a splat scene trained elsewhere (a 3DGS ``.ply``) with its cameras
 into one scene file that ``--n2r-scene`` and ``load_scene`` read."""
 
