@@ -16,11 +16,25 @@ from contextlib import contextmanager
 
 from .errors import N2RError
 
-__all__ = ["CallTimeout", "time_limit"]
+__all__ = ["CallTimeout", "TimeLimitReached", "time_limit"]
 
 
 class CallTimeout(N2RError):
     """A render or SUT call ran longer than its limit (``--n2r-timeout``)."""
+
+
+class TimeLimitReached(BaseException):
+    """The escaping form of :class:`CallTimeout` (``time_limit(..., escape=True)``): not an ``Exception``,
+    so neither the code under the limit (a SUT's ``except Exception``) nor Hypothesis (which would retry and
+    shrink a failing example, several time-outs in a row) catches it; the caller turns it back into a
+    :class:`CallTimeout` (:meth:`error`) once the search has stopped."""
+
+    def error(self) -> CallTimeout:
+        return CallTimeout(str(self))
+
+
+class _Expired(BaseException):
+    """Raised by the timer inside the block; ``except Exception`` in the timed code cannot swallow it."""
 
 
 def _message(what: str, seconds: float) -> str:
@@ -31,22 +45,24 @@ def _message(what: str, seconds: float) -> str:
 
 
 @contextmanager
-def time_limit(seconds: float | None, what: str) -> Iterator[None]:
+def time_limit(seconds: float | None, what: str, *, escape: bool = False) -> Iterator[None]:
     """Raise :class:`CallTimeout` naming ``what`` when the block runs longer than ``seconds``
-    (``None`` or 0: no limit). Restores any timer set before (pytest-timeout's) when it ends."""
+    (``None`` or 0: no limit), or :class:`TimeLimitReached` with ``escape=True``. Restores any timer set
+    before (pytest-timeout's) when it ends."""
     if not seconds:
         yield
         return
+    expired = TimeLimitReached if escape else CallTimeout
     usable = hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
     if not usable:
         start = time.perf_counter()
         yield
         if time.perf_counter() - start > seconds:
-            raise CallTimeout(_message(what, seconds))
+            raise expired(_message(what, seconds))
         return
 
     def on_alarm(signum, frame):  # noqa: ARG001 - signal handler signature
-        raise CallTimeout(_message(what, seconds))
+        raise _Expired
 
     previous_handler = signal.signal(signal.SIGALRM, on_alarm)
     previous_delay, _ = signal.getitimer(signal.ITIMER_REAL)
@@ -54,6 +70,8 @@ def time_limit(seconds: float | None, what: str) -> Iterator[None]:
     signal.setitimer(signal.ITIMER_REAL, seconds)
     try:
         yield
+    except _Expired:
+        raise expired(_message(what, seconds)) from None
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous_handler)

@@ -154,6 +154,8 @@ def reference_image(scene: Scene, view: SceneView, camera: Camera, kind: str,
             raise ValueError(f"view {view.name!r} stores no photo")
         if image.shape[:2] != (camera.height, camera.width):
             image = cv2.resize(image, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
+        image = image.view()
+        image.setflags(write=False)  # a SUT gets it as it gets a cached render: it may not draw on the photo
         return image
     twin = scene if getattr(scene, "is_exact", False) else exact_twin(scene)
     if kind != "exact" or twin is None:

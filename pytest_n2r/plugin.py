@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import inspect
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -104,6 +105,7 @@ def _rooted(config: pytest.Config, value: str) -> Path | None:
 def _build_session(config: pytest.Config) -> Any:
     """Parse and check every option (a bad value is a usage error naming the option)."""
     from .cache import parse_size
+    from .data.atomic import unwritable_reason
     from .errors import N2RError
     from .relations import RunSettings
     from .render.size import RenderSize
@@ -152,11 +154,32 @@ def _build_session(config: pytest.Config) -> Any:
             scenes = parse_scene_specs(config.getini("n2r_scenes"), base, "ini n2r_scenes")
     except N2RError as exc:
         raise pytest.UsageError(f"pytest-n2r: {exc}") from None
+    device = str(_raw(config, "n2r_device")).strip().lower()
+    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", device):
+        fail("n2r_device", f"{device!r}; expected auto, cpu, cuda or cuda:N")
+    if device.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            fail("n2r_device", f"{device!r}: CUDA is not available on this machine; use auto or cpu")
+    for ini in ("n2r_artifacts", "n2r_cache_dir"):
+        folder = _rooted(config, str(_raw(config, ini)))
+        reason = unwritable_reason(folder) if folder is not None else None
+        if reason is not None:
+            fail(ini, f"{folder}: {reason}; choose a writable folder, or 'none'")
+    for spec in scenes:
+        if spec.kind == "file":
+            from .scene.file import check_scene_file  # here: a run without scene files never loads the field
+
+            try:
+                check_scene_file(spec.source)
+            except N2RError as exc:
+                raise pytest.UsageError(f"pytest-n2r: --n2r-scene / ini n2r_scenes {spec.source}: {exc}") from None
     settings = RunSettings(
         examples=examples, size=size, derandomize=derandomize_on, timeout=timeout or None,
         artifacts=_rooted(config, str(_raw(config, "n2r_artifacts"))),
     )
-    return N2RSession(settings=settings, scenes=scenes, device=str(_raw(config, "n2r_device")),
+    return N2RSession(settings=settings, scenes=scenes, device=device,
                       render_scale=render_scale, cache_dir=_rooted(config, str(_raw(config, "n2r_cache_dir"))), cache_bytes=cache_bytes)
 
 
@@ -233,12 +256,16 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 def n2r_scene(request: pytest.FixtureRequest) -> Any:
     """The scene under test (a :class:`pytest_n2r.Scene`), loaded once per session; tests that use it
     are parametrized over every configured scene, with the scene name in the test id."""
+    from .errors import N2RError
     from .session import NO_SCENE_MESSAGE
 
     spec = getattr(request, "param", None)
     if spec is None:
         pytest.skip(NO_SCENE_MESSAGE)
-    return _session(request.config).load(spec)
+    try:
+        return _session(request.config).load(spec)
+    except N2RError as exc:  # the scene's own message, not a traceback through the loader
+        pytest.fail(f"pytest-n2r: scene {spec.source}: {exc}", pytrace=False)
 
 
 # -- running -----------------------------------------------------------------------------------------------
@@ -251,6 +278,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if relation is None:
         return None
     __tracebackhide__ = True
+    from ._determinism import SUTNotDeterministic
+    from ._timeout import CallTimeout
     from .relations import RelationFailure
 
     funcargs = pyfuncitem.funcargs
@@ -267,7 +296,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     failure = None
     try:
         session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid, replay=replay)
-    except RelationFailure as exc:
+    except (RelationFailure, CallTimeout, SUTNotDeterministic) as exc:
         failure = str(exc)
     finally:
         if session.stats and session.stats[-1].test_id == pyfuncitem.nodeid:  # kept whatever happened

@@ -32,9 +32,10 @@ from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 from hypothesis.database import ReadOnlyDatabase
-from hypothesis.errors import Unsatisfiable
+from hypothesis.errors import Flaky, Unsatisfiable
 
-from ._timeout import time_limit
+from ._determinism import NotDeterministic, SUTNotDeterministic, same_output, show_output
+from ._timeout import TimeLimitReached, time_limit
 from ._validation import check_range
 from .artifacts import artifact_dir, save_pair
 from .cache import RenderCache
@@ -277,6 +278,7 @@ class _Evaluation:
     """One drawn example evaluated: its plain record and what a failure report needs."""
 
     record: dict[str, Any]
+    where: str = ""
     result: MetricResult | None = None
     source: RenderedView | None = None
     follow: RenderedView | None = None
@@ -308,6 +310,7 @@ class _Engine:
         self.shrinking = False  # False: the survey pass; True: the shrink pass
         self.failed = False
         self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
+        self.images_error: str | None = None
 
     # -- pieces -----------------------------------------------------------------------------------------
 
@@ -318,7 +321,8 @@ class _Engine:
                role: str) -> RenderedView:
         start = time.perf_counter()
         renders = self.cache.stats.renders
-        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}"):
+        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}",
+                        escape=True):
             rendered = self.cache.render(self.scene, c2w, camera, outputs)
         self.stats.render_s += time.perf_counter() - start
         self.stats.renders += self.cache.stats.renders - renders
@@ -327,7 +331,8 @@ class _Engine:
     def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
         start = time.perf_counter()
         try:
-            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})"):
+            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})",
+                            escape=True):
                 output = self.sut(rgb)
         except Exception as exc:
             raise SUTError(
@@ -398,7 +403,7 @@ class _Engine:
             verdict = self.relation.validity.check(follow, self.scene, source)
             if not verdict.valid:
                 record.update(status="rejected", reason=verdict.reason)
-                return _Evaluation(record)
+                return _Evaluation(record, where)
         key = f"{view.name}|{camera.width}x{camera.height}|{record['source_c2w']}"
         if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
             self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
@@ -410,7 +415,7 @@ class _Engine:
         else:
             deviation = float(result.deviation)
             record.update(score=float(result.score), deviation=deviation, passed=deviation <= self.relation.eps)
-        return _Evaluation(record, result, source, follow, (out_source, out_follow))
+        return _Evaluation(record, where, result, source, follow, (out_source, out_follow))
 
     def count(self, record: dict[str, Any]) -> None:
         """Count a survey record and stop drawing when almost every draw is invalid or undefined."""
@@ -442,6 +447,9 @@ class _Engine:
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
         if not self.shrinking:
+            if record["status"] == "accepted" and not record["passed"] and not self.stats.inconsistencies:
+                self.check_deterministic(evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs,
+                                         evaluation.where)
             self.count(record)
         elif self.failed:
             self.stats.shrink_examples += 1
@@ -461,10 +469,27 @@ class _Engine:
         __tracebackhide__ = True
         record, stats = dict(evaluation.record), self.stats
         if self.settings.artifacts is not None:
-            record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id),
-                                         evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
+            try:
+                record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id),
+                                             evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
+            except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
+                self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
         stats.minimal = record
         raise RelationFailure(self.failure_message(view, tau, evaluation.result, record, note), stats)
+
+    def check_deterministic(self, source_rgb: np.ndarray, follow_rgb: np.ndarray, out_source: Any,
+                            out_follow: Any, where: str) -> None:
+        """Before the first failure counts: the SUT must give the same outputs again on the same two images
+        (else the failure is its noise, and Hypothesis's replay would fail at random)."""
+        for role, rgb, first in (("source", source_rgb, out_source), ("follow-up", follow_rgb, out_follow)):
+            again = self.run_sut(rgb, role, where)
+            if not same_output(first, again):
+                raise NotDeterministic(
+                    f"the system under test is not deterministic: called twice on the same {role} image "
+                    f"({where}) it returned\n  first:  {show_output(first, again)}\n  second: "
+                    f"{show_output(again, first)}\nA relation cannot tell its noise from an inconsistency: seed "
+                    "its random generators (and fix its thread count) inside the SUT, or raise eps above the "
+                    "noise")
 
     def describe_transform(self, tau: Transform) -> str:
         return tau.describe("ref" if self.units is Units.REFERENCE else self.units.value)
@@ -499,6 +524,8 @@ class _Engine:
             lines.append(f"              follow   {_shown_path(images['follow'])}")
             lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
                          f"{Path(images['follow_raw']).name})")
+        elif self.images_error:
+            lines.append(f"  images:     {self.images_error}")
         return "\n".join(lines)
 
     def metres(self, tau: Transform, scale: float) -> str:
@@ -591,6 +618,16 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         stats.outcome, stats.message = "failed", str(exc)
         exc.stats = stats
         raise
+    except (TimeLimitReached, NotDeterministic) as exc:  # escaped Hypothesis: the example ran once
+        stats.outcome, stats.message = "error", str(exc)
+        raise exc.error() from None
+    except Flaky:  # a failure that passed on replay without the SUT changing its outputs: the scene's render
+        stats.outcome = "error"
+        stats.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
+                         "is not deterministic. The system under test gave the same outputs twice on the first "
+                         "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
+                         "with randomness?) or the metric vary")
+        raise SUTNotDeterministic(stats.message) from None
     except BaseException as exc:
         stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
         raise

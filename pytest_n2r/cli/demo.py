@@ -5,16 +5,31 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ._output import FORCE_HELP
+
 
 def _size(text: str) -> int | tuple[int, int]:
-    """``480`` (longer side) or ``480x270`` (width x height), in pixels."""
+    """``480`` (longer side) or ``480x270`` (width x height), in pixels (each 8..4096)."""
     try:
-        if "x" in text:
+        if "x" in text.lower():
             w, h = text.lower().split("x")
-            return int(w), int(h)
-        return int(text)
+            size: int | tuple[int, int] = (int(w), int(h))
+        else:
+            size = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r}: expected WIDTHxHEIGHT (480x270) or the longer side (480)")
+        raise argparse.ArgumentTypeError(f"size {text!r}: expected WIDTHxHEIGHT (480x270) or the longer side "
+                                         "(480)") from None
+    if not all(8 <= v <= 4096 for v in (size if isinstance(size, tuple) else (size,))):
+        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be 8..4096 pixels")
+    return size
+
+
+def _is_export(folder: Path) -> bool:
+    """Whether ``folder`` holds an earlier ``n2r demo export`` (its transforms.json names the demo scene)."""
+    from ._output import _json_with_key
+
+    path = folder / "transforms.json"
+    return path.is_file() and _json_with_key("n2r_scene")(path)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -28,9 +43,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_list)
     p = sub.add_parser("export", help="write a demo scene's ground-truth images and transforms.json")
     p.add_argument("name", help="scene name (see `n2r demo list`)")
-    p.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    p.add_argument("-o", "--out", required=True, type=Path, metavar="DIR",
+                   help="output folder (created if missing)")
     p.add_argument("--size", type=_size, default=(480, 270), metavar="WxH",
                    help="image size, WIDTHxHEIGHT or the longer side (default: 480x270)")
+    p.add_argument("--force", action="store_true", help="write into a folder that holds other files")
     p.set_defaults(func=run_export)
     p = sub.add_parser(
         "build", help="fit the fitted demo scenes by their recipes (package data, or a folder)",
@@ -41,6 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("names", nargs="*", metavar="NAME", help="exact scene names (default: every demo scene)")
     p.add_argument("-o", "--out", type=Path, default=None, metavar="DIR",
                    help="output folder (default: the package's own pytest_n2r/demo/data, shipped with it)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run_build)
 
 
@@ -70,8 +88,14 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_export(args: argparse.Namespace) -> int:
-    from ..demo import export
+    from ..demo import demo_scene_names, export
+    from ..errors import InvalidArgument
+    from ._output import check_output_dir
 
+    if args.name not in demo_scene_names():
+        raise InvalidArgument(f"NAME {args.name!r}: no such demo scene; expected one of {demo_scene_names()} "
+                              "(`n2r demo list`)")
+    check_output_dir(args.out, _is_export, "the export (transforms.json and images/)", force=args.force)
     path = export(args.name, args.out, args.size)
     print(f"wrote {path} and {path.parent / 'images'}")
     return 0
@@ -82,6 +106,7 @@ def run_build(args: argparse.Namespace) -> int:
     from ..demo.fitted import DATA_DIR, RECIPES, build_fitted
     from ..errors import InvalidArgument
     from ..scene.file import read_scene_file
+    from ._output import SCENE, check_output
     from .fit import _Progress
 
     names = args.names or list(demo_scene_names())
@@ -89,6 +114,10 @@ def run_build(args: argparse.Namespace) -> int:
     if unknown:
         raise InvalidArgument(f"no fitted recipe for {unknown}; expected scene names from {tuple(RECIPES)}")
     out = args.out if args.out is not None else DATA_DIR
+    if out.exists() and not out.is_dir():
+        raise InvalidArgument(f"-o {out}: is a file; expected a folder for the scene files")
+    for name in names:
+        check_output(out / f"{name}.n2r", SCENE, force=args.force)
     for name in names:
         bar = _Progress(RECIPES[name].max_steps, None)
         try:

@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import argparse
 import ast
-import os
+import math
 import re
 import sys
 import time
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from ._output import FORCE_HELP
 
 if TYPE_CHECKING:
     from ..field.config import FieldConfig
@@ -70,7 +72,10 @@ def build_config(overrides: list[tuple[str, object]]) -> FieldConfig:
         if key not in base:
             raise InvalidArgument(f"--config {key}=...: unknown setting {key!r}; known: {sorted(base)}")
         changes[key] = (value,) if isinstance(base[key], list) and not isinstance(value, (tuple, list)) else value
-    return FieldConfig.from_dict({**base, **changes})
+    try:
+        return FieldConfig.from_dict({**base, **changes})
+    except InvalidArgument as exc:
+        raise InvalidArgument(f"--config: {exc}") from None
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -106,6 +111,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "report's history; evaluation time is not training time)")
     p.add_argument("--checkpoint-every", type=float, default=60.0, metavar="SECONDS",
                    help="write a checkpoint to the output this often (default: 60)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run)
 
 
@@ -141,29 +147,18 @@ def run(args: argparse.Namespace) -> int:
     from collections import Counter
 
     from ..data import ingest
-    from ..errors import InvalidArgument
     from ..field import fit as fitting
     from ..scene.file import read_scene_file, save_scene
+    from ._output import SCENE, check_output
     from .info import format_info
     from .poses import format_skipped
 
-    if args.downscale < 1:
-        raise InvalidArgument(f"--downscale {args.downscale}: expected a factor >= 1 (4: a quarter of the width)")
-    if args.max_steps is not None and args.max_steps < 1:
-        raise InvalidArgument(f"--max-steps {args.max_steps}: expected an integer >= 1")
-    if not args.checkpoint_every > 0:
-        raise InvalidArgument(f"--checkpoint-every {args.checkpoint_every}: expected seconds > 0")
+    check_arguments(args)
     time_budget = args.time_budget
     if time_budget is None and args.max_steps is None:
         time_budget = 600.0
     config = build_config(args.config)
-    output: Path = args.output
-    if output.is_dir():
-        raise InvalidArgument(f"-o {output}: is a folder; expected the path of the scene file to write (scene.n2r)")
-    output.parent.mkdir(parents=True, exist_ok=True)
-    if not os.access(output.parent, os.W_OK):
-        raise InvalidArgument(f"-o {output}: cannot write into {output.parent} (checked before fitting, so no "
-                              "fit is lost)")
+    output = check_output(args.output, SCENE, inputs=[Path(args.source)], force=args.force)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below
@@ -204,6 +199,28 @@ def run(args: argparse.Namespace) -> int:
     save(result, {**result.report, "complete": True})
     print(format_info(read_scene_file(output, images=False)))
     return 0
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Every number and the device, checked before the capture is read (so a typo costs no fit)."""
+    from ..errors import InvalidArgument
+    from ..field.device import resolve_device
+
+    if not (math.isfinite(args.downscale) and args.downscale >= 1):
+        raise InvalidArgument(f"--downscale {args.downscale}: expected a finite factor >= 1 (4: a quarter of "
+                              "the width)")
+    if args.max_steps is not None and args.max_steps < 1:
+        raise InvalidArgument(f"--max-steps {args.max_steps}: expected an integer >= 1")
+    if not (math.isfinite(args.checkpoint_every) and args.checkpoint_every > 0):
+        raise InvalidArgument(f"--checkpoint-every {args.checkpoint_every}: expected a finite number of seconds > 0")
+    mpu = args.metres_per_unit
+    if mpu is not None and not (math.isfinite(mpu) and mpu > 0):
+        raise InvalidArgument(f"--metres-per-unit {mpu}: expected the finite number of metres per scene unit, > 0 "
+                              "(leave it out when the capture's scale is unknown)")
+    if not Path(args.source).exists():
+        raise InvalidArgument(f"SOURCE {args.source}: does not exist; expected a transforms.json, a COLMAP "
+                              "model folder, a folder of photos or a video")
+    resolve_device(args.device)
 
 
 def _kept(output: Path, last: dict) -> str:

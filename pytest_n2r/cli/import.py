@@ -1,3 +1,4 @@
+# ruff: noqa: N999  (the module is named after its subcommand, as cli/main.py COMMANDS requires)
 """``n2r import scene.ply -o scene.n2r``: pack a splat scene trained elsewhere (a 3DGS ``.ply``) with its cameras
 into one scene file that ``--n2r-scene`` and ``load_scene`` read."""
 
@@ -8,6 +9,8 @@ import hashlib
 import sys
 import time
 from pathlib import Path
+
+from ._output import FORCE_HELP
 
 __all__ = ["add_parser", "parse_rgb", "run"]
 
@@ -45,6 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--background", type=parse_rgb, default=(0.0, 0.0, 0.0), metavar="R,G,B",
                    help="the colour the scene was trained over, in [0, 1] (default: 0,0,0, 3DGS's; 1,1,1 for "
                         "--white_background)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run)
 
 
@@ -54,11 +58,14 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InvalidArgument
     from ..scene.splat_file import save_splat_scene
     from ..scene.splat_scene import load_splat_scene
+    from ._output import SCENE, check_output
 
     if args.heldout_every is not None and args.heldout_every < 0:
         raise InvalidArgument(f"--heldout-every {args.heldout_every}: expected an int >= 0")
-    if args.output.suffix.lower() != ".n2r":
-        raise InvalidArgument(f"-o {args.output}: expected a path ending in .n2r")
+    for option, path in (("PLY", args.ply), ("--cameras", args.cameras)):
+        if path is not None and not path.exists():
+            raise InvalidArgument(f"{option} {path}: does not exist")
+    check_output(args.output, SCENE, inputs=[p for p in (args.ply, args.cameras) if p is not None], force=args.force)
     start = time.perf_counter()
     cameras = args.cameras if args.cameras is not None else find_cameras(args.ply)
     if cameras is None:

@@ -31,9 +31,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..render.size import RenderSize
     from ..scene.file import read_scene_file
     from ..scene.splat_file import is_splat_file, splat_info
 
+    RenderSize.parse(args.size, name="--size")  # checked before the scene is read
     if is_splat_file(args.scene):  # splats packed by `n2r import`
         info = splat_info(args.scene)
         lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -46,6 +47,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"n2r {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `n2r info ... | head`: the reader left; say nothing more
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - the interpreter flushes it at exit
+        return 141
+    except OSError as exc:  # the disk filled up, a file vanished: the system's reason, without a traceback
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"n2r {args.command}: error:{where}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(f"n2r {args.command}: error: out of memory (a smaller --size or --downscale needs less)",
+              file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -8,6 +8,8 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ._output import FORCE_HELP
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -45,6 +47,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--compare", metavar="OTHER", default=None,
                    help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
                         "image by image after a similarity alignment")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run)
 
 
@@ -52,6 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from ..data.ingest import complete_points, extent, load_poses
     from ..data.transforms_json import write_transforms_json
 
+    check_arguments(args)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
@@ -75,6 +79,30 @@ def run(args: argparse.Namespace) -> int:
         path = write_transforms_json(args.output, poses, extra=extra)
         print(f"wrote       {path} ({len(poses.frames)} frames)")
     return 0
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """The sources, numbers and output paths, checked before any structure from motion runs."""
+    from ..errors import InvalidArgument
+    from ._output import POSES_JSON, check_output, check_output_dir
+
+    for option, source in (("SOURCE", args.source), ("--compare", args.compare)):
+        if source is not None and not Path(source).exists():
+            raise InvalidArgument(f"{option} {source}: does not exist; expected a folder of photos, a video, "
+                                  "a COLMAP model folder or a transforms.json")
+    for option, value in (("--max-size", args.max_size), ("--max-frames", args.max_frames)):
+        if value < 1:
+            raise InvalidArgument(f"{option} {value}: expected an integer >= 1")
+    if args.max_size < 64:
+        raise InvalidArgument(f"--max-size {args.max_size}: structure from motion needs images of at least 64 "
+                              "pixels on the longer side (default: 960)")
+    sources = [Path(s) for s in (args.source, args.compare) if s is not None]
+    sources += [p / "transforms.json" for p in sources if p.is_dir()]
+    if args.output is not None:
+        check_output(args.output, POSES_JSON, inputs=sources, force=args.force)
+    if args.frames_dir is not None:
+        check_output_dir(args.frames_dir, lambda folder: True, "the video's frames", option="--frames-dir",
+                         force=True)
 
 
 def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:

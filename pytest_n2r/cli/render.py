@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ._output import FORCE_HELP
+
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
 
@@ -37,14 +39,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--opacity", action="store_true", help="also write the opacity (.opacity.png)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="OUT", help="the RGB image to write (.png)")
+    p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run)
 
 
 def output_paths(output: Path) -> dict[str, Path]:
-    """Where each output goes: ``rgb`` at ``output``, the others beside it (``out.depth.png`` ...)."""
-    stem = output.with_suffix("")
-    return {"rgb": output, "depth": stem.with_suffix(".depth.png"), "depth_raw": stem.with_suffix(".depth.npy"),
-            "opacity": stem.with_suffix(".opacity.png")}
+    """Where each output goes: ``rgb`` at ``output``, the others beside it with ``.depth.png``,
+    ``.depth.npy`` and ``.opacity.png`` appended to its name less ``.png`` (``view.depth.png`` →
+    ``view.depth.depth.png``: never the RGB image's own name)."""
+    stem = output.name[:-len(output.suffix)] if output.suffix else output.name
+    return {"rgb": output, **{key: output.with_name(stem + ending) for key, ending in
+                              (("depth", ".depth.png"), ("depth_raw", ".depth.npy"), ("opacity", ".opacity.png"))}}
 
 
 def depth_preview(depth: np.ndarray, opacity: np.ndarray) -> np.ndarray:
@@ -75,12 +80,20 @@ def _png(image: np.ndarray) -> bytes:
 
 def run(args: argparse.Namespace) -> int:
     from ..data.atomic import atomic_write_bytes
+    from ..errors import InvalidArgument
+    from ..field.device import resolve_device
     from ..geometry import Transform
     from ..render.size import RenderSize
     from ..scene.loading import load_scene
+    from ._output import NPY, PNG, check_output
 
     tau = Transform.parse(args.transform, name="--transform")
     size = None if args.size is None else RenderSize.parse(args.size, name="--size")
+    resolve_device(args.device)
+    paths = output_paths(check_output(args.output, PNG, inputs=[args.scene], force=args.force))
+    for key in (["depth", "depth_raw"] if args.depth else []) + (["opacity"] if args.opacity else []):
+        check_output(paths[key], NPY if key == "depth_raw" else PNG, option=f"-o (its {key.replace('_raw', '')} "
+                     "file beside it)", inputs=[args.scene], force=args.force)
     scene = load_scene(args.scene, device=args.device, images=False)
     if args.view is None:
         view = next((v for v in scene.views if v.split == "heldout"), scene.views[0])
@@ -89,19 +102,22 @@ def run(args: argparse.Namespace) -> int:
     camera = view.camera if size is None else size.apply(view.camera)
     outputs = ("rgb",) + (("depth",) if args.depth else ()) + (("opacity",) if args.depth or args.opacity else ())
     c2w = tau.apply(view.c2w, scene.length_scale(args.units))
+    try:
+        scene.check_camera_position(c2w)
+    except InvalidArgument as exc:
+        raise InvalidArgument(f"--transform {args.transform!r} moves the camera too far: {exc}") from None
     start = time.perf_counter()
     rendered = scene.render(c2w, camera, outputs)
     seconds = time.perf_counter() - start
-    paths = output_paths(args.output)
-    written = [atomic_write_bytes(paths["rgb"], _png(rendered.rgb))]
+    encoded = {"rgb": _png(rendered.rgb)}
     if args.depth:
         raw = io.BytesIO()
         np.save(raw, rendered.depth)
-        written.append(atomic_write_bytes(paths["depth"], _png(depth_preview(rendered.depth, rendered.opacity))))
-        written.append(atomic_write_bytes(paths["depth_raw"], raw.getvalue()))
+        encoded["depth"] = _png(depth_preview(rendered.depth, rendered.opacity))
+        encoded["depth_raw"] = raw.getvalue()
     if args.opacity:
-        grey = np.rint(rendered.opacity * 255).astype(np.uint8)
-        written.append(atomic_write_bytes(paths["opacity"], _png(grey)))
+        encoded["opacity"] = _png(np.rint(rendered.opacity * 255).astype(np.uint8))
+    written = [atomic_write_bytes(paths[key], data) for key, data in encoded.items()]
     print(f"rendered    view {view.index} {view.name!r} ({view.split}), {tau.describe(args.units)}, "
           f"{camera.width}x{camera.height} in {seconds:.2f} s on {scene.device} ({scene.backend})", file=sys.stderr)
     for path in written:

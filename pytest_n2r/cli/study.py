@@ -21,8 +21,8 @@ def _wxh(text: str) -> tuple[int, int]:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"size {text!r}: expected WIDTHxHEIGHT, e.g. 480x270") from None
-    if w < 1 or h < 1:
-        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be >= 1")
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise argparse.ArgumentTypeError(f"size {text!r}: width and height must be 1..8192 pixels")
     return w, h
 
 
@@ -38,6 +38,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--sut", action="append", required=True, metavar="SUT",
                         help="orb, sift, akaze, or 'module:callable' (repeatable)")
     parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    parser.add_argument("--force", action="store_true", help="write into a folder that holds other files")
     parser.add_argument("--examples", type=int, default=5, metavar="N",
                         help="draws per transform family, source view and scene (default: 5)")
     parser.add_argument("--views", type=int, default=3, metavar="N",
@@ -60,9 +61,18 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from ..errors import InvalidArgument
     from ..session import load_scene_spec, parse_scene_specs
     from ..study import StudyConfig, resolve_sut, run_study, write_study
+    from ._output import check_output_dir
 
+    for option, value in (("--examples", args.examples), ("--views", args.views), ("--fps-frames", args.fps_frames)):
+        if value < 1:
+            raise InvalidArgument(f"{option} {value}: expected an integer >= 1")
+    if not 16 <= args.size <= 4096:
+        raise InvalidArgument(f"--size {args.size}: expected the longer side of the test renders in 16..4096 pixels")
+    check_output_dir(Path(args.out), lambda folder: (folder / "study.md").is_file(), "the study's tables and plots",
+                     force=args.force)
     config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
                          fps_frames=args.fps_frames, seed=args.seed,
                          **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))

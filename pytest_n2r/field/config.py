@@ -10,6 +10,12 @@ from ..errors import InvalidArgument
 __all__ = ["FieldConfig"]
 
 
+def _is_number(value: object, kind: type) -> bool:
+    """``value`` is an int (``kind`` int) or an int or float (``kind`` float), not a bool."""
+    allowed = (int,) if kind is int else (int, float)
+    return isinstance(value, allowed) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class FieldConfig:
     """Settings of :func:`pytest_n2r.field.fit`. The defaults were chosen by measurement
@@ -69,6 +75,7 @@ class FieldConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        self._check_types()
         object.__setattr__(self, "resolutions", tuple(int(r) for r in self.resolutions))
         object.__setattr__(self, "stage_fractions", tuple(float(f) for f in self.stage_fractions))
         res, fr = self.resolutions, self.stage_fractions
@@ -97,6 +104,24 @@ class FieldConfig:
             raise InvalidArgument(f"FieldConfig.random_background={self.random_background!r}: expected True or False")
         if self.sh_degree not in (0, 1):
             raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0 or 1")
+
+    def _check_types(self) -> None:
+        """Every setting has its declared kind (a string, None or a bool where a number belongs is named)."""
+        for f in fields(self):
+            value, default = getattr(self, f.name), f.default
+            if isinstance(default, tuple):
+                kind, ok = "a list of numbers", isinstance(value, (tuple, list)) and all(
+                    _is_number(v, int if isinstance(default[0], int) else float) for v in value)
+                kind = "a list of integers" if isinstance(default[0], int) else kind
+            elif isinstance(default, bool):
+                kind, ok = "True or False", isinstance(value, bool)
+            elif isinstance(default, int):
+                kind, ok = "an integer", _is_number(value, int)
+            else:
+                kind, ok = "a number", _is_number(value, float)
+            if not ok:
+                raise InvalidArgument(f"FieldConfig.{f.name}={value!r}: expected {kind} (default: "
+                                      f"{','.join(map(str, default)) if isinstance(default, tuple) else default})")
 
     def stage(self, progress: float) -> int:
         """The index into ``resolutions`` at ``progress`` (0..1) of the run."""

@@ -34,6 +34,9 @@ from .space import SceneSpace
 
 __all__ = ["SceneField", "n_sh_coefficients", "used_vertex_index", "vertex_ijk", "FIELD_TENSORS"]
 
+#: The largest |density_shift| a scene file may hold: a fit's shift is -14.5..69 for alpha_init 1e-6..0.999
+#: over steps of 0.1..2 voxels (-8.5 by default); beyond ±100, every sample is empty or opaque alike.
+_MAX_DENSITY_SHIFT = 100.0
 #: Names of the tensors a scene file stores for the field.
 FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
 
@@ -232,8 +235,12 @@ class SceneField:
             background = metadata["background"]
         except (KeyError, TypeError, ValueError, InvalidArgument) as exc:
             raise SceneFileError(f"{source}: field metadata is incomplete or invalid ({exc})") from None
-        if not 4 <= res <= 2048 or not math.isfinite(shift):
-            raise SceneFileError(f"{source}: field resolution {res} / density_shift {shift} out of range")
+        if not 4 <= res <= 2048:
+            raise SceneFileError(f"{source}: field resolution={res}; expected grid vertices per axis in 4..2048")
+        if not abs(shift) <= _MAX_DENSITY_SHIFT:  # also NaN
+            raise SceneFileError(f"{source}: field density_shift={shift!r}; expected a finite number within "
+                                 f"±{_MAX_DENSITY_SHIFT:g} (a fit writes -8.5 by default; beyond the limit every "
+                                 "sample is empty or opaque and the scene renders flat)")
         if as_unit_rgb(background) is None:
             raise SceneFileError(f"{source}: field background {background!r} is not three values in [0, 1]")
         try:

@@ -8,11 +8,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InvalidArgument, InvalidType
+from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
 from ..render.view import OUTPUTS, RenderedView
 
-__all__ = ["Scene", "SceneView", "normalize_outputs"]
+__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs"]
+
+#: How far from the captured cameras a render may be, in reference lengths: beyond it a float32 renderer
+#: cannot place a sample within a thousandth of a reference length, so the picture would be noise or NaN.
+MAX_CAMERA_DISTANCE = 1e4
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,13 +80,41 @@ class Scene(ABC):
 
         Only the ``outputs`` asked for are computed (``"rgb"``, ``"depth"``, ``"opacity"``).
         """
-        c2w = check_pose(c2w)
+        c2w = self.check_camera_position(check_pose(c2w))
         if not isinstance(camera, Camera):
             raise InvalidType(f"camera must be a pytest_n2r.geometry.Camera, got {type(camera).__name__}")
         if camera.distortion:
             raise InvalidArgument("camera has lens distortion; scenes render ideal pinhole views only")
         outputs = normalize_outputs(outputs)
-        return RenderedView(camera=camera, c2w=c2w, **self._render(c2w, camera, outputs))
+        rendered = self._render(c2w, camera, outputs)
+        for name in ("depth", "opacity"):
+            value = rendered.get(name)
+            if value is not None and not np.isfinite(value).all():
+                bad = int(value.size - np.isfinite(value).sum())
+                raise InvalidArgument(f"scene {self.name!r} rendered {bad} NaN/Inf {name} value(s) at camera "
+                                      f"position {np.round(c2w[:3, 3], 6).tolist()}; its field holds values "
+                                      "the renderer cannot use")
+        return RenderedView(camera=camera, c2w=c2w, **rendered)
+
+    def check_camera_position(self, c2w: np.ndarray) -> np.ndarray:
+        """``c2w`` if its camera lies within :data:`MAX_CAMERA_DISTANCE` reference lengths of the captured
+        cameras' mean position; else an :class:`InvalidArgument` naming the position and the limit. A scene
+        without captured views or a reference length (yet) has no such limit."""
+        try:
+            limit = MAX_CAMERA_DISTANCE * float(self.reference_length)
+        except (AttributeError, N2RError):  # being built, or without cameras: nothing to measure against
+            return c2w
+        if not self.views:
+            return c2w
+        anchor = np.mean([np.asarray(v.c2w, dtype=np.float64)[:3, 3] for v in self.views], axis=0)
+        offset = np.abs(np.asarray(c2w, dtype=np.float64)[:3, 3] - anchor)
+        if not (np.isfinite(offset).all() and offset.max() <= limit):
+            position = ", ".join(f"{v:.4g}" for v in np.asarray(c2w)[:3, 3])
+            raise InvalidArgument(
+                f"camera position ({position}) is {offset.max():.3g} scene units from the captured cameras of "
+                f"scene {self.name!r}; renders are defined within {MAX_CAMERA_DISTANCE:g} reference lengths "
+                f"({limit:.4g} scene units) of them; use a smaller translation")
+        return c2w
 
     def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
         """Scene units per unit of transform translation in ``units``."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import math
 import os
 import zipfile
 import zlib
@@ -28,9 +29,9 @@ from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
 from ..field.grid import SceneField
 from . import schema
-from .base import SceneView
+from .base import MAX_CAMERA_DISTANCE, SceneView
 
-__all__ = ["save_scene", "read_scene_file", "SceneFile"]
+__all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 
 #: Every member's timestamp (the earliest a zip can hold), so the bytes do not depend on when they were written.
 _ZIP_TIME = (1980, 1, 1, 0, 0, 0)
@@ -113,6 +114,10 @@ def save_scene(
         raise InvalidArgument(f"save_scene: image_quality={image_quality!r}; expected an integer in 1..100")
     if not isinstance(config, FieldConfig):
         raise InvalidArgument(f"save_scene: config must be a FieldConfig, got {type(config).__name__}")
+    for name, value in (("reference_length", reference_length), ("metres_per_unit", metres_per_unit)):
+        if value is not None and not (isinstance(value, (int, float, np.floating)) and math.isfinite(value)
+                                      and value > 0):
+            raise InvalidArgument(f"save_scene: {name}={value!r}; expected a finite number > 0 (scene units)")
 
     import safetensors.torch
 
@@ -132,10 +137,18 @@ def save_scene(
         "report": report,
     }
     text = json.dumps(schema.json_ready(data), indent=1, allow_nan=False)
+    try:  # what a reader checks, checked before writing: never replace a file with one that cannot be read
+        _check_json(json.loads(text), f"save_scene({str(path)!r})")
+    except SceneFileError as exc:
+        raise InvalidArgument(f"{exc} (nothing was written)") from None
     # Deflate level 1 for the field: float16 values barely compress at any level (measured on a 160³ field,
     # 1.36 M stored vertices: 33.5 MiB in 1.6 s at level 1, 33.2 MiB in 2.5 s at level 6); JPEGs are stored.
+    tensors = field.tensors()
+    if not tensors["vertex_values"].isfinite().all():  # NaN, or beyond float16's ±65504
+        raise InvalidArgument("save_scene: the field holds NaN or values beyond float16's ±65504, which a scene "
+                              "file cannot store (nothing was written); the fit diverged")
     entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
-               (schema.FIELD_FILE, safetensors.torch.save(field.tensors()), zipfile.ZIP_DEFLATED, 1)]
+               (schema.FIELD_FILE, safetensors.torch.save(tensors), zipfile.ZIP_DEFLATED, 1)]
     for view, member in zip(views, members):
         if member is not None:
             entries.append((member, _encode_jpeg(view.image, image_quality, view.name), zipfile.ZIP_STORED, None))
@@ -169,23 +182,208 @@ def _encode_jpeg(image: np.ndarray, quality: int, name: str) -> bytes:
     return encoded.tobytes()
 
 
-def _decode_jpeg(payload: bytes, member: str, name: str, source: str) -> np.ndarray:
+#: The most bytes ``scene.json`` may inflate to (a scene of 10 000 frames takes about 4 MiB).
+MAX_JSON_BYTES = 64 * 2**20
+#: The most bytes a safetensors header may take (three tensors take under 300 bytes).
+_MAX_TENSOR_HEADER_BYTES = 2**20
+
+
+def _jpeg_size(payload: bytes) -> tuple[int, int] | None:
+    """``(width, height)`` from a JPEG's start-of-frame marker, read before decoding (so a photo claiming
+    60 000 × 60 000 pixels is refused without inflating it); ``None`` when no marker is found."""
+    i = 2 if payload[:2] == b"\xff\xd8" else len(payload)
+    while i + 9 <= len(payload):
+        if payload[i] != 0xFF:
+            return None
+        marker, length = payload[i + 1], int.from_bytes(payload[i + 2:i + 4], "big")
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):
+            return int.from_bytes(payload[i + 7:i + 9], "big"), int.from_bytes(payload[i + 5:i + 7], "big")
+        i += 2 + length
+    return None
+
+
+def _decode_jpeg(payload: bytes, member: str, name: str, source: str, width: int, height: int) -> np.ndarray:
+    """The photo of frame ``name`` (H×W×3 uint8 RGB), which must be ``width`` × ``height`` pixels."""
     import cv2
 
-    image = cv2.imdecode(np.frombuffer(payload, dtype=np.uint8), cv2.IMREAD_COLOR) if payload else None
+    declared = _jpeg_size(payload)
+    if declared is not None and declared != (width, height):
+        raise SceneFileError(f"{source}: {member} is {declared[0]}x{declared[1]} pixels; frame {name!r} has a "
+                             f"{width}x{height} camera")
+    image = cv2.imdecode(np.frombuffer(payload, dtype=np.uint8), cv2.IMREAD_COLOR) if declared else None
     if image is None:
-        raise SceneFileError(f"{source}: {member} (the photo of frame {name!r}) does not decode as an image")
+        raise SceneFileError(f"{source}: {member} (the photo of frame {name!r}) does not decode as a JPEG image")
+    if image.shape[:2] != (height, width):
+        raise SceneFileError(f"{source}: {member} is {image.shape[1]}x{image.shape[0]} pixels; frame {name!r} has "
+                             f"a {width}x{height} camera")
     return np.ascontiguousarray(image[:, :, ::-1])  # BGR → RGB
 
 
-def _member(archive: zipfile.ZipFile, name: str, source: str) -> bytes:
-    """The bytes of member ``name``, or a :class:`SceneFileError` saying it is missing or corrupt."""
+def _member(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: str) -> bytes:
+    """The bytes of member ``name``, or a :class:`SceneFileError` saying it is missing, corrupt or inflates
+    to more than ``limit`` bytes (``why``: what the limit follows from), checked before inflating it."""
     try:
-        return archive.read(name)
+        info = archive.getinfo(name)
     except KeyError:
         raise SceneFileError(f"{source}: the archive has no {name!r}") from None
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError) as exc:
+    if info.file_size > limit:
+        raise SceneFileError(f"{source}: {name!r} inflates to {info.file_size:,} bytes, more than the {limit:,} "
+                             f"bytes {why} allows; the file is corrupt or not a scene file `n2r fit` wrote")
+    try:
+        with archive.open(info) as fh:
+            data = fh.read(limit + 1)
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
         raise SceneFileError(f"{source}: {name!r} is corrupt or truncated ({exc})") from None
+    if len(data) > limit:  # pragma: no cover - zipfile stops at the declared size
+        raise SceneFileError(f"{source}: {name!r} inflates past its declared size")
+    return data
+
+
+def _field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
+    """The size of ``field.safetensors`` by its own header, once that is checked against the most the grid
+    ``field_meta`` declares can take (the occupancy: one byte per cell; at most every vertex stored, an int64
+    index and float16 values each). Only the header is read, so a member that would inflate to gigabytes
+    is refused before it is."""
+    from ..field.grid import n_sh_coefficients
+
+    res, sh_degree = field_meta.get("resolution"), field_meta.get("sh_degree")
+    if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.resolution={res!r}; expected an integer in "
+                             "4..2048 (grid vertices per axis)")
+    if sh_degree not in (0, 1) or isinstance(sh_degree, bool):
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0 or 1")
+    width = 1 + 3 * n_sh_coefficients(sh_degree)
+    where = f"{source}: {schema.FIELD_FILE}"
+    try:
+        info = archive.getinfo(schema.FIELD_FILE)
+        with archive.open(info) as fh:
+            head = fh.read(8)
+            length = int.from_bytes(head, "little") if len(head) == 8 else -1
+            if not 2 <= length <= _MAX_TENSOR_HEADER_BYTES:
+                raise SceneFileError(f"{where} is not a valid safetensors file (its header claims {length:,} "
+                                     f"bytes; at most {_MAX_TENSOR_HEADER_BYTES:,} expected)")
+            header = json.loads(fh.read(length))
+    except KeyError:
+        raise SceneFileError(f"{source}: the archive has no {schema.FIELD_FILE!r}") from None
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
+        raise SceneFileError(f"{source}: {schema.FIELD_FILE!r} is corrupt or truncated ({exc})") from None
+    except (ValueError, RecursionError) as exc:
+        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not JSON: {exc})") from None
+    if not isinstance(header, dict):
+        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not a JSON object)")
+    try:
+        end = max([int(entry["data_offsets"][1]) for name, entry in header.items() if name != "__metadata__"],
+                  default=0)
+    except (TypeError, KeyError, IndexError, ValueError):
+        raise SceneFileError(f"{where} is not a valid safetensors file (a tensor without data_offsets)") from None
+    total = 8 + length + end
+    if end > (res - 1) ** 3 + res ** 3 * (8 + 2 * width):  # names, shapes, dtypes: checked once loaded
+        raise SceneFileError(f"{where}: its tensors claim {end:,} bytes, more than the declared {res}³ grid of "
+                             f"SH degree {sh_degree} can hold; the file is corrupt or not written by `n2r fit`")
+    return total
+
+
+#: How far the field's normalization may stray from the scene's own scale, in reference lengths: a fit
+#: sets its radius to half the captured region (cameras included), a few reference lengths.
+_MAX_NORMALIZATION_RATIO = 1e4
+
+
+def _check_normalization(space: Any, reference_length: float, bounds: np.ndarray, source: str) -> None:
+    """The field's normalization must fit the scene it belongs to: a radius within a factor
+    :data:`_MAX_NORMALIZATION_RATIO` of the reference length and a centre within as many reference lengths
+    of the bounds (otherwise every ray misses the grid or crosses it in one sample: a flat image)."""
+    where = f"{source}: {schema.SCENE_JSON} normalization"
+    if not isinstance(space, dict):
+        raise SceneFileError(f"{where} must be a JSON object with center, radius and shell")
+    radius, center = space.get("radius"), space.get("center")
+    limit = _MAX_NORMALIZATION_RATIO
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) \
+            or not reference_length / limit <= radius <= reference_length * limit:
+        raise SceneFileError(f"{where}.radius={radius!r}; expected a number within a factor {limit:g} of the "
+                             f"reference length {reference_length:.4g} (scene units)")
+    try:
+        offset = np.abs(np.asarray(center, dtype=np.float64) - bounds.mean(axis=0))
+    except (TypeError, ValueError):
+        offset = np.full(3, np.nan)
+    if offset.shape != (3,) or not offset.max() <= reference_length * limit:
+        raise SceneFileError(f"{where}.center={center!r}; expected three numbers within {limit:g} reference "
+                             f"lengths ({reference_length * limit:.4g} scene units) of the bounds' centre")
+
+
+def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.ndarray, FieldConfig, dict]:
+    """Check a parsed ``scene.json`` (what :func:`read_scene_file` and, before writing, :func:`save_scene`
+    do); return its frames, reference length, metres per unit, bounds, config and field metadata."""
+    schema.check_header(data, source)
+    frames = schema.read_frames(data, source)
+    reference_length = schema.read_number(data, "reference_length", source)
+    metres_per_unit = schema.read_number(data, "metres_per_unit", source, optional=True)
+    try:
+        bounds = np.asarray(data["bounds"], dtype=np.float64)
+    except (TypeError, ValueError):
+        bounds = np.zeros(0)
+    if bounds.shape != (2, 3) or not np.isfinite(bounds).all():
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} bounds={data['bounds']!r}; expected [[min x, y, z], "
+                             "[max x, y, z]] (scene units)")
+    _check_normalization(data["normalization"], reference_length, bounds, source)
+    limit = MAX_CAMERA_DISTANCE * reference_length
+    for i, (_, _, c2w, _, _) in enumerate(frames):
+        offset = float(np.abs(c2w[:3, 3] - bounds.mean(axis=0)).max())
+        if not offset <= limit:
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} frames[{i}].c2w puts the camera {offset:.3g} scene "
+                                 f"units from the bounds' centre; expected within {MAX_CAMERA_DISTANCE:g} reference "
+                                 f"lengths ({limit:.4g} scene units), where renders are defined")
+    try:
+        config = FieldConfig.from_dict(data["config"])
+    except (InvalidArgument, TypeError) as exc:
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'config' is not a valid FieldConfig ({exc})") from None
+    if not isinstance(data["report"], dict):
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'report' must be a JSON object")
+    field_meta = schema.require(data, "field", schema.SCENE_JSON, source)
+    if not isinstance(field_meta, dict):
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'field' must be a JSON object")
+    return frames, reference_length, metres_per_unit, bounds, config, field_meta
+
+
+def _open(path: Path) -> zipfile.ZipFile:
+    source = str(path)
+    if path.is_dir():
+        raise SceneFileError(f"{source}: is a folder; expected a .n2r scene file (`n2r fit SOURCE -o scene.n2r` "
+                             "writes one)")
+    if not path.is_file():
+        raise SceneFileError(f"{source}: no such scene file (`n2r fit SOURCE -o {path.name}` writes one)")
+    try:
+        return zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc}); a .n2r scene file is the zip "
+                             "archive `n2r fit` writes") from None
+
+
+def _not_strict_json(token: str) -> Any:
+    raise ValueError(f"{token} is not a number in strict JSON; scene files store null for it")
+
+
+def _read_json(archive: zipfile.ZipFile, source: str) -> Any:
+    try:
+        return json.loads(_member(archive, schema.SCENE_JSON, source, MAX_JSON_BYTES,
+                                  f"the cap on {schema.SCENE_JSON}"), parse_constant=_not_strict_json)
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
+
+
+def check_scene_file(path: str | os.PathLike) -> None:
+    """The checks of :func:`read_scene_file` that need no inflating of the field or the photos (its
+    ``scene.json`` and the field's declared tensors), in a fraction of the time; raises
+    :class:`~pytest_n2r.errors.SceneFileError` the same way. Splat scenes (a ``.ply``, or a scene file
+    ``n2r import`` wrote) are left to their own reader, past the cap on ``scene.json``."""
+    path = Path(path)
+    if path.suffix.lower() == ".ply":  # a 3DGS splat scene: its reader checks it
+        return
+    with _open(path) as archive:
+        data = _read_json(archive, str(path))
+        if isinstance(data, dict) and data.get("representation") == "splats":  # `n2r import`: its reader checks it
+            return
+        field_meta = _check_json(data, str(path))[-1]
+        _field_limit(archive, field_meta, str(path))
 
 
 def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFile:
@@ -200,40 +398,13 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
 
     path = Path(path)
     source = str(path)
-    if not path.is_file():
-        raise SceneFileError(f"{source}: no such scene file (`n2r fit SOURCE -o {path.name}` writes one)")
+    archive = _open(path)
     size = path.stat().st_size
-    try:
-        archive = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc}); a .n2r scene file is the zip "
-                             "archive `n2r fit` writes") from None
     with archive:
-        try:
-            data = json.loads(_member(archive, schema.SCENE_JSON, source))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
-        schema.check_header(data, source)
-        frames = schema.read_frames(data, source)
-        reference_length = schema.read_number(data, "reference_length", source)
-        metres_per_unit = schema.read_number(data, "metres_per_unit", source, optional=True)
-        try:
-            bounds = np.asarray(data["bounds"], dtype=np.float64)
-        except (TypeError, ValueError):
-            bounds = np.zeros(0)
-        if bounds.shape != (2, 3) or not np.isfinite(bounds).all():
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} bounds={data['bounds']!r}; expected [[min x, y, z], "
-                                 "[max x, y, z]] (scene units)")
-        try:
-            config = FieldConfig.from_dict(data["config"])
-        except (InvalidArgument, TypeError) as exc:
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'config' is not a valid FieldConfig ({exc})") from None
-        if not isinstance(data["report"], dict):
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'report' must be a JSON object")
-        field_meta = schema.require(data, "field", schema.SCENE_JSON, source)
-        if not isinstance(field_meta, dict):
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'field' must be a JSON object")
-        payload = _member(archive, schema.FIELD_FILE, source)
+        data = _read_json(archive, source)
+        frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
+        payload = _member(archive, schema.FIELD_FILE, source, _field_limit(archive, field_meta, source),
+                          "its safetensors header")
         try:
             tensors = safetensors.torch.load(payload)
         except safetensors.SafetensorError as exc:
@@ -249,10 +420,10 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
         for index, (name, camera, c2w, split, member) in enumerate(frames):
             image = None
             if images and member is not None:
-                image = _decode_jpeg(_member(archive, member, source), member, name, source)
-                if image.shape[:2] != (camera.height, camera.width):
-                    raise SceneFileError(f"{source}: {member} is {image.shape[1]}x{image.shape[0]} pixels; frame "
-                                         f"{name!r} has a {camera.width}x{camera.height} camera")
+                limit = 6 * camera.width * camera.height + 2**20  # a JPEG is smaller than twice its pixels
+                payload_jpeg = _member(archive, member, source, limit,
+                                       f"a {camera.width}x{camera.height} photo")
+                image = _decode_jpeg(payload_jpeg, member, name, source, camera.width, camera.height)
             views.append(SceneView(index, name, camera, c2w, split, image))
     return SceneFile(
         path=path, version=schema.FORMAT_VERSION, views=tuple(views), field=field, config=config,

@@ -24,7 +24,7 @@ from ..render.splat_render import SplatSettings
 from ..splats.gaussians import TENSORS, Gaussians
 from . import schema
 from .base import SceneView
-from .file import _member, _zip_bytes
+from .file import _member, _read_json, _zip_bytes
 from .splat_scene import SplatScene
 
 __all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene",
@@ -40,10 +40,14 @@ _KEYS = ("format", "version", "representation", "cameras", "frames", "bounds", "
 
 def is_splat_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a zip whose ``scene.json`` says ``"representation": "splats"``."""
+    from .file import MAX_JSON_BYTES
+
     try:
         with zipfile.ZipFile(path) as archive:
+            if archive.getinfo(schema.SCENE_JSON).file_size > MAX_JSON_BYTES:
+                return False  # the field reader names the oversized member
             data = json.loads(archive.read(schema.SCENE_JSON))
-    except (OSError, KeyError, zipfile.BadZipFile, ValueError):
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError, RecursionError):
         return False
     return isinstance(data, dict) and data.get("representation") == REPRESENTATION
 
@@ -96,10 +100,7 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
     except (zipfile.BadZipFile, OSError) as exc:
         raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc})") from None
     with archive:
-        try:
-            data = json.loads(_member(archive, schema.SCENE_JSON, source))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
+        data = _read_json(archive, source)
         if not isinstance(data, dict) or data.get("format") != schema.FORMAT_NAME:
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not a pytest-n2r scene header")
         if data.get("version") != schema.FORMAT_VERSION:
@@ -116,7 +117,13 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
         if background is None:
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats.background={meta!r}; expected three values "
                                  "in [0, 1]")
-        payload = _member(archive, SPLATS_FILE, source)
+        count, degree = meta.get("count"), meta.get("sh_degree")
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0 or degree not in (0, 1, 2, 3):
+            raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats count={count!r}, sh_degree={degree!r}; "
+                                 "expected a count >= 0 and a degree in 0..3")
+        values = 11 + 3 * (degree + 1) ** 2  # means, quats, log_scales, opacity and SH per Gaussian
+        payload = _member(archive, SPLATS_FILE, source, 2**20 + 4 * values * count,
+                          f"{count} float32 Gaussians of SH degree {degree}")
     try:
         tensors = safetensors.numpy.load(payload)
     except safetensors.SafetensorError as exc:

@@ -39,8 +39,8 @@ def test_sfm_recovers_the_rendered_poses(tmp_path, matcher):
     took = time.perf_counter() - start
     assert took < 30, f"SfM of 11 small images took {took:.1f} s"
     assert [v.name for v in result.views] == cap.names, f"registered: {[v.name for v in result.views]}"
-    assert result.skipped == [("zz_noise.png", "not registered by structure from motion (too few features "
-                                               "matched with the other photos)")]
+    reason = "not registered by structure from motion (too few features matched with the other photos)"
+    assert result.skipped == [("zz_noise.png", reason)]
     assert result.report["matcher"] == matcher and result.views[0].image.shape == (120, 160, 3)
     rot, centre = _errors(result.views, dict(zip(cap.names, cap.c2ws)))
     assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"

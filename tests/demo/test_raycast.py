@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
 from pytest_n2r.demo.exact import GroundTruthScene
-from pytest_n2r.demo.materials import Material
+from pytest_n2r.demo.materials import Blend, Flat, Material, Poster
 from pytest_n2r.demo.raycast import _bilinear, _Builder
 from pytest_n2r.demo.textures import Texture
 from pytest_n2r.errors import InvalidArgument
@@ -114,6 +114,26 @@ def test_an_unknown_material_is_named():
 
     with pytest.raises(InvalidArgument, match="material Glow has no compiled form"):
         GroundTruthScene("glow", [dataclasses.replace(pipe, side=Glow())], wall.views[:2], light=(0, 0, 1),
+                         ambient=0.5, background=(0, 0, 0), far=10.0)
+
+
+def _python_only_mask(a, b):
+    return {a: "text"}[b] + 1.0  # a string plus a float: no compiled form
+
+
+@pytest.mark.parametrize("case", ["nested blend", "uncompilable mask"])
+def test_materials_the_kernel_cannot_compile_are_named(case):
+    wall = ground_truth("wall")
+    pipe = wall.primitives[1]
+    flat = Flat((0.5, 0.5, 0.5))
+    if case == "nested blend":
+        side = Poster(Blend(flat, flat, _python_only_mask, "m"), pipe.side.texture, (0, 0, 1, 1))
+        expected = "a Blend material must be a surface's own material"
+    else:
+        side = Blend(flat, flat, _python_only_mask, "m")
+        expected = "Blend mask '_python_only_mask' cannot be compiled"
+    with pytest.raises(InvalidArgument, match=expected):
+        GroundTruthScene("bad", [dataclasses.replace(pipe, side=side)], wall.views[:2], light=(0, 0, 1),
                          ambient=0.5, background=(0, 0, 0), far=10.0)
 
 

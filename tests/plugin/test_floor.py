@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from pytest_n2r.demo import ground_truth, load_demo
@@ -108,3 +109,16 @@ def test_study_measures_a_fitted_demo_scene_against_its_exact_twin():
     assert {r["metric"] for r in result.domain_shift} == {"repeatability", "ip_spread"}
     assert {r["source"] for r in result.realness} == {"tau0", "m1", "m2", "m3"}
     assert all(r["psnr"] < math.inf for r in result.realness if r["source"] == "tau0")
+
+
+def test_a_sut_cannot_draw_on_the_stored_photo():
+    scene = BlurredPlane(blur=1.0, width=160, height=120)
+    photo = scene.views[1].image.copy()
+
+    def scribbler(rgb):
+        rgb[:10] = 0  # raises: the floor hands the SUT a read-only image, like a cached render
+        return corners(rgb)
+
+    with pytest.raises(ValueError, match="read-only"):
+        measure_floor(scene, scribbler, repeatability(px=2))
+    assert np.array_equal(scene.views[1].image, photo), "the stored photo was changed"

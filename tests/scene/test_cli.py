@@ -7,6 +7,7 @@ import contextlib
 import io
 import json
 import shutil
+import zipfile
 from pathlib import Path
 
 import cv2
@@ -163,13 +164,15 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_pa
     interrupting_fit(monkeypatch, KeyboardInterrupt(), after_checkpoints=0)
     out = tmp_path / "scenes" / "object.n2r"
     out.parent.mkdir()
-    out.write_bytes(b"the previous scene")
+    with zipfile.ZipFile(out, "w") as previous:  # what `n2r fit` may replace: a scene file (a zip with scene.json)
+        previous.writestr("scene.json", "the previous scene")
+    before = out.read_bytes()
     assert run_fit(source / "transforms.json", out, "100000") == 130
     err = capsys.readouterr().err
     assert "  skipped   " in err and "object_005.png" in err, \
         f"the missing photo is not listed:\n{err}"
     assert f"no checkpoint was written yet, so {out} was not touched" in err
-    assert out.read_bytes() == b"the previous scene"
+    assert out.read_bytes() == before
     assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
@@ -215,5 +218,5 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
     assert main(["fit", str(exported), "-o", str(tmp_path), "--max-steps", "1"]) == 2
     err = capsys.readouterr().err
-    assert f"-o {tmp_path}: is a folder; expected the path of the scene file" in err, err
+    assert f"-o {tmp_path}: is a folder; expected the path of a .n2r scene file" in err, err
     assert "ingested" not in err, "the capture was ingested before the output was checked"

@@ -119,11 +119,12 @@ def test_bad_save_arguments_are_named(tmp_path, kwargs, message):
 
 
 # -- bad files ---------------------------------------------------------------------------------------------------
-def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes] | None = None,
+def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes | int] | None = None,
             drop: tuple[str, ...] = ()) -> Path:
-    """A copy of the scene file ``src`` with ``scene.json`` edited, members replaced or dropped."""
+    """A copy of the scene file ``src`` with ``scene.json`` edited, members replaced (an int: that many zero
+    bytes, streamed, so a member can inflate to gigabytes) or dropped."""
     replace = dict(replace or {})
-    with zipfile.ZipFile(src) as archive, zipfile.ZipFile(dst, "w") as out:
+    with zipfile.ZipFile(src) as archive, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as out:
         for name in archive.namelist():
             if name in drop:
                 continue
@@ -132,7 +133,12 @@ def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes] |
                 data = json.loads(payload)
                 edit_json(data)
                 payload = json.dumps(data).encode()
-            out.writestr(name, payload)
+            if isinstance(payload, int):
+                with out.open(name, "w", force_zip64=True) as member:
+                    for _ in range(payload // 2**20):
+                        member.write(bytes(2**20))
+            else:
+                out.writestr(name, payload)
         for name, payload in replace.items():
             out.writestr(name, payload)
     return dst

@@ -1,0 +1,70 @@
+"""Telling a non-deterministic system under test from a real inconsistency.
+
+A relation compares two outputs of the SUT; when the SUT gives different outputs for the same image, a
+failure is noise and Hypothesis's replay of it fails at random (its raw ``FlakyFailure``). The relation
+engine therefore calls the SUT a second time on the images of the first failing example and, when the
+outputs differ, stops with :class:`NotDeterministic`, which shows both.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .errors import N2RError
+
+__all__ = ["NotDeterministic", "SUTNotDeterministic", "same_output", "show_output"]
+
+_SHOWN_ITEMS = 6
+
+
+class SUTNotDeterministic(N2RError):
+    """The system under test gave two different outputs for the same image."""
+
+
+class NotDeterministic(BaseException):
+    """The escaping form of :class:`SUTNotDeterministic`: not an ``Exception``, so Hypothesis does not
+    retry the example; the caller raises :meth:`error` once the search has stopped."""
+
+    def error(self) -> SUTNotDeterministic:
+        return SUTNotDeterministic(str(self))
+
+
+def _plain(output: Any) -> Any:
+    """``cv2.KeyPoint`` lists as ``(N, 2)`` arrays of their positions; anything else as it is."""
+    if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
+        return np.array([k.pt for k in output], dtype=np.float64)
+    return output
+
+
+def same_output(a: Any, b: Any) -> bool:
+    """Whether two SUT outputs are identical (arrays element for element, NaN equal to NaN)."""
+    a, b = _plain(a), _plain(b)
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and a.dtype == b.dtype and bool(
+            np.array_equal(a, b, equal_nan=a.dtype.kind in "fc"))
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same_output(x, y) for x, y in zip(a, b))
+    try:
+        return bool(a == b)
+    except (ValueError, TypeError):  # objects whose == is ambiguous: compare their text
+        return repr(a) == repr(b)
+
+
+def show_output(output: Any, other: Any = None) -> str:
+    """A short, one-line picture of an output (its first values; for two arrays of one shape, where they
+    differ)."""
+    output, other = _plain(output), _plain(other)
+    if isinstance(output, np.ndarray):
+        head = np.array2string(output.reshape(-1)[:_SHOWN_ITEMS], precision=4, separator=", ")
+        text = f"array {output.shape} {output.dtype}, first values {head}"
+        if isinstance(other, np.ndarray) and other.shape == output.shape:
+            differ = output != other
+            if output.dtype.kind in "fc":
+                differ &= ~(np.isnan(output) & np.isnan(other))
+            text += f"; {int(differ.sum())} of {output.size} values differ"
+        return text
+    text = repr(output)
+    return text if len(text) <= 200 else text[:197] + "..."

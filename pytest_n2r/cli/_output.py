@@ -1,0 +1,141 @@
+"""Checks every ``n2r`` command runs on its output paths before doing any work.
+
+An output may replace an existing file only when that file is the command's own kind of output (a scene
+file for ``n2r fit``, a PNG for ``n2r render`` ...), never one of the command's inputs, and never anything
+else unless ``--force`` asks for it; its folder must exist (or be creatable) and be writable. Files are
+then written atomically (:mod:`pytest_n2r.data.atomic`), so an interrupted command leaves the old file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..data.atomic import unwritable_reason
+from ..errors import InvalidArgument
+
+__all__ = [
+    "FORCE_HELP",
+    "NPY",
+    "PNG",
+    "POSES_JSON",
+    "SCENE",
+    "OutputKind",
+    "check_output",
+    "check_output_dir",
+]
+
+FORCE_HELP = "replace an existing output even when it is not what this command writes"
+
+
+def _has_magic(magic: bytes) -> Callable[[Path], bool]:
+    def sniff(path: Path) -> bool:
+        with open(path, "rb") as fh:
+            return fh.read(len(magic)) == magic
+    return sniff
+
+
+def _is_scene_zip(path: Path) -> bool:
+    try:
+        with zipfile.ZipFile(path) as archive:
+            return "scene.json" in archive.namelist()
+    except (zipfile.BadZipFile, OSError):
+        return False
+
+
+def _json_with_key(key: str) -> Callable[[Path], bool]:
+    def sniff(path: Path) -> bool:
+        if path.stat().st_size > 256 * 2**20:
+            return False
+        try:
+            data = json.loads(path.read_bytes())
+        except (ValueError, RecursionError):
+            return False
+        return isinstance(data, dict) and key in data
+    return sniff
+
+
+@dataclass(frozen=True)
+class OutputKind:
+    """What a command writes: ``noun`` for messages, the file name ``suffixes`` it accepts and ``sniff``,
+    which tells whether an existing file is one (then replacing it needs no ``--force``)."""
+
+    noun: str
+    suffixes: tuple[str, ...]
+    sniff: Callable[[Path], bool]
+
+    def owns(self, path: Path) -> bool:
+        try:
+            return path.is_file() and self.sniff(path)
+        except OSError:
+            return False
+
+
+SCENE = OutputKind("a .n2r scene file", (".n2r",), _is_scene_zip)
+PNG = OutputKind("a PNG image", (".png",), _has_magic(b"\x89PNG\r\n\x1a\n"))
+NPY = OutputKind("a NumPy .npy array", (".npy",), _has_magic(b"\x93NUMPY"))
+#: ``n2r poses -o``: a transforms.json it wrote before carries its ``n2r`` key; any other one (the
+#: capture's own, nerfstudio's) is the user's data.
+POSES_JSON = OutputKind("a transforms.json written by `n2r poses`", (".json",), _json_with_key("n2r"))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def _check_folder(folder: Path, option: str, shown: Path) -> None:
+    """The folder an output goes into must be a folder we can write into, or be creatable."""
+    reason = unwritable_reason(folder)
+    if reason is not None:
+        raise InvalidArgument(f"{option} {shown}: {reason}; choose a writable folder (checked before any work, so "
+                              "nothing is lost)")
+
+
+def check_output(path: Path, kind: OutputKind, *, option: str = "-o", inputs: Iterable[Path] = (),
+                 force: bool = False) -> Path:
+    """``path`` if ``kind`` may be written there; otherwise an :class:`InvalidArgument` naming ``option``,
+    the path, what is wrong and the fix. ``inputs`` are the command's input files (never overwritten)."""
+    path = Path(path)
+    if not str(path).strip():
+        raise InvalidArgument(f"{option}: the output path is empty; expected {kind.noun} to write")
+    if path.is_dir():
+        raise InvalidArgument(f"{option} {path}: is a folder; expected the path of {kind.noun} to write "
+                              f"(e.g. {path / ('out' + kind.suffixes[0])})")
+    if path.suffix.lower() not in kind.suffixes:
+        raise InvalidArgument(f"{option} {path}: expected {kind.noun}, a name ending in "
+                              f"{' or '.join(kind.suffixes)} (e.g. {path.with_suffix(kind.suffixes[0]).name})")
+    for source in inputs:
+        if _same_file(path, Path(source)):
+            raise InvalidArgument(f"{option} {path}: is this command's input {source}; writing there would "
+                                  "destroy it; choose another output name")
+    if (path.exists() or path.is_symlink()) and not force and not kind.owns(path):
+        raise InvalidArgument(f"{option} {path}: exists and is not {kind.noun}, so writing would destroy it; "
+                              "choose another name, or pass --force to replace it")
+    _check_folder(path.parent, option, path)
+    return path
+
+
+def check_output_dir(path: Path, owned: Callable[[Path], bool], noun: str, *, option: str = "-o",
+                     force: bool = False) -> Path:
+    """``path`` if this command may write its files into that folder: missing, empty, or holding an earlier
+    output of the same command (``owned(folder)``); anything else needs ``force``."""
+    path = Path(path)
+    if not str(path).strip():
+        raise InvalidArgument(f"{option}: the output folder is empty; expected a folder for {noun}")
+    if path.exists() and not path.is_dir():
+        raise InvalidArgument(f"{option} {path}: is a file; expected a folder for {noun}")
+    if path.is_dir() and any(path.iterdir()) and not force and not owned(path):
+        raise InvalidArgument(f"{option} {path}: the folder holds other files, and {noun} would be written "
+                              "among them (replacing any of the same name); choose an empty or new folder, or "
+                              "pass --force")
+    _check_folder(path, option, path)
+    return path

@@ -1,0 +1,78 @@
+"""SUTs that hang or are not deterministic: each example ends once, with a message that says what happened."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from pytest_n2r._determinism import same_output, show_output
+
+PLANE = "tests.plugin.fakescene:plane"
+
+
+def test_a_hanging_sut_ends_after_one_time_out_not_after_hypothesis_retries(n2r_project):
+    n2r_project.write("""
+import time
+
+
+def hangs(rgb):
+    try:
+        time.sleep(30)
+    except Exception:  # a SUT that swallows every error must not swallow the time limit
+        return 0.0
+
+
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=10)
+def test_hang(n2r_scene):
+    return hangs
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-timeout", "2")
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([("*the system under test on the source view (*) did not finish within 2 s "
+                                  "(--n2r-timeout / ini n2r_timeout)*")])
+    text = result.stdout.str()
+    assert "Traceback" not in text and "FlakyFailure" not in text, text
+    # one time-out of 2 s; Hypothesis retrying and shrinking the failing example took several (27 s for 5 s)
+    assert result.duration < 5, f"the time-out was retried: {result.duration:.1f} s for a 2 s limit"
+
+
+def test_a_non_deterministic_sut_is_named_with_both_outputs(n2r_project):
+    n2r_project.write("""
+_rng = np.random.default_rng()
+
+
+def noisy(rgb):
+    return float(rgb.mean()) + float(_rng.normal(0.0, 30.0))
+
+
+@metamorphic(AbsDifference(), eps=1, transform=transforms(yaw=4), examples=20)
+def test_noisy(n2r_scene):
+    return noisy
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "the system under test is not deterministic: called twice on the same" in text, text
+    assert re.search(r"first:\s+-?\d", text) and re.search(r"second:\s+-?\d", text), text
+    assert "seed its random generators" in text, text
+    assert "FlakyFailure" not in text and "Traceback" not in text, text
+
+
+@pytest.mark.parametrize(("a", "b", "same"), [
+    (np.array([[1.0, np.nan]]), np.array([[1.0, np.nan]]), True),
+    (np.array([[1.0, 2.0]]), np.array([[1.0, 2.5]]), False),
+    (np.array([1, 2]), np.array([1, 2, 3]), False),
+    (3, 3, True),
+    ("cat", "dog", False),
+    ([np.zeros(2), 1], [np.zeros(2), 1], True),
+])
+def test_same_output_compares_arrays_value_for_value(a, b, same):
+    assert same_output(a, b) is same
+
+
+def test_show_output_counts_the_values_that_differ():
+    a, b = np.zeros((4, 2)), np.zeros((4, 2))
+    b[1, 0] = 1.0
+    assert show_output(a, b) == "array (4, 2) float64, first values [0., 0., 0., 0., 0., 0.]; 1 of 8 values differ"

@@ -1,0 +1,459 @@
+"""The bad-input catalogue of the ``n2r`` commands and of scene files (docs/reliability.md counts it).
+
+One line per case: the input a tired user (or a hostile file) gives → the message expected. Every command
+case asserts a non-zero exit code, no traceback (nothing escapes ``main``), a message naming the thing and
+the fix, and that no file in the workspace changed (every byte of every file compared).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import shutil
+import tracemalloc
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from pytest_n2r.cli.main import main
+from pytest_n2r.errors import SceneFileError
+from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.scene import read_scene_file, save_scene
+from pytest_n2r.scene.schema import FIELD_FILE, SCENE_JSON
+
+from .conftest import random_field, tiny_views
+from .test_file import rewrite
+
+#: (id, command line with {placeholders} of the workspace, regex the error message must match)
+COMMAND_CASES: list[tuple[str, str, str]] = [
+    # -- the command line itself
+    ("unknown command", "frobnicate", r"invalid choice: 'frobnicate'"),
+    ("demo without an action", "demo", r"the following arguments are required: ACTION"),
+    # -- n2r fit: outputs
+    ("fit over its own transforms.json", "fit {capture}/transforms.json -o {capture}/transforms.json",
+     r"-o .*transforms.json: expected a \.n2r scene file, a name ending in \.n2r \(e\.g\. transforms\.n2r\)"),
+    ("fit over a text file", "fit {capture} -o {notes_txt}",
+     r"expected a \.n2r scene file, a name ending in \.n2r"),
+    ("fit over a .n2r that is no scene", "fit {capture} -o {fake_n2r}",
+     (r"fake\.n2r: exists and is not a \.n2r scene file, so writing would destroy it; choose another nam"
+      r"e, or pass --force")),
+    ("fit over its own input scene", "fit {scene} -o {scene}",
+     r"is this command's input .*; writing there would destroy it"),
+    ("fit into a folder", "fit {capture} -o {capture}",
+     r"is a folder; expected the path of a \.n2r scene file"),
+    ("fit into a file's 'folder'", "fit {capture} -o {notes_txt}/x.n2r",
+     r"notes\.txt is a file, not a folder"),
+    ("fit into a read-only folder", "fit {capture} -o /proc/x.n2r", r"cannot write into /proc"),
+    ("fit without -o", "fit {capture}", r"the following arguments are required: -o/--output"),
+    # -- n2r fit: every number before any work
+    ("fit --metres-per-unit -1", "fit {capture} -o {new_n2r} --metres-per-unit -1",
+     r"--metres-per-unit -1\.0: expected the finite number of metres per scene unit, > 0"),
+    ("fit --metres-per-unit 0", "fit {capture} -o {new_n2r} --metres-per-unit 0", r"--metres-per-unit 0\.0"),
+    ("fit --metres-per-unit nan", "fit {capture} -o {new_n2r} --metres-per-unit nan",
+     r"--metres-per-unit nan"),
+    ("fit --metres-per-unit inf", "fit {capture} -o {new_n2r} --metres-per-unit inf",
+     r"--metres-per-unit inf"),
+    ("fit --metres-per-unit one", "fit {capture} -o {new_n2r} --metres-per-unit one",
+     r"argument --metres-per-unit: invalid float value: 'one'"),
+    ("fit --downscale 0.5", "fit {capture} -o {new_n2r} --downscale 0.5",
+     r"--downscale 0\.5: expected a finite factor >= 1"),
+    ("fit --downscale nan", "fit {capture} -o {new_n2r} --downscale nan",
+     r"--downscale nan: expected a finite"),
+    ("fit --max-steps 0", "fit {capture} -o {new_n2r} --max-steps 0",
+     r"--max-steps 0: expected an integer >= 1"),
+    ("fit --max-steps 1.5", "fit {capture} -o {new_n2r} --max-steps 1.5", r"invalid int value: '1\.5'"),
+    ("fit --time-budget 0", "fit {capture} -o {new_n2r} --time-budget 0", r"'0': expected a duration > 0"),
+    ("fit --time-budget ten", "fit {capture} -o {new_n2r} --time-budget ten",
+     r"'ten' is not a duration; expected e\.g\. 10m, 90s, 1h30m"),
+    ("fit --time-budget -5m", "fit {capture} -o {new_n2r} --time-budget=-5m", r"'-5m' is not a duration"),
+    ("fit --checkpoint-every 0", "fit {capture} -o {new_n2r} --checkpoint-every 0",
+     r"--checkpoint-every 0\.0: expected a finite number of seconds > 0"),
+    ("fit --checkpoint-every inf", "fit {capture} -o {new_n2r} --checkpoint-every inf",
+     r"--checkpoint-every inf"),
+    ("fit --eval-at 1m,,3m", "fit {capture} -o {new_n2r} --eval-at 1m,,3m", r"'' is not a duration"),
+    ("fit --device tpu", "fit {capture} -o {new_n2r} --device tpu",
+     r"device='tpu': expected 'auto', 'cpu' or 'cuda\[:N\]'"),
+    ("fit SOURCE missing", "fit {tmp}/nowhere -o {new_n2r}",
+     r"SOURCE .*nowhere: does not exist; expected a transforms\.json"),
+    # -- n2r fit --config
+    ("--config resolutions=abc", "fit {capture} -o {new_n2r} --config resolutions=abc",
+     r"--config 'resolutions=abc': 'abc' is not a number, True/False or a comma-separated list"),
+    ("--config resolutions='abc'", "fit {capture} -o {new_n2r} --config \"resolutions='abc'\"",
+     r"--config: FieldConfig\.resolutions=\('abc',\): expected a list of integers \(default: 48,96,160\)"),
+    ("--config seed='x'", "fit {capture} -o {new_n2r} --config \"seed='x'\"",
+     r"FieldConfig\.seed='x': expected an integer \(default: 0\)"),
+    ("--config seed=1.5", "fit {capture} -o {new_n2r} --config seed=1.5",
+     r"FieldConfig\.seed=1\.5: expected an integer"),
+    ("--config random_background=1", "fit {capture} -o {new_n2r} --config random_background=1",
+     r"FieldConfig\.random_background=1: expected True or False"),
+    ("--config tv=None", "fit {capture} -o {new_n2r} --config tv=None",
+     r"FieldConfig\.tv=None: expected a number"),
+    ("--config resolutions=4", "fit {capture} -o {new_n2r} --config resolutions=4",
+     r"resolutions=\(4,\): expected increasing grid sizes in 8\.\.1024"),
+    ("--config stage_fractions=2", "fit {capture} -o {new_n2r} --config stage_fractions=2",
+     r"stage_fractions=\(2\.0,\): expected 2 increasing fractions in \(0, 1\)"),
+    ("--config lr_density=-1", "fit {capture} -o {new_n2r} --config lr_density=-1",
+     r"FieldConfig\.lr_density=-1: expected a finite number > 0"),
+    ("--config warp=2", "fit {capture} -o {new_n2r} --config warp=2", r"unknown setting 'warp'; known: "),
+    ("--config without =", "fit {capture} -o {new_n2r} --config seed",
+     r"--config 'seed': expected key=value"),
+    ("--config code", "fit {capture} -o {new_n2r} --config \"seed=__import__('os')\"",
+     r"is not a number, True/False or a comma-separated list"),
+    # -- n2r render: outputs, checked before loading and rendering
+    ("render over its scene", "render {scene} -o {scene}",
+     r"-o .*scene\.n2r: expected a PNG image, a name ending in \.png \(e\.g\. scene\.png\)"),
+    ("render to .jpg", "render {scene} -o {tmp}/view.jpg", r"expected a PNG image, a name ending in \.png"),
+    ("render over a text file named .png", "render {scene} -o {fake_png}",
+     (r"fake\.png: exists and is not a PNG image, so writing would destroy it; choose another name, or p"
+      r"ass --force")),
+    ("render depth over a text file", "render {scene} --depth -o {tmp}/note.png",
+     r"-o \(its depth file beside it\) .*note\.depth\.png: exists and is not a PNG image"),
+    ("render opacity over a text file", "render {scene} --opacity -o {tmp}/note.png",
+     r"-o \(its opacity file beside it\) .*note\.opacity\.png: exists and is not a PNG image"),
+    ("render into a folder", "render {scene} -o {capture}", r"is a folder; expected the path of a PNG image"),
+    ("render to /", "render {scene} -o /", r"-o /: is a folder"),
+    ("render into a read-only folder", "render {scene} -o /proc/view.png", r"cannot write into /proc"),
+    ("render into a file's 'folder'", "render {scene} -o {notes_txt}/view.png",
+     r"notes\.txt is a file, not a folder"),
+    # -- n2r render: arguments
+    ("render --transform x=1e300", "render {scene} --transform x=1e300 -o {new_png}",
+     (r"--transform 'x=1e300' moves the camera too far: camera position \(.*\) is 3e\+300 scene units fr"
+      r"om the captured cameras .*within 10000 reference lengths")),
+    ("render --transform yaw=1e300", "render {scene} --transform yaw=1e300 -o {new_png}",
+     r"yaw=1e\+300 is out of range; expected a value in \[-360, 360\]"),
+    ("render --transform yaw=nan", "render {scene} --transform yaw=nan -o {new_png}",
+     r"yaw=nan must be finite"),
+    ("render --transform x=inf", "render {scene} --transform x=inf -o {new_png}", r"x=inf must be finite"),
+    ("render --transform spin=3", "render {scene} --transform spin=3 -o {new_png}",
+     r"unknown component 'spin'; expected one of \['roll', 'pitch', 'yaw'"),
+    ("render --transform yaw=abc", "render {scene} --transform yaw=abc -o {new_png}",
+     r"yaw='abc' is not a number"),
+    ("render --transform yaw 10", "render {scene} --transform 'yaw 10' -o {new_png}",
+     r"'yaw 10' is not 'name=value'"),
+    ("render --transform twice", "render {scene} --transform yaw=1,yaw=2 -o {new_png}",
+     r"'yaw' is given twice"),
+    ("render --view 99", "render {scene} --view 99 -o {new_png}",
+     r"view=99 is out of range; scene 'scene' has 4 views"),
+    ("render --view -1", "render {scene} --view -1 -o {new_png}", r"view=-1 is out of range"),
+    ("render --view by an unknown name", "render {scene} --view nosuch.png -o {new_png}", r"nosuch\.png"),
+    ("render --size 0", "render {scene} --size 0 -o {new_png}",
+     r"--size='0': longer side 0 must be in \[1, 16384\]"),
+    ("render --size abc", "render {scene} --size abc -o {new_png}", r"--size='abc' is not a render size"),
+    ("render --size 10x0", "render {scene} --size 10x0 -o {new_png}", r"height 0 must be in \[1, 16384\]"),
+    ("render --size 100000", "render {scene} --size 100000 -o {new_png}", r"must be in \[1, 16384\] pixels"),
+    ("render --units metres without a scale", "render {scene} --units metres --transform x=1 -o {new_png}",
+     r"units='metres' needs a scene with a known scale; scene 'scene' has none"),
+    ("render --units furlongs", "render {scene} --units furlongs -o {new_png}",
+     r"invalid choice: 'furlongs'"),
+    ("render --device tpu", "render {scene} --device tpu -o {new_png}",
+     r"device='tpu': expected 'auto', 'cpu'"),
+    ("render a missing scene", "render {tmp}/nowhere.n2r -o {new_png}", r"nowhere\.n2r: no such scene file"),
+    ("render a folder", "render {capture} -o {new_png}",
+     r"capture: is a folder; expected a \.n2r scene file"),
+    ("render a text file", "render {notes_txt} -o {new_png}", r"notes\.txt: not a zip archive, or truncated"),
+    # -- n2r info
+    ("info on a missing file", "info {tmp}/nowhere.n2r",
+     r"nowhere\.n2r: no such scene file \(`n2r fit SOURCE -o nowhere\.n2r` writes one\)"),
+    ("info on a folder", "info {capture}", r"is a folder; expected a \.n2r scene file"),
+    ("info on an empty file", "info {empty_n2r}", r"empty\.n2r: not a zip archive, or truncated"),
+    ("info --size abc", "info {scene} --shift --size abc", r"--size='abc' is not a render size"),
+    ("info on a zip without scene.json", "info {plain_zip}", r"the archive has no 'scene\.json'"),
+    # -- n2r poses
+    ("poses of a missing source", "poses {tmp}/nowhere", r"SOURCE .*nowhere: does not exist"),
+    ("poses over the capture's transforms.json", "poses {capture} -o {capture}/transforms.json",
+     r"transforms\.json: is this command's input .*transforms\.json; writing there would destroy it"),
+    ("poses over another transforms.json", "poses {capture} -o {other_json}",
+     r"other\.json: exists and is not a transforms\.json written by `n2r poses`.*--force"),
+    ("poses -o out.txt", "poses {capture} -o {tmp}/out.txt",
+     r"expected a transforms\.json written by `n2r poses`, a name ending in \.json"),
+    ("poses --max-size 0", "poses {capture} --max-size 0", r"--max-size 0: expected an integer >= 1"),
+    ("poses --max-size 10", "poses {capture} --max-size 10",
+     r"--max-size 10: structure from motion needs images of at least 64 pixels"),
+    ("poses --max-frames 0", "poses {capture} --max-frames 0", r"--max-frames 0: expected an integer >= 1"),
+    ("poses --compare a missing source", "poses {capture} --compare {tmp}/nowhere",
+     r"--compare .*nowhere: does not exist"),
+    ("poses --frames-dir is a file", "poses {capture} --frames-dir {notes_txt}",
+     r"--frames-dir .*notes\.txt: is a file; expected a folder for the video's frames"),
+    ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
+    # -- n2r import
+    ("import a missing ply", "import {tmp}/nowhere.ply -o {new_n2r}", r"PLY .*nowhere\.ply: does not exist"),
+    ("import with missing cameras", "import {notes_txt} --cameras {tmp}/nowhere.json -o {new_n2r}",
+     r"--cameras .*nowhere\.json: does not exist"),
+    ("import over a text file", "import {notes_txt} -o {fake_n2r}", r"fake\.n2r: exists and is not a \.n2r scene file"),
+    ("import to .txt", "import {notes_txt} -o {tmp}/out.txt", r"expected a \.n2r scene file, a name ending in \.n2r"),
+    ("import over its own ply", "import {scene} -o {scene}", r"is this command's input"),
+    ("import --heldout-every -1", "import {notes_txt} -o {new_n2r} --heldout-every=-1",
+     r"--heldout-every -1: expected an int >= 0"),
+    ("import --background 2,2,2", "import {notes_txt} -o {new_n2r} --background 2,2,2",
+     r"'2,2,2': expected three comma-separated values in \[0, 1\]"),
+    # -- n2r demo
+    ("demo export of an unknown scene", "demo export castle -o {tmp}/export",
+     r"NAME 'castle': no such demo scene; expected one of"),
+    ("demo export into a file", "demo export object -o {notes_txt}",
+     r"notes\.txt: is a file; expected a folder"),
+    ("demo export among other files", "demo export object -o {capture}",
+     r"capture: the folder holds other files, and the export .* would be written among them.*pass --force"),
+    ("demo export --size 0x0", "demo export object -o {tmp}/export --size 0x0",
+     r"width and height must be 8\.\.4096 pixels"),
+    ("demo export --size huge", "demo export object -o {tmp}/export --size 100000", r"8\.\.4096 pixels"),
+    ("demo export --size abc", "demo export object -o {tmp}/export --size abc",
+     r"size 'abc': expected WIDTHxHEIGHT"),
+    ("demo build of an unknown scene", "demo build castle -o {tmp}/built",
+     r"no fitted recipe for \['castle'\]"),
+    ("demo build into a file", "demo build object -o {notes_txt}",
+     r"notes\.txt: is a file; expected a folder"),
+    # -- n2r study
+    ("study --examples 0", "study {scene} --sut orb -o {tmp}/study --examples 0",
+     r"--examples 0: expected an integer >= 1"),
+    ("study --views 0", "study {scene} --sut orb -o {tmp}/study --views 0",
+     r"--views 0: expected an integer >= 1"),
+    ("study --fps-frames 0", "study {scene} --sut orb -o {tmp}/study --fps-frames 0", r"--fps-frames 0"),
+    ("study --size 5", "study {scene} --sut orb -o {tmp}/study --size 5",
+     r"--size 5: expected the longer side of the test renders in 16\.\.4096"),
+    ("study --eps -1", "study {scene} --sut orb -o {tmp}/study --eps=-1",
+     r"--eps '-1': expected one or more numbers >= 0"),
+    ("study --eps abc", "study {scene} --sut orb -o {tmp}/study --eps abc", r"--eps 'abc': expected numbers"),
+    ("study --fps-size 0x10", "study {scene} --sut orb -o {tmp}/study --fps-size 0x10",
+     r"width and height must be 1\.\.8192 pixels"),
+    ("study into a file", "study {scene} --sut orb -o {notes_txt}",
+     r"notes\.txt: is a file; expected a folder"),
+    ("study among other files", "study {scene} --sut orb -o {capture}", r"the folder holds other files"),
+    ("study without --sut", "study {scene} -o {tmp}/study", r"the following arguments are required: --sut"),
+    ("study of a missing scene", "study {tmp}/nowhere.n2r --sut orb -o {tmp}/study",
+     r"SCENE .*nowhere\.n2r.*: no such file"),
+    ("study --seed abc", "study {scene} --sut orb -o {tmp}/study --seed abc",
+     r"argument --seed: invalid int value"),
+    ("study --device tpu", "study {scene} --sut orb -o {tmp}/study --device tpu", r"invalid choice: 'tpu'"),
+]
+
+
+def _snapshot(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> dict[str, str]:
+    """A scene file, a capture folder and decoys (a text file named .png, another transforms.json ...)."""
+    tmp = tmp_path_factory.mktemp("workspace")
+    scene = save_scene(tmp / "scene.n2r", random_field(), FieldConfig(), tiny_views(), {}, reference_length=3.0)
+    capture = tmp / "capture"
+    (capture / "images").mkdir(parents=True)
+    (capture / "transforms.json").write_text('{"frames": []}\n')
+    (tmp / "notes.txt").write_text("my notes\n")
+    for name in ("fake.n2r", "fake.png", "note.depth.png", "note.opacity.png"):
+        (tmp / name).write_text("not what it seems\n")
+    (tmp / "other.json").write_text('{"camera_model": "OPENCV", "frames": []}\n')
+    (tmp / "empty.n2r").write_bytes(b"")
+    with zipfile.ZipFile(tmp / "plain.n2r", "w") as archive:
+        archive.writestr("readme.txt", "no scene here")
+    return {"tmp": str(tmp), "scene": str(scene), "capture": str(capture), "notes_txt": str(tmp / "notes.txt"),
+            "fake_n2r": str(tmp / "fake.n2r"), "fake_png": str(tmp / "fake.png"), "new_n2r": str(tmp / "new.n2r"),
+            "new_png": str(tmp / "new.png"), "other_json": str(tmp / "other.json"),
+            "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r")}
+
+
+def _argv(template: str, workspace: dict[str, str]) -> list[str]:
+    import shlex
+
+    return [part.format(**workspace) for part in shlex.split(template)]
+
+
+@pytest.mark.parametrize(("command", "expected"), [c[1:] for c in COMMAND_CASES], ids=[c[0] for c in COMMAND_CASES])
+def test_a_bad_command_line_is_refused_with_a_message_and_changes_nothing(command, expected, workspace, capsys):
+    before = _snapshot(Path(workspace["tmp"]))
+    try:
+        code = main(_argv(command, workspace))  # an exception escaping main would be a traceback
+    except SystemExit as exc:  # argparse's own usage errors
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code not in (0, None), f"exit code {code} for {command!r}; stderr:\n{err}"
+    assert "Traceback" not in err, err
+    one_line = " ".join(err.split())
+    assert re.search(expected, one_line), f"expected /{expected}/ in:\n{err}"
+    assert _snapshot(Path(workspace["tmp"])) == before, f"{command!r} changed a file"
+
+
+def test_the_catalogue_covers_every_command_and_option():
+    """Every option of every command that takes a value has at least one bad-input case."""
+    from pytest_n2r.cli.main import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    missing = []
+    for name, command in sub.choices.items():
+        cases = [c[1].split() for c in COMMAND_CASES if c[1].split()[0] == name]
+        parsers = {name: command}
+        for action in command._actions:
+            if action.dest == "demo_command":
+                parsers = {f"{name} {action_name}": p for action_name, p in action.choices.items()}
+        for label, p in parsers.items():
+            words = {w.split("=")[0] for case in cases if " ".join(case).startswith(label) for w in case}
+            if not words and any(a.option_strings and a.nargs != 0 and a.dest != "help" for a in p._actions):
+                missing.append(label)
+            for action in p._actions:
+                takes_value = action.nargs != 0 and action.option_strings and action.dest != "help"
+                if takes_value and not words & set(action.option_strings):
+                    missing.append(f"{label} {action.option_strings[-1]}")
+    assert not missing, f"options with no bad-input case: {missing}"
+
+
+def test_force_replaces_a_file_that_is_not_its_kind_and_the_result_is_its_kind(workspace, tmp_path, capsys):
+    target = tmp_path / "view.png"
+    target.write_text("an old note\n")
+    assert main(["render", workspace["scene"], "--size", "16", "-o", str(target), "--force"]) == 0, \
+        capsys.readouterr().err
+    assert target.read_bytes().startswith(b"\x89PNG")
+
+
+def test_render_depth_beside_a_depth_named_image_keeps_both(workspace, tmp_path, capsys):
+    out = tmp_path / "view.depth.png"
+    assert main(["render", workspace["scene"], "--size", "16", "--depth", "-o", str(out)]) == 0, \
+        capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["view.depth.depth.npy", "view.depth.depth.png",
+                                                          "view.depth.png"]
+
+
+# -- scene files: what a reader refuses, and with how much memory ----------------------------------------------
+
+
+def _set(path: str, value):
+    """An edit of ``scene.json`` setting the dotted ``path`` (``frames.0.c2w``) to ``value``."""
+    def edit(data):
+        *parents, last = path.split(".")
+        for key in parents:
+            data = data[int(key)] if key.isdigit() else data[key]
+        data[int(last) if last.isdigit() else last] = value
+    return edit
+
+
+def _huge_jpeg(good: Path) -> bytes:
+    """The scene's first photo with its start-of-frame marker claiming 60000 x 60000 pixels."""
+    with zipfile.ZipFile(good) as archive:
+        jpeg = bytearray(archive.read(next(n for n in archive.namelist() if n.startswith("images/"))))
+    sof = jpeg.index(b"\xff\xc0")
+    jpeg[sof + 5:sof + 9] = (60000).to_bytes(2, "big") * 2
+    return bytes(jpeg)
+
+
+def _field_values(value: float) -> bytes:
+    import safetensors.torch
+
+    tensors = random_field().tensors()
+    tensors["vertex_values"] = torch.full_like(tensors["vertex_values"], value)
+    return safetensors.torch.save(tensors)
+
+
+def _tensor_header(header: dict) -> bytes:
+    """A safetensors file that is only a header (no tensor data)."""
+    text = json.dumps(header).encode()
+    return len(text).to_bytes(8, "little") + text
+
+
+#: (id, how the good scene file is broken, regex of the SceneFileError); an int in ``replace`` is that many
+#: zero bytes, streamed into the archive (a member that inflates to that much)
+SCENE_FILE_CASES = [
+    ("metres_per_unit -1", {"edit": _set("metres_per_unit", -1)},
+     r"metres_per_unit=-1; expected a finite number > 0 or null"),
+    ("reference_length 0", {"edit": _set("reference_length", 0)}, r"reference_length=0; expected a finite number"),
+    ("reference_length a string", {"edit": _set("reference_length", "3")}, r"reference_length='3'"),
+    ("version from the future", {"edit": _set("version", 99)}, r"format version 99.*upgrade pytest-n2r"),
+    ("another format", {"edit": _set("format", "zip")}, r"format='zip'.*not a pytest-n2r scene file"),
+    ("no frames", {"edit": _set("frames", [])}, r"'frames' must be a non-empty list"),
+    ("a pose with NaN", {"edit": _set("frames.0.c2w.0.3", float("nan"))},
+     r"scene\.json is not valid JSON \(NaN is not a number in strict JSON"),
+    ("a pose at 1e300", {"edit": _set("frames.0.c2w.0.3", 1e300)},
+     r"frames\[0\]\.c2w puts the camera 1e\+300 scene units from the bounds' centre; expected within 10000"),
+    ("a pose that is no rotation", {"edit": _set("frames.0.c2w.0.0", 5.0)},
+     r"frames\[0\]\.c2w rotation block is not a rotation"),
+    ("an unknown split", {"edit": _set("frames.0.split", "test")}, r"frames\[0\]\.split='test'"),
+    ("a camera index out of range", {"edit": _set("frames.0.camera", 7)},
+     r"frames\[0\]\.camera=7; expected an index into the 1 cameras"),
+    ("an image member outside images/", {"edit": _set("frames.0.image", "../../etc/passwd")},
+     r"frames\[0\]\.image='\.\./\.\./etc/passwd'"),
+    ("a camera of negative width", {"edit": _set("cameras.0.width", -20)}, r"cameras\[0\] is not a valid camera"),
+    ("bounds not a box", {"edit": _set("bounds", [1, 2])}, r"bounds=\[1, 2\]; expected \[\[min x, y, z\]"),
+    ("density_shift 1e30", {"edit": _set("field.density_shift", 1e30)},
+     r"density_shift=1e\+30; expected a finite number within ±100"),
+    ("normalization radius 1e-300", {"edit": _set("normalization.radius", 1e-300)},
+     r"normalization\.radius=1e-300; expected a number within a factor 10000 of the reference length"),
+    ("normalization centre 1e300", {"edit": _set("normalization.center", [1e300, 0, 0])},
+     r"normalization\.center=\[1e\+300, 0, 0\]; expected three numbers within 10000 reference lengths"),
+    ("grid resolution 5000", {"edit": _set("field.resolution", 5000)},
+     r"field\.resolution=5000; expected an integer in 4\.\.2048"),
+    ("SH degree 3", {"edit": _set("field.sh_degree", 3)}, r"field\.sh_degree=3; expected 0 or 1"),
+    ("a config with seed 'x'", {"edit": _set("config.seed", "x")},
+     r"'config' is not a valid FieldConfig \(FieldConfig\.seed='x'"),
+    ("scene.json nested 100 000 deep", {"replace": {SCENE_JSON: b"[" * 100_000 + b"]" * 100_000}},
+     r"scene\.json is not valid JSON"),
+    ("scene.json inflating past 64 MiB", {"replace": {SCENE_JSON: 65 * 2**20}},
+     r"'scene\.json' inflates to 68,157,440 bytes, more than the 67,108,864 bytes the cap on scene\.json allows"),
+    ("field member inflating to 1 GB", {"replace": {FIELD_FILE: 2**30}},
+     r"field\.safetensors is not a valid safetensors file \(its header claims 0 bytes"),
+    ("field header claiming 1 GB of tensors", {"replace": {FIELD_FILE: _tensor_header(
+        {"occupancy": {"dtype": "U8", "shape": [2**30], "data_offsets": [0, 2**30]}})}},
+     r"its tensors claim 1,073,741,824 bytes, more than the declared 12³ grid of SH degree 1 can hold"),
+    ("field values beyond float16", {"replace": {FIELD_FILE: "inf values"}}, r"tensor 'vertex_values' holds NaN or Inf"),
+    ("a photo claiming 60000x60000 pixels", {"replace": {"images/frame_000.jpg": "huge jpeg"}},
+     r"images/frame_000\.jpg is 60000x60000 pixels; frame 'frame_000\.png' has a 20x16 camera"),
+]
+
+
+@pytest.fixture(scope="module")
+def good_scene(tmp_path_factory) -> Path:
+    return save_scene(tmp_path_factory.mktemp("good") / "good.n2r", random_field(), FieldConfig(), tiny_views(), {},
+                      reference_length=3.0)
+
+
+@pytest.mark.parametrize(("how", "expected"), [c[1:] for c in SCENE_FILE_CASES], ids=[c[0] for c in SCENE_FILE_CASES])
+def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected, good_scene, tmp_path):
+    built = {"huge jpeg": lambda: _huge_jpeg(good_scene), "inf values": lambda: _field_values(float("inf"))}
+    how = {**how, "replace": {k: built[v]() if isinstance(v, str) else v for k, v in how.get("replace", {}).items()}}
+    bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=how.get("edit"), replace=how["replace"])
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneFileError) as info:
+            read_scene_file(bad)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert re.search(expected, str(info.value)), f"expected /{expected}/ in:\n{info.value}"
+    assert str(bad) in str(info.value), "the message does not name the file"
+    assert peak < 40 * 2**20, f"reading the bad file took {peak / 2**20:.0f} MiB of Python memory"
+
+
+def test_an_unreadable_scene_is_never_written_over_a_good_one(good_scene, tmp_path):
+    target = shutil.copy(good_scene, tmp_path / "scene.n2r")
+    before = Path(target).read_bytes()
+    for bad in ({"metres_per_unit": -1.0}, {"metres_per_unit": float("nan")}, {"reference_length": 0.0}):
+        with pytest.raises(ValueError, match=r"save_scene: (metres_per_unit|reference_length)="):
+            save_scene(target, random_field(), FieldConfig(), tiny_views(), {}, **{"reference_length": 3.0, **bad})
+    field = random_field()
+    field.values[0, 0] = 1e6  # beyond float16
+    with pytest.raises(ValueError, match=r"beyond float16's ±65504.*nothing was written"):
+        save_scene(target, field, FieldConfig(), tiny_views(), {}, reference_length=3.0)
+    assert Path(target).read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.n2r"], "a temporary file was left behind"
+
+
+def test_a_render_far_beyond_the_scene_is_an_error_not_a_black_picture(good_scene):
+    from pytest_n2r.scene import load_scene
+
+    scene = load_scene(good_scene, device="cpu", images=False)
+    view = scene.views[0]
+    far = view.c2w.copy()
+    far[:3, 3] += np.array([0.0, 0.0, 1e12])
+    with pytest.raises(ValueError, match=r"is 1e\+12 scene units from the captured cameras of scene 'good'"):
+        scene.render(far, view.camera)
+
+
+def test_the_reliability_page_counts_this_catalogue():
+    from ..plugin.test_bad_options import OPTION_CASES
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "reliability.md").read_text(encoding="utf-8")
+    for label, cases in (("commands, total", COMMAND_CASES), ("scene files, total", SCENE_FILE_CASES)):
+        assert f"| **{label}** | **{len(cases)}** |" in page, f"docs/reliability.md: {label} is not {len(cases)}"
+    assert re.search(rf"\| plugin options: .* \| {len(OPTION_CASES)} \|", page), "the plugin options' count"
