@@ -457,3 +457,22 @@ def test_the_reliability_page_counts_this_catalogue():
     for label, cases in (("commands, total", COMMAND_CASES), ("scene files, total", SCENE_FILE_CASES)):
         assert f"| **{label}** | **{len(cases)}** |" in page, f"docs/reliability.md: {label} is not {len(cases)}"
     assert re.search(rf"\| plugin options: .* \| {len(OPTION_CASES)} \|", page), "the plugin options' count"
+
+
+def test_a_splat_scene_file_whose_tensors_inflate_to_a_gigabyte_is_refused_before_inflating(good_scene, tmp_path):
+    from pytest_n2r.scene import load_scene
+
+    def as_splats(data):
+        data["representation"] = "splats"
+        data["splats"] = {"count": 3, "sh_degree": 0, "background": [0, 0, 0]}
+
+    bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": 2**30})
+    tracemalloc.start()
+    try:
+        with pytest.raises(SceneFileError, match=r"'splats\.safetensors' inflates to 1,073,741,824 bytes, more "
+                                                 r"than the 1,048,744 bytes 3 float32 Gaussians of SH degree 0 allows"):
+            load_scene(bad)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 40 * 2**20, f"{peak / 2**20:.0f} MiB"
