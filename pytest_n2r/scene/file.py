@@ -228,7 +228,7 @@ def _member(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: s
         raise SceneFileError(f"{source}: the archive has no {name!r}") from None
     if info.file_size > limit:
         raise SceneFileError(f"{source}: {name!r} inflates to {info.file_size:,} bytes, more than the {limit:,} "
-                             f"bytes {why} allows; the file is corrupt or not a scene file `n2r fit` wrote")
+                             f"bytes {why} allows; the file is corrupt or was not written by pytest-n2r")
     try:
         with archive.open(info) as fh:
             data = fh.read(limit + 1)

@@ -413,10 +413,16 @@ def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected,
     built = {"huge jpeg": lambda: _huge_jpeg(good_scene), "inf values": lambda: _field_values(float("inf"))}
     how = {**how, "replace": {k: built[v]() if isinstance(v, str) else v for k, v in how.get("replace", {}).items()}}
     bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=how.get("edit"), replace=how["replace"])
+    _refused_in_bounded_memory(read_scene_file, bad, expected)
+
+
+def _refused_in_bounded_memory(read, bad: Path, expected: str) -> None:
+    """``read(bad)`` raises a :class:`SceneFileError` matching ``expected`` and naming the file, within
+    40 MiB of Python memory (tracemalloc: NumPy's buffers included)."""
     tracemalloc.start()
     try:
         with pytest.raises(SceneFileError) as info:
-            read_scene_file(bad)
+            read(bad)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -457,3 +463,15 @@ def test_the_reliability_page_counts_this_catalogue():
     for label, cases in (("commands, total", COMMAND_CASES), ("scene files, total", SCENE_FILE_CASES)):
         assert f"| **{label}** | **{len(cases)}** |" in page, f"docs/reliability.md: {label} is not {len(cases)}"
     assert re.search(rf"\| plugin options: .* \| {len(OPTION_CASES)} \|", page), "the plugin options' count"
+
+
+def test_a_splat_scene_file_whose_tensors_inflate_to_a_gigabyte_is_refused_before_inflating(good_scene, tmp_path):
+    from pytest_n2r.scene import load_scene
+
+    def as_splats(data):
+        data["representation"] = "splats"
+        data["splats"] = {"count": 3, "sh_degree": 0, "background": [0, 0, 0]}
+
+    bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": 2**30})
+    _refused_in_bounded_memory(load_scene, bad, r"'splats\.safetensors' inflates to 1,073,741,824 bytes, more than "
+                                                r"the 1,048,744 bytes 3 float32 Gaussians of SH degree 0 allows")

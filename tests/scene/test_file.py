@@ -125,6 +125,15 @@ def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes | 
     bytes, streamed, so a member can inflate to gigabytes) or dropped."""
     replace = dict(replace or {})
     with zipfile.ZipFile(src) as archive, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as out:
+
+        def put(name: str, payload: bytes | int) -> None:
+            if isinstance(payload, int):
+                with out.open(name, "w", force_zip64=True) as member:
+                    for _ in range(payload // 2**20):
+                        member.write(bytes(2**20))
+            else:
+                out.writestr(name, payload)
+
         for name in archive.namelist():
             if name in drop:
                 continue
@@ -133,14 +142,9 @@ def rewrite(src: Path, dst: Path, *, edit_json=None, replace: dict[str, bytes | 
                 data = json.loads(payload)
                 edit_json(data)
                 payload = json.dumps(data).encode()
-            if isinstance(payload, int):
-                with out.open(name, "w", force_zip64=True) as member:
-                    for _ in range(payload // 2**20):
-                        member.write(bytes(2**20))
-            else:
-                out.writestr(name, payload)
+            put(name, payload)
         for name, payload in replace.items():
-            out.writestr(name, payload)
+            put(name, payload)
     return dst
 
 
