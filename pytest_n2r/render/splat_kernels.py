@@ -6,11 +6,14 @@ The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
    3DGS low-pass dilation, its conic (inverse), the pixel rectangle where it can reach ``ALPHA_MIN``, its
    tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`).
 2. :func:`depth_order`: the visible Gaussians sorted by camera z-depth rounded to float32 (a stable LSD
-   radix sort; equal keys keep index order), and :func:`gather`: their records in that order.
-3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists, each in depth order.
+   radix sort; equal keys keep index order).
+3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists of their record indices, each in
+   depth order.
 4. :func:`composite_tiles` (parallel over tiles): front-to-back alpha compositing, pixel by pixel, with
    early termination; each pixel's state (transmittance, colour, depth) carries over between runs, so
-   compositing a long list in several runs gives the same bits as in one.
+   compositing a long list in several runs gives the same bits as in one. A tile's records are copied in
+   batches of :data:`BATCH` into a contiguous block first: the copy's loads are independent of each other,
+   so their cache misses overlap, where the pixel loop would wait for each record in turn.
 
 Each pixel's result depends only on the depth-ordered Gaussians that reach it, never on the tile size, the
 run boundaries or the thread count, so renders are deterministic to the bit.
@@ -28,13 +31,13 @@ from ..splats.sh import colour_of
 __all__ = [
     "ALPHA_MAX",
     "ALPHA_MIN",
+    "BATCH",
     "DILATION",
     "RECORD",
     "bin_tiles",
     "composite_tiles",
     "depth_order",
     "finish",
-    "gather",
     "project",
 ]
 
@@ -52,6 +55,8 @@ _GUARD = 0.15
 #: the pixel rectangle ``x0 <= x < x1, y0 <= y < y1`` where it can reach ``ALPHA_MIN``, and the squared
 #: Mahalanobis radius of that region (widened by a margin, see :func:`composite_tiles`).
 RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1", "r2")
+#: Records a tile copies at a time before compositing them (see :func:`composite_tiles`).
+BATCH = 32
 _U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1, _R2 = range(len(RECORD))
 @njit(cache=True, parallel=True)
 def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
@@ -169,21 +174,15 @@ def depth_order(tiles, records):
     return ids
 
 
-@njit(cache=True, parallel=True)
-def gather(order, records, sorted_records):
-    """``sorted_records[j] = records[order[j]]``, so that binning and compositing read memory in order."""
-    for j in prange(order.shape[0]):
-        sorted_records[j] = records[order[j]]
-
-
 @njit(cache=True)
-def bin_tiles(start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``start <= j < stop`` into the tiles whose pixels are not all done
-    (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s, in depth order."""
+def bin_tiles(order, start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``records[order[j]]``, ``start <= j < stop``, into the tiles whose pixels
+    are not all done (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s record
+    indices, in depth order."""
     n_tiles = live.shape[0]
     tile_start[:] = 0
     for j in range(start, stop):
-        rec = records[j]
+        rec = records[order[j]]
         for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
             for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
                 t = ty * tiles_x + tx
@@ -193,12 +192,13 @@ def bin_tiles(start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
         tile_start[t + 1] += tile_start[t]
     fill = tile_start[:n_tiles].copy()
     for j in range(start, stop):
-        rec = records[j]
+        i = order[j]
+        rec = records[i]
         for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
             for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
                 t = ty * tiles_x + tx
                 if live[t] > 0:
-                    tile_ids[fill[t]] = j
+                    tile_ids[fill[t]] = i
                     fill[t] += 1
 
 
@@ -216,6 +216,7 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
+    n_fields = records.shape[1]
     for t in prange(n_tiles):
         s, e = tile_start[t], tile_start[t + 1]
         if s == e or live[t] == 0:
@@ -225,8 +226,14 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
         tx1 = min(tx0 + tile, width)
         ty1 = min(ty0 + tile, height)
         left = live[t]
+        batch = np.empty((BATCH, n_fields))
         for k in range(s, e):
-            rec = records[tile_ids[k]]
+            if (k - s) % BATCH == 0:
+                for b in range(min(BATCH, e - k)):
+                    src = records[tile_ids[k + b]]
+                    for f in range(n_fields):
+                        batch[b, f] = src[f]
+            rec = batch[(k - s) % BATCH]
             gx0, gx1 = max(int(rec[_X0]), tx0), min(int(rec[_X1]), tx1)
             gy0, gy1 = max(int(rec[_Y0]), ty0), min(int(rec[_Y1]), ty1)
             u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
