@@ -204,7 +204,7 @@ def bin_tiles(order, start, stop, records, tile, tiles_x, live, tile_start, tile
 
 @njit(cache=True, parallel=True)
 def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop, live, trans, acc_rgb, acc_depth,
-                    done):
+                    done, final, background, rgb_out, depth_out, opacity_out):
     """Composite each tile's Gaussians (depth-ordered records) front to back into the pixel state
     (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``: terminated), updating
     ``live`` (pixels of the tile not yet done).
@@ -213,18 +213,21 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
     skipped below ``ALPHA_MIN``; if the transmittance after it would fall below ``t_stop`` the pixel is done
     without it; else it adds ``alpha · T`` times its colour and depth and ``T *= 1 - alpha``. Pixels outside
     the ellipse where ``alpha`` can reach ``ALPHA_MIN`` (with a margin) are not evaluated.
+
+    With ``final`` (the last run), each tile's pixels are then finished into the outputs (:func:`finish`) in
+    the same parallel region: one region fewer per frame.
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
     n_fields = records.shape[1]
     for t in prange(n_tiles):
         s, e = tile_start[t], tile_start[t + 1]
-        if s == e or live[t] == 0:
-            continue
         tx0 = (t % tiles_x) * tile
         ty0 = (t // tiles_x) * tile
         tx1 = min(tx0 + tile, width)
         ty1 = min(ty0 + tile, height)
+        if live[t] == 0:
+            e = s
         left = live[t]
         batch = np.empty((BATCH, n_fields))
         for k in range(s, e):
@@ -278,6 +281,10 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
             if left == 0:
                 break
         live[t] = left
+        if final:
+            for py in range(ty0, ty1):
+                for p in range(py * width + tx0, py * width + tx1):
+                    _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
 
 
 @njit(cache=True, parallel=True)
@@ -285,10 +292,16 @@ def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_ou
     """Pixel state → ``rgb`` uint8 (over ``background``, rounded half to even like ``np.rint``), ``depth``
     (the weighted mean z-depth; 0 where nothing contributed) and ``opacity`` (``1 - T``), flat over pixels."""
     for p in prange(trans.shape[0]):
-        tp = trans[p]
-        for ch in range(3):
-            value = acc_rgb[p, ch] + tp * background[ch]
-            rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
-        weight = 1.0 - tp
-        depth_out[p] = acc_depth[p] / weight if weight > 0.0 else 0.0
-        opacity_out[p] = weight
+        _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+
+
+@njit(inline="always")
+def _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
+    """:func:`finish` of pixel ``p``."""
+    tp = trans[p]
+    for ch in range(3):
+        value = acc_rgb[p, ch] + tp * background[ch]
+        rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
+    weight = 1.0 - tp
+    depth_out[p] = acc_depth[p] / weight if weight > 0.0 else 0.0
+    opacity_out[p] = weight

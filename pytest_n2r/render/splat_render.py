@@ -131,22 +131,25 @@ class SplatRenderer:
         done = np.zeros(w * h, np.uint8)
         tile_start = np.empty(len(live) + 1, np.int64)
         counts = np.cumsum(tiles[order])
-        start = 0
+        background = np.asarray(self.background)
+        out_rgb = np.empty((h * w, 3), np.uint8)
+        out_depth = np.empty(h * w, np.float32)
+        out_opacity = np.empty(h * w, np.float32)
+        start, finished = 0, False
         while start < len(order) and live.any():  # runs of at most max_pairs (tile, Gaussian) pairs
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
             k.bin_tiles(order, start, stop, records, s.tile, tiles_x, live, tile_start, tile_ids)
             clock.lap("bin")
+            finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
                 k.composite_tiles(tile_start, tile_ids, records, w, s.tile, tiles_x, s.t_stop, live, trans,
-                                  acc_rgb, acc_depth, done)
+                                  acc_rgb, acc_depth, done, finished, background, out_rgb, out_depth, out_opacity)
             clock.lap("composite")
             start = stop
-        out_rgb = np.empty((h * w, 3), np.uint8)
-        out_depth = np.empty(h * w, np.float32)
-        out_opacity = np.empty(h * w, np.float32)
-        k.finish(trans, acc_rgb, acc_depth, np.asarray(self.background), out_rgb, out_depth, out_opacity)
+        if not finished:  # nothing drawn, or every pixel done before the last run
+            k.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
         clock.lap("finish")
         self.stage_seconds = clock.seconds
         result = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),
