@@ -6,9 +6,8 @@ The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
    3DGS low-pass dilation, its conic (inverse), the pixel rectangle where it can reach ``ALPHA_MIN``, its
    tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`).
 2. :func:`depth_order`: the visible Gaussians sorted by camera z-depth rounded to float32 (a stable LSD
-   radix sort; equal keys keep index order).
-3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists of their record indices, each in
-   depth order.
+   radix sort; equal keys keep index order), and :func:`gather`: their records in that order.
+3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists, each in depth order.
 4. :func:`composite_tiles` (parallel over tiles): front-to-back alpha compositing, pixel by pixel, with
    early termination; each pixel's state (transmittance, colour, depth) carries over between runs, so
    compositing a long list in several runs gives the same bits as in one. A tile's records are copied in
@@ -38,6 +37,7 @@ __all__ = [
     "composite_tiles",
     "depth_order",
     "finish",
+    "gather",
     "project",
 ]
 
@@ -174,39 +174,36 @@ def depth_order(tiles, records):
     return ids
 
 
+@njit(cache=True, parallel=True)
+def gather(order, records, sorted_records):
+    """``sorted_records[j] = records[order[j]]``, so that binning reads memory in order."""
+    for j in prange(order.shape[0]):
+        sorted_records[j] = records[order[j]]
+
+
 @njit(cache=True)
-def bin_tiles(order, start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``records[order[j]]``, ``start <= j < stop``, into the tiles whose pixels
-    are not all done (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s record
-    indices, in depth order."""
+def bin_tiles(start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` into the tiles whose pixels are not all done
+    (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s, in depth order."""
     n_tiles = live.shape[0]
-    # the tile rectangles in depth order first: a tight loop of independent loads, whose cache misses overlap
-    # (records are in index order, so reading them in depth order misses the cache at nearly every one)
-    rect = np.empty((stop - start, 4), np.int32)
-    for j in range(start, stop):
-        rec = records[order[j]]
-        r = rect[j - start]
-        r[0], r[1] = int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1
-        r[2], r[3] = int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1
     tile_start[:] = 0
-    for j in range(stop - start):
-        r = rect[j]
-        for ty in range(r[2], r[3]):
-            for tx in range(r[0], r[1]):
+    for j in range(start, stop):
+        rec = records[j]
+        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
+            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
                 t = ty * tiles_x + tx
                 if live[t] > 0:
                     tile_start[t + 1] += 1
     for t in range(n_tiles):
         tile_start[t + 1] += tile_start[t]
     fill = tile_start[:n_tiles].copy()
-    for j in range(stop - start):
-        r = rect[j]
-        i = order[start + j]
-        for ty in range(r[2], r[3]):
-            for tx in range(r[0], r[1]):
+    for j in range(start, stop):
+        rec = records[j]
+        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
+            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
                 t = ty * tiles_x + tx
                 if live[t] > 0:
-                    tile_ids[fill[t]] = i
+                    tile_ids[fill[t]] = j
                     fill[t] += 1
 
 

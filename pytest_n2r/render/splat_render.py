@@ -116,12 +116,14 @@ class SplatRenderer:
         n = len(self._means)
         w2c = np.ascontiguousarray(invert_pose(c2w))
         clock = _Stages()
-        records, tiles = self._buffers(n)
+        records, tiles, ordered = self._buffers(n)
         k.project(self._means, self._cov, self._opacity, self._sh, self._degree, w2c,
                   np.ascontiguousarray(c2w[:3, 3]), camera.fx, camera.fy, camera.cx, camera.cy, w, h, s.near, s.tile,
                   records, tiles)
         clock.lap("project")
         order = k.depth_order(tiles, records)
+        ordered = ordered[:len(order)]
+        k.gather(order, records, ordered)
         clock.lap("sort")
         tiles_x = -(-w // s.tile)
         live = _tile_pixels(w, h, s.tile)
@@ -140,11 +142,11 @@ class SplatRenderer:
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
-            k.bin_tiles(order, start, stop, records, s.tile, tiles_x, live, tile_start, tile_ids)
+            k.bin_tiles(start, stop, ordered, s.tile, tiles_x, live, tile_start, tile_ids)
             clock.lap("bin")
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                k.composite_tiles(tile_start, tile_ids, records, w, s.tile, tiles_x, s.t_stop, live, trans,
+                k.composite_tiles(tile_start, tile_ids, ordered, w, s.tile, tiles_x, s.t_stop, live, trans,
                                   acc_rgb, acc_depth, done, finished, background, out_rgb, out_depth, out_opacity)
             clock.lap("composite")
             start = stop
@@ -157,12 +159,12 @@ class SplatRenderer:
         return {name: result[name] for name in outputs}
 
 
-    def _buffers(self, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """This thread's ``records`` (n × ``len(RECORD)`` float64) and ``tiles`` (n int64) buffers, which
-        :func:`~pytest_n2r.render.splat_kernels.project` overwrites for every Gaussian it keeps."""
+    def _buffers(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This thread's ``records`` and ``ordered`` (n × ``len(RECORD)`` float64) and ``tiles`` (n int64)
+        buffers: each render overwrites what it reads of them."""
         buffers = getattr(self._scratch, "buffers", None)
         if buffers is None or len(buffers[1]) != n:
-            buffers = (np.empty((n, len(k.RECORD))), np.empty(n, np.int64))
+            buffers = (np.empty((n, len(k.RECORD))), np.empty(n, np.int64), np.empty((n, len(k.RECORD))))
             self._scratch.buffers = buffers
         return buffers
 
