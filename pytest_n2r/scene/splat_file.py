@@ -12,6 +12,7 @@ deterministic.
 from __future__ import annotations
 
 import json
+import math
 import os
 import zipfile
 from pathlib import Path
@@ -19,7 +20,7 @@ from pathlib import Path
 from .._validation import as_unit_rgb
 from ..data.atomic import atomic_write_bytes
 from ..data.extent import scene_bounds
-from ..errors import SceneFileError
+from ..errors import InvalidArgument, SceneFileError
 from ..render.splat_render import SplatSettings
 from ..splats.gaussians import TENSORS, Gaussians
 from . import schema
@@ -63,6 +64,10 @@ def save_splat_scene(path: str | os.PathLike, scene: SplatScene, report: dict | 
     if not scene.views:
         raise SceneFileError(f"cannot write {path}: splat scene {scene.name!r} has no cameras; a scene file holds "
                              f"its views ({scene.no_views_reason})")
+    for key, value in (("reference_length", scene.reference_length), ("metres_per_unit", scene.metres_per_unit)):
+        if value is not None and not (math.isfinite(value) and value > 0):  # what read_splat_file would refuse
+            raise InvalidArgument(f"cannot write {path}: splat scene {scene.name!r} has {key}={value!r}; a scene "
+                                  "file needs a finite number > 0 (do its cameras see any Gaussian?)")
     views = scene.views
     bounds = scene_bounds(scene.gaussians.means, [v.camera for v in views], [v.c2w for v in views])
     cameras, frames, _ = schema.frames_to_json(views, with_images=False)

@@ -16,6 +16,7 @@ from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.splat_render import SplatSettings
 from pytest_n2r.scene import SplatScene, load_scene, read_splat_file
+from pytest_n2r.scene.splat_file import save_splat_scene
 from pytest_n2r.strategies import scene_views
 
 from ..splats.make_data import DATA, FILES, SCALE
@@ -155,3 +156,16 @@ def test_a_damaged_splat_file_is_named(tmp_path, damage, expected):
     with pytest.raises(SceneFileError) as info:
         read_splat_file(bad)
     assert expected in str(info.value) and str(bad) in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("key, value", [("_reference_length", float("nan")), ("_reference_length", 0.0),
+                                        ("metres_per_unit", float("inf")), ("metres_per_unit", -1.0)])
+def test_a_splat_scene_file_the_reader_would_refuse_is_never_written(tmp_path, key, value):
+    scene = load_scene(ply("object-sh0"))
+    setattr(scene, key, value)
+    out = tmp_path / "object.n2r"
+    out.write_bytes(b"the user's earlier file")
+    with pytest.raises(InvalidArgument, match=key.lstrip("_")):
+        save_splat_scene(out, scene)
+    assert out.read_bytes() == b"the user's earlier file", "the earlier file was replaced"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["object.n2r"], "a temporary file was left behind"
