@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, orthonormalize
 from .atomic import atomic_write_text
+from .json_file import read_json_file
 from .poses import PoseSet, SourceFrame
 
 __all__ = ["is_gs_cameras", "read_gs_cameras", "write_gs_cameras"]
@@ -54,12 +55,7 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
     malformed or a rotation is not a rotation.
     """
     path = Path(path)
-    if not path.is_file():
-        raise IngestError(f"cameras file {str(path)!r} does not exist")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise IngestError(f"{path}: not a readable JSON file ({exc})") from None
+    data = read_json_file(path, 'cameras')
     if not isinstance(data, list) or not data:
         raise IngestError(f"{path}: expected a non-empty JSON list of cameras (3DGS cameras.json)")
     frames = []

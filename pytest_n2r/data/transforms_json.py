@@ -30,6 +30,7 @@ from ..errors import IngestError, N2RError
 from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
 from .images import read_image_size
+from .json_file import read_json_file
 from .poses import PoseSet, SourceFrame
 
 __all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json"]
@@ -58,12 +59,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     malformed, a matrix is not a finite rigid transform, or no frame has its image.
     """
     path = Path(path)
-    if not path.is_file():
-        raise IngestError(f"transforms file {str(path)!r} does not exist")
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise IngestError(f"{path}: not a readable JSON file ({exc})") from None
+    meta = read_json_file(path, 'transforms')
     if not isinstance(meta, dict):
         raise IngestError(f"{path}: expected a JSON object at the top level, found {type(meta).__name__}")
     raw_frames = meta.get("frames")
