@@ -31,13 +31,13 @@ __all__ = ["is_gs_cameras", "read_gs_cameras", "write_gs_cameras"]
 
 
 def is_gs_cameras(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a JSON file holding a list of camera objects with ``position`` and ``rotation``."""
+    """Whether ``path`` is a JSON file in the 3DGS layout: a list at the top level (a ``transforms.json`` is an
+    object), so that a malformed ``cameras.json`` gets :func:`read_gs_cameras`' errors, not transforms.json's."""
     try:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError):
         return False
-    return isinstance(data, list) and bool(data) and isinstance(data[0], dict) and "rotation" in data[0] \
-        and "position" in data[0]
+    return isinstance(data, list)
 
 
 def _number(record: dict, key: str, where: str, positive: bool = True) -> float:

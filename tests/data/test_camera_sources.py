@@ -59,6 +59,18 @@ def test_a_bad_cameras_json_entry_is_named(tmp_path, change, expected):
     assert expected in str(info.value) and "[0]" in str(info.value), str(info.value)
 
 
+
+@pytest.mark.parametrize("content, expected", [
+    ([], "expected a non-empty JSON list of cameras (3DGS cameras.json)"),
+    ([{"id": 0, "img_name": "x", "width": 8, "height": 6, "fx": 5.0, "fy": 5.0}], "[0]"),
+])
+def test_a_malformed_cameras_json_gets_the_3dgs_reader_s_error(tmp_path, content, expected):
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps(content))
+    with pytest.raises(IngestError) as info:
+        read_cameras(path)
+    assert expected in str(info.value) and "transforms" not in str(info.value), str(info.value)
+
 def test_cameras_json_refuses_what_it_cannot_hold(tmp_path):
     frames = [SourceFrame("a.png", None, Camera(30, 20, 25.0, 25.0, 10.0, 9.5), np.eye(4))]
     with pytest.raises(IngestError, match="principal point off the image centre"):
