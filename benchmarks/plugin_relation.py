@@ -34,13 +34,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the repository's package and, as a fallback scene, its test scene
 
-from pytest_n2r.cache import RenderCache  # noqa: E402
-from pytest_n2r.metrics import repeatability  # noqa: E402
-from pytest_n2r.relations import Relation, RunSettings, check_relation  # noqa: E402
-from pytest_n2r.render.size import RenderSize  # noqa: E402
-from pytest_n2r.scene.base import Scene  # noqa: E402
-from pytest_n2r.session import default_scene_specs, load_scene_spec, parse_scene_specs  # noqa: E402
-from pytest_n2r.strategies import transforms  # noqa: E402
+from pytest_n2r.cache import RenderCache
+from pytest_n2r.metrics import repeatability
+from pytest_n2r.relations import Relation, RunSettings, check_relation
+from pytest_n2r.render.size import RenderSize
+from pytest_n2r.scene.base import Scene
+from pytest_n2r.session import default_scene_specs, load_scene_spec, parse_scene_specs
+from pytest_n2r.strategies import transforms
 
 ORB = cv2.ORB_create(500)
 

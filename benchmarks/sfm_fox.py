@@ -22,9 +22,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pytest_n2r.data.compare import compare_poses  # noqa: E402
-from pytest_n2r.data.sfm import run_sfm  # noqa: E402
-from pytest_n2r.data.transforms_json import read_transforms_json  # noqa: E402
+from pytest_n2r.data.compare import compare_poses
+from pytest_n2r.data.sfm import run_sfm
+from pytest_n2r.data.transforms_json import read_transforms_json
 
 FOX = ROOT.parent / "shared" / "scenes" / "fox"
 

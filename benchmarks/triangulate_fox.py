@@ -18,10 +18,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pytest_n2r.data.extent import reference_length  # noqa: E402
-from pytest_n2r.data.images import read_image, resize_image  # noqa: E402
-from pytest_n2r.data.transforms_json import read_transforms_json  # noqa: E402
-from pytest_n2r.data.triangulate import triangulate_views  # noqa: E402
+from pytest_n2r.data.extent import reference_length
+from pytest_n2r.data.images import read_image, resize_image
+from pytest_n2r.data.transforms_json import read_transforms_json
+from pytest_n2r.data.triangulate import triangulate_views
 
 FOX = ROOT.parent / "shared" / "scenes" / "fox"
 SIZES = (640, 480, 320)

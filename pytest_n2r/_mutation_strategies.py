@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import hypothesis.strategies as st
 
-from .mutations import BlackPatches, Brightness, Mutation, NoisePatch, _MAX_SEED
+from .mutations import _MAX_SEED, BlackPatches, Brightness, Mutation, NoisePatch
 
 _seeds = st.integers(0, _MAX_SEED)
 

@@ -61,7 +61,7 @@ def time_limit(seconds: float | None, what: str, *, escape: bool = False) -> Ite
             raise expired(_message(what, seconds))
         return
 
-    def on_alarm(signum, frame):  # noqa: ARG001 - signal handler signature
+    def on_alarm(signum, frame):
         raise _Expired
 
     previous_handler = signal.signal(signal.SIGALRM, on_alarm)

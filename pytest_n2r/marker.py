@@ -10,7 +10,8 @@ the test, not a failure in the middle of a run.
 
 from __future__ import annotations
 
-from typing import Any, Callable, TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 from .errors import N2RError
 from .plugin import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER

@@ -20,11 +20,11 @@ import os
 import random
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, assume, given, target
@@ -57,7 +57,7 @@ SEARCHES = ("random", "targeted")
 class RelationFailure(AssertionError):
     """The SUT's outputs on a source view and its follow-up deviate by more than ``eps``."""
 
-    def __init__(self, message: str, stats: "RelationStats | None" = None):
+    def __init__(self, message: str, stats: RelationStats | None = None):
         super().__init__(message)
         self.stats = stats
 
@@ -129,7 +129,7 @@ class Relation:
     @classmethod
     def build(cls, metric: Any, eps: Any, transform: Any, *, examples: int | None = None,
               size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
-              validity: Validity | None = None) -> "Relation":
+              validity: Validity | None = None) -> Relation:
         metric = resolve_metric(metric)
         try:
             eps = check_range("eps", eps, 0.0)

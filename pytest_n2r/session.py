@@ -10,9 +10,10 @@ import importlib
 import os
 import re
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from .cache import DEFAULT_DISK_BYTES, RenderCache
 from .errors import InvalidArgument, InvalidType, SceneFileError

@@ -33,7 +33,7 @@ class DocBlock:
     code: str
 
 
-_FENCE = re.compile(r'^```(\w*)(?:[ \t]+title="([^"]*)")?[ \t]*\n(.*?)^```[ \t]*$', flags=re.S | re.M)
+_FENCE = re.compile(r'^```(\w*)(?:[ \t]+title="([^"]*)")?[ \t]*\n(.*?)^```[ \t]*$', flags=re.DOTALL | re.MULTILINE)
 
 
 def doc_blocks(page: str) -> list[DocBlock]:

@@ -34,7 +34,7 @@ def test_mutations_return_a_new_uint8_image_and_leave_the_input_alone(mutation, 
 @settings(max_examples=60)
 @given(mutation=m.any_mutation())
 def test_repr_rebuilds_an_equal_mutation(mutation):
-    rebuilt = eval(repr(mutation), {**vars(m)})  # noqa: S307 - our own repr
+    rebuilt = eval(repr(mutation), {**vars(m)})
     assert rebuilt == mutation and hash(rebuilt) == hash(mutation)
     assert mutation.as_dict()["name"] == mutation.name and mutation.describe()
 

@@ -79,9 +79,9 @@ def _example_config() -> dict:
 def _readme_commands() -> dict[str, str]:
     """The README's setup commands by their comment: ``{"1": main job, "2": whole suite}``."""
     text = (REPO_ROOT / "README.md").read_text(encoding="utf-8")
-    block = re.search(r"^## Setup.*?^```bash\n(.*?)^```", text, flags=re.S | re.M)
+    block = re.search(r"^## Setup.*?^```bash\n(.*?)^```", text, flags=re.DOTALL | re.MULTILINE)
     assert block, "README.md has no ```bash block under '## Setup'"
-    commands = dict(re.findall(r"^# (\d+)\..*\n(.+)$", block[1], flags=re.M))
+    commands = dict(re.findall(r"^# (\d+)\..*\n(.+)$", block[1], flags=re.MULTILINE))
     assert set(commands) == {"1", "2"}, f"README.md's setup block should give commands 1 and 2, found {commands}"
     return commands
 

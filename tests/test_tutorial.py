@@ -115,7 +115,7 @@ def test_every_block_of_the_tutorial_runs_as_shown(pytester: pytest.Pytester, mo
         elif block.lang == "text":
             _check_output(block, result, command, pytester.path, where)
         elif block.lang == "yaml":
-            steps = re.findall(r"^\s*run:\s*(.+)$", block.code, flags=re.M)
+            steps = re.findall(r"^\s*run:\s*(.+)$", block.code, flags=re.MULTILINE)
             assert steps, f"{where}: a yaml block without a `run:` step"
             unknown = [step for step in steps if step.strip() not in ran]
             assert not unknown, f"{where}: CI steps {unknown} are not commands the tutorial ran ({ran})"

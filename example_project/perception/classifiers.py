@@ -60,7 +60,7 @@ def _network(name: str):
     return {"mobilenet_v2": MobileNetV2, "efficientnet_lite0": EfficientNetLite0}[name]()
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def classifier(name: str) -> Callable[[np.ndarray], np.ndarray]:
     """The classifier ``name`` as a function ``rgb (H×W×3 uint8) -> probabilities (1000,) float32``."""
     import torch

@@ -4,7 +4,6 @@ scenes by default (``n2r_scenes`` in pyproject.toml), or whatever ``--n2r-scene`
 from __future__ import annotations
 
 import pytest
-
 from perception.classifiers import WeightsMissing, classifier
 from perception.detectors import detector
 

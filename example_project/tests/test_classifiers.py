@@ -21,6 +21,7 @@ yet), and MobileNetV2 then failed τ2 at 0.474 and 0.488. They were measured aga
 from __future__ import annotations
 
 import pytest
+
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import cosine_similarity
 

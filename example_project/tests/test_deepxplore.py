@@ -11,6 +11,7 @@ eps 0.8 -> 0.95 to keep the 0.08 margin of test_detectors.py).
 from __future__ import annotations
 
 import pytest
+
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import class_invariance, repeatability
 from pytest_n2r.mutations import black_patches, brightness, noise_patch

@@ -20,10 +20,10 @@ spread τ1 worst 0.415 (object; 0.45 -> 0.5), AKAZE τ4 worst 0.750 (object; 0.8
 from __future__ import annotations
 
 import pytest
+from perception.detectors import detector
+
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import interest_point_spread, repeatability
-
-from perception.detectors import detector
 
 REPEATABILITY = repeatability(px=3)
 SPREAD = interest_point_spread(radius=8)

@@ -1,8 +1,8 @@
 """Scene ingestion: image folders, videos, COLMAP models and transforms.json into a :class:`Capture`."""
 
 from .capture import Capture, CapturedView, heldout_split
-from .compare import PoseComparison, compare_poses
 from .colmap import read_colmap_model, write_colmap_text
+from .compare import PoseComparison, compare_poses
 from .ingest import complete_points, extent, ingest, load_poses, source_kind
 from .poses import PoseSet, SourceFrame
 from .sfm import run_sfm

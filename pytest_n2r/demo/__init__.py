@@ -63,7 +63,7 @@ def _check_name(name: str) -> str:
     return name
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def ground_truth(name: str) -> GroundTruthScene:
     """The exact scene ``name``: renders the true RGB, z-depth and opacity at any camera and pose."""
     from .scenes import build_scene

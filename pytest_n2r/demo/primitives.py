@@ -321,7 +321,7 @@ class ReliefWall(Primitive):
 
     def _march(self, o: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """The first root in ``[lo, hi]`` of a residual that may not be monotonic (grazing rays)."""
-        res = lambda t: self.residual(o + t[:, None] * d)  # noqa: E731
+        res = lambda t: self.residual(o + t[:, None] * d)
         a, b = lo.copy(), lo.copy()
         found = res(lo) >= 0
         t_prev = lo

@@ -69,7 +69,7 @@ class Texture:
     def photo(
         cls, name: str, *, tint: tuple[float, float, float] = (1.0, 1.0, 1.0), gain: float = 1.0,
         contrast: float = 1.0, wrap: Literal["mirror", "clamp"] = "mirror", quarter_turns: int = 0,
-    ) -> "Texture":
+    ) -> Texture:
         """A bundled photo turned by ``quarter_turns`` × 90° counter-clockwise, contrast-stretched about its
         mean, then multiplied by ``gain * tint``."""
         img = np.rot90(sample_photo(name), quarter_turns)

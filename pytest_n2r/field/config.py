@@ -132,7 +132,7 @@ class FieldConfig:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in data.items()}
 
     @classmethod
-    def from_dict(cls, data: dict) -> "FieldConfig":
+    def from_dict(cls, data: dict) -> FieldConfig:
         """The config of ``data``; unknown keys are an error (they would be silently ignored otherwise)."""
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
@@ -140,5 +140,5 @@ class FieldConfig:
             raise InvalidArgument(f"field config has unknown keys {unknown}; known: {sorted(known)}")
         return cls(**data)
 
-    def replace(self, **changes) -> "FieldConfig":
+    def replace(self, **changes) -> FieldConfig:
         return replace(self, **changes)

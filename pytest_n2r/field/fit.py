@@ -14,7 +14,8 @@ import math
 import platform
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field as dataclass_field
+from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 
 import numpy as np
 import torch
@@ -27,12 +28,12 @@ from ..render.field_render import FieldRenderer, RenderSettings
 from ..render.lattice import grid_coords, lattice_position
 from ..render.march import MarchGrid, march_compiled, march_dense
 from .config import FieldConfig
-from .grid import SceneField, vertex_ijk
 from .device import resolve_device
+from .grid import SceneField, vertex_ijk
 from .optim import RowAdam
 from .query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
-from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 from .space import SceneSpace
+from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
 

@@ -54,7 +54,7 @@ class SceneSpace:
 
     @classmethod
     def around(cls, bounds: np.ndarray, camera_centers: np.ndarray | None = None, *, shell: float = 0.25,
-               padding: float = 0.05) -> "SceneSpace":
+               padding: float = 0.05) -> SceneSpace:
         """The space whose unit cube holds ``bounds`` ((2, 3) box, scene units) and the camera centres,
         widened by ``padding`` of its size."""
         bounds = np.asarray(bounds, dtype=np.float64)
@@ -98,7 +98,7 @@ class SceneSpace:
         return {"center": list(self.center), "radius": self.radius, "shell": self.shell}
 
     @classmethod
-    def from_dict(cls, data: dict) -> "SceneSpace":
+    def from_dict(cls, data: dict) -> SceneSpace:
         try:
             return cls(tuple(data["center"]), float(data["radius"]), float(data["shell"]))
         except (KeyError, TypeError) as exc:

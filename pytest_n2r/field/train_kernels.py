@@ -51,8 +51,7 @@ def sample_corners(o: np.ndarray, d: np.ndarray, t: np.ndarray, ray_idx: np.ndar
 def scatter_max(cells, values, out):
     """``out[cells[i]] = max(out[cells[i]], values[i])`` (the largest compositing weight seen per cell)."""
     for i in range(cells.shape[0]):
-        if values[i] > out[cells[i]]:
-            out[cells[i]] = values[i]
+        out[cells[i]] = max(out[cells[i]], values[i])
 
 
 @njit(cache=True)

@@ -64,7 +64,7 @@ class Camera:
         object.__setattr__(self, "distortion", coeffs)
 
     @classmethod
-    def from_K(cls, K: np.ndarray, width: int, height: int, distortion: tuple[float, ...] = ()) -> "Camera":
+    def from_K(cls, K: np.ndarray, width: int, height: int, distortion: tuple[float, ...] = ()) -> Camera:
         """Build from a 3x3 OpenCV intrinsic matrix (pixel centres at integer coordinates)."""
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3):
@@ -75,7 +75,7 @@ class Camera:
     def from_colmap_pixels(
         cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float,
         distortion: tuple[float, ...] = (),
-    ) -> "Camera":
+    ) -> Camera:
         """Build from intrinsics whose top-left pixel centre is ``(0.5, 0.5)`` (COLMAP, nerfstudio)."""
         return cls(width, height, fx, fy, float(cx) - 0.5, float(cy) - 0.5, tuple(distortion))
 
@@ -93,7 +93,7 @@ class Camera:
     def is_distorted(self) -> bool:
         return bool(self.distortion)
 
-    def resized(self, width: int, height: int) -> "Camera":
+    def resized(self, width: int, height: int) -> Camera:
         """The same camera for an image resized to ``width`` x ``height``.
 
         Per axis with scale ``s = new / old``: ``f' = f * s`` and ``c' = (c + 0.5) * s - 0.5``, so the
@@ -108,17 +108,17 @@ class Camera:
             cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5,
         )
 
-    def scaled(self, scale: float) -> "Camera":
+    def scaled(self, scale: float) -> Camera:
         """Resize by a factor (``0.25`` = a quarter of the width and height, rounded to whole pixels)."""
         scale = check_positive("scale", scale)
         return self.resized(max(1, round(self.width * scale)), max(1, round(self.height * scale)))
 
-    def fit_within(self, max_size: int) -> "Camera":
+    def fit_within(self, max_size: int) -> Camera:
         """Downscale (never upscale) so the longer side is at most ``max_size`` pixels."""
         longer = max(self.width, self.height)
         return self if longer <= max_size else self.scaled(max_size / longer)
 
-    def undistorted(self) -> "Camera":
+    def undistorted(self) -> Camera:
         """The ideal pinhole camera that :func:`undistort_image` maps this camera's images to."""
         return replace(self, distortion=())
 
@@ -147,7 +147,7 @@ class Camera:
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Camera":
+    def from_dict(cls, data: dict) -> Camera:
         """Inverse of :meth:`to_dict`."""
         try:
             return cls(

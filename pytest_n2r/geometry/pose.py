@@ -189,7 +189,7 @@ class Transform:
             object.__setattr__(self, f.name, value + 0.0)
 
     @classmethod
-    def identity(cls) -> "Transform":
+    def identity(cls) -> Transform:
         return cls()
 
     @property
@@ -215,7 +215,7 @@ class Transform:
         return T
 
     @classmethod
-    def from_matrix(cls, T: np.ndarray, length: float = 1.0) -> "Transform":
+    def from_matrix(cls, T: np.ndarray, length: float = 1.0) -> Transform:
         """Inverse of :meth:`matrix` (see :func:`euler_from_rotation` for angle ranges)."""
         T = check_pose(T, "T")
         length = check_real("length", length)
@@ -226,7 +226,7 @@ class Transform:
         return cls(roll, pitch, yaw, x, y, z)
 
     @classmethod
-    def parse(cls, text: str, name: str = "transform") -> "Transform":
+    def parse(cls, text: str, name: str = "transform") -> Transform:
         """A transform from its command-line form: ``name=value`` pairs separated by commas, e.g.
         ``"yaw=10,x=0.1"`` (angles in degrees, translations in the caller's units); ``""`` or
         ``"identity"`` is the identity. Errors name ``name`` (the option or argument being parsed).
@@ -265,11 +265,11 @@ class Transform:
         """The follow-up pose ``c2w @ T(tau)`` (translation scaled by ``length``)."""
         return compose(check_pose(c2w), self.matrix(length))
 
-    def then(self, other: "Transform") -> "Transform":
+    def then(self, other: Transform) -> Transform:
         """The single transform equal to applying ``self`` and then ``other`` (in the moved frame)."""
         return Transform.from_matrix(compose(self.matrix(), other.matrix()))
 
-    def inverse(self) -> "Transform":
+    def inverse(self) -> Transform:
         """The transform that undoes this one: ``tau.then(tau.inverse())`` is the identity."""
         return Transform.from_matrix(invert_pose(self.matrix()))
 

@@ -37,7 +37,7 @@ class MetricResult:
     valid: bool = True
 
     @classmethod
-    def undefined(cls, metric: str, reason: str, **details: Any) -> "MetricResult":
+    def undefined(cls, metric: str, reason: str, **details: Any) -> MetricResult:
         """A result flagged ``valid=False`` with NaN score and deviation, and ``reason`` in the details."""
         return cls(metric, math.nan, math.nan, {"reason": reason, **details}, valid=False)
 

@@ -253,7 +253,7 @@ class HomographyMapping(PointMapping):
     def from_views(
         cls, source: RenderedView, follow: RenderedView,
         plane: tuple[np.ndarray, float] | None = None,
-    ) -> "HomographyMapping":
+    ) -> HomographyMapping:
         """The homography between two views of the world plane ``plane = (n, d)`` (``n·X + d = 0``,
         world coordinates, scene units), or of the plane at infinity (pure rotation) when ``None``."""
         source = _check_view("source", source, ())

@@ -94,7 +94,7 @@ class RenderSettings:
     def to_dict(self) -> dict:
         return asdict(self)
 
-    def replace(self, **changes) -> "RenderSettings":
+    def replace(self, **changes) -> RenderSettings:
         return replace(self, **changes)
 
 

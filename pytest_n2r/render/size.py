@@ -21,7 +21,7 @@ class RenderSize:
     longer: int | None = None
 
     @classmethod
-    def parse(cls, value: "RenderSize | str | int | tuple[int, int]", name: str = "size") -> "RenderSize":
+    def parse(cls, value: RenderSize | str | int | tuple[int, int], name: str = "size") -> RenderSize:
         """``"480x270"``, ``(480, 270)``, ``"480"`` or ``480`` → a size; anything else names ``name``."""
         if isinstance(value, RenderSize):
             return value

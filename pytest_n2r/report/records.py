@@ -79,7 +79,7 @@ class ExampleRecord:
         return Transform(**(self.transform or {}))
 
     @classmethod
-    def from_dict(cls, data: dict) -> "ExampleRecord":
+    def from_dict(cls, data: dict) -> ExampleRecord:
         """The record of a plain dict (unknown keys ignored); ``valid=False`` in old data means rejected."""
         data = dict(data)
         if "status" not in data and data.get("valid") is False:
@@ -143,7 +143,7 @@ class RelationRecord:
         return data
 
     @classmethod
-    def from_dict(cls, data: dict) -> "RelationRecord":
+    def from_dict(cls, data: dict) -> RelationRecord:
         minimal, replayed = data.get("minimal"), data.get("replayed")
         return cls(
             nodeid=data["nodeid"], metric=data["metric"], eps=float(data["eps"]),

@@ -10,9 +10,8 @@ import torch
 
 from ..field.device import resolve_device
 from ..geometry import Camera
-from ..render.field_render import FieldRenderer, RenderSettings
+from ..render.field_render import RENDER_VERSION, FieldRenderer, RenderSettings
 from .base import Scene
-from ..render.field_render import RENDER_VERSION
 from .file import SceneFile
 
 __all__ = ["FieldScene", "RENDER_VERSION"]
@@ -66,7 +65,7 @@ class FieldScene(Scene):
             self._hash = h.hexdigest()
         return self._hash
 
-    def with_settings(self, settings: RenderSettings) -> "FieldScene":
+    def with_settings(self, settings: RenderSettings) -> FieldScene:
         """The same scene rendered with other ``settings`` (a new content hash; the field is shared)."""
         return FieldScene(self.file, device=self.device, settings=settings, name=self.name)
 

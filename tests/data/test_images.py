@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pytest_n2r.data.images import list_images, read_image, read_image_size, iter_readable, to_rgb8
+from pytest_n2r.data.images import iter_readable, list_images, read_image, read_image_size, to_rgb8
 from pytest_n2r.errors import IngestError
 
 

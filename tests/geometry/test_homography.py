@@ -8,7 +8,13 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.geometry import (
-    Camera, Transform, apply_homography, backproject, camera_rays, plane_homography, project,
+    Camera,
+    Transform,
+    apply_homography,
+    backproject,
+    camera_rays,
+    plane_homography,
+    project,
     rotation_homography,
 )
 

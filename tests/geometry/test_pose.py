@@ -11,7 +11,12 @@ from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import (
-    Transform, check_pose, compose, euler_from_rotation, invert_pose, rotation_from_euler,
+    Transform,
+    check_pose,
+    compose,
+    euler_from_rotation,
+    invert_pose,
+    rotation_from_euler,
 )
 
 from .strategies import angle_diff, pitch, poses, roll_yaw, transforms

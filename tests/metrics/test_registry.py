@@ -16,7 +16,7 @@ def test_every_metric_is_registered_under_its_name_with_a_rebuildable_repr():
     for name, cls in METRICS.items():
         metric = resolve_metric(name)
         assert isinstance(metric, cls) and metric.name == name
-        rebuilt = eval(repr(metric), vars(pytest_n2r.metrics))  # noqa: S307 - our own repr
+        rebuilt = eval(repr(metric), vars(pytest_n2r.metrics))
         assert repr(rebuilt) == repr(metric)
 
 

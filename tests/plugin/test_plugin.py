@@ -413,9 +413,9 @@ def test_hang(n2r_scene):
 
 
 def test_no_scene_configured_and_no_demo_scene_skips_with_instructions(n2r_project, monkeypatch):
-    import pytest_n2r.session as session
+    from pytest_n2r import session
 
-    monkeypatch.setattr(session, "default_scene_specs", lambda: [])
+    monkeypatch.setattr(session, "default_scene_specs", list)
     n2r_project.write("def test_uses_scene(n2r_scene):\n    pass\n")
     result = n2r_project.run("-rs")
     result.assert_outcomes(skipped=1)

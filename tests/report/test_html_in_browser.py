@@ -47,7 +47,7 @@ def test_report_renders_in_chromium(tmp_path):
         capture_output=True, text=True, timeout=120,
     )
     assert result.returncode == 0, result.stderr[-2000:]
-    title = re.search(r"<title>(.*?)</title>", result.stdout, re.S).group(1)
+    title = re.search(r"<title>(.*?)</title>", result.stdout, re.DOTALL).group(1)
     seen = json.loads(title.replace("&quot;", '"'))
     assert seen["widths"] == [60, 60], f"every embedded picture must decode (widths {seen['widths']})"
     assert seen["svgs"] == 2, "one histogram per relation"

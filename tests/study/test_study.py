@@ -12,9 +12,9 @@ import pytest
 from pytest_n2r.cli.main import main
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
+from pytest_n2r.strategies import PRESETS
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study, write_study
 from pytest_n2r.study.sampling import sample_mutation, sample_transform
-from pytest_n2r.strategies import PRESETS
 
 TINY = StudyConfig(examples=1, max_views=1, size=64, fps_frames=1, fps_sizes=((64, 36),))
 
