@@ -16,6 +16,7 @@ Times are the best of 3 renders after a warm-up, torch/numba on 2 threads. Resul
 
 from __future__ import annotations
 
+import functools
 import sys
 
 import cv2
@@ -56,7 +57,7 @@ def main(argv: list[str]) -> int:
     for w, h in ((480, 270), (960, 540), (1920, 1080)):
         camera = sized(views[0].camera, w * h)
         for variant, label, outputs in variants:
-            s = best_seconds(lambda: variant.render(views[0].c2w, camera, outputs))
+            s = best_seconds(functools.partial(variant.render, views[0].c2w, camera, outputs))
             print(f"{camera.width:>5}×{camera.height:<6} {'+'.join(outputs):>18} {label:>24} {s:>8.3f} "
                   f"{1 / s:>9.2f}")
 

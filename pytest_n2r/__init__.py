@@ -56,7 +56,17 @@ _EXPORTS: dict[str, str] = {
     "Validity": "pytest_n2r.validity",
 }
 
-__all__ = ["__version__", *_EXPORTS]
+#: the lazily exported names and __version__, spelled out for type checkers and linters; a test
+#: (tests/test_project.py) keeps it in step with _EXPORTS
+__all__ = [
+    "__version__", "Camera", "Transform", "Units", "Scene", "SceneView", "FieldScene", "SplatScene",
+    "load_scene", "save_scene", "RenderedView", "N2RError", "InvalidArgument", "InvalidType", "SceneFileError",
+    "IngestError", "ingest", "Capture", "SUTOutputError", "MetricUndefined", "Metric", "MetricResult",
+    "resolve_metric", "cosine_similarity", "l2_norm", "class_invariance", "repeatability",
+    "interest_point_spread", "Mutation", "Brightness", "NoisePatch", "BlackPatches", "GroundTruthScene",
+    "metamorphic", "transforms", "views", "Relation", "RelationFailure", "SUTError", "check_relation",
+    "RenderCache", "Validity",
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -24,29 +24,28 @@ pytest_plugins = ["pytest_n2r.plugin_report"]
 #: (CLI flag, ini name, metavar, help) of every option with an ini twin.
 OPTIONS: tuple[tuple[str, str, str, str], ...] = (
     ("--n2r-scene", "n2r_scenes", "PATH",
-     "scene to test on: a .n2r file, 'demo:<name>' or 'module:function' (repeatable; ini: globs allowed, "
-     "whitespace-separated). Default: the first built-in demo scene"),
+     ("scene to test on: a .n2r file, 'demo:<name>' or 'module:function' (repeatable; ini: globs allowed, "
+      "whitespace-separated). Default: the first built-in demo scene")),
     ("--n2r-examples", "n2r_examples", "N", "Hypothesis examples per relation (default: 50)"),
     ("--n2r-size", "n2r_size", "WxH", "render size: 'WxH' or the longer side in pixels (default: 480)"),
     ("--n2r-render-scale", "n2r_render_scale", "S",
-     "render scene fields at this fraction of the render size and upsample to it: 0.5 is about 4x faster "
-     "for a little sharpness (default: 1)"),
+     ("render scene fields at this fraction of the render size and upsample to it: 0.5 is about 4x faster "
+      "for a little sharpness (default: 1)")),
     ("--n2r-device", "n2r_device", "DEVICE", "device for scene fields: auto, cpu, cuda, cuda:1 (default: auto)"),
     ("--n2r-cache-dir", "n2r_cache_dir", "DIR",
-     "render cache directory, relative to the rootdir; 'none' keeps renders in memory only "
-     "(default: .n2r-cache)"),
+     "render cache directory, relative to the rootdir; 'none' keeps renders in memory only (default: .n2r-cache)"),
     ("--n2r-cache-size", "n2r_cache_size", "SIZE", "disk cap of the render cache, e.g. 2GiB (default: 2GiB)"),
     ("--n2r-artifacts", "n2r_artifacts", "DIR",
      "where failure pictures go, relative to the rootdir; 'none' saves none (default: n2r-artifacts)"),
     ("--n2r-timeout", "n2r_timeout", "SECONDS",
      "time limit of one render or one SUT call; 0 disables (default: 300)"),
     ("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
-     "draw the same examples every run; 'auto' means yes when the CI environment variable is set "
-     "(default: auto)"),
+     "draw the same examples every run; 'auto' means yes when the CI environment variable is set (default: auto)"),
 )
 DEFAULTS = {
     "n2r_examples": "50", "n2r_size": "480", "n2r_render_scale": "1", "n2r_device": "auto",
-    "n2r_cache_dir": ".n2r-cache", "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300", "n2r_derandomize": "auto",
+    "n2r_cache_dir": ".n2r-cache", "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300",
+    "n2r_derandomize": "auto",
 }
 SCENE_MARKER = "n2r_scene"
 #: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.marker).

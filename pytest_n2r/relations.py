@@ -260,11 +260,15 @@ def _reasons(counts: Counter) -> str:
 
 def _is_final_example() -> bool:
     """True while Hypothesis replays the minimal failing example for the last time."""
+    from hypothesis.errors import InvalidArgument
+
     try:
         from hypothesis.control import current_build_context
 
         return bool(current_build_context().is_final)
-    except Exception:  # outside Hypothesis, or its internals moved: treat every example as final
+    # InvalidArgument: outside a Hypothesis test (no build context); ImportError/AttributeError: its internals
+    # moved. Either way every example is treated as final.
+    except (InvalidArgument, ImportError, AttributeError):
         return True
 
 
@@ -497,8 +501,8 @@ class _Engine:
     def failure_message(self, view: SceneView, tau: Any, result: MetricResult, record: dict, note: str) -> str:
         camera = record["camera"]
         lines = [
-            f"metamorphic relation violated: {self.metric!r} deviates {result.deviation:.4g} from its ideal "
-            f"{self.metric.ideal:g}, more than eps={self.relation.eps:g}",
+            (f"metamorphic relation violated: {self.metric!r} deviates {result.deviation:.4g} from its ideal "
+             f"{self.metric.ideal:g}, more than eps={self.relation.eps:g}"),
             f"  scene:      {self.scene.name} (content {self.scene.content_hash[:12]})",
             f"  source:     view {view.name!r} ({view.split}), rendered at {camera['width']}x{camera['height']}",
         ]

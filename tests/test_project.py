@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import shutil
@@ -53,7 +54,7 @@ def test_unknown_public_name_raises_attribute_error():
 def test_docs_build_without_warnings(tmp_path):
     result = subprocess.run(
         ["mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
-        cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"},
+        cwd=REPO_ROOT, capture_output=True, text=True, env={**os.environ, "NO_MKDOCS_2_WARNING": "1"}, check=False,
     )
     assert result.returncode == 0, f"mkdocs build --strict failed:\n{result.stdout}\n{result.stderr}"
 
@@ -63,6 +64,34 @@ def test_every_public_name_resolves(name):
     value = getattr(pytest_n2r, name)
     assert getattr(value, "__name__", name) == name or not hasattr(value, "__name__"), \
         f"pytest_n2r.{name} resolves to {value!r}, whose name differs"
+
+
+#: package with a lazy ``__getattr__`` -> its table of lazily exported names
+LAZY_PACKAGES = {"pytest_n2r": "_EXPORTS", "pytest_n2r.scene": "_LAZY"}
+
+
+def test_every_lazy_package_is_checked():
+    found = {
+        ".".join(path.parent.relative_to(REPO_ROOT).parts)
+        for path in (REPO_ROOT / "pytest_n2r").rglob("__init__.py")
+        if re.search(r"^def __getattr__\(", path.read_text(encoding="utf-8"), re.MULTILINE)
+    }
+    assert found == set(LAZY_PACKAGES), \
+        f"packages with a lazy __getattr__ are {sorted(found)}; list each with its table in LAZY_PACKAGES"
+
+
+@pytest.mark.parametrize(("package", "table"), sorted(LAZY_PACKAGES.items()))
+def test_all_is_the_lazy_table_and_the_bound_names(package, table):
+    """``__all__`` is a literal list (linters and type checkers read it), so it must be kept in step with the
+    lazy table by hand: every lazy name is in it once, and every other name in it is bound by the package."""
+    module = importlib.import_module(package)
+    lazy, public = getattr(module, table), module.__all__
+    repeated = sorted({n for n in public if public.count(n) > 1})
+    assert not repeated, f"{package}.__all__ lists {repeated} more than once"
+    missing = sorted(set(lazy) - set(public))
+    assert not missing, f"{package}.__all__ lacks the lazily exported {missing} (in {table})"
+    unbound = [n for n in public if n not in lazy and n not in vars(module)]
+    assert not unbound, f"{package}.__all__ lists {unbound}, which are neither in {table} nor bound in the package"
 
 
 # -- the example project, as a new user installs and runs it -----------------------------------------------
@@ -137,7 +166,8 @@ def test_example_project_collects_with_strict_markers():
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(EXAMPLE), str(REPO_ROOT)])}
     env.pop("PYTEST_ADDOPTS", None)
     result = subprocess.run([sys.executable, "-m", "pytest", str(EXAMPLE), "--collect-only", "-q", "--strict-markers",
-                             "-p", "no:cacheprovider"], cwd=REPO_ROOT, capture_output=True, text=True, env=env)
+                             "-p", "no:cacheprovider"], cwd=REPO_ROOT, capture_output=True, text=True, env=env,
+                            check=False)
     assert result.returncode == 0 and re.search(r"\d+ tests collected", result.stdout), \
         f"`pytest example_project --collect-only` failed:\n{result.stdout}\n{result.stderr}"
 
@@ -148,7 +178,7 @@ def test_example_project_docs_use_only_options_the_plugin_has():
         flags |= set(re.findall(r"--n2r-[a-z-]+", path.read_text(encoding="utf-8")))
     assert flags, "example_project's README and workflow name no --n2r- option"
     help_text = subprocess.run([sys.executable, "-m", "pytest", "--help", "-p", "no:cacheprovider"],
-                               cwd=REPO_ROOT, capture_output=True, text=True).stdout
+                               cwd=REPO_ROOT, capture_output=True, text=True, check=False).stdout
     unknown = sorted(f for f in flags if not re.search(re.escape(f) + r"\b(?!-)", help_text))
     assert not unknown, f"example_project's README / workflow use options pytest-n2r does not have: {unknown}"
 

@@ -132,7 +132,7 @@ class _Progress:
         eta = info["eta_s"]
         self.bar.set_description_str(
             f"step {info['step']}, {info['resolution']}³ grid, loss {info['loss']:.4f}, PSNR {info['psnr']:.2f} dB, "
-            f"elapsed {_clock(info['elapsed_s'])}, ETA {_clock(eta) if eta == eta else '?'}", refresh=True)
+            f"elapsed {_clock(info['elapsed_s'])}, ETA {'?' if math.isnan(eta) else _clock(eta)}", refresh=True)
 
     def close(self) -> None:
         self.bar.close()
@@ -166,8 +166,8 @@ def run(args: argparse.Namespace) -> int:
     ingest_s = time.perf_counter() - start
     sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)
     shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))
-    lines = [f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
-             f"held out, {shown} ({ingest_s:.1f} s)",
+    lines = [(f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
+              f"held out, {shown} ({ingest_s:.1f} s)"),
              *format_skipped(capture.skipped)]
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}

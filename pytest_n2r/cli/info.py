@@ -91,8 +91,8 @@ def format_info(scene: SceneFile) -> str:
     report, field = info["report"], info["field"]
     lines = [
         f"scene       {info['path']} ({_size(info['file_bytes'])}, format version {info['format_version']})",
-        f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
-        f"{info['photos_stored']} photos stored",
+        (f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
+         f"{info['photos_stored']} photos stored"),
     ]
     for cam in info["cameras"][:3]:
         lines.append(f"  camera    {cam['width']}x{cam['height']} fx={cam['fx']:.2f} fy={cam['fy']:.2f} "

@@ -25,6 +25,12 @@ from .atomic import atomic_write_text
 from .images import IMAGE_SUFFIXES
 from .poses import PoseSet, SourceFrame
 
+#: What pycolmap (pybind11) raises for a C++ exception: pybind11 translates std::exception and anything unknown
+#: to RuntimeError, std::invalid_argument/domain_error/length_error/range_error to ValueError, std::out_of_range
+#: to IndexError, std::overflow_error/underflow_error to ArithmeticError subclasses, std::bad_alloc to
+#: MemoryError (COLMAP's failed checks are std::invalid_argument: ValueError).
+PYCOLMAP_ERRORS: tuple[type[Exception], ...] = (RuntimeError, ValueError, LookupError, ArithmeticError, MemoryError)
+
 __all__ = ["find_colmap_model", "read_colmap_model", "write_colmap_text", "camera_from_colmap", "colmap_camera_params"]
 
 _MODEL_FILES = ("cameras", "images", "points3D")
@@ -111,7 +117,7 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
         )
     try:
         rec = pycolmap.Reconstruction(str(found))
-    except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError with C++ messages
+    except PYCOLMAP_ERRORS as exc:  # plain RuntimeError/ValueError carrying C++ messages
         raise IngestError(f"COLMAP model {str(found)!r} cannot be read: {exc}") from None
     names = sorted(im.name for im in rec.images.values())
     images_dir = Path(images_dir) if images_dir is not None else _default_images_dir(found, names)

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import IngestError
 from ..geometry import invert_pose, orthonormalize
-from .colmap import camera_from_colmap
+from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
 from .images import iter_readable, list_images, resize_image
 from .poses import PoseSet, SourceFrame
 
@@ -178,7 +178,7 @@ def _stage(name: str, images_dir: Path, times: dict[str, float]) -> Iterator[Non
         yield
     except IngestError:
         raise
-    except Exception as exc:  # pycolmap raises RuntimeError/ValueError carrying C++ check messages
+    except PYCOLMAP_ERRORS as exc:  # plain RuntimeError/ValueError carrying C++ check messages
         raise IngestError(f"structure from motion on {str(images_dir)!r} failed during {name}: {exc}") from None
     finally:
         pycolmap.logging.minloglevel = level

@@ -38,7 +38,11 @@ def default_camera(width: int = 480, height: int = 270, hfov_deg: float = 60.0) 
     return Camera(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+#: world up of the demo scenes (+z)
+Z_UP = np.array([0.0, 0.0, 1.0])
+
+
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = Z_UP) -> np.ndarray:
     """Camera-to-world pose (OpenCV axes) at ``eye`` looking at ``target``, image 'up' towards world ``up``."""
     eye, target = np.asarray(eye, float), np.asarray(target, float)
     z = target - eye

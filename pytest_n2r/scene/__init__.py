@@ -26,7 +26,12 @@ _LAZY = {
     "read_splat_file": "splat_file",
 }
 
-__all__ = ["Scene", "SceneView", "normalize_outputs", *_LAZY]
+#: the eager names and those of _LAZY, spelled out for type checkers and linters; a test
+#: (tests/test_project.py) keeps it in step with them
+__all__ = [
+    "Scene", "SceneView", "normalize_outputs", "load_scene", "save_scene", "read_scene_file", "SceneFile",
+    "FieldScene", "SplatScene", "load_splat_scene", "save_splat_scene", "read_splat_file",
+]
 
 
 def __getattr__(name: str) -> Any:

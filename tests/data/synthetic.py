@@ -41,7 +41,11 @@ _PLANES = [  # (normal axis, in-plane axes u, v)
 ]
 
 
-def look_at(centre: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 0.0, -1.0])) -> np.ndarray:
+#: world up of the synthetic captures (-z)
+NEG_Z_UP = np.array([0.0, 0.0, -1.0])
+
+
+def look_at(centre: np.ndarray, target: np.ndarray, up: np.ndarray = NEG_Z_UP) -> np.ndarray:
     """Camera-to-world (OpenCV axes) at ``centre`` looking at ``target``; image-down along ``-up``."""
     z = target - centre
     z = z / np.linalg.norm(z)

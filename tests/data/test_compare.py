@@ -67,5 +67,5 @@ def test_poses_compare_option(corner, tmp_path, capsys):
     poses.frames[2] = replace(poses.frames[2], c2w=Transform(pitch=1.5).apply(poses.frames[2].c2w))
     write_colmap_text(tmp_path / "model", poses)
     assert main(["poses", str(json_path), "--compare", str(tmp_path / "model")]) == 0
-    line = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("compare")][0]
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("compare"))
     assert "(colmap): 6 common images: rotation error max 1.500 deg" in line, line

@@ -28,7 +28,7 @@ def test_capture_has_images_poses_points_and_bounds():
     inside = np.all((cap.points >= lo) & (cap.points <= hi), axis=1)
     assert inside.mean() > 0.95, f"only {inside.mean():.1%} of the points are inside the bounds"
     # the points are on surfaces the training cameras see: each projects in front of some camera
-    uv, z = project(cap.points[:50], v.camera, v.c2w)
+    _, z = project(cap.points[:50], v.camera, v.c2w)
     assert np.isfinite(z).all()
 
 

@@ -53,7 +53,7 @@ def test_ray_parameter_is_z_depth(camera, c2w):
 
 
 def test_principal_point_and_pixel_centres():
-    uv, z = project(np.array([[0.0, 0.0, 2.0], [-0.5 * 2 * 319.5 / 500 * 1.0, 0.0, 1.0]]), CAM, np.eye(4))
+    uv, _ = project(np.array([[0.0, 0.0, 2.0], [-0.5 * 2 * 319.5 / 500 * 1.0, 0.0, 1.0]]), CAM, np.eye(4))
     np.testing.assert_allclose(uv[0], [319.5, 239.5])
     assert uv[1, 0] == pytest.approx(0.0)  # the left pixel's centre is u = 0
 
