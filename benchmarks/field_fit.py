@@ -42,13 +42,15 @@ def main(argv: list[str] | None = None) -> int:
         warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
         t0 = time.perf_counter()
         capture = ingest(FOX, downscale=0.25)
+    height, width = capture.views[0].image.shape[:2]
     print(f"ingest: {time.perf_counter() - t0:.1f} s, {len(capture.train_views)} train / "
-          f"{len(capture.heldout_views)} held-out views of {capture.views[0].image.shape[1]}×{capture.views[0].image.shape[0]}")
+          f"{len(capture.heldout_views)} held-out views of {width}×{height}")
     marks = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget]
     result = fit(capture, config, time_budget_s=budget, eval_at_s=marks)
     report = result.report
     print(f"\n{'train time':>10} {'steps':>6} {'PSNR dB':>8} {'SSIM':>6}")
-    for row in report["history"] + [{"seconds": budget, "step": report["steps"], "psnr": report["psnr"], "ssim": report["ssim"]}]:
+    final = {"seconds": budget, "step": report["steps"], "psnr": report["psnr"], "ssim": report["ssim"]}
+    for row in [*report["history"], final]:
         print(f"{row['seconds'] / 60:>8.1f} m {row['step']:>6} {row['psnr']:>8.2f} {row['ssim']:>6.3f}")
     print(f"\nfield: {json.dumps(report['field'])}; {report['steps'] / report['train_seconds']:.2f} steps/s")
     print("held-out views:", ", ".join(f"{r['view']} {r['psnr']:.2f} dB" for r in report["heldout"]))

@@ -6,7 +6,8 @@ k pairs, k = 1 .. n. A regression is caught by a relation at the smallest k whos
 Printed per regression: how many relations catch it with all their pairs, the mean increase of the
 deviation (its range over the relations), and the smallest k over the catching relations (the gate fails as
 soon as one relation does) with the median k; and how many of the relations' own eps tests the regression
-fails on the same examples (the eps tests draw exactly the baseline's examples: derandomized). Run from the repository root (about 20 s on a 2-core CPU once the suite has filled the render cache):
+fails on the same examples (the eps tests draw exactly the baseline's examples: derandomized).
+Run from the repository root (about 20 s on a 2-core CPU once the suite has filled the render cache):
 
     python example_project/gate_power.py
 """

@@ -178,8 +178,8 @@ def _build_session(config: pytest.Config) -> Any:
         examples=examples, size=size, derandomize=derandomize_on, timeout=timeout or None,
         artifacts=_rooted(config, str(_raw(config, "n2r_artifacts"))),
     )
-    return N2RSession(settings=settings, scenes=scenes, device=device,
-                      render_scale=render_scale, cache_dir=_rooted(config, str(_raw(config, "n2r_cache_dir"))), cache_bytes=cache_bytes)
+    return N2RSession(settings=settings, scenes=scenes, device=device, render_scale=render_scale,
+                      cache_dir=_rooted(config, str(_raw(config, "n2r_cache_dir"))), cache_bytes=cache_bytes)
 
 
 def _session(config: pytest.Config) -> Any:

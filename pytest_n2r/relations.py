@@ -436,7 +436,8 @@ class _Engine:
             if not record["passed"]:
                 stats.inconsistencies += 1
         drawn = stats.examples + stats.n_rejected + stats.n_undefined
-        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > self.relation.validity.max_rejected:
+        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP \
+                and stats.n_rejected / drawn > self.relation.validity.max_rejected:
             self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
         evaluated = stats.examples + stats.n_undefined
         if stats.n_undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
@@ -563,7 +564,8 @@ def _check_output(output: Any, role: str, where: str, metric: Metric) -> None:
             "Did the SUT forget a return statement?"
         )
     if isinstance(output, (float, np.floating)) and not math.isfinite(output):
-        raise SUTOutputError(f"the system under test returned {output} on the {role} view ({where}); expected {expects}")
+        raise SUTOutputError(
+            f"the system under test returned {output} on the {role} view ({where}); expected {expects}")
     if isinstance(output, np.ndarray) and output.dtype.kind in "fc" and not np.isfinite(output).all() \
             and not (getattr(metric, "nan_means_no_output", False) and output.size and np.isnan(output).all()):
         bad = int(output.size - np.isfinite(output).sum())

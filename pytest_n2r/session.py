@@ -68,8 +68,8 @@ def _spec_from_text(text: str, base: Path, origin: str) -> list[SceneSpec]:
 def _file_spec(path: Path, origin: str, text: str) -> SceneSpec:
     if not path.exists():
         raise InvalidArgument(
-            f"{origin} {text!r}: no such file ({path}); expected a .n2r scene file (`n2r fit` writes one), a 3DGS .ply, "
-            f"'{DEMO_PREFIX}<name>' for a built-in demo scene, or 'module:function' returning a Scene"
+            f"{origin} {text!r}: no such file ({path}); expected a .n2r scene file (`n2r fit` writes one), "
+            f"a 3DGS .ply, '{DEMO_PREFIX}<name>' for a built-in demo scene, or 'module:function' returning a Scene"
         )
     if path.is_file() and path.suffix.lower() == ".ply":  # a 3DGS splat scene; its cameras are found beside it
         return SceneSpec(path.stem, "file", str(path))

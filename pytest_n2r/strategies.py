@@ -229,7 +229,8 @@ def scene_views(scene: Scene, split: str = "heldout") -> list[SceneView]:
     views = list(scene.views)
     if not views:
         reason = getattr(scene, "no_views_reason", None)
-        raise InvalidArgument(f"scene {scene.name!r} has no views to use as sources" + (f": {reason}" if reason else ""))
+        raise InvalidArgument(
+            f"scene {scene.name!r} has no views to use as sources" + (f": {reason}" if reason else ""))
     if split == "all":
         return views
     chosen = [v for v in views if v.split == split]

@@ -132,7 +132,8 @@ def test_example_project_declares_pytest_n2r_and_its_settings():
     project = config.get("project", {})
     assert "build-system" in config and project.get("name"), "example_project/pyproject.toml: no [build-system] or name"
     names = {canonicalize_name(Requirement(r).name) for r in project.get("dependencies", [])}
-    assert "pytest-n2r" in names, f"example_project/pyproject.toml: [project] dependencies {sorted(names)} lack pytest-n2r"
+    assert "pytest-n2r" in names, \
+        f"example_project/pyproject.toml: [project] dependencies {sorted(names)} lack pytest-n2r"
     ini = config["tool"]["pytest"]["ini_options"]
     specs = parse_scene_specs(ini.get("n2r_scenes", []), EXAMPLE, "example_project n2r_scenes")
     assert specs and all(s.kind == "demo" and s.name in demo_scene_names() for s in specs), \

@@ -125,6 +125,7 @@ def test_every_block_of_the_tutorial_runs_as_shown(pytester: pytest.Pytester, mo
 
 
 def test_the_tutorial_is_in_the_nav_and_linked_from_the_home_page():
-    assert f": {PAGE}" in (REPO_ROOT / "mkdocs.yml").read_text(encoding="utf-8"), f"docs/{PAGE} is not in the mkdocs nav"
+    assert f": {PAGE}" in (REPO_ROOT / "mkdocs.yml").read_text(encoding="utf-8"), \
+        f"docs/{PAGE} is not in the mkdocs nav"
     assert f"({PAGE})" in (REPO_ROOT / "docs" / "index.md").read_text(encoding="utf-8"), \
         f"docs/index.md does not link to {PAGE}"

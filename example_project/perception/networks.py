@@ -50,7 +50,8 @@ class MobileNetV2(nn.Module):
     """MobileNetV2, width 1.0, 1000 ImageNet classes. Input: ImageNet-normalized RGB ``(B, 3, 224, 224)``."""
 
     #: (expansion t, output channels c, repeats n, first stride s), from the paper's Table 2
-    SETTINGS = ((1, 16, 1, 1), (6, 24, 2, 2), (6, 32, 3, 2), (6, 64, 4, 2), (6, 96, 3, 1), (6, 160, 3, 2), (6, 320, 1, 1))
+    SETTINGS = ((1, 16, 1, 1), (6, 24, 2, 2), (6, 32, 3, 2), (6, 64, 4, 2), (6, 96, 3, 1), (6, 160, 3, 2),
+                (6, 320, 1, 1))
 
     def __init__(self, num_classes: int = 1000) -> None:
         super().__init__()

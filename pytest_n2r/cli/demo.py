@@ -80,7 +80,8 @@ def run_list(args: argparse.Namespace) -> int:
         if found is None:
             where = f"not built: fitted into {cached} on first use (`n2r demo build` ships it)"
         else:
-            where = f"{'shipped' if found.parent == DATA_DIR else 'cached'} {found} ({found.stat().st_size / 2**20:.1f} MiB)"
+            where = (f"{'shipped' if found.parent == DATA_DIR else 'cached'} {found} "
+                     f"({found.stat().st_size / 2**20:.1f} MiB)")
         w, h = recipe.size
         print(f"  {name + FIELD_SUFFIX:14s} {w}x{h}, {recipe.max_steps} steps, grid "
               f"{'/'.join(map(str, recipe.config.resolutions))}, recipe {recipe.digest[:12]}: {where}")

@@ -125,15 +125,16 @@ def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: floa
     cameras = list(dict.fromkeys(f.camera for f in frames))
     lines.append(f"cameras     {len(cameras)} (OpenCV pixel centres; COLMAP/nerfstudio cx = cx + 0.5)")
     for cam in cameras[:3]:
-        dist = " ".join(f"{k}={v:.4g}" for k, v in zip(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), cam.distortion))
+        dist = " ".join(f"{k}={v:.4g}"
+                        for k, v in zip(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"), cam.distortion))
         lines.append(f"  {cam.width}x{cam.height} fx={cam.fx:.2f} fy={cam.fy:.2f} cx={cam.cx:.2f} cy={cam.cy:.2f}"
                      + (f" {dist}" if dist else " no distortion"))
     if len(cameras) > 3:
         lines.append(f"  ... and {len(cameras) - 3} more")
     lines.append(f"points      {len(poses.points)} ({poses.report.get('points_method', '')})")
     lo, hi = bounds
-    lines.append("bounds      min (" + ", ".join(f"{v:.3f}" for v in lo) + ")  max (" + ", ".join(f"{v:.3f}" for v in hi)
-                 + ") scene units")
+    lines.append("bounds      min (" + ", ".join(f"{v:.3f}" for v in lo) + ")  max ("
+                 + ", ".join(f"{v:.3f}" for v in hi) + ") scene units")
     lines.append(f"reference   {ref:.4g} scene units (median z-depth of the points seen by the training cameras)")
     stages = ", ".join(f"{k} {v:.1f} s" for k, v in poses.report.get("time_s", {}).items())
     lines.append(f"time        {total_s:.1f} s ({stages})")

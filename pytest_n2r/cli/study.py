@@ -10,7 +10,8 @@ def _eps_list(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--eps {text!r}: expected numbers separated by commas (0.1,0.2,0.5)") from None
+        raise argparse.ArgumentTypeError(
+            f"--eps {text!r}: expected numbers separated by commas (0.1,0.2,0.5)") from None
     if not values or any(not v >= 0 for v in values):
         raise argparse.ArgumentTypeError(f"--eps {text!r}: expected one or more numbers >= 0")
     return values

@@ -175,7 +175,8 @@ def write_colmap_text(folder: str | os.PathLike, poses: PoseSet | Sequence[Sourc
             cam_lines.append(" ".join([str(cam_ids[frame.camera]), model, str(frame.camera.width),
                                        str(frame.camera.height), *(repr(float(x)) for x in params)]))
         q, t = colmap_from_c2w(frame.c2w)
-        img_lines.append(" ".join([str(k), *(repr(float(x)) for x in (*q, *t)), str(cam_ids[frame.camera]), frame.name]))
+        img_lines.append(" ".join([str(k), *(repr(float(x)) for x in (*q, *t)), str(cam_ids[frame.camera]),
+                                   frame.name]))
         img_lines.append("")
     pt_lines = ["# 3D point list: POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)"]
     pt_lines += [f"{k} {x!r} {y!r} {z!r} 128 128 128 0" for k, (x, y, z) in enumerate(points.tolist(), start=1)]

@@ -19,7 +19,9 @@ from ..geometry import Camera, project
 __all__ = ["seen_depths", "reference_length", "scene_bounds"]
 
 
-def seen_depths(points: np.ndarray, cameras: Sequence[Camera], c2ws: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def seen_depths(
+    points: np.ndarray, cameras: Sequence[Camera], c2ws: Sequence[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """``(depths, seen)``: the z-depth of every (camera, point) sighting, and a ``(N,)`` mask of the
     points seen by at least one camera."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -28,7 +28,9 @@ from ..geometry import Camera, invert_pose
 __all__ = ["neighbour_pairs", "triangulate_views"]
 
 
-def neighbour_pairs(c2ws: Sequence[np.ndarray], neighbours: int = 4, max_angle_deg: float = 60.0) -> list[tuple[int, int]]:
+def neighbour_pairs(
+    c2ws: Sequence[np.ndarray], neighbours: int = 4, max_angle_deg: float = 60.0
+) -> list[tuple[int, int]]:
     """Index pairs ``(i, j)``, ``i < j``: each camera with its ``neighbours`` nearest cameras (by centre)
     whose optical axis is within ``max_angle_deg`` degrees of its own."""
     centres = np.array([np.asarray(c)[:3, 3] for c in c2ws])
@@ -61,7 +63,8 @@ def triangulate_views(
         if cam.distortion:
             raise InvalidArgument(f"cameras[{k}] has lens distortion; undistort the images first")
         if img.shape[:2] != (cam.height, cam.width):
-            raise InvalidArgument(f"images[{k}] has size {img.shape[1]}x{img.shape[0]}; its camera is {cam.width}x{cam.height}")
+            raise InvalidArgument(
+                f"images[{k}] has size {img.shape[1]}x{img.shape[0]}; its camera is {cam.width}x{cam.height}")
 
     sift = cv2.SIFT_create(nfeatures=max_features)
     features = []

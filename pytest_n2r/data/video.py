@@ -137,6 +137,7 @@ def extract_frames(
     finally:
         cap.release()
     if len(names) < 3:
-        raise IngestError(f"video file {str(video)!r}: only {len(names)} frames could be decoded; at least 3 are needed")
+        raise IngestError(
+            f"video file {str(video)!r}: only {len(names)} frames could be decoded; at least 3 are needed")
     atomic_write_text(manifest, json.dumps({**key, "frames": names}, indent=1) + "\n")
     return [out / n for n in names]

@@ -82,7 +82,8 @@ class FittedRecipe:
         try:
             w, h = (int(v) for v in self.size)
         except (TypeError, ValueError):
-            raise InvalidArgument(f"FittedRecipe.size={self.size!r}: expected a (width, height) pair in pixels") from None
+            raise InvalidArgument(
+                f"FittedRecipe.size={self.size!r}: expected a (width, height) pair in pixels") from None
         if w < 8 or h < 8:
             raise InvalidArgument(f"FittedRecipe.size={self.size!r}: expected at least 8x8 pixels")
         object.__setattr__(self, "size", (w, h))

@@ -218,9 +218,9 @@ class ReliefWall(Primitive):
     slab and positive where it leaves it. Where the ray is steep enough that ``f`` is monotonic
     (``d_y > L |d_xz|`` with ``L`` a bound of ``|grad h|``: within about 70° of the wall's normal) the root
     is found by Newton's method safeguarded by bisection (at most ``newton`` iterations, until the
-    residual is below ``1e-7``); other rays march
-    ``steps`` samples to the first sign change and bisect ``bisections`` times. The relief is evaluated in float32, so hits are within
-    about ``1e-6`` scene units of the surface.
+    residual is below ``1e-7``); other rays march ``steps`` samples to the first sign change and bisect
+    ``bisections`` times. The relief is evaluated in float32, so hits are within about ``1e-6`` scene units of
+    the surface.
     """
 
     y0: float

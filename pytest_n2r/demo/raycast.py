@@ -5,9 +5,9 @@ The scene's primitives, materials and textures are flattened into arrays once (:
 kernel then follows the vectorized definitions of :mod:`.primitives`, :mod:`.materials` and
 :mod:`.textures` operation for operation (the same float64 geometry, the same float32 colour arithmetic, the
 bilinear lookup of OpenCV's ``remap`` with its 1/32-texel steps), so its images match theirs to within
-rounding (tested against them, ``tests/demo/test_raycast.py``). Threads take every n-th image row (the kernel runs without
-the GIL), and each pixel depends only on its own rays and on its row: results do not depend on the thread
-count.
+rounding (tested against them, ``tests/demo/test_raycast.py``). Threads take every n-th image row (the kernel
+runs without the GIL), and each pixel depends only on its own rays and on its row: results do not depend on the
+thread count.
 
 Convention
 ----------
@@ -451,8 +451,8 @@ def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
         return 0.0, 0.0, 1.0, x, y, 0
     if kind == _BOX:
         best, face = abs(x - prims[row, 0]), 0
-        for f, dist in ((1, abs(y - prims[row, 1])), (2, abs(z - prims[row, 2])), (3, abs(x - prims[row, 3])), (4, abs(y - prims[row, 4])),
-                        (5, abs(z - prims[row, 5]))):
+        for f, dist in ((1, abs(y - prims[row, 1])), (2, abs(z - prims[row, 2])), (3, abs(x - prims[row, 3])),
+                        (4, abs(y - prims[row, 4])), (5, abs(z - prims[row, 5]))):
             if dist < best:
                 best, face = dist, f
         sign = 1.0 if face >= 3 else -1.0
@@ -533,7 +533,8 @@ def _bilinear(tex_meta, texels, tex, level, s, t):
         x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
     r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
     r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
-    return (_lerp2(texels, r00, r01, r10, r11, alpha, beta), _lerp2(texels, r00 + 1, r01 + 1, r10 + 1, r11 + 1, alpha, beta),
+    return (_lerp2(texels, r00, r01, r10, r11, alpha, beta),
+            _lerp2(texels, r00 + 1, r01 + 1, r10 + 1, r11 + 1, alpha, beta),
             _lerp2(texels, r00 + 2, r01 + 2, r10 + 2, r11 + 2, alpha, beta))
 
 
@@ -568,7 +569,8 @@ def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, 
             return np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2])
         if kind == _TEXTURED:
             k = node_par[node, 1]
-            return _sample(tex_meta, texels, int(node_par[node, 0]), (a - node_par[node, 2]) * k, (b - node_par[node, 3]) * k, fp * k)
+            return _sample(tex_meta, texels, int(node_par[node, 0]), (a - node_par[node, 2]) * k,
+                           (b - node_par[node, 3]) * k, fp * k)
         if kind == _POSTER:
             a0, b0, a1, b1 = node_par[node, 1], node_par[node, 2], node_par[node, 3], node_par[node, 4]
             if a >= a0 and a <= a1 and b >= b0 and b <= b1:

@@ -177,7 +177,8 @@ def object_scene() -> GroundTruthScene:
     return GroundTruthScene(
         "object",
         [ground, Group((-2.3, -1.1, -0.01), (2.3, 1.1, 2.7), (cargo, cabin, chassis, *wheels)),
-         Group((3.5, 1.9, -0.01), (4.5, 2.9, 0.9), (crates[0],)), Group((-4.7, -3.1, -0.01), (-3.7, -2.1, 0.7), (crates[1],))],
+         Group((3.5, 1.9, -0.01), (4.5, 2.9, 0.9), (crates[0],)),
+         Group((-4.7, -3.1, -0.01), (-3.7, -2.1, 0.7), (crates[1],))],
         _views(poses, camera, "object"),
         light=(0.5, 0.35, 1.0), ambient=0.45, background=(0.62, 0.75, 0.90), far=60.0,
     )

@@ -50,7 +50,9 @@ class FitResult:
     report: dict = dataclass_field(default_factory=dict)
 
 
-def evaluate_views(field: SceneField, views: Sequence[CapturedView], settings: RenderSettings = FIT_RENDER) -> list[dict]:
+def evaluate_views(
+    field: SceneField, views: Sequence[CapturedView], settings: RenderSettings = FIT_RENDER
+) -> list[dict]:
     """PSNR (dB) and SSIM of the field's render against each view's real image."""
     from ..metrics.image_quality import psnr, ssim
 
@@ -60,7 +62,8 @@ def evaluate_views(field: SceneField, views: Sequence[CapturedView], settings: R
         if view.image is None:
             continue
         rgb = renderer.render(view.c2w, view.camera, ("rgb",))["rgb"]
-        rows.append({"view": view.name, "psnr": round(psnr(view.image, rgb), 3), "ssim": round(ssim(view.image, rgb), 4)})
+        rows.append({"view": view.name, "psnr": round(psnr(view.image, rgb), 3),
+                     "ssim": round(ssim(view.image, rgb), 4)})
     return rows
 
 
@@ -326,7 +329,8 @@ def fit(
         return train_s / time_budget_s
 
     def snapshot() -> FitResult:
-        return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2)})
+        return FitResult(trainer.field.quantized(), config,
+                         {"steps": trainer.steps, "train_seconds": round(train_s, 2)})
 
     while progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s):
         t0 = time.perf_counter()

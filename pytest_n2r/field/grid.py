@@ -259,7 +259,8 @@ class SceneField:
         for name, (shape, dtype) in expected.items():
             t = tensors[name]
             if tuple(t.shape) != shape or t.dtype != dtype or t.ndim != len(shape):
-                raise SceneFileError(f"{source}: tensor {name!r} is {t.dtype} {tuple(t.shape)}; expected {dtype} {shape}")
+                raise SceneFileError(
+                    f"{source}: tensor {name!r} is {t.dtype} {tuple(t.shape)}; expected {dtype} {shape}")
         if index.numel() and (int(index.min()) < 0 or int(index.max()) >= res ** 3):
             raise SceneFileError(f"{source}: tensor 'vertex_index' points outside the {res}³ grid")
         if not torch.isfinite(vals).all():

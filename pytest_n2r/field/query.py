@@ -84,8 +84,8 @@ def composite(alpha: torch.Tensor, rgb: torch.Tensor, t: torch.Tensor, ray_idx: 
     opacity = zeros.index_add(0, ray_idx, weights)
     remaining = (1.0 - opacity).clamp(min=0.0)
     out = {
-        "rgb": torch.zeros(n_rays, 3, device=alpha.device, dtype=alpha.dtype).index_add(0, ray_idx, weights[:, None] * rgb)
-        + remaining[:, None] * background,
+        "rgb": torch.zeros(n_rays, 3, device=alpha.device, dtype=alpha.dtype).index_add(
+            0, ray_idx, weights[:, None] * rgb) + remaining[:, None] * background,
         "opacity": opacity.clamp(max=1.0),
         "weights": weights,
     }

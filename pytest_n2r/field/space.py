@@ -102,4 +102,5 @@ class SceneSpace:
         try:
             return cls(tuple(data["center"]), float(data["radius"]), float(data["shell"]))
         except (KeyError, TypeError) as exc:
-            raise InvalidArgument(f"space {json.dumps(data)[:200]}: expected center, radius and shell ({exc})") from None
+            raise InvalidArgument(
+                f"space {json.dumps(data)[:200]}: expected center, radius and shell ({exc})") from None

@@ -80,7 +80,8 @@ class RenderSettings:
         for name, ok in checks.items():
             if not ok:
                 raise InvalidArgument(f"RenderSettings.{name}={getattr(self, name)!r} is out of range")
-        if self.shell_samples is not None and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
+        if self.shell_samples is not None \
+                and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
         if self.background is not None:
             bg = as_unit_rgb(self.background)

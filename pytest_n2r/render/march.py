@@ -55,7 +55,9 @@ def _packed(counts: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return ray_idx, offsets
 
 
-def march_compiled(o: torch.Tensor, d: torch.Tensor, grid: MarchGrid) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def march_compiled(
+    o: torch.Tensor, d: torch.Tensor, grid: MarchGrid
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Packed occupied samples of CPU float32 rays ``o, d (N, 3)`` (normalized space)."""
     cells, blocks = grid.numpy()
     o_np, d_np = o.numpy(), d.numpy()

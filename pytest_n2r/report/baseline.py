@@ -308,7 +308,8 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
                    confidence: float = 0.95, fail_on: tuple[str, ...] = DEFAULT_FAIL_ON) -> list[PairedComparison]:
     """Compare every current relation with the same test id's baseline on the replayed examples, in pairs;
     baseline relations that did not run are ``missing``."""
-    out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence) for rel in sorted(current, key=lambda r: r.nodeid)]
+    out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence)
+           for rel in sorted(current, key=lambda r: r.nodeid)]
     ran = {rel.nodeid for rel in current}
     out += [PairedComparison(nodeid, "missing", message="in the baseline but not run in this session (deselected, "
                              "renamed or deleted); run it, or pass --n2r-compare-fail-on without 'missing'")
@@ -318,7 +319,9 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
     return out
 
 
-def _compare_one(base: RelationRecord | None, cur: RelationRecord, margin: float, confidence: float) -> PairedComparison:
+def _compare_one(
+    base: RelationRecord | None, cur: RelationRecord, margin: float, confidence: float
+) -> PairedComparison:
     nodeid = cur.nodeid
     if base is None:
         return PairedComparison(nodeid, "new", message="not in the baseline: nothing to compare with (save a new "

@@ -104,7 +104,8 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
         body = [
             f'<h2 id="{anchor}">{html.escape(rel.nodeid)}</h2>',
             f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
-            f'<span class="{rel.outcome}">{rel.outcome}</span>' + (f"; time: {html.escape(timings)}" if timings else "") + "</p>",
+            f'<span class="{rel.outcome}">{rel.outcome}</span>'
+            + (f"; time: {html.escape(timings)}" if timings else "") + "</p>",
             _histogram_svg([e.deviation for e in valid], rel.eps),
         ]
         if rel.minimal is not None:

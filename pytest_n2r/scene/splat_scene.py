@@ -129,7 +129,8 @@ class SplatScene(Scene):
 
     def __repr__(self) -> str:
         cams = f"{len(self.views)} views" if self.views else "no cameras"
-        return f"<SplatScene {self.name!r}: {len(self.gaussians)} Gaussians (SH degree {self.gaussians.sh_degree}), {cams}>"
+        return (f"<SplatScene {self.name!r}: {len(self.gaussians)} Gaussians "
+                f"(SH degree {self.gaussians.sh_degree}), {cams}>")
 
 
 def measure_reference_length(scene: Scene, views: Sequence[SceneView]) -> float:

@@ -151,8 +151,9 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
         bad = ~np.isfinite(columns[name])
         if bad.any():
             first = int(np.argmax(bad))
-            raise SceneFileError(f"{source}: vertex property {name!r} of vertex {first} is {float(columns[name][first])} "
-                                 f"({int(bad.sum())} vertices have a NaN or infinite {name})")
+            raise SceneFileError(
+                f"{source}: vertex property {name!r} of vertex {first} is {float(columns[name][first])} "
+                f"({int(bad.sum())} vertices have a NaN or infinite {name})")
     stack = lambda names: np.stack([columns[n] for n in names], axis=1)
     k = sh_count(degree)
     sh = np.empty((count, k, 3), dtype=np.float32)

@@ -62,7 +62,8 @@ class StudyConfig:
                 raise InvalidArgument(f"{name}={getattr(self, name)!r} must be >= 1")
         unknown = set(self.families) - set(TRANSFORM_FAMILIES + MUTATION_FAMILIES)
         if unknown:
-            raise InvalidArgument(f"families {sorted(unknown)} unknown; expected {TRANSFORM_FAMILIES + MUTATION_FAMILIES}")
+            raise InvalidArgument(
+                f"families {sorted(unknown)} unknown; expected {TRANSFORM_FAMILIES + MUTATION_FAMILIES}")
 
 
 @dataclass
@@ -108,7 +109,9 @@ def _source_views(scene: Scene, max_views: int) -> list[SceneView]:
     return views
 
 
-def _score(metric: Any, out_s: Any, out_f: Any, source: RenderedView, follow: RenderedView) -> tuple[float, float, bool]:
+def _score(
+    metric: Any, out_s: Any, out_f: Any, source: RenderedView, follow: RenderedView
+) -> tuple[float, float, bool]:
     try:
         result = metric.compute(out_s, out_f, source, follow)
     except MetricUndefined:

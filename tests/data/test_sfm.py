@@ -96,11 +96,13 @@ def test_a_phone_capture_mixing_portrait_and_landscape_gets_one_camera_per_orien
 def test_too_few_readable_images(tmp_path):
     folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
     (folder / "2.png").write_bytes(b"broken")
-    with pytest.warns(UserWarning, match=r"2\.png"), pytest.raises(IngestError, match="only 2 of 3 images are readable"):
+    with pytest.warns(UserWarning, match=r"2\.png"), \
+            pytest.raises(IngestError, match="only 2 of 3 images are readable"):
         run_sfm(folder)
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [({"matcher": "vocab"}, "matcher='vocab'"), ({"max_size": 10}, "max_size=10")])
+@pytest.mark.parametrize(("kwargs", "match"),
+                         [({"matcher": "vocab"}, "matcher='vocab'"), ({"max_size": 10}, "max_size=10")])
 def test_bad_settings(tmp_path, kwargs, match):
     with pytest.raises(IngestError, match=match):
         run_sfm(_folder_of(tmp_path / "imgs", [(64, 48)] * 3), **kwargs)

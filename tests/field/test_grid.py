@@ -72,7 +72,8 @@ def test_upsampling_keeps_opacity_per_unit_length():
     exact = RenderSettings(t_stop=0.0)
     opacity = [FieldRenderer(f, exact).render(c2w, camera, ("opacity",))["opacity"][1, 1]
                for f in (flat, flat.upsampled(31))]
-    assert abs(opacity[0] - opacity[1]) < 1e-5, f"a ray through a homogeneous field: opacity {opacity[0]} → {opacity[1]}"
+    assert abs(opacity[0] - opacity[1]) < 1e-5, \
+        f"a ray through a homogeneous field: opacity {opacity[0]} → {opacity[1]}"
 
 
 def test_upsampling_keeps_occupied_cells_and_dilates_by_one_cell():

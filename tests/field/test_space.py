@@ -18,7 +18,8 @@ coordinates = st.one_of(st.floats(-1.0, 1.0), st.floats(-1e300, 1e300))
 points = st.tuples(coordinates, coordinates, coordinates)
 
 
-@pytest.mark.filterwarnings("error::RuntimeWarning")  # the outer branch, computed and discarded for tiny points, must not warn
+# the outer branch, computed and discarded for tiny points, must not warn
+@pytest.mark.filterwarnings("error::RuntimeWarning")
 @settings(max_examples=300, deadline=None)
 @given(p=points, shell=st.sampled_from([0.05, 0.25, 1.0, 4.0]))
 def test_contract_maps_all_of_space_into_the_cube_and_is_the_identity_inside(p, shell):

@@ -155,7 +155,8 @@ def test_probability_vector_check():
 
 
 def test_assert_within_message_has_score_deviation_and_eps():
-    with pytest.raises(AssertionError, match=r"l2_norm\(\): score 1\.4142 deviates 1\.4142 from the ideal 0, more than eps=0\.5"):
+    with pytest.raises(AssertionError,
+                       match=r"l2_norm\(\): score 1\.4142 deviates 1\.4142 from the ideal 0, more than eps=0\.5"):
         l2_norm().assert_within([1.0, 0.0], [0.0, 1.0], eps=0.5)
 
 

@@ -68,7 +68,8 @@ class N2RProject:
 
     def summary(self, result: pytest.RunResult, test: str) -> str:
         """The pytest-n2r summary line of ``test`` (a node id suffix)."""
-        lines = [line for line in result.outlines if re.match(r"(PASSED|FAILED|ERROR)\s+\S*" + re.escape(test) + ": ", line)]
+        pattern = r"(PASSED|FAILED|ERROR)\s+\S*" + re.escape(test) + ": "
+        lines = [line for line in result.outlines if re.match(pattern, line)]
         assert lines, f"no pytest-n2r summary line for {test!r} in:\n" + "\n".join(result.outlines)
         return lines[-1]
 

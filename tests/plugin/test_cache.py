@@ -41,7 +41,8 @@ def test_only_missing_outputs_are_rendered(tmp_path, monkeypatch):
     scene = PlaneScene()
     asked = []
     original = scene._render
-    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
+    monkeypatch.setattr(scene, "_render",
+                        lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
     cache = RenderCache(tmp_path)
     cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
     view = cache.render(scene, _pose(scene), scene.views[0].camera, ("rgb", "opacity"))

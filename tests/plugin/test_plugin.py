@@ -62,12 +62,15 @@ def test_heading(n2r_scene):
 @pytest.mark.parametrize(
     ("decorator", "message"),
     [
-        ("@metamorphic(AbsDifference(), eps=-0.1, transform=transforms(yaw=5))", "eps=-0.1 must be a finite number >= 0"),
+        ("@metamorphic(AbsDifference(), eps=-0.1, transform=transforms(yaw=5))",
+         "eps=-0.1 must be a finite number >= 0"),
         ("@metamorphic(AbsDifference(), eps=float('nan'), transform=transforms(yaw=5))", "eps=nan must be a finite"),
-        ("@metamorphic('no_such_metric', eps=0.1, transform=transforms(yaw=5))", "metric='no_such_metric' is not a known metric"),
+        ("@metamorphic('no_such_metric', eps=0.1, transform=transforms(yaw=5))",
+         "metric='no_such_metric' is not a known metric"),
         ("@metamorphic(AbsDifference(), eps=0.1, transform='tau9')", "transform='tau9' is not a preset"),
         ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), search='hard')", "search='hard'"),
-        ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), size='big')", "size='big' is not a render size"),
+        ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), size='big')",
+         "size='big' is not a render size"),
     ],
 )
 def test_bad_relation_arguments_are_collection_errors_naming_the_test(n2r_project, decorator, message):
@@ -97,7 +100,8 @@ def test_bad(n2r_scene):
     [
         (["--n2r-scene", "missing.n2r"], "--n2r-scene 'missing.n2r': no such file"),
         (["--n2r-scene", "notascene.txt"], "is not a scene file"),
-        (["--n2r-scene", RAMP, "--n2r-size", "huge"], "--n2r-size / ini n2r_size: n2r_size='huge' is not a render size"),
+        (["--n2r-scene", RAMP, "--n2r-size", "huge"],
+         "--n2r-size / ini n2r_size: n2r_size='huge' is not a render size"),
         (["--n2r-scene", RAMP, "--n2r-examples", "0"], "--n2r-examples / ini n2r_examples: '0' is not a whole number"),
         (["--n2r-scene", RAMP, "--n2r-timeout", "-1"], "--n2r-timeout / ini n2r_timeout"),
         (["--n2r-scene", RAMP, "--n2r-cache-size", "lots"], "n2r_cache_size='lots' is not a size"),
@@ -191,8 +195,8 @@ def test_unknown(n2r_scene):
 """, name="test_scenes")
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP)
     result.assert_outcomes(errors=1)
-    result.stdout.fnmatch_lines(["test_scenes.py::test_unknown: n2r_scene marker names the scene 'kitchen', which "
-                                 "is not configured (configured: plane, ramp)*"])
+    result.stdout.fnmatch_lines([("test_scenes.py::test_unknown: n2r_scene marker names the scene 'kitchen', which "
+                                  "is not configured (configured: plane, ramp)*")])
 
 
 def test_a_sut_that_raises_shows_its_traceback_and_the_transform(n2r_project):
@@ -211,8 +215,8 @@ def test_fragile(n2r_scene):
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines([
         "*raise ValueError(\"lost track\")*",
-        "*SUTError: the system under test raised ValueError: lost track -- on the follow-up view "
-        "(scene 'ramp', source view 'view*', yaw=+5.010°)*",
+        ("*SUTError: the system under test raised ValueError: lost track -- on the follow-up view "
+         "(scene 'ramp', source view 'view*', yaw=+5.010°)*"),
     ])
 
 
@@ -255,7 +259,8 @@ def test_far(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines(["*leaves what the scene 'plane' can render faithfully in 100% of * draws (empty view: *narrow the bounds*"])
+    result.stdout.fnmatch_lines(
+        ["*leaves what the scene 'plane' can render faithfully in 100% of * draws (empty view: *narrow the bounds*"])
     assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
 
 
@@ -407,8 +412,8 @@ def test_hang(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-timeout", "0.2")
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines(["*the system under test on the source view (*) did not finish within 0.2 s "
-                                 "(--n2r-timeout / ini n2r_timeout)*"])
+    result.stdout.fnmatch_lines([("*the system under test on the source view (*) did not finish within 0.2 s "
+                                  "(--n2r-timeout / ini n2r_timeout)*")])
     assert result.duration < 20, f"the hang was not interrupted ({result.duration:.1f} s)"
 
 

@@ -34,7 +34,8 @@ class NeedsDepth(AbsDifference):
 def _recording(scene, monkeypatch):
     asked = []
     original = scene._render
-    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
+    monkeypatch.setattr(scene, "_render",
+                        lambda c2w, cam, outputs: asked.append(outputs) or original(c2w, cam, outputs))
     return asked
 
 
@@ -48,7 +49,8 @@ def test_only_the_outputs_the_metric_and_the_validity_checks_need_are_rendered(m
     relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3))
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert set().union(*asked) == {"rgb", "depth", "opacity"}, set(asked)
-    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3), validity=Validity(max_empty_increase=1, min_coverage=0))
+    relation = Relation.build(NeedsDepth(), 255, transforms(yaw=3),
+                              validity=Validity(max_empty_increase=1, min_coverage=0))
     asked.clear()
     check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert set().union(*asked) == {"rgb", "depth"}, "with the validity checks off, opacity is not rendered"
@@ -227,7 +229,8 @@ def test_mutations_use_the_source_pose():
 def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 1, transforms(x=0.1, units="metres"))
-    with pytest.raises(InvalidArgument, match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
+    with pytest.raises(InvalidArgument,
+                       match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
         check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
     assert scene.calls == 0
 

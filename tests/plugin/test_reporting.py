@@ -116,7 +116,8 @@ def grid(rgb):
     other_scene = n2r_project.run("--n2r-scene", "tests.plugin.fakescene:ramp", "--n2r-derandomize", "yes",
                                   "--n2r-compare", base)
     assert other_scene.ret == pytest.ExitCode.TESTS_FAILED
-    other_scene.stdout.fnmatch_lines(["*test_brightness[[]ramp[]] *new*", "*test_brightness[[]plane[]] *missing (fails)*"])
+    other_scene.stdout.fnmatch_lines(["*test_brightness[[]ramp[]] *new*",
+                                      "*test_brightness[[]plane[]] *missing (fails)*"])
 
     n2r_project.write((GATED + EMPTY).replace("eps=1000", "eps=900") + """
 

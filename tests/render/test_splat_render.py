@@ -46,7 +46,8 @@ def assert_matches_reference(g: Gaussians, c2w: np.ndarray, camera: Camera, what
     ok = ~ref["ambiguous"]
     assert ok.mean() >= 1 - max_ambiguous, f"{what}: {int((~ok).sum())} pixels are decided by rounding"
     diff = np.abs(fast["rgb"].astype(int) - ref["rgb"])[ok]
-    assert diff.max(initial=0) == 0, f"{what}: rgb differs from the reference by up to {diff.max()} at {int((diff > 0).sum())} values"
+    assert diff.max(initial=0) == 0, \
+        f"{what}: rgb differs from the reference by up to {diff.max()} at {int((diff > 0).sum())} values"
     np.testing.assert_allclose(fast["opacity"][ok], ref["opacity"][ok], atol=2e-7, err_msg=f"{what}: opacity")
     solid = ok & (ref["opacity"] > 1e-4)
     np.testing.assert_allclose(fast["depth"][solid], ref["depth"][solid], rtol=2e-6, err_msg=f"{what}: depth")
@@ -98,13 +99,15 @@ def test_one_isotropic_gaussian_is_a_disc_of_known_opacity(sigma, depth, opacity
     alpha[alpha < 1 / 255] = 0.0
     radius = math.sqrt(2 * s2 * math.log(255 * opacity))
     assert (out["opacity"] > 0).sum() == (d2 <= radius ** 2).sum(), (
-        f"{(out['opacity'] > 0).sum()} pixels drawn; the disc of radius {radius:.3f} px holds {(d2 <= radius ** 2).sum()}")
+        f"{(out['opacity'] > 0).sum()} pixels drawn; "
+        f"the disc of radius {radius:.3f} px holds {(d2 <= radius ** 2).sum()}")
     np.testing.assert_allclose(out["opacity"], alpha, atol=1e-6, err_msg="opacity is not the Gaussian's")
     assert out["opacity"][20, 20] == pytest.approx(opacity, abs=1e-6), "peak opacity at the principal point"
     np.testing.assert_allclose(out["depth"][alpha > 0], depth, rtol=1e-6, err_msg="depth inside the disc")
     assert (out["depth"][alpha == 0] == 0).all(), "depth outside the disc is 0"
     expected = np.rint((alpha[..., None] * np.array([0.8, 0.4, 0.2]) + (1 - alpha[..., None]) * bg) * 255)
-    assert np.abs(out["rgb"].astype(int) - expected).max() <= 1, "colour is not opacity·colour + (1 - opacity)·background"
+    assert np.abs(out["rgb"].astype(int) - expected).max() <= 1, \
+        "colour is not opacity·colour + (1 - opacity)·background"
 
 
 def test_a_gaussian_behind_the_camera_or_at_the_near_plane_is_not_drawn():

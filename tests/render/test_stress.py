@@ -45,7 +45,8 @@ FIELD = stress_field()
 def far_end(renderer: FieldRenderer, c2w: np.ndarray, camera: Camera) -> np.ndarray:
     """Per pixel, the far end of the ray's lattice in scene units (``t`` is z-depth at every scale)."""
     o, d = renderer.field.space.normalize_rays(*camera_rays(camera, c2w))
-    t_far = renderer.grid.t_far(torch.from_numpy(o.reshape(-1, 3)).double(), torch.from_numpy(d.reshape(-1, 3)).double())
+    t_far = renderer.grid.t_far(torch.from_numpy(o.reshape(-1, 3)).double(),
+                                torch.from_numpy(d.reshape(-1, 3)).double())
     return t_far.numpy().reshape(camera.height, camera.width)
 
 
@@ -53,7 +54,8 @@ def assert_valid_view(out: dict, camera: Camera, t_far: np.ndarray, what: str) -
     """The invariants of every rendered view (see the module docstring)."""
     h, w = camera.height, camera.width
     rgb, depth, opacity = out["rgb"], out["depth"], out["opacity"]
-    assert rgb.dtype == np.uint8 and rgb.shape == (h, w, 3), f"{what}: rgb is {rgb.dtype} {rgb.shape}; expected uint8 {(h, w, 3)}"
+    assert rgb.dtype == np.uint8 and rgb.shape == (h, w, 3), \
+        f"{what}: rgb is {rgb.dtype} {rgb.shape}; expected uint8 {(h, w, 3)}"
     for name, array in (("depth", depth), ("opacity", opacity)):
         assert array.dtype == np.float32 and array.shape == (h, w), f"{what}: {name} is {array.dtype} {array.shape}"
         assert np.isfinite(array).all(), f"{what}: {name} has {int((~np.isfinite(array)).sum())} NaN/Inf values"
@@ -187,7 +189,8 @@ def test_one_and_two_pixel_images(size, backend):
     renderer = FieldRenderer(FIELD, RenderSettings(backend=backend))
     out = renderer.render(c2w, camera, OUTPUTS)
     assert_valid_view(out, camera, far_end(renderer, c2w, camera), f"{backend} {w}×{h} image")
-    assert out["opacity"].min() > 0.95, f"the centre ray of a {w}×{h} image misses the opaque blob: opacity {out['opacity']}"
+    assert out["opacity"].min() > 0.95, \
+        f"the centre ray of a {w}×{h} image misses the opaque blob: opacity {out['opacity']}"
 
 
 @pytest.mark.slow
@@ -236,7 +239,8 @@ def test_depth_is_where_the_weight_is_even_where_transmittance_is_left(backend):
     expected = 0.6 * SPACE.radius  # z-depth of the plane x = 0 from x = -0.6, scene units
     voxel = SPACE.voxel_size(17) * SPACE.radius
     error = np.abs(out["depth"][8:16, 12:20] - expected).max()
-    assert error < voxel / 4, f"{backend}: depth is up to {error:.3f} off the wall at {expected}; a voxel is {voxel:.3f}"
+    assert error < voxel / 4, \
+        f"{backend}: depth is up to {error:.3f} off the wall at {expected}; a voxel is {voxel:.3f}"
 
 
 @settings(max_examples=200, deadline=None)

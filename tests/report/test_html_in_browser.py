@@ -15,7 +15,8 @@ from pytest_n2r.report import ExampleRecord, RelationRecord
 from pytest_n2r.report.html import write_html
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed (apt-get install chromium)")
+pytestmark = pytest.mark.skipif(CHROMIUM is None,
+                                reason="Debian's chromium is not installed (apt-get install chromium)")
 
 #: Appended to a copy of the report: after load, the page title becomes each image's decoded width and the
 #: number of SVG histograms, so --dump-dom shows what a person would see.

@@ -396,7 +396,8 @@ SCENE_FILE_CASES = [
     ("field header claiming 1 GB of tensors", {"replace": {FIELD_FILE: _tensor_header(
         {"occupancy": {"dtype": "U8", "shape": [2**30], "data_offsets": [0, 2**30]}})}},
      r"its tensors claim 1,073,741,824 bytes, more than the declared 12³ grid of SH degree 1 can hold"),
-    ("field values beyond float16", {"replace": {FIELD_FILE: "inf values"}}, r"tensor 'vertex_values' holds NaN or Inf"),
+    ("field values beyond float16", {"replace": {FIELD_FILE: "inf values"}},
+     r"tensor 'vertex_values' holds NaN or Inf"),
     ("a photo claiming 60000x60000 pixels", {"replace": {"images/frame_000.jpg": "huge jpeg"}},
      r"images/frame_000\.jpg is 60000x60000 pixels; frame 'frame_000\.png' has a 20x16 camera"),
 ]

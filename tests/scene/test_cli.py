@@ -97,7 +97,8 @@ def test_info_prints_the_summary_and_json(fitted, capsys):
     path, _ = fitted
     assert main(["info", str(path)]) == 0
     text = capsys.readouterr().out
-    for words in ("views       48: 42 train, 6 held out; 48 photos stored", "1 m per scene unit", "fit         complete: 30 steps"):
+    for words in ("views       48: 42 train, 6 held out; 48 photos stored", "1 m per scene unit",
+                  "fit         complete: 30 steps"):
         assert words in text, f"{words!r} missing from n2r info:\n{text}"
     assert main(["info", str(path), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
@@ -195,7 +196,8 @@ def test_durations(text, seconds):
 
 @pytest.mark.parametrize("text", ["", "ten", "10x", "0", "m"])
 def test_bad_durations_say_what_is_expected(text):
-    with pytest.raises(argparse.ArgumentTypeError, match=r"is not a duration; expected e\.g\. 10m|expected a duration > 0"):
+    with pytest.raises(argparse.ArgumentTypeError,
+                       match=r"is not a duration; expected e\.g\. 10m|expected a duration > 0"):
         parse_duration(text)
 
 

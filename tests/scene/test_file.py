@@ -188,8 +188,8 @@ BAD_FILES = {
     "other format": (lambda good, bad: rewrite(good, bad, edit_json=_set("format", "nerfstudio")),
                      r"format='nerfstudio'; expected 'pytest-n2r scene' \(this is not a pytest-n2r scene file\)"),
     "newer version": (lambda good, bad: rewrite(good, bad, edit_json=_set("version", FORMAT_VERSION + 1)),
-                      rf"format version {FORMAT_VERSION + 1}; this pytest-n2r reads version {FORMAT_VERSION} "
-                      r"\(it was written by a newer pytest-n2r; upgrade"),
+                      (rf"format version {FORMAT_VERSION + 1}; this pytest-n2r reads version {FORMAT_VERSION} "
+                       r"\(it was written by a newer pytest-n2r; upgrade")),
     "older version": (lambda good, bad: rewrite(good, bad, edit_json=_set("version", 0)),
                       r"format version 0; .*refit the scene"),
     "missing key": (lambda good, bad: rewrite(good, bad, edit_json=lambda d: d.pop("reference_length")),
@@ -212,8 +212,9 @@ BAD_FILES = {
     "mis-shaped tensor": (lambda good, bad: rewrite(
         good, bad, replace={FIELD_FILE: tensors_with(occupancy=torch.ones((5, 5, 5), dtype=torch.uint8))}),
         r"tensor 'occupancy' is torch.uint8 \(5, 5, 5\); expected torch.uint8 \(11, 11, 11\)"),
-    "image that does not decode": (lambda good, bad: rewrite(good, bad, replace={"images/frame_001.jpg": b"\xff\xd8junk"}),
-                                   r"images/frame_001.jpg \(the photo of frame 'frame_001.png'\) does not decode"),
+    "image that does not decode": (
+        lambda good, bad: rewrite(good, bad, replace={"images/frame_001.jpg": b"\xff\xd8junk"}),
+        r"images/frame_001.jpg \(the photo of frame 'frame_001.png'\) does not decode"),
     "image of the wrong size": (lambda good, bad: rewrite(
         good, bad, replace={"images/frame_003.jpg": zipfile.ZipFile(write(bad.with_name("small.n2r"), views=[
             type(v)(v.index, v.name, v.camera.resized(10, 8), v.c2w, v.split, v.image[::2, ::2].copy())

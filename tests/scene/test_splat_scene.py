@@ -67,7 +67,8 @@ def test_the_shipped_splats_render_their_exact_scene(name, demo):
         scores.append(psnr(b.rgb, a.rgb))
         both = (a.opacity > 0.5) & (b.opacity == 1)
         ratios.append(np.median(a.depth[both] / b.depth[both]))
-    assert np.mean(scores) >= PSNR_FLOOR[name], f"{name}: held-out PSNR {np.round(scores, 2)} (floor {PSNR_FLOOR[name]})"
+    assert np.mean(scores) >= PSNR_FLOOR[name], \
+        f"{name}: held-out PSNR {np.round(scores, 2)} (floor {PSNR_FLOOR[name]})"
     assert np.allclose(ratios, scale, rtol=0.05 if demo == "object" else 0.15), (
         f"{name}: median splat/exact depth ratio per view {np.round(ratios, 3)}; expected {scale}")
 

@@ -147,8 +147,9 @@ def test_malformed_ascii_files_get_an_error_naming_the_problem(tmp_path, case, e
 def test_a_truncated_binary_file_says_how_many_bytes_are_missing(tmp_path):
     path = write_ply(tmp_path / "s.ply", random_gaussians(10, 1))
     path.write_bytes(path.read_bytes()[:-7])
-    with pytest.raises(SceneFileError, match=r"truncated: element vertex declares 10 vertices of 104 bytes \(1040 bytes\)"
-                                             r"; the file has 1033 bytes after the header \(9 whole vertices\)"):
+    with pytest.raises(SceneFileError,
+                       match=r"truncated: element vertex declares 10 vertices of 104 bytes \(1040 bytes\)"
+                             r"; the file has 1033 bytes after the header \(9 whole vertices\)"):
         read_ply(path)
 
 
