@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from pytest_n2r.mutations import BlackPatches, Brightness, NoisePatch
+from pytest_n2r.strategies import BlackPatches, Brightness, NoisePatch
 
 WIDTH, HEIGHT = 480, 270
 

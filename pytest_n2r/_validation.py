@@ -31,6 +31,15 @@ def check_range(name: str, value: Any, lo: float | None = None, hi: float | None
     return value
 
 
+def check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    """``value`` as an int in ``[lo, hi]``, or raise naming ``name`` (a bool is not an int here)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InvalidType(f"{name}={value!r} must be an int, not {type(value).__name__}")
+    if not lo <= value <= hi:
+        raise InvalidArgument(f"{name}={value!r} is out of range; expected an int in [{lo}, {hi}]")
+    return int(value)
+
+
 def check_positive(name: str, value: Any) -> float:
     """Return ``value`` as a finite float > 0, or raise."""
     value = check_real(name, value)

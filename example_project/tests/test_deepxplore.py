@@ -14,7 +14,7 @@ import pytest
 
 from pytest_n2r import metamorphic
 from pytest_n2r.metrics import class_invariance, repeatability
-from pytest_n2r.mutations import black_patches, brightness, noise_patch
+from pytest_n2r.strategies import black_patches, brightness, noise_patch
 
 from .conftest import load_classifier, skip_without_object
 

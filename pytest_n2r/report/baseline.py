@@ -201,7 +201,7 @@ def _example(e: Any, where: str) -> ExampleRecord:
         for key, value in transform.items():
             _number(value, f"{where}.transform.{key}")
     if isinstance(mutation, dict) and "name" in mutation:
-        from ..mutations import mutation_from_dict
+        from ..strategies.mutation import mutation_from_dict
 
         try:
             mutation_from_dict(mutation)

@@ -71,7 +71,7 @@ class ExampleRecord:
     def follow_up(self) -> Any:
         """The follow-up as an object: a :class:`~pytest_n2r.geometry.Transform` or a mutation."""
         if self.mutation is not None:
-            from ..mutations import mutation_from_dict
+            from ..strategies.mutation import mutation_from_dict
 
             return mutation_from_dict(self.mutation)
         from ..geometry import Transform

@@ -2,7 +2,8 @@
 
 The study characterizes SUTs, so it samples each family **uniformly** within its bounds from a seeded
 ``numpy.random.Generator`` (Hypothesis's draws, made to find and shrink failures, favour boundaries).
-The τ families are the presets of :mod:`pytest_n2r.strategies` (same bounds, same look-at compensation).
+The τ families are the presets of :mod:`pytest_n2r.strategies.presets` (same bounds, same look-at
+compensation: :func:`pytest_n2r.geometry.look_at.look_at_transform`).
 
 Mutation families (the paper gives no parameters; these are ours, stated here):
 
@@ -16,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import Transform
-from ..mutations import BlackPatches, Brightness, Mutation, NoisePatch
+from ..geometry.look_at import look_at_transform
+from ..strategies.mutation import BlackPatches, Brightness, Mutation, NoisePatch
 
 __all__ = ["TRANSFORM_FAMILIES", "MUTATION_FAMILIES", "sample_transform", "sample_mutation"]
 
@@ -26,15 +28,11 @@ MUTATION_FAMILIES = ("m1", "m2", "m3")
 
 def sample_transform(family: str, rng: np.random.Generator) -> Transform:
     """A transform drawn uniformly within the bounds of preset ``family`` (``"tau1"`` … ``"tau6"``)."""
-    from ..strategies import PRESETS, look_at_compensation
+    from ..strategies.presets import PRESETS
 
     strategy = PRESETS[family]
     values = {axis: float(rng.uniform(lo, hi)) for axis, (lo, hi) in sorted(strategy.n2r_bounds.items())}
-    if strategy.n2r_look_at:
-        pitch, yaw = look_at_compensation(values.get("x", 0.0), values.get("y", 0.0), values.get("z", 0.0))
-        values["pitch"] = values.get("pitch", 0.0) + pitch
-        values["yaw"] = values.get("yaw", 0.0) + yaw
-    return Transform(**values)
+    return look_at_transform(**values) if strategy.n2r_look_at else Transform(**values)
 
 
 def sample_mutation(family: str, rng: np.random.Generator) -> Mutation:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pytest_n2r import mutations as m
+from pytest_n2r import strategies as m
 from pytest_n2r.geometry import Camera
 from pytest_n2r.metrics import interest_point_spread, repeatability
 from pytest_n2r.render.view import RenderedView

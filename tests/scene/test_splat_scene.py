@@ -17,7 +17,7 @@ from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.splat_render import SplatSettings
 from pytest_n2r.scene import SplatScene, load_scene, read_splat_file
 from pytest_n2r.scene.splat_file import save_splat_scene
-from pytest_n2r.strategies import scene_views
+from pytest_n2r.scene.splits import scene_views
 
 from ..splats.make_data import DATA, FILES, SCALE
 

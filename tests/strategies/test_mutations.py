@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import find, given, settings
 
-from pytest_n2r import mutations as m
+from pytest_n2r import strategies as m
 from pytest_n2r.errors import InvalidArgument, InvalidType
 
 images = st.tuples(st.integers(1, 64), st.integers(1, 64), st.integers(0, 2**16)).map(
@@ -92,6 +92,10 @@ def test_shrinking_finds_the_smallest_breaking_brightness():
 def test_strategy_reprs_are_their_calls():
     assert repr(m.brightness(max_levels=30)) == "brightness(max_levels=30)"
     assert repr(m.black_patches(count=4)) == "black_patches(max_size=0.08, count=4)"
+    # a relation's description keys its Hypothesis database and derandomized seed: these reprs must not drift
+    assert repr(m.noise_patch()) == "noise_patch(max_size=0.5, min_size=0.0)"
+    assert repr(m.black_patches()) == "black_patches(max_size=0.08)"
+    assert repr(m.any_mutation()) == "any_mutation(max_noise_size=0.5, max_patch_size=0.08)"
 
 
 @pytest.mark.parametrize(

@@ -16,9 +16,8 @@ Convention
   top to bottom); patches always lie inside the image.
 - Random pixels and positions come from ``numpy.random.default_rng(seed)``: the same mutation gives
   the same image, bit for bit.
-- The Hypothesis strategies (:func:`brightness`, :func:`noise_patch`, :func:`black_patches`,
-  :func:`any_mutation`) shrink toward **no change**: a failing example is reported as the smallest
-  mutation that still breaks the SUT.
+- The Hypothesis strategies that draw them (:mod:`pytest_n2r.strategies.mutation_strategies`) shrink
+  toward **no change**: a failing example is reported as the smallest mutation that still breaks the SUT.
 """
 
 from __future__ import annotations
@@ -29,28 +28,26 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._validation import check_array, check_range
-from .errors import InvalidArgument, InvalidType
+from .._validation import check_array, check_int, check_range
+from ..errors import InvalidArgument, InvalidType
 
 if TYPE_CHECKING:
-    from hypothesis.strategies import SearchStrategy
-
-    from .render.view import RenderedView
+    from ..render.view import RenderedView
 
 __all__ = [
+    "MAX_SEED",
+    "MAX_COUNT",
     "Mutation",
     "Brightness",
     "NoisePatch",
     "BlackPatches",
-    "brightness",
-    "noise_patch",
-    "black_patches",
-    "any_mutation",
     "mutation_from_dict",
 ]
 
-_MAX_SEED = 2**32 - 1
-_MAX_COUNT = 64
+#: Largest seed of a mutation's random generator.
+MAX_SEED = 2**32 - 1
+#: Most black patches one :class:`BlackPatches` may draw.
+MAX_COUNT = 64
 
 
 def _check_image(rgb: Any) -> np.ndarray:
@@ -58,14 +55,6 @@ def _check_image(rgb: Any) -> np.ndarray:
     if arr.dtype != np.uint8:
         raise InvalidType(f"rgb must be an H×W×3 uint8 RGB image, got dtype {arr.dtype}")
     return arr
-
-
-def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InvalidType(f"{name}={value!r} must be an int, not {type(value).__name__}")
-    if not lo <= value <= hi:
-        raise InvalidArgument(f"{name}={value!r} is out of range; expected an int in [{lo}, {hi}]")
-    return int(value)
 
 
 def _patch_pixels(size: float, extent: int) -> int:
@@ -93,7 +82,7 @@ class Mutation(ABC):
     def apply_to_view(self, view: RenderedView) -> RenderedView:
         """The follow-up view of a mutation relation: ``view`` with its ``rgb`` mutated; pose, camera,
         depth and opacity unchanged (a mutation does not move the camera)."""
-        from .render.view import RenderedView
+        from ..render.view import RenderedView
 
         if not isinstance(view, RenderedView):
             raise InvalidType(f"view must be a RenderedView, got {type(view).__name__}")
@@ -131,7 +120,7 @@ class Brightness(Mutation):
     name: ClassVar[str] = "brightness"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "levels", _check_int("levels", self.levels, -255, 255))
+        object.__setattr__(self, "levels", check_int("levels", self.levels, -255, 255))
 
     @property
     def is_identity(self) -> bool:
@@ -162,7 +151,7 @@ class NoisePatch(Mutation):
         object.__setattr__(self, "size", check_range("size", self.size, 0.0, 1.0) + 0.0)
         object.__setattr__(self, "x", check_range("x", self.x, 0.0, 1.0) + 0.0)
         object.__setattr__(self, "y", check_range("y", self.y, 0.0, 1.0) + 0.0)
-        object.__setattr__(self, "seed", _check_int("seed", self.seed, 0, _MAX_SEED))
+        object.__setattr__(self, "seed", check_int("seed", self.seed, 0, MAX_SEED))
 
     @property
     def is_identity(self) -> bool:
@@ -194,8 +183,8 @@ class BlackPatches(Mutation):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "size", check_range("size", self.size, 0.0, 1.0) + 0.0)
-        object.__setattr__(self, "count", _check_int("count", self.count, 0, _MAX_COUNT))
-        object.__setattr__(self, "seed", _check_int("seed", self.seed, 0, _MAX_SEED))
+        object.__setattr__(self, "count", check_int("count", self.count, 0, MAX_COUNT))
+        object.__setattr__(self, "seed", check_int("seed", self.seed, 0, MAX_SEED))
 
     @property
     def is_identity(self) -> bool:
@@ -233,45 +222,3 @@ def mutation_from_dict(data: dict[str, Any]) -> Mutation:
     if unknown:
         raise InvalidArgument(f"mutation={data!r}: {cls.__name__} has no parameter(s) {unknown}")
     return cls(**params)
-
-
-# --- Hypothesis strategies: validate eagerly, draw lazily (private composites whose repr is the call) --
-
-
-def brightness(max_levels: int = 128) -> SearchStrategy[Brightness]:
-    """:class:`Brightness` with ``levels`` in ``[-max_levels, max_levels]``; shrinks toward ``levels=0``
-    (integers shrink exactly: a failure is reported at the smallest offset that breaks the SUT)."""
-    from . import _mutation_strategies as s
-
-    return s.brightness(max_levels=_check_int("max_levels", max_levels, 0, 255))
-
-
-def noise_patch(max_size: float = 0.5, min_size: float = 0.0) -> SearchStrategy[NoisePatch]:
-    """:class:`NoisePatch` with ``size`` in ``[min_size, max_size]``, any position and seed; shrinks toward
-    ``size=min_size`` (no change when 0), the top-left position and seed 0."""
-    from . import _mutation_strategies as s
-
-    max_size = check_range("max_size", max_size, 0.0, 1.0)
-    return s.noise_patch(max_size=max_size, min_size=check_range("min_size", min_size, 0.0, max_size))
-
-
-def black_patches(max_size: float = 0.08, count: int = 6) -> SearchStrategy[BlackPatches]:
-    """:class:`BlackPatches` of ``count`` patches with ``size`` in ``[0, max_size]`` and any seed; shrinks
-    toward ``size=0`` (no change) and seed 0."""
-    from . import _mutation_strategies as s
-
-    return s.black_patches(max_size=check_range("max_size", max_size, 0.0, 1.0),
-                           count=_check_int("count", count, 0, _MAX_COUNT))
-
-
-def any_mutation(
-    max_levels: int = 128, max_noise_size: float = 0.5, max_patch_size: float = 0.08,
-) -> SearchStrategy[Mutation]:
-    """One of m1, m2, m3 with the given bounds; shrinks toward ``Brightness(levels=0)`` (no change)."""
-    from . import _mutation_strategies as s
-
-    return s.any_mutation(
-        max_levels=_check_int("max_levels", max_levels, 0, 255),
-        max_noise_size=check_range("max_noise_size", max_noise_size, 0.0, 1.0),
-        max_patch_size=check_range("max_patch_size", max_patch_size, 0.0, 1.0),
-    )

@@ -1,4 +1,4 @@
-"""Strategy properties: bounds, validation messages, repr, shrinking to the boundary, look-at, views."""
+"""Pose-transform strategies: bounds, validation messages, repr, shrinking to the boundary, look-at, presets."""
 
 from __future__ import annotations
 
@@ -12,8 +12,6 @@ from hypothesis import strategies as st
 from pytest_n2r import InvalidArgument, InvalidType, Transform
 from pytest_n2r import strategies as n2r
 from pytest_n2r.geometry import Units
-
-from .fakescene import PlaneScene
 
 BOUNDS = st.tuples(st.floats(-170, 170), st.floats(-170, 170)).map(sorted).map(tuple)
 
@@ -103,45 +101,6 @@ def test_presets_are_look_at_transforms_in_reference_units(name):
     strategy = n2r.PRESETS[name]
     assert "look_at=True" in repr(strategy)
     assert n2r.transform_units(strategy) is Units.REFERENCE
-
-
-def test_views_split_and_fallback():
-    scene = PlaneScene(n_views=4)
-    assert [v.name for v in n2r.scene_views(scene, "heldout")] == ["view1", "view3"]
-    assert [v.name for v in n2r.scene_views(scene, "train")] == ["view0", "view2"]
-    assert len(n2r.scene_views(scene, "all")) == 4
-    single = PlaneScene(n_views=1)  # only a train view: held-out falls back to every view
-    assert [v.name for v in n2r.scene_views(single, "heldout")] == ["view0"]
-    with pytest.raises(InvalidArgument, match="split='test' is not a split"):
-        n2r.views(split="test")
-
-
-def test_views_shrink_to_the_first_view_and_picks_resolve_through_the_scene():
-    scene = PlaneScene(n_views=4)
-    assert find(n2r.views(scene), lambda v: True).name == "view1"
-    pick = find(n2r.views(), lambda v: True)
-    source, _ = scene.pair(pick, Transform(yaw=1))
-    np.testing.assert_array_equal(source.c2w, scene.views[1].c2w)
-
-
-def test_interpolated_views_lie_on_the_trajectory():
-    scene = PlaneScene(n_views=3)
-    a, b = scene.views[0], scene.views[1]
-    mid = n2r.interpolate_view(a, b, 0.5)
-    np.testing.assert_allclose(mid.c2w[:3, 3], (a.c2w[:3, 3] + b.c2w[:3, 3]) / 2)
-    rotated = type(b)(b.index, b.name, b.camera, Transform(yaw=40).apply(b.c2w), b.split)
-    quarter = n2r.interpolate_view(a, rotated, 0.25)
-    np.testing.assert_allclose(quarter.c2w[:3, :3], Transform(yaw=10).rotation, atol=1e-12)
-    assert n2r.interpolate_view(a, b, 0.0) is a
-
-
-@settings(max_examples=20)
-@given(data=st.data())
-def test_interpolating_views_draws_poses_between_neighbours(data):
-    scene = PlaneScene(n_views=3)
-    view = data.draw(n2r.views(scene, interpolate=True))
-    ys = [v.c2w[1, 3] for v in scene.views]
-    assert min(ys) <= view.c2w[1, 3] <= max(ys)
 
 
 def test_draws_spread_over_the_whole_bound():

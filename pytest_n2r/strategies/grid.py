@@ -1,0 +1,101 @@
+"""Bounded numbers drawn on a decimal grid, so shrinking finds the smallest failing value.
+
+Values are drawn on a decimal grid (for example 0.01° for a ±20° bound and 0.0001 for a ±0.1 bound, at
+least :data:`MIN_STEPS` steps across each bound), so shrinking is a binary search for the smallest failing
+step: a SUT that breaks beyond 5° of yaw is reported at ``yaw=5.01``, not at the nearest "simple" float.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from hypothesis import strategies as st
+
+from .._validation import check_real
+from ..errors import InvalidArgument, InvalidType
+
+__all__ = ["AXES", "ANGLES", "MAX_ANGLE", "MIN_STEPS", "Bound", "check_bound", "grid_step", "draw_axis"]
+
+#: The components of a pose transform, in :class:`~pytest_n2r.geometry.Transform` order.
+AXES = ("roll", "pitch", "yaw", "x", "y", "z")
+ANGLES = ("roll", "pitch", "yaw")
+#: Largest accepted angle bound (degrees); |yaw| > 180 describes the same views twice.
+MAX_ANGLE = 180.0
+#: At least this many grid steps across a bound (see the module docstring).
+MIN_STEPS = 2000
+#: Wide step ranges are drawn as one of about this many buckets plus an offset (see _draw_steps).
+_BUCKETS = 64
+_BUCKET = 255
+
+Bound = tuple[float, float]
+
+
+def check_bound(name: str, value: Any) -> Bound:
+    """Normalise a bound: ``b`` means ``(-|b|, |b|)``; ``(lo, hi)`` must be finite with ``lo <= hi``.
+    Angle bounds (``name`` in :data:`ANGLES`, degrees) must lie within ±:data:`MAX_ANGLE`."""
+    if isinstance(value, (tuple, list)):
+        if len(value) != 2:
+            raise InvalidArgument(f"{name}={value!r} must be a number b (meaning -b..b) or a pair (lo, hi)")
+        lo = check_real(f"{name}[0]", value[0])
+        hi = check_real(f"{name}[1]", value[1])
+        if lo > hi:
+            raise InvalidArgument(f"{name}={tuple(value)!r} has lo > hi; write {name}=({value[1]!r}, {value[0]!r})")
+    else:
+        try:
+            b = check_real(name, value)
+        except InvalidType:
+            raise InvalidType(
+                f"{name}={value!r} must be a number b (meaning -b..b) or a pair (lo, hi), "
+                f"not {type(value).__name__}"
+            ) from None
+        lo, hi = -abs(b), abs(b)
+    if name in ANGLES and max(abs(lo), abs(hi)) > MAX_ANGLE:
+        raise InvalidArgument(f"{name}={value!r} is out of range; angles are degrees in [-180, 180]")
+    return lo + 0.0, hi + 0.0
+
+
+def grid_step(lo: float, hi: float) -> float:
+    """The decimal step (a power of ten) that puts at least :data:`MIN_STEPS` steps across ``[lo, hi]``.
+
+    >>> grid_step(-20.0, 20.0), grid_step(-0.1, 0.1)
+    (0.01, 0.0001)
+    """
+    span = hi - lo
+    return 10.0 ** math.floor(math.log10(span / MIN_STEPS)) if span > 0 else 1.0
+
+
+def _draw_steps(draw: Any, n: int) -> int:
+    """An integer in ``[0, n]``, spread over the whole range, that shrinks to the smallest failing value.
+
+    Hypothesis draws a wide integer range with a strong bias toward small values (the median draw of
+    ``integers(0, 8000)`` is about 800), so a wide range first draws a bucket start (a near-uniform small
+    range), then the smaller of two values between that start and ``n`` (which offsets the upward skew
+    of starting inside a bucket). Shrinking lowers the bucket to 0 while the values stay valid in the
+    widened range, then binary-searches the smaller value: the result is the smallest failing integer.
+    """
+    if n <= _BUCKET:
+        return draw(st.integers(0, n))
+    start = draw(st.integers(0, _BUCKETS - 1)) * n // _BUCKETS
+    return min(draw(st.integers(start, n)), draw(st.integers(start, n)))
+
+
+def draw_axis(draw: Any, lo: float, hi: float) -> float:
+    """A value in ``[lo, hi]`` that shrinks toward the point of the interval nearest 0, step by step
+    (``draw`` is a Hypothesis composite's draw function)."""
+    if lo == hi:
+        return lo
+    origin = min(max(0.0, lo), hi)
+    step = grid_step(lo, hi)
+    digits = max(0, -int(round(math.log10(step))))
+    sides = []  # (sign, steps on the grid, the exact end of the bound)
+    for sign, end in ((1, hi), (-1, lo)):
+        n = math.floor(abs(end - origin) / step + 1e-9)
+        if abs(end - origin) > 0:
+            sides.append((sign, n + (abs(origin + sign * n * step - end) > 1e-12), end))
+    sign, n, end = sides[draw(st.integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
+    k = _draw_steps(draw, n)
+    value = origin + sign * k * step
+    if sign * (value - end) >= 0 or k == n:
+        return end
+    return min(max(round(value, digits), lo), hi) + 0.0  # rounding may cross a bound that is off the grid

@@ -1,0 +1,49 @@
+"""Pose interpolation: slerp turns at constant speed about one axis, centres move on a straight line."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pytest_n2r.errors import InvalidArgument, InvalidType
+from pytest_n2r.geometry import rotation_angle_deg
+from pytest_n2r.geometry.interpolation import interpolate_c2w, slerp_rotation
+
+from .strategies import poses
+
+fractions = st.floats(0.0, 1.0)
+
+
+@given(start=poses(), end=poses(), t=fractions)
+def test_slerp_turns_a_fraction_t_of_the_angle_and_the_rest_remains(start, end, t):
+    R0, R1 = start[:3, :3], end[:3, :3]
+    total = rotation_angle_deg(R0, R1)
+    Rt = slerp_rotation(R0, R1, t)
+    if total < 179.0:  # near 180 degrees the shorter way round is ill-defined
+        assert rotation_angle_deg(R0, Rt) == pytest.approx(t * total, abs=1e-6)
+        assert rotation_angle_deg(Rt, R1) == pytest.approx((1 - t) * total, abs=1e-6)
+    np.testing.assert_allclose(Rt.T @ Rt, np.eye(3), atol=1e-9)
+
+
+@given(start=poses(), end=poses(), t=fractions)
+def test_interpolated_centres_lie_on_the_segment(start, end, t):
+    c2w = interpolate_c2w(start, end, t)
+    np.testing.assert_allclose(c2w[:3, 3], start[:3, 3] + t * (end[:3, 3] - start[:3, 3]), atol=1e-9)
+    np.testing.assert_array_equal(c2w[3], [0.0, 0.0, 0.0, 1.0])
+
+
+@given(start=poses(), end=poses())
+def test_the_ends_are_the_given_poses(start, end):
+    np.testing.assert_array_equal(interpolate_c2w(start, end, 0.0), start)
+    np.testing.assert_allclose(interpolate_c2w(start, end, 1.0), end, atol=1e-9)
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(InvalidArgument, match=r"t=-0.5 is out of range; expected a value in \[0, 1\]"):
+        interpolate_c2w(np.eye(4), np.eye(4), -0.5)
+    with pytest.raises(InvalidType, match=r"c2w_end must have shape \(4 4\), got \(3, 3\)"):
+        interpolate_c2w(np.eye(4), np.eye(3), 0.5)
+    with pytest.raises(InvalidType, match=r"R_start must have shape \(3 3\)"):
+        slerp_rotation(np.eye(4), np.eye(3), 0.5)

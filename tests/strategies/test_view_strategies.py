@@ -1,0 +1,66 @@
+"""Source-view strategies: splits, shrinking to the first view, picks resolved by a scene, the trajectory."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import find, given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r import InvalidArgument, InvalidType, Transform
+from pytest_n2r import strategies as n2r
+from pytest_n2r.scene.trajectory import trajectory_view
+
+from ..plugin.fakescene import PlaneScene
+
+
+def test_views_name_a_bad_split_or_flag():
+    with pytest.raises(InvalidArgument, match="split='test' is not a split"):
+        n2r.views(split="test")
+    with pytest.raises(InvalidType, match="interpolate=1 must be True or False"):
+        n2r.views(interpolate=1)
+    with pytest.raises(InvalidType, match="scene='plane' must be a pytest_n2r.Scene"):
+        n2r.views("plane")
+
+
+def test_views_shrink_to_the_first_view_and_picks_resolve_through_the_scene():
+    scene = PlaneScene(n_views=4)
+    assert find(n2r.views(scene), lambda v: True).name == "view1"
+    pick = find(n2r.views(), lambda v: True)
+    source, _ = scene.pair(pick, Transform(yaw=1))
+    np.testing.assert_array_equal(source.c2w, scene.views[1].c2w)
+
+
+@settings(max_examples=20)
+@given(data=st.data())
+def test_views_of_a_split_are_the_scenes_own_views(data):
+    scene = PlaneScene(n_views=4)
+    view = data.draw(n2r.views(scene, split="train"))
+    assert view in scene.views and view.split == "train"
+
+
+@settings(max_examples=20)
+@given(data=st.data())
+def test_interpolating_views_draws_poses_between_neighbours(data):
+    scene = PlaneScene(n_views=3)
+    view = data.draw(n2r.views(scene, interpolate=True))
+    ys = [v.c2w[1, 3] for v in scene.views]
+    assert min(ys) <= view.c2w[1, 3] <= max(ys)
+
+
+@settings(max_examples=20)
+@given(pick=n2r.views(interpolate=True))
+def test_an_interpolated_pick_resolves_to_the_trajectory_view_of_the_same_segment(pick):
+    scene = PlaneScene(n_views=3)
+    view = scene.view(pick)
+    if pick.t:
+        expected = trajectory_view(list(scene.views), pick.index, pick.t)
+        np.testing.assert_array_equal(view.c2w, expected.c2w)
+        assert view.split == "interpolated"
+    else:
+        assert view in scene.views
+
+
+def test_a_scene_with_one_view_has_no_trajectory_and_draws_its_view():
+    scene = PlaneScene(n_views=1)
+    assert find(n2r.views(scene, interpolate=True), lambda v: True) is scene.views[0]
