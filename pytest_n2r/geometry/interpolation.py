@@ -9,6 +9,11 @@ Convention
 - The rotation turns at constant angular speed about the one axis of ``R_start^T @ R_end`` (the relative
   rotation, in the start camera's frame): ``R(t) = R_start @ exp(t * log(R_start^T @ R_end))``, the
   shorter way round. The camera centre moves along the straight line between the two centres.
+
+Warning
+-------
+Near a half turn the axis of ``R_start^T @ R_end`` is ill-conditioned (OpenCV's Rodrigues logarithm):
+measured against ``R_end`` at ``t = 1``, the error is below 1e-12 up to 179.999° and 3.5e-6 at 179.9999°.
 """
 
 from __future__ import annotations
