@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))  # the repository's package and, as a fallback sce
 
 from pytest_n2r.cache import RenderCache
 from pytest_n2r.metrics import repeatability
-from pytest_n2r.relations import Relation, RunSettings, check_relation
+from pytest_n2r.relation import Relation, RunSettings, check_relation
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.base import Scene
 from pytest_n2r.session import default_scene_specs, load_scene_spec, parse_scene_specs

@@ -48,12 +48,12 @@ _EXPORTS: dict[str, str] = {
     "metamorphic": "pytest_n2r.marker",
     "transforms": "pytest_n2r.strategies",
     "views": "pytest_n2r.strategies",
-    "Relation": "pytest_n2r.relations",
-    "RelationFailure": "pytest_n2r.relations",
-    "SUTError": "pytest_n2r.relations",
-    "check_relation": "pytest_n2r.relations",
+    "Relation": "pytest_n2r.relation",
+    "RelationFailure": "pytest_n2r.relation",
+    "SUTError": "pytest_n2r.relation",
+    "check_relation": "pytest_n2r.relation",
     "RenderCache": "pytest_n2r.cache",
-    "Validity": "pytest_n2r.validity",
+    "Validity": "pytest_n2r.relation",
 }
 
 #: the lazily exported names and __version__, spelled out for type checkers and linters; a test

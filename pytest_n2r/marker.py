@@ -2,7 +2,7 @@
 
 The decorated test takes the ``n2r_scene`` fixture (and any other fixtures) and **returns the SUT**, a
 callable ``rgb (H×W×3 uint8, RGB) -> output``. The plugin then renders source and follow-up views,
-runs the SUT on both and compares them with the metric (see :mod:`pytest_n2r.relations`).
+runs the SUT on both and compares them with the metric (see :mod:`pytest_n2r.relation`).
 
 Arguments are validated when the module is imported; a bad one becomes a collection error that names
 the test, not a failure in the middle of a run.
@@ -15,8 +15,7 @@ from typing import Any, TypeVar
 
 from .errors import N2RError
 from .plugin import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
-from .relations import Relation
-from .validity import Validity
+from .relation import Relation, Validity
 
 __all__ = ["metamorphic"]
 
@@ -46,7 +45,7 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
         Source views: ``"heldout"`` (default), ``"train"`` or ``"all"``; ``interpolate=True`` draws poses
         between consecutive captured views.
     validity
-        Thresholds that decide when a follow-up view is a fair input (:class:`~pytest_n2r.validity.Validity`).
+        Thresholds that decide when a follow-up view is a fair input (:class:`~pytest_n2r.relation.Validity`).
     """
     try:
         relation: Relation | None = Relation.build(

@@ -106,7 +106,7 @@ def _build_session(config: pytest.Config) -> Any:
     from .cache import parse_size
     from .data.atomic import unwritable_reason
     from .errors import N2RError
-    from .relations import RunSettings
+    from .relation import RunSettings
     from .render.size import RenderSize
     from .session import N2RSession, parse_scene_specs
 
@@ -277,9 +277,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if relation is None:
         return None
     __tracebackhide__ = True
-    from ._determinism import SUTNotDeterministic
     from ._timeout import CallTimeout
-    from .relations import RelationFailure
+    from .relation import RelationFailure
+    from .relation.determinism import SUTNotDeterministic
 
     funcargs = pyfuncitem.funcargs
     sut = pyfuncitem.obj(**{arg: funcargs[arg] for arg in pyfuncitem._fixtureinfo.argnames})
@@ -310,8 +310,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
 
 
 def _floor(session: Any, scene: Any, sut: Any, relation: Any, records: list) -> dict | None:
-    """The field floor beside a relation's result (:func:`pytest_n2r.floor.annotate_relation`)."""
-    from .floor import annotate_relation
+    """The field floor beside a relation's result (:func:`pytest_n2r.relation.floor.annotate_relation`)."""
+    from .relation.floor import annotate_relation
 
     return annotate_relation(scene, sut, relation, records, size=relation.size or session.settings.size,
                              cache=session.cache, cache_dir=session.cache_dir)
@@ -366,7 +366,7 @@ class _Summary:
         if not runs:
             return
         terminalreporter.section("pytest-n2r")
-        from .floor import annotation_lines
+        from .relation.floor import annotation_lines
 
         for stats in runs:
             terminalreporter.write_line(stats["summary"])

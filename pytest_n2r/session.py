@@ -17,7 +17,7 @@ from typing import Any
 
 from .cache import DEFAULT_DISK_BYTES, RenderCache
 from .errors import InvalidArgument, InvalidType, SceneFileError
-from .relations import Relation, RelationStats, RunSettings, check_relation
+from .relation import Relation, RelationStats, RunSettings, check_relation
 from .scene.base import Scene
 
 __all__ = ["SceneSpec", "N2RSession", "parse_scene_specs", "default_scene_specs", "DEMO_PREFIX"]

@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 def _shift(scene: SceneFile, size: str) -> FidelityReport:
     """The detector shift of the scene file (floors cached in the user cache folder)."""
     from ..demo.fitted import cache_dir
-    from ..floor import FloorStore
+    from ..relation.floor import FloorStore
     from ..scene.field_scene import FieldScene
     from ..study.fidelity import measure_fidelity
 

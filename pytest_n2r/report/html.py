@@ -79,7 +79,8 @@ def _example_block(title: str, ex: ExampleRecord) -> str:
 
 
 def _floor(rel: RelationRecord) -> str:
-    """The relation's field floor line (what the scene field alone costs, :mod:`pytest_n2r.floor`), or a dash."""
+    """The relation's field floor line (what the scene field alone costs, :mod:`pytest_n2r.relation.floor`), or
+    a dash."""
     line = (rel.floor or {}).get("line")
     return html.escape(line) if line else "—"
 

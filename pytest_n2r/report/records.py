@@ -5,7 +5,7 @@ One :class:`ExampleRecord` per drawn example -- accepted, rejected (invalid foll
 bit: the scene's content hash, the source view's name, pose and camera (render size), the render
 settings, and the follow-up (a pose transform with its units, or a mutation with its parameters).
 A :class:`RelationRecord` holds every example of one relation run plus its verdict and, on fitted scenes,
-its ``floor`` (the deviation the scene field alone causes, :mod:`pytest_n2r.floor`).
+its ``floor`` (the deviation the scene field alone causes, :mod:`pytest_n2r.relation.floor`).
 """
 
 from __future__ import annotations
@@ -110,7 +110,8 @@ class RelationRecord:
     scene: str = ""
     scene_hash: str = ""
     replayed: list[ExampleRecord] | None = None
-    #: The field floor beside the result (:func:`pytest_n2r.floor.annotate_relation`; ``None`` on exact scenes).
+    #: The field floor beside the result (:func:`pytest_n2r.relation.floor.annotate_relation`; ``None`` on an
+    #: exact scene).
     floor: dict[str, Any] | None = None
 
     @property

@@ -18,11 +18,6 @@ strategies), :mod:`.view_strategies` (``views``).
 from __future__ import annotations
 
 from ..geometry.look_at import look_at_compensation
-
-# the relation engine still imports these three from here; they live with the scene
-from ..scene.splits import SOURCE_SPLITS as SPLITS  # noqa: F401
-from ..scene.splits import scene_views  # noqa: F401
-from ..scene.trajectory import interpolate_view  # noqa: F401
 from .mutation import BlackPatches, Brightness, Mutation, NoisePatch, mutation_from_dict
 from .mutation_strategies import any_mutation, black_patches, brightness, noise_patch
 from .pose_strategies import transform_units, transforms

@@ -3,7 +3,7 @@ the built-in detectors (ORB, SIFT, AKAZE: repeatability and interest-point sprea
 render at the same held-out pose). ``n2r info --shift`` and ``benchmarks/fidelity.py`` print it.
 
 The reference image is the stored photo, or the exact render for a fitted demo scene
-(:func:`pytest_n2r.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
+(:func:`pytest_n2r.relation.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
 ``1 - score`` is the field floor a relation with that detector and metric inherits.
 """
 
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cache import RenderCache
-from ..floor import FieldFloor, FloorStore, floor_views, measure_floor, reference_image, reference_kind
 from ..metrics.image_quality import psnr, ssim
+from ..relation.floor import FieldFloor, FloorStore, floor_views, measure_floor, reference_image, reference_kind
 from ..render.size import RenderSize
 from ..scene.base import Scene
 from .suts import resolve_sut
@@ -29,7 +29,7 @@ DETECTORS = ("orb", "sift", "akaze")
 @dataclass(frozen=True)
 class FidelityReport:
     """``images``: per held-out view, PSNR (dB) and SSIM of the render against the reference image;
-    ``floors``: a :class:`~pytest_n2r.floor.FieldFloor` per detector and metric name (``("orb",
+    ``floors``: a :class:`~pytest_n2r.relation.floor.FieldFloor` per detector and metric name (``("orb",
     "repeatability")``, ...); ``reference``: the
     reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``)."""
 

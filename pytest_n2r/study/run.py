@@ -12,7 +12,7 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
 
 "Real photo" is the view's stored image (``SceneView.image``); for an exact demo scene without stored
 images it is the exact render at the captured pose, and for a fitted demo scene the exact twin's render
-(:mod:`pytest_n2r.floor` measures the same shift for the plugin's field floor). Scenes with neither skip
+(:mod:`pytest_n2r.relation.floor` measures the same shift for the plugin's field floor). Scenes with neither skip
 RQ1.
 """
 
@@ -26,12 +26,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidArgument, MetricUndefined, N2RError
-from ..floor import exact_twin, reference_image, shift_sample
 from ..geometry import Camera
 from ..metrics.image_quality import lpips, lpips_unavailable_reason, psnr, ssim
+from ..relation.floor import exact_twin, reference_image, shift_sample
+from ..relation.validity import Validity
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
-from ..validity import Validity
 from .sampling import MUTATION_FAMILIES, TRANSFORM_FAMILIES, sample_mutation, sample_transform
 from .suts import SUT
 

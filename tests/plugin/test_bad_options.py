@@ -112,12 +112,12 @@ def test_a_scene_whose_field_does_not_load_fails_with_its_message_not_a_tracebac
 
 
 def test_failure_pictures_that_cannot_be_saved_do_not_hide_the_failure(n2r_project, monkeypatch):
-    from pytest_n2r import relations
+    from pytest_n2r.relation import engine
 
     def unwritable(directory, *args):
         raise PermissionError(13, "Permission denied", str(directory))
 
-    monkeypatch.setattr(relations, "save_pair", unwritable)
+    monkeypatch.setattr(engine, "save_pair", unwritable)
     n2r_project.write("""
 @metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=30)
 def test_heading(n2r_scene):

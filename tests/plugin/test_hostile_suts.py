@@ -7,7 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from pytest_n2r._determinism import same_output, show_output
+from pytest_n2r.relation.determinism import same_output, show_output
 
 PLANE = "tests.plugin.fakescene:plane"
 

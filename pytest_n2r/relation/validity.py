@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._validation import check_range
-from .geometry import backproject, project
-from .render.view import RenderedView
-from .scene.base import Scene, SceneView
+from .._validation import check_range
+from ..geometry import backproject, project
+from ..render.view import RenderedView
+from ..scene.base import Scene, SceneView
 
 __all__ = ["Validity", "Verdict"]
 

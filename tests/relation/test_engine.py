@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import signal
-import time
-
 import cv2
 import numpy as np
 import pytest
-from hypothesis import find
 from hypothesis import strategies as st
 
-from pytest_n2r import InvalidArgument, InvalidType, Transform
-from pytest_n2r._timeout import CallTimeout, time_limit
-from pytest_n2r.artifacts import artifact_dir, draw_output, save_png
+from pytest_n2r import InvalidArgument
+from pytest_n2r.artifacts import artifact_dir
 from pytest_n2r.cache import RenderCache
 from pytest_n2r.metrics.base import MetricResult
-from pytest_n2r.relations import Relation, RelationFailure, RunSettings, check_relation
+from pytest_n2r.relation import Relation, RelationFailure, RunSettings, Validity, check_relation
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.strategies import transforms
-from pytest_n2r.validity import Validity
-
-from .fakemetrics import AbsDifference, SameLabel
-from .fakescene import PlaneScene, decode_ramp_x
+from tests.plugin.fakemetrics import AbsDifference, SameLabel
+from tests.plugin.fakescene import PlaneScene, decode_ramp_x
 
 FAST = RunSettings(examples=10, database=None)
 
@@ -122,88 +115,6 @@ def test_shared_cache_makes_a_rerun_render_nothing():
     assert scene.calls == calls and stats.renders == 0
 
 
-def test_relation_build_names_bad_arguments():
-    with pytest.raises(InvalidType, match="eps='0.1' must be a number"):
-        Relation.build(AbsDifference(), "0.1", transforms(yaw=3))
-    with pytest.raises(InvalidArgument, match="examples=0 must be a whole number >= 1"):
-        Relation.build(AbsDifference(), 0.1, transforms(yaw=3), examples=0)
-    with pytest.raises(InvalidArgument, match="views='test'"):
-        Relation.build(AbsDifference(), 0.1, transforms(yaw=3), views="test")
-    with pytest.raises(InvalidType, match="metric=<lambda> must be a pytest_n2r.metrics.Metric|metric=.*function"):
-        Relation.build(lambda a, b: 0, 0.1, transforms(yaw=3))
-    with pytest.raises(InvalidType, match="transform=5 must be a strategy"):
-        Relation.build(AbsDifference(), 0.1, 5)
-    assert find(Relation.build(AbsDifference(), 0, Transform(yaw=2)).transform, lambda t: True) == Transform(yaw=2)
-
-
-def test_a_fixed_transform_and_a_preset_are_accepted():
-    scene = PlaneScene()
-    for transform in (Transform(yaw=1), "tau1"):
-        relation = Relation.build(SameLabel(), 0.5, transform, examples=3)
-        stats = check_relation(scene, lambda rgb: 0, relation, settings=FAST)
-        assert stats.outcome == "passed"
-
-
-def test_draw_output_marks_keypoints_and_labels():
-    rgb = np.zeros((60, 80, 3), np.uint8)
-    circled = draw_output(rgb, np.array([[40.0, 30.0]]))
-    assert circled[30, 40:48].any() and not circled[5:10, 60:70].any()
-    labelled = draw_output(rgb, np.array([0.1, 0.7, 0.2]))
-    assert labelled.any()
-    assert not draw_output(rgb, {"odd": "output"}).any(), "unknown outputs are saved undecorated"
-    assert not rgb.any(), "the input must not be drawn on"
-
-
-def test_save_png_round_trips_rgb(tmp_path):
-    rgb = np.random.default_rng(0).integers(0, 255, (9, 11, 3), dtype=np.uint8)
-    path = save_png(tmp_path / "a" / "x.png", rgb)
-    np.testing.assert_array_equal(cv2.imread(str(path))[..., ::-1], rgb)
-
-
-def test_validity_rejects_empty_and_uncovered_views():
-    scene = PlaneScene()
-    view = scene.views[1]
-    outputs = ("rgb", "depth", "opacity")
-    assert Validity().check(scene.render(view.c2w, view.camera, outputs), scene).valid
-    empty = Validity().check(scene.render(Transform(yaw=50).apply(view.c2w), view.camera, outputs), scene)
-    assert (empty.valid, empty.reason) == (False, "empty view"), empty
-    source = scene.render(view.c2w, view.camera, outputs)
-    half = scene.render(Transform(yaw=30).apply(view.c2w), view.camera, outputs)
-    assert not Validity().check(half, scene, source).valid
-    # a source that already shows that much emptiness (an object against the sky) makes the same view fair
-    assert Validity(min_coverage=0).check(half, scene, half).valid
-    # large plane: opacity stays 1, but the training cameras never saw that far out
-    wide = PlaneScene(half_width=50.0)
-    uncovered = Validity().check(wide.render(Transform(yaw=40).apply(view.c2w), view.camera, outputs), wide)
-    assert (uncovered.valid, uncovered.reason) == (False, "outside the captured region"), uncovered
-
-
-def test_validity_thresholds_are_checked():
-    with pytest.raises(InvalidArgument, match=r"max_empty_increase=1.5 is out of range"):
-        Validity(max_empty_increase=1.5)
-
-
-@pytest.mark.parametrize(("text", "size"), [("480x270", (480, 270)), ("96", (96, 72)), ((40, 30), (40, 30))])
-def test_render_size(text, size):
-    camera = PlaneScene().views[0].camera
-    resized = RenderSize.parse(text).apply(camera)
-    assert (resized.width, resized.height) == size
-
-
-def test_time_limit_interrupts_and_restores_the_previous_timer():
-    previous = signal.signal(signal.SIGALRM, signal.SIG_IGN)
-    try:
-        start = time.perf_counter()
-        with pytest.raises(CallTimeout, match="napping did not finish within 0.1 s"), time_limit(0.1, "napping"):
-            time.sleep(5)
-        assert time.perf_counter() - start < 2
-        assert signal.getsignal(signal.SIGALRM) is signal.SIG_IGN
-        with time_limit(None, "anything"):
-            pass
-    finally:
-        signal.signal(signal.SIGALRM, previous)
-
-
 def test_interpolated_sources_and_all_views():
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=2), examples=8, interpolate=True)
@@ -229,8 +140,8 @@ def test_mutations_use_the_source_pose():
 def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 1, transforms(x=0.1, units="metres"))
-    with pytest.raises(InvalidArgument,
-                       match="units='metres' needs a scene with a known scale; scene 'plane' has none"):
+    message = "units='metres' needs a scene with a known scale; scene 'plane' has none"
+    with pytest.raises(InvalidArgument, match=message):
         check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
     assert scene.calls == 0
 
@@ -254,7 +165,7 @@ def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeyp
     """Shrinking a failure toward yaw=14° walks through the undefined band (5°..15°): those rejections
     must not count toward "almost every draw is invalid", or the final replay of the minimal failure is
     itself rejected and Hypothesis reports a FlakyFailure instead of the failure."""
-    monkeypatch.setattr("pytest_n2r.relations._MIN_REJECTED_TO_GIVE_UP", 3)
+    monkeypatch.setattr("pytest_n2r.relation.engine._MIN_REJECTED_TO_GIVE_UP", 3)
     relation = Relation.build(_BandedHeading(), 0.5, transforms(yaw=(14, 20)),
                               validity=Validity(min_coverage=0, max_empty_increase=1))
     with pytest.raises(RelationFailure) as exc:
@@ -267,7 +178,7 @@ def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeyp
 
 
 def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_search():
-    from pytest_n2r.relations import replay_relation
+    from pytest_n2r.relation import replay_relation
     from pytest_n2r.report import ExampleRecord
 
     scene = PlaneScene(texture="ramp")

@@ -1,4 +1,4 @@
-"""The field floor (pytest_n2r.floor): the SUT on the real photo vs on the render at the same pose."""
+"""The field floor (pytest_n2r.relation.floor): the SUT on the real photo vs on the render at the same pose."""
 
 from __future__ import annotations
 
@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 
 from pytest_n2r.demo import ground_truth, load_demo
-from pytest_n2r.floor import FieldFloor, FloorStore, measure_floor, reference_kind
 from pytest_n2r.metrics import repeatability
+from pytest_n2r.relation.floor import FieldFloor, FloorStore, measure_floor, reference_kind
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study
-
-from .fakefield import BlurredPlane, corners
+from tests.plugin.fakefield import BlurredPlane, corners
 
 
 class Counting:

@@ -8,13 +8,14 @@ outputs differ, stops with :class:`NotDeterministic`, which shows both.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from .errors import N2RError
+from ..errors import N2RError
 
-__all__ = ["NotDeterministic", "SUTNotDeterministic", "same_output", "show_output"]
+__all__ = ["NotDeterministic", "SUTNotDeterministic", "check_deterministic", "same_output", "show_output"]
 
 _SHOWN_ITEMS = 6
 
@@ -68,3 +69,19 @@ def show_output(output: Any, other: Any = None) -> str:
         return text
     text = repr(output)
     return text if len(text) <= 200 else text[:197] + "..."
+
+
+def check_deterministic(run_sut: Callable[[np.ndarray, str, str], Any], source_rgb: np.ndarray,
+                        follow_rgb: np.ndarray, out_source: Any, out_follow: Any, where: str) -> None:
+    """Before the first failure counts: the SUT (``run_sut(rgb, role, where)``) must give the same outputs
+    again on the same two images (else the failure is its noise, and Hypothesis's replay would fail at
+    random); raises :class:`NotDeterministic` showing both outputs."""
+    for role, rgb, first in (("source", source_rgb, out_source), ("follow-up", follow_rgb, out_follow)):
+        again = run_sut(rgb, role, where)
+        if not same_output(first, again):
+            raise NotDeterministic(
+                f"the system under test is not deterministic: called twice on the same {role} image "
+                f"({where}) it returned\n  first:  {show_output(first, again)}\n  second: "
+                f"{show_output(again, first)}\nA relation cannot tell its noise from an inconsistency: seed "
+                "its random generators (and fix its thread count) inside the SUT, or raise eps above the "
+                "noise")

@@ -1,0 +1,29 @@
+"""The metamorphic relation engine: render a source and a follow-up view, run the SUT on both, compare.
+
+One concept per module:
+
+- :mod:`~pytest_n2r.relation.spec`: the :class:`Relation` (metric, ``eps``, follow-up, source views) and
+  the checks of its arguments;
+- :mod:`~pytest_n2r.relation.validity`: when a rendered follow-up view is a fair input (:class:`Validity`);
+- :mod:`~pytest_n2r.relation.settings`: the run-wide defaults (:class:`RunSettings`);
+- :mod:`~pytest_n2r.relation.engine`: one drawn or replayed example evaluated and counted;
+- :mod:`~pytest_n2r.relation.search`: Hypothesis's survey and shrink passes (:func:`check_relation`) and
+  exact replay (:func:`replay_relation`);
+- :mod:`~pytest_n2r.relation.stats`: what a run did (:class:`RelationStats`);
+- :mod:`~pytest_n2r.relation.outputs`: checks of the SUT's outputs (:class:`SUTError`);
+- :mod:`~pytest_n2r.relation.failure`: :class:`RelationFailure` and the messages of every verdict;
+- :mod:`~pytest_n2r.relation.determinism`: telling a non-deterministic SUT from an inconsistency;
+- :mod:`~pytest_n2r.relation.floor`: the field floor beside a relation's result.
+"""
+
+from .determinism import SUTNotDeterministic
+from .failure import RelationFailure
+from .outputs import SUTError
+from .search import check_relation, replay_relation
+from .settings import RunSettings
+from .spec import SEARCHES, Relation, resolve_metric
+from .stats import MAX_UNDEFINED, RelationStats
+from .validity import Validity
+
+__all__ = ["Relation", "RunSettings", "RelationStats", "RelationFailure", "SUTError", "SUTNotDeterministic",
+           "Validity", "check_relation", "replay_relation", "resolve_metric", "SEARCHES", "MAX_UNDEFINED"]

@@ -1,0 +1,270 @@
+"""The relation engine: one relation on one scene with one SUT, evaluated one drawn (or replayed) example
+at a time -- render the source and its follow-up, judge the follow-up's validity, run the SUT on both,
+compare with the metric -- and counted into the run's :class:`~pytest_n2r.relation.stats.RelationStats`.
+:mod:`pytest_n2r.relation.search` drives it with Hypothesis.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from hypothesis import assume, target
+
+from .._timeout import time_limit
+from ..artifacts import artifact_dir, save_pair
+from ..cache import RenderCache
+from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
+from ..geometry import Camera, Units
+from ..metrics.base import MetricResult
+from ..render.view import RenderedView
+from ..scene.base import Scene, SceneView, normalize_outputs
+from ..strategies import transform_units
+from .determinism import check_deterministic
+from .failure import RelationFailure, describe_transform, failure_message
+from .outputs import SUTError, check_output
+from .settings import RunSettings
+from .spec import Relation, mutation_like
+from .stats import MAX_UNDEFINED, RelationStats
+
+__all__ = ["Engine", "Evaluation"]
+
+#: Give up on a relation once this many draws were invalid and they are more than ``max_rejected`` of all.
+_MIN_REJECTED_TO_GIVE_UP = 40
+
+
+def _is_final_example() -> bool:
+    """True while Hypothesis replays the minimal failing example for the last time."""
+    from hypothesis.errors import InvalidArgument
+
+    try:
+        from hypothesis.control import current_build_context
+
+        return bool(current_build_context().is_final)
+    # InvalidArgument: outside a Hypothesis test (no build context); ImportError/AttributeError: its internals
+    # moved. Either way every example is treated as final.
+    except (InvalidArgument, ImportError, AttributeError):
+        return True
+
+
+@dataclass
+class Evaluation:
+    """One drawn example evaluated: its plain record and what a failure report needs."""
+
+    record: dict[str, Any]
+    where: str = ""
+    result: MetricResult | None = None
+    source: RenderedView | None = None
+    follow: RenderedView | None = None
+    outputs: tuple[Any, Any] = (None, None)
+
+
+class Engine:
+    """One relation on one scene with one SUT: evaluates drawn (or replayed) examples.
+
+    The search runs in two passes that draw the same examples (same seed): the *survey* records every
+    draw and never raises, so a relation's records cover all its examples, not just those up to the first
+    failure; only when the survey saw a failure does the *shrink* pass run, raising at the first failure so
+    Hypothesis shrinks it to the smallest transform."""
+
+    def __init__(self, scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation,
+                 settings: RunSettings, cache: RenderCache, stats: RelationStats):
+        self.scene, self.sut, self.relation, self.settings = scene, sut, relation, settings
+        self.cache, self.stats = cache, stats
+        self.metric = relation.metric
+        self.size = relation.size or settings.size
+        self.units = transform_units(relation.transform)
+        needs = tuple(getattr(self.metric, "needs", ()) or ())
+        self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
+        self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
+        self.source_outputs_cache: dict[str, Any] = {}
+        render_settings = getattr(scene, "settings", None)
+        self.render_settings = render_settings.to_dict() if callable(getattr(render_settings, "to_dict", None)) \
+            else {}
+        self.shrinking = False  # False: the survey pass; True: the shrink pass
+        self.failed = False
+        self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
+        self.images_error: str | None = None
+
+    # -- pieces -----------------------------------------------------------------------------------------
+
+    def camera_for(self, view: SceneView):
+        return view.camera if self.size is None else self.size.apply(view.camera)
+
+    def render(self, c2w: np.ndarray, camera: Any, view: SceneView, outputs: tuple[str, ...],
+               role: str) -> RenderedView:
+        start = time.perf_counter()
+        renders = self.cache.stats.renders
+        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}",
+                        escape=True):
+            rendered = self.cache.render(self.scene, c2w, camera, outputs)
+        self.stats.render_s += time.perf_counter() - start
+        self.stats.renders += self.cache.stats.renders - renders
+        return rendered
+
+    def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
+        start = time.perf_counter()
+        try:
+            with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})",
+                            escape=True):
+                output = self.sut(rgb)
+        except Exception as exc:
+            raise SUTError(
+                f"the system under test raised {type(exc).__name__}: {exc} -- on the {role} view ({where}); "
+                "its traceback is above"
+            ) from exc
+        finally:
+            self.stats.sut_s += time.perf_counter() - start
+        check_output(output, role, where, self.metric)
+        return output
+
+    def compute(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
+                where: str) -> MetricResult:
+        start = time.perf_counter()
+        try:
+            result = self.metric.compute(out_source, out_follow, source, follow)
+        except MetricUndefined as exc:  # the pair tests nothing (e.g. no keypoint in the common region)
+            return MetricResult.undefined(self.metric.name, str(exc))
+        except (InvalidType, InvalidArgument) as exc:
+            if isinstance(exc, SUTOutputError):
+                raise
+            raise SUTOutputError(f"{self.metric!r} cannot use the SUT's output ({where}): {exc}") from exc
+        finally:
+            self.stats.metric_s += time.perf_counter() - start
+        if not isinstance(result, MetricResult):
+            raise InvalidType(f"{self.metric!r}.compute returned {type(result).__name__}, not a MetricResult")
+        if getattr(result, "valid", True) and not math.isfinite(result.deviation):
+            raise SUTOutputError(
+                f"{self.metric!r} gave deviation {result.deviation} ({where}); the SUT's output probably "
+                "contains NaN or Inf"
+            )
+        return result
+
+    # -- one example ------------------------------------------------------------------------------------
+
+    def follow_up(self, tau: Any, units: Units) -> dict[str, Any]:
+        """The follow-up of a record: a pose transform's fields and units, or a mutation's parameters."""
+        if not mutation_like(tau):
+            return {"transform": tau.as_dict(), "units": units.value}
+        as_dict = getattr(tau, "as_dict", None)
+        return {"transform": None, "mutation": as_dict() if callable(as_dict) else {"description": tau.describe()}}
+
+    def evaluate(self, view: SceneView, tau: Any, camera: Any = None, units: Units | None = None) -> Evaluation:
+        """Render, check validity, run the SUT and the metric on one example; never raises on a verdict.
+
+        ``camera`` and ``units`` (a replayed example's recorded ones) override the run's render size and the
+        relation's translation units."""
+        camera = camera if camera is not None else self.camera_for(view)
+        units = units or self.units
+        mutation = mutation_like(tau)
+        describe = tau.describe() if mutation else describe_transform(tau, self.units)
+        where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
+        record: dict[str, Any] = {
+            "scene": self.scene.name, "scene_hash": self.scene.content_hash, "view": view.name,
+            "source_c2w": np.asarray(view.c2w, dtype=np.float64).ravel().tolist(), "camera": camera.to_dict(),
+            "settings": self.render_settings, **self.follow_up(tau, units), "status": "accepted", "reason": "",
+            "score": math.nan, "deviation": math.nan, "passed": False,
+        }
+        source = self.render(view.c2w, camera, view, self.outputs, "source")
+        if mutation:  # the follow-up is the mutated source render, same pose
+            apply_to_view = getattr(tau, "apply_to_view", None)
+            follow = apply_to_view(source) if callable(apply_to_view) else RenderedView(
+                camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb), depth=source.depth,
+                opacity=source.opacity)
+        else:
+            follow_c2w = tau.apply(view.c2w, self.scene.length_scale(units))
+            follow = self.render(follow_c2w, camera, view, self.follow_outputs, "follow-up")
+            verdict = self.relation.validity.check(follow, self.scene, source)
+            if not verdict.valid:
+                record.update(status="rejected", reason=verdict.reason)
+                return Evaluation(record, where)
+        key = f"{view.name}|{camera.width}x{camera.height}|{record['source_c2w']}"
+        if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
+            self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
+        out_source = self.source_outputs_cache[key]
+        out_follow = self.run_sut(follow.rgb, "follow-up", where)
+        result = self.compute(out_source, out_follow, source, follow, where)
+        if not getattr(result, "valid", True):
+            record.update(status="undefined", reason=str(result.details.get("reason", "metric undefined")))
+        else:
+            deviation = float(result.deviation)
+            record.update(score=float(result.score), deviation=deviation, passed=deviation <= self.relation.eps)
+        return Evaluation(record, where, result, source, follow, (out_source, out_follow))
+
+    def count(self, record: dict[str, Any]) -> None:
+        """Count a survey record and stop drawing when almost every draw is invalid or undefined."""
+        stats = self.stats
+        stats.records.append(record)
+        if record["status"] == "rejected":
+            stats.rejected[record["reason"]] += 1
+        elif record["status"] == "undefined":
+            stats.undefined[record["reason"]] += 1
+        else:
+            stats.examples += 1
+            if not record["deviation"] <= stats.worst_deviation:  # also true for the first (NaN)
+                stats.worst_deviation, stats.worst = record["deviation"], record
+            if not record["passed"]:
+                stats.inconsistencies += 1
+        drawn = stats.examples + stats.n_rejected + stats.n_undefined
+        max_rejected = self.relation.validity.max_rejected
+        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > max_rejected:
+            self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
+        evaluated = stats.examples + stats.n_undefined
+        if stats.n_undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
+                and stats.n_undefined / evaluated > MAX_UNDEFINED:
+            self.gave_up = "undefined"
+
+    def example(self, view: SceneView, tau: Any) -> None:
+        """The body of one Hypothesis example (survey or shrink pass)."""
+        __tracebackhide__ = True
+        if self.gave_up:  # reject the rest of the draws without rendering them
+            assume(False)
+        evaluation = self.evaluate(view, tau)
+        record = evaluation.record
+        if not self.shrinking:
+            if record["status"] == "accepted" and not record["passed"] and not self.stats.inconsistencies:
+                check_deterministic(self.run_sut, evaluation.source.rgb, evaluation.follow.rgb,
+                                    *evaluation.outputs, evaluation.where)
+            self.count(record)
+        elif self.failed:
+            self.stats.shrink_examples += 1
+        if record["status"] != "accepted":
+            assume(False)  # not a test: Hypothesis draws another
+        if self.relation.search == "targeted":
+            target(record["deviation"], label="deviation")
+        if record["passed"] or not self.shrinking:
+            return
+        self.failed = True
+        if not _is_final_example():
+            raise RelationFailure("inconsistent (shrinking)")
+        self.fail(view, tau, evaluation)
+
+    def fail(self, view: SceneView, tau: Any, evaluation: Evaluation, note: str = "") -> None:
+        """Save the failure pictures and raise the :class:`RelationFailure` of ``evaluation``."""
+        __tracebackhide__ = True
+        record, stats = dict(evaluation.record), self.stats
+        if self.settings.artifacts is not None:
+            try:
+                record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id),
+                                             evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
+            except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
+                self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
+        stats.minimal = record
+        message = failure_message(self.scene, self.relation, stats, self.units, view, tau, evaluation.result, record,
+                                  note=note, images_error=self.images_error)
+        raise RelationFailure(message, stats)
+
+
+    def replay(self, records: list[Any]) -> list[dict[str, Any]]:
+        """Evaluate each recorded example again, exactly: the recorded source pose, camera and follow-up."""
+        out = []
+        for rec in records:
+            view = SceneView(index=-1, name=rec.view, camera=Camera.from_dict(rec.camera),
+                             c2w=np.asarray(rec.source_c2w, dtype=np.float64).reshape(4, 4), split="replayed")
+            out.append(self.evaluate(view, rec.follow_up(), camera=view.camera, units=Units(rec.units)).record)
+        return out
+

@@ -1,0 +1,111 @@
+"""A relation's verdicts in words: the :class:`RelationFailure` a broken relation raises and its message
+(scene, source view, the minimal follow-up, score and deviation against ``eps``, the search's counts, where
+the failure pictures are), and the messages of a relation that tested nothing or drew mostly invalid views.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from ..geometry import Transform, Units
+from ..metrics.base import MetricResult
+from ..scene.base import Scene, SceneView
+from .spec import Relation, mutation_like
+from .stats import MAX_UNDEFINED, RelationStats, plural
+
+__all__ = ["RelationFailure", "describe_transform", "failure_message", "nothing_to_test", "too_many_invalid"]
+
+
+class RelationFailure(AssertionError):
+    """The SUT's outputs on a source view and its follow-up deviate by more than ``eps``."""
+
+    def __init__(self, message: str, stats: RelationStats | None = None):
+        super().__init__(message)
+        self.stats = stats
+
+
+def describe_transform(tau: Transform, units: Units) -> str:
+    """``tau`` in words, its translations in ``units`` (``ref`` for reference lengths)."""
+    return tau.describe("ref" if units is Units.REFERENCE else units.value)
+
+
+def failure_message(scene: Scene, relation: Relation, stats: RelationStats, units: Units, view: SceneView,
+                    tau: Any, result: MetricResult, record: dict, *, note: str = "",
+                    images_error: str | None = None) -> str:
+    """The message of a failing example: ``record`` (its plain record, with the saved ``images`` if any) of
+    source ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``."""
+    metric = relation.metric
+    camera = record["camera"]
+    lines = [
+        (f"metamorphic relation violated: {metric!r} deviates {result.deviation:.4g} from its ideal "
+         f"{metric.ideal:g}, more than eps={relation.eps:g}"),
+        f"  scene:      {scene.name} (content {scene.content_hash[:12]})",
+        f"  source:     view {view.name!r} ({view.split}), rendered at {camera['width']}x{camera['height']}",
+    ]
+    if mutation_like(tau):
+        lines.append(f"  follow-up:  the source render mutated by {tau.describe()}")
+    else:
+        lines.append(f"  transform:  {describe_transform(tau, units)}  ({note or 'minimal after shrinking'})")
+        if any((tau.x, tau.y, tau.z)):
+            scale = scene.length_scale(units)
+            lines.append("              = " + ", ".join(
+                f"{n}={getattr(tau, n) * scale:+.4g}" for n in ("x", "y", "z") if getattr(tau, n)
+            ) + " scene units" + _metres(scene, tau, scale))
+    details = ", ".join(f"{k}={v}" for k, v in result.details.items())
+    lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
+                 f"{relation.eps:g}" + (f" ({details})" if details else ""))
+    lines.append(f"  search:     {plural(stats.examples, 'example')}, {stats.inconsistencies} inconsistent, "
+                 f"{stats.n_rejected} rejected as invalid, {stats.n_undefined} undefined, "
+                 f"{plural(stats.shrink_examples, 'shrink step')}")
+    if record.get("images"):
+        images = record["images"]
+        lines.append(f"  images:     source   {_shown_path(images['source'])}")
+        lines.append(f"              follow   {_shown_path(images['follow'])}")
+        lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
+                     f"{Path(images['follow_raw']).name})")
+    elif images_error:
+        lines.append(f"  images:     {images_error}")
+    return "\n".join(lines)
+
+
+def _metres(scene: Scene, tau: Transform, scale: float) -> str:
+    mpu = getattr(scene, "metres_per_unit", None)
+    if not mpu:
+        return ""
+    parts = [f"{n}={getattr(tau, n) * scale * mpu:+.3g}" for n in ("x", "y", "z") if getattr(tau, n)]
+    return " = " + ", ".join(parts) + " m"
+
+
+def _shown_path(path: str | os.PathLike) -> str:
+    """``path`` relative to the current directory when it lies inside it (shorter, and what a reader can
+    open from where they ran pytest), else as it is."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
+
+
+def nothing_to_test(stats: RelationStats, relation: Relation) -> str:
+    """Why a relation whose draws were mostly undefined fails (more than :data:`MAX_UNDEFINED`)."""
+    evaluated = stats.examples + stats.n_undefined
+    reasons = "; ".join(f"{n}x {r}" for r, n in stats.undefined.most_common(3))
+    return (
+        f"the SUT produced nothing to test: {relation.metric!r} was undefined on {stats.n_undefined} of "
+        f"{evaluated} evaluated draws ({stats.n_undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
+        f"{stats.scene!r}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
+        "never passes a relation"
+    )
+
+
+def too_many_invalid(stats: RelationStats, relation: Relation) -> str:
+    """Why a relation whose follow-up views were mostly invalid is a usage error."""
+    drawn = stats.examples + stats.n_rejected + stats.n_undefined
+    share = stats.n_rejected / drawn if drawn else 1.0
+    reasons = ", ".join(f"{r}: {n}" for r, n in stats.rejected.most_common()) or "no valid example"
+    return (
+        f"{relation.transform!r} leaves what the scene {stats.scene!r} can render faithfully in {share:.0%} of "
+        f"{drawn} draws ({reasons}); narrow the bounds (or use look_at=True) so most follow-up views stay "
+        "in the captured region"
+    )

@@ -1,0 +1,63 @@
+"""What the plugin shows beside a relation's result: the field floor, whether ``eps`` is below it, and on a
+fitted demo scene the exact-vs-fitted replay; as plain JSON-ready data and as terminal lines."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...cache import RenderCache
+from ...render.size import RenderSize
+from ...scene.base import Scene
+from .exact import compare_exact
+from .measure import FieldFloor, FloorStore, measure_floor, sut_name
+
+__all__ = ["annotate_relation", "annotation_lines"]
+
+_STORES: dict[Path | None, FloorStore] = {}
+
+
+def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Any, records: list[dict[str, Any]],
+                      *, size: RenderSize | None, cache: RenderCache | None,
+                      cache_dir: Path | None) -> dict[str, Any] | None:
+    """What the plugin shows beside a relation's result on ``scene`` (``None`` on an exact scene): the field
+    floor of the relation's SUT, metric and render size, whether ``eps`` is below it, and on a fitted demo
+    scene the relation's examples replayed on exact renders. Plain JSON-ready data; a floor that cannot be
+    measured (the SUT raises on a photo, ...) is reported with the reason, never raised."""
+    if getattr(scene, "is_exact", False):
+        return None
+    from ...strategies import transform_units
+
+    directory = None if cache_dir is None else Path(cache_dir) / "floors"
+    store = _STORES.setdefault(directory, FloorStore(directory))
+    eps = float(relation.eps)
+    try:
+        floor = measure_floor(scene, sut, relation.metric, size=size, cache=cache, store=store)
+    except Exception as exc:  # noqa: BLE001 -- an annotation: what went wrong is said, the verdict stands
+        floor = FieldFloor(scene.name, sut_name(sut), repr(relation.metric), str(size), "none",
+                           reason=f"measuring it failed: {type(exc).__name__}: {exc}")
+    out: dict[str, Any] = {"floor": floor.to_dict(), "line": floor.describe(eps), "below_floor": floor.above(eps)}
+    try:
+        length = scene.length_scale(transform_units(relation.transform))
+        comparison = compare_exact(scene, sut, relation.metric, records,
+                                   lambda v: v.camera if size is None else size.apply(v.camera), length,
+                                   cache=cache)
+    except Exception as exc:  # noqa: BLE001 -- as above
+        out["exact_line"] = f"exact vs fitted: replay failed: {type(exc).__name__}: {exc}"
+    else:
+        if comparison is not None:
+            out["exact"], out["exact_line"] = comparison.to_dict(), comparison.describe()
+    return out
+
+
+def annotation_lines(annotation: dict[str, Any] | None) -> list[tuple[str, bool]]:
+    """``(line, is_warning)`` pairs to print under a relation's summary line."""
+    if not annotation:
+        return []
+    lines = [(annotation["line"], bool(annotation["below_floor"]))]
+    if annotation.get("exact_line"):
+        lines.append((annotation["exact_line"], False))
+    return lines

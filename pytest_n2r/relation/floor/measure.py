@@ -1,0 +1,222 @@
+"""The field floor of one SUT and metric on one scene at one render size: the mean deviation, over the
+held-out views whose metric is defined, between the SUT's output on each view's reference image and on the
+field's render at the same pose (:func:`measure_floor`), kept in memory and on disk by a :class:`FloorStore`.
+See :mod:`pytest_n2r.relation.floor` for what it means.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from itertools import chain
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ... import __version__
+from ...cache import RenderCache
+from ...data.atomic import atomic_write_text
+from ...geometry import Camera
+from ...metrics.base import Metric
+from ...render.size import RenderSize
+from ...render.view import RenderedView
+from ...scene.base import Scene, SceneView, normalize_outputs
+from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
+
+__all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_floor", "sut_name"]
+
+#: Bumped when the measurement changes, so cached floors of an older measurement are not reused.
+FLOOR_VERSION = 1
+
+
+@dataclass(frozen=True)
+class FieldFloor:
+    """The reality-to-field shift of one SUT and metric on one scene at one render size.
+
+    ``reference`` is ``"photo"``, ``"exact"`` or ``"none"`` (then ``reason`` says why there is no floor);
+    ``samples`` holds one :class:`ShiftSample` per held-out view. :attr:`value` is the mean deviation of
+    the defined samples (NaN when none is defined)."""
+
+    scene: str
+    sut: str
+    metric: str
+    size: str
+    reference: str
+    samples: tuple[ShiftSample, ...] = ()
+    reason: str = ""
+    key: str = ""
+
+    @property
+    def deviations(self) -> list[float]:
+        return [s.deviation for s in self.samples if s.valid]
+
+    @property
+    def n(self) -> int:
+        """Held-out views whose metric is defined."""
+        return len(self.deviations)
+
+    @property
+    def available(self) -> bool:
+        return self.n > 0
+
+    @property
+    def value(self) -> float:
+        """The floor: mean deviation over the defined held-out views (NaN when there is none)."""
+        return float(np.mean(self.deviations)) if self.deviations else math.nan
+
+    @property
+    def max(self) -> float:
+        return float(np.max(self.deviations)) if self.deviations else math.nan
+
+    @property
+    def why_unavailable(self) -> str:
+        if self.available:
+            return ""
+        if self.reason:
+            return self.reason
+        reasons = sorted({s.reason for s in self.samples if not s.valid})
+        return (f"the metric is undefined on all {len(self.samples)} held-out views"
+                + (f" ({'; '.join(reasons)})" if reasons else ""))
+
+    def above(self, eps: float) -> bool:
+        """True when ``eps`` is below the floor: the relation then tests the scene field, not the SUT."""
+        return self.available and eps < self.value
+
+    def describe(self, eps: float | None = None) -> str:
+        """One line: ``field floor 0.31 (photo vs render, mean of 7 held-out views, max 0.45)``, with a
+        warning when ``eps`` is below it."""
+        if not self.available:
+            return f"field floor n/a: {self.why_unavailable}"
+        against = "photo" if self.reference == "photo" else "exact render"
+        undefined = len(self.samples) - self.n
+        text = (f"field floor {self.value:.3g} ({against} vs field render at the same pose, mean of "
+                f"{self.n} held-out view{'s' if self.n != 1 else ''}, max {self.max:.3g}"
+                + (f", {undefined} undefined" if undefined else "") + ")")
+        if eps is not None and self.above(eps):
+            text += (f"; WARNING: eps {eps:g} is below the field floor: this relation tests the scene field, "
+                     "not the SUT")
+        return text
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (NaN as ``None``), with the summary values for readers of reports."""
+        d = asdict(self)
+        d["samples"] = [{**s, "score": json_number(s["score"]), "deviation": json_number(s["deviation"])}
+                        for s in d["samples"]]
+        d.update(value=json_number(self.value), max=json_number(self.max), n=self.n)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> FieldFloor:
+        samples = tuple(ShiftSample(s["view"], _num(s["score"]), _num(s["deviation"]), bool(s["valid"]),
+                                    s.get("reason", "")) for s in d.get("samples", ()))
+        return cls(d["scene"], d["sut"], d["metric"], d["size"], d["reference"], samples, d.get("reason", ""),
+                   d.get("key", ""))
+
+
+def json_number(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def _num(x: float | None) -> float:
+    return math.nan if x is None else float(x)
+
+
+class FloorStore:
+    """Measured floors, in memory and (with a ``directory``) on disk as JSON, one file per key."""
+
+    def __init__(self, directory: str | os.PathLike | None = None):
+        self.directory = Path(directory) if directory is not None else None
+        self._memory: dict[str, FieldFloor] = {}
+
+    def get(self, key: str) -> FieldFloor | None:
+        floor = self._memory.get(key)
+        if floor is None and self.directory is not None:
+            path = self.directory / f"{key}.json"
+            try:
+                floor = FieldFloor.from_dict(json.loads(path.read_text()))
+            except (OSError, ValueError, KeyError, TypeError):  # absent, or torn by a crash: measure again
+                return None
+            self._memory[key] = floor
+        return floor
+
+    def put(self, floor: FieldFloor) -> None:
+        self._memory[floor.key] = floor
+        if self.directory is not None:
+            atomic_write_text(self.directory / f"{floor.key}.json", json.dumps(floor.to_dict(), indent=1) + "\n")
+
+
+def sut_name(sut: Callable[..., Any]) -> str:
+    """``module:qualname`` of a SUT callable (its class's for a callable object)."""
+    target = sut if hasattr(sut, "__qualname__") else type(sut)
+    return f"{getattr(target, '__module__', '?')}:{getattr(target, '__qualname__', type(sut).__name__)}"
+
+
+def _digest_output(output: Any) -> str:
+    """A digest of a SUT output (keypoint lists as their coordinates, arrays with shape and dtype)."""
+    h = hashlib.sha256()
+    if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
+        output = np.array([k.pt for k in output], dtype=np.float64)
+    if hasattr(output, "detach") and hasattr(output, "cpu"):
+        output = output.detach().cpu().numpy()
+    if isinstance(output, np.ndarray):
+        h.update(f"{output.shape}/{output.dtype}".encode())
+        h.update(np.ascontiguousarray(output).tobytes())
+    else:
+        h.update(repr(output).encode())
+    return h.hexdigest()
+
+
+def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, *,
+                  size: RenderSize | None = None, cache: RenderCache | None = None,
+                  store: FloorStore | None = None, name: str | None = None,
+                  max_views: int | None = 12) -> FieldFloor:
+    """The field floor of ``sut`` (an H×W×3 uint8 RGB image → its output) under ``metric`` on ``scene``,
+    rendered at ``size`` (``None``: each view's camera) on at most ``max_views`` held-out views.
+
+    Renders go through ``cache`` (default: none); ``store`` keeps measured floors keyed by the scene's
+    content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and a digest of its output
+    on the first reference image, so an edited SUT whose output changes there is measured again), the
+    metric's ``repr``, the size, the views and :data:`FLOOR_VERSION`.
+    """
+    name = name or sut_name(sut)
+    size_text = "view size" if size is None else str(size)
+    kind, reason = reference_kind(scene)
+    if kind == "none":
+        return FieldFloor(scene.name, name, repr(metric), size_text, kind, reason=reason)
+    views = floor_views(scene, max_views)
+    render_cache = cache if cache is not None else RenderCache(None)
+    outputs = normalize_outputs(("rgb", *(getattr(metric, "needs", ()) or ())))
+
+    def camera_of(view: SceneView) -> Camera:
+        return view.camera if size is None else size.apply(view.camera)
+
+    def render(s: Scene, c2w: np.ndarray, camera: Camera) -> RenderedView:
+        return render_cache.render(s, c2w, camera, outputs if s is scene else ("rgb",))
+
+    references = (reference_image(scene, v, camera_of(v), kind, render) for v in views)
+    first = next(references)
+    first_output = sut(first)
+    twin = exact_twin(scene) if kind == "exact" else None
+    spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "scene": scene.content_hash,
+            "twin": twin.content_hash if twin is not None else None, "sut": name,
+            "probe": _digest_output(first_output), "metric": repr(metric), "size": size_text,
+            "views": [v.name for v in views], "reference": kind}
+    key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
+    if store is not None and (known := store.get(key)) is not None:
+        return known
+    samples = []
+    for view, image in zip(views, chain([first], references)):
+        rendered = render(scene, view.c2w, camera_of(view))
+        real = RenderedView(rendered.camera, rendered.c2w, rgb=image, depth=rendered.depth,
+                            opacity=rendered.opacity)
+        out_real = first_output if image is first else sut(image)
+        samples.append(shift_sample(metric, out_real, sut(rendered.rgb), real, rendered, view.name))
+    floor = FieldFloor(scene.name, name, repr(metric), size_text, kind, tuple(samples), key=key)
+    if store is not None:
+        store.put(floor)
+    return floor

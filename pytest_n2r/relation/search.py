@@ -1,0 +1,209 @@
+"""The search: Hypothesis draws source views and follow-ups for the :class:`~pytest_n2r.relation.engine.Engine`.
+
+No pytest here: the plugin (and anyone else) calls :func:`check_relation` with a scene, a SUT and a
+:class:`~pytest_n2r.relation.spec.Relation`, and gets a :class:`~pytest_n2r.relation.stats.RelationStats`
+back or a :class:`~pytest_n2r.relation.failure.RelationFailure` (an ``AssertionError``).
+
+Hypothesis drives the search: it draws a source view and a transform, shrinks a failure to the smallest
+transform that still fails, replays the last failure first from its example database, seeds from the
+relation's identity when ``derandomize`` is on, and with ``search="targeted"`` steers toward larger
+deviations with :func:`hypothesis.target`. Deadlines are off and the "too slow" / "filters too much"
+health checks are suppressed, because renders are slow and invalid views are expected; a real hang is
+caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+from hypothesis import HealthCheck, Phase, given
+from hypothesis import seed as hypothesis_seed
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
+from hypothesis.database import ReadOnlyDatabase
+from hypothesis.errors import Flaky, Unsatisfiable
+
+from .._timeout import TimeLimitReached
+from ..cache import RenderCache
+from ..errors import InvalidArgument, InvalidType
+from ..geometry import Camera
+from ..scene.base import Scene, SceneView
+from ..scene.splits import scene_views
+from ..scene.trajectory import interpolate_view
+from ..strategies import transform_units
+from .determinism import NotDeterministic, SUTNotDeterministic
+from .engine import Engine
+from .failure import RelationFailure, nothing_to_test, too_many_invalid
+from .settings import RunSettings
+from .spec import Relation
+from .stats import MAX_UNDEFINED, RelationStats
+
+__all__ = ["check_relation", "replay_relation"]
+
+
+def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[SceneView]:
+    """Source views by name (so Hypothesis reports ``view='IMG_0042'``, not a pose matrix)."""
+    if relation.interpolate and len(scene.views) >= 2:
+        trajectory = list(scene.views)
+        return st.builds(lambda i, k: interpolate_view(trajectory[i], trajectory[i + 1], k / 100),
+                         st.integers(0, len(trajectory) - 2), st.integers(0, 100))
+    names = [v.name for v in scene_views(scene, relation.views)]
+    return st.sampled_from(names).map(scene.view)
+
+
+def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
+                   settings: RunSettings | None = None, cache: RenderCache | None = None,
+                   test_id: str = "relation", replay: list[Any] | None = None,
+                   on_start: Callable[[RelationStats], None] | None = None) -> RelationStats:
+    """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
+
+    Returns the run's :class:`RelationStats` when the relation held on every valid example; raises
+    :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform, or saying that the
+    SUT produced nothing to test (more than :data:`MAX_UNDEFINED` of the evaluated draws undefined);
+    :class:`~pytest_n2r.errors.InvalidArgument` when almost every drawn follow-up view was invalid.
+    ``replay``: recorded examples (:class:`~pytest_n2r.report.records.ExampleRecord`, e.g. a baseline's)
+    evaluated exactly, before the search, into ``stats.replayed`` (their verdicts do not fail the run: a
+    baseline comparison judges them). ``test_id`` names the run in reports and keys its Hypothesis database
+    entries and seed; ``on_start`` receives the (still empty) stats before anything runs, so a caller keeps
+    them even when the run raises.
+    """
+    __tracebackhide__ = True
+    if not isinstance(scene, Scene):
+        raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
+    if not callable(sut):
+        raise InvalidType(f"sut={sut!r} must be a callable taking an H×W×3 uint8 RGB image, "
+                          f"not {type(sut).__name__}")
+    if not isinstance(relation, Relation):
+        raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
+    settings = settings or RunSettings()
+    scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
+    cache = cache if cache is not None else RenderCache(None)
+    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
+    if on_start is not None:
+        on_start(stats)
+    engine = Engine(scene, sut, relation, settings, cache, stats)
+    try:
+        if replay is not None:
+            stats.replayed = engine.replay(replay)
+        _search(engine, scene, relation, settings, test_id)
+    except RelationFailure as exc:
+        stats.outcome, stats.message = "failed", str(exc)
+        exc.stats = stats
+        raise
+    except (TimeLimitReached, NotDeterministic) as exc:  # escaped Hypothesis: the example ran once
+        stats.outcome, stats.message = "error", str(exc)
+        raise exc.error() from None
+    except Flaky:  # a failure that passed on replay without the SUT changing its outputs: the scene's render
+        stats.outcome = "error"
+        stats.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
+                         "is not deterministic. The system under test gave the same outputs twice on the first "
+                         "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
+                         "with randomness?) or the metric vary")
+        raise SUTNotDeterministic(stats.message) from None
+    except BaseException as exc:
+        stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
+        raise
+    return stats
+
+
+def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, examples: list[Any], *,
+                    settings: RunSettings | None = None, cache: RenderCache | None = None,
+                    test_id: str = "relation") -> RelationStats:
+    """Evaluate exactly the recorded ``examples`` (e.g. a baseline's, see
+    :func:`pytest_n2r.report.replay_candidates`) for ``sut`` on ``scene``, without a search: their records
+    are ``stats.replayed``, in order. A verdict never raises; only the SUT's own errors do. Pair them with
+    :func:`pytest_n2r.report.compare_paired`."""
+    if not isinstance(scene, Scene):
+        raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
+    if not isinstance(relation, Relation):
+        raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
+    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
+    engine = Engine(scene, sut, relation, settings or RunSettings(), cache if cache is not None else RenderCache(None),
+                     stats)
+    stats.replayed = engine.replay(examples)
+    return stats
+
+
+def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSettings, test_id: str) -> None:
+    """The survey pass, then (after a failure) the shrink pass; raise the relation's verdict."""
+    __tracebackhide__ = True
+    stats = engine.stats
+
+    def example(view: SceneView, tau: Any) -> None:
+        __tracebackhide__ = True
+        engine.example(view, tau)
+
+    # key this run's database entries and (with derandomize) its seed to the test, scene and relation
+    example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
+    options: dict[str, Any] = {
+        "max_examples": relation.examples or settings.examples, "deadline": None,
+        "derandomize": settings.derandomize,
+        "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large],
+        # no "explain" phase: it re-runs variations of the failure (renders) to annotate source lines
+        "phases": [Phase.explicit, Phase.reuse, Phase.generate, Phase.target, Phase.shrink],
+    }
+    database = None if settings.derandomize else (
+        hsettings().database if settings.database == "default" else settings.database)
+    seed = None if settings.derandomize else random.getrandbits(64)  # both passes draw the same examples
+
+    def run(db: Any) -> None:
+        test = given(view=_views_strategy(scene, relation), tau=relation.transform)(example)
+        if seed is not None:
+            test = hypothesis_seed(seed)(test)
+        hsettings(**options, database=db)(test)()
+
+    try:  # the survey: records every draw, never fails (and leaves the example database as it was)
+        with _without_local_constants():
+            run(None if database is None else ReadOnlyDatabase(database))
+    except Unsatisfiable:
+        pass
+    drawn = stats.examples + stats.n_rejected + stats.n_undefined
+    evaluated = stats.examples + stats.n_undefined
+    if stats.n_undefined and stats.n_undefined / evaluated > MAX_UNDEFINED:
+        raise RelationFailure(nothing_to_test(stats, relation), stats)
+    if engine.gave_up == "invalid" or not drawn or stats.n_rejected / drawn > relation.validity.max_rejected:
+        raise InvalidArgument(too_many_invalid(stats, relation))
+    if not stats.inconsistencies:
+        return
+    engine.shrinking = True
+    try:
+        with _without_local_constants():
+            run(database)
+    except Unsatisfiable:
+        pass
+    # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic): report the
+    # survey's worst failing example as it was drawn
+    worst = stats.worst
+    view = SceneView(index=-1, name=worst["view"], camera=Camera.from_dict(worst["camera"]),
+                     c2w=np.asarray(worst["source_c2w"]).reshape(4, 4), split="drawn")
+    from ..report.records import ExampleRecord
+
+    tau = ExampleRecord.from_dict(worst).follow_up()
+    engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
+                note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
+
+
+@contextmanager
+def _without_local_constants() -> Iterator[None]:
+    """Hypothesis mixes numbers it finds in the source of the loaded local modules into its draws, so which
+    modules happen to be imported changed the examples of a derandomized search (a rerun in one process, a
+    pytest-xdist worker, a run that loads the report modules earlier). The engine's draws (views,
+    transforms) gain nothing from them, so they are off while it searches. This patches Hypothesis's
+    internal ``providers`` module; if that moves, nothing is patched."""
+    try:
+        from hypothesis.internal.conjecture import providers
+
+        empty, original, cache = providers.Constants(), providers._get_local_constants, providers.CONSTANTS_CACHE
+        cache.cache.clear()
+    except (ImportError, AttributeError):
+        yield
+        return
+    providers._get_local_constants = lambda: empty
+    try:
+        yield
+    finally:
+        providers._get_local_constants = original

@@ -1,0 +1,26 @@
+"""How to run relations: the run-wide defaults a relation's own values override."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..render.size import RenderSize
+
+__all__ = ["RunSettings"]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How to run relations: defaults for ``examples`` and ``size`` (a relation's own values win),
+    ``derandomize`` (same examples every run: for CI), ``timeout`` seconds per render / SUT call
+    (``None``: no limit), where failure pictures go (``artifacts``; ``None``: nowhere) and the Hypothesis
+    example ``database`` (``"default"``: Hypothesis's own setting)."""
+
+    examples: int = 50
+    size: RenderSize | None = None
+    derandomize: bool = False
+    timeout: float | None = 300.0
+    artifacts: Path | None = None
+    database: Any = "default"

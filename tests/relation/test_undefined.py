@@ -1,0 +1,79 @@
+"""Nothing to compare is never a pass: a SUT that gives no output, or the same output whatever the image,
+fails its relation with a message that says so (issue 15, point 1)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pytest_n2r import transforms
+from pytest_n2r.metrics import MetricResult, interest_point_spread, repeatability
+from pytest_n2r.relation import MAX_UNDEFINED, Relation, RelationFailure, RunSettings, check_relation
+from tests.plugin.fakemetrics import AbsDifference
+from tests.plugin.fakescene import PlaneScene
+
+SETTINGS = RunSettings(examples=12, database=None, derandomize=True)
+
+
+def no_keypoints(rgb: np.ndarray) -> np.ndarray:
+    return np.zeros((0, 2), np.float32)
+
+
+def same_grid(step: float):
+    """A content-independent detector: the same grid of points on every image."""
+    def detect(rgb: np.ndarray) -> np.ndarray:
+        h, w = rgb.shape[:2]
+        u, v = np.meshgrid(np.arange(step / 2, w, step), np.arange(step / 2, h, step))
+        return np.stack([u.ravel(), v.ravel()], axis=1)
+    return detect
+
+
+@pytest.mark.parametrize("metric", [repeatability(px=2), interest_point_spread(radius=8)], ids=repr)
+def test_an_empty_detector_fails_with_nothing_to_test(metric):
+    relation = Relation.build(metric, eps=0.5, transform=transforms(yaw=3))
+    with pytest.raises(RelationFailure, match="the SUT produced nothing to test") as info:
+        check_relation(PlaneScene(), no_keypoints, relation, settings=SETTINGS)
+    stats = info.value.stats
+    assert stats.outcome == "failed" and stats.examples == 0 and stats.n_undefined > 0
+    assert "the SUT found no keypoint in either view" in str(info.value)
+    assert all(r["status"] == "undefined" for r in stats.records) and stats.records
+
+
+class _SometimesUndefined(AbsDifference):
+    """Undefined on every ``every``-th pair."""
+
+    def __init__(self, every: int):
+        self.every, self.calls = every, 0
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        self.calls += 1
+        if self.calls % self.every == 0:
+            return MetricResult.undefined(self.name, "no output this time")
+        return super().compute(out_source, out_follow, source, follow)
+
+
+@pytest.mark.parametrize("every, fails", [(7, False), (1, True)])
+def test_undefined_draws_are_counted_and_a_mostly_undefined_relation_fails(every, fails):
+    relation = Relation.build(_SometimesUndefined(every), eps=255, transform=transforms(yaw=3))
+    if fails:
+        with pytest.raises(RelationFailure, match=r"nothing to test: .* undefined on \d+ of \d+ evaluated draws"):
+            check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
+        return
+    stats = check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
+    share = stats.n_undefined / (stats.examples + stats.n_undefined)
+    assert stats.outcome == "passed" and 0 < share <= MAX_UNDEFINED and stats.examples == 12
+    assert "undefined (" in stats.summary_line() and stats.undefined["no output this time"] == stats.n_undefined
+    assert sum(r["status"] == "undefined" for r in stats.records) == stats.n_undefined
+
+
+def mean_colour(rgb: np.ndarray) -> float:
+    return float(rgb.mean())
+
+
+@pytest.mark.parametrize("metric, eps", [(repeatability(px=2), 0.5), (interest_point_spread(radius=8), 0.5)],
+                         ids=["repeatability", "spread"])
+def test_a_content_independent_detector_fails_a_relation_with_yaw_of_5_degrees_or_more(metric, eps):
+    relation = Relation.build(metric, eps=eps, transform=transforms(yaw=(5, 10)))
+    with pytest.raises(RelationFailure) as info:
+        check_relation(PlaneScene(), same_grid(8), relation, settings=SETTINGS)
+    assert info.value.stats.outcome == "failed"
