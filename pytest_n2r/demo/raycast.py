@@ -30,6 +30,8 @@ import numba
 import numpy as np
 from numba import njit
 from numba.core.errors import NumbaError, NumbaExperimentalFeatureWarning
+from numba.extending import intrinsic
+from numba.np.arrayobj import populate_array
 
 from ..errors import InvalidArgument
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
@@ -58,6 +60,8 @@ class CompiledScene:
 
     ``groups`` rows: ``first, end`` primitive indices and ``has_box``; ``group_box`` rows ``lo, hi``.
     ``prims`` rows hold each primitive's parameters, ``prim_mat`` its material node per face slot.
+    ``cull_boxes`` rows ``lo, hi``: each group's box (NaN without one), then each primitive's bounds; a render
+    turns them into screen rectangles (:func:`screen_rects`) that rays outside skip.
     """
 
     groups: np.ndarray
@@ -75,6 +79,7 @@ class CompiledScene:
     texels: np.ndarray
     shading: np.ndarray
     background: np.ndarray
+    cull_boxes: np.ndarray
 
     def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest hit of rays ``o + t d`` (``(N, 3)`` float64 each): ``t`` (``inf`` on a miss) and the index
@@ -83,7 +88,8 @@ class CompiledScene:
         d = np.ascontiguousarray(d, dtype=np.float64)
         t = np.empty(len(o))
         which = np.empty(len(o), dtype=np.int64)
-        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, t, which)
+        everywhere = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(self.cull_boxes), 1))
+        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, everywhere, t, which)
         return t, which
 
     def render(self, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float, height: int, width: int,
@@ -95,7 +101,9 @@ class CompiledScene:
         depth = np.empty((height, width) if want_depth else (0, 0), dtype=np.float32)
         opacity = np.empty((height, width) if want_opacity else (0, 0), dtype=np.float32)
         camera = np.array([fx, fy, cx, cy, far])
-        args = (np.ascontiguousarray(c2w, dtype=np.float64), camera, int(supersample), self.groups,
+        c2w = np.ascontiguousarray(c2w, dtype=np.float64)
+        rects = screen_rects(self.cull_boxes, c2w, fx, fy, cx, cy)
+        args = (c2w, camera, int(supersample), rects, self.groups,
                 self.group_box, self.kinds, self.prims, self.waves, self.prim_mat, self.node_kind, self.node_par,
                 self.node_child, self.rings, self.masks, self.tex_meta, self.texels, self.shading,
                 self.background, rgb, depth, opacity)
@@ -217,6 +225,58 @@ class _Builder:
         return meta, np.ascontiguousarray(texels, dtype=np.float32)
 
 
+def _curvature_bound(relief: ReliefWall) -> float:
+    """A bound of the relief's Hessian norm, ``depth * sum |amp| (fx² + fz²)`` (1 / scene units): how fast its
+    gradient can change along the surface."""
+    w = relief._w
+    return float(relief.depth * np.sum(np.abs(w[:, 0]) * (w[:, 1] ** 2 + w[:, 3] ** 2)))
+
+
+def _bounds(prim: Primitive) -> list[float]:
+    """``lo, hi`` of an axis-aligned box that holds every hit of ``prim``."""
+    if isinstance(prim, Disc):
+        (x, y), r = prim.centre, prim.radius
+        return [x - r, y - r, prim.height, x + r, y + r, prim.height]
+    if isinstance(prim, Box):
+        return [*prim.lo, *prim.hi]
+    if isinstance(prim, Cylinder):
+        half = [prim.radius] * 3
+        half["xyz".index(prim.axis)] = prim.half_length
+        return [c - h for c, h in zip(prim.centre, half)] + [c + h for c, h in zip(prim.centre, half)]
+    x0, x1, z0, z1 = prim.extent  # ReliefWall
+    return [x0, prim.y0 - prim.depth, z0, x1, prim.y0, z1]
+
+
+#: How far a relief's gradient may change between Newton's last evaluation and its last step (see
+#: :func:`_relief_hit`): 1e-5 turns a normal by at most 1e-5 rad, a colour by a few thousandths of a grey level.
+_GRADIENT_TOLERANCE = 1e-5
+#: Screen rectangles are widened by this many pixels (their corners' projections round, the rays' too).
+_RECT_MARGIN = 1.0
+
+
+def screen_rects(boxes: np.ndarray, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """``(M, 4)`` pixel rectangles ``u_lo, u_hi, v_lo, v_hi`` that hold the projection of each box ``lo, hi``
+    (rows of ``boxes (M, 6)``, world frame) seen from ``c2w``: a ray whose pixel coordinates lie outside a box's
+    rectangle cannot hit anything inside the box. A box with a corner at or behind the camera plane (or a
+    row of NaN: no box) gets the whole plane.
+
+    The projection of a convex body in front of the camera is the convex hull of its corners' projections;
+    the margin covers the rounding of both."""
+    rects = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(boxes), 1))
+    lo, hi = boxes[:, None, :3], boxes[:, None, 3:]
+    pick = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)  # 8 corners
+    corners = np.where(pick[None], hi, lo)  # M 8 3
+    cam = (corners - c2w[:3, 3]) @ c2w[:3, :3]  # world -> camera frame (R^T (p - o))
+    z = cam[..., 2]
+    ok = np.all(z > 1e-6, axis=1) & np.all(np.isfinite(boxes), axis=1)
+    if ok.any():
+        u = fx * cam[ok, :, 0] / z[ok] + cx
+        v = fy * cam[ok, :, 1] / z[ok] + cy
+        rects[ok] = np.stack([u.min(1) - _RECT_MARGIN, u.max(1) + _RECT_MARGIN,
+                              v.min(1) - _RECT_MARGIN, v.max(1) + _RECT_MARGIN], axis=1)
+    return rects
+
+
 def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list[float], list[int]]:
     """Kind, parameters and face materials of one primitive."""
     par = [0.0] * 16
@@ -231,8 +291,8 @@ def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list
         par[:6] = [*prim.centre, "xyz".index(prim.axis), prim.radius, prim.half_length]
         return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
     if isinstance(prim, ReliefWall):
-        par[:12] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w), prim.newton,
-                    prim.steps, prim.bisections]
+        par[:13] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w), prim.newton,
+                    prim.steps, prim.bisections, _curvature_bound(prim)]
         waves.extend(prim._w.astype(np.float32).tolist())
         return _RELIEF, par, [b.material(prim.material)] * 6
     raise InvalidArgument(f"primitive {type(prim).__name__} has no compiled form; expected one of Disc, Box, "
@@ -243,7 +303,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
                   background: np.ndarray) -> CompiledScene:
     """Flatten a scene's primitives (groups keep their box), materials and textures into kernel tables."""
     b = _Builder()
-    groups, boxes, kinds, prims, prim_mat, waves = [], [], [], [], [], []
+    groups, boxes, kinds, prims, prim_mat, waves, bounds = [], [], [], [], [], [], []
     for item in items:
         children = item.children if isinstance(item, Group) else (item,)
         first = len(kinds)
@@ -255,6 +315,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         boxed = isinstance(item, Group)
         groups.append((first, len(kinds), int(boxed)))
         boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
+        bounds.extend(_bounds(prim) for prim in children)
     tex_meta, texels = b.texture_tables()
     masks = tuple(b.masks) or (_no_mask,)
     return CompiledScene(
@@ -268,10 +329,30 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         tex_meta=tex_meta, texels=texels,
         shading=np.array([*np.asarray(light, np.float64), float(ambient)]),
         background=np.asarray(background, np.float32),
+        cull_boxes=np.asarray([box if boxed else [math.nan] * 6 for box, (_, _, boxed) in zip(boxes, groups)]
+                              + bounds, np.float64).reshape(-1, 6),
     )
 
 
 # -- geometry ------------------------------------------------------------------------------------------------
+
+
+@intrinsic
+def _borrowed(typingctx, array):
+    """A view of ``array`` without a reference count, valid while the caller holds ``array``.
+
+    numba counts references to an array each time a helper it inlines receives one (an atomic increment
+    and decrement per call, per array): in the per-ray loops that was about half of a render's time. The
+    kernel passes views of its own arguments to its helpers instead, which are alive for the whole call."""
+    def codegen(context, builder, signature, args):
+        source = context.make_array(signature.args[0])(context, builder, value=args[0])
+        view = context.make_array(signature.return_type)(context, builder)
+        populate_array(view, data=source.data, shape=source.shape, strides=source.strides,
+                       itemsize=source.itemsize, meminfo=None)
+        return view._getvalue()
+
+    return array(array), codegen
+
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -290,7 +371,7 @@ def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
     return t_near, t_far
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _relief(waves, first, count, depth, x, z):
     """``h``, ``dh/dx``, ``dh/dz`` of a relief at ``(x, z)``, in float32 like :meth:`ReliefWall.height_and_gradient`."""
     x32, z32 = np.float32(x), np.float32(z)
@@ -308,13 +389,20 @@ def _relief(waves, first, count, depth, x, z):
     return depth * np.float64(h), depth * np.float64(gx), depth * np.float64(gz)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
     """First hit ``t`` of a :class:`ReliefWall` (``inf`` on a miss), with ``dh/dx``, ``dh/dz`` there when the
-    root search ended on an evaluation at ``t`` (``have``), so the normal needs no second one."""
+    root search ended on an evaluation at ``t`` (``have``), so the normal needs no second one.
+
+    Newton's method stops where the residual is below ``1e-7`` (like :meth:`ReliefWall._newton`) or where its
+    step is so short that the gradient cannot change by more than :data:`_GRADIENT_TOLERANCE` over it
+    (``curvature * |d_xz| * |step| <= tolerance``): then the residual after the step is below
+    ``curvature * |d_xz|² step² / 2``, far below ``1e-7``, and the gradient of the last evaluation serves as
+    the normal's. From a guess of a neighbouring ray's root this takes one evaluation instead of two."""
     y0, x0, x1, z0, z1 = prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4]
     depth, slope, first, count = prims[row, 5], prims[row, 6], int(prims[row, 7]), int(prims[row, 8])
     newton, steps, bisections = int(prims[row, 9]), int(prims[row, 10]), int(prims[row, 11])
+    curvature = prims[row, 12]
     t_in = (y0 - depth - oy) / dy
     t_out = (y0 - oy) / dy
     gx = gz = 0.0
@@ -322,9 +410,11 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
     if not (dy > 0 and t_out > T_MIN):
         return math.inf, gx, gz, have
     lo, hi = max(t_in, T_MIN), t_out
-    if dy > 1.05 * slope * math.hypot(dx, dz):  # monotonic residual: safeguarded Newton
+    across = math.sqrt(dx * dx + dz * dz)  # not hypot (several times slower): only picks the search below
+    if dy > 1.05 * slope * across:  # monotonic residual: safeguarded Newton
         a, b = lo, hi
         t = guess if (guess > a and guess < b) else 0.5 * (a + b)
+        short = _GRADIENT_TOLERANCE / (curvature * across + 1e-300)
         for _ in range(newton):
             h, gx, gz = _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)
             f = oy + t * dy - y0 + h
@@ -337,7 +427,13 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
             else:
                 b = t
             step = t - f / df
-            t = step if (step > a and step < b) else 0.5 * (a + b)
+            if step > a and step < b:
+                if abs(step - t) <= short:
+                    t, have = step, True
+                    break
+                t = step
+            else:
+                t = 0.5 * (a + b)
     else:  # grazing: march to the first sign change, then bisect
         t_prev = lo
         found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
@@ -364,7 +460,7 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
     return math.inf, gx, gz, have
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
     """First hit of a capped :class:`Cylinder`, ``inf`` on a miss."""
     qx, qy, qz = ox - prims[row, 0], oy - prims[row, 1], oz - prims[row, 2]
@@ -395,7 +491,7 @@ def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
     return best
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
     """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there (see
     :func:`_relief_hit`)."""
@@ -417,19 +513,26 @@ def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
     return t, 0.0, 0.0, False
 
 
-@njit(cache=True, error_model="numpy")
-def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess):
+@njit(cache=True, inline="always", error_model="numpy")
+def _cast(groups, group_box, kinds, prims, waves, rects, u, v, ox, oy, oz, dx, dy, dz, guess):
     """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of a ray over all groups (``t = inf`` and primitive
-    0 on a miss; the gradient as :func:`_relief_hit` gives it)."""
+    0 on a miss; the gradient as :func:`_relief_hit` gives it). ``u, v``: the ray's pixel coordinates; groups
+    and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
     best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
     ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
-    for g in range(groups.shape[0]):
+    n_groups = groups.shape[0]
+    for g in range(n_groups):
+        if u < rects[g, 0] or u > rects[g, 1] or v < rects[g, 2] or v > rects[g, 3]:
+            continue
         if groups[g, 2]:
             t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
                                   group_box[g, 3], group_box[g, 4], group_box[g, 5])
             if not (t_near <= t_far and t_far > T_MIN):
                 continue
         for k in range(groups[g, 0], groups[g, 1]):
+            r = n_groups + k
+            if u < rects[r, 0] or u > rects[r, 1] or v < rects[r, 2] or v > rects[r, 3]:
+                continue
             t, gx, gz, have = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
                 best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
@@ -437,13 +540,13 @@ def _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
 
 
 @njit(cache=True, error_model="numpy")
-def _cast_rays(o, d, groups, group_box, kinds, prims, waves, t_out, which_out):
+def _cast_rays(o, d, groups, group_box, kinds, prims, waves, rects, t_out, which_out):
     for r in range(o.shape[0]):  # serial: used for small batches, and a parallel loop compiles slowly
-        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, o[r, 0], o[r, 1], o[r, 2],
-                                       d[r, 0], d[r, 1], d[r, 2], math.nan)
+        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, rects, 0.0, 0.0, o[r, 0],
+                                                o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], math.nan)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
     :meth:`Primitive.surface`); a relief uses the gradient ``gx, gz`` its hit gave when it ``have`` one."""
@@ -508,7 +611,7 @@ def _fma32(a, b, c):
     return np.float32(np.float64(a) * np.float64(b) + np.float64(c))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _bilinear(tex_meta, texels, tex, level, s, t):
     """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
     level-0 texel coordinates."""
@@ -560,7 +663,7 @@ def _sample(tex_meta, texels, tex, s, t, footprint):
     return r, g, b
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp):
     """Albedo of a material without a blend (Flat, Textured, Poster, Radial), float32 RGB."""
     while True:
@@ -591,30 +694,80 @@ def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, 
         node = node_child[node, 0]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _albedo(node, node_kind, node_par, node_child, rings, masks, tex_meta, texels, a, b, fp):
-    """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB."""
-    if node_kind[node] != _BLEND:
-        return _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-    m = np.float32(min(max(masks[int(node_par[node, 0])](a, b), 0.0), 1.0))
-    bottom, top = node_child[node, 0], node_child[node, 1]
-    if m == _F0:  # bottom * 1 + top * 0: exactly the bottom colour
-        return _leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-    if m == _F1:
-        return _leaf(top, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-    r0, g0, b0 = _leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-    r1, g1, b1 = _leaf(top, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-    keep = _F1 - m
-    return r0 * keep + r1 * m, g0 * keep + g1 * m, b0 * keep + b1 * m
+    """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB: a blend's
+    two materials mixed by its mask (only the one it shows where the mask is 0 or 1), else the material's own."""
+    m = _F0
+    bottom, top = node, -1
+    if node_kind[node] == _BLEND:
+        m = np.float32(min(max(masks[int(node_par[node, 0])](a, b), 0.0), 1.0))
+        bottom, top = node_child[node, 0], node_child[node, 1]
+        if m == _F1:  # bottom * 0 + top * 1: exactly the top colour
+            bottom, top, m = top, -1, _F0
+        elif m == _F0:  # exactly the bottom colour
+            top = -1
+    r, g, b_ = _F0, _F0, _F0
+    for leaf in (bottom, top):  # one call site: the leaf's code is inlined once
+        if leaf < 0:
+            break
+        lr, lg, lb = _leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
+        if leaf == bottom:
+            r, g, b_ = lr, lg, lb
+        else:
+            keep = _F1 - m
+            r, g, b_ = r * keep + lr * m, g * keep + lg * m, b_ * keep + lb * m
+    return r, g, b_
 
 
 # -- the image kernel ----------------------------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _predict(ts, ks, kinds, row, j, above):
+    """A guess of a relief root at sub-ray ``j`` of sub-row ``row`` from the roots already found in this pixel row:
+    ``t[j-1] + t_above[j] - t_above[j-1]`` where the sub-row above hit the same relief, else the linear
+    extrapolation ``2 t[j-1] - t[j-2]``, else ``t[j-1]``; NaN where the last sub-ray hit no relief."""
+    if j == 0 or kinds[ks[row, j - 1]] != _RELIEF or not math.isfinite(ts[row, j - 1]):
+        return math.nan
+    k = ks[row, j - 1]
+    if above and ks[row - 1, j] == k and ks[row - 1, j - 1] == k and math.isfinite(ts[row - 1, j]) \
+            and math.isfinite(ts[row - 1, j - 1]):
+        return ts[row, j - 1] + (ts[row - 1, j] - ts[row - 1, j - 1])
+    if j >= 2 and ks[row, j - 2] == k and math.isfinite(ts[row, j - 2]):
+        return 2.0 * ts[row, j - 1] - ts[row, j - 2]
+    return ts[row, j - 1]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _centre_guess(ts, ks, kinds, n, u, have_rows):
+    """The mean of pixel ``u``'s sub-ray roots where they all lie on one relief (a guess of the root through the
+    pixel centre), else NaN."""
+    if not have_rows:
+        return math.nan
+    k = ks[0, u * n]
+    if kinds[k] != _RELIEF:
+        return math.nan
+    total = 0.0
+    for row in range(n):
+        for j in range(u * n, u * n + n):
+            if ks[row, j] != k or not math.isfinite(ts[row, j]):
+                return math.nan
+            total += ts[row, j]
+    return total / (n * n)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _render_kernel(first, step, c2w, camera, n, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par,
-                   node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
+def _render_kernel(first, step, c2w, camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind,
+                   node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
+    """Rows ``first, first + step, ...`` of the image. Per pixel row: the ``n`` sub-rows of supersampling rays
+    are cast first (a relief's root searched from a guess of the roots beside and above), then the depth rays
+    through the pixel centres (from the mean of the pixel's sub-ray roots), then each pixel is shaded."""
     fx, fy, cx, cy, far = camera[0], camera[1], camera[2], camera[3], camera[4]
+    rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
+    prims, waves, prim_mat, node_kind = _borrowed(prims), _borrowed(waves), _borrowed(prim_mat), _borrowed(node_kind)
+    node_par, node_child, rings = _borrowed(node_par), _borrowed(node_child), _borrowed(rings)
+    tex_meta, texels, background = _borrowed(tex_meta), _borrowed(texels), _borrowed(background)
     height = max(rgb.shape[0], depth.shape[0], opacity.shape[0])
     width = max(rgb.shape[1], depth.shape[1], opacity.shape[1])
     want_colour = rgb.shape[0] > 0
@@ -623,41 +776,58 @@ def _render_kernel(first, step, c2w, camera, n, groups, group_box, kinds, prims,
     lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
     scale_fp = 0.5 * (fx + fy) * n
     inv_count = np.float32(n * n)
+    sub = n * width
+    # the rays of one pixel row: n rows of sub-pixel offsets, then the pixel centres (views: see _borrowed)
+    ts_, ks_ = np.empty((n + 1, sub)), np.zeros((n + 1, sub), dtype=np.int64)
+    gxs_, gzs_, haves_ = np.empty((n + 1, sub)), np.empty((n + 1, sub)), np.empty((n + 1, sub), dtype=np.bool_)
+    ts, ks, gxs, gzs, haves = _borrowed(ts_), _borrowed(ks_), _borrowed(gxs_), _borrowed(gzs_), _borrowed(haves_)
     for v in range(first, height, step):
-        guess = math.nan  # a relief's root is searched from the last one found in this row (Newton converges fast)
-        for u in range(width):
-            if depth.shape[0] > 0:
-                xc, yc = (u - cx) / fx, (v - cy) / fy
+        for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
+            centre = row == n
+            vs = float(v) if centre else v + ((row + 0.5) / n - 0.5)
+            yc = (vs - cy) / fy
+            for j in range(width if centre else sub):
+                if centre:
+                    us = float(j)
+                    guess = _centre_guess(ts, ks, kinds, n, j, want_hits)
+                    if math.isnan(guess) and j > 0 and kinds[ks[n, j - 1]] == _RELIEF and math.isfinite(ts[n, j - 1]):
+                        guess = ts[n, j - 1]
+                else:
+                    u = j // n
+                    us = u + ((j - u * n + 0.5) / n - 0.5)
+                    guess = _predict(ts, ks, kinds, row, j, row > 0)
+                xc = (us - cx) / fx
                 dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
                 dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
                 dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                t, k, _, _, _ = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz, guess)
-                if kinds[k] == _RELIEF and math.isfinite(t):
-                    guess = t
-                depth[v, u] = np.float32(t if math.isfinite(t) else far)
-            if not want_hits:
-                continue
+                ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
+                    groups, group_box, kinds, prims, waves, rects, us, vs, ox, oy, oz, dx, dy, dz, guess)
+            if centre:
+                for u in range(width):
+                    depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
+        if not want_hits:
+            continue
+        for u in range(width):
             hits = 0
             acc_r, acc_g, acc_b = _F0, _F0, _F0
             for sv in range(n):
+                yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
                 for su in range(n):
-                    xc = (u + ((su + 0.5) / n - 0.5) - cx) / fx
-                    yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
-                    dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
-                    dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
-                    dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                    t, k, gx, gz, have = _cast(groups, group_box, kinds, prims, waves, ox, oy, oz, dx, dy, dz,
-                                               guess)
-                    if kinds[k] == _RELIEF and math.isfinite(t):
-                        guess = t
+                    j = u * n + su
+                    t, k = ts[sv, j], ks[sv, j]
                     if not math.isfinite(t):
                         cr, cg, cb = background[0], background[1], background[2]
                     else:
                         hits += 1
                         if not want_colour:
                             continue
+                        xc = (u + ((su + 0.5) / n - 0.5) - cx) / fx
+                        dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+                        dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+                        dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
                         x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
-                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z, gx, gz, have)
+                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z, gxs[sv, j], gzs[sv, j],
+                                                          haves[sv, j])
                         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
                         cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
                         fp = t / scale_fp / max(cos, 0.2)
