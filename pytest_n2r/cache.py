@@ -1,11 +1,11 @@
 """Render cache: an in-memory LRU for one session over an on-disk, content-addressed store.
 
-A render is identified by everything that determines its pixels: the scene's content hash, the pose
-(exact float64 bytes), the camera, the scene's render settings and the package version. Each output
-(``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs renders only
-the missing ones. Files are written under a temporary name and renamed into place, so concurrent pytest-
-xdist workers sharing one directory never see a torn file: at worst two workers render the same view and
-the second rename wins with identical bytes (rendering is deterministic).
+A render is identified by everything that determines its pixels: the scene's content hash, its renderer's
+version, the pose (exact float64 bytes), the camera, the scene's render settings and the package version.
+Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs
+renders only the missing ones. Files are written under a temporary name and renamed into place, so
+concurrent pytest-xdist workers sharing one directory never see a torn file: at worst two workers render
+the same view and the second rename wins with identical bytes (rendering is deterministic).
 """
 
 from __future__ import annotations
@@ -62,6 +62,7 @@ def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
     spec = {
         "version": __version__,
         "scene": scene.content_hash,
+        "renderer": scene.renderer_version,
         "camera": camera.to_dict(),
         "settings": settings() if callable(settings) else settings,
     }

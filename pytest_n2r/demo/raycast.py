@@ -1,13 +1,25 @@
 """Compiled ray casting of the exact demo scenes (numba): every pixel's rays, hits, shading and outputs in one
-parallel kernel.
+kernel that runs without the GIL.
 
 The scene's primitives, materials and textures are flattened into arrays once (:func:`compile_scene`); the
 kernel then follows the vectorized definitions of :mod:`.primitives`, :mod:`.materials` and
 :mod:`.textures` operation for operation (the same float64 geometry, the same float32 colour arithmetic, the
 bilinear lookup of OpenCV's ``remap`` with its 1/32-texel steps), so its images match theirs to within
-rounding (tested against them, ``tests/demo/test_raycast.py``). Threads take every n-th image row (the kernel
-runs without the GIL), and each pixel depends only on its own rays and on its row: results do not depend on the
-thread count.
+rounding (tested against them, ``tests/demo/test_raycast.py``).
+
+What makes it fast (measured in ``docs/performance.md``):
+
+- Per image row, all sub-pixel rays of a sub-row are cast before any pixel is shaded, so a relief's root
+  search starts from a prediction of the roots already found beside and above (one evaluation of the relief
+  per ray instead of two or three, see :func:`_relief_hit`); the depth ray through a pixel's centre starts
+  from the mean of the pixel's sub-ray roots.
+- Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
+  a ray tests only what may lie under its pixel.
+- The hot helpers are inlined and receive views of the kernel's arrays without reference counts
+  (:func:`_borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
+
+Threads take every n-th image row, and each pixel depends only on its own row: results do not depend on
+the thread count.
 
 Convention
 ----------
@@ -355,7 +367,7 @@ def _borrowed(typingctx, array):
 
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
     """Entry and exit ``t`` of a ray (inverse direction ``1 / d``) through a box, NaN-safe like ``np.fmin`` /
     ``np.fmax``."""
@@ -434,30 +446,38 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
                 t = step
             else:
                 t = 0.5 * (a + b)
-    else:  # grazing: march to the first sign change, then bisect
-        t_prev = lo
-        found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
-        a = b = lo
-        if not found:
-            for s in range(1, steps + 1):
-                t = lo + (hi - lo) * (s / steps)
-                if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
-                    a, b, found = t_prev, t, True
-                    break
-                t_prev = t
-        if not found:
-            return math.inf, gx, gz, have
-        for _ in range(bisections):
-            m = 0.5 * (a + b)
-            if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
-                b = m
-            else:
-                a = m
-        t = 0.5 * (a + b)
+    else:
+        t = _relief_march(waves, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections)
     px, pz = ox + t * dx, oz + t * dz
     if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
         return t, gx, gz, have
     return math.inf, gx, gz, have
+
+
+@njit(cache=True, error_model="numpy")
+def _relief_march(waves, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections):
+    """The first root of a grazing ray's residual in ``[lo, hi]`` (which may not be monotonic there): march
+    ``steps`` samples to the first sign change, then bisect ``bisections`` times; ``inf`` if there is none.
+    Apart from the Newton search so that only the common case is inlined into the kernel."""
+    t_prev = lo
+    found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
+    a = b = lo
+    if not found:
+        for s in range(1, steps + 1):
+            t = lo + (hi - lo) * (s / steps)
+            if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
+                a, b, found = t_prev, t, True
+                break
+            t_prev = t
+    if not found:
+        return math.inf
+    for _ in range(bisections):
+        m = 0.5 * (a + b)
+        if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
+            b = m
+        else:
+            a = m
+    return 0.5 * (a + b)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -587,7 +607,7 @@ def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
 # -- materials and textures ----------------------------------------------------------------------------------
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _reflect(p, n):
     """OpenCV's ``borderInterpolate`` for ``BORDER_REFLECT`` (``fedcba|abcdefgh|hgfedcb``)."""
     if n == 1:
@@ -597,14 +617,14 @@ def _reflect(p, n):
     return p
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _mirror_period(x, period):
     """``x mod period`` in ``[0, period]`` like ``np.mod`` (whose float ``fmod`` is several times slower)."""
     r = x - period * math.floor(x / period)
     return r + period if r < 0 else (r - period if r > period else r)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _fma32(a, b, c):
     """``a * b + c`` rounded once to float32, as the fused multiply-add of OpenCV's vector code (the float32
     product is exact in float64)."""
@@ -636,16 +656,16 @@ def _bilinear(tex_meta, texels, tex, level, s, t):
         x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
     r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
     r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
-    return (_lerp2(texels, r00, r01, r10, r11, alpha, beta),
-            _lerp2(texels, r00 + 1, r01 + 1, r10 + 1, r11 + 1, alpha, beta),
-            _lerp2(texels, r00 + 2, r01 + 2, r10 + 2, r11 + 2, alpha, beta))
+    return (_lerp2(texels[r00], texels[r01], texels[r10], texels[r11], alpha, beta),
+            _lerp2(texels[r00 + 1], texels[r01 + 1], texels[r10 + 1], texels[r11 + 1], alpha, beta),
+            _lerp2(texels[r00 + 2], texels[r01 + 2], texels[r10 + 2], texels[r11 + 2], alpha, beta))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _lerp2(texels, i00, i01, i10, i11, alpha, beta):
+@njit(cache=True, error_model="numpy")
+def _lerp2(p00, p01, p10, p11, alpha, beta):
     """One channel of the bilinear blend of four texels."""
-    v0 = _fma32(alpha, texels[i01] - texels[i00], texels[i00])
-    v1 = _fma32(alpha, texels[i11] - texels[i10], texels[i10])
+    v0 = _fma32(alpha, p01 - p00, p00)
+    v1 = _fma32(alpha, p11 - p10, p10)
     return _fma32(beta, v1 - v0, v0)
 
 
@@ -790,8 +810,8 @@ def _render_kernel(first, step, c2w, camera, n, rects, groups, group_box, kinds,
                 if centre:
                     us = float(j)
                     guess = _centre_guess(ts, ks, kinds, n, j, want_hits)
-                    if math.isnan(guess) and j > 0 and kinds[ks[n, j - 1]] == _RELIEF and math.isfinite(ts[n, j - 1]):
-                        guess = ts[n, j - 1]
+                    if math.isnan(guess):
+                        guess = _predict(ts, ks, kinds, n, j, False)
                 else:
                     u = j // n
                     us = u + ((j - u * n + 0.5) / n - 0.5)

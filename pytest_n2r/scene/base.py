@@ -65,6 +65,9 @@ class Scene(ABC):
     is_exact: bool = False
     #: Why the scene has no captured views, when it has none (a splat scene without cameras); said in errors.
     no_views_reason: str | None = None
+    #: Changes when the renderer's pixels change for the same content (keys the render cache beside
+    #: :attr:`content_hash`, which also keys what was fitted to the scene's renders and stays put).
+    renderer_version: str = "1"
 
     @property
     @abstractmethod

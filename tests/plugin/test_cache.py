@@ -58,6 +58,8 @@ def test_the_key_changes_with_everything_that_changes_pixels():
     assert render_key(other, _pose(scene), camera) != base
     assert render_key(scene, _pose(scene, 1e-9), camera) != base
     assert render_key(scene, _pose(scene), camera.resized(48, 36)) != base
+    scene.renderer_version = "another renderer"
+    assert render_key(scene, _pose(scene), camera) != base
     scene.render_settings = {"samples": 64}
     assert render_key(scene, _pose(scene), camera) != base
 
