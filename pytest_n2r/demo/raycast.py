@@ -120,12 +120,14 @@ class CompiledScene:
                 self.node_child, self.rings, self.masks, self.tex_meta, self.texels, self.shading,
                 self.background, rgb, depth, opacity)
         threads = min(numba.get_num_threads(), height)
+        rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
+        scratch = [(np.empty((3, *rays)), np.empty((2, *rays), dtype=np.int64)) for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
             if threads <= 1:
-                _render_kernel(0, 1, *args)
+                _render_kernel(0, 1, *scratch[0], *args)
             else:  # every thread-th row per thread: rows of sky and of wall interleave (the kernel drops the GIL)
-                list(_pool().map(lambda first: _render_kernel(first, threads, *args), range(threads)))
+                list(_pool().map(lambda first: _render_kernel(first, threads, *scratch[first], *args), range(threads)))
         out = {}
         if want_rgb:
             out["rgb"] = rgb
@@ -778,8 +780,9 @@ def _centre_guess(ts, ks, kinds, n, u, have_rows):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _render_kernel(first, step, c2w, camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind,
-                   node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
+def _render_kernel(first, step, scratch, scratch_int, c2w, camera, n, rects, groups, group_box, kinds, prims, waves,
+                   prim_mat, node_kind, node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb,
+                   depth, opacity):
     """Rows ``first, first + step, ...`` of the image. Per pixel row: the ``n`` sub-rows of supersampling rays
     are cast first (a relief's root searched from a guess of the roots beside and above), then the depth rays
     through the pixel centres (from the mean of the pixel's sub-ray roots), then each pixel is shaded."""
@@ -797,10 +800,10 @@ def _render_kernel(first, step, c2w, camera, n, rects, groups, group_box, kinds,
     scale_fp = 0.5 * (fx + fy) * n
     inv_count = np.float32(n * n)
     sub = n * width
-    # the rays of one pixel row: n rows of sub-pixel offsets, then the pixel centres (views: see _borrowed)
-    ts_, ks_ = np.empty((n + 1, sub)), np.zeros((n + 1, sub), dtype=np.int64)
-    gxs_, gzs_, haves_ = np.empty((n + 1, sub)), np.empty((n + 1, sub)), np.empty((n + 1, sub), dtype=np.bool_)
-    ts, ks, gxs, gzs, haves = _borrowed(ts_), _borrowed(ks_), _borrowed(gxs_), _borrowed(gzs_), _borrowed(haves_)
+    # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
+    # and the primitive hit, whether the gradient is the hit's (in the caller's buffers: see _borrowed)
+    ts, gxs, gzs = _borrowed(scratch[0]), _borrowed(scratch[1]), _borrowed(scratch[2])
+    ks, haves = _borrowed(scratch_int[0]), _borrowed(scratch_int[1])
     for v in range(first, height, step):
         for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
             centre = row == n
