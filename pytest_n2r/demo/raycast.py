@@ -357,7 +357,9 @@ def _borrowed(typingctx, array):
 
     numba counts references to an array each time a helper it inlines receives one (an atomic increment
     and decrement per call, per array): in the per-ray loops that was about half of a render's time. The
-    kernel passes views of its own arguments to its helpers instead, which are alive for the whole call."""
+    kernel passes views of its own arguments to its helpers instead, which are alive for the whole call.
+    Never borrow an array the kernel allocates itself: numba frees it after its last named use, and the
+    view would outlive it."""
     def codegen(context, builder, signature, args):
         source = context.make_array(signature.args[0])(context, builder, value=args[0])
         view = context.make_array(signature.return_type)(context, builder)
