@@ -4,18 +4,22 @@ The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
 
 1. :func:`project` (parallel over Gaussians): EWA projection of each 3-D covariance to a 2-D one with the
    3DGS low-pass dilation, its conic (inverse), the pixel rectangle where it can reach ``ALPHA_MIN``, its
-   tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`).
+   tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`); the rectangle
+   (int32) and the depth key (float32) also go to small arrays of their own, which the next two stages read.
 2. :func:`depth_order`: the visible Gaussians sorted by camera z-depth rounded to float32 (a stable LSD
-   radix sort; equal keys keep index order), and :func:`gather`: their records in that order.
-3. :func:`bin_tiles`: a depth-ordered run of Gaussians into per-tile lists, each in depth order.
-4. :func:`composite_tiles` (parallel over tiles): front-to-back alpha compositing, pixel by pixel, with
-   early termination; each pixel's state (transmittance, colour, depth) carries over between runs, so
-   compositing a long list in several runs gives the same bits as in one. A tile's records are copied in
-   batches of :data:`BATCH` into a contiguous block first: the copy's loads are independent of each other,
-   so their cache misses overlap, where the pixel loop would wait for each record in turn.
+   radix sort; equal keys keep index order), and :func:`gather_rects` (parallel): their rectangles and tile
+   counts in that order, so that binning reads memory in order (16 bytes a Gaussian, not a whole record).
+3. :func:`bin_tiles` (parallel over fixed chunks of the depth order: a count pass, a prefix sum, a fill
+   pass): a depth-ordered run of Gaussians into per-tile lists of Gaussian indices, each in depth order.
+4. :func:`composite_tiles` (parallel over tiles, the busiest first): front-to-back alpha compositing, pixel
+   by pixel, with early termination; each pixel's state (transmittance, colour, depth) carries over between
+   runs, so compositing a long list in several runs gives the same bits as in one. A tile's records are
+   copied in batches of :data:`BATCH` into a contiguous block first: the copy's loads are independent of
+   each other, so their cache misses overlap, where the pixel loop would wait for each record in turn.
 
 Each pixel's result depends only on the depth-ordered Gaussians that reach it, never on the tile size, the
-run boundaries or the thread count, so renders are deterministic to the bit.
+run boundaries, the binning chunks, the order tiles are composited in or the thread count, so renders are
+deterministic to the bit.
 """
 
 from __future__ import annotations
@@ -37,8 +41,9 @@ __all__ = [
     "composite_tiles",
     "depth_order",
     "finish",
-    "gather",
+    "gather_rects",
     "project",
+    "reach",
 ]
 
 #: Opacity of one Gaussian at one pixel is capped here (3DGS reference), so transmittance never hits 0.
@@ -57,12 +62,27 @@ _GUARD = 0.15
 RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1", "r2")
 #: Records a tile copies at a time before compositing them (see :func:`composite_tiles`).
 BATCH = 32
+#: Depth-ordered Gaussians per chunk of :func:`bin_tiles` (at least; at most :data:`_BIN_CHUNKS` chunks):
+#: a function of the count alone, never of the thread count.
+_BIN_CHUNK = 4096
+_BIN_CHUNKS = 64
 _U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1, _R2 = range(len(RECORD))
+@njit(cache=True)
+def reach(opacity, out):
+    """``out[i]``: the squared Mahalanobis radius inside which Gaussian ``i`` of peak ``opacity[i]`` reaches
+    ``ALPHA_MIN``, widened by a relative 1e-6 (0 for an opacity below ``ALPHA_MIN``): a property of the
+    Gaussian alone, computed once per scene."""
+    for i in range(opacity.shape[0]):
+        o = opacity[i]
+        out[i] = 2.0 * math.log(o / ALPHA_MIN) + 1e-6 if o >= ALPHA_MIN else 0.0
+
+
 @njit(cache=True, parallel=True)
-def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
-            records, tiles):
+def project(means, cov3d, opacity, r2s, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
+            records, rects, keys, tiles):
     """Project every Gaussian for the camera ``w2c`` (world → camera 4×4, OpenCV axes) into ``records``
-    (:data:`RECORD`) and ``tiles`` (tiles its rectangle touches; 0: culled).
+    (:data:`RECORD`), ``rects`` (its pixel rectangle ``x0, x1, y0, y1``), ``keys`` (its z-depth as float32)
+    and ``tiles`` (tiles its rectangle touches; 0: culled). ``r2s`` is :func:`reach` of ``opacity``.
 
     Culled: peak opacity below ``ALPHA_MIN``, mean at or in front of the ``near`` plane, a non-finite or
     singular 2-D covariance, or a rectangle outside the image.
@@ -112,7 +132,7 @@ def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, widt
             continue
         # opacity reaches ALPHA_MIN where the Mahalanobis distance² is at most r2; its bounding box, widened
         # a little so that rounding never drops a pixel the per-pixel test would keep
-        r2 = 2.0 * math.log(o / ALPHA_MIN) + 1e-6
+        r2 = r2s[i]
         ex = math.sqrt(r2 * a) * (1.0 + 1e-6) + 1e-4
         ey = math.sqrt(r2 * c) * (1.0 + 1e-6) + 1e-4
         x0 = max(math.ceil(u - ex), 0.0)
@@ -125,6 +145,8 @@ def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, widt
         rec = records[i]
         rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O], rec[_Z] = u, v, c / det, -b / det, a / det, o, z
         rec[_X0], rec[_X1], rec[_Y0], rec[_Y1] = x0, x1, y0, y1
+        rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3] = int(x0), int(x1), int(y0), int(y1)
+        keys[i] = np.float32(z)
         rec[_R2] = r2 * (1.0 + 1e-6)
         dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
         n = math.sqrt(dx * dx + dy * dy + dz * dz)
@@ -135,23 +157,23 @@ def project(means, cov3d, opacity, sh, degree, w2c, campos, fx, fy, cx, cy, widt
 
 
 @njit(cache=True)
-def depth_order(tiles, records):
-    """Indices of the Gaussians with ``tiles > 0`` sorted front to back by their z-depth rounded to float32
-    (> 0, so its bit pattern orders it); equal keys keep index order (stable LSD radix sort, 16 bits a
+def depth_order(tiles, keys):
+    """Indices of the Gaussians with ``tiles > 0`` sorted front to back by ``keys`` (z-depths as float32,
+    > 0, so their bit patterns order them); equal keys keep index order (stable LSD radix sort, 16 bits a
     pass)."""
+    all_bits = keys.view(np.uint32)
     n = 0
     for i in range(tiles.shape[0]):
         if tiles[i] > 0:
             n += 1
     ids = np.empty(n, np.int64)
-    keys = np.empty(n, np.float32)
+    bits = np.empty(n, np.uint32)
     k = 0
     for i in range(tiles.shape[0]):
         if tiles[i] > 0:
             ids[k] = i
-            keys[k] = np.float32(records[i, _Z])
+            bits[k] = all_bits[i]
             k += 1
-    bits = keys.view(np.uint32)
     ids2 = np.empty(n, np.int64)
     bits2 = np.empty(n, np.uint32)
     count = np.empty(65537, np.int64)
@@ -175,42 +197,65 @@ def depth_order(tiles, records):
 
 
 @njit(cache=True, parallel=True)
-def gather(order, records, sorted_records):
-    """``sorted_records[j] = records[order[j]]``, so that binning reads memory in order."""
+def gather_rects(order, rects, tiles, sorted_rects, sorted_tiles):
+    """``sorted_rects[j] = rects[order[j]]`` and ``sorted_tiles[j] = tiles[order[j]]``."""
     for j in prange(order.shape[0]):
-        sorted_records[j] = records[order[j]]
+        i = order[j]
+        for f in range(4):
+            sorted_rects[j, f] = rects[i, f]
+        sorted_tiles[j] = tiles[i]
 
 
-@njit(cache=True)
-def bin_tiles(start, stop, records, tile, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``start <= j < stop`` into the tiles whose pixels are not all done
-    (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s, in depth order."""
-    n_tiles = live.shape[0]
-    tile_start[:] = 0
-    for j in range(start, stop):
-        rec = records[j]
-        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
-            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
-                t = ty * tiles_x + tx
-                if live[t] > 0:
-                    tile_start[t + 1] += 1
-    for t in range(n_tiles):
-        tile_start[t + 1] += tile_start[t]
-    fill = tile_start[:n_tiles].copy()
-    for j in range(start, stop):
-        rec = records[j]
-        for ty in range(int(rec[_Y0]) // tile, (int(rec[_Y1]) - 1) // tile + 1):
-            for tx in range(int(rec[_X0]) // tile, (int(rec[_X1]) - 1) // tile + 1):
-                t = ty * tiles_x + tx
-                if live[t] > 0:
-                    tile_ids[fill[t]] = j
-                    fill[t] += 1
+@njit(inline="always")
+def _tile_span(rect, tile):
+    """The tiles ``tx0 <= tx < tx1``, ``ty0 <= ty < ty1`` a pixel rectangle ``x0, x1, y0, y1`` touches."""
+    return rect[0] // tile, (rect[1] - 1) // tile + 1, rect[2] // tile, (rect[3] - 1) // tile + 1
 
 
 @njit(cache=True, parallel=True)
-def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop, live, trans, acc_rgb, acc_depth,
-                    done, final, background, rgb_out, depth_out, opacity_out):
-    """Composite each tile's Gaussians (depth-ordered records) front to back into the pixel state
+def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their rectangles, ``order``:
+    their indices) into the tiles whose pixels are not all done (``live > 0``):
+    ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s Gaussian indices, in depth order.
+
+    Fixed chunks of the run (their number depends on its length alone) are counted per tile in parallel,
+    each chunk's slots within a tile follow the previous chunk's (a prefix sum over tiles, then chunks),
+    and the chunks fill their slots in parallel: the same lists whatever the thread count.
+    """
+    n_tiles = live.shape[0]
+    n = stop - start
+    chunks = min(max(n // _BIN_CHUNK, 1), _BIN_CHUNKS)
+    slots = np.zeros((chunks, n_tiles), np.int64)
+    for c in prange(chunks):
+        for j in range(start + n * c // chunks, start + n * (c + 1) // chunks):
+            tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
+            for ty in range(ty0, ty1):
+                for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
+                    if live[t] > 0:
+                        slots[c, t] += 1
+    pos = 0
+    for t in range(n_tiles):
+        tile_start[t] = pos
+        for c in range(chunks):
+            count = slots[c, t]
+            slots[c, t] = pos
+            pos += count
+    tile_start[n_tiles] = pos
+    for c in prange(chunks):
+        for j in range(start + n * c // chunks, start + n * (c + 1) // chunks):
+            tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
+            for ty in range(ty0, ty1):
+                for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
+                    if live[t] > 0:
+                        tile_ids[slots[c, t]] = order[j]
+                        slots[c, t] += 1
+
+
+@njit(cache=True, parallel=True)
+def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_order, t_stop, live, trans, acc_rgb,
+                    acc_depth, done, final, background, rgb_out, depth_out, opacity_out):
+    """Composite each tile's Gaussians (``tile_ids`` into ``records``, depth-ordered) front to back into the
+    pixel state
     (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``: terminated), updating
     ``live`` (pixels of the tile not yet done).
 
@@ -220,12 +265,14 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, t_stop,
     the ellipse where ``alpha`` can reach ``ALPHA_MIN`` (with a margin) are not evaluated.
 
     With ``final`` (the last run), each tile's pixels are then finished into the outputs (:func:`finish`) in
-    the same parallel region: one region fewer per frame.
+    the same parallel region: one region fewer per frame. Tiles are taken in ``tile_order`` (every tile
+    once; the busiest first, so that no thread is left with a long tile at the end).
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
     n_fields = records.shape[1]
-    for t in prange(n_tiles):
+    for i in prange(n_tiles):
+        t = tile_order[i]
         s, e = tile_start[t], tile_start[t + 1]
         tx0 = (t % tiles_x) * tile
         ty0 = (t // tiles_x) * tile
