@@ -31,7 +31,7 @@ __all__ = ["SPLAT_RENDER_VERSION", "SplatRenderer", "SplatSettings"]
 
 #: Part of every splat scene's content hash: bump it whenever the output for the same Gaussians and settings
 #: changes, so render caches built by an older pytest-n2r are not reused.
-SPLAT_RENDER_VERSION = 1
+SPLAT_RENDER_VERSION = 2
 
 
 @dataclass(frozen=True)

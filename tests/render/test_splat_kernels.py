@@ -1,10 +1,27 @@
-"""Kernels of the splat rasterizer checked on their own: the parallel tile binning against a plain one."""
+"""Kernels of the splat rasterizer checked on their own: the exponential compositing uses, and the parallel
+tile binning against a plain one."""
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from pytest_n2r.render import splat_kernels as k
+
+
+@njit
+def _exps(powers):
+    out = np.empty_like(powers)
+    for i in range(powers.shape[0]):
+        out[i] = k.exp_of_power(powers[i])
+    return out
+
+
+def test_exp_of_power_is_exp_to_a_few_ulps_where_compositing_uses_it():
+    powers = np.concatenate([-np.random.default_rng(0).uniform(0, 6, 200_000), np.linspace(-6, 0, 4097),
+                             [0.0, -1e-300, -np.log(255.0)]])
+    rel = np.abs(_exps(powers) / np.exp(powers) - 1)
+    assert rel.max() < 1e-15, f"relative error up to {rel.max():.3g} at power {powers[np.argmax(rel)]}"
 
 
 def _plain_bins(rects, order, tile, tiles_x, live):
