@@ -24,6 +24,7 @@ SMOKE = {
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),
+    "splat_compare.py": (["HEAD", "--smoke"], "| 64x36 | HEAD"),
 }
 
 
