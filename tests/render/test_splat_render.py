@@ -188,7 +188,8 @@ def test_only_the_outputs_asked_for_are_returned():
 @pytest.mark.slow
 def test_1080p_with_a_million_gaussians_fits_in_a_few_gigabytes():
     """Peak NumPy memory (tracemalloc) of a 1920×1080 render of 10⁶ Gaussians spread so that most are in view:
-    measured 0.28 GB for one render's buffers (records of 112 B per visible Gaussian, 48 B of state per pixel);
+    measured 0.33 GB for one render's buffers (a record of 120 B, a rectangle, key and tile count of 28 B per
+    Gaussian, their depth order and sort keys of 48 B per visible Gaussian, 48 B of state per pixel);
     the bound is 2 GB. The scene's own arrays (float64 means and covariances, float32 SH) add about 140 B per
     Gaussian at SH degree 0."""
     rng = np.random.default_rng(0)
