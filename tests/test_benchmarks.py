@@ -25,6 +25,7 @@ SMOKE = {
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),
     "splat_compare.py": (["HEAD", "--smoke"], "| 64x36 | HEAD"),
+    "splat_from_field.py": (["--smoke"], "| splats from the field |"),
 }
 
 

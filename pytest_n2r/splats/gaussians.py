@@ -54,7 +54,7 @@ class Gaussians:
             if not ok:
                 shape = ", ".join(["N", *("K" if t is None else str(t) for t in tail)])
                 raise InvalidType(f"Gaussians.{name} has shape {array.shape}; expected ({shape}) with N = {n}")
-            finite = np.isfinite(array).reshape(len(array), -1).all(axis=1)
+            finite = np.isfinite(array).reshape(len(array), int(np.prod(array.shape[1:]))).all(axis=1)
             if not finite.all():
                 first = int(np.argmin(finite))
                 raise InvalidArgument(f"Gaussians.{name} of Gaussian {first} is {array[first].tolist()}; "

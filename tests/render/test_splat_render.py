@@ -207,3 +207,12 @@ def test_1080p_with_a_million_gaussians_fits_in_a_few_gigabytes():
         tracemalloc.stop()
     assert peak < 2e9, f"the 1080p render of 10⁶ Gaussians peaked at {peak / 1e9:.2f} GB"
     assert out["opacity"][440:640, 860:1060].min() > 0.9, "the middle of the view should be covered"
+
+
+def test_no_gaussians_render_the_background():
+    """An empty set (a converted field with nothing opaque enough, a filtered file) is a valid scene."""
+    g = Gaussians(means=np.zeros((0, 3)), quats=np.zeros((0, 4)), log_scales=np.zeros((0, 3)),
+                  opacity_logits=np.zeros(0), sh=np.zeros((0, 1, 3)))
+    out = SplatRenderer(g, background=(0.2, 0.4, 0.6)).render(np.eye(4), CAMERA)
+    assert (out["rgb"] == [51, 102, 153]).all() and out["opacity"].max() == 0 and out["depth"].max() == 0, (
+        "an empty scene should render the background, opacity 0 and depth 0")
