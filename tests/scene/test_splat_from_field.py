@@ -98,3 +98,51 @@ def test_cells_too_thin_to_draw_are_dropped():
 def test_bad_knobs_are_named(knob, value):
     with pytest.raises(InvalidArgument, match=f"{knob}={value!r}; expected a finite number > 0"):
         field_to_gaussians(one_cell_field((1, 1, 1), 0.0, np.zeros((1, 3))), **{knob: value})
+
+
+def test_n2r_import_turns_a_fitted_scene_file_into_a_splat_scene_file(tmp_path, capsys):
+    from pytest_n2r.cli.main import main
+    from pytest_n2r.field.config import FieldConfig
+    from pytest_n2r.scene import SplatScene, load_scene, save_scene
+
+    from .conftest import random_field, tiny_views
+
+    fitted = save_scene(tmp_path / "fitted.n2r", random_field(), FieldConfig(), tiny_views(), {"train_seconds": 1.0},
+                        reference_length=3.0)
+    out = tmp_path / "splats.n2r"
+    assert main(["import", str(fitted), "-o", str(out), "--size", "0.3"]) == 0, capsys.readouterr().err
+    assert "Gaussians, SH degree 1" in capsys.readouterr().err
+    field_scene, splats = load_scene(fitted, device="cpu"), load_scene(out)
+    assert isinstance(splats, SplatScene)
+    expected = field_to_gaussians(field_scene.field, size=0.3)
+    assert len(splats.gaussians) == len(expected) > 0
+    np.testing.assert_array_equal(splats.gaussians.means, expected.means)
+    assert [(v.name, v.split) for v in splats.views] == [(v.name, v.split) for v in field_scene.views]
+    assert splats.reference_length == field_scene.reference_length == 3.0
+    assert splats.background == field_scene.field.background
+
+
+@pytest.mark.parametrize("extra, expected", [
+    (["--cameras", "x.json"], "--cameras: only for a .ply"),
+    (["--background", "1,1,1"], "--background: only for a .ply"),
+])
+def test_n2r_import_of_a_fitted_file_refuses_the_ply_options(tmp_path, capsys, extra, expected):
+    from pytest_n2r.cli.main import main
+    from pytest_n2r.field.config import FieldConfig
+    from pytest_n2r.scene import save_scene
+
+    from .conftest import random_field, tiny_views
+
+    fitted = save_scene(tmp_path / "fitted.n2r", random_field(), FieldConfig(), tiny_views(), {}, reference_length=3.0)
+    assert main(["import", str(fitted), "-o", str(tmp_path / "out.n2r"), *extra]) == 2
+    assert expected in capsys.readouterr().err and not (tmp_path / "out.n2r").exists()
+
+
+def test_n2r_import_help_states_the_conversion_defaults(capsys):
+    from pytest_n2r.cli.main import main
+    from pytest_n2r.scene.splat_from_field import DEFAULT_PATH, DEFAULT_SIZE
+
+    with pytest.raises(SystemExit):
+        main(["import", "--help"])
+    shown = " ".join(capsys.readouterr().out.split())
+    assert f"(default {DEFAULT_SIZE})" in shown and f"(default {DEFAULT_PATH})" in shown, shown
