@@ -262,7 +262,7 @@ def exp_of_power(power):
     ``power >= ln(ALPHA_MIN) > -5.6``) within 1e-15 relative (a few ulps; measured 6.7e-16): a table of
     ``exp(-j / 64)`` times a degree-5 Taylor polynomial on the remainder (``|r| <= 1/128``, truncation error
     below ``1e-16``). Inlined and free of calls, so the compositing loop keeps its values in registers (libm's
-    ``exp`` is a call that spills them); and the same bits on every machine, whatever its libm."""
+    ``exp`` is a call that spills them)."""
     x = -power * _EXP_STEPS
     j = min(int(x + 0.5), _EXP_TABLE.shape[0] - 1)
     r = (j - x) * (1.0 / _EXP_STEPS)
