@@ -55,8 +55,9 @@ for c2w, (vw, vh, fx, fy, cx, cy) in zip(data["c2w"], data["cameras"]):
         thread.append(time.thread_time() - c0)
     rates.append(1.0 / min(wall))
     cpu.append(min(thread))
+import pytest_n2r
 print(json.dumps({"fps": statistics.median(rates), "cpu_ms": 1e3 * statistics.median(cpu),
-                  "digest": digest.hexdigest()}))
+                  "digest": digest.hexdigest(), "package": pytest_n2r.__file__}))
 """
 
 
@@ -77,11 +78,15 @@ def measure(folder: Path, data: Path, size: str, repeats: int, threads: int | No
     env = dict(os.environ, PYTHONPATH=str(folder))
     if threads is not None:
         env["NUMBA_NUM_THREADS"] = str(threads)
-    result = subprocess.run([sys.executable, "-c", CHILD, str(data), size, str(repeats)], env=env,
+    # run in the export: `python -c` puts the working directory first on sys.path, before PYTHONPATH
+    result = subprocess.run([sys.executable, "-c", CHILD, str(data), size, str(repeats)], env=env, cwd=folder,
                             capture_output=True, text=True, check=False)
     if result.returncode != 0:
         raise SystemExit(f"the render at {folder.name[:10]} failed:\n{result.stderr}")
-    return json.loads(result.stdout.splitlines()[-1])
+    measured = json.loads(result.stdout.splitlines()[-1])
+    if not Path(measured["package"]).resolve().is_relative_to(folder.resolve()):
+        raise SystemExit(f"the render of {folder.name[:10]} imported {measured['package']}, not the export")
+    return measured
 
 
 def main(argv: list[str] | None = None) -> int:
