@@ -34,12 +34,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the repository's package and, as a fallback scene, its test scene
 
-from pytest_n2r.cache import RenderCache
 from pytest_n2r.metrics import repeatability
+from pytest_n2r.plugin.scenes import default_scene_specs, load_scene_spec, parse_scene_specs
 from pytest_n2r.relation import Relation, RunSettings, check_relation
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.base import Scene
-from pytest_n2r.session import default_scene_specs, load_scene_spec, parse_scene_specs
+from pytest_n2r.scene.render_cache import RenderCache
 from pytest_n2r.strategies import transforms
 
 ORB = cv2.ORB_create(500)

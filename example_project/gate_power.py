@@ -25,7 +25,7 @@ from perception.detectors import detector
 from perception.regressions import REGRESSIONS
 from tests.test_gate import MARGIN, relations_of, replay
 
-from pytest_n2r.cache import RenderCache
+from pytest_n2r import RenderCache
 from pytest_n2r.demo import load_demo
 from pytest_n2r.report import RelationRecord, compare_paired, replay_candidates
 

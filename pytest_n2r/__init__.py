@@ -45,14 +45,14 @@ _EXPORTS: dict[str, str] = {
     "NoisePatch": "pytest_n2r.strategies",
     "BlackPatches": "pytest_n2r.strategies",
     "GroundTruthScene": "pytest_n2r.demo",
-    "metamorphic": "pytest_n2r.marker",
+    "metamorphic": "pytest_n2r.plugin.marker",
     "transforms": "pytest_n2r.strategies",
     "views": "pytest_n2r.strategies",
     "Relation": "pytest_n2r.relation",
     "RelationFailure": "pytest_n2r.relation",
     "SUTError": "pytest_n2r.relation",
     "check_relation": "pytest_n2r.relation",
-    "RenderCache": "pytest_n2r.cache",
+    "RenderCache": "pytest_n2r.scene.render_cache",
     "Validity": "pytest_n2r.relation",
 }
 

@@ -16,7 +16,7 @@ from packaging.utils import canonicalize_name
 import pytest_n2r
 from pytest_n2r.cli.main import main
 from pytest_n2r.demo import demo_scene_names
-from pytest_n2r.session import parse_scene_specs
+from pytest_n2r.plugin.scenes import parse_scene_specs
 
 from .conftest import REPO_ROOT
 

@@ -24,8 +24,7 @@ import pytest
 from perception.detectors import detector
 from perception.regressions import REGRESSIONS
 
-from pytest_n2r import Transform
-from pytest_n2r.cache import RenderCache
+from pytest_n2r import RenderCache, Transform
 from pytest_n2r.relation import Relation, RelationStats, RunSettings, replay_relation
 from pytest_n2r.report import (
     PairedComparison,

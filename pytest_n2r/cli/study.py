@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..errors import InvalidArgument
-    from ..session import load_scene_spec, parse_scene_specs
+    from ..plugin.scenes import load_scene_spec, parse_scene_specs
     from ..study import StudyConfig, resolve_sut, run_study, write_study
     from ._output import check_output_dir
 

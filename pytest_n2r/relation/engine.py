@@ -17,12 +17,12 @@ from hypothesis import assume, target
 
 from .._timeout import time_limit
 from ..artifacts import artifact_dir, save_pair
-from ..cache import RenderCache
 from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
 from ..geometry import Camera, Units
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
+from ..scene.render_cache import RenderCache
 from ..strategies import transform_units
 from .determinism import check_deterministic
 from .failure import RelationFailure, describe_transform, failure_message

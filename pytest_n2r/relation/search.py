@@ -28,10 +28,10 @@ from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
 from .._timeout import TimeLimitReached
-from ..cache import RenderCache
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 from ..scene.base import Scene, SceneView
+from ..scene.render_cache import RenderCache
 from ..scene.splits import scene_views
 from ..scene.trajectory import interpolate_view
 from ..strategies import transform_units

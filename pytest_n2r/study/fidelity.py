@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cache import RenderCache
 from ..metrics.image_quality import psnr, ssim
 from ..relation.floor import FieldFloor, FloorStore, floor_views, measure_floor, reference_image, reference_kind
 from ..render.size import RenderSize
 from ..scene.base import Scene
+from ..scene.render_cache import RenderCache
 from .suts import resolve_sut
 
 __all__ = ["DETECTORS", "FidelityReport", "measure_fidelity"]

@@ -8,15 +8,15 @@ import pytest
 
 # pytester drops the modules an inner run imported first; importing them here keeps one copy of each (see
 # tests/plugin/conftest.py).
-import pytest_n2r.marker
+import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
 from pytest_n2r.cli.main import main
 from pytest_n2r.demo import demo_scene_names, load_demo
 from pytest_n2r.demo.fitted import RECIPES, FittedRecipe, build_fitted, fitted_path, packaged_path
 from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.plugin.scenes import parse_scene_specs
 from pytest_n2r.scene.file import read_scene_file
-from pytest_n2r.session import parse_scene_specs
 
 #: A recipe small enough to fit in seconds: enough steps for two prunes and one refinement (to a sparse grid).
 TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), sh_degree=0, batch_rays=512)

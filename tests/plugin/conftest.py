@@ -11,8 +11,8 @@ from hypothesis import settings
 
 # pytester drops the modules an inner run imported first; importing these here keeps one copy of each, so
 # an inner test's metric is an instance of the same Metric class the (cached) @metamorphic checks against.
-import pytest_n2r.marker
 import pytest_n2r.metrics
+import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
 
 from . import fakemetrics  # noqa: F401

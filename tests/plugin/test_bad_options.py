@@ -12,8 +12,8 @@ import pytest
 
 # imported here, not first inside an inner run: pytester drops what an inner run imported, and importing
 # torch's extension modules a second time in one process crashes it
-import pytest_n2r.scene.loading
-import pytest_n2r.session  # noqa: F401
+import pytest_n2r.plugin.session
+import pytest_n2r.scene.loading  # noqa: F401
 
 PLANE = "tests.plugin.fakescene:plane"
 

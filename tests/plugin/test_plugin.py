@@ -339,7 +339,7 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    assert loaded == ["pytest_n2r.plugin", "pytest_n2r.plugin_report"], loaded
+    assert loaded == ["pytest_n2r.plugin", "pytest_n2r.plugin.report"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
@@ -418,9 +418,9 @@ def test_hang(n2r_scene):
 
 
 def test_no_scene_configured_and_no_demo_scene_skips_with_instructions(n2r_project, monkeypatch):
-    from pytest_n2r import session
+    import pytest_n2r.demo
 
-    monkeypatch.setattr(session, "default_scene_specs", list)
+    monkeypatch.setattr(pytest_n2r.demo, "demo_scene_names", list)
     n2r_project.write("def test_uses_scene(n2r_scene):\n    pass\n")
     result = n2r_project.run("-rs")
     result.assert_outcomes(skipped=1)

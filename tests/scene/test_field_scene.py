@@ -8,9 +8,9 @@ import pytest
 import pytest_n2r
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import Transform
+from pytest_n2r.plugin.scenes import SceneSpec, load_scene_spec
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 from pytest_n2r.scene import FieldScene, load_scene, save_scene
-from pytest_n2r.session import SceneSpec, load_scene_spec
 
 from .conftest import TINY_STEPS, random_field, tiny_views
 

@@ -6,8 +6,8 @@ import pytest
 
 # pytester drops the modules an inner run imported first; importing them here keeps one copy of each (see
 # tests/plugin/conftest.py).
-import pytest_n2r.marker
 import pytest_n2r.metrics
+import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
 
 INNER = """

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from ...cache import RenderCache
 from ...render.size import RenderSize
 from ...scene.base import Scene
+from ...scene.render_cache import RenderCache
 from .exact import compare_exact
 from .measure import FieldFloor, FloorStore, measure_floor, sut_name
 

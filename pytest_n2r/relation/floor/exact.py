@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from ...cache import RenderCache
 from ...geometry import Camera
 from ...metrics.base import Metric
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
+from ...scene.render_cache import RenderCache
 from .measure import json_number
 from .reference import exact_twin, shift_sample
 

@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 
 from ... import __version__
-from ...cache import RenderCache
 from ...data.atomic import atomic_write_text
 from ...geometry import Camera
 from ...metrics.base import Metric
 from ...render.size import RenderSize
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
+from ...scene.render_cache import RenderCache
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
 __all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_floor", "sut_name"]

@@ -52,8 +52,8 @@ def pytest_configure(config: pytest.Config) -> None:
         raise pytest.UsageError(f"pytest-n2r: {extra[0]} needs --n2r-compare PATH (the baseline to compare with)")
     if not compare:
         return
-    from .errors import N2RError
-    from .report import load_baseline, parse_margin, parse_outcomes
+    from ..errors import N2RError
+    from ..report import load_baseline, parse_margin, parse_outcomes
 
     try:
         confidence = float(config.getoption("n2r_compare_confidence") or 0.95)
@@ -79,7 +79,7 @@ def baseline_examples(config: pytest.Config, nodeid: str, scene: Any, relation: 
     base = baseline.get(nodeid) if baseline else None
     if base is None or base.scene_hash != scene.content_hash or base.metric != repr(relation.metric):
         return None
-    from .report import replay_candidates
+    from ..report import replay_candidates
 
     return replay_candidates(base)
 
@@ -111,10 +111,10 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         return
     import json
 
-    from .data.atomic import atomic_write_text
-    from .plugin import relation_records
-    from .report import compare_paired, save_baseline
-    from .report.html import write_html
+    from ..data.atomic import atomic_write_text
+    from ..report import compare_paired, save_baseline
+    from ..report.html import write_html
+    from . import relation_records
 
     records = relation_records(config)
     written = []
@@ -141,7 +141,7 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         return
     comparisons = result.get("comparisons")
     if comparisons is not None:
-        from .report.baseline import format_comparison_table
+        from ..report.baseline import format_comparison_table
 
         terminalreporter.section("pytest-n2r baseline comparison")
         terminalreporter.write_line(

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pytest_n2r import InvalidArgument, Transform
-from pytest_n2r.cache import RenderCache, parse_size, render_key
+from pytest_n2r.scene.render_cache import RenderCache, parse_size, render_key
 
-from .fakescene import PlaneScene
+from ..plugin.fakescene import PlaneScene
 
 ALL = ("rgb", "depth", "opacity")
 

@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, TypeVar
 
-from .errors import N2RError
-from .plugin import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
-from .relation import Relation, Validity
+from ..errors import N2RError
+from ..relation import Relation, Validity
+from . import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
 
 __all__ = ["metamorphic"]
 

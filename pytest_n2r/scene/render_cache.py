@@ -23,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
-from .data.atomic import atomic_write_text
-from .errors import InvalidArgument
-from .geometry import Camera, check_pose
-from .render.view import RenderedView
-from .scene.base import Scene, normalize_outputs
+from .. import __version__
+from ..data.atomic import atomic_write_text
+from ..errors import InvalidArgument
+from ..geometry import Camera, check_pose
+from ..render.view import RenderedView
+from .base import Scene, normalize_outputs
 
 __all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
 

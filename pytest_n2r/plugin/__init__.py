@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 #: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
-pytest_plugins = ["pytest_n2r.plugin_report"]
+pytest_plugins = ["pytest_n2r.plugin.report"]
 
 #: (CLI flag, ini name, metavar, help) of every option with an ini twin.
 OPTIONS: tuple[tuple[str, str, str, str], ...] = (
@@ -48,7 +48,7 @@ DEFAULTS = {
     "n2r_derandomize": "auto",
 }
 SCENE_MARKER = "n2r_scene"
-#: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.marker).
+#: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.plugin.marker).
 RELATION_ATTR = "__n2r_relation__"
 #: Attribute holding the message of an invalid ``@metamorphic(...)`` call (reported at collection).
 ERROR_ATTR = "__n2r_error__"
@@ -103,12 +103,13 @@ def _rooted(config: pytest.Config, value: str) -> Path | None:
 
 def _build_session(config: pytest.Config) -> Any:
     """Parse and check every option (a bad value is a usage error naming the option)."""
-    from .cache import parse_size
-    from .data.atomic import unwritable_reason
-    from .errors import N2RError
-    from .relation import RunSettings
-    from .render.size import RenderSize
-    from .session import N2RSession, parse_scene_specs
+    from ..data.atomic import unwritable_reason
+    from ..errors import N2RError
+    from ..relation import RunSettings
+    from ..render.size import RenderSize
+    from ..scene.render_cache import parse_size
+    from .scenes import parse_scene_specs
+    from .session import N2RSession
 
     def fail(ini: str, message: str) -> None:
         flag = next(f for f, i, _, _ in OPTIONS if i == ini)
@@ -168,7 +169,7 @@ def _build_session(config: pytest.Config) -> Any:
             fail(ini, f"{folder}: {reason}; choose a writable folder, or 'none'")
     for spec in scenes:
         if spec.kind == "file":
-            from .scene.file import check_scene_file  # here: a run without scene files never loads the field
+            from ..scene.file import check_scene_file  # here: a run without scene files never loads the field
 
             try:
                 check_scene_file(spec.source)
@@ -212,7 +213,7 @@ def pytest_report_header(config: pytest.Config) -> list[str] | None:
 def _describe(config: pytest.Config, session: Any) -> str:
     import sys
 
-    from .session import default_scene_specs
+    from .scenes import default_scene_specs
 
     scenes = session.scenes or default_scene_specs()
     names = ", ".join(s.name for s in scenes) or "none configured"
@@ -237,7 +238,7 @@ def pytest_pycollect_makeitem(collector: pytest.Collector, name: str, obj: Any) 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     if "n2r_scene" not in metafunc.fixturenames:
         return
-    from .errors import N2RError
+    from ..errors import N2RError
 
     session = _session(metafunc.config)
     pins = [str(a) for m in metafunc.definition.iter_markers(SCENE_MARKER) for a in m.args]
@@ -255,8 +256,8 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 def n2r_scene(request: pytest.FixtureRequest) -> Any:
     """The scene under test (a :class:`pytest_n2r.Scene`), loaded once per session; tests that use it
     are parametrized over every configured scene, with the scene name in the test id."""
-    from .errors import N2RError
-    from .session import NO_SCENE_MESSAGE
+    from ..errors import N2RError
+    from .scenes import NO_SCENE_MESSAGE
 
     spec = getattr(request, "param", None)
     if spec is None:
@@ -277,9 +278,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if relation is None:
         return None
     __tracebackhide__ = True
-    from ._timeout import CallTimeout
-    from .relation import RelationFailure
-    from .relation.determinism import SUTNotDeterministic
+    from .._timeout import CallTimeout
+    from ..relation import RelationFailure
+    from ..relation.determinism import SUTNotDeterministic
 
     funcargs = pyfuncitem.funcargs
     sut = pyfuncitem.obj(**{arg: funcargs[arg] for arg in pyfuncitem._fixtureinfo.argnames})
@@ -289,7 +290,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
         )
     session = _session(pyfuncitem.config)
-    from .plugin_report import baseline_examples
+    from .report import baseline_examples
 
     replay = baseline_examples(pyfuncitem.config, pyfuncitem.nodeid, funcargs["n2r_scene"], relation)
     failure = None
@@ -311,7 +312,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
 
 def _floor(session: Any, scene: Any, sut: Any, relation: Any, records: list) -> dict | None:
     """The field floor beside a relation's result (:func:`pytest_n2r.relation.floor.annotate_relation`)."""
-    from .relation.floor import annotate_relation
+    from ..relation.floor import annotate_relation
 
     return annotate_relation(scene, sut, relation, records, size=relation.size or session.settings.size,
                              cache=session.cache, cache_dir=session.cache_dir)
@@ -343,7 +344,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
 def relation_records(config: pytest.Config) -> list[Any]:
     """The :class:`pytest_n2r.report.RelationRecord` of every relation run so far in this session
     (including those of pytest-xdist workers), for reports and baselines."""
-    from .report.records import RelationRecord
+    from ..report.records import RelationRecord
 
     summary = config.pluginmanager.get_plugin("n2r-summary")
     return [RelationRecord.from_dict(run["record"]) for run in (summary.runs if summary else [])]
@@ -366,7 +367,7 @@ class _Summary:
         if not runs:
             return
         terminalreporter.section("pytest-n2r")
-        from .relation.floor import annotation_lines
+        from ..relation.floor import annotation_lines
 
         for stats in runs:
             terminalreporter.write_line(stats["summary"])

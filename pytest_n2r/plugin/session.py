@@ -1,0 +1,87 @@
+"""The one pytest-n2r session object: resolved settings, scene specs, loaded scenes, the render cache and
+the statistics of every relation run. No pytest import: the plugin builds it from the command line and
+ini file, and anything else (a script, a notebook) can build one directly.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import InvalidArgument
+from ..relations import Relation, RelationStats, RunSettings, check_relation
+from ..scene.base import Scene
+from ..scene.render_cache import DEFAULT_DISK_BYTES, RenderCache
+from .scenes import DEMO_PREFIX, SceneSpec, default_scene_specs, load_scene_spec, parse_scene_specs
+
+__all__ = ["N2RSession"]
+
+
+@dataclass
+class N2RSession:
+    """Settings, scenes, cache and statistics of one test session (one per pytest-xdist worker)."""
+
+    settings: RunSettings = field(default_factory=RunSettings)
+    scenes: list[SceneSpec] = field(default_factory=list)
+    device: str = "auto"
+    #: Scene fields render at this fraction of the size asked for, upsampled (``RenderSettings.scale``).
+    render_scale: float = 1.0
+    cache_dir: Path | None = None
+    cache_bytes: int = DEFAULT_DISK_BYTES
+    stats: list[RelationStats] = field(default_factory=list)
+    _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
+    _cache: RenderCache | None = field(default=None, repr=False)
+
+    @property
+    def cache(self) -> RenderCache:
+        """The render cache (created on first use, so an unused session touches no file)."""
+        if self._cache is None:
+            self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes)
+        return self._cache
+
+    def scene_specs(self, pins: list[str] | None = None, base: str | os.PathLike = ".") -> list[SceneSpec]:
+        """The scenes a test runs on: ``pins`` (scene names or scene entries from an
+        ``n2r_scene`` marker) select or add scenes; otherwise every configured scene, or the default."""
+        configured = self.scenes or default_scene_specs()
+        if not pins:
+            return configured
+        by_name = {s.name: s for s in configured}
+        chosen: list[SceneSpec] = []
+        for pin in pins:
+            if pin in by_name:
+                chosen.append(by_name[pin])
+            elif pin.startswith(DEMO_PREFIX) or ":" in pin or "/" in pin or pin.endswith((".n2r", ".ply")):
+                chosen.extend(parse_scene_specs([pin], base, "n2r_scene marker"))
+            else:
+                known = ", ".join(by_name) or "none"
+                raise InvalidArgument(
+                    f"n2r_scene marker names the scene {pin!r}, which is not configured (configured: {known}); "
+                    "pin a configured scene name, or give a .n2r path, 'demo:<name>' or 'module:function'"
+                )
+        return chosen
+
+    def load(self, spec: SceneSpec) -> Scene:
+        """The scene of ``spec``, loaded once per session."""
+        scene = self._loaded.get(spec.source)
+        if scene is None:
+            scene = load_scene_spec(spec, self.device)
+            if self.render_scale != 1.0:
+                # imported only here: a session on exact scenes alone must not load the field machinery
+                # (importing it changed which examples a derandomized run of the example project drew)
+                from ..scene.field_scene import FieldScene
+
+                if isinstance(scene, FieldScene):
+                    scene = scene.with_settings(scene.settings.replace(scale=self.render_scale))
+            self._loaded[spec.source] = scene
+        return scene
+
+    def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
+            replay: list[Any] | None = None) -> RelationStats:
+        """Check ``relation`` for ``sut`` on ``scene`` (replaying ``replay``, a baseline's examples, first);
+        the stats are kept whatever the outcome."""
+        __tracebackhide__ = True
+        return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
+                              replay=replay, on_start=self.stats.append)
