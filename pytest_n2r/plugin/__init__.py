@@ -4,49 +4,23 @@ Thin and lazy: this module imports only pytest; the engine (Hypothesis, NumPy, t
 inside hooks and fixtures, the first time a test uses pytest-n2r. Without an ``--n2r-*`` option, an
 ``n2r_*`` ini value, an ``n2r_scene`` fixture or a ``@metamorphic`` test, it does nothing.
 
-Every option is a CLI / ini pair; ``@metamorphic(examples=..., size=...)`` and ``@pytest.mark.n2r_scene``
-override them per test: marker keyword > command line > ini file > default.
+Every option is declared once, in :mod:`pytest_n2r.plugin.options`; ``@metamorphic(examples=..., size=...)``
+and ``@pytest.mark.n2r_scene`` override them per test: marker keyword > command line > ini file > default.
 """
 
 from __future__ import annotations
 
 import inspect
-import os
-import re
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from .options import add_options, is_used, read_options
+
 #: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
 pytest_plugins = ["pytest_n2r.plugin.report"]
 
-#: (CLI flag, ini name, metavar, help) of every option with an ini twin.
-OPTIONS: tuple[tuple[str, str, str, str], ...] = (
-    ("--n2r-scene", "n2r_scenes", "PATH",
-     ("scene to test on: a .n2r file, 'demo:<name>' or 'module:function' (repeatable; ini: globs allowed, "
-      "whitespace-separated). Default: the first built-in demo scene")),
-    ("--n2r-examples", "n2r_examples", "N", "Hypothesis examples per relation (default: 50)"),
-    ("--n2r-size", "n2r_size", "WxH", "render size: 'WxH' or the longer side in pixels (default: 480)"),
-    ("--n2r-render-scale", "n2r_render_scale", "S",
-     ("render scene fields at this fraction of the render size and upsample to it: 0.5 is about 4x faster "
-      "for a little sharpness (default: 1)")),
-    ("--n2r-device", "n2r_device", "DEVICE", "device for scene fields: auto, cpu, cuda, cuda:1 (default: auto)"),
-    ("--n2r-cache-dir", "n2r_cache_dir", "DIR",
-     "render cache directory, relative to the rootdir; 'none' keeps renders in memory only (default: .n2r-cache)"),
-    ("--n2r-cache-size", "n2r_cache_size", "SIZE", "disk cap of the render cache, e.g. 2GiB (default: 2GiB)"),
-    ("--n2r-artifacts", "n2r_artifacts", "DIR",
-     "where failure pictures go, relative to the rootdir; 'none' saves none (default: n2r-artifacts)"),
-    ("--n2r-timeout", "n2r_timeout", "SECONDS",
-     "time limit of one render or one SUT call; 0 disables (default: 300)"),
-    ("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
-     "draw the same examples every run; 'auto' means yes when the CI environment variable is set (default: auto)"),
-)
-DEFAULTS = {
-    "n2r_examples": "50", "n2r_size": "480", "n2r_render_scale": "1", "n2r_device": "auto",
-    "n2r_cache_dir": ".n2r-cache", "n2r_cache_size": "2GiB", "n2r_artifacts": "n2r-artifacts", "n2r_timeout": "300",
-    "n2r_derandomize": "auto",
-}
 SCENE_MARKER = "n2r_scene"
 #: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.plugin.marker).
 RELATION_ATTR = "__n2r_relation__"
@@ -60,127 +34,20 @@ _STATS = pytest.StashKey["dict"]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
-    group = parser.getgroup("n2r", "pytest-n2r: metamorphic tests on rendered views")
-    for flag, ini, metavar, help_text in OPTIONS:
-        dest = ini if ini != "n2r_scenes" else "n2r_scene"
-        if flag == "--n2r-scene":
-            group.addoption(flag, action="append", dest=dest, metavar=metavar, default=None, help=help_text)
-            parser.addini(ini, help_text, type="args", default=[])
-        else:
-            group.addoption(flag, dest=dest, metavar=metavar, default=None, help=help_text)
-            parser.addini(ini, help_text, default=None)
-    group.addoption("--n2r-cache-clear", action="store_true", default=False,
-                    help="empty the render cache before the run")
-
-
-def _raw(config: pytest.Config, ini: str) -> Any:
-    """An option's value: the command line if given, else the ini file, else the default."""
-    cli = config.getoption(ini if ini != "n2r_scenes" else "n2r_scene")
-    if cli is not None:
-        return cli
-    value = config.getini(ini)
-    if value not in (None, "", []):
-        return value
-    return DEFAULTS.get(ini)
-
-
-def _used(config: pytest.Config) -> bool:
-    """Whether any pytest-n2r option or ini value is set (the header shows only then)."""
-    for _, ini, _, _ in OPTIONS:
-        if config.getoption(ini if ini != "n2r_scenes" else "n2r_scene") is not None:
-            return True
-        if config.getini(ini) not in (None, "", []):
-            return True
-    return bool(config.getoption("n2r_cache_clear"))
-
-
-def _rooted(config: pytest.Config, value: str) -> Path | None:
-    if value.strip().lower() == "none":
-        return None
-    path = Path(value).expanduser()
-    return path if path.is_absolute() else Path(config.rootpath) / path
+    add_options(parser)
 
 
 def _build_session(config: pytest.Config) -> Any:
     """Parse and check every option (a bad value is a usage error naming the option)."""
-    from ..data.atomic import unwritable_reason
-    from ..errors import N2RError
     from ..relation import RunSettings
-    from ..render.size import RenderSize
-    from ..scene.render_cache import parse_size
-    from .scenes import parse_scene_specs
     from .session import N2RSession
 
-    def fail(ini: str, message: str) -> None:
-        flag = next(f for f, i, _, _ in OPTIONS if i == ini)
-        raise pytest.UsageError(f"pytest-n2r: {flag} / ini {ini}: {message}")
-
-    try:
-        examples = int(_raw(config, "n2r_examples"))
-        if examples < 1:
-            raise ValueError
-    except ValueError:
-        fail("n2r_examples", f"{_raw(config, 'n2r_examples')!r} is not a whole number >= 1")
-    try:
-        size = RenderSize.parse(str(_raw(config, "n2r_size")), "n2r_size")
-    except N2RError as exc:
-        fail("n2r_size", str(exc))
-    try:
-        render_scale = float(_raw(config, "n2r_render_scale"))
-        if not 0.1 <= render_scale <= 1.0:
-            raise ValueError
-    except ValueError:
-        fail("n2r_render_scale", f"{_raw(config, 'n2r_render_scale')!r} is not a fraction in [0.1, 1]")
-    try:
-        timeout = float(_raw(config, "n2r_timeout"))
-        if not timeout >= 0:
-            raise ValueError
-    except ValueError:
-        fail("n2r_timeout", f"{_raw(config, 'n2r_timeout')!r} is not a number of seconds >= 0")
-    derandomize = str(_raw(config, "n2r_derandomize")).strip().lower()
-    if derandomize not in ("auto", "yes", "no", "true", "false", "1", "0"):
-        fail("n2r_derandomize", f"{derandomize!r}; expected auto, yes or no")
-    derandomize_on = derandomize in ("yes", "true", "1") or (derandomize == "auto" and bool(os.environ.get("CI")))
-    try:
-        cache_bytes = parse_size(str(_raw(config, "n2r_cache_size")), "n2r_cache_size")
-    except N2RError as exc:
-        fail("n2r_cache_size", str(exc))
-    cli_scenes = config.getoption("n2r_scene")
-    try:
-        if cli_scenes:
-            scenes = parse_scene_specs(cli_scenes, Path.cwd(), "--n2r-scene")
-        else:
-            base = Path(config.inipath).parent if config.inipath else Path(config.rootpath)
-            scenes = parse_scene_specs(config.getini("n2r_scenes"), base, "ini n2r_scenes")
-    except N2RError as exc:
-        raise pytest.UsageError(f"pytest-n2r: {exc}") from None
-    device = str(_raw(config, "n2r_device")).strip().lower()
-    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", device):
-        fail("n2r_device", f"{device!r}; expected auto, cpu, cuda or cuda:N")
-    if device.startswith("cuda"):
-        import torch
-
-        if not torch.cuda.is_available():
-            fail("n2r_device", f"{device!r}: CUDA is not available on this machine; use auto or cpu")
-    for ini in ("n2r_artifacts", "n2r_cache_dir"):
-        folder = _rooted(config, str(_raw(config, ini)))
-        reason = unwritable_reason(folder) if folder is not None else None
-        if reason is not None:
-            fail(ini, f"{folder}: {reason}; choose a writable folder, or 'none'")
-    for spec in scenes:
-        if spec.kind == "file":
-            from ..scene.file import check_scene_file  # here: a run without scene files never loads the field
-
-            try:
-                check_scene_file(spec.source)
-            except N2RError as exc:
-                raise pytest.UsageError(f"pytest-n2r: --n2r-scene / ini n2r_scenes {spec.source}: {exc}") from None
-    settings = RunSettings(
-        examples=examples, size=size, derandomize=derandomize_on, timeout=timeout or None,
-        artifacts=_rooted(config, str(_raw(config, "n2r_artifacts"))),
-    )
-    return N2RSession(settings=settings, scenes=scenes, device=device, render_scale=render_scale,
-                      cache_dir=_rooted(config, str(_raw(config, "n2r_cache_dir"))), cache_bytes=cache_bytes)
+    values = read_options(config)
+    settings = RunSettings(examples=values["examples"], size=values["size"], derandomize=values["derandomize"],
+                           timeout=values["timeout"] or None, artifacts=values["artifacts"])
+    return N2RSession(settings=settings, scenes=values["scene"] or [], device=values["device"],
+                      render_scale=values["render_scale"], cache_dir=values["cache_dir"],
+                      cache_bytes=values["cache_size"])
 
 
 def _session(config: pytest.Config) -> Any:
@@ -198,14 +65,14 @@ def pytest_configure(config: pytest.Config) -> None:
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
     config.pluginmanager.register(_Summary(config), "n2r-summary")
-    if _used(config):
+    if is_used(config):
         session = _session(config)  # bad options fail now, before collection
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
             session.cache.clear()  # the controller clears before xdist workers start
 
 
 def pytest_report_header(config: pytest.Config) -> list[str] | None:
-    if not _used(config):
+    if not is_used(config):
         return None
     return [_describe(config, _session(config))]
 

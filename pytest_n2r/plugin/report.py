@@ -13,28 +13,9 @@ from typing import Any
 
 import pytest
 
+from .options import option, read_options
+
 _RESULT = pytest.StashKey["dict"]()
-
-
-def pytest_addoption(parser: pytest.Parser) -> None:
-    group = parser.getgroup("n2r")
-    group.addoption("--n2r-save-baseline", metavar="PATH", default=None,
-                    help="write every relation's drawn examples (all a replay needs, and their deviations) to PATH")
-    group.addoption("--n2r-compare", metavar="PATH", default=None,
-                    help="replay the baseline's examples at PATH, pair them with this run's and fail on regressions")
-    group.addoption("--n2r-compare-fail", metavar="mean:MARGIN", action="append", default=None,
-                    help="regression rule for --n2r-compare: fail a relation when the lower confidence bound of "
-                         "the mean increase of the deviation over its paired examples exceeds MARGIN "
-                         "(default: mean:0.02)")
-    group.addoption("--n2r-compare-confidence", metavar="P", default=None,
-                    help="confidence of that one-sided bound, in (0.5, 1) (default: 0.95)")
-    group.addoption("--n2r-compare-fail-on", metavar="OUTCOMES", action="append", default=None,
-                    help="comma-separated comparison outcomes that fail the run (default: worse, lost, no-pairs, "
-                         "changed-scene, changed-metric, missing; also possible: new, changed-eps)")
-    group.addoption("--n2r-report", metavar="PATH", default=None,
-                    help="write a self-contained HTML report of every relation to PATH")
-    group.addoption("--n2r-json", metavar="PATH", default=None,
-                    help="write every relation's results (examples, scores, timings) to PATH as JSON")
 
 
 def _is_worker(config: pytest.Config) -> bool:
@@ -44,31 +25,15 @@ def _is_worker(config: pytest.Config) -> bool:
 def pytest_configure(config: pytest.Config) -> None:
     """Check the reporting options up front: a bad rule or a missing or malformed baseline is a usage
     error. The baseline is loaded in pytest-xdist workers too: they replay its examples."""
-    compare = config.getoption("n2r_compare")
-    extra = [flag for flag, dest in (("--n2r-compare-fail", "n2r_compare_fail"),
-                                     ("--n2r-compare-confidence", "n2r_compare_confidence"),
-                                     ("--n2r-compare-fail-on", "n2r_compare_fail_on")) if config.getoption(dest)]
-    if extra and not compare:
-        raise pytest.UsageError(f"pytest-n2r: {extra[0]} needs --n2r-compare PATH (the baseline to compare with)")
-    if not compare:
+    rules = (option("compare_confidence"), option("compare_fail"), option("compare_fail_on"))
+    given = [o.flag for o in rules if o.given(config) is not None]
+    if given and not config.getoption("n2r_compare"):
+        raise pytest.UsageError(f"pytest-n2r: {given[0]} needs --n2r-compare PATH (the baseline to compare with)")
+    if not config.getoption("n2r_compare"):
         return
-    from ..errors import N2RError
-    from ..report import load_baseline, parse_margin, parse_outcomes
-
-    try:
-        confidence = float(config.getoption("n2r_compare_confidence") or 0.95)
-        if not 0.5 < confidence < 1.0:
-            raise ValueError
-    except ValueError:
-        raise pytest.UsageError(f"pytest-n2r: --n2r-compare-confidence={config.getoption('n2r_compare_confidence')!r}"
-                                " is not a probability in (0.5, 1), e.g. 0.95") from None
-    try:
-        config.stash[_RESULT] = {
-            "margin": parse_margin(config.getoption("n2r_compare_fail")), "confidence": confidence,
-            "fail_on": parse_outcomes(config.getoption("n2r_compare_fail_on")), "baseline": load_baseline(compare),
-        }
-    except N2RError as exc:
-        raise pytest.UsageError(f"pytest-n2r: {exc}") from None
+    values = read_options(config, (*rules, option("compare")))
+    config.stash[_RESULT] = {"margin": values["compare_fail"], "confidence": values["compare_confidence"],
+                             "fail_on": values["compare_fail_on"], "baseline": values["compare"]}
 
 
 def baseline_examples(config: pytest.Config, nodeid: str, scene: Any, relation: Any) -> list | None:

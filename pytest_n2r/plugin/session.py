@@ -11,8 +11,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .. import defaults
 from ..errors import InvalidArgument
-from ..relations import Relation, RelationStats, RunSettings, check_relation
+from ..relation import Relation, RelationStats, RunSettings, check_relation
 from ..scene.base import Scene
 from ..scene.render_cache import DEFAULT_DISK_BYTES, RenderCache
 from .scenes import DEMO_PREFIX, SceneSpec, default_scene_specs, load_scene_spec, parse_scene_specs
@@ -26,9 +27,9 @@ class N2RSession:
 
     settings: RunSettings = field(default_factory=RunSettings)
     scenes: list[SceneSpec] = field(default_factory=list)
-    device: str = "auto"
+    device: str = defaults.DEVICE
     #: Scene fields render at this fraction of the size asked for, upsampled (``RenderSettings.scale``).
-    render_scale: float = 1.0
+    render_scale: float = defaults.RENDER_SCALE
     cache_dir: Path | None = None
     cache_bytes: int = DEFAULT_DISK_BYTES
     stats: list[RelationStats] = field(default_factory=list)

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import defaults
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
 from .records import STATUSES, ExampleRecord, RelationRecord
@@ -50,7 +51,7 @@ OUTCOMES = {
     "new": "run but not in the baseline (nothing to compare with)",
 }
 #: Outcomes that fail the run unless ``--n2r-compare-fail-on`` says otherwise.
-DEFAULT_FAIL_ON = ("worse", "lost", "no-pairs", "changed-scene", "changed-metric", "missing")
+DEFAULT_FAIL_ON = defaults.COMPARE_FAIL_ON
 #: Share of a baseline's accepted examples that may become undefined before a relation is "lost".
 MAX_LOST = 0.1
 #: Bootstrap resamples of the paired bound (a fixed seed: the same pairs always give the same verdict).
@@ -230,7 +231,7 @@ def replay_candidates(baseline: RelationRecord) -> list[ExampleRecord]:
     return [e for e in baseline.examples if e.valid and e.replayable]
 
 
-def paired_bound(changes: list[float], confidence: float = 0.95) -> float:
+def paired_bound(changes: list[float], confidence: float = defaults.COMPARE_CONFIDENCE) -> float:
     """One-sided lower confidence bound of the mean of paired ``changes`` (percentile bootstrap,
     :data:`BOOTSTRAP_RESAMPLES` resamples, fixed seed). NaN for no changes.
 
@@ -271,14 +272,15 @@ _MARGIN = re.compile(r"^\s*mean\s*:\s*(?P<value>[0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s
 
 
 def parse_margin(spec: str | list[str] | None) -> float:
-    """The margin of ``--n2r-compare-fail mean:MARGIN`` (absolute deviation units, default 0.02).
+    """The margin of ``--n2r-compare-fail mean:MARGIN`` (absolute deviation units; default
+    :data:`pytest_n2r.defaults.COMPARE_MARGIN`).
 
     >>> parse_margin("mean:0.05")
     0.05
     """
     parts = [p for chunk in ([spec] if isinstance(spec, str) else spec or []) for p in chunk.split(",") if p.strip()]
     if not parts:
-        return 0.02
+        return defaults.COMPARE_MARGIN
     if len(parts) > 1:
         raise InvalidArgument(f"--n2r-compare-fail={','.join(parts)!r}: give one rule, mean:MARGIN")
     m = _MARGIN.match(parts[0])
@@ -304,8 +306,9 @@ def parse_outcomes(spec: str | list[str] | None) -> tuple[str, ...]:
     return tuple(parts)
 
 
-def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRecord], *, margin: float = 0.02,
-                   confidence: float = 0.95, fail_on: tuple[str, ...] = DEFAULT_FAIL_ON) -> list[PairedComparison]:
+def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRecord], *,
+                   margin: float = defaults.COMPARE_MARGIN, confidence: float = defaults.COMPARE_CONFIDENCE,
+                   fail_on: tuple[str, ...] = DEFAULT_FAIL_ON) -> list[PairedComparison]:
     """Compare every current relation with the same test id's baseline on the replayed examples, in pairs;
     baseline relations that did not run are ``missing``."""
     out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence)
@@ -372,7 +375,8 @@ def _compare_one(
     return result
 
 
-def format_comparison_table(comparisons: list[PairedComparison], confidence: float = 0.95) -> str:
+def format_comparison_table(comparisons: list[PairedComparison],
+                            confidence: float = defaults.COMPARE_CONFIDENCE) -> str:
     """A plain-text table per relation: n, mean change, its lower confidence bound, verdict."""
     header = ["relation", "n", "mean change", f"{confidence:.0%} lower bound", "verdict"]
     rows = [header]

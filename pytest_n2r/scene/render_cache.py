@@ -1,7 +1,7 @@
 """Render cache: an in-memory LRU for one session over an on-disk, content-addressed store.
 
-A render is identified by everything that determines its pixels: the scene's content hash, its renderer's
-version, the pose (exact float64 bytes), the camera, the scene's render settings and the package version.
+A render is identified by everything that determines its pixels: the scene's content hash (which covers its
+render settings), its renderer's version, the pose (exact float64 bytes), the camera and the package version.
 Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs
 renders only the missing ones. Files are written under a temporary name and renamed into place, so
 concurrent pytest-xdist workers sharing one directory never see a torn file: at worst two workers render
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from .. import __version__, defaults
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
@@ -33,7 +33,6 @@ from .base import Scene, normalize_outputs
 __all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
 
 DEFAULT_MEMORY_BYTES = 512 * 2**20
-DEFAULT_DISK_BYTES = 2 * 2**30
 #: Check the disk size cap after this many bytes were written (a directory scan is not free).
 _TRIM_EVERY_BYTES = 64 * 2**20
 _SUBDIR = "renders"
@@ -56,15 +55,18 @@ def parse_size(text: str | int, name: str = "size") -> int:
     return value
 
 
+DEFAULT_DISK_BYTES = parse_size(defaults.CACHE_SIZE)
+
+
 def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
-    """Hex SHA-256 of what determines a render's pixels (the outputs are stored under this key)."""
-    settings = getattr(scene, "render_settings", None)
+    """Hex SHA-256 of what determines a render's pixels (the outputs are stored under this key): the package
+    version, the scene's :attr:`~pytest_n2r.scene.base.Scene.content_hash` (which covers its render settings),
+    its renderer's version, the camera and the exact pose."""
     spec = {
         "version": __version__,
         "scene": scene.content_hash,
         "renderer": scene.renderer_version,
         "camera": camera.to_dict(),
-        "settings": settings() if callable(settings) else settings,
     }
     h = hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode())
     h.update(np.ascontiguousarray(c2w, dtype="<f8").tobytes())

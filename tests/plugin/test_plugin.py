@@ -339,7 +339,9 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    assert loaded == ["pytest_n2r.plugin", "pytest_n2r.plugin.report"], loaded
+    # the plugin, its option registry and the two leaf modules that registry reads: nothing of the engine
+    assert loaded == ["pytest_n2r.defaults", "pytest_n2r.errors", "pytest_n2r.plugin", "pytest_n2r.plugin.options",
+                      "pytest_n2r.plugin.report"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)

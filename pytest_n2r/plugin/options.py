@@ -1,0 +1,313 @@
+"""The plugin's options, in one registry: flag, ini name, default, parser and help of every ``--n2r-*`` option.
+
+The plugin loops over :data:`OPTIONS` to register them (``pytest_addoption``), to tell whether pytest-n2r is
+used at all, and to parse them (:func:`read_options`): the command line wins over the ini file, which wins
+over the default; a marker keyword (``@metamorphic(examples=...)``) wins over all three. A value that does
+not parse is a ``pytest.UsageError`` naming the flag and the ini key. Defaults that the library objects share
+come from :mod:`pytest_n2r.defaults`.
+
+Like the plugin, this module imports only pytest: each parser imports what it needs when it runs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import pytest
+
+from .. import defaults
+from ..errors import InvalidArgument, N2RError
+
+__all__ = ["Option", "Where", "OPTIONS", "RUN_OPTIONS", "REPORT_OPTIONS", "option", "read_options", "is_used"]
+
+
+@dataclass(frozen=True)
+class Where:
+    """Where a value came from: ``origin`` names it in errors (``--n2r-scene``, ``ini n2r_scenes``), relative
+    scene paths are taken from ``base`` (the working directory, or the ini file's folder) and relative output
+    folders from ``root`` (pytest's rootdir)."""
+
+    origin: str
+    base: Path
+    root: Path
+
+
+@dataclass(frozen=True)
+class Option:
+    """One ``--n2r-*`` option.
+
+    ``ini`` is its ini twin (``None``: command line only); ``default`` the value used when neither gives
+    one, written as a user would type it (``None``: none); ``parse(value, where)`` turns a given value into
+    what the session uses and raises :class:`~pytest_n2r.errors.N2RError` with what was expected;
+    ``help`` may show the default as ``{default}``. The parser's message is prefixed with the flag and ini
+    key, unless ``names_itself`` (its messages already name the option and the entry). ``part`` says which
+    half of the plugin reads it: ``"run"`` (the session) or ``"report"`` (baselines and reports).
+    """
+
+    flag: str
+    ini: str | None
+    metavar: str | None
+    help: str
+    default: str | None = None
+    parse: Callable[[Any, Where], Any] | None = None
+    action: Literal["store", "append", "store_true"] = "store"
+    part: Literal["run", "report"] = "run"
+    names_itself: bool = False
+
+    @property
+    def dest(self) -> str:
+        """The ``config.getoption`` name: the flag without dashes (``--n2r-cache-dir`` → ``n2r_cache_dir``)."""
+        return self.flag.lstrip("-").replace("-", "_")
+
+    @property
+    def name(self) -> str:
+        """The key of :func:`read_options`' result: ``dest`` without ``n2r_`` (``cache_dir``)."""
+        return self.dest.removeprefix("n2r_")
+
+    @property
+    def help_text(self) -> str:
+        return self.help.format(default=self.default)
+
+    def given(self, config: pytest.Config) -> tuple[Any, Where] | None:
+        """The value given on the command line, else in the ini file, with where it came from; ``None``
+        when neither gives one."""
+        root = Path(config.rootpath)
+        value = config.getoption(self.dest)
+        if value not in (None, False):
+            return value, Where(self.flag, Path.cwd(), root)
+        if self.ini is not None:
+            value = config.getini(self.ini)
+            if value not in (None, "", []):
+                base = Path(config.inipath).parent if config.inipath else root
+                return value, Where(f"ini {self.ini}", base, root)
+        return None
+
+    def value(self, config: pytest.Config) -> Any:
+        """The parsed value: given (command line, ini file) or the default; a bad one is a usage error."""
+        given = self.given(config)
+        if given is None:
+            if self.default is None:
+                return None if self.action != "store_true" else False
+            given = self.default, Where("default", Path(config.rootpath), Path(config.rootpath))
+        if self.parse is None:
+            return given[0]
+        try:
+            return self.parse(*given)
+        except N2RError as exc:
+            where = "" if self.names_itself else f"{self.flag}{f' / ini {self.ini}' if self.ini else ''}: "
+            raise pytest.UsageError(f"pytest-n2r: {where}{exc}") from None
+
+
+# -- parsers (each imports what it needs when it runs) -----------------------------------------------------
+
+
+def _whole_number(value: str, where: Where) -> int:
+    try:
+        number = int(value)
+    except ValueError:
+        number = 0
+    if number < 1:
+        raise InvalidArgument(f"{value!r} is not a whole number >= 1")
+    return number
+
+
+def _number_in(low: float, high: float, what: str) -> Callable[[str, Where], float]:
+    def parse(value: str, where: Where) -> float:
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not low <= number <= high:
+            raise InvalidArgument(f"{value!r} is not {what}")
+        return number
+
+    return parse
+
+
+def _render_size(value: str, where: Where) -> Any:
+    from ..render.size import RenderSize
+
+    return RenderSize.parse(str(value), "n2r_size")
+
+
+def _device(value: str, where: Where) -> str:
+    device = str(value).strip().lower()
+    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", device):
+        raise InvalidArgument(f"{device!r}; expected auto, cpu, cuda or cuda:N")
+    if device.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            raise InvalidArgument(f"{device!r}: CUDA is not available on this machine; use auto or cpu")
+    return device
+
+
+def _folder(value: str, where: Where) -> Path | None:
+    """A writable folder, relative to the rootdir; ``none``: ``None`` (nothing written)."""
+    if value.strip().lower() == "none":
+        return None
+    from ..data.atomic import unwritable_reason
+
+    path = Path(value).expanduser()
+    folder = path if path.is_absolute() else where.root / path
+    reason = unwritable_reason(folder)
+    if reason is not None:
+        raise InvalidArgument(f"{folder}: {reason}; choose a writable folder, or 'none'")
+    return folder
+
+
+def _byte_size(value: str, where: Where) -> int:
+    from ..scene.render_cache import parse_size
+
+    return parse_size(str(value), "n2r_cache_size")
+
+
+def _derandomize(value: str, where: Where) -> bool:
+    text = str(value).strip().lower()
+    if text not in ("auto", "yes", "no", "true", "false", "1", "0"):
+        raise InvalidArgument(f"{text!r}; expected auto, yes or no")
+    return text in ("yes", "true", "1") or (text == "auto" and bool(os.environ.get("CI")))
+
+
+def _scenes(entries: list[str], where: Where) -> list[Any]:
+    """Scene specs; each scene file is opened and checked now, so a broken one is a usage error."""
+    from .scenes import parse_scene_specs
+
+    specs = parse_scene_specs(entries, where.base, where.origin)
+    for spec in specs:
+        if spec.kind == "file":
+            from ..scene.file import check_scene_file  # here: a run without scene files never loads the field
+
+            try:
+                check_scene_file(spec.source)
+            except N2RError as exc:
+                raise InvalidArgument(f"--n2r-scene / ini n2r_scenes {spec.source}: {exc}") from None
+    return specs
+
+
+def _probability(value: str, where: Where) -> float:
+    try:
+        number = float(value)
+    except ValueError:
+        number = math.nan
+    if not 0.5 < number < 1.0:
+        raise InvalidArgument(f"--n2r-compare-confidence={value!r} is not a probability in (0.5, 1), e.g. 0.95")
+    return number
+
+
+def _margin(spec: str | list[str], where: Where) -> float:
+    from ..report import parse_margin
+
+    return parse_margin(spec)
+
+
+def _outcomes(spec: str | list[str], where: Where) -> tuple[str, ...]:
+    from ..report import parse_outcomes
+
+    return parse_outcomes(spec)
+
+
+def _baseline(path: str, where: Where) -> Any:
+    from ..report import load_baseline
+
+    return load_baseline(path)
+
+
+def _text(number: float) -> str:
+    return f"{number:g}"
+
+
+#: Every option, in the order ``pytest --help`` lists them.
+OPTIONS: tuple[Option, ...] = (
+    Option("--n2r-scene", "n2r_scenes", "PATH",
+           "scene to test on: a .n2r file, 'demo:<name>' or 'module:function' (repeatable; ini: globs allowed, "
+           "whitespace-separated). Default: the first built-in demo scene",
+           parse=_scenes, action="append", names_itself=True),
+    Option("--n2r-examples", "n2r_examples", "N", "Hypothesis examples per relation (default: {default})",
+           default=str(defaults.EXAMPLES), parse=_whole_number),
+    Option("--n2r-size", "n2r_size", "WxH", "render size: 'WxH' or the longer side in pixels (default: {default})",
+           default="480", parse=_render_size),
+    Option("--n2r-render-scale", "n2r_render_scale", "S",
+           "render scene fields at this fraction of the render size and upsample to it: 0.5 is about 4x faster "
+           "for a little sharpness (default: {default})",
+           default=_text(defaults.RENDER_SCALE), parse=_number_in(0.1, 1.0, "a fraction in [0.1, 1]")),
+    Option("--n2r-device", "n2r_device", "DEVICE",
+           "device for scene fields: auto, cpu, cuda, cuda:1 (default: {default})",
+           default=defaults.DEVICE, parse=_device),
+    Option("--n2r-cache-dir", "n2r_cache_dir", "DIR",
+           "render cache directory, relative to the rootdir; 'none' keeps renders in memory only "
+           "(default: {default})", default=".n2r-cache", parse=_folder),
+    Option("--n2r-cache-size", "n2r_cache_size", "SIZE", "disk cap of the render cache, e.g. 2GiB (default: {default})",
+           default=defaults.CACHE_SIZE, parse=_byte_size),
+    Option("--n2r-artifacts", "n2r_artifacts", "DIR",
+           "where failure pictures go, relative to the rootdir; 'none' saves none (default: {default})",
+           default="n2r-artifacts", parse=_folder),
+    Option("--n2r-timeout", "n2r_timeout", "SECONDS",
+           "time limit of one render or one SUT call; 0 disables (default: {default})",
+           default=_text(defaults.TIMEOUT_S), parse=_number_in(0.0, math.inf, "a number of seconds >= 0")),
+    Option("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
+           "draw the same examples every run; 'auto' means yes when the CI environment variable is set "
+           "(default: {default})", default="auto", parse=_derandomize),
+    Option("--n2r-cache-clear", None, None, "empty the render cache before the run", action="store_true"),
+    Option("--n2r-save-baseline", None, "PATH",
+           "write every relation's drawn examples (all a replay needs, and their deviations) to PATH",
+           part="report"),
+    Option("--n2r-compare", None, "PATH",
+           "replay the baseline's examples at PATH, pair them with this run's and fail on regressions",
+           parse=_baseline, part="report", names_itself=True),
+    Option("--n2r-compare-fail", None, "mean:MARGIN",
+           "regression rule for --n2r-compare: fail a relation when the lower confidence bound of the mean "
+           "increase of the deviation over its paired examples exceeds MARGIN (default: {default})",
+           default=f"mean:{defaults.COMPARE_MARGIN:g}", parse=_margin, action="append", part="report",
+           names_itself=True),
+    Option("--n2r-compare-confidence", None, "P",
+           "confidence of that one-sided bound, in (0.5, 1) (default: {default})",
+           default=_text(defaults.COMPARE_CONFIDENCE), parse=_probability, part="report", names_itself=True),
+    Option("--n2r-compare-fail-on", None, "OUTCOMES",
+           "comma-separated comparison outcomes that fail the run (default: {default}; also possible: new, "
+           "changed-eps)", default=", ".join(defaults.COMPARE_FAIL_ON), parse=_outcomes, action="append",
+           part="report", names_itself=True),
+    Option("--n2r-report", None, "PATH", "write a self-contained HTML report of every relation to PATH",
+           part="report"),
+    Option("--n2r-json", None, "PATH",
+           "write every relation's results (examples, scores, timings) to PATH as JSON", part="report"),
+)
+RUN_OPTIONS = tuple(o for o in OPTIONS if o.part == "run")
+REPORT_OPTIONS = tuple(o for o in OPTIONS if o.part == "report")
+
+
+def option(name: str) -> Option:
+    """The option called ``name`` (``"examples"``, ``"compare_fail"``)."""
+    return next(o for o in OPTIONS if o.name == name)
+
+
+def add_options(parser: pytest.Parser) -> None:
+    """Register every option in the ``n2r`` group, and the ini twin of those that have one."""
+    group = parser.getgroup("n2r", "pytest-n2r: metamorphic tests on rendered views")
+    for o in OPTIONS:
+        kwargs: dict[str, Any] = {"dest": o.dest, "help": o.help_text}
+        if o.action == "store_true":
+            group.addoption(o.flag, action="store_true", default=False, **kwargs)
+        else:
+            group.addoption(o.flag, action=o.action, metavar=o.metavar, default=None, **kwargs)
+        if o.ini is not None:
+            if o.action == "append":
+                parser.addini(o.ini, o.help_text, type="args", default=[])
+            else:
+                parser.addini(o.ini, o.help_text, default=None)
+
+
+def is_used(config: pytest.Config, options: tuple[Option, ...] = RUN_OPTIONS) -> bool:
+    """Whether any of ``options`` is given, on the command line or in the ini file."""
+    return any(o.given(config) is not None for o in options)
+
+
+def read_options(config: pytest.Config, options: tuple[Option, ...] = RUN_OPTIONS) -> dict[str, Any]:
+    """Every option of ``options`` parsed, by :attr:`Option.name` (a bad value is a usage error)."""
+    return {o.name: o.value(config) for o in options}

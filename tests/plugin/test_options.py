@@ -1,0 +1,88 @@
+"""The option registry (pytest_n2r.plugin.options): one entry per --n2r-* option, whose defaults are the
+library's defaults, documented in the docs tables and shown by ``pytest --help`` through the entry point."""
+
+from __future__ import annotations
+
+import inspect
+import re
+from pathlib import Path
+
+import pytest
+
+from pytest_n2r import defaults
+from pytest_n2r.plugin.options import OPTIONS, REPORT_OPTIONS, RUN_OPTIONS, Where, option
+
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+def _default_value(name: str):
+    o = option(name)
+    return o.parse(o.default, Where("default", Path.cwd(), Path.cwd()))
+
+
+def test_every_option_is_declared_once_with_its_help():
+    flags = [o.flag for o in OPTIONS]
+    assert len(set(flags)) == len(flags), f"a flag is declared twice: {flags}"
+    assert len({o.name for o in OPTIONS}) == len(OPTIONS)
+    for o in OPTIONS:
+        assert o.flag.startswith("--n2r-") and o.help_text.strip(), o
+        assert o.ini is None or o.ini.startswith("n2r_"), o
+        assert "{default}" in o.help or o.default is None, f"{o.flag}: help does not show its default {o.default!r}"
+    assert set(RUN_OPTIONS) | set(REPORT_OPTIONS) == set(OPTIONS)
+
+
+def test_the_plugin_defaults_are_the_library_defaults():
+    from pytest_n2r.plugin.session import N2RSession
+    from pytest_n2r.relation import RunSettings
+    from pytest_n2r.report.baseline import DEFAULT_FAIL_ON, compare_paired, parse_margin
+    from pytest_n2r.scene.render_cache import RenderCache
+
+    settings, session = RunSettings(), N2RSession()
+    assert _default_value("examples") == settings.examples == defaults.EXAMPLES
+    assert _default_value("timeout") == settings.timeout == defaults.TIMEOUT_S
+    assert _default_value("cache_size") == RenderCache().disk_bytes == session.cache_bytes
+    assert _default_value("render_scale") == session.render_scale
+    assert _default_value("device") == session.device
+    assert _default_value("compare_fail") == parse_margin(None) == inspect.signature(compare_paired).parameters[
+        "margin"].default
+    assert _default_value("compare_confidence") == inspect.signature(compare_paired).parameters["confidence"].default
+    assert _default_value("compare_fail_on") == DEFAULT_FAIL_ON
+
+
+@pytest.mark.parametrize("o", [o for o in OPTIONS if o.default is not None], ids=lambda o: o.flag)
+def test_every_default_parses(o, tmp_path):
+    assert o.parse(o.default, Where("default", tmp_path, tmp_path)) is not None
+
+
+def _table_row(flag: str) -> str:
+    for page in ("plugin.md", "reporting.md"):
+        for line in (DOCS / page).read_text(encoding="utf-8").splitlines():
+            if re.match(r"\|\s*`" + re.escape(flag) + r"[ `]", line):
+                return line
+    raise AssertionError(f"{flag} has no row in the option tables of docs/plugin.md or docs/reporting.md")
+
+
+@pytest.mark.parametrize("o", OPTIONS, ids=lambda o: o.flag)
+def test_the_docs_tables_show_each_option_with_its_ini_key_and_default(o):
+    row = _table_row(o.flag)
+    if o.ini is not None:
+        assert f"`{o.ini}`" in row, f"docs row of {o.flag} does not name its ini key {o.ini}:\n{row}"
+    if o.default is not None:
+        shown = o.default.replace(" ", "") in row.replace(" ", "")
+        assert shown, f"docs row of {o.flag} does not show its default {o.default}:\n{row}"
+
+
+def test_pytest_help_lists_every_option_through_the_entry_point(pytester):
+    result = pytester.runpytest_subprocess("--help")
+    text = result.stdout.str()
+    missing = [o.flag for o in OPTIONS if o.flag not in text] + [o.ini for o in OPTIONS if o.ini and o.ini not in text]
+    assert not missing, f"`pytest --help` (plugin loaded from the pytest11 entry point) lacks {missing}"
+    assert "(default: 50)" in text and "(default: 2GiB)" in text, "the help does not show the defaults"
+
+
+def test_command_line_beats_ini_beats_default(pytester):
+    pytester.makeini("[pytest]\nn2r_examples = 7\nn2r_timeout = 9\n")
+    config = pytester.parseconfig("--n2r-examples", "3")
+    assert option("examples").value(config) == 3  # command line over ini
+    assert option("timeout").value(config) == 9  # ini over default
+    assert option("size").value(config).longer == 480  # the default
