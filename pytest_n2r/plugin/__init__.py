@@ -145,9 +145,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if relation is None:
         return None
     __tracebackhide__ = True
-    from .._timeout import CallTimeout
     from ..relation import RelationFailure
     from ..relation.determinism import SUTNotDeterministic
+    from ..relation.timeout import CallTimeout
 
     funcargs = pyfuncitem.funcargs
     sut = pyfuncitem.obj(**{arg: funcargs[arg] for arg in pyfuncitem._fixtureinfo.argnames})

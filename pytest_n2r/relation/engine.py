@@ -15,8 +15,6 @@ from typing import Any
 import numpy as np
 from hypothesis import assume, target
 
-from .._timeout import time_limit
-from ..artifacts import artifact_dir, save_pair
 from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
 from ..geometry import Camera, Units
 from ..metrics.base import MetricResult
@@ -24,12 +22,14 @@ from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
 from ..scene.render_cache import RenderCache
 from ..strategies import transform_units
+from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
 from .failure import RelationFailure, describe_transform, failure_message
 from .outputs import SUTError, check_output
 from .settings import RunSettings
 from .spec import Relation, mutation_like
 from .stats import MAX_UNDEFINED, RelationStats
+from .timeout import time_limit
 
 __all__ = ["Engine", "Evaluation"]
 

@@ -9,7 +9,7 @@ transform that still fails, replays the last failure first from its example data
 relation's identity when ``derandomize`` is on, and with ``search="targeted"`` steers toward larger
 deviations with :func:`hypothesis.target`. Deadlines are off and the "too slow" / "filters too much"
 health checks are suppressed, because renders are slow and invalid views are expected; a real hang is
-caught by the per-call time limit instead (:mod:`pytest_n2r._timeout`).
+caught by the per-call time limit instead (:mod:`pytest_n2r.relation.timeout`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ from hypothesis import strategies as st
 from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
-from .._timeout import TimeLimitReached
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 from ..scene.base import Scene, SceneView
@@ -41,6 +40,7 @@ from .failure import RelationFailure, nothing_to_test, too_many_invalid
 from .settings import RunSettings
 from .spec import Relation
 from .stats import MAX_UNDEFINED, RelationStats
+from .timeout import TimeLimitReached
 
 __all__ = ["check_relation", "replay_relation"]
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from .. import defaults
 from ..render.size import RenderSize
 
 __all__ = ["RunSettings"]
@@ -18,9 +19,9 @@ class RunSettings:
     (``None``: no limit), where failure pictures go (``artifacts``; ``None``: nowhere) and the Hypothesis
     example ``database`` (``"default"``: Hypothesis's own setting)."""
 
-    examples: int = 50
+    examples: int = defaults.EXAMPLES
     size: RenderSize | None = None
     derandomize: bool = False
-    timeout: float | None = 300.0
+    timeout: float | None = defaults.TIMEOUT_S
     artifacts: Path | None = None
     database: Any = "default"

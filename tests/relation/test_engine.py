@@ -8,9 +8,9 @@ import pytest
 from hypothesis import strategies as st
 
 from pytest_n2r import InvalidArgument
-from pytest_n2r.artifacts import artifact_dir
 from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, Validity, check_relation
+from pytest_n2r.relation.artifacts import artifact_dir
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.render_cache import RenderCache
 from pytest_n2r.strategies import transforms

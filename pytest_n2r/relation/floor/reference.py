@@ -56,10 +56,8 @@ def exact_twin(scene: Scene) -> Scene | None:
     name = recipe.get("scene") if isinstance(recipe, dict) else None
     if not isinstance(name, str):
         return None
-    try:
-        from ...demo import demo_scene_names, ground_truth
-    except ImportError:  # a build without demo scenes
-        return None
+    from ...demo import demo_scene_names, ground_truth
+
     return ground_truth(name) if name in demo_scene_names() else None
 
 

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from pytest_n2r._timeout import CallTimeout, time_limit
+from pytest_n2r.relation.timeout import CallTimeout, time_limit
 
 
 def test_time_limit_interrupts_and_restores_the_previous_timer():

@@ -14,7 +14,7 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from .errors import N2RError
+from ..errors import N2RError
 
 __all__ = ["CallTimeout", "TimeLimitReached", "time_limit"]
 

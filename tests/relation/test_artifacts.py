@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from pytest_n2r.artifacts import draw_output, save_png
+from pytest_n2r.relation.artifacts import draw_output, save_png
 
 
 def test_draw_output_marks_keypoints_and_labels():

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .data.atomic import atomic_write_bytes
+from ..data.atomic import atomic_write_bytes
 
 __all__ = ["draw_output", "save_png", "save_pair", "artifact_dir"]
 
