@@ -1,15 +1,45 @@
 """pytest-n2r: metamorphic tests for perception code on rendered views of real scenes.
 
 The top-level names are imported lazily, so ``import pytest_n2r`` (and the pytest plugin) costs
-nothing until a name is used.
+nothing until a name is used; type checkers read the same names from the ``TYPE_CHECKING`` imports.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
+
+if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step with _EXPORTS
+    from .data import Capture, ingest
+    from .demo import GroundTruthScene
+    from .errors import (
+        IngestError,
+        InvalidArgument,
+        InvalidType,
+        MetricUndefined,
+        N2RError,
+        SceneFileError,
+        SUTOutputError,
+    )
+    from .geometry import Camera, Transform, Units
+    from .metrics import (
+        Metric,
+        MetricResult,
+        class_invariance,
+        cosine_similarity,
+        interest_point_spread,
+        l2_norm,
+        repeatability,
+        resolve_metric,
+    )
+    from .plugin.marker import metamorphic
+    from .relation import Relation, RelationFailure, SUTError, Validity, check_relation
+    from .render import RenderedView
+    from .scene import FieldScene, Scene, SceneView, SplatScene, load_scene, save_scene
+    from .scene.render_cache import RenderCache
+    from .strategies import BlackPatches, Brightness, Mutation, NoisePatch, transforms, views
 
 #: public name -> module that defines it
 _EXPORTS: dict[str, str] = {

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import ast
 import importlib
+import importlib.util
 import os
 import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from packaging.requirements import Requirement
@@ -92,6 +95,35 @@ def test_all_is_the_lazy_table_and_the_bound_names(package, table):
     assert not missing, f"{package}.__all__ lacks the lazily exported {missing} (in {table})"
     unbound = [n for n in public if n not in lazy and n not in vars(module)]
     assert not unbound, f"{package}.__all__ lists {unbound}, which are neither in {table} nor bound in the package"
+
+
+
+def _type_checking_imports(package: str) -> dict[str, str]:
+    """Name -> absolute module of each ``from X import name`` inside the package's ``if TYPE_CHECKING:``."""
+    init = importlib.import_module(package).__file__
+    tree = ast.parse(Path(init).read_text(encoding="utf-8"))
+    found: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+            for stmt in node.body:
+                assert isinstance(stmt, ast.ImportFrom), f"{package}: only `from . import` lines under TYPE_CHECKING"
+                module = importlib.util.resolve_name("." * stmt.level + (stmt.module or ""), package)
+                found.update({alias.name: module for alias in stmt.names})
+    return found
+
+
+@pytest.mark.parametrize(("package", "table"), sorted(LAZY_PACKAGES.items()))
+def test_type_checkers_see_every_lazy_name(package, table):
+    """The ``TYPE_CHECKING`` imports are what type checkers and IDEs see of the lazy names: the same names,
+    from the modules the lazy table loads them from (``__all__`` is checked against the table above)."""
+    module = importlib.import_module(package)
+    lazy = {name: mod if mod.startswith("pytest_n2r") else f"{package}.{mod}"
+            for name, mod in getattr(module, table).items()}
+    seen = _type_checking_imports(package)
+    assert set(seen) == set(lazy), (f"{package}: TYPE_CHECKING imports lack {sorted(set(lazy) - set(seen))} and "
+                                    f"have extra {sorted(set(seen) - set(lazy))} (compared with {table})")
+    moved = {name: (seen[name], lazy[name]) for name in lazy if seen[name] != lazy[name]}
+    assert not moved, f"{package}: TYPE_CHECKING and {table} import these from different modules: {moved}"
 
 
 # -- the example project, as a new user installs and runs it -----------------------------------------------

@@ -2,16 +2,23 @@
 
 ``Scene``, ``SceneView`` and ``normalize_outputs`` are light; ``load_scene``, ``save_scene``,
 ``read_scene_file``, ``FieldScene`` and the splat scenes (``SplatScene``, ``load_splat_scene``,
-``save_splat_scene``, ``read_splat_file``) are loaded on first use (the pytest plugin imports
-this package at start-up).
+``save_splat_scene``, ``read_splat_file``) are loaded on first use, so importing the package loads no
+field or splat machinery; type checkers read them from the ``TYPE_CHECKING`` imports.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .base import Scene, SceneView, normalize_outputs
+
+if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step with _LAZY
+    from .field_scene import FieldScene
+    from .file import SceneFile, read_scene_file, save_scene
+    from .loading import load_scene
+    from .splat_file import read_splat_file, save_splat_scene
+    from .splat_scene import SplatScene, load_splat_scene
 
 #: lazily exported name -> module of this package that defines it
 _LAZY = {
