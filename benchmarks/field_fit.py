@@ -20,7 +20,7 @@ import torch
 
 from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration
 from pytest_n2r.data import ingest
-from pytest_n2r.field.fit import fit
+from pytest_n2r.fit import fit
 from pytest_n2r.scene import save_scene
 
 FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"

@@ -30,8 +30,8 @@ from pytest_n2r.data import ingest
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.field.config import FieldConfig
-from pytest_n2r.field.fit import fit
 from pytest_n2r.field.grid import SceneField
+from pytest_n2r.fit import fit
 from pytest_n2r.geometry import Camera
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.image_quality import psnr, ssim

@@ -146,8 +146,8 @@ def _clock(seconds: float) -> str:
 def run(args: argparse.Namespace) -> int:
     from collections import Counter
 
+    from .. import fit as fitting
     from ..data import ingest
-    from ..field import fit as fitting
     from ..scene.file import read_scene_file, save_scene
     from ._output import SCENE, check_output
     from .info import format_info

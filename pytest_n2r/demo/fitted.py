@@ -161,9 +161,9 @@ def build_fitted(
 
     The stored report is the fit report without timings, plus ``demo_recipe`` (:meth:`FittedRecipe.to_dict`)
     and ``recipe_digest``; no photos are stored (the exact scene renders them). ``progress`` receives the
-    fit's progress dicts (see :func:`pytest_n2r.field.fit.fit`).
+    fit's progress dicts (see :func:`pytest_n2r.fit.fit`).
     """
-    from ..field.fit import fit
+    from ..fit import fit
     from ..scene.file import save_scene
     from . import capture
 

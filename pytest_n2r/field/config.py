@@ -18,7 +18,7 @@ def _is_number(value: object, kind: type) -> bool:
 
 @dataclass(frozen=True)
 class FieldConfig:
-    """Settings of :func:`pytest_n2r.field.fit`. The defaults were chosen by measurement
+    """Settings of :func:`pytest_n2r.fit.fit`. The defaults were chosen by measurement
     (docs/scene-field.md); every field is stored in the scene file.
 
     Grid

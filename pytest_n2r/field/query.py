@@ -9,7 +9,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from ..render.kernels import SH_C0, SH_C1
+from .kernels import SH_C0, SH_C1
 
 __all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "distortion", "ALPHA_MAX"]
 

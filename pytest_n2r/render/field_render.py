@@ -1,6 +1,6 @@
 """Rendering a scene field at a camera and pose: RGB, z-depth and opacity, deterministic and memory-bounded.
 
-Two backends render the same lattice (:mod:`pytest_n2r.render.lattice`):
+Two backends render the same lattice (:mod:`pytest_n2r.field.lattice`):
 
 - ``"compiled"`` (CPU): one fused numba kernel per ray batch, with empty-space skipping and early ray
   termination (a ray stops once its transmittance is below ``t_stop``);
@@ -22,11 +22,11 @@ import torch
 from .._validation import as_unit_rgb, check_array
 from ..errors import InvalidArgument
 from ..field.grid import SceneField
+from ..field.lattice import grid_coords
+from ..field.march import MarchGrid, march_dense
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera, camera_rays
-from . import kernels
-from .lattice import grid_coords
-from .march import MarchGrid, march_dense
+from .field_kernels import render_rays
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -162,10 +162,10 @@ class FieldRenderer:
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
-            kernels.render_rays(o, d, self._density, self._values, self._rows, cells, blocks, g.resolution,
-                                g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
-                                f.sh_degree, s.t_stop, np.asarray(self.background), want_depth, rgb, depth,
-                                opacity)
+            render_rays(o, d, self._density, self._values, self._rows, cells, blocks, g.resolution,
+                        g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
+                        f.sh_degree, s.t_stop, np.asarray(self.background), want_depth, rgb, depth,
+                        opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.render.lattice import contract as contract_torch
 
 SPACE = SceneSpace((0.5, -1.0, 2.0), 3.0, shell=0.25)
 
@@ -36,8 +34,6 @@ def test_contract_maps_all_of_space_into_the_cube_and_is_the_identity_inside(p, 
         expected = 1.0 + shell * (1.0 - 1.0 / r)  # the ∞-norm of the contracted point
         assert abs(np.abs(q).max() - expected) <= 1e-12 * expected, f"|contract({p.tolist()})|∞ = {np.abs(q).max()}"
         assert np.allclose(q / np.abs(q).max(), p / r, rtol=1e-12, atol=1e-300), "contract changed the direction"
-    q_torch = contract_torch(torch.from_numpy(p)[None], shell)[0].numpy()
-    np.testing.assert_allclose(q_torch, q, rtol=1e-12, err_msg="render.lattice.contract disagrees with SceneSpace")
 
 
 def test_contract_is_continuous_and_radially_increasing():

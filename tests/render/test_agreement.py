@@ -13,10 +13,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
+from pytest_n2r.field.kernels import BLOCK
+from pytest_n2r.field.march import MarchGrid, march_compiled, march_dense
 from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
-from pytest_n2r.render.kernels import BLOCK
-from pytest_n2r.render.march import MarchGrid, march_compiled, march_dense
 
 from ..field.fields import CAMERA, POSES, camera_for, named_pose, pose, random_field
 from .strategies import cameras, poses

@@ -18,11 +18,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
+from pytest_n2r.field.march import march_dense
 from pytest_n2r.field.space import SceneSpace
 from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
-from pytest_n2r.render.kernels import _alpha
-from pytest_n2r.render.march import march_dense
 
 from ..field.fields import CAMERA, SPACE, pose, random_field
 from .strategies import cameras, poses
@@ -241,13 +240,3 @@ def test_depth_is_where_the_weight_is_even_where_transmittance_is_left(backend):
     error = np.abs(out["depth"][8:16, 12:20] - expected).max()
     assert error < voxel / 4, \
         f"{backend}: depth is up to {error:.3f} off the wall at {expected}; a voxel is {voxel:.3f}"
-
-
-@settings(max_examples=200, deadline=None)
-@given(x=st.floats(-800.0, 1e6), sigma_step=st.sampled_from([0.5, 0.25, 1.0, 1.3]))
-def test_sample_opacity_is_in_0_1_and_the_half_voxel_fast_path_is_the_formula(x, sigma_step):
-    """The compiled kernel's ``1 - (1 + eˣ)^-½`` at half-voxel spacing equals ``1 - exp(-softplus(x)·s)``."""
-    alpha = _alpha(x, sigma_step)
-    assert 0.0 <= alpha <= 1.0, f"opacity {alpha} of raw density {x} at spacing {sigma_step}"
-    expected = -np.expm1(-float(torch.nn.functional.softplus(torch.tensor(x, dtype=torch.float64))) * sigma_step)
-    assert abs(alpha - expected) <= 1e-12, f"opacity {alpha} of raw density {x}, expected {expected}"

@@ -10,9 +10,9 @@ import torch
 
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.field.config import FieldConfig
-from pytest_n2r.field.fit import FitResult
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit import FitResult
 from pytest_n2r.geometry import Camera
 from pytest_n2r.scene import SceneView
 
@@ -78,7 +78,7 @@ def tiny_capture() -> Capture:
 
 @pytest.fixture(scope="session")
 def tiny_fit(tiny_capture: Capture) -> FitResult:
-    from pytest_n2r.field.fit import fit
+    from pytest_n2r.fit import fit
 
     return fit(tiny_capture, TINY_CONFIG, max_steps=TINY_STEPS, device="cpu")
 

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 from pytest_n2r.data.capture import Capture
-from pytest_n2r.field.fit import fit
+from pytest_n2r.fit import fit
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import FieldRenderer
 

@@ -23,16 +23,16 @@ import torch.nn.functional as F
 
 from ..data.capture import Capture, CapturedView
 from ..errors import FitError, InvalidArgument
+from ..field.config import FieldConfig
+from ..field.device import resolve_device
+from ..field.grid import SceneField, vertex_ijk
+from ..field.lattice import grid_coords, lattice_position
+from ..field.march import MarchGrid, march_compiled, march_dense
+from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
+from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
-from ..render.lattice import grid_coords, lattice_position
-from ..render.march import MarchGrid, march_compiled, march_dense
-from .config import FieldConfig
-from .device import resolve_device
-from .grid import SceneField, vertex_ijk
 from .optim import RowAdam
-from .query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
-from .space import SceneSpace
 from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
-from pytest_n2r.field.optim import RowAdam
+from pytest_n2r.field.lattice import grid_coords
 from pytest_n2r.field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
-from pytest_n2r.field.train_kernels import Composite, Interpolate, RowIndex, adam_rows, sample_corners
-from pytest_n2r.render.lattice import grid_coords
+from pytest_n2r.fit.optim import RowAdam
+from pytest_n2r.fit.train_kernels import Composite, Interpolate, RowIndex, adam_rows, sample_corners
 
 TOL = 1e-10
 SHIFT, STEP_RATIO, DELTA = -2.0, 0.5, 0.03

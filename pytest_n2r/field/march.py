@@ -1,6 +1,6 @@
 """Ray marching: the occupied lattice samples of a batch of normalized rays, packed.
 
-Two implementations of the same lattice (:mod:`pytest_n2r.render.lattice`): :func:`march_compiled` (numba,
+Two implementations of the same lattice (:mod:`pytest_n2r.field.lattice`): :func:`march_compiled` (numba,
 CPU, skips empty 8³ blocks in one jump) and :func:`march_dense` (torch on any device: enumerates every
 lattice sample, then keeps the occupied ones). Both return ``(ray_idx, t, offsets)``: the ray of each
 sample, its ``t`` (z-depth), and ``offsets`` (N+1) so ray ``r`` owns samples ``offsets[r]:offsets[r+1]``.

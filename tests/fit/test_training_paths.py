@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from pytest_n2r.field.config import FieldConfig
-from pytest_n2r.field.fit import _Trainer
+from pytest_n2r.fit.field_fit import _Trainer
 
 
 def _train(capture, compiled: bool, steps: int = 30) -> _Trainer:

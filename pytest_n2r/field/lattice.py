@@ -14,7 +14,7 @@ a sample's opacity is ``alpha = 1 - exp(-σ·step_ratio)`` with ``step_ratio = s
 The part of a ray between a camera *outside* the cube and the cube is not sampled (the field is empty there:
 fitted captures put every camera inside the cube).
 
-The NumPy/Torch functions here and the compiled kernels in :mod:`pytest_n2r.render.kernels` follow the same
+The NumPy/Torch functions here and the compiled kernels in :mod:`pytest_n2r.field.kernels` follow the same
 formulas; tests check that they agree.
 """
 

@@ -6,12 +6,12 @@ import numpy as np
 import torch
 from hypothesis import given, settings
 
+from pytest_n2r.field.lattice import lattice_position
+from pytest_n2r.field.march import MarchGrid, march_dense
 from pytest_n2r.geometry import camera_rays
-from pytest_n2r.render.lattice import lattice_position
-from pytest_n2r.render.march import MarchGrid, march_dense
 
 from ..field.fields import CAMERA, SPACE, pose
-from .strategies import poses
+from ..render.strategies import poses
 
 
 @settings(max_examples=40, deadline=None)

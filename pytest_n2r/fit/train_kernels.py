@@ -13,7 +13,7 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from ..render.kernels import _grid, vertex_row
+from ..field.kernels import cell_of, grid_coords_xyz, vertex_row
 
 __all__ = ["sample_corners", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
 
@@ -25,8 +25,8 @@ def _sample_corners(o, d, t, ray_idx, shell, res, vertex_rows, rows, weights, ce
     for i in prange(t.shape[0]):
         r = ray_idx[i]
         ti = np.float64(t[i])
-        gx, gy, gz = _grid(o[r, 0] + ti * d[r, 0], o[r, 1] + ti * d[r, 1], o[r, 2] + ti * d[r, 2], shell, res)
-        ci, cj, ck = min(int(gx), res - 2), min(int(gy), res - 2), min(int(gz), res - 2)
+        gx, gy, gz = grid_coords_xyz(o[r, 0] + ti * d[r, 0], o[r, 1] + ti * d[r, 1], o[r, 2] + ti * d[r, 2], shell, res)
+        ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
         fx, fy, fz = gx - ci, gy - cj, gz - ck
         base = (ci * res + cj) * res + ck
         cells[i] = (ci * nc + cj) * nc + ck

@@ -6,7 +6,7 @@ import pytest
 
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.field.config import FieldConfig
-from pytest_n2r.field.fit import FitResult
+from pytest_n2r.fit import FitResult
 
 #: Two small grids, small batches and an initial opacity the first prune keeps (0.01 per sample).
 #: Measured on the 48×27 capture: 80 steps take about 1 s and reach 18.6 dB held-out PSNR (with a random
@@ -28,6 +28,6 @@ def capture48() -> Capture:
 @pytest.fixture(scope="session")
 def short_fit(capture48: Capture) -> FitResult:
     """:data:`SHORT_CONFIG` fitted for :data:`SHORT_STEPS` steps on the CPU."""
-    from pytest_n2r.field.fit import fit
+    from pytest_n2r.fit import fit
 
     return fit(capture48, SHORT_CONFIG, max_steps=SHORT_STEPS, device="cpu")
