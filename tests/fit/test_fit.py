@@ -10,10 +10,10 @@ import pytest
 import torch
 
 from pytest_n2r.errors import FitError, InvalidArgument
-from pytest_n2r.field import fit as fit_module
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.fit import evaluate_views, fit
+from pytest_n2r.fit import field_fit as fit_module
 
 from .conftest import SHORT_CONFIG, SHORT_STEPS
 

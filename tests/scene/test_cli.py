@@ -117,7 +117,7 @@ def test_info_on_a_bad_file_is_an_error_naming_it(tmp_path, capsys):
 def interrupting_fit(monkeypatch, error: BaseException, after_checkpoints: int) -> list[int]:
     """Make ``fit`` raise ``error`` from its progress callback once ``after_checkpoints`` checkpoints were
     written (as Ctrl-C or a crash would, mid-training); returns the steps of the checkpoints written."""
-    from pytest_n2r.field import fit as fitting
+    from pytest_n2r import fit as fitting
 
     real_fit = fitting.fit
     written: list[int] = []
