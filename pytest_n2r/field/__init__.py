@@ -1,1 +1,11 @@
-"""Scene fields: trainable radiance fields that a scene file stores and the renderer queries."""
+"""Scene fields: the representation a scene file stores, and all of its sampling maths, written once.
+
+- :mod:`~pytest_n2r.field.space`: the normalized, contracted scene space (the contraction's definition);
+- :mod:`~pytest_n2r.field.grid`: the sparse voxel grid of density and colour (:class:`SceneField`);
+- :mod:`~pytest_n2r.field.lattice`: where a ray is sampled, and the contraction and grid lookup in torch;
+- :mod:`~pytest_n2r.field.kernels`: the same maths compiled (numba), and the marching kernels;
+- :mod:`~pytest_n2r.field.march`: a ray batch's occupied samples, packed;
+- :mod:`~pytest_n2r.field.query`: differentiable evaluation and compositing of packed samples (torch).
+
+Renderers (:mod:`pytest_n2r.render`) and fitting (:mod:`pytest_n2r.fit`) build on it; it imports neither.
+"""
