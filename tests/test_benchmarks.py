@@ -26,6 +26,7 @@ SMOKE = {
     "splat_speed.py": (["--smoke"], "| 64×36 |"),
     "splat_compare.py": (["HEAD", "--smoke"], "| 64x36 | HEAD"),
     "splat_from_field.py": (["--smoke"], "| splats from the field |"),
+    "render_fingerprint.py": (["--twins", "--steps", "4"], "| short-fit/file |"),
 }
 
 
