@@ -1,11 +1,12 @@
 """Render speed of the exact demo scenes, compiled kernel against the vectorized numpy definition, and how
 far their images are apart.
 
-Run: ``python benchmarks/demo_render_speed.py [--poses N] [--size WxH] [--threads T]``. Prints, per demo
-scene at the given size (default 480x270, the capture size):
+Run: ``python benchmarks/demo_render_speed.py [--poses N] [--size WxH] [--threads T] [--repeats R]``. Prints,
+per demo scene at the given size (default 480x270, the capture size):
 
-1. frames/s of the compiled renderer for RGB + depth + opacity and for each output alone, and of the numpy
-   reference for all three (best of 3 after a warm-up);
+1. frames/s of the compiled renderer for RGB + depth + opacity and for each output alone (best of ``R``,
+   default 10, after a warm-up: on a shared machine the best run is the one least disturbed), and of the
+   numpy reference for all three (one run after a warm-up);
 2. the agreement over ``N`` random poses (the captured views moved by up to 20°/30° and half a reference
    length): the largest RGB difference in grey levels outside pixels where two surfaces coincide, the share
    of pixels that differ at all, the largest relative z-depth difference and the opacity pixels that differ.
@@ -27,9 +28,9 @@ from pytest_n2r.geometry import Transform
 OUTPUTS = ("rgb", "depth", "opacity")
 
 
-def frames_per_second(scene, camera, c2w) -> tuple[dict[tuple[str, ...], float], float]:
+def frames_per_second(scene, camera, c2w, repeats: int) -> tuple[dict[tuple[str, ...], float], float]:
     """Frames/s of the compiled renderer per set of outputs, and of the numpy reference for all three."""
-    fps = {outs: 1 / best_seconds(lambda o=outs: scene.render(c2w, camera, o))
+    fps = {outs: 1 / best_seconds(lambda o=outs: scene.render(c2w, camera, o), repeats=repeats)
            for outs in (OUTPUTS, ("rgb",), ("depth",), ("opacity",))}
     return fps, 1 / best_seconds(lambda: scene.render_reference(c2w, camera, OUTPUTS), repeats=1)
 
@@ -68,13 +69,15 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--poses", type=int, default=40, help="random poses per scene for the agreement check")
     parser.add_argument("--size", default="480x270", help="render size WxH (default 480x270)")
     parser.add_argument("--threads", type=int, default=None, help="numba threads (default: all)")
+    parser.add_argument("--repeats", type=int, default=10, help="timed renders per output set (the best counts)")
     args = parser.parse_args(argv)
     width, height = (int(v) for v in args.size.lower().split("x"))
     if args.threads:
         import numba
 
         numba.set_num_threads(args.threads)
-    print(f"{width}x{height}, frames/s (best of 3 after a warm-up); agreement over {args.poses} random poses\n")
+    print(f"{width}x{height}, frames/s (best of {args.repeats} after a warm-up); agreement over {args.poses} random "
+          "poses\n")
     print("| scene | rgb+depth+opacity | rgb | depth | opacity | numpy reference, all three | speed-up |"
           " rgb max diff (grey levels) | pixels differing | coincident-surface pixels > 1 |"
           " depth rel. diff | opacity pixels differing |")
@@ -82,7 +85,7 @@ def main(argv: list[str]) -> int:
     for name in demo_scene_names():
         scene = ground_truth(name)
         camera = scene.views[5].camera.resized(width, height)
-        fps, ref = frames_per_second(scene, camera, scene.views[5].c2w)
+        fps, ref = frames_per_second(scene, camera, scene.views[5].c2w, args.repeats)
         a = agreement(scene, camera, random_poses(scene, args.poses))
         print(f"| {name} | {fps[OUTPUTS]:.1f} | {fps[('rgb',)]:.1f} | {fps[('depth',)]:.1f} | "
               f"{fps[('opacity',)]:.1f} | {ref:.2f} | {fps[OUTPUTS] / ref:.0f}× | {a['rgb_max']} | "
