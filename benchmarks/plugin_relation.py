@@ -78,10 +78,10 @@ def scene_spec(text: str | None):
 
 def run(scene, relation, settings, cache, label: str) -> list[str]:
     start = time.perf_counter()
-    stats = check_relation(scene, orb, relation, settings=settings, cache=cache, test_id="benchmark")
+    record = check_relation(scene, orb, relation, settings=settings, cache=cache, test_id="benchmark")
     wall = time.perf_counter() - start
-    return [label, f"{wall:.2f}", f"{stats.render_s:.2f}", f"{stats.sut_s:.2f}", f"{stats.metric_s:.2f}",
-            str(stats.renders), str(stats.examples), str(stats.n_rejected)]
+    return [label, f"{wall:.2f}", *(f"{record.timings[k]:.2f}" for k in ("render", "sut", "metric")),
+            str(record.renders), str(len(record.valid_examples)), str(record.rejected)]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -25,7 +25,7 @@ from perception.detectors import detector
 from perception.regressions import REGRESSIONS
 
 from pytest_n2r import RenderCache, Transform
-from pytest_n2r.relation import Relation, RelationStats, RunSettings, replay_relation
+from pytest_n2r.relation import Relation, RunSettings, replay_relation
 from pytest_n2r.report import (
     PairedComparison,
     RelationRecord,
@@ -65,12 +65,11 @@ def replay(scene: Any, sut: Any, base: RelationRecord, cache: RenderCache) -> Re
     or the metric changed: the comparison says so)."""
     metric = METRICS.get(base.metric)
     if metric is None or base.scene_hash != scene.content_hash:
-        stats = RelationStats(base.nodeid, scene.name, base.metric if metric is None else repr(metric), base.eps,
-                              scene.content_hash)
-        return stats.to_record()
+        return RelationRecord(base.nodeid, base.metric if metric is None else repr(metric), base.eps,
+                              scene=scene.name, scene_hash=scene.content_hash)
     relation = Relation.build(metric, base.eps, Transform())
     return replay_relation(scene, sut, relation, replay_candidates(base), settings=RunSettings(timeout=None),
-                           cache=cache, test_id=base.nodeid).to_record()
+                           cache=cache, test_id=base.nodeid)
 
 
 def gate(scene: Any, sut: Any, prefix: str, cache: RenderCache, margin: float = MARGIN) -> list[PairedComparison]:

@@ -56,7 +56,8 @@ def resolve_metric(metric: Metric | str, **params: Any) -> Metric:
                                   "pass them to its factory instead")
         return metric
     if not isinstance(metric, str):
-        raise InvalidType(f"metric={metric!r} must be a Metric or a metric name, not {type(metric).__name__}")
+        raise InvalidType(f"metric={metric!r} must be a Metric or a metric name (e.g. repeatability(px=2) or "
+                          f"'repeatability'), not {type(metric).__name__}")
     cls = METRICS.get(metric)
     if cls is None:
         raise InvalidArgument(f"unknown metric {metric!r}; known: {', '.join(sorted(METRICS))}")

@@ -30,7 +30,7 @@ ERROR_ATTR = "__n2r_error__"
 RELATION_MARKER = "n2r_relation"
 
 _SESSION = pytest.StashKey["Any"]()
-_STATS = pytest.StashKey["dict"]()
+_RECORD = pytest.StashKey["dict"]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -166,12 +166,12 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     except (RelationFailure, CallTimeout, SUTNotDeterministic) as exc:
         failure = str(exc)
     finally:
-        if session.stats and session.stats[-1].test_id == pyfuncitem.nodeid:  # kept whatever happened
-            plain = pyfuncitem.stash[_STATS] = _plain(session.stats[-1])
-            plain["floor"] = plain["record"]["floor"] = _floor(session, funcargs["n2r_scene"], sut, relation,
-                                                                session.stats[-1].records)
+        record = session.records[-1] if session.records else None
+        if record is not None and record.nodeid == pyfuncitem.nodeid:  # kept whatever happened
+            record.floor = _floor(session, funcargs["n2r_scene"], sut, relation, record.examples)
+            pyfuncitem.stash[_RECORD] = record.to_dict()
     if failure is not None:  # outside the except block, so the report shows the message once
-        floor = pyfuncitem.stash.get(_STATS, {}).get("floor") or {}
+        floor = pyfuncitem.stash.get(_RECORD, {}).get("floor") or {}
         pytest.fail(failure + (f"\n  floor:      {floor['line']}" if floor.get("below_floor") else ""),
                     pytrace=False)
     return True
@@ -185,70 +185,54 @@ def _floor(session: Any, scene: Any, sut: Any, relation: Any, records: list) -> 
                              cache=session.cache, cache_dir=session.cache_dir)
 
 
-def _plain(stats: Any) -> dict:
-    """The JSON-ready summary of a relation run (travels from xdist workers on the test report)."""
-    return {
-        "test_id": stats.test_id, "scene": stats.scene, "metric": stats.metric, "eps": stats.eps,
-        "outcome": stats.outcome, "examples": stats.examples, "rejected": dict(stats.rejected),
-        "undefined": dict(stats.undefined), "inconsistencies": stats.inconsistencies,
-        "shrink_examples": stats.shrink_examples,
-        "worst_deviation": stats.worst_deviation, "render_s": stats.render_s, "sut_s": stats.sut_s,
-        "metric_s": stats.metric_s, "renders": stats.renders, "summary": stats.summary_line(),
-        "images": (stats.minimal or {}).get("images", {}),
-        "record": stats.to_record().to_dict(),
-    }
-
-
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
     outcome = yield
     if call.when == "call":
-        stats = item.stash.get(_STATS, None)
-        if stats is not None:
-            outcome.get_result().n2r_stats = stats  # a plain dict: pytest-xdist ships it to the controller
+        record = item.stash.get(_RECORD, None)
+        if record is not None:  # the RelationRecord as a plain dict: pytest-xdist ships it to the controller
+            outcome.get_result().n2r_record = record
 
 
 def relation_records(config: pytest.Config) -> list[Any]:
     """The :class:`pytest_n2r.report.RelationRecord` of every relation run so far in this session
     (including those of pytest-xdist workers), for reports and baselines."""
-    from ..report.records import RelationRecord
-
     summary = config.pluginmanager.get_plugin("n2r-summary")
-    return [RelationRecord.from_dict(run["record"]) for run in (summary.runs if summary else [])]
+    return list(summary.records) if summary else []
 
 
 class _Summary:
-    """Collects the relation stats of every test report (from xdist workers too) for the summary."""
+    """Collects the relation record of every test report (from xdist workers too) for the summary."""
 
     def __init__(self, config: pytest.Config):
         self.config = config
-        self.runs: list[dict] = []
+        self.records: list[Any] = []
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
-        stats = getattr(report, "n2r_stats", None)
-        if stats is not None and report.when == "call":
-            self.runs.append(stats)
+        record = getattr(report, "n2r_record", None)
+        if record is not None and report.when == "call":
+            from ..relation.record import RelationRecord
+
+            self.records.append(RelationRecord.from_dict(record))
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
-        runs = self.runs
-        if not runs:
+        records = self.records
+        if not records:
             return
         terminalreporter.section("pytest-n2r")
         from ..relation.floor import annotation_lines
+        from ..relation.record import plural
 
-        for stats in runs:
-            terminalreporter.write_line(stats["summary"])
-            for line, warn in annotation_lines(stats.get("floor")):
+        for record in records:
+            terminalreporter.write_line(record.summary_line())
+            for line, warn in annotation_lines(record.floor):
                 terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
-        total = {k: sum(s[k] for s in runs)
-                 for k in ("examples", "inconsistencies", "render_s", "sut_s", "metric_s", "renders")}
-        rejected = sum(sum(s["rejected"].values()) for s in runs)
-        undefined = sum(sum(s.get("undefined", {}).values()) for s in runs)
+        examples = sum(len(r.valid_examples) for r in records)
+        render, sut, metric = (sum(r.timings.get(k, 0.0) for r in records) for k in ("render", "sut", "metric"))
         terminalreporter.write_line(
-            f"{len(runs)} relation{'s' if len(runs) != 1 else ''}: {total['examples']} example"
-            f"{'s' if total['examples'] != 1 else ''}, {rejected} rejected as invalid, {undefined} undefined, "
-            f"{total['inconsistencies']} inconsistent; {total['renders']} renders (the rest from the cache); "
-            f"time render {total['render_s']:.2f} s / SUT {total['sut_s']:.2f} s / metric "
-            f"{total['metric_s']:.2f} s"
+            f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
+            f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
+            f"{sum(r.inconsistencies for r in records)} inconsistent; {sum(r.renders for r in records)} renders "
+            f"(the rest from the cache); time render {render:.2f} s / SUT {sut:.2f} s / metric {metric:.2f} s"
         )
         terminalreporter.write_line(_describe(self.config, _session(self.config)))

@@ -55,14 +55,15 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
 
     An old-style wrapper, like the plugin's, so pytest 7.4 (the declared minimum) works too."""
     outcome = yield
-    report = outcome.get_result()
-    stats = getattr(report, "n2r_stats", None)
-    if call.when == "call" and stats is not None:
+    plain = getattr(outcome.get_result(), "n2r_record", None)
+    if call.when == "call" and plain is not None:
+        from ..relation.record import RelationRecord
+
+        record = RelationRecord.from_dict(plain)
         item.user_properties.extend([
-            ("n2r_scene", stats["scene"]), ("n2r_metric", stats["metric"]), ("n2r_eps", stats["eps"]),
-            ("n2r_examples", stats["examples"]), ("n2r_rejected", sum(stats["rejected"].values())),
-            ("n2r_inconsistencies", stats["inconsistencies"]),
-            ("n2r_worst_deviation", stats["worst_deviation"]),
+            ("n2r_scene", record.scene), ("n2r_metric", record.metric), ("n2r_eps", record.eps),
+            ("n2r_examples", len(record.valid_examples)), ("n2r_rejected", record.rejected),
+            ("n2r_inconsistencies", record.inconsistencies), ("n2r_worst_deviation", record.worst_deviation),
         ])
 
 

@@ -1,5 +1,5 @@
 """The one pytest-n2r session object: resolved settings, scene specs, loaded scenes, the render cache and
-the statistics of every relation run. No pytest import: the plugin builds it from the command line and
+the records of every relation run. No pytest import: the plugin builds it from the command line and
 ini file, and anything else (a script, a notebook) can build one directly.
 """
 
@@ -13,7 +13,7 @@ from typing import Any
 
 from .. import defaults
 from ..errors import InvalidArgument
-from ..relation import Relation, RelationStats, RunSettings, check_relation
+from ..relation import Relation, RelationRecord, RunSettings, check_relation
 from ..scene.base import Scene
 from ..scene.render_cache import DEFAULT_DISK_BYTES, RenderCache
 from .scenes import DEMO_PREFIX, SceneSpec, default_scene_specs, load_scene_spec, parse_scene_specs
@@ -23,7 +23,7 @@ __all__ = ["N2RSession"]
 
 @dataclass
 class N2RSession:
-    """Settings, scenes, cache and statistics of one test session (one per pytest-xdist worker)."""
+    """Settings, scenes, cache and relation records of one test session (one per pytest-xdist worker)."""
 
     settings: RunSettings = field(default_factory=RunSettings)
     scenes: list[SceneSpec] = field(default_factory=list)
@@ -32,7 +32,7 @@ class N2RSession:
     render_scale: float = defaults.RENDER_SCALE
     cache_dir: Path | None = None
     cache_bytes: int = DEFAULT_DISK_BYTES
-    stats: list[RelationStats] = field(default_factory=list)
+    records: list[RelationRecord] = field(default_factory=list)
     _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
     _cache: RenderCache | None = field(default=None, repr=False)
 
@@ -80,9 +80,9 @@ class N2RSession:
         return scene
 
     def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
-            replay: list[Any] | None = None) -> RelationStats:
+            replay: list[Any] | None = None) -> RelationRecord:
         """Check ``relation`` for ``sut`` on ``scene`` (replaying ``replay``, a baseline's examples, first);
-        the stats are kept whatever the outcome."""
+        its record is kept in :attr:`records` whatever the outcome."""
         __tracebackhide__ = True
         return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
-                              replay=replay, on_start=self.stats.append)
+                              replay=replay, on_start=self.records.append)

@@ -9,21 +9,23 @@ One concept per module:
 - :mod:`~pytest_n2r.relation.engine`: one drawn or replayed example evaluated and counted;
 - :mod:`~pytest_n2r.relation.search`: Hypothesis's survey and shrink passes (:func:`check_relation`) and
   exact replay (:func:`replay_relation`);
-- :mod:`~pytest_n2r.relation.stats`: what a run did (:class:`RelationStats`);
+- :mod:`~pytest_n2r.relation.record`: what a run did: one :class:`ExampleRecord` per drawn example, in the
+  run's :class:`RelationRecord` (what the plugin, baselines and reports read);
 - :mod:`~pytest_n2r.relation.outputs`: checks of the SUT's outputs (:class:`SUTError`);
-- :mod:`~pytest_n2r.relation.failure`: :class:`RelationFailure` and the messages of every verdict;
+- :mod:`~pytest_n2r.relation.failure`: :class:`RelationFailure` and the messages of every verdict
+  (:data:`MAX_UNDEFINED`);
 - :mod:`~pytest_n2r.relation.determinism`: telling a non-deterministic SUT from an inconsistency;
 - :mod:`~pytest_n2r.relation.floor`: the field floor beside a relation's result.
 """
 
 from .determinism import SUTNotDeterministic
-from .failure import RelationFailure
+from .failure import MAX_UNDEFINED, RelationFailure
 from .outputs import SUTError
+from .record import ExampleRecord, RelationRecord
 from .search import check_relation, replay_relation
 from .settings import RunSettings
-from .spec import SEARCHES, Relation, resolve_metric
-from .stats import MAX_UNDEFINED, RelationStats
+from .spec import SEARCHES, Relation
 from .validity import Validity
 
-__all__ = ["Relation", "RunSettings", "RelationStats", "RelationFailure", "SUTError", "SUTNotDeterministic",
-           "Validity", "check_relation", "replay_relation", "resolve_metric", "SEARCHES", "MAX_UNDEFINED"]
+__all__ = ["Relation", "RunSettings", "RelationRecord", "ExampleRecord", "RelationFailure", "SUTError",
+           "SUTNotDeterministic", "Validity", "check_relation", "replay_relation", "SEARCHES", "MAX_UNDEFINED"]

@@ -1,6 +1,7 @@
 """The relation engine: one relation on one scene with one SUT, evaluated one drawn (or replayed) example
 at a time -- render the source and its follow-up, judge the follow-up's validity, run the SUT on both,
-compare with the metric -- and counted into the run's :class:`~pytest_n2r.relation.stats.RelationStats`.
+compare with the metric -- each into an :class:`~pytest_n2r.relation.record.ExampleRecord` of the run's
+:class:`~pytest_n2r.relation.record.RelationRecord`.
 :mod:`pytest_n2r.relation.search` drives it with Hypothesis.
 """
 
@@ -9,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -24,14 +25,14 @@ from ..scene.render_cache import RenderCache
 from ..strategies import transform_units
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
-from .failure import RelationFailure, describe_transform, failure_message
+from .failure import MAX_UNDEFINED, RelationFailure, describe_transform, failure_message
 from .outputs import SUTError, check_output
+from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation, mutation_like
-from .stats import MAX_UNDEFINED, RelationStats
 from .timeout import time_limit
 
-__all__ = ["Engine", "Evaluation"]
+__all__ = ["Engine", "Evaluation", "recorded_view"]
 
 #: Give up on a relation once this many draws were invalid and they are more than ``max_rejected`` of all.
 _MIN_REJECTED_TO_GIVE_UP = 40
@@ -53,9 +54,9 @@ def _is_final_example() -> bool:
 
 @dataclass
 class Evaluation:
-    """One drawn example evaluated: its plain record and what a failure report needs."""
+    """One drawn example evaluated: its record and what a failure report needs."""
 
-    record: dict[str, Any]
+    record: ExampleRecord
     where: str = ""
     result: MetricResult | None = None
     source: RenderedView | None = None
@@ -72,9 +73,9 @@ class Engine:
     Hypothesis shrinks it to the smallest transform."""
 
     def __init__(self, scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation,
-                 settings: RunSettings, cache: RenderCache, stats: RelationStats):
+                 settings: RunSettings, cache: RenderCache, run_record: RelationRecord):
         self.scene, self.sut, self.relation, self.settings = scene, sut, relation, settings
-        self.cache, self.stats = cache, stats
+        self.cache, self.run_record = cache, run_record
         self.metric = relation.metric
         self.size = relation.size or settings.size
         self.units = transform_units(relation.transform)
@@ -102,8 +103,8 @@ class Engine:
         with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}",
                         escape=True):
             rendered = self.cache.render(self.scene, c2w, camera, outputs)
-        self.stats.render_s += time.perf_counter() - start
-        self.stats.renders += self.cache.stats.renders - renders
+        self.run_record.timings["render"] += time.perf_counter() - start
+        self.run_record.renders += self.cache.stats.renders - renders
         return rendered
 
     def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
@@ -118,7 +119,7 @@ class Engine:
                 "its traceback is above"
             ) from exc
         finally:
-            self.stats.sut_s += time.perf_counter() - start
+            self.run_record.timings["sut"] += time.perf_counter() - start
         check_output(output, role, where, self.metric)
         return output
 
@@ -134,7 +135,7 @@ class Engine:
                 raise
             raise SUTOutputError(f"{self.metric!r} cannot use the SUT's output ({where}): {exc}") from exc
         finally:
-            self.stats.metric_s += time.perf_counter() - start
+            self.run_record.timings["metric"] += time.perf_counter() - start
         if not isinstance(result, MetricResult):
             raise InvalidType(f"{self.metric!r}.compute returned {type(result).__name__}, not a MetricResult")
         if getattr(result, "valid", True) and not math.isfinite(result.deviation):
@@ -163,12 +164,12 @@ class Engine:
         mutation = mutation_like(tau)
         describe = tau.describe() if mutation else describe_transform(tau, self.units)
         where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
-        record: dict[str, Any] = {
-            "scene": self.scene.name, "scene_hash": self.scene.content_hash, "view": view.name,
-            "source_c2w": np.asarray(view.c2w, dtype=np.float64).ravel().tolist(), "camera": camera.to_dict(),
-            "settings": self.render_settings, **self.follow_up(tau, units), "status": "accepted", "reason": "",
-            "score": math.nan, "deviation": math.nan, "passed": False,
-        }
+        record = ExampleRecord(
+            scene=self.scene.name, scene_hash=self.scene.content_hash, view=view.name,
+            source_c2w=np.asarray(view.c2w, dtype=np.float64).ravel().tolist(), camera=camera.to_dict(),
+            settings=self.render_settings, **self.follow_up(tau, units), score=math.nan, deviation=math.nan,
+            passed=False,
+        )
         source = self.render(view.c2w, camera, view, self.outputs, "source")
         if mutation:  # the follow-up is the mutated source render, same pose
             apply_to_view = getattr(tau, "apply_to_view", None)
@@ -180,42 +181,30 @@ class Engine:
             follow = self.render(follow_c2w, camera, view, self.follow_outputs, "follow-up")
             verdict = self.relation.validity.check(follow, self.scene, source)
             if not verdict.valid:
-                record.update(status="rejected", reason=verdict.reason)
+                record.status, record.reason = "rejected", verdict.reason
                 return Evaluation(record, where)
-        key = f"{view.name}|{camera.width}x{camera.height}|{record['source_c2w']}"
+        key = f"{view.name}|{camera.width}x{camera.height}|{record.source_c2w}"
         if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
             self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
         out_source = self.source_outputs_cache[key]
         out_follow = self.run_sut(follow.rgb, "follow-up", where)
         result = self.compute(out_source, out_follow, source, follow, where)
         if not getattr(result, "valid", True):
-            record.update(status="undefined", reason=str(result.details.get("reason", "metric undefined")))
+            record.status, record.reason = "undefined", str(result.details.get("reason", "metric undefined"))
         else:
-            deviation = float(result.deviation)
-            record.update(score=float(result.score), deviation=deviation, passed=deviation <= self.relation.eps)
+            record.score, record.deviation = float(result.score), float(result.deviation)
+            record.passed = record.deviation <= self.relation.eps
         return Evaluation(record, where, result, source, follow, (out_source, out_follow))
 
-    def count(self, record: dict[str, Any]) -> None:
-        """Count a survey record and stop drawing when almost every draw is invalid or undefined."""
-        stats = self.stats
-        stats.records.append(record)
-        if record["status"] == "rejected":
-            stats.rejected[record["reason"]] += 1
-        elif record["status"] == "undefined":
-            stats.undefined[record["reason"]] += 1
-        else:
-            stats.examples += 1
-            if not record["deviation"] <= stats.worst_deviation:  # also true for the first (NaN)
-                stats.worst_deviation, stats.worst = record["deviation"], record
-            if not record["passed"]:
-                stats.inconsistencies += 1
-        drawn = stats.examples + stats.n_rejected + stats.n_undefined
-        max_rejected = self.relation.validity.max_rejected
-        if stats.n_rejected >= _MIN_REJECTED_TO_GIVE_UP and stats.n_rejected / drawn > max_rejected:
+    def count(self, record: ExampleRecord) -> None:
+        """Record a survey example and stop drawing when almost every draw is invalid or undefined."""
+        run = self.run_record
+        run.examples.append(record)
+        accepted, rejected, undefined = len(run.valid_examples), run.rejected, run.undefined
+        if rejected >= _MIN_REJECTED_TO_GIVE_UP and rejected / len(run.examples) > self.relation.validity.max_rejected:
             self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
-        evaluated = stats.examples + stats.n_undefined
-        if stats.n_undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
-                and stats.n_undefined / evaluated > MAX_UNDEFINED:
+        if undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
+                and undefined / (accepted + undefined) > MAX_UNDEFINED:
             self.gave_up = "undefined"
 
     def example(self, view: SceneView, tau: Any) -> None:
@@ -226,17 +215,17 @@ class Engine:
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
         if not self.shrinking:
-            if record["status"] == "accepted" and not record["passed"] and not self.stats.inconsistencies:
+            if record.valid and not record.passed and not self.run_record.inconsistencies:
                 check_deterministic(self.run_sut, evaluation.source.rgb, evaluation.follow.rgb,
                                     *evaluation.outputs, evaluation.where)
             self.count(record)
         elif self.failed:
-            self.stats.shrink_examples += 1
-        if record["status"] != "accepted":
+            self.run_record.shrink_examples += 1
+        if not record.valid:
             assume(False)  # not a test: Hypothesis draws another
         if self.relation.search == "targeted":
-            target(record["deviation"], label="deviation")
-        if record["passed"] or not self.shrinking:
+            target(record.deviation, label="deviation")
+        if record.passed or not self.shrinking:
             return
         self.failed = True
         if not _is_final_example():
@@ -246,25 +235,29 @@ class Engine:
     def fail(self, view: SceneView, tau: Any, evaluation: Evaluation, note: str = "") -> None:
         """Save the failure pictures and raise the :class:`RelationFailure` of ``evaluation``."""
         __tracebackhide__ = True
-        record, stats = dict(evaluation.record), self.stats
+        record, run = replace(evaluation.record), self.run_record
         if self.settings.artifacts is not None:
             try:
-                record["images"] = save_pair(artifact_dir(self.settings.artifacts, stats.test_id),
+                record.images = save_pair(artifact_dir(self.settings.artifacts, run.nodeid),
                                              evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
             except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
                 self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
-        stats.minimal = record
-        message = failure_message(self.scene, self.relation, stats, self.units, view, tau, evaluation.result, record,
+        run.minimal = record
+        message = failure_message(self.scene, self.relation, run, self.units, view, tau, evaluation.result, record,
                                   note=note, images_error=self.images_error)
-        raise RelationFailure(message, stats)
+        raise RelationFailure(message, run)
 
-
-    def replay(self, records: list[Any]) -> list[dict[str, Any]]:
+    def replay(self, records: list[ExampleRecord]) -> list[ExampleRecord]:
         """Evaluate each recorded example again, exactly: the recorded source pose, camera and follow-up."""
         out = []
         for rec in records:
-            view = SceneView(index=-1, name=rec.view, camera=Camera.from_dict(rec.camera),
-                             c2w=np.asarray(rec.source_c2w, dtype=np.float64).reshape(4, 4), split="replayed")
+            view = recorded_view(rec, "replayed")
             out.append(self.evaluate(view, rec.follow_up(), camera=view.camera, units=Units(rec.units)).record)
         return out
+
+
+def recorded_view(record: ExampleRecord, split: str) -> SceneView:
+    """The source view of a recorded example, exactly as recorded (pose and camera, render size included)."""
+    return SceneView(index=-1, name=record.view, camera=Camera.from_dict(record.camera),
+                     c2w=np.asarray(record.source_c2w, dtype=np.float64).reshape(4, 4), split=split)
 

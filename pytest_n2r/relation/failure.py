@@ -12,18 +12,24 @@ from typing import Any
 from ..geometry import Transform, Units
 from ..metrics.base import MetricResult
 from ..scene.base import Scene, SceneView
+from .record import ExampleRecord, RelationRecord, plural
 from .spec import Relation, mutation_like
-from .stats import MAX_UNDEFINED, RelationStats, plural
 
-__all__ = ["RelationFailure", "describe_transform", "failure_message", "nothing_to_test", "too_many_invalid"]
+__all__ = ["RelationFailure", "MAX_UNDEFINED", "describe_transform", "failure_message", "nothing_to_test",
+           "too_many_invalid"]
+
+#: A relation fails as "the SUT produced nothing to test" when more than this share of the draws it could
+#: evaluate (valid follow-up views) had an undefined metric (no keypoints, empty or all-NaN outputs, ...).
+MAX_UNDEFINED = 0.5
 
 
 class RelationFailure(AssertionError):
-    """The SUT's outputs on a source view and its follow-up deviate by more than ``eps``."""
+    """The SUT's outputs on a source view and its follow-up deviate by more than ``eps`` (or the SUT gave
+    nothing to test); ``record`` is the run's :class:`~pytest_n2r.relation.record.RelationRecord`."""
 
-    def __init__(self, message: str, stats: RelationStats | None = None):
+    def __init__(self, message: str, record: RelationRecord | None = None):
         super().__init__(message)
-        self.stats = stats
+        self.record = record
 
 
 def describe_transform(tau: Transform, units: Units) -> str:
@@ -31,13 +37,13 @@ def describe_transform(tau: Transform, units: Units) -> str:
     return tau.describe("ref" if units is Units.REFERENCE else units.value)
 
 
-def failure_message(scene: Scene, relation: Relation, stats: RelationStats, units: Units, view: SceneView,
-                    tau: Any, result: MetricResult, record: dict, *, note: str = "",
+def failure_message(scene: Scene, relation: Relation, run: RelationRecord, units: Units, view: SceneView,
+                    tau: Any, result: MetricResult, record: ExampleRecord, *, note: str = "",
                     images_error: str | None = None) -> str:
-    """The message of a failing example: ``record`` (its plain record, with the saved ``images`` if any) of
-    source ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``."""
+    """The message of a failing example of ``run``: ``record`` (with the saved ``images`` if any) of source
+    ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``."""
     metric = relation.metric
-    camera = record["camera"]
+    camera = record.camera
     lines = [
         (f"metamorphic relation violated: {metric!r} deviates {result.deviation:.4g} from its ideal "
          f"{metric.ideal:g}, more than eps={relation.eps:g}"),
@@ -56,11 +62,11 @@ def failure_message(scene: Scene, relation: Relation, stats: RelationStats, unit
     details = ", ".join(f"{k}={v}" for k, v in result.details.items())
     lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
                  f"{relation.eps:g}" + (f" ({details})" if details else ""))
-    lines.append(f"  search:     {plural(stats.examples, 'example')}, {stats.inconsistencies} inconsistent, "
-                 f"{stats.n_rejected} rejected as invalid, {stats.n_undefined} undefined, "
-                 f"{plural(stats.shrink_examples, 'shrink step')}")
-    if record.get("images"):
-        images = record["images"]
+    lines.append(f"  search:     {plural(len(run.valid_examples), 'example')}, {run.inconsistencies} inconsistent, "
+                 f"{run.rejected} rejected as invalid, {run.undefined} undefined, "
+                 f"{plural(run.shrink_examples, 'shrink step')}")
+    if record.images:
+        images = record.images
         lines.append(f"  images:     source   {_shown_path(images['source'])}")
         lines.append(f"              follow   {_shown_path(images['follow'])}")
         lines.append(f"              (the renders the SUT saw: {Path(images['source_raw']).name}, "
@@ -87,25 +93,25 @@ def _shown_path(path: str | os.PathLike) -> str:
         return str(path)
 
 
-def nothing_to_test(stats: RelationStats, relation: Relation) -> str:
+def nothing_to_test(run: RelationRecord, relation: Relation) -> str:
     """Why a relation whose draws were mostly undefined fails (more than :data:`MAX_UNDEFINED`)."""
-    evaluated = stats.examples + stats.n_undefined
-    reasons = "; ".join(f"{n}x {r}" for r, n in stats.undefined.most_common(3))
+    evaluated = len(run.valid_examples) + run.undefined
+    reasons = "; ".join(f"{n}x {r}" for r, n in run.undefined_reasons.most_common(3))
     return (
-        f"the SUT produced nothing to test: {relation.metric!r} was undefined on {stats.n_undefined} of "
-        f"{evaluated} evaluated draws ({stats.n_undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
-        f"{stats.scene!r}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
+        f"the SUT produced nothing to test: {relation.metric!r} was undefined on {run.undefined} of "
+        f"{evaluated} evaluated draws ({run.undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
+        f"{run.scene!r}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
         "never passes a relation"
     )
 
 
-def too_many_invalid(stats: RelationStats, relation: Relation) -> str:
+def too_many_invalid(run: RelationRecord, relation: Relation) -> str:
     """Why a relation whose follow-up views were mostly invalid is a usage error."""
-    drawn = stats.examples + stats.n_rejected + stats.n_undefined
-    share = stats.n_rejected / drawn if drawn else 1.0
-    reasons = ", ".join(f"{r}: {n}" for r, n in stats.rejected.most_common()) or "no valid example"
+    drawn = len(run.examples)
+    share = run.rejected / drawn if drawn else 1.0
+    reasons = ", ".join(f"{r}: {n}" for r, n in run.rejected_reasons.most_common()) or "no valid example"
     return (
-        f"{relation.transform!r} leaves what the scene {stats.scene!r} can render faithfully in {share:.0%} of "
+        f"{relation.transform!r} leaves what the scene {run.scene!r} can render faithfully in {share:.0%} of "
         f"{drawn} draws ({reasons}); narrow the bounds (or use look_at=True) so most follow-up views stay "
         "in the captured region"
     )

@@ -1,8 +1,9 @@
 """The search: Hypothesis draws source views and follow-ups for the :class:`~pytest_n2r.relation.engine.Engine`.
 
 No pytest here: the plugin (and anyone else) calls :func:`check_relation` with a scene, a SUT and a
-:class:`~pytest_n2r.relation.spec.Relation`, and gets a :class:`~pytest_n2r.relation.stats.RelationStats`
-back or a :class:`~pytest_n2r.relation.failure.RelationFailure` (an ``AssertionError``).
+:class:`~pytest_n2r.relation.spec.Relation`, and gets the run's
+:class:`~pytest_n2r.relation.record.RelationRecord` back or a
+:class:`~pytest_n2r.relation.failure.RelationFailure` (an ``AssertionError``) that carries it.
 
 Hypothesis drives the search: it draws a source view and a transform, shrinks a failure to the smallest
 transform that still fails, replays the last failure first from its example database, seeds from the
@@ -28,18 +29,17 @@ from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
 from ..errors import InvalidArgument, InvalidType
-from ..geometry import Camera
 from ..scene.base import Scene, SceneView
 from ..scene.render_cache import RenderCache
 from ..scene.splits import scene_views
 from ..scene.trajectory import interpolate_view
 from ..strategies import transform_units
 from .determinism import NotDeterministic, SUTNotDeterministic
-from .engine import Engine
-from .failure import RelationFailure, nothing_to_test, too_many_invalid
+from .engine import Engine, recorded_view
+from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
+from .record import TIMINGS, ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation
-from .stats import MAX_UNDEFINED, RelationStats
 from .timeout import TimeLimitReached
 
 __all__ = ["check_relation", "replay_relation"]
@@ -57,19 +57,20 @@ def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[Scene
 
 def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
                    settings: RunSettings | None = None, cache: RenderCache | None = None,
-                   test_id: str = "relation", replay: list[Any] | None = None,
-                   on_start: Callable[[RelationStats], None] | None = None) -> RelationStats:
+                   test_id: str = "relation", replay: list[ExampleRecord] | None = None,
+                   on_start: Callable[[RelationRecord], None] | None = None) -> RelationRecord:
     """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
 
-    Returns the run's :class:`RelationStats` when the relation held on every valid example; raises
-    :class:`RelationFailure` (with ``.stats``) naming the minimal failing transform, or saying that the
-    SUT produced nothing to test (more than :data:`MAX_UNDEFINED` of the evaluated draws undefined);
-    :class:`~pytest_n2r.errors.InvalidArgument` when almost every drawn follow-up view was invalid.
-    ``replay``: recorded examples (:class:`~pytest_n2r.report.records.ExampleRecord`, e.g. a baseline's)
-    evaluated exactly, before the search, into ``stats.replayed`` (their verdicts do not fail the run: a
-    baseline comparison judges them). ``test_id`` names the run in reports and keys its Hypothesis database
-    entries and seed; ``on_start`` receives the (still empty) stats before anything runs, so a caller keeps
-    them even when the run raises.
+    Returns the run's :class:`~pytest_n2r.relation.record.RelationRecord` (one
+    :class:`~pytest_n2r.relation.record.ExampleRecord` per drawn example: accepted, rejected and undefined)
+    when the relation held on every valid example; raises :class:`RelationFailure` (with the record as
+    ``.record``) naming the minimal failing transform, or saying that the SUT produced nothing to test (more
+    than :data:`MAX_UNDEFINED` of the evaluated draws undefined); :class:`~pytest_n2r.errors.InvalidArgument`
+    when almost every drawn follow-up view was invalid. ``replay``: recorded examples (e.g. a baseline's)
+    evaluated exactly, before the search, into the record's ``replayed`` (their verdicts do not fail the run:
+    a baseline comparison judges them). ``test_id`` names the run in reports and keys its Hypothesis database
+    entries and seed; ``on_start`` receives the (still empty) record before anything runs, so a caller keeps
+    it even when the run raises.
     """
     __tracebackhide__ = True
     if not isinstance(scene, Scene):
@@ -82,56 +83,62 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     settings = settings or RunSettings()
     scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
     cache = cache if cache is not None else RenderCache(None)
-    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
+    record = _new_record(scene, relation, test_id)
     if on_start is not None:
-        on_start(stats)
-    engine = Engine(scene, sut, relation, settings, cache, stats)
+        on_start(record)
+    engine = Engine(scene, sut, relation, settings, cache, record)
     try:
         if replay is not None:
-            stats.replayed = engine.replay(replay)
+            record.replayed = engine.replay(replay)
         _search(engine, scene, relation, settings, test_id)
     except RelationFailure as exc:
-        stats.outcome, stats.message = "failed", str(exc)
-        exc.stats = stats
+        record.outcome, record.message = "failed", str(exc)
+        exc.record = record
         raise
     except (TimeLimitReached, NotDeterministic) as exc:  # escaped Hypothesis: the example ran once
-        stats.outcome, stats.message = "error", str(exc)
+        record.outcome, record.message = "error", str(exc)
         raise exc.error() from None
     except Flaky:  # a failure that passed on replay without the SUT changing its outputs: the scene's render
-        stats.outcome = "error"
-        stats.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
+        record.outcome = "error"
+        record.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
                          "is not deterministic. The system under test gave the same outputs twice on the first "
                          "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
                          "with randomness?) or the metric vary")
-        raise SUTNotDeterministic(stats.message) from None
+        raise SUTNotDeterministic(record.message) from None
     except BaseException as exc:
-        stats.outcome, stats.message = "error", f"{type(exc).__name__}: {exc}"
+        record.outcome, record.message = "error", f"{type(exc).__name__}: {exc}"
         raise
-    return stats
+    return record
 
 
 def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, examples: list[Any], *,
                     settings: RunSettings | None = None, cache: RenderCache | None = None,
-                    test_id: str = "relation") -> RelationStats:
+                    test_id: str = "relation") -> RelationRecord:
     """Evaluate exactly the recorded ``examples`` (e.g. a baseline's, see
     :func:`pytest_n2r.report.replay_candidates`) for ``sut`` on ``scene``, without a search: their records
-    are ``stats.replayed``, in order. A verdict never raises; only the SUT's own errors do. Pair them with
-    :func:`pytest_n2r.report.compare_paired`."""
+    are the returned record's ``replayed``, in order. A verdict never raises; only the SUT's own errors do.
+    Pair them with :func:`pytest_n2r.report.compare_paired`."""
     if not isinstance(scene, Scene):
         raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
     if not isinstance(relation, Relation):
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
-    stats = RelationStats(test_id, scene.name, repr(relation.metric), relation.eps, scene.content_hash)
+    record = _new_record(scene, relation, test_id)
     engine = Engine(scene, sut, relation, settings or RunSettings(), cache if cache is not None else RenderCache(None),
-                     stats)
-    stats.replayed = engine.replay(examples)
-    return stats
+                    record)
+    record.replayed = engine.replay(examples)
+    return record
+
+
+def _new_record(scene: Scene, relation: Relation, test_id: str) -> RelationRecord:
+    """The still empty record of a run of ``relation`` on ``scene``, its clock at zero."""
+    return RelationRecord(nodeid=test_id, metric=repr(relation.metric), eps=relation.eps, scene=scene.name,
+                          scene_hash=scene.content_hash, timings=dict.fromkeys(TIMINGS, 0.0))
 
 
 def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSettings, test_id: str) -> None:
     """The survey pass, then (after a failure) the shrink pass; raise the relation's verdict."""
     __tracebackhide__ = True
-    stats = engine.stats
+    run = engine.run_record
 
     def example(view: SceneView, tau: Any) -> None:
         __tracebackhide__ = True
@@ -150,7 +157,7 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
         hsettings().database if settings.database == "default" else settings.database)
     seed = None if settings.derandomize else random.getrandbits(64)  # both passes draw the same examples
 
-    def run(db: Any) -> None:
+    def search(db: Any) -> None:
         test = given(view=_views_strategy(scene, relation), tau=relation.transform)(example)
         if seed is not None:
             test = hypothesis_seed(seed)(test)
@@ -158,31 +165,26 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
 
     try:  # the survey: records every draw, never fails (and leaves the example database as it was)
         with _without_local_constants():
-            run(None if database is None else ReadOnlyDatabase(database))
+            search(None if database is None else ReadOnlyDatabase(database))
     except Unsatisfiable:
         pass
-    drawn = stats.examples + stats.n_rejected + stats.n_undefined
-    evaluated = stats.examples + stats.n_undefined
-    if stats.n_undefined and stats.n_undefined / evaluated > MAX_UNDEFINED:
-        raise RelationFailure(nothing_to_test(stats, relation), stats)
-    if engine.gave_up == "invalid" or not drawn or stats.n_rejected / drawn > relation.validity.max_rejected:
-        raise InvalidArgument(too_many_invalid(stats, relation))
-    if not stats.inconsistencies:
+    drawn, undefined = len(run.examples), run.undefined
+    if undefined and undefined / (len(run.valid_examples) + undefined) > MAX_UNDEFINED:
+        raise RelationFailure(nothing_to_test(run, relation), run)
+    if engine.gave_up == "invalid" or not drawn or run.rejected / drawn > relation.validity.max_rejected:
+        raise InvalidArgument(too_many_invalid(run, relation))
+    if not run.inconsistencies:
         return
     engine.shrinking = True
     try:
         with _without_local_constants():
-            run(database)
+            search(database)
     except Unsatisfiable:
         pass
     # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic): report the
     # survey's worst failing example as it was drawn
-    worst = stats.worst
-    view = SceneView(index=-1, name=worst["view"], camera=Camera.from_dict(worst["camera"]),
-                     c2w=np.asarray(worst["source_c2w"]).reshape(4, 4), split="drawn")
-    from ..report.records import ExampleRecord
-
-    tau = ExampleRecord.from_dict(worst).follow_up()
+    worst = run.worst
+    view, tau = recorded_view(worst, "drawn"), worst.follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
                 note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
 

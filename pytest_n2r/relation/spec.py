@@ -12,33 +12,15 @@ from hypothesis import strategies as st
 from .._validation import check_range
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform
-from ..metrics.base import Metric
+from ..metrics import Metric, resolve_metric
 from ..render.size import RenderSize
 from ..scene.splits import SOURCE_SPLITS
 from ..strategies import PRESETS
 from .validity import Validity
 
-__all__ = ["Relation", "SEARCHES", "resolve_metric", "mutation_like"]
+__all__ = ["Relation", "SEARCHES", "mutation_like"]
 
 SEARCHES = ("random", "targeted")
-
-
-def resolve_metric(metric: Any) -> Metric:
-    """A :class:`Metric` instance, or a metric's name (``"repeatability"``) built with its defaults
-    (:data:`pytest_n2r.metrics.METRICS` lists the names)."""
-    from .. import metrics
-
-    if isinstance(metric, Metric):
-        return metric
-    if isinstance(metric, str):
-        if metric not in metrics.METRICS:
-            known = ", ".join(sorted(metrics.METRICS))
-            raise InvalidArgument(f"metric={metric!r} is not a known metric; known names: {known}")
-        return metrics.resolve_metric(metric)
-    raise InvalidType(
-        f"metric={metric!r} must be a pytest_n2r.metrics.Metric (e.g. repeatability(px=2)) or a metric name, "
-        f"not {type(metric).__name__}"
-    )
 
 
 def _resolve_transform(transform: Any) -> st.SearchStrategy:

@@ -1,8 +1,11 @@
 """Results of metamorphic relations as plain data: baselines, paired comparisons, HTML and JSON reports.
 
-Nothing here imports pytest or torch: the plugin fills :class:`RelationRecord` objects and hands them over.
+Nothing here imports pytest or torch: everything reads the relation engine's records
+(:class:`~pytest_n2r.relation.record.RelationRecord`, :class:`~pytest_n2r.relation.record.ExampleRecord`, also
+importable from here), which the plugin gathers and hands over.
 """
 
+from ..relation.record import ExampleRecord, RelationRecord
 from .baseline import (
     BaselineError,
     PairedComparison,
@@ -13,7 +16,6 @@ from .baseline import (
     replay_candidates,
     save_baseline,
 )
-from .records import ExampleRecord, RelationRecord
 
 __all__ = [
     "ExampleRecord", "RelationRecord", "save_baseline", "load_baseline", "BaselineError", "PairedComparison",

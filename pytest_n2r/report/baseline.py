@@ -2,7 +2,7 @@
 
 A baseline is JSON with stable ordering (sorted keys, relations by test id) so it diffs well in review. It
 holds, per relation, one record per drawn example with all a replay needs (see
-:class:`~pytest_n2r.report.records.ExampleRecord`). ``--n2r-compare`` replays the baseline's accepted
+:class:`~pytest_n2r.relation.record.ExampleRecord`). ``--n2r-compare`` replays the baseline's accepted
 examples on the current code, pairs each with its baseline record and judges the per-example changes of
 the **deviation** (0 = ideal, larger = worse, whatever the metric's direction): the relation regressed when
 a one-sided bootstrap lower confidence bound of the mean increase exceeds the margin the user sets
@@ -29,7 +29,7 @@ import numpy as np
 from .. import defaults
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
-from .records import STATUSES, ExampleRecord, RelationRecord
+from ..relation.record import STATUSES, ExampleRecord, RelationRecord
 
 __all__ = ["FORMAT", "VERSION", "BaselineError", "save_baseline", "load_baseline", "OUTCOMES", "DEFAULT_FAIL_ON",
            "PairedComparison", "parse_margin", "parse_outcomes", "compare_paired", "paired_bound",

@@ -1,6 +1,6 @@
 """A self-contained HTML report of relation runs (one file: inline CSS, SVG histograms, base64 images).
 
-Built from plain :class:`~pytest_n2r.report.records.RelationRecord` data only, so it can be regenerated from
+Built from plain :class:`~pytest_n2r.relation.record.RelationRecord` data only, so it can be regenerated from
 a JSON results file without pytest.
 """
 
@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 from ..data.atomic import atomic_write_text
-from .records import ExampleRecord, RelationRecord
+from ..relation.record import ExampleRecord, RelationRecord
 
 __all__ = ["render_html", "write_html"]
 

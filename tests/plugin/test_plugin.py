@@ -66,7 +66,7 @@ def test_heading(n2r_scene):
          "eps=-0.1 must be a finite number >= 0"),
         ("@metamorphic(AbsDifference(), eps=float('nan'), transform=transforms(yaw=5))", "eps=nan must be a finite"),
         ("@metamorphic('no_such_metric', eps=0.1, transform=transforms(yaw=5))",
-         "metric='no_such_metric' is not a known metric"),
+         "unknown metric 'no_such_metric'; known: class_invariance"),
         ("@metamorphic(AbsDifference(), eps=0.1, transform='tau9')", "transform='tau9' is not a preset"),
         ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), search='hard')", "search='hard'"),
         ("@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5), size='big')",

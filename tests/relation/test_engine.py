@@ -63,32 +63,32 @@ def test_the_render_size_of_the_relation_wins_over_the_run_setting():
     assert shapes == {(48, 64, 3)}
 
 
-def test_stats_count_examples_rejections_and_time():
+def test_the_record_counts_examples_rejections_and_time():
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=25))
-    stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
-    assert stats.outcome == "passed" and stats.examples == 10 and stats.inconsistencies == 0
-    assert stats.n_rejected > 0, "yaw up to 25° looks past the plane in some draws"
-    assert min(stats.render_s, stats.sut_s, stats.metric_s) >= 0 and stats.render_s > 0
-    record = stats.to_record()
-    assert len(record.valid_examples) == 10 and record.rejected == stats.n_rejected, "one record per draw"
-    assert len(record.examples) == 10 + stats.n_rejected and record.timings["render"] == stats.render_s
+    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert record.outcome == "passed" and len(record.valid_examples) == 10 and record.inconsistencies == 0
+    assert record.rejected > 0, "yaw up to 25° looks past the plane in some draws"
+    assert set(record.timings) == {"render", "sut", "metric"} and min(record.timings.values()) >= 0
+    assert record.timings["render"] > 0
+    assert len(record.examples) == 10 + record.rejected, "one record per draw"
+    assert sum(record.rejected_reasons.values()) == record.rejected
     assert all(e.passed for e in record.valid_examples)
     assert all(e.reason and e.score != e.score for e in record.examples if e.status == "rejected")
 
 
-def test_a_failure_carries_stats_and_pictures(tmp_path):
+def test_a_failure_carries_its_record_and_pictures(tmp_path):
     scene = PlaneScene(texture="ramp")
     relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=30)
     with pytest.raises(RelationFailure) as info:
         check_relation(scene, lambda rgb: float(decode_ramp_x(rgb)[36, 48]), relation,
                        settings=RunSettings(artifacts=tmp_path, database=None), test_id="t.py::test[plane]")
-    stats = info.value.stats
-    assert stats.outcome == "failed" and stats.minimal["deviation"] > 0.05
+    record = info.value.record
+    assert record.outcome == "failed" and record.minimal.deviation > 0.05
     # every drawn example is recorded, also those after the first failure (the survey pass draws all 30)
-    assert stats.examples == 30 and len(stats.records) == 30 + stats.n_rejected + stats.n_undefined
-    assert stats.inconsistencies == sum(not r["passed"] for r in stats.records if r["status"] == "accepted") > 1
-    images = stats.minimal["images"]
+    assert len(record.valid_examples) == 30 and len(record.examples) == 30 + record.rejected + record.undefined
+    assert record.inconsistencies == sum(not e.passed for e in record.examples if e.status == "accepted") > 1
+    images = record.minimal.images
     assert set(images) == {"source", "follow", "source_raw", "follow_raw"}
     source = cv2.imread(images["source_raw"])[..., ::-1]
     np.testing.assert_array_equal(source, scene.render(scene.views[1].c2w, scene.views[1].camera.scaled(1.0)).rgb)
@@ -99,9 +99,9 @@ def test_sut_output_is_computed_once_per_source_view():
     scene = PlaneScene()
     calls = []
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), examples=20)
-    stats = check_relation(scene, lambda rgb: calls.append(1) or 0.0, relation, settings=RunSettings(
+    record = check_relation(scene, lambda rgb: calls.append(1) or 0.0, relation, settings=RunSettings(
         examples=20, database=None))
-    assert len(calls) == stats.examples + len({r["view"] for r in stats.records})
+    assert len(calls) == len(record.valid_examples) + len({e.view for e in record.examples})
 
 
 def test_shared_cache_makes_a_rerun_render_nothing():
@@ -111,15 +111,15 @@ def test_shared_cache_makes_a_rerun_render_nothing():
     settings = RunSettings(derandomize=True, database=None)
     check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=cache, test_id="a")
     calls = scene.calls
-    stats = check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=cache, test_id="a")
-    assert scene.calls == calls and stats.renders == 0
+    record = check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=cache, test_id="a")
+    assert scene.calls == calls and record.renders == 0
 
 
 def test_interpolated_sources_and_all_views():
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=2), examples=8, interpolate=True)
-    stats = check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
-    assert any("~" in r["view"] for r in stats.records), [r["view"] for r in stats.records]
+    record = check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
+    assert any("~" in e.view for e in record.examples), [e.view for e in record.examples]
 
 
 def test_mutations_use_the_source_pose():
@@ -132,9 +132,9 @@ def test_mutations_use_the_source_pose():
 
     scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 300, st.just(Invert()), examples=3)
-    stats = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
-    assert stats.records[0]["mutation"] == {"description": "invert()"} and stats.n_rejected == 0
-    assert stats.records[0]["transform"] is None
+    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert record.examples[0].mutation == {"description": "invert()"} and record.rejected == 0
+    assert record.examples[0].transform is None
 
 
 def test_metres_on_a_scene_without_scale_is_refused_before_any_render():
@@ -171,15 +171,14 @@ def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeyp
     with pytest.raises(RelationFailure) as exc:
         check_relation(PlaneScene(name="ramp", texture="ramp"), _heading_class, relation,
                        settings=RunSettings(examples=30, database=None, derandomize=True))
-    stats = exc.value.stats
-    assert stats.outcome == "failed" and stats.n_undefined < stats.examples, (stats.outcome, stats.undefined)
-    yaw = stats.minimal["transform"]["yaw"]
+    record = exc.value.record
+    assert record.outcome == "failed" and record.undefined < len(record.valid_examples), record.summary_line()
+    yaw = record.minimal.transform["yaw"]
     assert 15.0 <= abs(yaw) <= 15.5, f"shrunk to yaw={yaw}, expected just past the undefined band (15°)"
 
 
 def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_search():
     from pytest_n2r.relation import replay_relation
-    from pytest_n2r.report import ExampleRecord
 
     scene = PlaneScene(texture="ramp")
     relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=15)
@@ -188,10 +187,10 @@ def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_searc
 
     with pytest.raises(RelationFailure) as info:
         check_relation(scene, sut, relation, settings=RunSettings(database=None))
-    recorded = [ExampleRecord.from_dict(r) for r in info.value.stats.records if r["status"] == "accepted"]
+    recorded = info.value.record.valid_examples
     calls = []
-    stats = replay_relation(scene, lambda rgb: calls.append(1) or sut(rgb), relation, recorded)
-    assert [r["deviation"] for r in stats.replayed] == [e.deviation for e in recorded], "bit for bit"
-    assert [r["transform"] for r in stats.replayed] == [e.transform for e in recorded]
-    assert stats.records == [] and stats.outcome == "passed", "a replay searches nothing and judges nothing"
+    record = replay_relation(scene, lambda rgb: calls.append(1) or sut(rgb), relation, recorded)
+    assert [e.deviation for e in record.replayed] == [e.deviation for e in recorded], "bit for bit"
+    assert [e.transform for e in record.replayed] == [e.transform for e in recorded]
+    assert record.examples == [] and record.outcome == "passed", "a replay searches nothing and judges nothing"
     assert len(calls) == len(recorded) + len({e.view for e in recorded})

@@ -32,5 +32,5 @@ def test_a_fixed_transform_and_a_preset_are_accepted():
     scene = PlaneScene()
     for transform in (Transform(yaw=1), "tau1"):
         relation = Relation.build(SameLabel(), 0.5, transform, examples=3)
-        stats = check_relation(scene, lambda rgb: 0, relation, settings=FAST)
-        assert stats.outcome == "passed"
+        record = check_relation(scene, lambda rgb: 0, relation, settings=FAST)
+        assert record.outcome == "passed"

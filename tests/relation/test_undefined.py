@@ -33,10 +33,10 @@ def test_an_empty_detector_fails_with_nothing_to_test(metric):
     relation = Relation.build(metric, eps=0.5, transform=transforms(yaw=3))
     with pytest.raises(RelationFailure, match="the SUT produced nothing to test") as info:
         check_relation(PlaneScene(), no_keypoints, relation, settings=SETTINGS)
-    stats = info.value.stats
-    assert stats.outcome == "failed" and stats.examples == 0 and stats.n_undefined > 0
+    record = info.value.record
+    assert record.outcome == "failed" and not record.valid_examples and record.undefined > 0
     assert "the SUT found no keypoint in either view" in str(info.value)
-    assert all(r["status"] == "undefined" for r in stats.records) and stats.records
+    assert all(e.status == "undefined" for e in record.examples) and record.examples
 
 
 class _SometimesUndefined(AbsDifference):
@@ -59,11 +59,11 @@ def test_undefined_draws_are_counted_and_a_mostly_undefined_relation_fails(every
         with pytest.raises(RelationFailure, match=r"nothing to test: .* undefined on \d+ of \d+ evaluated draws"):
             check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
         return
-    stats = check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
-    share = stats.n_undefined / (stats.examples + stats.n_undefined)
-    assert stats.outcome == "passed" and 0 < share <= MAX_UNDEFINED and stats.examples == 12
-    assert "undefined (" in stats.summary_line() and stats.undefined["no output this time"] == stats.n_undefined
-    assert sum(r["status"] == "undefined" for r in stats.records) == stats.n_undefined
+    record = check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
+    share = record.undefined / (len(record.valid_examples) + record.undefined)
+    assert record.outcome == "passed" and 0 < share <= MAX_UNDEFINED and len(record.valid_examples) == 12
+    assert f"{record.undefined} undefined ({record.undefined} no output this time)" in record.summary_line()
+    assert record.undefined_reasons == {"no output this time": record.undefined}
 
 
 def mean_colour(rgb: np.ndarray) -> float:
@@ -76,4 +76,4 @@ def test_a_content_independent_detector_fails_a_relation_with_yaw_of_5_degrees_o
     relation = Relation.build(metric, eps=eps, transform=transforms(yaw=(5, 10)))
     with pytest.raises(RelationFailure) as info:
         check_relation(PlaneScene(), same_grid(8), relation, settings=SETTINGS)
-    assert info.value.stats.outcome == "failed"
+    assert info.value.record.outcome == "failed"

@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.relation.record import deviation_stats
 from pytest_n2r.report import (
     BaselineError,
     ExampleRecord,
@@ -24,7 +25,6 @@ from pytest_n2r.report import (
     save_baseline,
 )
 from pytest_n2r.report.baseline import DEFAULT_FAIL_ON, format_comparison_table, paired_bound
-from pytest_n2r.report.records import deviation_stats
 
 CAMERA = {"width": 320, "height": 180, "fx": 250.0, "fy": 250.0, "cx": 159.5, "cy": 89.5, "distortion": []}
 POSE = [1.0, 0, 0, 0.5, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]

@@ -12,6 +12,7 @@ import numpy as np
 from ...render.size import RenderSize
 from ...scene.base import Scene
 from ...scene.render_cache import RenderCache
+from ..record import ExampleRecord
 from .exact import compare_exact
 from .measure import FieldFloor, FloorStore, measure_floor, sut_name
 
@@ -20,7 +21,7 @@ __all__ = ["annotate_relation", "annotation_lines"]
 _STORES: dict[Path | None, FloorStore] = {}
 
 
-def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Any, records: list[dict[str, Any]],
+def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Any, records: list[ExampleRecord],
                       *, size: RenderSize | None, cache: RenderCache | None,
                       cache_dir: Path | None) -> dict[str, Any] | None:
     """What the plugin shows beside a relation's result on ``scene`` (``None`` on an exact scene): the field

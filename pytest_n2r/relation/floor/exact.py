@@ -15,6 +15,7 @@ from ...metrics.base import Metric
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.render_cache import RenderCache
+from ..record import ExampleRecord
 from .measure import json_number
 from .reference import exact_twin, shift_sample
 
@@ -62,11 +63,11 @@ class ExactComparison:
                 "n": self.n, "fitted_mean": json_number(fitted), "exact_mean": json_number(exact)}
 
 
-def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, records: list[dict[str, Any]],
+def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, records: list[ExampleRecord],
                   camera_of: Callable[[SceneView], Camera], length_scale: float, *,
                   cache: RenderCache | None = None, limit: int = EXACT_REPLAY_EXAMPLES) -> ExactComparison | None:
-    """Replay the first ``limit`` ``records`` of a relation on ``scene`` (``view`` name, ``transform`` fields,
-    ``deviation``) on the scene's exact twin; ``None`` when ``scene`` has none. ``length_scale`` converts the
+    """Replay the first ``limit`` accepted ``records`` of a relation on ``scene`` (source view by name, pose
+    transform, deviation) on the scene's exact twin; ``None`` when ``scene`` has none. ``length_scale`` converts the
     transforms' translations to scene units, ``camera_of`` gives the render camera of a source view."""
     from ...geometry import Transform
 
@@ -78,11 +79,11 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     by_name = {v.name: v for v in scene.views}
     sources: dict[str, tuple[RenderedView, Any]] = {}
     pairs, undefined, skipped = [], 0, 0
-    accepted = [r for r in records if r.get("status", "accepted") == "accepted"]  # the draws that were tests
+    accepted = [r for r in records if r.valid]  # the draws that were tests
     for record in accepted[:limit]:
-        view = by_name.get(record["view"])
-        transform = record["transform"]
-        if view is None or transform is None or "mutation" in transform:
+        view = by_name.get(record.view)
+        transform = record.transform
+        if view is None or transform is None or record.mutation is not None:
             skipped += 1
             continue
         if view.name not in sources:
@@ -93,7 +94,7 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         follow = render_cache.render(twin, follow_c2w, camera_of(view), outputs)
         sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name)
         if sample.valid:
-            pairs.append((float(record["deviation"]), sample.deviation))
+            pairs.append((float(record.deviation), sample.deviation))
         else:
             undefined += 1
     return ExactComparison(tuple(pairs), undefined, skipped)

@@ -1,20 +1,23 @@
-"""Plain-data records of relation runs (JSON-ready; no pytest, no numpy objects).
+"""The records of relation runs: what the engine writes, and what the plugin, baselines, JSON, JUnit and HTML
+read (plain, JSON-ready data: no pytest, no numpy objects).
 
 One :class:`ExampleRecord` per drawn example -- accepted, rejected (invalid follow-up view) or undefined
 (the metric had no value, e.g. the SUT found no keypoint) -- with everything needed to replay it bit for
 bit: the scene's content hash, the source view's name, pose and camera (render size), the render
 settings, and the follow-up (a pose transform with its units, or a mutation with its parameters).
-A :class:`RelationRecord` holds every example of one relation run plus its verdict and, on fitted scenes,
-its ``floor`` (the deviation the scene field alone causes, :mod:`pytest_n2r.relation.floor`).
+A :class:`RelationRecord` is one relation run: every example it drew, the baseline examples it replayed,
+its verdict, where the time went and, on fitted scenes, its ``floor`` (the deviation the scene field alone
+causes, :mod:`pytest_n2r.relation.floor`).
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES"]
+__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES", "TIMINGS", "plural"]
 
 #: What happened to a drawn example.
 STATUSES = ("accepted", "rejected", "undefined")
@@ -90,13 +93,20 @@ class ExampleRecord:
         return asdict(self)
 
 
+#: The parts of a relation run's wall-clock time (seconds): rendering (cache lookups included), the SUT, the metric.
+TIMINGS = ("render", "sut", "metric")
+
+
 @dataclass
 class RelationRecord:
-    """Every example of one relation (one test id) plus its verdict and timing split (seconds).
+    """One relation run (one test id): every example the search drew (:attr:`examples`, in draw order,
+    also after the first failure), its verdict and the time split (:data:`TIMINGS`, seconds).
 
     ``replayed`` holds the baseline examples replayed before the search (``None`` when none were asked
-    for). ``floor`` is the plain dict of the field-floor measurement beside the result (``None`` when none
-    was made); reports show its ``line`` beside the relation's deviations.
+    for); ``minimal`` the minimal failing example after shrinking (with its saved ``images``); ``renders``
+    the renders that missed the cache and ``shrink_examples`` the examples Hypothesis ran while shrinking a
+    failure. ``floor`` is the plain dict of the field-floor measurement beside the result (``None`` when
+    none was made); reports show its ``line`` beside the relation's deviations.
     """
 
     nodeid: str
@@ -113,9 +123,12 @@ class RelationRecord:
     #: The field floor beside the result (:func:`pytest_n2r.relation.floor.annotate_relation`; ``None`` on an
     #: exact scene).
     floor: dict[str, Any] | None = None
+    renders: int = 0
+    shrink_examples: int = 0
 
     @property
     def valid_examples(self) -> list[ExampleRecord]:
+        """The accepted examples: those that tested the SUT."""
         return [e for e in self.examples if e.valid]
 
     @property
@@ -127,16 +140,45 @@ class RelationRecord:
         return sum(e.status == "undefined" for e in self.examples)
 
     @property
+    def rejected_reasons(self) -> Counter:
+        """Rejected examples by reason (``"empty view"``, ``"outside the captured region"``)."""
+        return Counter(e.reason for e in self.examples if e.status == "rejected")
+
+    @property
+    def undefined_reasons(self) -> Counter:
+        """Undefined examples by the metric's reason (``"the SUT found no keypoint in either view"``, ...)."""
+        return Counter(e.reason for e in self.examples if e.status == "undefined")
+
+    @property
     def inconsistencies(self) -> int:
         return sum(not e.passed for e in self.valid_examples)
 
     @property
     def worst(self) -> ExampleRecord | None:
+        """The accepted example of the largest deviation (the first of equals), ``None`` without one."""
         valid = self.valid_examples
         return max(valid, key=lambda e: e.deviation) if valid else None
 
+    @property
+    def worst_deviation(self) -> float:
+        worst = self.worst
+        return math.nan if worst is None else worst.deviation
+
     def stats(self) -> dict[str, float]:
         return deviation_stats([e.deviation for e in self.valid_examples], self.eps)
+
+    def summary_line(self) -> str:
+        """One line for the terminal: outcome, test id, counts (with reasons), worst deviation, time split."""
+        worst = "n/a" if math.isnan(self.worst_deviation) else f"{self.worst_deviation:.3g}"
+        rejected = f"{self.rejected} rejected as invalid" + _reasons(self.rejected_reasons)
+        undefined = f"{self.undefined} undefined" + _reasons(self.undefined_reasons)
+        replayed = "" if self.replayed is None else f"{len(self.replayed)} baseline examples replayed, "
+        render, sut, metric = (self.timings.get(k, 0.0) for k in TIMINGS)
+        return (
+            f"{self.outcome.upper():6s} {self.nodeid}: {replayed}{plural(len(self.valid_examples), 'example')}, "
+            f"{rejected}, {undefined}, {self.inconsistencies} inconsistent, worst deviation {worst} (eps "
+            f"{self.eps:g}); time render {render:.2f} s / SUT {sut:.2f} s / metric {metric:.2f} s"
+        )
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -154,8 +196,17 @@ class RelationRecord:
             minimal=ExampleRecord.from_dict(minimal) if minimal else None,
             scene=data.get("scene", ""), scene_hash=data.get("scene_hash", ""),
             replayed=None if replayed is None else [ExampleRecord.from_dict(e) for e in replayed],
-            floor=data.get("floor"),
+            floor=data.get("floor"), renders=int(data.get("renders", 0)),
+            shrink_examples=int(data.get("shrink_examples", 0)),
         )
+
+
+def plural(n: int, noun: str) -> str:
+    return f"{n} {noun}" + ("" if n == 1 else "s")
+
+
+def _reasons(counts: Counter) -> str:
+    return " (" + ", ".join(f"{n} {r}" for r, n in counts.most_common()) + ")" if counts else ""
 
 
 #: Statistics of a relation's deviations (0 = ideal, larger = worse) that reports show.
