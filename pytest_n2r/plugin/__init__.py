@@ -221,14 +221,14 @@ class _Summary:
             return
         terminalreporter.section("pytest-n2r")
         from ..relation.floor import annotation_lines
-        from ..relation.record import plural
+        from ..relation.record import TIMINGS, plural
 
         for record in records:
             terminalreporter.write_line(record.summary_line())
             for line, warn in annotation_lines(record.floor):
                 terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
         examples = sum(len(r.valid_examples) for r in records)
-        render, sut, metric = (sum(r.timings.get(k, 0.0) for r in records) for k in ("render", "sut", "metric"))
+        render, sut, metric = (sum(r.timings.get(k, 0.0) for r in records) for k in TIMINGS)
         terminalreporter.write_line(
             f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
             f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
