@@ -12,7 +12,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
-from pytest_n2r.relation.record import deviation_stats
 from pytest_n2r.report import (
     BaselineError,
     ExampleRecord,
@@ -230,17 +229,6 @@ def test_the_bound_is_below_the_mean_and_deterministic(changes):
 
 def test_the_bound_of_nothing_is_nan():
     assert math.isnan(paired_bound([])) and math.isnan(paired_bound([math.nan, 0.1]))
-
-
-@given(st.lists(st.floats(0, 10), min_size=1, max_size=50), st.floats(0, 10))
-def test_stats_are_ordered_and_bounded(devs, eps):
-    s = deviation_stats(devs, eps)
-    assert s["p10"] <= s["median"] <= s["p90"] <= s["max"] == max(devs)
-    assert min(devs) <= s["mean"] <= max(devs) and 0 <= s["rate"] <= 1
-
-
-def test_stats_of_nothing_are_nan():
-    assert all(math.isnan(v) for v in deviation_stats([], 0.1).values())
 
 
 def test_replayed_examples_that_are_not_the_baselines_are_not_paired():

@@ -1,0 +1,70 @@
+"""The one record of a relation run: counts and reasons derived from its examples, the summary line, JSON."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pytest_n2r.relation.record import ExampleRecord, RelationRecord, deviation_stats
+
+CAMERA = {"width": 320, "height": 180, "fx": 250.0, "fy": 250.0, "cx": 159.5, "cy": 89.5, "distortion": []}
+
+
+def _example(i: int, status: str = "accepted", deviation: float = 0.1, reason: str = "") -> ExampleRecord:
+    ok = status == "accepted"
+    return ExampleRecord("wall", f"view{i}", {"yaw": float(i)}, 1 - deviation if ok else math.nan,
+                         deviation if ok else math.nan, ok and deviation <= 0.2, status=status, reason=reason,
+                         scene_hash="abc", source_c2w=[1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0],
+                         camera=dict(CAMERA))
+
+
+def _run() -> RelationRecord:
+    examples = [_example(0, deviation=0.1), _example(1, "rejected", reason="empty view"),
+                _example(2, deviation=0.3), _example(3, "undefined", reason="no keypoint"),
+                _example(4, "rejected", reason="outside the captured region"), _example(5, deviation=0.3),
+                _example(6, "rejected", reason="empty view")]
+    return RelationRecord("t.py::test[wall]", "repeatability(px=2.0)", 0.2, examples, outcome="failed",
+                          timings={"render": 1.5, "sut": 0.25, "metric": 0.125}, scene="wall", scene_hash="abc",
+                          renders=9, shrink_examples=4)
+
+
+def test_counts_reasons_and_the_worst_example_come_from_the_examples():
+    run = _run()
+    assert (len(run.valid_examples), run.rejected, run.undefined, run.inconsistencies) == (3, 3, 1, 2)
+    assert list(run.rejected_reasons.items()) == [("empty view", 2), ("outside the captured region", 1)]
+    assert run.undefined_reasons == {"no keypoint": 1}
+    assert run.worst is run.examples[2], "the first of equal deviations is the worst"
+    assert run.worst_deviation == 0.3
+    assert math.isnan(RelationRecord("a", "m", 0.1).worst_deviation), "no accepted example: no worst deviation"
+
+
+def test_the_summary_line_names_counts_reasons_worst_and_time():
+    assert _run().summary_line() == (
+        "FAILED t.py::test[wall]: 3 examples, 3 rejected as invalid (2 empty view, 1 outside the captured "
+        "region), 1 undefined (1 no keypoint), 2 inconsistent, worst deviation 0.3 (eps 0.2); time render "
+        "1.50 s / SUT 0.25 s / metric 0.12 s"
+    )
+
+
+def test_the_record_round_trips_through_json_with_every_field():
+    run = _run()
+    run.replayed, run.minimal, run.floor = [_example(7)], _example(2, deviation=0.3), {"line": "field floor n/a"}
+    text = json.dumps(run.to_dict())
+    again = RelationRecord.from_dict(json.loads(text))
+    assert json.dumps(again.to_dict()) == text, "NaN scores of rejected examples included"
+    assert again.renders == 9 and again.shrink_examples == 4 and again.minimal.view == "view2"
+    assert again.to_dict()["stats"]["max"] == 0.3 and again.summary_line() == run.summary_line()
+
+
+@given(st.lists(st.floats(0, 10), min_size=1, max_size=50), st.floats(0, 10))
+def test_stats_are_ordered_and_bounded(devs, eps):
+    s = deviation_stats(devs, eps)
+    assert s["p10"] <= s["median"] <= s["p90"] <= s["max"] == max(devs)
+    assert min(devs) <= s["mean"] <= max(devs) and 0 <= s["rate"] <= 1
+
+
+def test_stats_of_nothing_are_nan():
+    assert all(math.isnan(v) for v in deviation_stats([], 0.1).values())
