@@ -1,0 +1,114 @@
+"""How much detail a capture can give a field: the training views' pixel footprint on the scene, the grid
+size whose voxel matches it, and the finest grid a machine's memory holds.
+
+A field cannot show detail finer than its voxel, and a photo shows none finer than its pixel's footprint on
+the surface. Where the cameras look closely, the voxel should approach that footprint; a coarser grid blurs
+what the photos show (ORB and SIFT respond to exactly that detail), a finer one has nothing more to learn.
+
+Convention
+    Footprints are in the field's *normalized* units (scene units divided by the space's ``radius``, so the
+    captured region is ``[-1, 1]³``) per pixel: a view's footprint is ``z / fx`` at the median z-depth of the
+    sparse points it sees. "Where the cameras look closely" is the 10th percentile of the training views'
+    footprints. A grid of ``R`` vertices per axis spans the contracted cube of side ``2·(1 + shell)``, so its
+    voxel is ``2·(1 + shell) / (R - 1)`` (:meth:`~pytest_n2r.field.space.SceneSpace.voxel_size`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.capture import Capture
+from ..errors import InvalidArgument
+from ..geometry import project
+from .space import SceneSpace
+
+__all__ = ["CaptureDetail", "capture_detail", "fit_memory_bytes", "memory_resolution"]
+
+#: Fewest sparse points a view must see for its footprint to count.
+MIN_POINTS = 10
+#: Percentile of the views' footprints that stands for "where the cameras look closely".
+CLOSE_PERCENTILE = 10.0
+
+
+@dataclass(frozen=True)
+class CaptureDetail:
+    """The training views' pixel footprint (normalized units per pixel): ``close`` where the cameras look
+    closely (10th percentile over views), ``median`` over views; ``views`` counted (those seeing at least
+    ``MIN_POINTS`` sparse points); ``space`` the field's space they are measured in."""
+
+    close: float
+    median: float
+    views: int
+    space: SceneSpace
+
+    def matching_resolution(self) -> int:
+        """Vertices per axis of the grid whose voxel equals the close footprint."""
+        return int(math.ceil(2.0 * self.space.half_size / self.close)) + 1
+
+    def pixels_per_voxel(self, resolution: int) -> float:
+        """How many close-footprint pixels one voxel of a ``resolution``³ grid spans (1: it matches; more:
+        the field is blurrier than the photos)."""
+        return self.space.voxel_size(resolution) / self.close
+
+    def describe(self, resolution: int) -> dict:
+        """Report figures for a field of ``resolution``³ (plain JSON values)."""
+        return {"footprint_close": round(self.close, 6), "footprint_median": round(self.median, 6),
+                "views": self.views, "matching_resolution": self.matching_resolution(),
+                "pixels_per_voxel": round(self.pixels_per_voxel(resolution), 2)}
+
+
+def capture_detail(capture: Capture, space: SceneSpace, views: Sequence | None = None) -> CaptureDetail | None:
+    """The pixel footprint of ``views`` (default: the capture's training views) in ``space``; ``None`` when
+    no view sees ``MIN_POINTS`` of the capture's sparse points (nothing to measure the depth with)."""
+    views = capture.train_views if views is None else list(views)
+    points = np.asarray(capture.points, dtype=np.float64).reshape(-1, 3)
+    footprints = []
+    for view in views:
+        if not len(points):
+            break
+        uv, z = project(points, view.camera, view.c2w)
+        with np.errstate(invalid="ignore"):
+            seen = (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] < view.camera.width - 0.5) \
+                & (uv[:, 1] >= -0.5) & (uv[:, 1] < view.camera.height - 0.5)
+        if seen.sum() >= MIN_POINTS:
+            footprints.append(float(np.median(z[seen])) / view.camera.fx / space.radius)
+    if not footprints:
+        return None
+    return CaptureDetail(float(np.percentile(footprints, CLOSE_PERCENTILE)), float(np.median(footprints)),
+                         len(footprints), space)
+
+
+def fit_memory_bytes(resolution: int, *, occupied: float = 0.1, width: int = 13) -> int:
+    """An upper estimate of the bytes a fit holds on its finest grid of ``resolution``³: the row map (int32
+    per vertex), the occupancy (a byte per cell) and the training visibility (float32 per cell), plus the
+    stored vertices of ``occupied`` of the cells (about 1.2 vertices per occupied cell at the fractions fits
+    reach) with ``width`` float32 values each, Adam's two moments and their row index (8 bytes)."""
+    if not 0.0 < occupied <= 1.0:
+        raise InvalidArgument(f"occupied={occupied!r}: expected a fraction of the cells in (0, 1]")
+    if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 2:
+        raise InvalidArgument(f"resolution={resolution!r}: expected vertices per axis >= 2")
+    vertices, cells = resolution ** 3, (resolution - 1) ** 3
+    stored = min(vertices, 1.2 * occupied * cells)
+    return int(4 * vertices + 5 * cells + stored * (3 * 4 * width + 8))
+
+
+def memory_resolution(memory_bytes: float, *, occupied: float = 0.1, width: int = 13, multiple: int = 16) -> int:
+    """The largest grid size (a multiple of ``multiple``, at most 1024) whose fit fits in ``memory_bytes``
+    by :func:`fit_memory_bytes`.
+
+    >>> memory_resolution(24 * 2**30)
+    960
+    """
+    if not (math.isfinite(memory_bytes) and memory_bytes > 0):
+        raise InvalidArgument(f"memory_bytes={memory_bytes!r}: expected a number of bytes > 0")
+    best = 0
+    for r in range(multiple, 1024 + 1, multiple):
+        if fit_memory_bytes(r, occupied=occupied, width=width) <= memory_bytes:
+            best = r
+    if best == 0:
+        raise InvalidArgument(f"memory_bytes={memory_bytes!r}: not even a {multiple}³ grid fits")
+    return best
