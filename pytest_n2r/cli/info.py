@@ -105,6 +105,10 @@ def format_info(scene: SceneFile) -> str:
     lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
                  f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
                  f"stored ({_size(field['tensor_bytes'])}; {_size(field['memory_bytes'])} in memory)")
+    detail = report.get("detail")
+    if detail:
+        lines.append(f"  detail    a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras "
+                     f"look closest (a {detail['matching_resolution']}³ grid would match the photos)")
     state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
     where = f" on {report['device']}" if "device" in report else ""
     threads = f" ({report['threads']} threads)" if "threads" in report else ""

@@ -32,6 +32,7 @@ from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basi
 from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
+from ..field.detail import capture_detail
 from .optim import RowAdam
 from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 
@@ -360,6 +361,7 @@ def fit(
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
     final = trainer.field.quantized()
+    detail = capture_detail(capture, trainer.space)
     e0 = time.perf_counter()
     rows = evaluate_views(final, heldout)
     eval_s += time.perf_counter() - e0
@@ -373,6 +375,7 @@ def fit(
         "max_steps": max_steps,
         "final_loss": round(loss, 6),
         "field": final.describe(),
+        "detail": None if detail is None else detail.describe(final.resolution),
         "heldout": rows,
         **_means(rows),
         "history": history,

@@ -69,3 +69,19 @@ def test_the_memory_ceiling_grows_with_memory_and_the_estimate_with_the_grid():
 def test_bad_arguments_are_named(call, message):
     with pytest.raises(InvalidArgument, match=message):
         call()
+
+
+def test_a_fit_reports_how_many_training_pixels_its_finest_voxel_spans(short_fit, capture48, tmp_path):
+    from pytest_n2r.cli.info import format_info
+    from pytest_n2r.scene.file import read_scene_file, save_scene
+
+    detail = short_fit.report["detail"]
+    expected = capture_detail(capture48, short_fit.field.space)
+    assert detail == expected.describe(short_fit.field.resolution)
+    assert expected.matching_resolution() > short_fit.field.resolution
+    assert detail["pixels_per_voxel"] == pytest.approx(expected.pixels_per_voxel(short_fit.field.resolution), abs=0.01)
+    path = save_scene(tmp_path / "s.n2r", short_fit.field, short_fit.config, capture48, short_fit.report,
+                      images=False)
+    text = format_info(read_scene_file(path, images=False))
+    assert (f"a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras look closest "
+            f"(a {detail['matching_resolution']}³ grid would match the photos)") in text, text
