@@ -124,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     ladders = args.ladder or [parse_ladder(text) for text in LADDERS]
     torch.set_num_threads(2)
     rows = []
-    print("| scene | ladder | steps | fit s | pixels/voxel | validation PSNR / SSIM / ORB | held-out PSNR / SSIM / ORB |")
+    print("| scene | ladder | steps | fit s | pixels/voxel | validation PSNR / SSIM / ORB "
+          "| held-out PSNR / SSIM / ORB |")
     print("|---|---|---|---|---|---|---|")
 
     def report(row: dict) -> None:

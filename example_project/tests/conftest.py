@@ -9,8 +9,8 @@ from perception.detectors import detector
 
 #: The scene of the UAV mission; classifiers are only meaningful where there is an object to classify.
 OBJECT_SCENES = ("object",)
-#: The built-in demo scene without an object (the AUV wall).
-WALL_SCENES = ("wall",)
+#: The built-in demo scene without an object (the AUV wall) and its fitted twin.
+WALL_SCENES = ("wall", "wall-field")
 
 
 @pytest.fixture(scope="session")
