@@ -2,7 +2,7 @@
 
 Run: ``python benchmarks/capture_detail.py [--fox-grid 160] [--demo-grid 384] [--demo-size 240x135]``
 
-For each capture, :func:`pytest_n2r.field.detail.capture_detail` in the space a fit would build: the
+For each capture, :func:`pytest_n2r.fit.detail.capture_detail` in the space a fit would build: the
 training views' pixel footprint (z-depth / fx at the median depth of the sparse points each sees) where
 the cameras look closely (10th percentile) and at the median view, the finest grid's voxel in those pixels,
 and the grid that would match them. No fit: seconds. The fox (``../shared/scenes/fox``, 1/4 resolution,
@@ -21,8 +21,8 @@ import numpy as np
 from pytest_n2r.data import ingest
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.demo import capture as demo_capture
-from pytest_n2r.field.detail import capture_detail
 from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit.detail import capture_detail
 
 FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"
 

@@ -11,7 +11,7 @@ view: it is not fitted, and it is where variants are compared and chosen. The de
 never fitted and never used for choosing: they are what is reported. Both are scored against the exact
 render at the same pose: PSNR, SSIM and ORB repeatability (1000 points, 2 px) between the exact image and
 the field's. ``pixels/voxel``: how many training pixels one voxel of the finest grid spans where the
-cameras look closely (:mod:`pytest_n2r.field.detail`; 1 would match the photos).
+cameras look closely (:mod:`pytest_n2r.fit.detail`; 1 would match the photos).
 
 ``--fox 10m`` also fits the fox (``../shared/scenes/fox``, 1/4 resolution, every 8th photo held out, every
 8th of the rest from the 4th for validation) once per ladder within that time budget, scored against the
@@ -38,9 +38,9 @@ from pytest_n2r.data.capture import Capture
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.field.config import FieldConfig
-from pytest_n2r.field.detail import capture_detail
-from pytest_n2r.field.fit import evaluate_views, fit
 from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit import evaluate_views, fit
+from pytest_n2r.fit.detail import capture_detail
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.image_quality import psnr, ssim
 from pytest_n2r.render.field_render import FieldRenderer

@@ -32,7 +32,7 @@ from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basi
 from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
-from ..field.detail import capture_detail
+from .detail import capture_detail
 from .optim import RowAdam
 from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
 

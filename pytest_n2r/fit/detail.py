@@ -23,8 +23,8 @@ import numpy as np
 
 from ..data.capture import Capture
 from ..errors import InvalidArgument
+from ..field.space import SceneSpace
 from ..geometry import project
-from .space import SceneSpace
 
 __all__ = ["CaptureDetail", "capture_detail", "fit_memory_bytes", "memory_resolution"]
 

@@ -7,8 +7,8 @@ import pytest
 
 from pytest_n2r.data.capture import Capture, CapturedView
 from pytest_n2r.errors import InvalidArgument
-from pytest_n2r.field.detail import capture_detail, fit_memory_bytes, memory_resolution
 from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit.detail import capture_detail, fit_memory_bytes, memory_resolution
 from pytest_n2r.geometry import Camera
 
 CAMERA = Camera(200, 100, 100.0, 100.0, 99.5, 49.5)
