@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import math
 import sys
 import time
 from pathlib import Path
@@ -116,6 +117,9 @@ def _from_field(args: argparse.Namespace) -> int:
     if given:
         raise InvalidArgument(f"{', '.join(given)}: only for a .ply; a fitted scene file {args.ply} brings its own "
                               "views, split and background")
+    for option, value in (("--size", size), ("--path", path_voxels)):
+        if not (math.isfinite(value) and value > 0):
+            raise InvalidArgument(f"{option} {value}: expected a finite number > 0 (voxels)")
     if not args.ply.exists():
         raise InvalidArgument(f"SOURCE {args.ply}: does not exist")
     check_output(args.output, SCENE, inputs=[args.ply], force=args.force)
