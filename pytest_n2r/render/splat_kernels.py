@@ -232,12 +232,8 @@ def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start,
     chunks = min(max(n // _BIN_CHUNK, 1), _BIN_CHUNKS)
     slots = np.zeros((chunks, n_tiles), np.int64)
     for c in prange(chunks):
-        for j in range(start + n * c // chunks, start + n * (c + 1) // chunks):
-            tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
-            for ty in range(ty0, ty1):
-                for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
-                    if live[t] > 0:
-                        slots[c, t] += 1
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, order, tile, tiles_x, live,
+                   slots, c, tile_ids, False)
     pos = 0
     for t in range(n_tiles):
         tile_start[t] = pos
@@ -247,13 +243,22 @@ def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start,
             pos += count
     tile_start[n_tiles] = pos
     for c in prange(chunks):
-        for j in range(start + n * c // chunks, start + n * (c + 1) // chunks):
-            tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
-            for ty in range(ty0, ty1):
-                for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
-                    if live[t] > 0:
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, order, tile, tiles_x, live,
+                   slots, c, tile_ids, True)
+
+
+@njit(inline="always")
+def _bin_chunk(j0, j1, sorted_rects, order, tile, tiles_x, live, slots, c, tile_ids, fill):
+    """One chunk's pass of :func:`bin_tiles`: count its Gaussians per live tile into ``slots[c]``, or (``fill``)
+    write their indices at ``slots[c]`` and advance it."""
+    for j in range(j0, j1):
+        tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
+        for ty in range(ty0, ty1):
+            for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
+                if live[t] > 0:
+                    if fill:
                         tile_ids[slots[c, t]] = order[j]
-                        slots[c, t] += 1
+                    slots[c, t] += 1
 
 
 @njit(inline="always")
