@@ -84,7 +84,7 @@ def classifier(name: str) -> Callable[[np.ndarray], np.ndarray]:
         resized = cv2.resize(rgb, (max(224, round(w * s)), max(224, round(h * s))), interpolation=cv2.INTER_AREA)
         top, left = (resized.shape[0] - 224) // 2, (resized.shape[1] - 224) // 2
         x = (resized[top:top + 224, left:left + 224].astype(np.float32) / 255.0 - mean_a) / std_a
-        with torch.no_grad():
+        with torch.inference_mode():
             logits = net(torch.from_numpy(np.ascontiguousarray(x.transpose(2, 0, 1)))[None])
         return torch.softmax(logits, dim=1)[0].numpy().astype(np.float32)
 

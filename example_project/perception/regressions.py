@@ -1,7 +1,8 @@
 """Realistic ways a change to the shipped ORB could make it worse while still clearing every ``eps``.
 
-Not shipped code: the regression gate's own test (``tests/test_gate.py``) and its power measurement
-(``gate_power.py``) use them to show that the committed baseline catches each, and with how many examples.
+Not shipped code: pytest-n2r's test of the regression gate (its ``tests/example/test_regression_gate.py``)
+and the gate's power measurement (``gate_power.py``) use them to show that the committed baseline catches
+each, and with how many examples.
 Each wraps the shipped ``orb`` and returns keypoints as it does (``(N, 2)`` float32 ``(u, v)`` pixels).
 """
 
