@@ -20,8 +20,9 @@ Convention
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from enum import Enum
+from typing import ClassVar
 
 import numpy as np
 
@@ -181,12 +182,15 @@ class Transform:
     y: float = 0.0
     z: float = 0.0
 
+    #: The six components, in constructor order (a subclass may add fields that are not components).
+    COMPONENTS: ClassVar[tuple[str, ...]] = ("roll", "pitch", "yaw", "x", "y", "z")
+
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = check_real(f.name, getattr(self, f.name))
-            if f.name in ("roll", "pitch", "yaw"):
-                value = check_range(f.name, value, -360.0, 360.0)
-            object.__setattr__(self, f.name, value + 0.0)
+        for name in self.COMPONENTS:
+            value = check_real(name, getattr(self, name))
+            if name in ("roll", "pitch", "yaw"):
+                value = check_range(name, value, -360.0, 360.0)
+            object.__setattr__(self, name, value + 0.0)
 
     @classmethod
     def identity(cls) -> Transform:
@@ -194,7 +198,7 @@ class Transform:
 
     @property
     def is_identity(self) -> bool:
-        return all(getattr(self, f.name) == 0.0 for f in fields(self))
+        return all(getattr(self, name) == 0.0 for name in self.COMPONENTS)
 
     @property
     def rotation(self) -> np.ndarray:
@@ -238,7 +242,7 @@ class Transform:
         """
         if not isinstance(text, str):
             raise InvalidType(f"{name}={text!r} must be a string such as 'yaw=10,x=0.1'")
-        known = [f.name for f in fields(cls)]
+        known = list(cls.COMPONENTS)
         values: dict[str, float] = {}
         stripped = text.strip()
         if stripped in ("", "identity"):
@@ -274,10 +278,11 @@ class Transform:
         return Transform.from_matrix(invert_pose(self.matrix()))
 
     def as_dict(self) -> dict[str, float]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """The six components by name (degrees; translations in the caller's units)."""
+        return {name: getattr(self, name) for name in self.COMPONENTS}
 
     def __repr__(self) -> str:
-        parts = [f"{f.name}={getattr(self, f.name)!r}" for f in fields(self) if getattr(self, f.name) != 0.0]
+        parts = [f"{name}={getattr(self, name)!r}" for name in self.COMPONENTS if getattr(self, name) != 0.0]
         return f"Transform({', '.join(parts)})"
 
     def describe(self, units: str = "ref") -> str:

@@ -17,19 +17,20 @@ import numpy as np
 from hypothesis import assume, target
 
 from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
-from ..geometry import Camera, Units
+from ..geometry import Camera
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
 from ..scene.render_cache import RenderCache
-from ..strategies import transform_units
+from ..strategies.follow_up import FollowUp
+from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
-from .failure import MAX_UNDEFINED, RelationFailure, describe_transform, failure_message
+from .failure import MAX_UNDEFINED, RelationFailure, failure_message
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
-from .spec import Relation, mutation_like
+from .spec import Relation
 from .timeout import time_limit
 
 __all__ = ["Engine", "Evaluation", "recorded_view"]
@@ -78,7 +79,6 @@ class Engine:
         self.cache, self.run_record = cache, run_record
         self.metric = relation.metric
         self.size = relation.size or settings.size
-        self.units = transform_units(relation.transform)
         needs = tuple(getattr(self.metric, "needs", ()) or ())
         self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
@@ -147,38 +147,23 @@ class Engine:
 
     # -- one example ------------------------------------------------------------------------------------
 
-    def follow_up(self, tau: Any, units: Units) -> dict[str, Any]:
-        """The follow-up of a record: a pose transform's fields and units, or a mutation's parameters."""
-        if not mutation_like(tau):
-            return {"transform": tau.as_dict(), "units": units.value}
-        as_dict = getattr(tau, "as_dict", None)
-        return {"transform": None, "mutation": as_dict() if callable(as_dict) else {"description": tau.describe()}}
-
-    def evaluate(self, view: SceneView, tau: Any, camera: Any = None, units: Units | None = None) -> Evaluation:
+    def evaluate(self, view: SceneView, tau: FollowUp, camera: Any = None) -> Evaluation:
         """Render, check validity, run the SUT and the metric on one example; never raises on a verdict.
 
-        ``camera`` and ``units`` (a replayed example's recorded ones) override the run's render size and the
-        relation's translation units."""
+        ``camera`` (a replayed example's recorded one) overrides the run's render size."""
         camera = camera if camera is not None else self.camera_for(view)
-        units = units or self.units
-        mutation = mutation_like(tau)
-        describe = tau.describe() if mutation else describe_transform(tau, self.units)
-        where = f"scene {self.scene.name!r}, source view {view.name!r}, {describe}"
+        tau.check_scene(self.scene)  # e.g. units='metres' on a scene without scale: said before any render
+        where = f"scene {self.scene.name!r}, source view {view.name!r}, {tau.describe()}"
         record = ExampleRecord(
             scene=self.scene.name, scene_hash=self.scene.content_hash, view=view.name,
             source_c2w=np.asarray(view.c2w, dtype=np.float64).ravel().tolist(), camera=camera.to_dict(),
-            settings=self.render_settings, **self.follow_up(tau, units), score=math.nan, deviation=math.nan,
+            settings=self.render_settings, **tau.record_fields(), score=math.nan, deviation=math.nan,
             passed=False,
         )
         source = self.render(view.c2w, camera, view, self.outputs, "source")
-        if mutation:  # the follow-up is the mutated source render, same pose
-            apply_to_view = getattr(tau, "apply_to_view", None)
-            follow = apply_to_view(source) if callable(apply_to_view) else RenderedView(
-                camera=source.camera, c2w=source.c2w, rgb=tau.apply(source.rgb), depth=source.depth,
-                opacity=source.opacity)
-        else:
-            follow_c2w = tau.apply(view.c2w, self.scene.length_scale(units))
-            follow = self.render(follow_c2w, camera, view, self.follow_outputs, "follow-up")
+        follow = tau.follow_view(source, self.scene,
+                                 lambda c2w: self.render(c2w, camera, view, self.follow_outputs, "follow-up"))
+        if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
             verdict = self.relation.validity.check(follow, self.scene, source)
             if not verdict.valid:
                 record.status, record.reason = "rejected", verdict.reason
@@ -212,6 +197,7 @@ class Engine:
         __tracebackhide__ = True
         if self.gave_up:  # reject the rest of the draws without rendering them
             assume(False)
+        tau = as_follow_up(tau)
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
         if not self.shrinking:
@@ -232,7 +218,7 @@ class Engine:
             raise RelationFailure("inconsistent (shrinking)")
         self.fail(view, tau, evaluation)
 
-    def fail(self, view: SceneView, tau: Any, evaluation: Evaluation, note: str = "") -> None:
+    def fail(self, view: SceneView, tau: FollowUp, evaluation: Evaluation, note: str = "") -> None:
         """Save the failure pictures and raise the :class:`RelationFailure` of ``evaluation``."""
         __tracebackhide__ = True
         record, run = replace(evaluation.record), self.run_record
@@ -243,8 +229,8 @@ class Engine:
             except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
                 self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
         run.minimal = record
-        message = failure_message(self.scene, self.relation, run, self.units, view, tau, evaluation.result, record,
-                                  note=note, images_error=self.images_error)
+        message = failure_message(self.scene, self.relation, run, view, tau, evaluation.result, record, note=note,
+                                  images_error=self.images_error)
         raise RelationFailure(message, run)
 
     def replay(self, records: list[ExampleRecord]) -> list[ExampleRecord]:
@@ -252,7 +238,7 @@ class Engine:
         out = []
         for rec in records:
             view = recorded_view(rec, "replayed")
-            out.append(self.evaluate(view, rec.follow_up(), camera=view.camera, units=Units(rec.units)).record)
+            out.append(self.evaluate(view, rec.follow_up(), camera=view.camera).record)
         return out
 
 

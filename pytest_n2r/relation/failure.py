@@ -7,15 +7,14 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
 
-from ..geometry import Transform, Units
 from ..metrics.base import MetricResult
 from ..scene.base import Scene, SceneView
+from ..strategies.follow_up import FollowUp
 from .record import ExampleRecord, RelationRecord, plural
-from .spec import Relation, mutation_like
+from .spec import Relation
 
-__all__ = ["RelationFailure", "MAX_UNDEFINED", "describe_transform", "failure_message", "nothing_to_test",
+__all__ = ["RelationFailure", "MAX_UNDEFINED", "failure_message", "nothing_to_test",
            "too_many_invalid"]
 
 #: A relation fails as "the SUT produced nothing to test" when more than this share of the draws it could
@@ -32,13 +31,8 @@ class RelationFailure(AssertionError):
         self.record = record
 
 
-def describe_transform(tau: Transform, units: Units) -> str:
-    """``tau`` in words, its translations in ``units`` (``ref`` for reference lengths)."""
-    return tau.describe("ref" if units is Units.REFERENCE else units.value)
-
-
-def failure_message(scene: Scene, relation: Relation, run: RelationRecord, units: Units, view: SceneView,
-                    tau: Any, result: MetricResult, record: ExampleRecord, *, note: str = "",
+def failure_message(scene: Scene, relation: Relation, run: RelationRecord, view: SceneView,
+                    tau: FollowUp, result: MetricResult, record: ExampleRecord, *, note: str = "",
                     images_error: str | None = None) -> str:
     """The message of a failing example of ``run``: ``record`` (with the saved ``images`` if any) of source
     ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``."""
@@ -50,15 +44,7 @@ def failure_message(scene: Scene, relation: Relation, run: RelationRecord, units
         f"  scene:      {scene.name} (content {scene.content_hash[:12]})",
         f"  source:     view {view.name!r} ({view.split}), rendered at {camera['width']}x{camera['height']}",
     ]
-    if mutation_like(tau):
-        lines.append(f"  follow-up:  the source render mutated by {tau.describe()}")
-    else:
-        lines.append(f"  transform:  {describe_transform(tau, units)}  ({note or 'minimal after shrinking'})")
-        if any((tau.x, tau.y, tau.z)):
-            scale = scene.length_scale(units)
-            lines.append("              = " + ", ".join(
-                f"{n}={getattr(tau, n) * scale:+.4g}" for n in ("x", "y", "z") if getattr(tau, n)
-            ) + " scene units" + _metres(scene, tau, scale))
+    lines.extend(tau.explain(scene, note))
     details = ", ".join(f"{k}={v}" for k, v in result.details.items())
     lines.append(f"  metric:     score {result.score:.4g}, deviation {result.deviation:.4g} > eps "
                  f"{relation.eps:g}" + (f" ({details})" if details else ""))
@@ -74,14 +60,6 @@ def failure_message(scene: Scene, relation: Relation, run: RelationRecord, units
     elif images_error:
         lines.append(f"  images:     {images_error}")
     return "\n".join(lines)
-
-
-def _metres(scene: Scene, tau: Transform, scale: float) -> str:
-    mpu = getattr(scene, "metres_per_unit", None)
-    if not mpu:
-        return ""
-    parts = [f"{n}={getattr(tau, n) * scale * mpu:+.3g}" for n in ("x", "y", "z") if getattr(tau, n)]
-    return " = " + ", ".join(parts) + " m"
 
 
 def _shown_path(path: str | os.PathLike) -> str:

@@ -72,14 +72,15 @@ class ExampleRecord:
             self.transform is not None or (self.mutation is not None and "name" in self.mutation))
 
     def follow_up(self) -> Any:
-        """The follow-up as an object: a :class:`~pytest_n2r.geometry.Transform` or a mutation."""
+        """The follow-up as an object (:class:`~pytest_n2r.strategies.FollowUp`): a
+        :class:`~pytest_n2r.strategies.PoseChange` in the recorded ``units``, or a mutation."""
         if self.mutation is not None:
             from ..strategies.mutation import mutation_from_dict
 
             return mutation_from_dict(self.mutation)
-        from ..geometry import Transform
+        from ..strategies.pose_change import PoseChange
 
-        return Transform(**(self.transform or {}))
+        return PoseChange(**(self.transform or {}), units=self.units)
 
     @classmethod
     def from_dict(cls, data: dict) -> ExampleRecord:

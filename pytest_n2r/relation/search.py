@@ -24,16 +24,13 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, given
 from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
-from hypothesis import strategies as st
 from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
 from ..errors import InvalidArgument, InvalidType
 from ..scene.base import Scene, SceneView
 from ..scene.render_cache import RenderCache
-from ..scene.splits import scene_views
-from ..scene.trajectory import interpolate_view
-from ..strategies import transform_units
+from ..strategies.view_strategies import views as source_views
 from .determinism import NotDeterministic, SUTNotDeterministic
 from .engine import Engine, recorded_view
 from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
@@ -43,16 +40,6 @@ from .spec import Relation
 from .timeout import TimeLimitReached
 
 __all__ = ["check_relation", "replay_relation"]
-
-
-def _views_strategy(scene: Scene, relation: Relation) -> st.SearchStrategy[SceneView]:
-    """Source views by name (so Hypothesis reports ``view='IMG_0042'``, not a pose matrix)."""
-    if relation.interpolate and len(scene.views) >= 2:
-        trajectory = list(scene.views)
-        return st.builds(lambda i, k: interpolate_view(trajectory[i], trajectory[i + 1], k / 100),
-                         st.integers(0, len(trajectory) - 2), st.integers(0, 100))
-    names = [v.name for v in scene_views(scene, relation.views)]
-    return st.sampled_from(names).map(scene.view)
 
 
 def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
@@ -81,7 +68,6 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     if not isinstance(relation, Relation):
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
     settings = settings or RunSettings()
-    scene.length_scale(transform_units(relation.transform))  # units='metres' on a scene without scale: say so now
     cache = cache if cache is not None else RenderCache(None)
     record = _new_record(scene, relation, test_id)
     if on_start is not None:
@@ -158,7 +144,8 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     seed = None if settings.derandomize else random.getrandbits(64)  # both passes draw the same examples
 
     def search(db: Any) -> None:
-        test = given(view=_views_strategy(scene, relation), tau=relation.transform)(example)
+        test = given(view=source_views(scene, split=relation.views, interpolate=relation.interpolate),
+                     tau=relation.transform)(example)
         if seed is not None:
             test = hypothesis_seed(seed)(test)
         hsettings(**options, database=db)(test)()

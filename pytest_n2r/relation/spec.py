@@ -18,7 +18,7 @@ from ..scene.splits import SOURCE_SPLITS
 from ..strategies import PRESETS
 from .validity import Validity
 
-__all__ = ["Relation", "SEARCHES", "mutation_like"]
+__all__ = ["Relation", "SEARCHES"]
 
 SEARCHES = ("random", "targeted")
 
@@ -88,9 +88,3 @@ class Relation:
 
     def describe(self) -> str:
         return f"{self.metric!r} within eps={self.eps:g} under {self.transform!r}"
-
-
-def mutation_like(value: Any) -> bool:
-    """Whether a drawn follow-up is a mutation of the source render (not a pose :class:`Transform`)."""
-    return not isinstance(value, Transform) and callable(getattr(value, "apply", None)) \
-        and callable(getattr(value, "describe", None))

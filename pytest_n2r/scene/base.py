@@ -153,17 +153,23 @@ class Scene(ABC):
         tau: Transform,
         outputs: str | Iterable[str] = ("rgb",),
         camera: Camera | None = None,
-        units: Units | str = Units.REFERENCE,
+        units: Units | str | None = None,
     ) -> tuple[RenderedView, RenderedView]:
         """Render the source view and its follow-up under ``tau`` (applied in the source camera frame).
 
         ``camera`` overrides the view's own camera (e.g. a smaller render size); translations of ``tau``
-        are in ``units`` (default: reference lengths).
+        are in ``units``: by default the units ``tau`` carries (a drawn ``PoseChange``), else reference
+        lengths; ``units`` that contradict the ones ``tau`` carries are an error.
         """
         if not isinstance(view, SceneView):
             view = self.view(view)
         if not isinstance(tau, Transform):
             raise InvalidType(f"tau must be a pytest_n2r.Transform, got {type(tau).__name__}")
+        own = getattr(tau, "units", None)  # a PoseChange (pytest_n2r.strategies) carries its units
+        if units is not None and own is not None and Units(units) is not own:
+            raise InvalidArgument(f"units={Units(units).value!r} contradicts tau={tau!r}, whose translation is in "
+                                  f"{own.value!r} units; leave units out")
+        units = units if units is not None else own if own is not None else Units.REFERENCE
         camera = view.camera if camera is None else camera
         source = self.render(view.c2w, camera, outputs)
         follow = self.render(tau.apply(view.c2w, self.length_scale(units)), camera, outputs)

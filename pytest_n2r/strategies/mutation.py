@@ -22,7 +22,8 @@ Convention
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+from abc import abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -30,9 +31,11 @@ import numpy as np
 
 from .._validation import check_array, check_int, check_range
 from ..errors import InvalidArgument, InvalidType
+from .follow_up import FollowUp
 
 if TYPE_CHECKING:
     from ..render.view import RenderedView
+    from ..scene.base import Scene
 
 __all__ = [
     "MAX_SEED",
@@ -62,14 +65,34 @@ def _patch_pixels(size: float, extent: int) -> int:
     return 0 if size == 0 else min(extent, max(1, round(size * extent)))
 
 
-class Mutation(ABC):
-    """An immutable, seeded image mutation: ``apply(rgb) -> rgb`` on H×W×3 uint8 RGB images.
+#: Mutation classes by ``name``, for :func:`mutation_from_dict` (every subclass with a name registers).
+_KINDS: dict[str, type[Mutation]] = {}
 
-    ``repr`` rebuilds the constructor call; :meth:`describe` says what it does in words.
+
+class Mutation(FollowUp):
+    """An immutable, seeded image mutation: ``apply(rgb) -> rgb`` on H×W×3 uint8 RGB images; as a
+    follow-up, the source render mutated at the same pose.
+
+    ``repr`` rebuilds the constructor call; :meth:`describe` says what it does in words. A mutation of
+    your own is a frozen dataclass subclass (``@dataclass(frozen=True, repr=False)``) with a ``name``
+    (registered, so :func:`mutation_from_dict` rebuilds it from an example record while the class is
+    imported), ``_apply``, ``is_identity`` and ``describe``.
     """
 
-    #: Short name used in reports (``"brightness"``).
+    #: Short name used in reports and records (``"brightness"``).
     name: ClassVar[str]
+    moves_camera: ClassVar[bool] = False
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        name = cls.__dict__.get("name")
+        if name is None:
+            return
+        taken = _KINDS.get(name)
+        if taken is not None and taken.__module__ == __name__ and cls.__module__ != __name__:
+            raise InvalidArgument(f"{cls.__qualname__}.name={name!r} is the built-in {taken.__name__}'s; "
+                                  "give the mutation another name")
+        _KINDS[name] = cls
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         return self.apply(rgb)
@@ -88,6 +111,17 @@ class Mutation(ABC):
             raise InvalidType(f"view must be a RenderedView, got {type(view).__name__}")
         view.require("rgb")
         return replace(view, rgb=self.apply(view.rgb))
+
+    def follow_view(self, source: RenderedView, scene: Scene,
+                    render: Callable[[np.ndarray], RenderedView]) -> RenderedView:
+        """:meth:`apply_to_view` of ``source``: nothing is rendered."""
+        return self.apply_to_view(source)
+
+    def record_fields(self) -> dict[str, Any]:
+        return {"transform": None, "mutation": self.as_dict()}
+
+    def explain(self, scene: Scene, note: str) -> list[str]:
+        return [f"  follow-up:  the source render mutated by {self.describe()}"]
 
     @abstractmethod
     def _apply(self, rgb: np.ndarray) -> np.ndarray:
@@ -208,15 +242,15 @@ class BlackPatches(Mutation):
 
 
 def mutation_from_dict(data: dict[str, Any]) -> Mutation:
-    """The mutation of :meth:`Mutation.as_dict` (``{"name": "brightness", "levels": 30}``), validated.
+    """The mutation of :meth:`Mutation.as_dict` (``{"name": "brightness", "levels": 30}``), validated; the
+    name is a built-in one or that of an imported :class:`Mutation` subclass.
 
     >>> mutation_from_dict({"name": "brightness", "levels": 30})
     Brightness(levels=30)
     """
-    kinds = {cls.name: cls for cls in (Brightness, NoisePatch, BlackPatches)}
-    if not isinstance(data, dict) or data.get("name") not in kinds:
-        raise InvalidArgument(f"mutation={data!r}: expected a dict with 'name' one of {sorted(kinds)}")
-    cls = kinds[data["name"]]
+    if not isinstance(data, dict) or data.get("name") not in _KINDS:
+        raise InvalidArgument(f"mutation={data!r}: expected a dict with 'name' one of {sorted(_KINDS)}")
+    cls = _KINDS[data["name"]]
     params = {k: v for k, v in data.items() if k != "name"}
     unknown = sorted(set(params) - {f.name for f in fields(cls)})
     if unknown:

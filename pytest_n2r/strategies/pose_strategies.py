@@ -1,31 +1,99 @@
-"""Hypothesis strategies of pose transforms τ (camera motions in the source camera's frame).
+"""Families of pose changes and the Hypothesis strategy that draws them (``transforms``).
 
 Convention
 ----------
-- Transforms are :class:`~pytest_n2r.geometry.Transform` values applied in the **source camera's frame**
-  (``c2w_tau = c2w @ T(tau)``, design.md §2): angles in **degrees**, translations in ``units``
-  (reference lengths by default, so one bound means the same on every scene).
-- Every strategy shrinks toward the identity (no motion) on a decimal grid (:mod:`.grid`): a failing
-  example is reported as the smallest motion that still breaks the system under test.
+- A drawn value is a :class:`~pytest_n2r.strategies.pose_change.PoseChange`: a
+  :class:`~pytest_n2r.geometry.Transform` applied in the **source camera's frame** (``c2w_tau = c2w @
+  T(tau)``, design.md §2), angles in **degrees**, carrying the ``units`` of its translation (reference
+  lengths by default, so one bound means the same on every scene).
+- A :class:`PoseChangeFamily` (bounds, units, look-at) is the one place pose changes are drawn from:
+  :meth:`~PoseChangeFamily.strategy` for Hypothesis (shrinking toward the identity on a decimal grid,
+  :mod:`.grid`: a failing example is the smallest motion that still breaks the system under test) and
+  :meth:`~PoseChangeFamily.sample` for uniform draws from a seeded generator (``n2r study``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 from hypothesis import strategies as st
 
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform, Units
 from ..geometry.look_at import look_at_transform
 from .grid import AXES, Bound, check_bound, draw_axis
+from .pose_change import PoseChange
 
-__all__ = ["transforms", "transform_units"]
+__all__ = ["PoseChangeFamily", "transforms"]
 
 
-def _transforms_impl(draw: Any, *, look_at: bool = False, units: str = "reference", **bounds: Bound) -> Transform:
+@dataclass(frozen=True)
+class PoseChangeFamily:
+    """Pose changes with each component in its bound (``bounds``: component -> ``(lo, hi)``; a component
+    that is not there is 0), translations in ``units``; with ``look_at`` the camera also turns toward the
+    point one reference length ahead (:func:`~pytest_n2r.geometry.look_at.look_at_transform`), the
+    ``pitch`` and ``yaw`` bounds then being extra rotation on top. Build one with :meth:`of`.
+    """
+
+    bounds: Mapping[str, Bound] = field(default_factory=dict)
+    units: Units = Units.REFERENCE
+    look_at: bool = False
+
+    @classmethod
+    def of(cls, roll: float | Bound = 0.0, pitch: float | Bound = 0.0, yaw: float | Bound = 0.0,
+           x: float | Bound = 0.0, y: float | Bound = 0.0, z: float | Bound = 0.0,
+           *, units: Units | str = Units.REFERENCE, look_at: bool = False) -> PoseChangeFamily:
+        """The family of :func:`transforms` with these arguments, validated (errors name the argument)."""
+        bounds = {}
+        for name, value in zip(AXES, (roll, pitch, yaw, x, y, z)):
+            lo, hi = check_bound(name, value)
+            if (lo, hi) != (0.0, 0.0):
+                bounds[name] = (lo, hi)
+        try:
+            units = Units(units)
+        except ValueError:
+            raise InvalidArgument(
+                f"units={units!r} is not a unit; expected one of {[u.value for u in Units]}") from None
+        if not isinstance(look_at, bool):
+            raise InvalidType(f"look_at={look_at!r} must be True or False")
+        if look_at and units is not Units.REFERENCE:
+            raise InvalidArgument(
+                f"look_at=True needs units='reference' (the look-at point is one reference length ahead); "
+                f"got units={units.value!r}"
+            )
+        if look_at and "z" in bounds and bounds["z"][1] >= 0.9:
+            raise InvalidArgument(
+                f"z={bounds['z']!r} with look_at=True moves the camera up to the look-at point one reference "
+                "length ahead; keep z below 0.9"
+            )
+        return cls(bounds, units, look_at)
+
+    def build(self, values: Mapping[str, float]) -> PoseChange:
+        """The pose change with these component ``values`` (missing ones 0), look-at compensated if asked."""
+        transform = look_at_transform(**values) if self.look_at else Transform(**values)
+        return PoseChange.of(transform, self.units)
+
+    def strategy(self) -> st.SearchStrategy[PoseChange]:
+        """Hypothesis draws of this family; the ``repr`` is the :func:`transforms` call."""
+        extra: dict[str, Any] = {}
+        if self.look_at:
+            extra["look_at"] = True
+        if self.units is not Units.REFERENCE:
+            extra["units"] = self.units.value
+        return _transforms(**self.bounds, **extra)
+
+    def sample(self, rng: np.random.Generator) -> PoseChange:
+        """A pose change drawn uniformly within the bounds from ``rng`` (one ``uniform`` draw per bounded
+        component, in alphabetical order of the component names)."""
+        return self.build({axis: float(rng.uniform(lo, hi)) for axis, (lo, hi) in sorted(self.bounds.items())})
+
+
+def _transforms_impl(draw: Any, *, look_at: bool = False, units: str = "reference", **bounds: Bound) -> PoseChange:
     values = {a: draw_axis(draw, *bounds[a]) if a in bounds else 0.0 for a in AXES}
-    return look_at_transform(**values) if look_at else Transform(**values)
+    return PoseChangeFamily(bounds, Units(units), look_at).build(values)
 
 
 _transforms_impl.__name__ = _transforms_impl.__qualname__ = "transforms"  # so the repr reads transforms(...)
@@ -36,13 +104,16 @@ def transforms(
     roll: float | Bound = 0.0, pitch: float | Bound = 0.0, yaw: float | Bound = 0.0,
     x: float | Bound = 0.0, y: float | Bound = 0.0, z: float | Bound = 0.0,
     *, units: Units | str = Units.REFERENCE, look_at: bool = False,
-) -> st.SearchStrategy[Transform]:
-    """Pose transforms τ with each component within its bound; shrinks toward the identity.
+) -> st.SearchStrategy[PoseChange]:
+    """Pose changes τ with each component within its bound; shrinks toward the identity.
 
     Each bound is a number ``b`` (meaning ``-|b|..|b|``) or a pair ``(lo, hi)``. Angles are **degrees**
     (yaw about the camera's y axis, pitch about x, roll about the optical axis; +yaw turns right, +pitch
     tilts up), translations ``x, y, z`` are in ``units``: ``"reference"`` (fractions of the scene's
     reference length, the default), ``"scene"`` or ``"metres"``. +x moves right, +y **down**, +z forward.
+    Each drawn :class:`~pytest_n2r.strategies.pose_change.PoseChange` (a ``Transform``) carries its
+    ``units``, so they survive ``.map``, ``.filter`` and ``st.one_of`` (a ``.map`` that builds a new plain
+    ``Transform`` means reference lengths).
 
     ``look_at=True`` adds the yaw and pitch that keep the scene point one reference length ahead on the
     optical axis at the image centre (the paper's design: moving the camera up tilts it down); the
@@ -56,39 +127,4 @@ def transforms(
     >>> transforms(yaw=10, x=(-0.1, 0.2))
     transforms(x=(-0.1, 0.2), yaw=(-10.0, 10.0))
     """
-    bounds = {}
-    for name, value in zip(AXES, (roll, pitch, yaw, x, y, z)):
-        lo, hi = check_bound(name, value)
-        if (lo, hi) != (0.0, 0.0):
-            bounds[name] = (lo, hi)
-    try:
-        units = Units(units)
-    except ValueError:
-        raise InvalidArgument(f"units={units!r} is not a unit; expected one of {[u.value for u in Units]}") from None
-    if not isinstance(look_at, bool):
-        raise InvalidType(f"look_at={look_at!r} must be True or False")
-    if look_at and units is not Units.REFERENCE:
-        raise InvalidArgument(
-            f"look_at=True needs units='reference' (the look-at point is one reference length ahead); "
-            f"got units={units.value!r}"
-        )
-    if look_at and "z" in bounds and bounds["z"][1] >= 0.9:
-        raise InvalidArgument(
-            f"z={bounds['z']!r} with look_at=True moves the camera up to the look-at point one reference "
-            "length ahead; keep z below 0.9"
-        )
-    extra: dict[str, Any] = {}
-    if look_at:
-        extra["look_at"] = True
-    if units is not Units.REFERENCE:
-        extra["units"] = units.value
-    strategy = _transforms(**bounds, **extra)
-    strategy.n2r_units = units  # read by the relation engine through transform_units()
-    strategy.n2r_bounds = dict(bounds)
-    strategy.n2r_look_at = look_at
-    return strategy
-
-
-def transform_units(strategy: Any) -> Units:
-    """The translation units of a :func:`transforms` strategy (reference lengths for anything else)."""
-    return getattr(strategy, "n2r_units", Units.REFERENCE)
+    return PoseChangeFamily.of(roll, pitch, yaw, x, y, z, units=units, look_at=look_at).strategy()

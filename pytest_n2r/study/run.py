@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -142,7 +143,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                 for _ in range(config.examples):
                     if family.startswith("tau"):
                         tau = sample_transform(family, rng)
-                        follow = scene.render(tau.apply(view.c2w, scene.length_scale()), camera, outputs)
+                        follow = tau.follow_view(source, scene, partial(scene.render, camera=camera, outputs=outputs))
                         valid = validity.check(follow, scene, source).valid
                         drawn = tau.describe()
                     else:

@@ -2,8 +2,9 @@
 
 The study characterizes SUTs, so it samples each family **uniformly** within its bounds from a seeded
 ``numpy.random.Generator`` (Hypothesis's draws, made to find and shrink failures, favour boundaries).
-The τ families are the presets of :mod:`pytest_n2r.strategies.presets` (same bounds, same look-at
-compensation: :func:`pytest_n2r.geometry.look_at.look_at_transform`).
+The τ families are the presets of :mod:`pytest_n2r.strategies.presets`, drawn by the same
+:class:`~pytest_n2r.strategies.pose_strategies.PoseChangeFamily` as the plugin's strategies (same bounds,
+same look-at compensation), uniformly.
 
 Mutation families (the paper gives no parameters; these are ours, stated here):
 
@@ -16,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import Transform
-from ..geometry.look_at import look_at_transform
 from ..strategies.mutation import BlackPatches, Brightness, Mutation, NoisePatch
+from ..strategies.pose_change import PoseChange
+from ..strategies.presets import PRESET_FAMILIES
 
 __all__ = ["TRANSFORM_FAMILIES", "MUTATION_FAMILIES", "sample_transform", "sample_mutation"]
 
@@ -26,13 +27,9 @@ TRANSFORM_FAMILIES = ("tau1", "tau2", "tau3", "tau4", "tau5", "tau6")
 MUTATION_FAMILIES = ("m1", "m2", "m3")
 
 
-def sample_transform(family: str, rng: np.random.Generator) -> Transform:
-    """A transform drawn uniformly within the bounds of preset ``family`` (``"tau1"`` … ``"tau6"``)."""
-    from ..strategies.presets import PRESETS
-
-    strategy = PRESETS[family]
-    values = {axis: float(rng.uniform(lo, hi)) for axis, (lo, hi) in sorted(strategy.n2r_bounds.items())}
-    return look_at_transform(**values) if strategy.n2r_look_at else Transform(**values)
+def sample_transform(family: str, rng: np.random.Generator) -> PoseChange:
+    """A pose change drawn uniformly within the bounds of preset ``family`` (``"tau1"`` … ``"tau6"``)."""
+    return PRESET_FAMILIES[family].sample(rng)
 
 
 def sample_mutation(family: str, rng: np.random.Generator) -> Mutation:

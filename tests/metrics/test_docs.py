@@ -15,6 +15,8 @@ def test_page_examples_run(page, capsys):
     assert blocks, f"docs/{page} has no python examples"
     for i, code in enumerate(blocks):
         try:
-            exec(compile(code, f"docs/{page}[block {i}]", "exec"), {"__name__": f"docs_{i}"})  # noqa: S102
+            # dont_inherit: a block runs as a file of its own would (without this module's __future__ imports)
+            exec(compile(code, f"docs/{page}[block {i}]", "exec", dont_inherit=True),  # noqa: S102
+                 {"__name__": f"docs_{i}"})
         except Exception as exc:  # noqa: BLE001 - a docs example may raise anything  # pragma: no cover
             pytest.fail(f"docs/{page} python block {i} failed: {exc!r}\n{code}")

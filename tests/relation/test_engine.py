@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 import cv2
 import numpy as np
 import pytest
 from hypothesis import strategies as st
 
-from pytest_n2r import InvalidArgument
+from pytest_n2r import InvalidArgument, InvalidType
 from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, Validity, check_relation
 from pytest_n2r.relation.artifacts import artifact_dir
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.render_cache import RenderCache
-from pytest_n2r.strategies import transforms
+from pytest_n2r.strategies import Mutation, transforms
 from tests.plugin.fakemetrics import AbsDifference, SameLabel
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
 
@@ -122,19 +125,63 @@ def test_interpolated_sources_and_all_views():
     assert any("~" in e.view for e in record.examples), [e.view for e in record.examples]
 
 
+@dataclass(frozen=True, repr=False)
+class _Invert(Mutation):
+    """A mutation of a user's own: every pixel inverted."""
+
+    name: ClassVar[str] = "invert"
+
+    @property
+    def is_identity(self) -> bool:
+        return False
+
+    def _apply(self, rgb):
+        return 255 - rgb
+
+    def describe(self):
+        return "invert()"
+
+
 def test_mutations_use_the_source_pose():
-    class Invert:
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 300, st.just(_Invert()), examples=3)
+    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    assert record.examples[0].mutation == {"name": "invert"} and record.rejected == 0
+    assert record.examples[0].transform is None
+
+
+def test_a_drawn_value_that_is_no_follow_up_is_named():
+    class Invert:  # an image change that does not implement the follow-up protocol
         def apply(self, rgb):
             return 255 - rgb
 
         def describe(self):
             return "invert()"
 
-    scene = PlaneScene()
     relation = Relation.build(AbsDifference(), 300, st.just(Invert()), examples=3)
-    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
-    assert record.examples[0].mutation == {"description": "invert()"} and record.rejected == 0
-    assert record.examples[0].transform is None
+    with pytest.raises(InvalidType, match=r"drew .*Invert object.* \(Invert\); expected a pose change"):
+        check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation, settings=FAST)
+
+
+def test_translation_units_survive_map_filter_and_one_of(monkeypatch):
+    """The units ride on each drawn pose change, so combinators cannot drop them: x=0.5 scene units moves
+    the camera 0.5, not 0.5 reference lengths (1.0 on this scene)."""
+    scene = PlaneScene()
+    poses = []
+    original = scene._render
+    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: poses.append(c2w) or original(c2w, cam, outputs))
+    scene_units = transforms(x=(0.5, 0.5), units="scene")
+    for strategy in (scene_units.map(lambda t: t), scene_units.filter(lambda t: t.x > 0),
+                     st.one_of(scene_units, scene_units.map(lambda t: t))):
+        poses.clear()
+        relation = Relation.build(AbsDifference(), 255, strategy, examples=2,
+                                  validity=Validity(min_coverage=0, max_empty_increase=1))
+        record = check_relation(scene, lambda rgb: 0.0, relation, settings=FAST)
+        assert {e.units for e in record.examples} == {"scene"}, strategy
+        centres = [v.c2w[:3, 3] for v in scene.views]
+        follows = [c2w[:3, 3] for c2w in poses if not any(np.allclose(c2w, v.c2w) for v in scene.views)]
+        moves = {round(min(float(np.linalg.norm(f - c)) for c in centres), 9) for f in follows}
+        assert moves == {0.5}, f"{strategy!r} moved the camera by {moves} scene units"
 
 
 def test_metres_on_a_scene_without_scale_is_refused_before_any_render():

@@ -48,7 +48,6 @@ def test_repr_rebuilds_the_call():
     strategy = n2r.transforms(yaw=10, x=(-0.1, 0.2), look_at=True)
     assert repr(strategy) == "transforms(look_at=True, x=(-0.1, 0.2), yaw=(-10.0, 10.0))"
     assert repr(n2r.transforms(x=0.5, units="scene")) == "transforms(units='scene', x=(-0.5, 0.5))"
-    assert n2r.transform_units(n2r.transforms(x=0.5, units="scene")) is Units.SCENE
 
 
 def test_unconstrained_search_shrinks_to_the_identity():
@@ -100,7 +99,8 @@ def test_look_at_tilts_down_when_the_camera_moves_up():
 def test_presets_are_look_at_transforms_in_reference_units(name):
     strategy = n2r.PRESETS[name]
     assert "look_at=True" in repr(strategy)
-    assert n2r.transform_units(strategy) is Units.REFERENCE
+    assert n2r.PRESET_FAMILIES[name].units is Units.REFERENCE and n2r.PRESET_FAMILIES[name].look_at
+    assert find(strategy, lambda t: True).units is Units.REFERENCE
 
 
 def test_draws_spread_over_the_whole_bound():

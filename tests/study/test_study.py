@@ -12,7 +12,7 @@ import pytest
 from pytest_n2r.cli.main import main
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
-from pytest_n2r.strategies import PRESETS
+from pytest_n2r.strategies import PRESET_FAMILIES
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study, write_study
 from pytest_n2r.study.sampling import sample_mutation, sample_transform
 
@@ -57,10 +57,10 @@ def test_outputs_are_written(study, tmp_path):
 
 
 def test_draws_are_reproducible_and_within_bounds():
-    for family, strategy in PRESETS.items():
+    for family, pose_changes in PRESET_FAMILIES.items():
         a = sample_transform(family, np.random.default_rng(3))
         assert a == sample_transform(family, np.random.default_rng(3))
-        assert abs(a.roll) <= strategy.n2r_bounds.get("roll", (0, 0))[1] + 1e-12
+        assert abs(a.roll) <= pose_changes.bounds.get("roll", (0, 0))[1] + 1e-12
     assert sample_mutation("m2", np.random.default_rng(1)) == sample_mutation("m2", np.random.default_rng(1))
     with pytest.raises(KeyError, match="unknown mutation family"):
         sample_mutation("m9", np.random.default_rng(0))

@@ -30,8 +30,6 @@ def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: 
     measured (the SUT raises on a photo, ...) is reported with the reason, never raised."""
     if getattr(scene, "is_exact", False):
         return None
-    from ...strategies import transform_units
-
     directory = None if cache_dir is None else Path(cache_dir) / "floors"
     store = _STORES.setdefault(directory, FloorStore(directory))
     eps = float(relation.eps)
@@ -42,10 +40,8 @@ def annotate_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: 
                            reason=f"measuring it failed: {type(exc).__name__}: {exc}")
     out: dict[str, Any] = {"floor": floor.to_dict(), "line": floor.describe(eps), "below_floor": floor.above(eps)}
     try:
-        length = scene.length_scale(transform_units(relation.transform))
         comparison = compare_exact(scene, sut, relation.metric, records,
-                                   lambda v: v.camera if size is None else size.apply(v.camera), length,
-                                   cache=cache)
+                                   lambda v: v.camera if size is None else size.apply(v.camera), cache=cache)
     except Exception as exc:  # noqa: BLE001 -- as above
         out["exact_line"] = f"exact vs fitted: replay failed: {type(exc).__name__}: {exc}"
     else:

@@ -64,13 +64,11 @@ class ExactComparison:
 
 
 def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, records: list[ExampleRecord],
-                  camera_of: Callable[[SceneView], Camera], length_scale: float, *,
+                  camera_of: Callable[[SceneView], Camera], *,
                   cache: RenderCache | None = None, limit: int = EXACT_REPLAY_EXAMPLES) -> ExactComparison | None:
     """Replay the first ``limit`` accepted ``records`` of a relation on ``scene`` (source view by name, pose
-    transform, deviation) on the scene's exact twin; ``None`` when ``scene`` has none. ``length_scale`` converts the
-    transforms' translations to scene units, ``camera_of`` gives the render camera of a source view."""
-    from ...geometry import Transform
-
+    change in its recorded units, deviation) on the scene's exact twin; ``None`` when ``scene`` has none.
+    ``camera_of`` gives the render camera of a source view."""
     twin = exact_twin(scene)
     if twin is None:
         return None
@@ -90,7 +88,8 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             rendered = render_cache.render(twin, view.c2w, camera_of(view), outputs)
             sources[view.name] = (rendered, sut(rendered.rgb))
         source, out_source = sources[view.name]
-        follow_c2w = Transform(**transform).apply(view.c2w, length_scale)
+        tau = record.follow_up()
+        follow_c2w = tau.apply(view.c2w, scene.length_scale(tau.units))
         follow = render_cache.render(twin, follow_c2w, camera_of(view), outputs)
         sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name)
         if sample.valid:
