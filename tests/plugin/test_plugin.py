@@ -359,18 +359,23 @@ def test_p_no_n2r_disables_the_plugin(n2r_project):
 
 def test_a_mutation_strategy_as_transform(n2r_project):
     n2r_project.write("""
+from dataclasses import dataclass
+from typing import ClassVar
+
 from hypothesis import strategies as st
+from pytest_n2r.strategies import Mutation
 
 
-class Darken:
-    def __init__(self, amount):
-        self.amount = amount
+@dataclass(frozen=True, repr=False)
+class Darken(Mutation):
+    amount: float = 0.0
+    name: ClassVar[str] = "darken"
 
     @property
     def is_identity(self):
         return self.amount == 0
 
-    def apply(self, rgb):
+    def _apply(self, rgb):
         return (rgb * (1 - self.amount)).astype(np.uint8)
 
     def describe(self):

@@ -82,7 +82,7 @@ def test_mean_colour(n2r_scene):
 """)
     result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(lone), "--n2r-size", "64")
     result.assert_outcomes(failed=1)
-    result.stdout.fnmatch_lines([("*splat scene 'lone' has no reference length: no cameras were given and none were "
+    result.stdout.fnmatch_lines([("*scene 'lone' has no views to use as sources: no cameras were given and none were "
                                   "found beside*")])
 
 
