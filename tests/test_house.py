@@ -31,3 +31,41 @@ def test_ruff_check_is_clean():
         f"`ruff check .` ({version}; pyproject.toml pins the version in the dev extra) found problems:\n"
         f"{result.stdout}{result.stderr}"
     )
+
+
+# -- modest rooms ------------------------------------------------------------------------------------------
+
+#: The most lines a module of pytest_n2r may have: one concept per module keeps every room small enough to
+#: read in one sitting.
+LINE_BUDGET = 400
+#: Modules over the budget: path -> (the most lines it may have, why it is not split). The cap keeps them from
+#: growing unnoticed; a module that shrinks under the budget must leave this table.
+OVER_BUDGET: dict[str, tuple[int, str]] = {
+    "pytest_n2r/demo/raycast.py": (
+        900, ("the compiled ray caster of the exact demo scenes: the scene compiler and the numba kernel with its "
+              "inlined helpers, still being tuned (issue 16); to be split into the compile step and the kernel")),
+}
+
+
+def _module_lines() -> dict[str, int]:
+    return {path.relative_to(REPO_ROOT).as_posix(): len(path.read_text(encoding="utf-8").splitlines())
+            for path in sorted((REPO_ROOT / "pytest_n2r").rglob("*.py"))}
+
+
+def test_no_module_exceeds_the_line_budget():
+    sizes = _module_lines()
+    over = {path: n for path, n in sizes.items() if n > OVER_BUDGET.get(path, (LINE_BUDGET, ""))[0]}
+    assert not over, (f"modules over the budget of {LINE_BUDGET} lines (or over their cap in OVER_BUDGET): {over}; "
+                      "split them one concept per module (docs/architecture.md)")
+    back = sorted(path for path in OVER_BUDGET if sizes.get(path, 0) <= LINE_BUDGET)
+    assert not back, f"{back} are within the budget now (or gone): remove them from OVER_BUDGET"
+
+
+# -- the architecture page ---------------------------------------------------------------------------------
+
+
+def test_the_architecture_page_is_in_the_nav_and_linked_from_the_front_pages():
+    assert ": architecture.md" in (REPO_ROOT / "mkdocs.yml").read_text(encoding="utf-8"), \
+        "docs/architecture.md is not in the mkdocs nav"
+    for page, link in (("docs/index.md", "(architecture.md)"), ("README.md", "(docs/architecture.md)")):
+        assert link in (REPO_ROOT / page).read_text(encoding="utf-8"), f"{page} does not link to the architecture page"

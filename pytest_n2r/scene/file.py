@@ -10,7 +10,6 @@ names and shapes and the images, raising :class:`~pytest_n2r.errors.SceneFileErr
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import math
 import os
@@ -29,13 +28,10 @@ from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
 from ..field.grid import SceneField
 from . import schema
+from .archive import read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
-
-#: Every member's timestamp (the earliest a zip can hold), so the bytes do not depend on when they were written.
-_ZIP_TIME = (1980, 1, 1, 0, 0, 0)
-
 
 @dataclass(frozen=True, eq=False)
 class SceneFile:
@@ -152,21 +148,7 @@ def save_scene(
     for view, member in zip(views, members):
         if member is not None:
             entries.append((member, _encode_jpeg(view.image, image_quality, view.name), zipfile.ZIP_STORED, None))
-    return atomic_write_bytes(path, _zip_bytes(entries))
-
-
-def _zip_bytes(entries: list[tuple[str, bytes, int, int | None]]) -> bytes:
-    """A zip archive of ``(name, data, compression, level)`` in the given order, with fixed timestamps and
-    modes."""
-    buffer = io.BytesIO()
-    with zipfile.ZipFile(buffer, "w") as archive:
-        for name, payload, compression, level in entries:
-            info = zipfile.ZipInfo(name, date_time=_ZIP_TIME)
-            info.compress_type = compression
-            info.create_system = 3  # Unix, whatever the platform, so the bytes match everywhere
-            info.external_attr = 0o644 << 16
-            archive.writestr(info, payload, compresslevel=level)
-    return buffer.getvalue()
+    return atomic_write_bytes(path, zip_bytes(entries))
 
 
 def _encode_jpeg(image: np.ndarray, quality: int, name: str) -> bytes:
@@ -182,8 +164,6 @@ def _encode_jpeg(image: np.ndarray, quality: int, name: str) -> bytes:
     return encoded.tobytes()
 
 
-#: The most bytes ``scene.json`` may inflate to (a scene of 10 000 frames takes about 4 MiB).
-MAX_JSON_BYTES = 64 * 2**20
 #: The most bytes a safetensors header may take (three tensors take under 300 bytes).
 _MAX_TENSOR_HEADER_BYTES = 2**20
 
@@ -217,26 +197,6 @@ def _decode_jpeg(payload: bytes, member: str, name: str, source: str, width: int
         raise SceneFileError(f"{source}: {member} is {image.shape[1]}x{image.shape[0]} pixels; frame {name!r} has "
                              f"a {width}x{height} camera")
     return np.ascontiguousarray(image[:, :, ::-1])  # BGR → RGB
-
-
-def _member(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: str) -> bytes:
-    """The bytes of member ``name``, or a :class:`SceneFileError` saying it is missing, corrupt or inflates
-    to more than ``limit`` bytes (``why``: what the limit follows from), checked before inflating it."""
-    try:
-        info = archive.getinfo(name)
-    except KeyError:
-        raise SceneFileError(f"{source}: the archive has no {name!r}") from None
-    if info.file_size > limit:
-        raise SceneFileError(f"{source}: {name!r} inflates to {info.file_size:,} bytes, more than the {limit:,} "
-                             f"bytes {why} allows; the file is corrupt or was not written by pytest-n2r")
-    try:
-        with archive.open(info) as fh:
-            data = fh.read(limit + 1)
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
-        raise SceneFileError(f"{source}: {name!r} is corrupt or truncated ({exc})") from None
-    if len(data) > limit:  # pragma: no cover - zipfile stops at the declared size
-        raise SceneFileError(f"{source}: {name!r} inflates past its declared size")
-    return data
 
 
 def _field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
@@ -358,18 +318,6 @@ def _open(path: Path) -> zipfile.ZipFile:
                              "archive `n2r fit` writes") from None
 
 
-def _not_strict_json(token: str) -> Any:
-    raise ValueError(f"{token} is not a number in strict JSON; scene files store null for it")
-
-
-def _read_json(archive: zipfile.ZipFile, source: str) -> Any:
-    try:
-        return json.loads(_member(archive, schema.SCENE_JSON, source, MAX_JSON_BYTES,
-                                  f"the cap on {schema.SCENE_JSON}"), parse_constant=_not_strict_json)
-    except (ValueError, RecursionError) as exc:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not valid JSON ({exc})") from None
-
-
 def check_scene_file(path: str | os.PathLike) -> None:
     """The checks of :func:`read_scene_file` that need no inflating of the field or the photos (its
     ``scene.json`` and the field's declared tensors), in a fraction of the time; raises
@@ -379,7 +327,7 @@ def check_scene_file(path: str | os.PathLike) -> None:
     if path.suffix.lower() == ".ply":  # a 3DGS splat scene: its reader checks it
         return
     with _open(path) as archive:
-        data = _read_json(archive, str(path))
+        data = read_scene_json(archive, str(path))
         if isinstance(data, dict) and data.get("representation") == "splats":  # `n2r import`: its reader checks it
             return
         field_meta = _check_json(data, str(path))[-1]
@@ -401,9 +349,9 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
     archive = _open(path)
     size = path.stat().st_size
     with archive:
-        data = _read_json(archive, source)
+        data = read_scene_json(archive, source)
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
-        payload = _member(archive, schema.FIELD_FILE, source, _field_limit(archive, field_meta, source),
+        payload = read_member(archive, schema.FIELD_FILE, source, _field_limit(archive, field_meta, source),
                           "its safetensors header")
         try:
             tensors = safetensors.torch.load(payload)
@@ -421,7 +369,7 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
             image = None
             if images and member is not None:
                 limit = 6 * camera.width * camera.height + 2**20  # a JPEG is smaller than twice its pixels
-                payload_jpeg = _member(archive, member, source, limit,
+                payload_jpeg = read_member(archive, member, source, limit,
                                        f"a {camera.width}x{camera.height} photo")
                 image = _decode_jpeg(payload_jpeg, member, name, source, camera.width, camera.height)
             views.append(SceneView(index, name, camera, c2w, split, image))

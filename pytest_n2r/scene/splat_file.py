@@ -24,8 +24,8 @@ from ..errors import InvalidArgument, SceneFileError
 from ..render.splat_render import SplatSettings
 from ..splats.gaussians import TENSORS, Gaussians
 from . import schema
+from .archive import read_member, read_scene_json, zip_bytes
 from .base import SceneView
-from .file import _member, _read_json, _zip_bytes
 from .splat_scene import SplatScene
 
 __all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene",
@@ -41,7 +41,7 @@ _KEYS = ("format", "version", "representation", "cameras", "frames", "bounds", "
 
 def is_splat_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a zip whose ``scene.json`` says ``"representation": "splats"``."""
-    from .file import MAX_JSON_BYTES
+    from .archive import MAX_JSON_BYTES
 
     try:
         with zipfile.ZipFile(path) as archive:
@@ -83,7 +83,7 @@ def save_splat_scene(path: str | os.PathLike, scene: SplatScene, report: dict | 
     payload = safetensors.numpy.save(scene.gaussians.tensors())
     entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
                (SPLATS_FILE, payload, zipfile.ZIP_DEFLATED, 1)]
-    return atomic_write_bytes(path, _zip_bytes(entries))
+    return atomic_write_bytes(path, zip_bytes(entries))
 
 
 def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None = None,
@@ -105,7 +105,7 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
     except (zipfile.BadZipFile, OSError) as exc:
         raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc})") from None
     with archive:
-        data = _read_json(archive, source)
+        data = read_scene_json(archive, source)
         if not isinstance(data, dict) or data.get("format") != schema.FORMAT_NAME:
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} is not a pytest-n2r scene header")
         if data.get("version") != schema.FORMAT_VERSION:
@@ -127,7 +127,7 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats count={count!r}, sh_degree={degree!r}; "
                                  "expected a count >= 0 and a degree in 0..3")
         values = 11 + 3 * (degree + 1) ** 2  # means, quats, log_scales, opacity and SH per Gaussian
-        payload = _member(archive, SPLATS_FILE, source, 2**20 + 4 * values * count,
+        payload = read_member(archive, SPLATS_FILE, source, 2**20 + 4 * values * count,
                           f"{count} float32 Gaussians of SH degree {degree}")
     try:
         tensors = safetensors.numpy.load(payload)
