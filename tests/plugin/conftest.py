@@ -10,7 +10,9 @@ import pytest
 from hypothesis import settings
 
 # pytester drops the modules an inner run imported first; importing these here keeps one copy of each, so
-# an inner test's metric is an instance of the same Metric class the (cached) @metamorphic checks against.
+# an inner test's metric is an instance of the same Metric class the (cached) @metamorphic checks against,
+# and a test that patches the demo scenes patches the module the inner run reads.
+import pytest_n2r.demo
 import pytest_n2r.metrics
 import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
