@@ -1,8 +1,11 @@
-"""House rules the whole repository keeps: ``ruff check .`` is clean (rules pinned in pyproject.toml)."""
+"""House rules the whole repository keeps: ``ruff check .`` is clean (rules pinned in pyproject.toml), the imports
+follow the layers of docs/architecture.md (import-linter contracts in pyproject.toml) and no module grows into a
+500-line room."""
 
 from __future__ import annotations
 
 import importlib.util
+import os
 import shutil
 import subprocess
 import sys
@@ -32,6 +35,20 @@ def test_ruff_check_is_clean():
         f"{result.stdout}{result.stderr}"
     )
 
+
+
+def test_imports_follow_the_architecture():
+    """``lint-imports`` with the contracts of pyproject.toml: the layers, no cycles, pytest only in the plugin."""
+    if importlib.util.find_spec("importlinter") is None:
+        pytest.skip("import-linter is not installed (pip install -e '.[dev]' installs the pinned version)")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH")) if p)}
+    result = subprocess.run(  # the package of this checkout, whatever is installed
+        [sys.executable, "-c", "from importlinter.cli import lint_imports_command; lint_imports_command()",
+         "--no-cache", "--no-logo"], cwd=REPO_ROOT, env=env, capture_output=True, text=True, check=False)
+    assert result.returncode == 0, (
+        "`lint-imports` found imports that break the architecture (docs/architecture.md says where code goes; "
+        f"the contracts are in pyproject.toml):\n{result.stdout}{result.stderr}"
+    )
 
 # -- modest rooms ------------------------------------------------------------------------------------------
 
