@@ -7,10 +7,11 @@ The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
    tile count and its SH colour for this view, as one record per Gaussian (:data:`RECORD`); the rectangle
    (int32) and the depth key (float32) also go to small arrays of their own, which the next two stages read.
 2. :func:`depth_order`: the visible Gaussians sorted by camera z-depth rounded to float32 (a stable LSD
-   radix sort; equal keys keep index order), and :func:`gather_rects` (parallel): their rectangles and tile
-   counts in that order, so that binning reads memory in order (16 bytes a Gaussian, not a whole record).
+   radix sort; equal keys keep index order), and :func:`gather` (parallel): their records, rectangles and
+   tile counts in that order, so that binning reads memory in order and compositing reads each tile's
+   records from ascending addresses.
 3. :func:`bin_tiles` (parallel over fixed chunks of the depth order: a count pass, a prefix sum, a fill
-   pass): a depth-ordered run of Gaussians into per-tile lists of Gaussian indices, each in depth order.
+   pass): a depth-ordered run of Gaussians into per-tile lists of their depth-order positions.
 4. :func:`composite_tiles` (parallel over tiles, the busiest first): front-to-back alpha compositing, pixel
    by pixel, with early termination; each pixel's state (transmittance, colour, depth) carries over between
    runs, so compositing a long list in several runs gives the same bits as in one. A tile's records are
@@ -42,7 +43,7 @@ __all__ = [
     "depth_order",
     "exp_of_power",
     "finish",
-    "gather_rects",
+    "gather",
     "project",
     "reach",
 ]
@@ -202,10 +203,14 @@ def depth_order(tiles, keys):
 
 
 @njit(cache=True, parallel=True)
-def gather_rects(order, rects, tiles, sorted_rects, sorted_tiles):
-    """``sorted_rects[j] = rects[order[j]]`` and ``sorted_tiles[j] = tiles[order[j]]``."""
+def gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles):
+    """``ordered[j] = records[order[j]]``, ``sorted_rects[j] = rects[order[j]]`` and ``sorted_tiles[j] =
+    tiles[order[j]]``: binning reads the rectangles in order, and compositing reads a tile's records from
+    ascending addresses (its list is in depth order)."""
     for j in prange(order.shape[0]):
         i = order[j]
+        for f in range(records.shape[1]):
+            ordered[j, f] = records[i, f]
         for f in range(4):
             sorted_rects[j, f] = rects[i, f]
         sorted_tiles[j] = tiles[i]
@@ -218,10 +223,10 @@ def _tile_span(rect, tile):
 
 
 @njit(cache=True, parallel=True)
-def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their rectangles, ``order``:
-    their indices) into the tiles whose pixels are not all done (``live > 0``):
-    ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists tile ``t``'s Gaussian indices, in depth order.
+def bin_tiles(start, stop, sorted_rects, tile, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their rectangles) into the
+    tiles whose pixels are not all done (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists
+    tile ``t``'s Gaussians by their positions ``j``, in depth order.
 
     Fixed chunks of the run (their number depends on its length alone) are counted per tile in parallel,
     each chunk's slots within a tile follow the previous chunk's (a prefix sum over tiles, then chunks),
@@ -232,7 +237,7 @@ def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start,
     chunks = min(max(n // _BIN_CHUNK, 1), _BIN_CHUNKS)
     slots = np.zeros((chunks, n_tiles), np.int64)
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, order, tile, tiles_x, live,
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tile, tiles_x, live,
                    slots, c, tile_ids, False)
     pos = 0
     for t in range(n_tiles):
@@ -243,12 +248,12 @@ def bin_tiles(start, stop, sorted_rects, order, tile, tiles_x, live, tile_start,
             pos += count
     tile_start[n_tiles] = pos
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, order, tile, tiles_x, live,
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tile, tiles_x, live,
                    slots, c, tile_ids, True)
 
 
 @njit(inline="always")
-def _bin_chunk(j0, j1, sorted_rects, order, tile, tiles_x, live, slots, c, tile_ids, fill):
+def _bin_chunk(j0, j1, sorted_rects, tile, tiles_x, live, slots, c, tile_ids, fill):
     """One chunk's pass of :func:`bin_tiles`: count its Gaussians per live tile into ``slots[c]``, or (``fill``)
     write their indices at ``slots[c]`` and advance it."""
     for j in range(j0, j1):
@@ -257,7 +262,7 @@ def _bin_chunk(j0, j1, sorted_rects, order, tile, tiles_x, live, slots, c, tile_
             for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
                 if live[t] > 0:
                     if fill:
-                        tile_ids[slots[c, t]] = order[j]
+                        tile_ids[slots[c, t]] = j
                     slots[c, t] += 1
 
 

@@ -118,15 +118,16 @@ class SplatRenderer:
         n = len(self._means)
         w2c = np.ascontiguousarray(invert_pose(c2w))
         clock = _Stages()
-        records, rects, keys, tiles = self._buffers(n)
+        records, rects, keys, tiles, ordered = self._buffers(n)
         k.project(self._means, self._cov, self._opacity, self._reach, self._sh, self._degree, w2c,
                   np.ascontiguousarray(c2w[:3, 3]), camera.fx, camera.fy, camera.cx, camera.cy, w, h, s.near, s.tile,
                   records, rects, keys, tiles)
         clock.lap("project")
         order = k.depth_order(tiles, keys)
+        ordered = ordered[:len(order)]
         sorted_rects = np.empty((len(order), 4), np.int32)
         sorted_tiles = np.empty(len(order), np.int64)
-        k.gather_rects(order, rects, tiles, sorted_rects, sorted_tiles)
+        k.gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles)
         clock.lap("sort")
         tiles_x = -(-w // s.tile)
         live = _tile_pixels(w, h, s.tile)
@@ -145,13 +146,13 @@ class SplatRenderer:
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
-            k.bin_tiles(start, stop, sorted_rects, order, s.tile, tiles_x, live, tile_start, tile_ids)
+            k.bin_tiles(start, stop, sorted_rects, s.tile, tiles_x, live, tile_start, tile_ids)
             # the busiest tiles first (a stable order of the list lengths: the same order on every run)
             tile_order = np.argsort(-np.diff(tile_start), kind="stable")
             clock.lap("bin")
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                k.composite_tiles(tile_start, tile_ids, records, w, s.tile, tiles_x, tile_order, s.t_stop, live,
+                k.composite_tiles(tile_start, tile_ids, ordered, w, s.tile, tiles_x, tile_order, s.t_stop, live,
                                   trans, acc_rgb, acc_depth, done, finished, background, out_rgb, out_depth,
                                   out_opacity)
             clock.lap("composite")
@@ -165,13 +166,14 @@ class SplatRenderer:
         return {name: result[name] for name in outputs}
 
 
-    def _buffers(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _buffers(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """This thread's per-Gaussian buffers ``records`` (n × ``len(RECORD)`` float64), ``rects`` (n × 4 int32),
-        ``keys`` (n float32) and ``tiles`` (n int64): each render overwrites what it reads of them."""
+        ``keys`` (n float32), ``tiles`` (n int64) and ``ordered`` (the records in depth order): each render
+        overwrites what it reads of them."""
         buffers = getattr(self._scratch, "buffers", None)
         if buffers is None or len(buffers[3]) != n:
             buffers = (np.empty((n, len(k.RECORD))), np.empty((n, 4), np.int32), np.empty(n, np.float32),
-                       np.empty(n, np.int64))
+                       np.empty(n, np.int64), np.empty((n, len(k.RECORD))))
             self._scratch.buffers = buffers
         return buffers
 
