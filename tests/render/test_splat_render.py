@@ -188,8 +188,9 @@ def test_only_the_outputs_asked_for_are_returned():
 @pytest.mark.slow
 def test_1080p_with_a_million_gaussians_fits_in_a_few_gigabytes():
     """Peak NumPy memory (tracemalloc) of a 1920×1080 render of 10⁶ Gaussians spread so that most are in view:
-    measured 0.33 GB for one render's buffers (a record of 120 B, a rectangle, key and tile count of 28 B per
-    Gaussian, their depth order and sort keys of 48 B per visible Gaussian, 48 B of state per pixel);
+    measured 0.45 GB for one render's buffers (a record of 120 B, a rectangle, key and tile count of 28 B per
+    Gaussian, the depth-ordered records, rectangles, counts and sort keys of 168 B per visible Gaussian, 48 B
+    of state per pixel);
     the bound is 2 GB. The scene's own arrays (float64 means and covariances, float32 SH) add about 140 B per
     Gaussian at SH degree 0."""
     rng = np.random.default_rng(0)
