@@ -14,6 +14,9 @@ Warning
 -------
 Near a half turn the axis of ``R_start^T @ R_end`` is ill-conditioned (OpenCV's Rodrigues logarithm):
 measured against ``R_end`` at ``t = 1``, the error is below 1e-12 up to 179.999° and 3.5e-6 at 179.9999°.
+Below about 6e-4° (a sine under 1e-5) OpenCV's logarithm returns no rotation at all; there the skew part of
+``R_start^T @ R_end`` gives the axis and angle instead (a Hypothesis example at 1e-5° found the end off by
+1.7e-7 before).
 """
 
 from __future__ import annotations
@@ -39,7 +42,13 @@ def slerp_rotation(R_start: np.ndarray, R_end: np.ndarray, t: float) -> np.ndarr
     R_start = check_array("R_start", R_start, "3 3", dtype=np.float64)
     R_end = check_array("R_end", R_end, "3 3", dtype=np.float64)
     t = check_range("t", t, 0.0, 1.0)
-    rvec, _ = cv2.Rodrigues(np.ascontiguousarray(R_start.T @ R_end))  # the relative rotation, axis * angle
+    relative = R_start.T @ R_end
+    rvec, _ = cv2.Rodrigues(np.ascontiguousarray(relative))  # the relative rotation, axis * angle
+    if not rvec.any():
+        # OpenCV reads a rotation whose sine is below 1e-5 as none at all; there sin(angle) * axis, the
+        # skew part of the matrix, is the angle * axis to a relative error of angle² / 6 < 2e-11.
+        rvec = 0.5 * np.array([[relative[2, 1] - relative[1, 2]], [relative[0, 2] - relative[2, 0]],
+                               [relative[1, 0] - relative[0, 1]]])
     step, _ = cv2.Rodrigues(rvec * t)
     return R_start @ step
 
