@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import math
 import sys
 import time
 from pathlib import Path
@@ -107,7 +106,7 @@ def _from_field(args: argparse.Namespace) -> int:
     from ..scene import load_scene
     from ..scene.field_scene import FieldScene
     from ..scene.splat_file import save_splat_scene
-    from ..scene.splat_from_field import DEFAULT_PATH, DEFAULT_SIZE, splat_scene_from_field
+    from ..scene.splat_from_field import DEFAULT_PATH, DEFAULT_SIZE, check_voxels, splat_scene_from_field
     from ._output import SCENE, check_output
 
     size = DEFAULT_SIZE if args.size is None else args.size
@@ -118,8 +117,7 @@ def _from_field(args: argparse.Namespace) -> int:
         raise InvalidArgument(f"{', '.join(given)}: only for a .ply; a fitted scene file {args.ply} brings its own "
                               "views, split and background")
     for option, value in (("--size", size), ("--path", path_voxels)):
-        if not (math.isfinite(value) and value > 0):
-            raise InvalidArgument(f"{option} {value}: expected a finite number > 0 (voxels)")
+        check_voxels(value, f"{option} {value}:")  # before the fitted scene is loaded
     if not args.ply.exists():
         raise InvalidArgument(f"SOURCE {args.ply}: does not exist")
     check_output(args.output, SCENE, inputs=[args.ply], force=args.force)

@@ -64,12 +64,19 @@ def uncontract(space: SceneSpace, q: np.ndarray) -> np.ndarray:
     return np.where(r <= 1.0, q, outer)
 
 
+def check_voxels(value: float, where: str) -> float:
+    """``value`` if it is a conversion knob's valid value (a finite number of voxels > 0), else an
+    :class:`InvalidArgument` whose message starts with ``where`` (the argument or option and its value)."""
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise InvalidArgument(f"{where} expected a finite number > 0 (voxels)")
+    return value
+
+
 def field_to_gaussians(field: SceneField, *, size: float = DEFAULT_SIZE, path: float = DEFAULT_PATH) -> Gaussians:
     """The Gaussians of ``field`` (see the module docstring): ``size`` is each Gaussian's standard deviation in
     cell sides, ``path`` the voxels of density its peak opacity stands for."""
     for name, value in (("size", size), ("path", path)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise InvalidArgument(f"{name}={value!r}; expected a finite number > 0 (voxels)")
+        check_voxels(value, f"{name}={value!r};")
     res = field.resolution
     cells = field.occupancy.nonzero().cpu()
     corners = (cells[:, None, :] + _CORNERS[None]).reshape(-1, 3)
