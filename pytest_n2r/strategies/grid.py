@@ -55,14 +55,25 @@ def check_bound(name: str, value: Any) -> Bound:
     return lo + 0.0, hi + 0.0
 
 
+#: The exponent of the smallest power of ten a float holds (a subnormal; 10.0 ** -324 is 0).
+_MIN_EXPONENT = -323
+
+
 def grid_step(lo: float, hi: float) -> float:
     """The decimal step (a power of ten) that puts at least :data:`MIN_STEPS` steps across ``[lo, hi]``.
 
-    >>> grid_step(-20.0, 20.0), grid_step(-0.1, 0.1)
-    (0.01, 0.0001)
+    A span of a few subnormal floats gets the smallest power of ten a float holds (``1e-323``), not a step
+    that underflows to 0.
+
+    >>> grid_step(-20.0, 20.0), grid_step(-0.1, 0.1), grid_step(0.0, 5e-324)
+    (0.01, 0.0001, 1e-323)
     """
     span = hi - lo
-    return 10.0 ** math.floor(math.log10(span / MIN_STEPS)) if span > 0 else 1.0
+    if not span > 0:
+        return 1.0
+    per_step = span / MIN_STEPS
+    exponent = math.floor(math.log10(per_step)) if per_step > 0 else _MIN_EXPONENT
+    return 10.0 ** max(exponent, _MIN_EXPONENT)
 
 
 def _draw_steps(draw: Any, n: int) -> int:

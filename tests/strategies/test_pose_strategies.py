@@ -24,6 +24,14 @@ def test_drawn_values_stay_within_their_bounds(bound, data):
     assert (tau.roll, tau.pitch, tau.y, tau.z) == (0.0, 0.0, 0.0, 0.0)
 
 
+@given(data=st.data())
+def test_a_bound_a_few_subnormals_wide_draws_inside_it(data):
+    """Hypothesis found transforms(yaw=(0.0, 5e-324)) failing with 'math domain error': the grid step
+    underflowed to 0."""
+    tau = data.draw(n2r.transforms(yaw=(0.0, 5e-324)))
+    assert 0.0 <= tau.yaw <= 5e-324, f"yaw={tau.yaw} outside (0, 5e-324)"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "error", "words"),
     [
