@@ -2,13 +2,22 @@
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 pytest_plugins = ["pytester"]
+
+# Our own property tests: "dev" draws new examples on every run (how most of our edge cases were found);
+# "ci" draws the same examples on every run, so a red CI run is a change in the code, never the luck of a
+# draw. CI selects "ci" (the CI variable is set); HYPOTHESIS_PROFILE=dev brings the random search to CI.
+settings.register_profile("dev", print_blob=True)
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev"))
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHARED_SCENES = REPO_ROOT.parent / "shared" / "scenes"
