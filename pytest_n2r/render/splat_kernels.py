@@ -58,10 +58,14 @@ DILATION = 0.3
 #: How far beyond the image edges (as a fraction of the image width or height, on each side) the
 #: projection's Jacobian is evaluated at most (3DGS reference: 1.3 × the half field of view).
 _GUARD = 0.15
-#: Fields of a projected Gaussian's record (float64): pixel position, conic, peak opacity, colour, z-depth,
-#: the pixel rectangle ``x0 <= x < x1, y0 <= y < y1`` where it can reach ``ALPHA_MIN``, and the squared
-#: Mahalanobis radius of that region (widened by a margin, see :func:`composite_tiles`).
-RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "x0", "x1", "y0", "y1", "r2")
+#: Fields of a projected Gaussian's record (float64): pixel position, conic, peak opacity, colour, z-depth
+#: and the squared Mahalanobis radius inside which it can reach ``ALPHA_MIN`` (widened by a margin, see
+#: :func:`composite_tiles`).
+RECORD = ("u", "v", "conic_a", "conic_b", "conic_c", "opacity", "r", "g", "b", "z", "r2")
+#: Fields of a projected Gaussian's rectangle (int32): the pixels ``x0 <= x < x1, y0 <= y < y1`` where it can
+#: reach ``ALPHA_MIN``, and the tiles ``tx0 <= tx < tx1, ty0 <= ty < ty1`` they touch (divided once, here:
+#: an integer division by a run-time tile size is slow, and binning would repeat it in each of its passes).
+RECT = ("x0", "x1", "y0", "y1", "tx0", "tx1", "ty0", "ty1")
 #: Records a tile copies at a time before compositing them (see :func:`composite_tiles`).
 BATCH = 32
 #: Depth-ordered Gaussians per chunk of :func:`bin_tiles` (at least; at most :data:`_BIN_CHUNKS` chunks):
@@ -72,7 +76,7 @@ _BIN_CHUNKS = 64
 _EXP_STEPS = 64
 _POWER_MIN_EXP = 6.0
 _EXP_TABLE = np.exp(-np.arange(int(_POWER_MIN_EXP * _EXP_STEPS) + 1) / _EXP_STEPS)
-_U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _X0, _X1, _Y0, _Y1, _R2 = range(len(RECORD))
+_U, _V, _CA, _CB, _CC, _O, _R, _G, _B, _Z, _R2 = range(len(RECORD))
 @njit(cache=True)
 def reach(opacity, out):
     """``out[i]``: the squared Mahalanobis radius inside which Gaussian ``i`` of peak ``opacity[i]`` reaches
@@ -87,7 +91,7 @@ def reach(opacity, out):
 def project(means, cov3d, opacity, r2s, sh, degree, w2c, campos, fx, fy, cx, cy, width, height, near, tile,
             records, rects, keys, tiles):
     """Project every Gaussian for the camera ``w2c`` (world → camera 4×4, OpenCV axes) into ``records``
-    (:data:`RECORD`), ``rects`` (its pixel rectangle ``x0, x1, y0, y1``), ``keys`` (its z-depth as float32)
+    (:data:`RECORD`), ``rects`` (its pixel and tile rectangles, :data:`RECT`), ``keys`` (its z-depth as float32)
     and ``tiles`` (tiles its rectangle touches; 0: culled). ``r2s`` is :func:`reach` of ``opacity``.
 
     Culled: peak opacity below ``ALPHA_MIN``, mean at or in front of the ``near`` plane, a non-finite or
@@ -147,11 +151,13 @@ def project(means, cov3d, opacity, r2s, sh, degree, w2c, campos, fx, fy, cx, cy,
         y1 = min(math.floor(v + ey) + 1.0, float(height))
         if not (x0 < x1 and y0 < y1):
             continue
-        tiles[i] = ((int(x1) - 1) // tile - int(x0) // tile + 1) * ((int(y1) - 1) // tile - int(y0) // tile + 1)
+        rect = rects[i]
+        rect[0], rect[1], rect[2], rect[3] = int(x0), int(x1), int(y0), int(y1)
+        rect[4], rect[5] = rect[0] // tile, (rect[1] - 1) // tile + 1
+        rect[6], rect[7] = rect[2] // tile, (rect[3] - 1) // tile + 1
+        tiles[i] = (rect[5] - rect[4]) * (rect[7] - rect[6])
         rec = records[i]
         rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O], rec[_Z] = u, v, c / det, -b / det, a / det, o, z
-        rec[_X0], rec[_X1], rec[_Y0], rec[_Y1] = x0, x1, y0, y1
-        rects[i, 0], rects[i, 1], rects[i, 2], rects[i, 3] = int(x0), int(x1), int(y0), int(y1)
         keys[i] = np.float32(z)
         rec[_R2] = r2 * (1.0 + 1e-6)
         dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
@@ -211,20 +217,14 @@ def gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles):
         i = order[j]
         for f in range(records.shape[1]):
             ordered[j, f] = records[i, f]
-        for f in range(4):
+        for f in range(rects.shape[1]):
             sorted_rects[j, f] = rects[i, f]
         sorted_tiles[j] = tiles[i]
 
 
-@njit(inline="always")
-def _tile_span(rect, tile):
-    """The tiles ``tx0 <= tx < tx1``, ``ty0 <= ty < ty1`` a pixel rectangle ``x0, x1, y0, y1`` touches."""
-    return rect[0] // tile, (rect[1] - 1) // tile + 1, rect[2] // tile, (rect[3] - 1) // tile + 1
-
-
 @njit(cache=True, parallel=True)
-def bin_tiles(start, stop, sorted_rects, tile, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their rectangles) into the
+def bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their :data:`RECT`) into the
     tiles whose pixels are not all done (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists
     tile ``t``'s Gaussians by their positions ``j``, in depth order.
 
@@ -237,8 +237,8 @@ def bin_tiles(start, stop, sorted_rects, tile, tiles_x, live, tile_start, tile_i
     chunks = min(max(n // _BIN_CHUNK, 1), _BIN_CHUNKS)
     slots = np.zeros((chunks, n_tiles), np.int64)
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tile, tiles_x, live,
-                   slots, c, tile_ids, False)
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tiles_x, live, slots,
+                   c, tile_ids, False)
     pos = 0
     for t in range(n_tiles):
         tile_start[t] = pos
@@ -248,16 +248,17 @@ def bin_tiles(start, stop, sorted_rects, tile, tiles_x, live, tile_start, tile_i
             pos += count
     tile_start[n_tiles] = pos
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tile, tiles_x, live,
-                   slots, c, tile_ids, True)
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tiles_x, live, slots,
+                   c, tile_ids, True)
 
 
 @njit(inline="always")
-def _bin_chunk(j0, j1, sorted_rects, tile, tiles_x, live, slots, c, tile_ids, fill):
+def _bin_chunk(j0, j1, sorted_rects, tiles_x, live, slots, c, tile_ids, fill):
     """One chunk's pass of :func:`bin_tiles`: count its Gaussians per live tile into ``slots[c]``, or (``fill``)
     write their indices at ``slots[c]`` and advance it."""
     for j in range(j0, j1):
-        tx0, tx1, ty0, ty1 = _tile_span(sorted_rects[j], tile)
+        rect = sorted_rects[j]
+        tx0, tx1, ty0, ty1 = rect[4], rect[5], rect[6], rect[7]
         for ty in range(ty0, ty1):
             for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
                 if live[t] > 0:
@@ -280,18 +281,20 @@ def exp_of_power(power):
 
 
 @njit(cache=True, parallel=True, fastmath={"contract"})
-def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_order, t_stop, live, trans, acc_rgb,
-                    acc_depth, done, final, background, rgb_out, depth_out, opacity_out):
-    """Composite each tile's Gaussians (``tile_ids`` into ``records``, depth-ordered) front to back into the
-    pixel state (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``: terminated), updating
-    ``live`` (pixels of the tile not yet done).
+def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
+                    acc_rgb, acc_depth, done, final, background, rgb_out, depth_out, opacity_out):
+    """Composite each tile's Gaussians (``tile_ids`` into ``records`` and ``sorted_rects``, depth-ordered) front to
+    back into the pixel state (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``:
+    terminated), updating ``live`` (pixels of the tile not yet done).
 
     Per pixel and Gaussian (3DGS reference): ``alpha = min(ALPHA_MAX, opacity · exp(-½ dᵀ conic d))``,
     skipped below ``ALPHA_MIN``; if the transmittance after it would fall below ``t_stop`` the pixel is done
     without it; else it adds ``alpha · T`` times its colour and depth and ``T *= 1 - alpha``. Every pixel of
-    the Gaussian's rectangle inside the tile is visited; where the exponent is below ``-r2 / 2`` (``alpha``
-    below ``ALPHA_MIN`` with a margin) the exponential is skipped, which is cheaper than bounding each row by
-    the ellipse (a square root per row). Compiled with floating-point contraction (fused multiply-adds).
+    the Gaussian's rectangle inside the tile is visited, except those outside the span of each tile row's
+    pixels not yet done (kept per row: done pixels gather at a row's ends as the surface fills in, and a
+    third of the visits went to them); where the exponent is below ``-r2 / 2`` (``alpha`` below ``ALPHA_MIN``
+    with a margin) the exponential is skipped, which is cheaper than bounding each row by the ellipse (a
+    square root per row). Compiled with floating-point contraction (fused multiply-adds).
 
     With ``final`` (the last run), each tile's pixels are then finished into the outputs (:func:`finish`) in
     the same parallel region: one region fewer per frame. Tiles are taken in ``tile_order`` (every tile
@@ -310,16 +313,26 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_or
         if live[t] == 0:
             e = s
         left = live[t]
+        # per row of the tile, the pixels lo <= x < hi hold every pixel not yet done
+        lo = np.empty(ty1 - ty0, np.int64)
+        hi = np.empty(ty1 - ty0, np.int64)
+        for py in range(ty0, ty1):
+            lo[py - ty0], hi[py - ty0] = tx0, tx1
+            _shrink_span(done, py * width, py - ty0, lo, hi)
         batch = np.empty((BATCH, n_fields))
+        spans = np.empty((BATCH, 4), np.int64)
         for k in range(s, e):
             if (k - s) % BATCH == 0:
                 for b in range(min(BATCH, e - k)):
-                    src = records[tile_ids[k + b]]
+                    j = tile_ids[k + b]
                     for f in range(n_fields):
-                        batch[b, f] = src[f]
+                        batch[b, f] = records[j, f]
+                    for f in range(4):
+                        spans[b, f] = sorted_rects[j, f]
             rec = batch[(k - s) % BATCH]
-            gx0, gx1 = max(int(rec[_X0]), tx0), min(int(rec[_X1]), tx1)
-            gy0, gy1 = max(int(rec[_Y0]), ty0), min(int(rec[_Y1]), ty1)
+            span = spans[(k - s) % BATCH]
+            gx0, gx1 = max(span[0], tx0), min(span[1], tx1)
+            gy0, gy1 = max(span[2], ty0), min(span[3], ty1)
             u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
             r, gr, bl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
             # alpha can reach ALPHA_MIN only where ca dx² + 2 cb dx dy + cc dy² <= r2, i.e. power >= -r2 / 2;
@@ -328,7 +341,7 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_or
             for py in range(gy0, gy1):
                 dy = v - py
                 row = py * width
-                for px in range(gx0, gx1):
+                for px in range(max(gx0, lo[py - ty0]), min(gx1, hi[py - ty0])):
                     p = row + px
                     if done[p]:
                         continue
@@ -344,6 +357,7 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_or
                     if after < t_stop:
                         done[p] = 1
                         left -= 1
+                        _shrink_span(done, row, py - ty0, lo, hi)
                         continue
                     w = alpha * tp
                     acc_rgb[p, 0] += w * r
@@ -358,6 +372,17 @@ def composite_tiles(tile_start, tile_ids, records, width, tile, tiles_x, tile_or
             for py in range(ty0, ty1):
                 for p in range(py * width + tx0, py * width + tx1):
                     _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+
+
+@njit(inline="always")
+def _shrink_span(done, row, r, lo, hi):
+    """Move the ends of row ``r``'s span ``lo[r] <= x < hi[r]`` (pixel ``row + x``) past the done pixels there."""
+    x0, x1 = lo[r], hi[r]
+    while x0 < x1 and done[row + x0]:
+        x0 += 1
+    while x1 > x0 and done[row + x1 - 1]:
+        x1 -= 1
+    lo[r], hi[r] = x0, x1
 
 
 @njit(cache=True, parallel=True)

@@ -125,7 +125,7 @@ class SplatRenderer:
         clock.lap("project")
         order = k.depth_order(tiles, keys)
         ordered = ordered[:len(order)]
-        sorted_rects = np.empty((len(order), 4), np.int32)
+        sorted_rects = np.empty((len(order), len(k.RECT)), np.int32)
         sorted_tiles = np.empty(len(order), np.int64)
         k.gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles)
         clock.lap("sort")
@@ -146,15 +146,15 @@ class SplatRenderer:
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
-            k.bin_tiles(start, stop, sorted_rects, s.tile, tiles_x, live, tile_start, tile_ids)
+            k.bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids)
             # the busiest tiles first (a stable order of the list lengths: the same order on every run)
             tile_order = np.argsort(-np.diff(tile_start), kind="stable")
             clock.lap("bin")
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                k.composite_tiles(tile_start, tile_ids, ordered, w, s.tile, tiles_x, tile_order, s.t_stop, live,
-                                  trans, acc_rgb, acc_depth, done, finished, background, out_rgb, out_depth,
-                                  out_opacity)
+                k.composite_tiles(tile_start, tile_ids, ordered, sorted_rects, w, s.tile, tiles_x, tile_order,
+                                  s.t_stop, live, trans, acc_rgb, acc_depth, done, finished, background, out_rgb,
+                                  out_depth, out_opacity)
             clock.lap("composite")
             start = stop
         if not finished:  # nothing drawn, or every pixel done before the last run
@@ -167,12 +167,12 @@ class SplatRenderer:
 
 
     def _buffers(self, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """This thread's per-Gaussian buffers ``records`` (n × ``len(RECORD)`` float64), ``rects`` (n × 4 int32),
-        ``keys`` (n float32), ``tiles`` (n int64) and ``ordered`` (the records in depth order): each render
-        overwrites what it reads of them."""
+        """This thread's per-Gaussian buffers ``records`` (n × ``len(RECORD)`` float64), ``rects`` (n ×
+        ``len(RECT)`` int32), ``keys`` (n float32), ``tiles`` (n int64) and ``ordered`` (the records in depth
+        order): each render overwrites what it reads of them."""
         buffers = getattr(self._scratch, "buffers", None)
         if buffers is None or len(buffers[3]) != n:
-            buffers = (np.empty((n, len(k.RECORD))), np.empty((n, 4), np.int32), np.empty(n, np.float32),
+            buffers = (np.empty((n, len(k.RECORD))), np.empty((n, len(k.RECT)), np.int32), np.empty(n, np.float32),
                        np.empty(n, np.int64), np.empty((n, len(k.RECORD))))
             self._scratch.buffers = buffers
         return buffers

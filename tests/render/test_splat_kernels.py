@@ -34,6 +34,13 @@ def _plain_bins(rects, start, tile, tiles_x, live):
     return lists
 
 
+def with_tiles(rects, tile):
+    """Pixel rectangles ``x0, x1, y0, y1`` with their tile rectangles appended (:data:`RECT`)."""
+    x0, x1, y0, y1 = rects.T
+    return np.stack([x0, x1, y0, y1, x0 // tile, (x1 - 1) // tile + 1, y0 // tile, (y1 - 1) // tile + 1],
+                    axis=1).astype(np.int32)
+
+
 def test_binning_in_parallel_chunks_gives_the_plain_depth_ordered_lists():
     """50 000 depth-ordered Gaussians (12 chunks) on a 100×60 image with 8-pixel tiles, some tiles already
     done: every tile's list of positions is the plain loop's, in depth order, whatever the chunks."""
@@ -47,7 +54,7 @@ def test_binning_in_parallel_chunks_gives_the_plain_depth_ordered_lists():
     expected = _plain_bins(rects.tolist(), 0, tile, tiles_x, live)
     tile_start = np.empty(len(live) + 1, np.int64)
     tile_ids = np.full(sum(map(len, expected)), -1, np.int64)
-    k.bin_tiles(0, n, rects, tile, tiles_x, live, tile_start, tile_ids)
+    k.bin_tiles(0, n, with_tiles(rects, tile), tiles_x, live, tile_start, tile_ids)
     for t, want in enumerate(expected):
         got = tile_ids[tile_start[t]:tile_start[t + 1]].tolist()
         assert got == want, (f"tile {t}: {len(got)} Gaussians binned, expected {len(want)}; first differences "
@@ -55,6 +62,6 @@ def test_binning_in_parallel_chunks_gives_the_plain_depth_ordered_lists():
     # a run from the middle of the order bins that run alone
     expected = _plain_bins(rects[1000:9000].tolist(), 1000, tile, tiles_x, live)
     tile_ids = np.full(sum(map(len, expected)), -1, np.int64)
-    k.bin_tiles(1000, 9000, rects, tile, tiles_x, live, tile_start, tile_ids)
+    k.bin_tiles(1000, 9000, with_tiles(rects, tile), tiles_x, live, tile_start, tile_ids)
     assert [tile_ids[tile_start[t]:tile_start[t + 1]].tolist() for t in range(len(live))] == expected, \
         "binning the run 1000..9000 differs from the plain loop's"
