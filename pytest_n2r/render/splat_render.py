@@ -31,7 +31,9 @@ __all__ = ["SPLAT_RENDER_VERSION", "SplatRenderer", "SplatSettings"]
 
 #: Part of every splat scene's content hash: bump it whenever the output for the same Gaussians and settings
 #: changes, so render caches built by an older pytest-n2r are not reused.
-SPLAT_RENDER_VERSION = 2
+SPLAT_RENDER_VERSION = 3
+#: Iterations (Gaussians, pixels) a thread takes at a time in the parallel loops over Gaussians or pixels.
+_CHUNK = 2048
 
 
 @dataclass(frozen=True)
@@ -82,7 +84,7 @@ class SplatSettings:
 
 class SplatRenderer:
     """Renders one set of Gaussians with fixed settings over ``background`` (RGB in [0, 1]; the settings'
-    background wins). The world-frame covariances and opacities are computed once, here."""
+    background wins). The world-frame covariance factors and opacities are computed once, here."""
 
     def __init__(self, gaussians: Gaussians, settings: SplatSettings | None = None,
                  background: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
@@ -94,7 +96,7 @@ class SplatRenderer:
         #: The background actually rendered over.
         self.background = bg
         self._means = np.ascontiguousarray(gaussians.means, dtype=np.float64)
-        self._cov = gaussians.covariances()
+        self._factors = gaussians.factors()
         self._opacity = gaussians.opacities
         self._reach = np.empty(len(self._opacity))
         k.reach(self._opacity, self._reach)
@@ -119,15 +121,20 @@ class SplatRenderer:
         w2c = np.ascontiguousarray(invert_pose(c2w))
         clock = _Stages()
         records, rects, keys, tiles, ordered = self._buffers(n)
-        k.project(self._means, self._cov, self._opacity, self._reach, self._sh, self._degree, w2c,
-                  np.ascontiguousarray(c2w[:3, 3]), camera.fx, camera.fy, camera.cx, camera.cy, w, h, s.near, s.tile,
-                  records, rects, keys, tiles)
+        # every parallel loop hands out its work in pieces (dynamic scheduling): with a fixed half per thread
+        # (OpenMP's static default) a region waits for its slower thread, and on a shared machine one of the
+        # two threads is often held up by another process
+        with parallel_chunksize(_CHUNK):
+            k.project(self._means, self._factors, self._opacity, self._reach, self._sh, self._degree, w2c,
+                      np.ascontiguousarray(c2w[:3, 3]), camera.fx, camera.fy, camera.cx, camera.cy, w, h, s.near,
+                      s.tile, records, rects, keys, tiles)
         clock.lap("project")
         order = k.depth_order(tiles, keys)
         ordered = ordered[:len(order)]
         sorted_rects = np.empty((len(order), len(k.RECT)), np.int32)
         sorted_tiles = np.empty(len(order), np.int64)
-        k.gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles)
+        with parallel_chunksize(_CHUNK):
+            k.gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles)
         clock.lap("sort")
         tiles_x = -(-w // s.tile)
         live = _tile_pixels(w, h, s.tile)
@@ -146,7 +153,8 @@ class SplatRenderer:
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
             tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
-            k.bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids)
+            with parallel_chunksize(1):  # a chunk of the depth order at a time
+                k.bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids)
             # the busiest tiles first (a stable order of the list lengths: the same order on every run)
             tile_order = np.argsort(-np.diff(tile_start), kind="stable")
             clock.lap("bin")
@@ -158,7 +166,8 @@ class SplatRenderer:
             clock.lap("composite")
             start = stop
         if not finished:  # nothing drawn, or every pixel done before the last run
-            k.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
+            with parallel_chunksize(_CHUNK):
+                k.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
         clock.lap("finish")
         self.stage_seconds = clock.seconds
         result = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),

@@ -98,11 +98,11 @@ class Gaussians:
             np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
         ], axis=1)
 
-    def covariances(self) -> np.ndarray:
-        """World-frame covariances ``(N, 6)`` float64 as ``(xx, xy, xz, yy, yz, zz)`` (scene units²)."""
-        m = self.rotations() * self.scales[:, None, :]  # R S
-        cov = np.einsum("nij,nkj->nik", m, m)
-        return np.ascontiguousarray(cov[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]])
+    def factors(self) -> np.ndarray:
+        """``R S`` ``(N, 3, 3)`` float64 (scene units), the rotation times the scales: the world-frame covariance
+        is ``F Fᵀ``. Renderers project ``F``, not the covariance: formed in float64, a long axis's rounding in
+        the covariance's entries can exceed a short axis's whole extent."""
+        return np.ascontiguousarray(self.rotations() * self.scales[:, None, :])
 
     def tensors(self) -> dict[str, np.ndarray]:
         """The arrays by name (:data:`TENSORS`), for storing."""

@@ -8,6 +8,8 @@ that float rounding may decide it either way; comparisons skip those pixels.
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
 from pytest_n2r.geometry import Camera
@@ -50,6 +52,35 @@ def quat_matrix(q: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * k + (1 - c) * (k @ k)
 
 
+def exact_conics(M: np.ndarray, F: np.ndarray, dilation: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """The inverses ``(a, b, c)`` (N × 3, rounded to float64 once) of the 2-D covariances ``(M F)(M F)ᵀ +
+    dilation·I``, computed exactly in rational arithmetic from the float64 ``M`` (N × 2 × 3) and ``F`` (the
+    rotation times the scales, N × 3 × 3), and whether each is defined (finite inputs, a determinant float64
+    holds). In float64 these lose every digit for a needle or a flat disc with one huge scale (the covariance's
+    long-axis entries round by more than its short axes measure, and ``det = ac - b²`` cancels): with
+    log-scales like (−85, 9.4, −56) ``np.linalg.inv`` was 0.2 % off the exact conic, which moved a pixel's
+    opacity by 1e-3."""
+    out = np.zeros((len(M), 3))
+    ok = np.zeros(len(M), bool)
+    d = Fraction(dilation)
+    for i in range(len(M)):
+        if not (np.isfinite(M[i]).all() and np.isfinite(F[i]).all()):
+            continue
+        m = [[Fraction(x) for x in row] for row in M[i].tolist()]
+        f = [[Fraction(x) for x in row] for row in F[i].tolist()]
+        A = [[sum(m[r][j] * f[j][k] for j in range(3)) for k in range(3)] for r in range(2)]
+        a = sum(x * x for x in A[0]) + d
+        b = sum(x * y for x, y in zip(A[0], A[1]))
+        c = sum(x * x for x in A[1]) + d
+        det = a * c - b * b
+        try:
+            out[i] = float(c / det), float(-b / det), float(a / det)
+            ok[i] = np.isfinite(float(det))
+        except OverflowError:
+            continue
+    return out, ok
+
+
 def render_reference(g: Gaussians, c2w: np.ndarray, camera: Camera, background=(0.0, 0.0, 0.0), near: float = 0.01,
                      t_stop: float = 1e-4, eps: float = 1e-7) -> dict[str, np.ndarray]:
     """``rgb`` (float64 in [0, 1] and uint8), ``depth``, ``opacity`` and ``ambiguous`` (H×W bool)."""
@@ -59,9 +90,7 @@ def render_reference(g: Gaussians, c2w: np.ndarray, camera: Camera, background=(
     means = g.means.astype(np.float64)
     cam = means @ R.T + t
     opacity = 1 / (1 + np.exp(-g.opacity_logits.astype(np.float64)))
-    rot = quat_matrix(g.quats.astype(np.float64))
-    scales = np.exp(g.log_scales.astype(np.float64))
-    sigma = rot @ (scales[:, :, None] ** 2 * rot.transpose(0, 2, 1))
+    factor = quat_matrix(g.quats.astype(np.float64)) * np.exp(g.log_scales.astype(np.float64))[:, None, :]
     # the projection's Jacobian, evaluated no farther than 15 % of the image beyond its edges
     xz = np.clip(cam[:, 0] / cam[:, 2], (-0.5 - camera.cx) / camera.fx - 0.15 * w / camera.fx,
                  (w - 0.5 - camera.cx) / camera.fx + 0.15 * w / camera.fx)
@@ -70,11 +99,9 @@ def render_reference(g: Gaussians, c2w: np.ndarray, camera: Camera, background=(
     J = np.zeros((len(g), 2, 3))
     J[:, 0, 0], J[:, 0, 2] = camera.fx / cam[:, 2], -camera.fx * xz / cam[:, 2]
     J[:, 1, 1], J[:, 1, 2] = camera.fy / cam[:, 2], -camera.fy * yz / cam[:, 2]
-    M = J @ R
-    cov = M @ sigma @ M.transpose(0, 2, 1) + 0.3 * np.eye(2)
-    det = cov[:, 0, 0] * cov[:, 1, 1] - cov[:, 0, 1] ** 2
+    conics, defined = exact_conics(J @ R, factor)
     mean2 = np.stack([camera.fx * cam[:, 0] / cam[:, 2] + camera.cx, camera.fy * cam[:, 1] / cam[:, 2] + camera.cy], 1)
-    keep = (opacity >= 1 / 255) & (cam[:, 2] > near) & (det > 0) & np.isfinite(det)
+    keep = (opacity >= 1 / 255) & (cam[:, 2] > near) & defined
     dirs = means - c2w[:3, 3]
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     colour = np.maximum(np.einsum("nk,nkc->nc", sh_basis(dirs, g.sh_degree), g.sh.astype(np.float64)) + 0.5, 0)
@@ -87,9 +114,9 @@ def render_reference(g: Gaussians, c2w: np.ndarray, camera: Camera, background=(
     live = np.ones((h, w), bool)
     ambiguous = np.zeros((h, w), bool)
     for i in idx:
-        inv = np.linalg.inv(cov[i])
+        ca, cb, cc = conics[i]
         dx, dy = mean2[i, 0] - px, mean2[i, 1] - py
-        power = -0.5 * (inv[0, 0] * dx * dx + inv[1, 1] * dy * dy) - inv[0, 1] * dx * dy
+        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
         alpha = np.minimum(0.99, opacity[i] * np.exp(power))
         ambiguous |= live & (np.abs(alpha - 1 / 255) < eps)
         take = live & (alpha >= 1 / 255)
