@@ -29,7 +29,7 @@ def test_the_fixture_is_the_splat_scene(n2r_scene):
     assert len(n2r_scene.views) == 48 and n2r_scene.gaussians.sh_degree == 0, n2r_scene
 
 
-@metamorphic(l2_norm(), eps=0.2, transform=transforms(yaw=(-3, 3)), examples=4)
+@metamorphic(l2_norm(inputs="raw"), eps=0.2, transform=transforms(yaw=(-3, 3)), examples=4)
 def test_mean_colour(n2r_scene):
     return lambda rgb: [float(rgb.mean()) / 255.0]
 
@@ -76,7 +76,7 @@ def test_a_ply_without_cameras_fails_the_relation_with_the_reason(pytester: pyte
 from pytest_n2r import l2_norm, metamorphic, transforms
 
 
-@metamorphic(l2_norm(), eps=0.2, transform=transforms(yaw=3), examples=2)
+@metamorphic(l2_norm(inputs="raw"), eps=0.2, transform=transforms(yaw=3), examples=2)
 def test_mean_colour(n2r_scene):
     return lambda rgb: [float(rgb.mean())]
 """)
@@ -92,3 +92,63 @@ def test_n2r_study_runs_on_a_splat_scene(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     assert (tmp_path / "study.md").is_file() and (tmp_path / "examples.csv").is_file()
     assert "splat" in (tmp_path / "study.md").read_text()
+
+
+GATED = """
+import os
+
+from pytest_n2r import l2_norm, metamorphic, transforms
+
+
+@metamorphic(l2_norm(inputs="raw"), eps=1000.0, transform=transforms(yaw=(-3, 3)), examples=8)
+def test_mean_colour(n2r_scene):
+    gain = float(os.environ["N2R_TEST_GAIN"])  # a larger gain: the same relation, a worse SUT
+    return lambda rgb: [gain * float(rgb.mean()) / 255.0]
+"""
+
+
+def test_the_gate_on_a_ply_passes_the_same_sut_and_fails_a_worse_one_or_a_retrained_scene(
+        pytester: pytest.Pytester, monkeypatch):
+    """Baseline on a .ply (with JUnit properties), then ``--n2r-compare``: the same SUT is ``ok`` and the run
+    passes; the SUT made worse (its deviations 2000 times larger, still far inside ``eps``) is ``worse`` and
+    fails the run although the relation holds; the same file trained again (other content) is
+    ``changed-scene``."""
+    import shutil
+    import xml.etree.ElementTree as ET
+
+    from pytest_n2r.splats import read_ply, write_ply
+
+    monkeypatch.delenv("CI", raising=False)
+    pytester.makepyfile(test_gated=GATED)
+    ply = DATA / FILES["object-sh0"][0]
+    common = ("-p", "no:cacheprovider", "--n2r-size", "96", "--n2r-derandomize", "yes")
+    base, junit = pytester.path / "base.json", pytester.path / "junit.xml"
+    monkeypatch.setenv("N2R_TEST_GAIN", "1")
+    saved = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-save-baseline", str(base),
+                               "--junitxml", str(junit))
+    saved.assert_outcomes(passed=1)
+    properties = {p.get("name"): p.get("value") for p in ET.parse(junit).iter("property")}
+    assert properties.get("n2r_scene") == "point_cloud" and properties.get("n2r_examples") == "8", properties
+    assert {"n2r_metric", "n2r_eps", "n2r_worst_deviation"} <= set(properties), properties
+
+    same = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-compare", str(base))
+    same.assert_outcomes(passed=1)
+    assert same.ret == 0, same.stdout.str()
+
+    monkeypatch.setenv("N2R_TEST_GAIN", "2000")
+    worse = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-compare", str(base))
+    worse.assert_outcomes(passed=1)
+    assert worse.ret == 1, f"the gate let a worse SUT through:\n{worse.stdout.str()}"
+    worse.stdout.fnmatch_lines(["*worse*"])
+
+    monkeypatch.setenv("N2R_TEST_GAIN", "1")
+    retrained = pytester.path / "retrained"
+    shutil.copytree(DATA / "object-sh0", retrained)
+    g = read_ply(ply)
+    tensors = g.tensors()
+    tensors["opacity_logits"] = tensors["opacity_logits"] - 0.5
+    write_ply(retrained / ply.relative_to(DATA / "object-sh0"), type(g)(**tensors))
+    changed = pytester.runpytest(*common, "--n2r-scene", str(retrained / ply.relative_to(DATA / "object-sh0")),
+                                 "--n2r-compare", str(base))
+    assert changed.ret == 1, f"a retrained scene passed the gate:\n{changed.stdout.str()}"
+    changed.stdout.fnmatch_lines(["*changed-scene*"])
