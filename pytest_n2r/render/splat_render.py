@@ -25,6 +25,7 @@ from .._validation import as_unit_rgb, check_array
 from ..errors import InvalidArgument
 from ..geometry import Camera, invert_pose
 from ..splats.gaussians import Gaussians
+from . import splat_composite as c
 from . import splat_kernels as k
 
 __all__ = ["SPLAT_RENDER_VERSION", "SplatRenderer", "SplatSettings"]
@@ -160,14 +161,14 @@ class SplatRenderer:
             clock.lap("bin")
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                k.composite_tiles(tile_start, tile_ids, ordered, sorted_rects, w, s.tile, tiles_x, tile_order,
+                c.composite_tiles(tile_start, tile_ids, ordered, sorted_rects, w, s.tile, tiles_x, tile_order,
                                   s.t_stop, live, trans, acc_rgb, acc_depth, done, finished, background, out_rgb,
                                   out_depth, out_opacity)
             clock.lap("composite")
             start = stop
         if not finished:  # nothing drawn, or every pixel done before the last run
             with parallel_chunksize(_CHUNK):
-                k.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
+                c.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
         clock.lap("finish")
         self.stage_seconds = clock.seconds
         result = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from pytest_n2r.render import splat_composite
 from pytest_n2r.render import splat_kernels as k
 
 
@@ -13,7 +14,7 @@ from pytest_n2r.render import splat_kernels as k
 def _exps(powers):
     out = np.empty_like(powers)
     for i in range(powers.shape[0]):
-        out[i] = k.exp_of_power(powers[i])
+        out[i] = splat_composite.exp_of_power(powers[i])
     return out
 
 

@@ -1,0 +1,164 @@
+"""Compiled CPU compositing (numba) of the splat rasterizer, its last stage (the others:
+:mod:`pytest_n2r.render.splat_kernels`).
+
+:func:`composite_tiles` (parallel over tiles, the busiest first): front-to-back alpha compositing, pixel by
+pixel, with early termination; each pixel's state (transmittance, colour, depth) carries over between runs,
+so compositing a long list in several runs gives the same bits as in one. A tile's records are copied in
+batches of :data:`BATCH` into a contiguous block first: the copy's loads are independent of each other, so
+their cache misses overlap, where the pixel loop would wait for each record in turn. :func:`finish` turns
+the pixel state into the outputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .splat_kernels import _B, _CA, _CB, _CC, _G, _O, _R, _R2, _U, _V, _Z, ALPHA_MAX, ALPHA_MIN
+
+__all__ = ["BATCH", "composite_tiles", "exp_of_power", "finish"]
+
+#: Records a tile copies at a time before compositing them (see :func:`composite_tiles`).
+BATCH = 32
+#: :func:`exp_of_power`'s table: ``exp(-j / _EXP_STEPS)`` for ``0 <= j <= _POWER_MIN_EXP · _EXP_STEPS``.
+_EXP_STEPS = 64
+_POWER_MIN_EXP = 6.0
+_EXP_TABLE = np.exp(-np.arange(int(_POWER_MIN_EXP * _EXP_STEPS) + 1) / _EXP_STEPS)
+
+
+@njit(inline="always")
+def exp_of_power(power):
+    """``exp(power)`` for ``-6 <= power <= 1/128`` (what compositing needs: ``alpha >= ALPHA_MIN`` implies
+    ``power >= ln(ALPHA_MIN) > -5.6``) within 1e-15 relative (a few ulps; measured 6.7e-16): a table of
+    ``exp(-j / 64)`` times a degree-5 Taylor polynomial on the remainder (``|r| <= 1/128``, truncation error
+    below ``1e-16``). Inlined and free of calls, so the compositing loop keeps its values in registers (libm's
+    ``exp`` is a call that spills them)."""
+    x = -power * _EXP_STEPS
+    j = min(max(int(x + 0.5), 0), _EXP_TABLE.shape[0] - 1)  # a rounding's tiny positive power: j = 0
+    r = (j - x) * (1.0 / _EXP_STEPS)
+    return _EXP_TABLE[j] * (1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0))))))
+
+
+@njit(cache=True, parallel=True, fastmath={"contract"})
+def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
+                    acc_rgb, acc_depth, done, final, background, rgb_out, depth_out, opacity_out):
+    """Composite each tile's Gaussians (``tile_ids`` into ``records`` and ``sorted_rects``, depth-ordered) front to
+    back into the pixel state (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``:
+    terminated), updating ``live`` (pixels of the tile not yet done).
+
+    Per pixel and Gaussian (3DGS reference): ``alpha = min(ALPHA_MAX, opacity · exp(-½ dᵀ conic d))``,
+    skipped below ``ALPHA_MIN``; if the transmittance after it would fall below ``t_stop`` the pixel is done
+    without it; else it adds ``alpha · T`` times its colour and depth and ``T *= 1 - alpha``. Every pixel of
+    the Gaussian's rectangle inside the tile is visited, except those outside the span of each tile row's
+    pixels not yet done (kept per row: done pixels gather at a row's ends as the surface fills in, and a
+    third of the visits went to them); where the exponent is below ``-r2 / 2`` (``alpha`` below ``ALPHA_MIN``
+    with a margin) the exponential is skipped, which is cheaper than bounding each row by the ellipse (a
+    square root per row). Compiled with floating-point contraction (fused multiply-adds).
+
+    With ``final`` (the last run), each tile's pixels are then finished into the outputs (:func:`finish`) in
+    the same parallel region: one region fewer per frame. Tiles are taken in ``tile_order`` (every tile
+    once; the busiest first, so that no thread is left with a long tile at the end).
+    """
+    n_tiles = live.shape[0]
+    height = trans.shape[0] // width
+    n_fields = records.shape[1]
+    for i in prange(n_tiles):
+        t = tile_order[i]
+        s, e = tile_start[t], tile_start[t + 1]
+        tx0 = (t % tiles_x) * tile
+        ty0 = (t // tiles_x) * tile
+        tx1 = min(tx0 + tile, width)
+        ty1 = min(ty0 + tile, height)
+        if live[t] == 0:
+            e = s
+        left = live[t]
+        # per row of the tile, the pixels lo <= x < hi hold every pixel not yet done
+        lo = np.empty(ty1 - ty0, np.int64)
+        hi = np.empty(ty1 - ty0, np.int64)
+        for py in range(ty0, ty1):
+            lo[py - ty0], hi[py - ty0] = tx0, tx1
+            _shrink_span(done, py * width, py - ty0, lo, hi)
+        batch = np.empty((BATCH, n_fields))
+        spans = np.empty((BATCH, 4), np.int64)
+        for k in range(s, e):
+            if (k - s) % BATCH == 0:
+                for b in range(min(BATCH, e - k)):
+                    j = tile_ids[k + b]
+                    for f in range(n_fields):
+                        batch[b, f] = records[j, f]
+                    for f in range(4):
+                        spans[b, f] = sorted_rects[j, f]
+            rec = batch[(k - s) % BATCH]
+            span = spans[(k - s) % BATCH]
+            gx0, gx1 = max(span[0], tx0), min(span[1], tx1)
+            gy0, gy1 = max(span[2], ty0), min(span[3], ty1)
+            u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
+            r, gr, bl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
+            # alpha can reach ALPHA_MIN only where ca dx² + 2 cb dx dy + cc dy² <= r2, i.e. power >= -r2 / 2;
+            # r2 is widened, so rounding never skips a pixel the exact test would keep
+            power_min = -0.5 * rec[_R2]
+            for py in range(gy0, gy1):
+                dy = v - py
+                row = py * width
+                for px in range(max(gx0, lo[py - ty0]), min(gx1, hi[py - ty0])):
+                    p = row + px
+                    if done[p]:
+                        continue
+                    dx = u - px
+                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                    if power < power_min:
+                        continue
+                    alpha = min(ALPHA_MAX, o * exp_of_power(power))
+                    if alpha < ALPHA_MIN:
+                        continue
+                    tp = trans[p]
+                    after = tp * (1.0 - alpha)
+                    if after < t_stop:
+                        done[p] = 1
+                        left -= 1
+                        _shrink_span(done, row, py - ty0, lo, hi)
+                        continue
+                    w = alpha * tp
+                    acc_rgb[p, 0] += w * r
+                    acc_rgb[p, 1] += w * gr
+                    acc_rgb[p, 2] += w * bl
+                    acc_depth[p] += w * z
+                    trans[p] = after
+            if left == 0:
+                break
+        live[t] = left
+        if final:
+            for py in range(ty0, ty1):
+                for p in range(py * width + tx0, py * width + tx1):
+                    _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+
+
+@njit(inline="always")
+def _shrink_span(done, row, r, lo, hi):
+    """Move the ends of row ``r``'s span ``lo[r] <= x < hi[r]`` (pixel ``row + x``) past the done pixels there."""
+    x0, x1 = lo[r], hi[r]
+    while x0 < x1 and done[row + x0]:
+        x0 += 1
+    while x1 > x0 and done[row + x1 - 1]:
+        x1 -= 1
+    lo[r], hi[r] = x0, x1
+
+
+@njit(cache=True, parallel=True)
+def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
+    """Pixel state → ``rgb`` uint8 (over ``background``, rounded half to even like ``np.rint``), ``depth``
+    (the weighted mean z-depth; 0 where nothing contributed) and ``opacity`` (``1 - T``), flat over pixels."""
+    for p in prange(trans.shape[0]):
+        _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+
+
+@njit(inline="always")
+def _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
+    """:func:`finish` of pixel ``p``."""
+    tp = trans[p]
+    for ch in range(3):
+        value = acc_rgb[p, ch] + tp * background[ch]
+        rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
+    weight = 1.0 - tp
+    depth_out[p] = acc_depth[p] / weight if weight > 0.0 else 0.0
+    opacity_out[p] = weight
