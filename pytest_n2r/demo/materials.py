@@ -89,8 +89,8 @@ class Poster(Material):
 class Blend(Material):
     """``mask * top + (1 - mask) * bottom`` with ``mask(a, b)`` in ``[0, 1]`` (e.g. marine growth on stone).
 
-    ``mask`` takes numpy arrays here and floats in the compiled renderer (:mod:`.raycast` compiles it): write
-    it with numpy ufuncs, ``math`` and compiled helpers only.
+    ``mask`` takes numpy arrays here and floats in the compiled renderer (:mod:`.mask_kernel` compiles it,
+    with its sines and cosines inlined): write it with numpy ufuncs, ``math`` and compiled helpers only.
     """
 
     bottom: Material

@@ -17,6 +17,9 @@ What makes it fast (measured in ``docs/performance.md``):
   a ray tests only what may lie under its pixel.
 - The hot helpers are inlined and receive views of the kernel's arrays without reference counts
   (:func:`_borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
+- No sine goes to the C library: a relief's waves take theirs in one vectorized loop (:func:`_relief`), and
+  the blend masks run once per pixel row over all its sub-rays, each a vectorized loop (:mod:`.mask_kernel`),
+  both with :mod:`.trig`'s inlined polynomials.
 
 Threads take every n-th image row, and each pixel depends only on its own row: results do not depend on
 the thread count.
@@ -26,7 +29,8 @@ Convention
 - Rays, hits and surface coordinates as in :mod:`.primitives`; colours as in :mod:`.exact` (the mean of
   ``supersample²`` rays per pixel, rows of sub-pixel offsets outer, columns inner).
 - A :class:`~.materials.Blend` mask is a function of scalars ``(a, b)`` written with numpy ufuncs, so the
-  same function serves numpy arrays and the compiled kernel (which calls it through a compiled copy).
+  same function serves numpy arrays and the compiled kernel (which calls a compiled batch copy of it, see
+  :mod:`.mask_kernel`).
 """
 
 from __future__ import annotations
@@ -41,14 +45,16 @@ from typing import Any
 import numba
 import numpy as np
 from numba import njit
-from numba.core.errors import NumbaError, NumbaExperimentalFeatureWarning
+from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
 from numba.np.arrayobj import populate_array
 
 from ..errors import InvalidArgument
+from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
 from .textures import Texture
+from .trig import sincos
 
 __all__ = ["CompiledScene", "compile_scene"]
 
@@ -57,13 +63,6 @@ _DISC, _BOX, _CYLINDER, _RELIEF = 0, 1, 2, 3
 # material kinds
 _FLAT, _TEXTURED, _POSTER, _BLEND, _RADIAL = 0, 1, 2, 3, 4
 _F0, _F1 = np.float32(0.0), np.float32(1.0)
-_MASK_SIGNATURE = "float64(float64, float64)"
-_compiled_masks: dict[Any, Any] = {}
-
-
-@njit(_MASK_SIGNATURE, cache=True)
-def _no_mask(a, b):  # pragma: no cover - compiled; only pads an empty tuple of masks (never called)
-    return 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,7 +100,8 @@ class CompiledScene:
         t = np.empty(len(o))
         which = np.empty(len(o), dtype=np.int64)
         everywhere = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(self.cull_boxes), 1))
-        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, everywhere, t, which)
+        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, np.empty(_LANES), everywhere,
+                   t, which)
         return t, which
 
     def render(self, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float, height: int, width: int,
@@ -121,7 +121,9 @@ class CompiledScene:
                 self.background, rgb, depth, opacity)
         threads = min(numba.get_num_threads(), height)
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
-        scratch = [(np.empty((3, *rays)), np.empty((2, *rays), dtype=np.int64)) for _ in range(threads)]
+        samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
+        scratch = [(np.empty((3, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
+                    np.empty((2, samples), dtype=np.int64), np.empty(_LANES)) for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
             if threads <= 1:
@@ -173,15 +175,7 @@ class _Builder:
         return self.textures[id(tex)]
 
     def mask(self, fn: Any) -> int:
-        compiled = _compiled_masks.get(fn)
-        if compiled is None:
-            try:
-                compiled = _compiled_masks[fn] = njit(_MASK_SIGNATURE, cache=True)(fn)
-            except NumbaError as exc:
-                raise InvalidArgument(
-                    f"Blend mask {getattr(fn, '__name__', fn)!r} cannot be compiled ({type(exc).__name__}); a "
-                    "mask must be a plain function of two floats written with numpy ufuncs and math") from None
-        self.masks.append(compiled)
+        self.masks.append(compile_mask(fn))
         return len(self.masks) - 1
 
     def material(self, mat: Material, top: bool = True) -> int:
@@ -331,7 +325,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
         bounds.extend(_bounds(prim) for prim in children)
     tex_meta, texels = b.texture_tables()
-    masks = tuple(b.masks) or (_no_mask,)
+    masks = tuple(b.masks) or (no_mask,)
     return CompiledScene(
         groups=np.asarray(groups, np.int64), group_box=np.asarray(boxes, np.float64),
         kinds=np.asarray(kinds, np.int64), prims=np.asarray(prims, np.float64),
@@ -387,26 +381,44 @@ def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
     return t_near, t_far
 
 
+#: Waves evaluated at once by :func:`_relief`; its ``lanes`` buffer holds 6 of this many float64.
+_WAVE_CHUNK = 4
+_LANES = 6 * _WAVE_CHUNK
+
+
 @njit(cache=True, error_model="numpy")
-def _relief(waves, first, count, depth, x, z):
-    """``h``, ``dh/dx``, ``dh/dz`` of a relief at ``(x, z)``, in float32 like :meth:`ReliefWall.height_and_gradient`."""
+def _relief(waves, lanes, first, count, depth, x, z):
+    """``h``, ``dh/dx``, ``dh/dz`` of a relief at ``(x, z)``, in float32 like :meth:`ReliefWall.height_and_gradient`.
+
+    The sines and cosines of up to :data:`_WAVE_CHUNK` waves' two phases are taken in one loop over the
+    ``lanes`` buffer (float64, :data:`_LANES` long, the caller's), which LLVM vectorizes (:func:`.trig.sincos`);
+    each is rounded to float32, NumPy's float32 result but in rare ties (see :mod:`.trig`)."""
     x32, z32 = np.float32(x), np.float32(z)
     h = np.float32(0.5)
     gx = np.float32(0.0)
     gz = np.float32(0.0)
-    for k in range(first, first + count):
-        amp, fx, px, fz, pz = waves[k, 0], waves[k, 1], waves[k, 2], waves[k, 3], waves[k, 4]
-        ax = fx * x32 + px
-        az = fz * z32 + pz
-        sx, cx, sz, cz = math.sin(ax), math.cos(ax), math.sin(az), math.cos(az)
-        h += amp * sx * sz
-        gx += amp * fx * cx * sz
-        gz += amp * fz * sx * cz
+    n = _WAVE_CHUNK
+    for start in range(first, first + count, n):
+        used = min(n, first + count - start)
+        for lane in range(n):  # phases of x, then of z; the unused lanes repeat the last wave
+            k = start + min(lane, used - 1)
+            lanes[lane] = np.float64(waves[k, 1] * x32 + waves[k, 2])
+            lanes[n + lane] = np.float64(waves[k, 3] * z32 + waves[k, 4])
+        for lane in range(2 * n):
+            lanes[2 * n + lane], lanes[4 * n + lane] = sincos(lanes[lane])
+        for lane in range(used):
+            k = start + lane
+            amp, fx, fz = waves[k, 0], waves[k, 1], waves[k, 3]
+            sx, sz = np.float32(lanes[2 * n + lane]), np.float32(lanes[3 * n + lane])
+            cx, cz = np.float32(lanes[4 * n + lane]), np.float32(lanes[5 * n + lane])
+            h += amp * sx * sz
+            gx += amp * fx * cx * sz
+            gz += amp * fz * sx * cz
     return depth * np.float64(h), depth * np.float64(gx), depth * np.float64(gz)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
+def _relief_hit(prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, guess):
     """First hit ``t`` of a :class:`ReliefWall` (``inf`` on a miss), with ``dh/dx``, ``dh/dz`` there when the
     root search ended on an evaluation at ``t`` (``have``), so the normal needs no second one.
 
@@ -432,7 +444,7 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
         t = guess if (guess > a and guess < b) else 0.5 * (a + b)
         short = _GRADIENT_TOLERANCE / (curvature * across + 1e-300)
         for _ in range(newton):
-            h, gx, gz = _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)
+            h, gx, gz = _relief(waves, lanes, first, count, depth, ox + t * dx, oz + t * dz)
             f = oy + t * dy - y0 + h
             if abs(f) <= 1e-7:
                 have = True
@@ -451,7 +463,7 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
             else:
                 t = 0.5 * (a + b)
     else:
-        t = _relief_march(waves, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections)
+        t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections)
     px, pz = ox + t * dx, oz + t * dz
     if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
         return t, gx, gz, have
@@ -459,17 +471,17 @@ def _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess):
 
 
 @njit(cache=True, error_model="numpy")
-def _relief_march(waves, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections):
+def _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections):
     """The first root of a grazing ray's residual in ``[lo, hi]`` (which may not be monotonic there): march
     ``steps`` samples to the first sign change, then bisect ``bisections`` times; ``inf`` if there is none.
     Apart from the Newton search so that only the common case is inlined into the kernel."""
     t_prev = lo
-    found = oy + lo * dy - (y0 - _relief(waves, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
+    found = oy + lo * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
     a = b = lo
     if not found:
         for s in range(1, steps + 1):
             t = lo + (hi - lo) * (s / steps)
-            if oy + t * dy - (y0 - _relief(waves, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
+            if oy + t * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
                 a, b, found = t_prev, t, True
                 break
             t_prev = t
@@ -477,7 +489,7 @@ def _relief_march(waves, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi
         return math.inf
     for _ in range(bisections):
         m = 0.5 * (a + b)
-        if oy + m * dy - (y0 - _relief(waves, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
+        if oy + m * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
             b = m
         else:
             a = m
@@ -516,11 +528,11 @@ def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
+def _hit(kind, prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
     """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there (see
     :func:`_relief_hit`)."""
     if kind == _RELIEF:
-        return _relief_hit(prims, row, waves, ox, oy, oz, dx, dy, dz, guess)
+        return _relief_hit(prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, guess)
     t = math.inf
     if kind == _DISC:
         t = (prims[row, 0] - oz) / dz
@@ -538,7 +550,7 @@ def _hit(kind, prims, row, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _cast(groups, group_box, kinds, prims, waves, rects, u, v, ox, oy, oz, dx, dy, dz, guess):
+def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz, dx, dy, dz, guess):
     """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of a ray over all groups (``t = inf`` and primitive
     0 on a miss; the gradient as :func:`_relief_hit` gives it). ``u, v``: the ray's pixel coordinates; groups
     and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
@@ -557,21 +569,21 @@ def _cast(groups, group_box, kinds, prims, waves, rects, u, v, ox, oy, oz, dx, d
             r = n_groups + k
             if u < rects[r, 0] or u > rects[r, 1] or v < rects[r, 2] or v > rects[r, 3]:
                 continue
-            t, gx, gz, have = _hit(kinds[k], prims, k, waves, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
+            t, gx, gz, have = _hit(kinds[k], prims, k, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
                 best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
     return best, which, best_gx, best_gz, best_have
 
 
 @njit(cache=True, error_model="numpy")
-def _cast_rays(o, d, groups, group_box, kinds, prims, waves, rects, t_out, which_out):
+def _cast_rays(o, d, groups, group_box, kinds, prims, waves, lanes, rects, t_out, which_out):
     for r in range(o.shape[0]):  # serial: used for small batches, and a parallel loop compiles slowly
-        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, rects, 0.0, 0.0, o[r, 0],
-                                                o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], math.nan)
+        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, lanes, rects, 0.0, 0.0,
+                                                o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], math.nan)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
+def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
     :meth:`Primitive.surface`); a relief uses the gradient ``gx, gz`` its hit gave when it ``have`` one."""
     if kind == _DISC:
@@ -603,7 +615,7 @@ def _surface(kind, prims, row, waves, x, y, z, gx, gz, have):
         n[j] = q[j] / radius
         return n[0], n[1], n[2], math.atan2(q[j], q[i]) * radius, q[k], 0
     if not have:
-        _, gx, gz = _relief(waves, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
+        _, gx, gz = _relief(waves, lanes, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
     norm = math.sqrt(gx * gx + 1.0 + gz * gz)
     return -gx / norm, -1.0 / norm, -gz / norm, x, -z, 0
 
@@ -719,13 +731,14 @@ def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, 
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _albedo(node, node_kind, node_par, node_child, rings, masks, tex_meta, texels, a, b, fp):
+def _albedo(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp, mask):
     """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB: a blend's
-    two materials mixed by its mask (only the one it shows where the mask is 0 or 1), else the material's own."""
+    two materials mixed by its ``mask`` value there (only the one it shows where the mask is 0 or 1), else the
+    material's own."""
     m = _F0
     bottom, top = node, -1
     if node_kind[node] == _BLEND:
-        m = np.float32(min(max(masks[int(node_par[node, 0])](a, b), 0.0), 1.0))
+        m = np.float32(min(max(mask, 0.0), 1.0))
         bottom, top = node_child[node, 0], node_child[node, 1]
         if m == _F1:  # bottom * 0 + top * 1: exactly the top colour
             bottom, top, m = top, -1, _F0
@@ -781,10 +794,59 @@ def _centre_guess(ts, ks, kinds, n, u, have_rows):
     return total / (n * n)
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, kinds, prims, waves, lanes, prim_mat,
+                    node_kind, node_par, masks, shade, shade_int):
+    """For each sub-ray ``i = row * n * width + j`` of pixel row ``v`` that hit: surface coordinates ``a, b``,
+    footprint, light factor and material node (``shade[0:4, i]``, ``shade_int[0, i]``; node -1 on a miss), then
+    every blend mask over all the sub-rays it covers in one call (``shade[4, i]``; a compiled mask is a
+    vectorized loop over a batch, see :mod:`.mask_kernel`)."""
+    fx, fy, cx, cy = camera[0], camera[1], camera[2], camera[3]
+    ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
+    lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
+    scale_fp = 0.5 * (fx + fy) * n
+    sub = n * width
+    sa, sb, sfp, slight, sm = shade[0], shade[1], shade[2], shade[3], shade[4]
+    batch_a, batch_b, batch_m = shade[5], shade[6], shade[7]
+    nodes, where = shade_int[0], shade_int[1]
+    for sv in range(n):
+        yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
+        for j in range(sub):
+            i = sv * sub + j
+            t, k = ts[sv, j], ks[sv, j]
+            if not math.isfinite(t):
+                nodes[i] = -1
+                continue
+            u = j // n
+            xc = (u + ((j - u * n + 0.5) / n - 0.5) - cx) / fx
+            dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+            dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+            dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
+            x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
+            nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, lanes, x, y, z, gxs[sv, j], gzs[sv, j],
+                                              haves[sv, j])
+            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+            cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
+            sa[i], sb[i], sfp[i] = a, b, t / scale_fp / max(cos, 0.2)
+            slight[i] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
+            nodes[i] = prim_mat[k, face]
+    for mask in range(len(masks)):
+        count = 0
+        for i in range(n * sub):
+            node = nodes[i]
+            if node >= 0 and node_kind[node] == _BLEND and int(node_par[node, 0]) == mask:
+                batch_a[count], batch_b[count], where[count] = sa[i], sb[i], i
+                count += 1
+        if count:
+            masks[mask](batch_a, batch_b, batch_m, count)
+            for c in range(count):
+                sm[where[c]] = batch_m[c]
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _render_kernel(first, step, scratch, scratch_int, c2w, camera, n, rects, groups, group_box, kinds, prims, waves,
-                   prim_mat, node_kind, node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb,
-                   depth, opacity):
+def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c2w, camera, n, rects, groups, group_box,
+                   kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings, masks, tex_meta, texels,
+                   shading, background, rgb, depth, opacity):
     """Rows ``first, first + step, ...`` of the image. Per pixel row: the ``n`` sub-rows of supersampling rays
     are cast first (a relief's root searched from a guess of the roots beside and above), then the depth rays
     through the pixel centres (from the mean of the pixel's sub-ray roots), then each pixel is shaded."""
@@ -798,14 +860,17 @@ def _render_kernel(first, step, scratch, scratch_int, c2w, camera, n, rects, gro
     want_colour = rgb.shape[0] > 0
     want_hits = want_colour or opacity.shape[0] > 0
     ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
-    lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
-    scale_fp = 0.5 * (fx + fy) * n
     inv_count = np.float32(n * n)
     sub = n * width
     # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
     # and the primitive hit, whether the gradient is the hit's (in the caller's buffers: see _borrowed)
     ts, gxs, gzs = _borrowed(scratch[0]), _borrowed(scratch[1]), _borrowed(scratch[2])
     ks, haves = _borrowed(scratch_int[0]), _borrowed(scratch_int[1])
+    # each sub-ray's surface coordinates, footprint, light, material and mask value (see _shading_inputs)
+    sa, sb, sfp, slight, sm = (_borrowed(shade[0]), _borrowed(shade[1]), _borrowed(shade[2]), _borrowed(shade[3]),
+                               _borrowed(shade[4]))
+    nodes = _borrowed(shade_int[0])
+    lanes = _borrowed(lanes)
     for v in range(first, height, step):
         for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
             centre = row == n
@@ -826,40 +891,31 @@ def _render_kernel(first, step, scratch, scratch_int, c2w, camera, n, rects, gro
                 dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
                 dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
                 ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
-                    groups, group_box, kinds, prims, waves, rects, us, vs, ox, oy, oz, dx, dy, dz, guess)
+                    groups, group_box, kinds, prims, waves, lanes, rects, us, vs, ox, oy, oz, dx, dy, dz, guess)
             if centre:
                 for u in range(width):
                     depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
         if not want_hits:
             continue
+        if want_colour:
+            _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, kinds, prims, waves, lanes,
+                            prim_mat, node_kind, node_par, masks, shade, shade_int)
         for u in range(width):
             hits = 0
             acc_r, acc_g, acc_b = _F0, _F0, _F0
             for sv in range(n):
-                yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
                 for su in range(n):
                     j = u * n + su
-                    t, k = ts[sv, j], ks[sv, j]
-                    if not math.isfinite(t):
+                    if not math.isfinite(ts[sv, j]):
                         cr, cg, cb = background[0], background[1], background[2]
                     else:
                         hits += 1
                         if not want_colour:
                             continue
-                        xc = (u + ((su + 0.5) / n - 0.5) - cx) / fx
-                        dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
-                        dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
-                        dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                        x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
-                        nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, x, y, z, gxs[sv, j], gzs[sv, j],
-                                                          haves[sv, j])
-                        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-                        cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
-                        fp = t / scale_fp / max(cos, 0.2)
-                        cr, cg, cb = _albedo(prim_mat[k, face], node_kind, node_par, node_child, rings, masks,
-                                             tex_meta, texels, a, b, fp)
-                        lambert = min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
-                        light = np.float32(ambient + (1.0 - ambient) * lambert)
+                        i = sv * sub + j
+                        cr, cg, cb = _albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, texels,
+                                             sa[i], sb[i], sfp[i], sm[i])
+                        light = np.float32(slight[i])
                         cr, cg, cb = cr * light, cg * light, cb * light
                     acc_r += cr
                     acc_g += cg

@@ -55,9 +55,10 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = Z_UP) -> np.nd
     return c2w
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _smoothstep(lo: float, hi: float, x: np.ndarray) -> np.ndarray:
-    """Smooth 0 → 1 between ``lo`` and ``hi`` (numpy ufuncs only: masks also run compiled, on floats)."""
+    """Smooth 0 → 1 between ``lo`` and ``hi`` (numpy ufuncs only: masks also run compiled, on floats; no
+    zero-division check, ``lo < hi``, so that a loop over compiled masks vectorizes)."""
     s = np.minimum(np.maximum((x - lo) / (hi - lo), 0.0), 1.0)
     return s * s * (3 - 2 * s)
 
