@@ -50,6 +50,7 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import populate_array
 
 from ..errors import InvalidArgument
+from .albedo_kernel import BLEND, F0, FLAT, POSTER, RADIAL, TEXTURED, albedo
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
@@ -60,9 +61,6 @@ __all__ = ["CompiledScene", "compile_scene"]
 
 # primitive kinds
 _DISC, _BOX, _CYLINDER, _RELIEF = 0, 1, 2, 3
-# material kinds
-_FLAT, _TEXTURED, _POSTER, _BLEND, _RADIAL = 0, 1, 2, 3, 4
-_F0, _F1 = np.float32(0.0), np.float32(1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,24 +183,24 @@ class _Builder:
         par: list[float] = [0.0] * 6
         child = (-1, -1)
         if isinstance(mat, Flat):
-            kind = _FLAT
+            kind = FLAT
             par[:3] = [float(np.float32(c)) for c in mat.colour]
         elif isinstance(mat, Textured):
-            kind = _TEXTURED
+            kind = TEXTURED
             par[:4] = [self.texture(mat.texture), mat.texels_per_unit, *mat.offset]
         elif isinstance(mat, Poster):
-            kind = _POSTER
+            kind = POSTER
             par[:5] = [self.texture(mat.picture), *mat.rect]
             child = (self.material(mat.base, top=False), -1)
         elif isinstance(mat, Blend):
             if not top:
                 raise InvalidArgument("a Blend material must be a surface's own material, not inside another one "
                                       "(the compiled renderer blends once per hit)")
-            kind = _BLEND
+            kind = BLEND
             par[0] = self.mask(mat.mask)
             child = (self.material(mat.bottom, top=False), self.material(mat.top, top=False))
         elif isinstance(mat, Radial):
-            kind = _RADIAL
+            kind = RADIAL
             rings = sorted(zip(mat.radii, mat.colours), reverse=True)  # as Radial.albedo: the last match wins
             par[:2] = [len(self.rings), len(rings)]
             self.rings.extend((r, *(float(np.float32(c)) for c in colour)) for r, colour in rings)
@@ -620,143 +618,6 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
     return -gx / norm, -1.0 / norm, -gz / norm, x, -z, 0
 
 
-# -- materials and textures ----------------------------------------------------------------------------------
-
-
-@njit(cache=True, error_model="numpy")
-def _reflect(p, n):
-    """OpenCV's ``borderInterpolate`` for ``BORDER_REFLECT`` (``fedcba|abcdefgh|hgfedcb``)."""
-    if n == 1:
-        return 0
-    while p < 0 or p >= n:
-        p = -p - 1 if p < 0 else n - 1 - (p - n)
-    return p
-
-
-@njit(cache=True, error_model="numpy")
-def _mirror_period(x, period):
-    """``x mod period`` in ``[0, period]`` like ``np.mod`` (whose float ``fmod`` is several times slower)."""
-    r = x - period * math.floor(x / period)
-    return r + period if r < 0 else (r - period if r > period else r)
-
-
-@njit(cache=True, error_model="numpy")
-def _fma32(a, b, c):
-    """``a * b + c`` rounded once to float32, as the fused multiply-add of OpenCV's vector code (the float32
-    product is exact in float64)."""
-    return np.float32(np.float64(a) * np.float64(b) + np.float64(c))
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _bilinear(tex_meta, texels, tex, level, s, t):
-    """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
-    level-0 texel coordinates."""
-    offset, h, w = tex_meta[tex, level, 0], tex_meta[tex, level, 1], tex_meta[tex, level, 2]
-    scale = 1.0 / (1 << level)
-    s = (s + 0.5) * scale - 0.5
-    t = (t + 0.5) * scale - 0.5
-    clamp = tex_meta[tex, 0, 3] == 1
-    if clamp:
-        s, t = min(max(s, -1.0), float(w)), min(max(t, -1.0), float(h))
-    else:
-        s, t = _mirror_period(s, 2.0 * w), _mirror_period(t, 2.0 * h)
-    s32, t32 = np.float32(s), np.float32(t)
-    x0 = int(np.float64(s32) + 1.0) - 1  # floor: both are >= -1 here, and +1 is exact in float64
-    y0 = int(np.float64(t32) + 1.0) - 1
-    alpha, beta = s32 - np.float32(x0), t32 - np.float32(y0)
-    x1, y1 = x0 + 1, y0 + 1
-    if clamp:
-        x0, x1 = min(max(x0, 0), w - 1), min(max(x1, 0), w - 1)
-        y0, y1 = min(max(y0, 0), h - 1), min(max(y1, 0), h - 1)
-    else:
-        x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
-    r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
-    r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
-    return (_lerp2(texels[r00], texels[r01], texels[r10], texels[r11], alpha, beta),
-            _lerp2(texels[r00 + 1], texels[r01 + 1], texels[r10 + 1], texels[r11 + 1], alpha, beta),
-            _lerp2(texels[r00 + 2], texels[r01 + 2], texels[r10 + 2], texels[r11 + 2], alpha, beta))
-
-
-@njit(cache=True, error_model="numpy")
-def _lerp2(p00, p01, p10, p11, alpha, beta):
-    """One channel of the bilinear blend of four texels."""
-    v0 = _fma32(alpha, p01 - p00, p00)
-    v1 = _fma32(alpha, p11 - p10, p10)
-    return _fma32(beta, v1 - v0, v0)
-
-
-@njit(cache=True, error_model="numpy")
-def _sample(tex_meta, texels, tex, s, t, footprint):
-    """Trilinear mip-mapped colour at texel coordinates ``(s, t)`` (see :meth:`Texture.sample`)."""
-    n_levels = tex_meta[tex, 1, 3]
-    lod = min(math.log2(max(footprint, 1.0)), n_levels - 1)
-    lo = math.floor(lod)
-    r, g, b = _bilinear(tex_meta, texels, tex, lo, s, t)
-    f = np.float32(lod - lo)
-    if lo + 1 < n_levels and f != _F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
-        r2, g2, b2 = _bilinear(tex_meta, texels, tex, lo + 1, s, t)
-        r, g, b = r * (_F1 - f) + r2 * f, g * (_F1 - f) + g2 * f, b * (_F1 - f) + b2 * f
-    return r, g, b
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp):
-    """Albedo of a material without a blend (Flat, Textured, Poster, Radial), float32 RGB."""
-    while True:
-        kind = node_kind[node]
-        if kind == _FLAT:
-            return np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2])
-        if kind == _TEXTURED:
-            k = node_par[node, 1]
-            return _sample(tex_meta, texels, int(node_par[node, 0]), (a - node_par[node, 2]) * k,
-                           (b - node_par[node, 3]) * k, fp * k)
-        if kind == _POSTER:
-            a0, b0, a1, b1 = node_par[node, 1], node_par[node, 2], node_par[node, 3], node_par[node, 4]
-            if a >= a0 and a <= a1 and b >= b0 and b <= b1:
-                tex = int(node_par[node, 0])
-                h, w = tex_meta[tex, 0, 1], tex_meta[tex, 0, 2]
-                k = w / (a1 - a0)
-                return _sample(tex_meta, texels, tex, (a - a0) * k - 0.5, (b - b0) * (h / (b1 - b0)) - 0.5, fp * k)
-            node = node_child[node, 0]
-            continue
-        # radial: the smallest ring that holds the point, else the outer material
-        r = math.hypot(a, b)
-        ring = -1
-        for i in range(int(node_par[node, 0]), int(node_par[node, 0]) + int(node_par[node, 1])):
-            if r <= rings[i, 0]:
-                ring = i
-        if ring >= 0:
-            return np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3])
-        node = node_child[node, 0]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _albedo(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp, mask):
-    """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB: a blend's
-    two materials mixed by its ``mask`` value there (only the one it shows where the mask is 0 or 1), else the
-    material's own."""
-    m = _F0
-    bottom, top = node, -1
-    if node_kind[node] == _BLEND:
-        m = np.float32(min(max(mask, 0.0), 1.0))
-        bottom, top = node_child[node, 0], node_child[node, 1]
-        if m == _F1:  # bottom * 0 + top * 1: exactly the top colour
-            bottom, top, m = top, -1, _F0
-        elif m == _F0:  # exactly the bottom colour
-            top = -1
-    r, g, b_ = _F0, _F0, _F0
-    for leaf in (bottom, top):  # one call site: the leaf's code is inlined once
-        if leaf < 0:
-            break
-        lr, lg, lb = _leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-        if leaf == bottom:
-            r, g, b_ = lr, lg, lb
-        else:
-            keep = _F1 - m
-            r, g, b_ = r * keep + lr * m, g * keep + lg * m, b_ * keep + lb * m
-    return r, g, b_
-
-
 # -- the image kernel ----------------------------------------------------------------------------------------
 
 
@@ -834,7 +695,7 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, 
         count = 0
         for i in range(n * sub):
             node = nodes[i]
-            if node >= 0 and node_kind[node] == _BLEND and int(node_par[node, 0]) == mask:
+            if node >= 0 and node_kind[node] == BLEND and int(node_par[node, 0]) == mask:
                 batch_a[count], batch_b[count], where[count] = sa[i], sb[i], i
                 count += 1
         if count:
@@ -902,7 +763,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
                             prim_mat, node_kind, node_par, masks, shade, shade_int)
         for u in range(width):
             hits = 0
-            acc_r, acc_g, acc_b = _F0, _F0, _F0
+            acc_r, acc_g, acc_b = F0, F0, F0
             for sv in range(n):
                 for su in range(n):
                     j = u * n + su
@@ -913,7 +774,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
                         if not want_colour:
                             continue
                         i = sv * sub + j
-                        cr, cg, cb = _albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, texels,
+                        cr, cg, cb = albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, texels,
                                              sa[i], sb[i], sfp[i], sm[i])
                         light = np.float32(slight[i])
                         cr, cg, cb = cr * light, cg * light, cb * light
@@ -925,4 +786,4 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
             if want_colour:
                 for c, value in ((0, acc_r), (1, acc_g), (2, acc_b)):
                     level = np.rint(value / inv_count * np.float32(255.0))
-                    rgb[v, u, c] = np.uint8(min(max(level, _F0), np.float32(255.0)))
+                    rgb[v, u, c] = np.uint8(min(max(level, F0), np.float32(255.0)))

@@ -13,9 +13,9 @@ Convention
   rounded to float32, NumPy's float32 result to one float32 unit (``tests/demo/test_trig.py``).
 - Beyond ``1e5`` the reduction loses digits: callers keep to the stated range.
 
->>> import numpy as np
+>>> import math
 >>> s, c = sincos(1.0)
->>> abs(s - np.sin(1.0)) <= 2.3e-16, abs(c - np.cos(1.0)) <= 2.3e-16
+>>> abs(s - math.sin(1.0)) <= 2.3e-16, abs(c - math.cos(1.0)) <= 2.3e-16
 (True, True)
 """
 

@@ -9,9 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
+from pytest_n2r.demo.albedo_kernel import bilinear
 from pytest_n2r.demo.exact import GroundTruthScene
 from pytest_n2r.demo.materials import Blend, Flat, Material, Poster
-from pytest_n2r.demo.raycast import _bilinear, _Builder
+from pytest_n2r.demo.raycast import _Builder
 from pytest_n2r.demo.textures import Texture
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import camera_rays
@@ -79,7 +80,7 @@ def test_texture_lookups_equal_opencv_remap_bit_for_bit(wrap):
     s, t = rng.uniform(-900, 1700, 3000), rng.uniform(-900, 1700, 3000)
     for level in range(3):
         want = texture._bilinear(level, s, t)
-        got = np.array([_bilinear(meta, texels, index, level, a, b) for a, b in zip(s, t)], np.float32)
+        got = np.array([bilinear(meta, texels, index, level, a, b) for a, b in zip(s, t)], np.float32)
         np.testing.assert_array_equal(got, want, err_msg=f"{wrap} level {level}")
 
 
