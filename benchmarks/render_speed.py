@@ -1,25 +1,35 @@
 """Render speed of a fitted scene, and run time against error for every render knob.
 
-Run: ``python benchmarks/render_speed.py [SCENE.n2r]`` (default: the fox scene that
-``benchmarks/field_fit.py`` writes). Prints
+Run: ``python benchmarks/render_speed.py [SCENE]`` with ``SCENE`` a ``.n2r`` file (default: the fox scene that
+``benchmarks/field_fit.py`` writes) or ``demo:NAME``, the fitted twin of demo scene ``NAME``, whose held-out
+views are compared against the exact scene's renders instead of photos (a field not fitted on the fox).
+``--sizes`` (default ``480x270,960x540,1920x1080``), ``--views`` (held-out views compared, default 3),
+``--threads`` (default 2) and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prints
 
-1. frames/s at 480×270, 960×540 and 1920×1080 pixels (portrait captures: the same pixel counts, turned),
-   RGB only, RGB + depth + opacity, and RGB with the two fastest settings the sweep prices (half the size
-   upsampled, ``scale=0.5``; and that with twice the sample spacing);
-2. a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing, the opacity below which
-   cells are skipped, early ray termination, and render resolution — with frames/s at 480×270 and the PSNR
-   of each variant against the best-quality render (finest spacing, no skipping, no termination) and against
-   the real held-out photos. The default is marked.
+1. at each size (portrait captures: the same pixel counts, turned), RGB only: seconds and frames/s (wall
+   clock, best of 3 after a warm-up), CPU milliseconds a frame (all threads; the ratio that stays put on a
+   shared machine) and the share of pixels traced, for the defaults, the defaults with every pixel traced
+   (``adaptive=0``: the renderer before adaptive sampling, the same kernel), and the two fastest settings the
+   sweep prices (half the size upsampled, ``scale=0.5``; and that with twice the sample spacing);
+2. at each size, the PSNR of the defaults and of ``adaptive=0`` against the held-out photos (or the exact
+   scene), mean over the views, and of the defaults against ``adaptive=0``;
+3. at the first size, a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing,
+   the opacity below which cells are skipped, early ray termination, adaptive sampling's tolerance and
+   render resolution — with frames/s and the PSNR of each variant against the best-quality render (finest
+   spacing, no skipping, no termination, every pixel traced) and against the photos. The default is marked.
 
-Times are the best of 3 renders after a warm-up, torch/numba on 2 threads. Results: docs/performance.md.
+Results: docs/performance.md.
 """
 
 from __future__ import annotations
 
+import argparse
 import functools
 import sys
+import time
 
 import cv2
+import numba
 import numpy as np
 import torch
 from _timing import best_seconds
@@ -29,7 +39,8 @@ from pytest_n2r.render.field_render import RenderSettings
 from pytest_n2r.scene import load_scene
 
 DEFAULT = RenderSettings()
-BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0)
+EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
+BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
 
@@ -40,52 +51,106 @@ def sized(camera, pixels: int):
     return camera.resized(round(camera.width * scale), round(camera.height * scale))
 
 
+def load(spec: str, n_views: int):
+    """``(scene, views, truth)``: the fitted scene, its held-out views, and ``truth(view, camera)`` → the
+    reference RGB (the photo resized, or the exact demo scene's render)."""
+    if spec.startswith("demo:"):
+        from pytest_n2r.demo import load_demo
+
+        name = spec.removeprefix("demo:").removesuffix("-field")
+        scene, exact = load_demo(name + "-field", device="cpu"), load_demo(name)
+        views = [v for v in scene.views if v.split == "heldout"][:n_views]
+        return scene, views, lambda view, camera: exact.render(view.c2w, camera, ("rgb",)).rgb
+    scene = load_scene(spec, device="cpu")
+    views = [v for v in scene.views if v.split == "heldout" and v.image is not None][:n_views]
+    return scene, views, lambda view, camera: cv2.resize(view.image, (camera.width, camera.height),
+                                                         interpolation=cv2.INTER_AREA)
+
+
+def cpu_ms(fn, repeats: int) -> float:
+    """The least CPU time (all threads) of ``repeats`` calls of ``fn``, in milliseconds."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        fn()
+        best = min(best, time.process_time() - t0)
+    return best * 1e3
+
+
 def main(argv: list[str]) -> int:
-    path = argv[0] if argv else "/tmp/n2r-bench-fox.n2r"
-    torch.set_num_threads(2)
-    scene = load_scene(path, device="cpu")
-    views = [v for v in scene.views if v.split == "heldout" and v.image is not None][:3]
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scene", nargs="?", default="/tmp/n2r-bench-fox.n2r")
+    parser.add_argument("--sizes", default="480x270,960x540,1920x1080")
+    parser.add_argument("--views", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--smoke", action="store_true", help="one tiny size, one view, one timed render")
+    args = parser.parse_args(argv)
+    sizes = [tuple(int(v) for v in s.split("x")) for s in ("96x54" if args.smoke else args.sizes).split(",")]
+    repeats = 1 if args.smoke else 3
+    torch.set_num_threads(args.threads)
+    numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
+    scene, views, truth = load(args.scene, 1 if args.smoke else args.views)
     if not views:
-        print(f"{path}: no held-out view with a stored photo; nothing to compare against")
+        print(f"{args.scene}: no held-out view with a stored photo; nothing to compare against")
         return 1
-    print(f"scene {path}: field {scene.report.get('field')}, fit PSNR {scene.report.get('psnr')} dB\n")
+    print(f"scene {args.scene}: field {scene.field.resolution}³, fit PSNR {scene.report.get('psnr')} dB, "
+          f"{args.threads} threads\n")
+    variants = {"default": scene, "adaptive=0": scene.with_settings(EVERY_PIXEL),
+                "scale=0.5": scene.with_settings(FAST[0]), "scale=0.5, step_ratio=1": scene.with_settings(FAST[1])}
 
-    variants = ((scene, "default", ("rgb",)), (scene, "default", ("rgb", "depth", "opacity")),
-                (scene.with_settings(FAST[0]), "scale=0.5", ("rgb",)),
-                (scene.with_settings(FAST[1]), "scale=0.5, step_ratio=1", ("rgb",)))
-    print(f"{'size':>12} {'outputs':>18} {'settings':>24} {'s/frame':>8} {'frames/s':>9}")
-    for w, h in ((480, 270), (960, 540), (1920, 1080)):
+    print(f"| size | settings | s / frame | frames/s | CPU ms / frame | pixels traced |\n|{' --- |' * 6}")
+    for w, h in sizes:
         camera = sized(views[0].camera, w * h)
-        for variant, label, outputs in variants:
-            s = best_seconds(functools.partial(variant.render, views[0].c2w, camera, outputs))
-            print(f"{camera.width:>5}×{camera.height:<6} {'+'.join(outputs):>18} {label:>24} {s:>8.3f} "
-                  f"{1 / s:>9.2f}")
+        for label, variant in variants.items():
+            render = functools.partial(variant.render, views[0].c2w, camera, ("rgb",))
+            s = best_seconds(render, repeats)
+            ms = cpu_ms(render, repeats)
+            traced = variant._renderer.last_traced / (camera.width * camera.height)
+            print(f"| {camera.width}×{camera.height} | {label} | {s:.3f} | {1 / s:.2f} | {ms:.0f} | {traced:.0%} |")
 
-    small = sized(views[0].camera, 480 * 270)
+    print(f"\nmean over {len(views)} held-out views\n| size | PSNR → truth, default | PSNR → truth, adaptive=0 | "
+          f"difference | PSNR default → adaptive=0 |\n|{' --- |' * 5}")
+    for w, h in sizes:
+        camera = sized(views[0].camera, w * h)
+        refs = [truth(v, camera) for v in views]
+        fast = [scene.render(v.c2w, camera, ("rgb",)).rgb for v in views]
+        full = [variants["adaptive=0"].render(v.c2w, camera, ("rgb",)).rgb for v in views]
+        p_fast = np.mean([psnr(r, i) for r, i in zip(refs, fast)])
+        p_full = np.mean([psnr(r, i) for r, i in zip(refs, full)])
+        to_full = np.mean([psnr(a, b) if not np.array_equal(a, b) else np.inf for a, b in zip(full, fast)])
+        print(f"| {camera.width}×{camera.height} | {p_fast:.2f} dB | {p_full:.2f} dB | {p_fast - p_full:+.3f} dB | "
+              f"{to_full:.1f} dB |")
+
+    small = sized(views[0].camera, sizes[0][0] * sizes[0][1])
     reference = [scene.with_settings(BEST).render(v.c2w, small, ("rgb",)).rgb for v in views]
-    photos = [cv2.resize(v.image, (small.width, small.height), interpolation=cv2.INTER_AREA) for v in views]
+    photos = [truth(v, small) for v in views]
 
     def row(label: str, settings: RenderSettings) -> None:
         variant = scene.with_settings(settings)
         images = [variant.render(v.c2w, small, ("rgb",)).rgb for v in views]
-        s = best_seconds(lambda: variant.render(views[0].c2w, small, ("rgb",)))
+        s = best_seconds(lambda: variant.render(views[0].c2w, small, ("rgb",)), repeats)
         to_best = np.mean([psnr(r, i) if not np.array_equal(r, i) else np.inf for r, i in zip(reference, images)])
         to_photo = np.mean([psnr(p, i) for p, i in zip(photos, images)])
-        mark = "  <- default" if settings == DEFAULT else ""
-        print(f"{label:>38} {1 / s:>9.2f} {to_best:>12.2f} {to_photo:>12.2f}{mark}")
+        mark = " ← default" if settings == DEFAULT else ""
+        print(f"| {label}{mark} | {1 / s:.2f} | {to_best:.1f} dB | {to_photo:.2f} dB |")
 
-    print(f"\nat {small.width}×{small.height}, mean over {len(views)} held-out views")
-    print(f"{'variant':>38} {'frames/s':>9} {'PSNR→best':>12} {'PSNR→photo':>12}")
+    print(f"\nat {small.width}×{small.height}, mean over {len(views)} held-out views\n"
+          f"| variant | frames/s | PSNR → best | PSNR → truth |\n|{' --- |' * 4}")
     row("best quality (reference)", BEST)
-    for step in (0.5, 1.0, 2.0):
-        row(f"step_ratio={step}", DEFAULT.replace(step_ratio=step))
-    for min_alpha in (0.0, 1e-3, 1e-2, 5e-2):
-        row(f"min_alpha={min_alpha:g}", DEFAULT.replace(min_alpha=min_alpha))
-    for t_stop in (0.0, 1e-3, 1e-2, 3e-2, 1e-1):
-        row(f"t_stop={t_stop:g}", DEFAULT.replace(t_stop=t_stop))
-    row("scale=0.75 (render smaller, upsample)", DEFAULT.replace(scale=0.75))
-    row("scale=0.5", FAST[0])
-    row("scale=0.5, step_ratio=1.0", FAST[1])
+    row("defaults", DEFAULT)
+    if not args.smoke:
+        for step in (1.0, 2.0):
+            row(f"step_ratio={step}", DEFAULT.replace(step_ratio=step))
+        for min_alpha in (0.0, 1e-2, 5e-2):
+            row(f"min_alpha={min_alpha:g}", DEFAULT.replace(min_alpha=min_alpha))
+        for t_stop in (0.0, 1e-2, 1e-1):
+            row(f"t_stop={t_stop:g}", DEFAULT.replace(t_stop=t_stop))
+        for tolerance in (0.0, 0.02, 0.08, 0.16):
+            row(f"adaptive={tolerance:g}", DEFAULT.replace(adaptive=tolerance))
+        row("adaptive_stride=4", DEFAULT.replace(adaptive_stride=4))
+        row("scale=0.75 (render smaller, upsample)", DEFAULT.replace(scale=0.75))
+        row("scale=0.5", FAST[0])
+        row("scale=0.5, step_ratio=1.0", FAST[1])
     return 0
 
 

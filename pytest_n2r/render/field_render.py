@@ -26,6 +26,7 @@ from ..field.lattice import grid_coords
 from ..field.march import MarchGrid, march_dense
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera, camera_rays
+from .adaptive import sample_adaptively
 from .field_kernels import render_rays
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
@@ -33,7 +34,7 @@ __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 BACKENDS = ("auto", "compiled", "torch")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 2
+RENDER_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -53,6 +54,12 @@ class RenderSettings:
       (bilinear; depth takes the nearest rendered pixel, so it never invents a depth between a surface and
       what is behind it). A fitted field has no more detail than its grid: on the fox, 0.5 renders 3.6×
       faster for 0.26 dB less PSNR against the real photos (docs/performance.md);
+    - ``adaptive``: adaptive pixel sampling (:mod:`pytest_n2r.render.adaptive`): trace a coarse grid of
+      pixels and interpolate each grid cell whose corners agree within this (colour and opacity in [0, 1];
+      z-depth within ``adaptive_depth`` relatively), tracing the pixels of every other cell; 0 traces every
+      pixel;
+    - ``adaptive_stride``: the spacing of the coarsest grid in pixels (a power of two), ``None``: by image
+      size, the largest power of two not above ``min(width, height) / 135`` (2 at 480×270, 8 at 1920×1080);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
@@ -64,6 +71,9 @@ class RenderSettings:
     t_stop: float = 3e-2
     min_alpha: float = 1e-4
     scale: float = 1.0
+    adaptive: float = 0.04
+    adaptive_depth: float = 0.1
+    adaptive_stride: int | None = None
     chunk_rays: int = 1 << 16
     background: tuple[float, float, float] | None = None
     backend: str = "auto"
@@ -75,6 +85,8 @@ class RenderSettings:
             "t_stop": 0.0 <= self.t_stop < 1.0,
             "min_alpha": 0.0 <= self.min_alpha < 1.0,
             "scale": 0.1 <= self.scale <= 1.0,
+            "adaptive": 0.0 <= self.adaptive <= 1.0,
+            "adaptive_depth": 0.0 <= self.adaptive_depth <= 1.0,
             "chunk_rays": isinstance(self.chunk_rays, int) and self.chunk_rays >= 1,
         }
         for name, ok in checks.items():
@@ -83,6 +95,11 @@ class RenderSettings:
         if self.shell_samples is not None \
                 and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
+        if self.adaptive_stride is not None and not (
+                isinstance(self.adaptive_stride, int) and 1 <= self.adaptive_stride <= 64
+                and self.adaptive_stride & (self.adaptive_stride - 1) == 0):
+            raise InvalidArgument(f"RenderSettings.adaptive_stride={self.adaptive_stride!r}: expected None or a "
+                                  "power of two in 1..64")
         if self.background is not None:
             bg = as_unit_rgb(self.background)
             if bg is None:
@@ -100,7 +117,10 @@ class RenderSettings:
 
 
 class FieldRenderer:
-    """Renders one field with fixed settings (the marching grid is prepared once)."""
+    """Renders one field with fixed settings (the marching grid is prepared once).
+
+    ``last_traced`` is the number of pixels the last render traced (the others were interpolated).
+    """
 
     def __init__(self, field: SceneField, settings: RenderSettings | None = None):
         self.field = field
@@ -118,6 +138,7 @@ class FieldRenderer:
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background if s.background is not None else field.background
+        self.last_traced = 0
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
@@ -138,16 +159,27 @@ class FieldRenderer:
 
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         h, w = camera.height, camera.width
-        rgb = np.empty((h * w, 3), dtype=np.float32)
-        depth = np.empty(h * w, dtype=np.float32)
-        opacity = np.empty(h * w, dtype=np.float32)
-        rows = max(1, self.settings.chunk_rays // w)
-        for y0 in range(0, h, rows):
-            y1 = min(h, y0 + rows)
-            uv = np.stack(np.meshgrid(np.arange(w, dtype=np.float64), np.arange(y0, y1, dtype=np.float64)), -1)
-            o, d = self.field.space.normalize_rays(*camera_rays(camera, c2w, uv))
-            sl = slice(y0 * w, y1 * w)
-            self._render_rays(o.reshape(-1, 3), d.reshape(-1, 3), "depth" in outputs, rgb[sl], depth[sl], opacity[sl])
+        adaptive = self.settings.adaptive > 0 and self.stride(camera) > 1
+        want_depth = adaptive or "depth" in outputs  # the adaptive sampler compares depths
+
+        def trace(index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            n = index.size
+            rgb = np.empty((n, 3), dtype=np.float32)
+            depth = np.empty(n, dtype=np.float32)
+            opacity = np.empty(n, dtype=np.float32)
+            for start in range(0, n, self.settings.chunk_rays):
+                sl = slice(start, min(n, start + self.settings.chunk_rays))
+                uv = np.stack([index[sl] % w, index[sl] // w], -1).astype(np.float64)
+                o, d = self.field.space.normalize_rays(*camera_rays(camera, c2w, uv))
+                self._render_rays(o, d, want_depth, rgb[sl], depth[sl], opacity[sl])
+            return rgb, depth, opacity
+
+        if adaptive:
+            rgb, depth, opacity, self.last_traced = sample_adaptively(
+                trace, h, w, self.stride(camera), self.settings.adaptive, self.settings.adaptive_depth)
+        else:
+            rgb, depth, opacity = trace(np.arange(h * w))
+            self.last_traced = h * w
         out: dict[str, np.ndarray] = {}
         if "rgb" in outputs:
             out["rgb"] = np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8).reshape(h, w, 3)
@@ -156,6 +188,12 @@ class FieldRenderer:
         if "opacity" in outputs:
             out["opacity"] = np.clip(opacity, 0.0, 1.0).reshape(h, w)
         return out
+
+    def stride(self, camera: Camera) -> int:
+        """The coarsest grid spacing of adaptive sampling at ``camera``'s size (pixels; 1: every pixel)."""
+        if self.settings.adaptive_stride is not None:
+            return self.settings.adaptive_stride
+        return 1 << max(0, int(math.floor(math.log2(max(1.0, min(camera.width, camera.height) / 135.0)))))
 
     def _render_rays(self, o: np.ndarray, d: np.ndarray, want_depth: bool, rgb: np.ndarray, depth: np.ndarray,
                      opacity: np.ndarray) -> None:

@@ -1,0 +1,134 @@
+"""Adaptive pixel sampling: trace a coarse grid of pixels, interpolate where the image is smooth, trace the rest.
+
+A fitted field has no more detail than its grid, so at most image sizes neighbouring pixels mostly agree.
+:func:`sample_adaptively` traces the pixels of a coarse grid (every ``stride``-th pixel in x and y, plus the
+last column and row, so every pixel lies in a cell whose four corners are traced). A cell whose corners agree
+(colour and opacity within ``tolerance``, z-depth within ``depth_tolerance`` relatively) is filled by bilinear
+interpolation of its corners; any other cell is split in four: the grid of half the spacing is traced inside it
+and its sub-cells are judged the same way, down to single pixels, which are all traced. Edges, occlusion
+boundaries and texture are therefore traced pixel by pixel; flat colour, sky and slowly shaded surfaces are
+interpolated. A pixel interpolated to opacity 0 is traced too (its ray sees nothing, which is cheap, and its
+depth is its own ray's far end).
+
+Convention: pixel ``(x, y)`` (column, row) has flat index ``y·width + x`` and is traced at its centre, exactly
+as a full render traces it, so every traced pixel holds the full render's value to the bit. The result
+depends only on the traced values (not on the thread count or on the order of the work): deterministic.
+A feature narrower than the spacing of the coarsest grid that lies between its traced pixels can be missed;
+the stride is therefore chosen by image size (docs/performance.md measures the error).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numba import njit
+
+__all__ = ["sample_adaptively", "grid_axis"]
+
+#: ``trace(index)`` → ``(rgb (M, 3), depth (M,), opacity (M,))`` float32 of the pixels with flat indices ``index``.
+Tracer = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def grid_axis(n: int, stride: int) -> np.ndarray:
+    """The traced coordinates of one image axis of ``n`` pixels at ``stride``: multiples of it and ``n - 1``.
+
+    >>> grid_axis(10, 4).tolist()
+    [0, 4, 8, 9]
+    """
+    axis = np.arange(0, n, stride, dtype=np.int64)
+    return axis if axis[-1] == n - 1 else np.append(axis, n - 1)
+
+
+@njit(cache=True)
+def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split):
+    """For each active cell: ``split`` it where its corners disagree, else interpolate its untraced pixels."""
+    for a in range(ys.shape[0] - 1):
+        y0, y1 = ys[a], ys[a + 1]
+        for b in range(xs.shape[0] - 1):
+            split[a, b] = False
+            if not active[a, b]:
+                continue
+            x0, x1 = xs[b], xs[b + 1]
+            i00, i01, i10, i11 = y0 * width + x0, y0 * width + x1, y1 * width + x0, y1 * width + x1
+            smooth = True
+            for c in range(3):
+                v00, v01, v10, v11 = rgb[i00, c], rgb[i01, c], rgb[i10, c], rgb[i11, c]
+                if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
+                    smooth = False
+            v00, v01, v10, v11 = opacity[i00], opacity[i01], opacity[i10], opacity[i11]
+            if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
+                smooth = False
+            v00, v01, v10, v11 = depth[i00], depth[i01], depth[i10], depth[i11]
+            if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > depth_tolerance * min(v00, v01, v10, v11):
+                smooth = False
+            if not smooth:
+                split[a, b] = True
+                continue
+            for y in range(y0, y1 + 1):
+                fy = (y - y0) / (y1 - y0)
+                for x in range(x0, x1 + 1):
+                    i = y * width + x
+                    if traced[i]:
+                        continue
+                    fx = (x - x0) / (x1 - x0)
+                    w00, w01, w10, w11 = (1 - fy) * (1 - fx), (1 - fy) * fx, fy * (1 - fx), fy * fx
+                    for c in range(3):
+                        rgb[i, c] = w00 * rgb[i00, c] + w01 * rgb[i01, c] + w10 * rgb[i10, c] + w11 * rgb[i11, c]
+                    depth[i] = w00 * depth[i00] + w01 * depth[i01] + w10 * depth[i10] + w11 * depth[i11]
+                    opacity[i] = w00 * opacity[i00] + w01 * opacity[i01] + w10 * opacity[i10] + w11 * opacity[i11]
+
+
+@njit(cache=True)
+def _pixels_to_trace(ys, xs, split, stride, height, width, traced):
+    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells."""
+    want = np.zeros(height * width, dtype=np.bool_)
+    for a in range(ys.shape[0] - 1):
+        for b in range(xs.shape[0] - 1):
+            if not split[a, b]:
+                continue
+            for y in range(ys[a], ys[a + 1] + 1):
+                if y % stride != 0 and y != height - 1:
+                    continue
+                for x in range(xs[b], xs[b + 1] + 1):
+                    if (x % stride == 0 or x == width - 1) and not traced[y * width + x]:
+                        want[y * width + x] = True
+    return np.flatnonzero(want)
+
+
+def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, tolerance: float,
+                      depth_tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """``(rgb (H·W, 3), depth (H·W,), opacity (H·W,), traced)``: an image traced at the pixels where it is not
+    smooth and interpolated elsewhere (float32; ``traced`` counts the pixels traced). ``stride`` (a power of
+    two) is the spacing of the coarsest grid, ``tolerance`` the largest spread of colour or opacity ([0, 1])
+    over a cell's corners that is interpolated, ``depth_tolerance`` that of z-depth relative to its smallest."""
+    if stride < 1 or stride & (stride - 1):
+        raise ValueError(f"stride={stride}: expected a power of two")
+    if min(height, width) < 2:
+        stride = 1  # a single row or column has no cells: trace it all
+    n = height * width
+    rgb = np.zeros((n, 3), dtype=np.float32)
+    depth = np.zeros(n, dtype=np.float32)
+    opacity = np.zeros(n, dtype=np.float32)
+    traced = np.zeros(n, dtype=np.bool_)
+
+    def trace_into(index: np.ndarray) -> None:
+        if index.size:
+            rgb[index], depth[index], opacity[index] = trace(index)
+            traced[index] = True
+
+    ys, xs = grid_axis(height, stride), grid_axis(width, stride)
+    trace_into((ys[:, None] * width + xs[None, :]).reshape(-1))
+    active = np.ones((ys.size - 1, xs.size - 1), dtype=np.bool_)
+    while stride > 1 and active.size:
+        split = np.empty_like(active)
+        _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split)
+        if not split.any():
+            break
+        finer = stride // 2
+        trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced))
+        fine_ys, fine_xs = grid_axis(height, finer), grid_axis(width, finer)
+        active = split[(fine_ys[:-1] // stride)[:, None], (fine_xs[:-1] // stride)[None, :]]
+        ys, xs, stride = fine_ys, fine_xs, finer
+    trace_into(np.flatnonzero((opacity == 0.0) & ~traced))  # a ray that sees nothing ends at its own far end
+    return rgb, depth, opacity, int(traced.sum())
