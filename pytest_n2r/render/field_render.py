@@ -57,7 +57,9 @@ class RenderSettings:
     - ``adaptive``: adaptive pixel sampling (:mod:`pytest_n2r.render.adaptive`): trace a coarse grid of
       pixels and interpolate each grid cell whose corners agree within this (colour and opacity in [0, 1];
       z-depth within ``adaptive_depth`` relatively), tracing the pixels of every other cell; 0 traces every
-      pixel;
+      pixel. The default 0.04 traced 67 % / 39 % / 17 % of the fox's pixels at 480×270 / 960×540 / 1080p
+      and stayed within 0.08 dB of tracing every pixel against the photos and the demo twins' exact scenes
+      (docs/performance.md);
     - ``adaptive_stride``: the spacing of the coarsest grid in pixels (a power of two), ``None``: by image
       size, the largest power of two not above ``min(width, height) / 135`` (2 at 480×270, 8 at 1920×1080);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
