@@ -11,12 +11,16 @@ and ``@pytest.mark.n2r_scene`` override them per test: marker keyword > command 
 from __future__ import annotations
 
 import inspect
+import time
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from .options import add_options, is_used, read_options
+
+#: When pytest loaded the plugin (early in its start-up: before conftest files and test modules are imported).
+_LOADED = time.perf_counter()
 
 #: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
 pytest_plugins = ["pytest_n2r.plugin.report"]
@@ -65,6 +69,10 @@ def pytest_configure(config: pytest.Config) -> None:
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
     config.pluginmanager.register(_Summary(config), "n2r-summary")
+    if hasattr(config, "workerinput") and is_used(config):
+        from .threads import share_cores
+
+        share_cores()  # each pytest-xdist worker renders on its share of the cores
     if is_used(config):
         session = _session(config)  # bad options fail now, before collection
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
@@ -168,7 +176,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     finally:
         record = session.records[-1] if session.records else None
         if record is not None and record.nodeid == pyfuncitem.nodeid:  # kept whatever happened
+            start = time.perf_counter()
             record.floor = _floor(session, funcargs["n2r_scene"], sut, relation, record.examples)
+            record.timings["floor"] = time.perf_counter() - start
             pyfuncitem.stash[_RECORD] = record.to_dict()
     if failure is not None:  # outside the except block, so the report shows the message once
         floor = pyfuncitem.stash.get(_RECORD, {}).get("floor") or {}
@@ -202,14 +212,23 @@ def relation_records(config: pytest.Config) -> list[Any]:
 
 
 class _Summary:
-    """Collects the relation record of every test report (from xdist workers too) for the summary."""
+    """Collects the relation record of every test report (from xdist workers too) for the summary, and where
+    the session's time went: start-up and collection, fixtures' setup, relations, other tests."""
 
     def __init__(self, config: pytest.Config):
         self.config = config
         self.records: list[Any] = []
+        self.first_report: float | None = None  # when the first test report arrived, less its duration
+        self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if self.first_report is None:
+            self.first_report = time.perf_counter() - report.duration
         record = getattr(report, "n2r_record", None)
+        if report.when == "call":
+            self.phases["relations" if record is not None else "other tests"] += report.duration
+        else:
+            self.phases["setup"] += report.duration  # setup and teardown: the fixtures' time
         if record is not None and report.when == "call":
             from ..relation.record import RelationRecord
 
@@ -221,18 +240,38 @@ class _Summary:
             return
         terminalreporter.section("pytest-n2r")
         from ..relation.floor import annotation_lines
-        from ..relation.record import TIMINGS, plural
+        from ..relation.record import plural
 
         for record in records:
             terminalreporter.write_line(record.summary_line())
             for line, warn in annotation_lines(record.floor):
                 terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
         examples = sum(len(r.valid_examples) for r in records)
-        render, sut, metric = (sum(r.timings.get(k, 0.0) for r in records) for k in TIMINGS)
+        calls, shared = sum(r.sut_calls for r in records), sum(r.sut_shared for r in records)
         terminalreporter.write_line(
             f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
             f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
             f"{sum(r.inconsistencies for r in records)} inconsistent; {sum(r.renders for r in records)} renders "
-            f"(the rest from the cache); time render {render:.2f} s / SUT {sut:.2f} s / metric {metric:.2f} s"
+            f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs shared by calls on the same "
+            "render)"
         )
+        terminalreporter.write_line(self.time_line())
         terminalreporter.write_line(_describe(self.config, _session(self.config)))
+
+    def time_line(self) -> str:
+        """Where the session's time went: start-up and collection, fixtures, the relations' split, the rest."""
+        now = time.perf_counter()
+        total = now - _LOADED
+        startup = (self.first_report if self.first_report is not None else now) - _LOADED
+        t = {k: sum(r.timings.get(k, 0.0) for r in self.records)
+             for k in ("render", "sut", "metric", "validity", "total", "floor")}
+        other = max(0.0, self.phases["relations"] - t["render"] - t["sut"] - t["metric"] - t["validity"] - t["floor"])
+        workers = getattr(self.config.option, "numprocesses", None) if hasattr(self.config.option, "dist") else None
+        summed = f" (test times summed over the {workers} workers)" if isinstance(workers, int) and workers > 1 else ""
+        return (
+            f"time {total:.1f} s since pytest loaded pytest-n2r{summed}: start-up and collection {startup:.1f} s; "
+            f"fixtures {self.phases['setup']:.1f} s; relations {self.phases['relations']:.1f} s = render "
+            f"{t['render']:.2f} s / SUT {t['sut']:.2f} s / metric {t['metric']:.2f} s / validity "
+            f"{t['validity']:.2f} s / field floors {t['floor']:.2f} s / search and other {other:.2f} s; other tests "
+            f"{self.phases['other tests']:.1f} s"
+        )

@@ -14,6 +14,7 @@ from typing import Any
 from .. import defaults
 from ..errors import InvalidArgument
 from ..relation import Relation, RelationRecord, RunSettings, check_relation
+from ..relation.sut_outputs import SUTOutputs
 from ..scene.base import Scene
 from ..scene.render_cache import DEFAULT_DISK_BYTES, RenderCache
 from .scenes import DEMO_PREFIX, SceneSpec, default_scene_specs, load_scene_spec, parse_scene_specs
@@ -33,6 +34,8 @@ class N2RSession:
     cache_dir: Path | None = None
     cache_bytes: int = DEFAULT_DISK_BYTES
     records: list[RelationRecord] = field(default_factory=list)
+    #: The SUTs' outputs on renders, shared by the relations that run one SUT object on one render.
+    sut_outputs: SUTOutputs = field(default_factory=SUTOutputs, repr=False)
     _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
     _cache: RenderCache | None = field(default=None, repr=False)
 
@@ -85,4 +88,4 @@ class N2RSession:
         its record is kept in :attr:`records` whatever the outcome."""
         __tracebackhide__ = True
         return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
-                              replay=replay, on_start=self.records.append)
+                              replay=replay, on_start=self.records.append, sut_outputs=self.sut_outputs)

@@ -21,7 +21,7 @@ from ..geometry import Camera
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
-from ..scene.render_cache import RenderCache
+from ..scene.render_cache import RenderCache, render_key
 from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
@@ -31,6 +31,7 @@ from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation
+from .sut_outputs import MISSING, SUTOutputs
 from .timeout import time_limit
 
 __all__ = ["Engine", "Evaluation", "recorded_view"]
@@ -74,15 +75,18 @@ class Engine:
     Hypothesis shrinks it to the smallest transform."""
 
     def __init__(self, scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation,
-                 settings: RunSettings, cache: RenderCache, run_record: RelationRecord):
+                 settings: RunSettings, cache: RenderCache, run_record: RelationRecord,
+                 sut_outputs: SUTOutputs | None = None):
         self.scene, self.sut, self.relation, self.settings = scene, sut, relation, settings
         self.cache, self.run_record = cache, run_record
+        #: The SUT's outputs on renders, by render key: the session's (shared with its other relations) or
+        #: this run's own (so the SUT still runs once per source view).
+        self.sut_outputs = sut_outputs if sut_outputs is not None else SUTOutputs()
         self.metric = relation.metric
         self.size = relation.size or settings.size
         needs = tuple(getattr(self.metric, "needs", ()) or ())
         self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
-        self.source_outputs_cache: dict[str, Any] = {}
         render_settings = getattr(scene, "settings", None)
         self.render_settings = render_settings.to_dict() if callable(getattr(render_settings, "to_dict", None)) \
             else {}
@@ -120,7 +124,23 @@ class Engine:
             ) from exc
         finally:
             self.run_record.timings["sut"] += time.perf_counter() - start
+            self.run_record.sut_calls += 1
         check_output(output, role, where, self.metric)
+        return output
+
+    def sut_on_render(self, rendered: RenderedView, key: str | None, role: str, where: str) -> Any:
+        """The SUT's output on a render: kept from an earlier call on the render ``key`` (by this relation or,
+        with a session's :class:`SUTOutputs`, another one running the same SUT object), else a new call.
+        ``key=None``: an image that is not a render (a mutation's), always a new call."""
+        if key is not None:
+            output = self.sut_outputs.get(self.sut, key)
+            if output is not MISSING:
+                self.run_record.sut_shared += 1
+                check_output(output, role, where, self.metric)
+                return output
+        output = self.run_sut(rendered.rgb, role, where)
+        if key is not None:
+            self.sut_outputs.put(self.sut, key, output)
         return output
 
     def compute(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
@@ -161,18 +181,24 @@ class Engine:
             passed=False,
         )
         source = self.render(view.c2w, camera, view, self.outputs, "source")
-        follow = tau.follow_view(source, self.scene,
-                                 lambda c2w: self.render(c2w, camera, view, self.follow_outputs, "follow-up"))
+        rendered: list[RenderedView] = []
+
+        def render_follow(c2w: np.ndarray) -> RenderedView:
+            rendered.append(self.render(c2w, camera, view, self.follow_outputs, "follow-up"))
+            return rendered[-1]
+
+        follow = tau.follow_view(source, self.scene, render_follow)
         if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
+            start = time.perf_counter()
             verdict = self.relation.validity.check(follow, self.scene, source)
+            self.run_record.timings["validity"] += time.perf_counter() - start
             if not verdict.valid:
                 record.status, record.reason = "rejected", verdict.reason
                 return Evaluation(record, where)
-        key = f"{view.name}|{camera.width}x{camera.height}|{record.source_c2w}"
-        if key not in self.source_outputs_cache:  # the SUT runs once per source view and size
-            self.source_outputs_cache[key] = self.run_sut(source.rgb, "source", where)
-        out_source = self.source_outputs_cache[key]
-        out_follow = self.run_sut(follow.rgb, "follow-up", where)
+        # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
+        follow_key = render_key(self.scene, follow.c2w, camera) if rendered and follow is rendered[-1] else None
+        out_source = self.sut_on_render(source, render_key(self.scene, source.c2w, camera), "source", where)
+        out_follow = self.sut_on_render(follow, follow_key, "follow-up", where)
         result = self.compute(out_source, out_follow, source, follow, where)
         if not getattr(result, "valid", True):
             record.status, record.reason = "undefined", str(result.details.get("reason", "metric undefined"))

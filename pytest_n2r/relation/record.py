@@ -17,7 +17,8 @@ from collections import Counter
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES", "TIMINGS", "plural"]
+__all__ = ["ExampleRecord", "RelationRecord", "deviation_stats", "STATS", "STATUSES", "TIMINGS", "MORE_TIMINGS",
+           "plural"]
 
 #: What happened to a drawn example.
 STATUSES = ("accepted", "rejected", "undefined")
@@ -96,18 +97,25 @@ class ExampleRecord:
 
 #: The parts of a relation run's wall-clock time (seconds): rendering (cache lookups included), the SUT, the metric.
 TIMINGS = ("render", "sut", "metric")
+#: More of a run's clock (seconds), kept beside :data:`TIMINGS`: the validity checks, the whole run (``total``:
+#: the search, its Hypothesis bookkeeping and the parts above) and the annotations the plugin adds afterwards
+#: (``floor``: the field floor and the exact-twin replay, 0 on exact scenes).
+MORE_TIMINGS = ("validity", "total", "floor")
 
 
 @dataclass
 class RelationRecord:
     """One relation run (one test id): every example the search drew (:attr:`examples`, in draw order,
-    also after the first failure), its verdict and the time split (:data:`TIMINGS`, seconds).
+    also after the first failure), its verdict and the time split (:data:`TIMINGS` and :data:`MORE_TIMINGS`,
+    seconds).
 
     ``replayed`` holds the baseline examples replayed before the search (``None`` when none were asked
     for); ``minimal`` the minimal failing example after shrinking (with its saved ``images``); ``renders``
-    the renders that missed the cache and ``shrink_examples`` the examples Hypothesis ran while shrinking a
-    failure. ``floor`` is the plain dict of the field-floor measurement beside the result (``None`` when
-    none was made); reports show its ``line`` beside the relation's deviations.
+    the renders that missed the cache, ``sut_calls`` the calls of the SUT and ``sut_shared`` the outputs taken
+    from an earlier call on the same render (:mod:`pytest_n2r.relation.sut_outputs`), ``shrink_examples`` the
+    examples Hypothesis ran while shrinking a failure. ``floor`` is the plain dict of the field-floor
+    measurement beside the result (``None`` when none was made); reports show its ``line`` beside the
+    relation's deviations.
     """
 
     nodeid: str
@@ -125,6 +133,8 @@ class RelationRecord:
     #: exact scene).
     floor: dict[str, Any] | None = None
     renders: int = 0
+    sut_calls: int = 0
+    sut_shared: int = 0
     shrink_examples: int = 0
 
     @property
@@ -175,10 +185,12 @@ class RelationRecord:
         undefined = f"{self.undefined} undefined" + _reasons(self.undefined_reasons)
         replayed = "" if self.replayed is None else f"{len(self.replayed)} baseline examples replayed, "
         render, sut, metric = (self.timings.get(k, 0.0) for k in TIMINGS)
+        total = self.timings.get("total", 0.0) + self.timings.get("floor", 0.0)
         return (
             f"{self.outcome.upper():6s} {self.nodeid}: {replayed}{plural(len(self.valid_examples), 'example')}, "
             f"{rejected}, {undefined}, {self.inconsistencies} inconsistent, worst deviation {worst} (eps "
             f"{self.eps:g}); time render {render:.2f} s / SUT {sut:.2f} s / metric {metric:.2f} s"
+            + (f" of {total:.2f} s" if total else "")
         )
 
     def to_dict(self) -> dict:
@@ -198,6 +210,7 @@ class RelationRecord:
             scene=data.get("scene", ""), scene_hash=data.get("scene_hash", ""),
             replayed=None if replayed is None else [ExampleRecord.from_dict(e) for e in replayed],
             floor=data.get("floor"), renders=int(data.get("renders", 0)),
+            sut_calls=int(data.get("sut_calls", 0)), sut_shared=int(data.get("sut_shared", 0)),
             shrink_examples=int(data.get("shrink_examples", 0)),
         )
 

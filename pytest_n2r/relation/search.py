@@ -16,6 +16,7 @@ caught by the per-call time limit instead (:mod:`pytest_n2r.relation.timeout`).
 from __future__ import annotations
 
 import random
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -34,9 +35,10 @@ from ..strategies.view_strategies import views as source_views
 from .determinism import NotDeterministic, SUTNotDeterministic
 from .engine import Engine, recorded_view
 from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
-from .record import TIMINGS, ExampleRecord, RelationRecord
+from .record import MORE_TIMINGS, TIMINGS, ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation
+from .sut_outputs import SUTOutputs
 from .timeout import TimeLimitReached
 
 __all__ = ["check_relation", "replay_relation"]
@@ -45,7 +47,8 @@ __all__ = ["check_relation", "replay_relation"]
 def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, *,
                    settings: RunSettings | None = None, cache: RenderCache | None = None,
                    test_id: str = "relation", replay: list[ExampleRecord] | None = None,
-                   on_start: Callable[[RelationRecord], None] | None = None) -> RelationRecord:
+                   on_start: Callable[[RelationRecord], None] | None = None,
+                   sut_outputs: SUTOutputs | None = None) -> RelationRecord:
     """Search for a source view and transform where ``sut`` breaks ``relation`` on ``scene``.
 
     Returns the run's :class:`~pytest_n2r.relation.record.RelationRecord` (one
@@ -57,7 +60,8 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     evaluated exactly, before the search, into the record's ``replayed`` (their verdicts do not fail the run:
     a baseline comparison judges them). ``test_id`` names the run in reports and keys its Hypothesis database
     entries and seed; ``on_start`` receives the (still empty) record before anything runs, so a caller keeps
-    it even when the run raises.
+    it even when the run raises. ``sut_outputs``: the SUT's outputs on renders kept across relations (a
+    session's :class:`~pytest_n2r.relation.sut_outputs.SUTOutputs`); without it, the run keeps its own.
     """
     __tracebackhide__ = True
     if not isinstance(scene, Scene):
@@ -69,10 +73,11 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
     settings = settings or RunSettings()
     cache = cache if cache is not None else RenderCache(None)
+    started = time.perf_counter()
     record = _new_record(scene, relation, test_id)
     if on_start is not None:
         on_start(record)
-    engine = Engine(scene, sut, relation, settings, cache, record)
+    engine = Engine(scene, sut, relation, settings, cache, record, sut_outputs)
     try:
         if replay is not None:
             record.replayed = engine.replay(replay)
@@ -94,6 +99,8 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     except BaseException as exc:
         record.outcome, record.message = "error", f"{type(exc).__name__}: {exc}"
         raise
+    finally:
+        record.timings["total"] = time.perf_counter() - started
     return record
 
 
@@ -118,7 +125,7 @@ def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Re
 def _new_record(scene: Scene, relation: Relation, test_id: str) -> RelationRecord:
     """The still empty record of a run of ``relation`` on ``scene``, its clock at zero."""
     return RelationRecord(nodeid=test_id, metric=repr(relation.metric), eps=relation.eps, scene=scene.name,
-                          scene_hash=scene.content_hash, timings=dict.fromkeys(TIMINGS, 0.0))
+                          scene_hash=scene.content_hash, timings=dict.fromkeys((*TIMINGS, *MORE_TIMINGS), 0.0))
 
 
 def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSettings, test_id: str) -> None:

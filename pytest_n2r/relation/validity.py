@@ -14,13 +14,14 @@ that disagrees there is not inconsistent, the input is. Two checks, both on the 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .._validation import check_range
-from ..geometry import backproject, project
+from ..geometry import backproject, invert_pose
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
 
@@ -79,15 +80,16 @@ class Validity:
                            f"(at most {self.max_empty_increase:.0%} more allowed)")
         if self.min_coverage <= 0:
             return Verdict(True)
-        coverage = self.coverage(view, cameras if cameras is not None else training_views(scene))
+        coverage = self.coverage(view, scene, cameras)
         if coverage < self.min_coverage:
             return Verdict(False, "outside the captured region",
                            f"{coverage:.0%} of the visible surface was seen by a training camera "
                            f"(min {self.min_coverage:.0%})")
         return Verdict(True)
 
-    def coverage(self, view: RenderedView, cameras: Sequence[SceneView]) -> float:
-        """Fraction of the view's sampled surface points inside some training camera's image."""
+    def coverage(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> float:
+        """Fraction of the view's sampled surface points inside some training camera's image (``cameras``,
+        default: the scene's :func:`training_views`), all cameras projected in one array operation."""
         cam = view.camera
         us = np.linspace(0, cam.width - 1, self.grid)
         vs = np.linspace(0, cam.height - 1, self.grid)
@@ -97,15 +99,53 @@ class Validity:
         if not solid.any():
             return 0.0
         points = backproject(uv[solid], view.depth[iv, iu][solid].astype(np.float64), cam, view.c2w)
-        seen = np.zeros(len(points), dtype=bool)
-        for other in cameras:
-            px, z = project(points, other.camera, other.c2w)
-            c = other.camera
-            seen |= (z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= c.width - 0.5) \
-                & (px[:, 1] >= -0.5) & (px[:, 1] <= c.height - 0.5)
-            if seen.all():
-                break
-        return float(seen.mean())
+        stack = training_stack(scene) if cameras is None else CameraStack.of(cameras)
+        return float(stack.seen(points).mean())
+
+
+@dataclass(frozen=True)
+class CameraStack:
+    """Pinhole cameras stacked as arrays, so that points are projected into all of them in one operation:
+    ``w2c`` ``(K, 4, 4)`` world-to-camera poses, ``intrinsics`` ``(K, 4)`` (fx, fy, cx, cy, pixels) and
+    ``size`` ``(K, 2)`` (width, height, pixels)."""
+
+    w2c: np.ndarray
+    intrinsics: np.ndarray
+    size: np.ndarray
+
+    @classmethod
+    def of(cls, views: Sequence[SceneView]) -> CameraStack:
+        w2c = np.stack([invert_pose(v.c2w) for v in views]) if views else np.zeros((0, 4, 4))
+        cams = [v.camera for v in views]
+        intrinsics = np.array([[c.fx, c.fy, c.cx, c.cy] for c in cams], dtype=np.float64).reshape(-1, 4)
+        size = np.array([[c.width, c.height] for c in cams], dtype=np.float64).reshape(-1, 2)
+        return cls(w2c, intrinsics, size)
+
+    def seen(self, points: np.ndarray) -> np.ndarray:
+        """For world points ``(N, 3)``: whether each lies in front of some camera and projects inside its
+        image (pixel centres at integers, so the image spans ``[-0.5, width - 0.5]``)."""
+        pc = np.einsum("kij,nj->kni", self.w2c[:, :3, :3], points) + self.w2c[:, None, :3, 3]
+        z = pc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            safe = np.where(z > 0, z, np.nan)
+            fx, fy, cx, cy = (self.intrinsics[:, i, None] for i in range(4))
+            u = fx * pc[..., 0] / safe + cx
+            v = fy * pc[..., 1] / safe + cy
+        width, height = self.size[:, 0, None], self.size[:, 1, None]
+        inside = (z > 0) & (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
+        return inside.any(axis=0)
+
+
+_STACKS: weakref.WeakKeyDictionary[Scene, tuple[object, CameraStack]] = weakref.WeakKeyDictionary()
+
+
+def training_stack(scene: Scene) -> CameraStack:
+    """The :class:`CameraStack` of a scene's :func:`training_views`, built once per scene (and again when
+    its ``views`` are replaced)."""
+    known = _STACKS.get(scene)
+    if known is None or known[0] is not scene.views:
+        known = _STACKS[scene] = (scene.views, CameraStack.of(training_views(scene)))
+    return known[1]
 
 
 def training_views(scene: Scene) -> list[SceneView]:

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from hypothesis import strategies as st
 
-from pytest_n2r import InvalidArgument, InvalidType
+from pytest_n2r import Camera, InvalidArgument, InvalidType
 from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, Validity, check_relation
 from pytest_n2r.relation.artifacts import artifact_dir
 from pytest_n2r.render.size import RenderSize
-from pytest_n2r.scene.render_cache import RenderCache
+from pytest_n2r.scene.render_cache import RenderCache, render_key
 from pytest_n2r.strategies import Mutation, transforms
 from tests.plugin.fakemetrics import AbsDifference, SameLabel
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
@@ -72,8 +72,11 @@ def test_the_record_counts_examples_rejections_and_time():
     record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=FAST)
     assert record.outcome == "passed" and len(record.valid_examples) == 10 and record.inconsistencies == 0
     assert record.rejected > 0, "yaw up to 25° looks past the plane in some draws"
-    assert set(record.timings) == {"render", "sut", "metric"} and min(record.timings.values()) >= 0
-    assert record.timings["render"] > 0
+    timings = record.timings
+    assert set(timings) == {"render", "sut", "metric", "validity", "total", "floor"} and min(timings.values()) >= 0
+    assert timings["render"] > 0 and timings["validity"] > 0 and timings["floor"] == 0
+    parts = sum(timings[k] for k in ("render", "sut", "metric", "validity"))
+    assert parts <= timings["total"], f"the parts ({parts:.4f} s) are within the run ({timings['total']:.4f} s)"
     assert len(record.examples) == 10 + record.rejected, "one record per draw"
     assert sum(record.rejected_reasons.values()) == record.rejected
     assert all(e.passed for e in record.valid_examples)
@@ -98,13 +101,21 @@ def test_a_failure_carries_its_record_and_pictures(tmp_path):
     assert str(artifact_dir(tmp_path, "t.py::test[plane]")) in images["follow"]
 
 
-def test_sut_output_is_computed_once_per_source_view():
+def test_the_sut_runs_once_per_render():
+    """Once per source view, and once per follow-up render: a follow-up drawn twice (or one at the source's
+    own pose) takes the output of the earlier call."""
     scene = PlaneScene()
     calls = []
     relation = Relation.build(AbsDifference(), 255, transforms(yaw=3), examples=20)
     record = check_relation(scene, lambda rgb: calls.append(1) or 0.0, relation, settings=RunSettings(
         examples=20, database=None))
-    assert len(calls) == len(record.valid_examples) + len({e.view for e in record.examples})
+    renders = set()
+    for e in record.valid_examples:
+        c2w, tau = np.asarray(e.source_c2w).reshape(4, 4), e.follow_up()
+        renders |= {render_key(scene, c2w, Camera.from_dict(e.camera)),
+                    render_key(scene, tau.apply(c2w, scene.length_scale(tau.units)), Camera.from_dict(e.camera))}
+    assert len(calls) == record.sut_calls == len(renders), (len(calls), record.sut_calls, len(renders))
+    assert record.sut_shared == 2 * len(record.valid_examples) - len(renders) > 0
 
 
 def test_shared_cache_makes_a_rerun_render_nothing():
@@ -240,4 +251,6 @@ def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_searc
     assert [e.deviation for e in record.replayed] == [e.deviation for e in recorded], "bit for bit"
     assert [e.transform for e in record.replayed] == [e.transform for e in recorded]
     assert record.examples == [] and record.outcome == "passed", "a replay searches nothing and judges nothing"
-    assert len(calls) == len(recorded) + len({e.view for e in recorded})
+    # once per render: a source view, and a follow-up pose the survey drew more than once, run the SUT once
+    assert len(calls) == record.sut_calls <= len(recorded) + len({e.view for e in recorded})
+    assert record.sut_calls + record.sut_shared == 2 * len(recorded)

@@ -1,0 +1,76 @@
+"""The SUT's outputs on rendered views, kept so that one SUT runs once on one render: relations of a session
+that run the same SUT object on the same source view (or the same pose-change follow-up) share its output.
+
+A render is named by its :func:`~pytest_n2r.scene.render_cache.render_key` (scene content, renderer,
+camera, exact pose): the same key means the same pixels. The SUT is named by its object identity, so two
+tests that build their own detector (``detector("sift")`` in each) do not share, while tests that return
+one fixture's object do. A relation assumes its SUT is deterministic (the engine checks it, calling the SUT
+again, before the first failure counts); under that assumption a kept output is the one a new call would
+give. The determinism check itself always calls the SUT.
+
+Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections import OrderedDict
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["MISSING", "SUTOutputs"]
+
+#: Outputs kept at most (least recently used first out): a classifier's 1000 probabilities or a detector's
+#: 500 keypoints are a few KiB each.
+MAX_OUTPUTS = 4096
+
+#: What :meth:`SUTOutputs.get` returns for an output it does not hold (``None`` may be an output).
+MISSING = object()
+
+
+class SUTOutputs:
+    """Outputs of SUT calls keyed by ``(SUT object, render key)``; a SUT's outputs are forgotten when the SUT
+    object is garbage-collected (objects that take no weak reference, e.g. built-in functions, are held)."""
+
+    def __init__(self, max_outputs: int = MAX_OUTPUTS):
+        self.max_outputs = max_outputs
+        self._outputs: OrderedDict[tuple[int, str], Any] = OrderedDict()
+        self._suts: dict[int, Any] = {}  # id -> weak reference (or the object), so an id is never reused
+        self.hits = 0
+
+    def __len__(self) -> int:
+        return len(self._outputs)
+
+    def get(self, sut: Callable[..., Any], key: str) -> Any:
+        """The kept output of ``sut`` on the render ``key``, or :data:`MISSING`."""
+        if not self._knows(sut):
+            return MISSING
+        output = self._outputs.get((id(sut), key), MISSING)
+        if output is not MISSING:
+            self._outputs.move_to_end((id(sut), key))
+            self.hits += 1
+        return output
+
+    def put(self, sut: Callable[..., Any], key: str, output: Any) -> None:
+        ident = id(sut)
+        if not self._knows(sut):
+            try:
+                self._suts[ident] = weakref.ref(sut, lambda _: self._forget(ident))
+            except TypeError:  # no weak reference to it: hold the object itself
+                self._suts[ident] = sut
+        self._outputs[(id(sut), key)] = output
+        self._outputs.move_to_end((id(sut), key))
+        while len(self._outputs) > self.max_outputs:
+            self._outputs.popitem(last=False)
+
+    def _knows(self, sut: Any) -> bool:
+        held = self._suts.get(id(sut))
+        if held is None:
+            return False
+        return (held() if isinstance(held, weakref.ref) else held) is sut
+
+    def _forget(self, ident: int) -> None:
+        self._suts.pop(ident, None)
+        for k in [k for k in self._outputs if k[0] == ident]:
+            del self._outputs[k]
+

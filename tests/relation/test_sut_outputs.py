@@ -1,0 +1,100 @@
+"""The SUT's outputs shared between relations: one call per SUT object and render, never across SUT objects,
+never for a mutated image, forgotten with the SUT."""
+
+from __future__ import annotations
+
+import gc
+from dataclasses import dataclass
+from typing import ClassVar
+
+from hypothesis import strategies as st
+
+from pytest_n2r.relation import Relation, RunSettings, check_relation
+from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs
+from pytest_n2r.strategies import Mutation, transforms
+from tests.plugin.fakemetrics import AbsDifference
+from tests.plugin.fakescene import PlaneScene, decode_ramp_x
+
+SETTINGS = RunSettings(examples=12, database=None, derandomize=True)
+
+
+class CountingSUT:
+    """The ramp's x coordinate at one pixel, counting its calls."""
+
+    def __init__(self) -> None:
+        self.calls = 0
+
+    def __call__(self, rgb):
+        self.calls += 1
+        return float(decode_ramp_x(rgb)[36, 48])
+
+
+def _verdicts(record):
+    return [(e.view, e.status, e.deviation) for e in record.examples]
+
+
+def test_relations_running_one_sut_share_its_outputs_and_keep_their_verdicts():
+    scene = PlaneScene(texture="ramp")
+    first = Relation.build(AbsDifference(), 255, transforms(yaw=5), examples=12)
+    second = Relation.build(AbsDifference(), 255, transforms(yaw=8), examples=12)
+    alone = [check_relation(scene, CountingSUT(), r, settings=SETTINGS, test_id=f"t{i}")
+             for i, r in enumerate((first, second))]
+    shared, sut = SUTOutputs(), CountingSUT()
+    together = [check_relation(scene, sut, r, settings=SETTINGS, test_id=f"t{i}", sut_outputs=shared)
+                for i, r in enumerate((first, second))]
+    assert [_verdicts(r) for r in together] == [_verdicts(r) for r in alone]
+    # the second relation draws from the same source views: their outputs come from the first one's calls
+    assert together[1].sut_shared > alone[1].sut_shared
+    assert sut.calls == sum(r.sut_calls for r in together) < sum(r.sut_calls for r in alone)
+
+
+def test_another_sut_object_is_called_itself():
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=5), examples=12)
+    shared, a, b = SUTOutputs(), CountingSUT(), CountingSUT()
+    check_relation(scene, a, relation, settings=SETTINGS, sut_outputs=shared)
+    check_relation(scene, b, relation, settings=SETTINGS, sut_outputs=shared)
+    assert a.calls == b.calls > 0, "an equal SUT of another object shares nothing"
+
+
+@dataclass(frozen=True)
+class _Invert(Mutation):
+    name: ClassVar[str] = "invert"
+
+    @property
+    def is_identity(self) -> bool:
+        return False
+
+    def _apply(self, rgb):
+        return 255 - rgb
+
+    def describe(self):
+        return "invert()"
+
+
+def test_a_mutated_image_always_runs_the_sut():
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 300, st.just(_Invert()), examples=5)
+    shared, sut = SUTOutputs(), CountingSUT()
+    record = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    again = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared, test_id="again")
+    accepted = len(record.valid_examples)
+    views = len({e.view for e in record.examples})
+    assert record.sut_calls == accepted + views, "the sources once each, every mutated follow-up"
+    assert again.sut_calls == accepted and again.sut_shared == accepted, "the sources shared, mutations called"
+
+
+def test_outputs_are_forgotten_with_their_sut_and_capped():
+    shared = SUTOutputs(max_outputs=3)
+
+    def sut(rgb):
+        return 0
+
+    for key in "abcd":
+        shared.put(sut, key, key.upper())
+    assert len(shared) == 3 and shared.get(sut, "a") is MISSING and shared.get(sut, "d") == "D"
+    del sut
+    gc.collect()
+    assert len(shared) == 0
+    shared.put(len, "k", 1)  # a built-in takes no weak reference: held, and still told apart by identity
+    assert shared.get(len, "k") == 1 and shared.get(abs, "k") is MISSING
