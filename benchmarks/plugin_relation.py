@@ -16,8 +16,9 @@ side by side in one process:
 kernel), for a side-by-side comparison; ``--runs`` picks some of the four runs. Scenes are loaded and their
 renderer compiled before the runs start (printed apart).
 
-Columns: wall time, time spent rendering (cache lookups included), in the SUT and in the metric (seconds),
-renders done, valid and rejected examples.
+Columns: wall time, time spent rendering (cache lookups included), in the SUT, in the metric and in the
+validity checks (seconds), renders done, calls of the SUT (once per render: a follow-up pose drawn twice runs
+it once), valid and rejected examples.
 """
 
 from __future__ import annotations
@@ -80,8 +81,8 @@ def run(scene, relation, settings, cache, label: str) -> list[str]:
     start = time.perf_counter()
     record = check_relation(scene, orb, relation, settings=settings, cache=cache, test_id="benchmark")
     wall = time.perf_counter() - start
-    return [label, f"{wall:.2f}", *(f"{record.timings[k]:.2f}" for k in ("render", "sut", "metric")),
-            str(record.renders), str(len(record.valid_examples)), str(record.rejected)]
+    return [label, f"{wall:.2f}", *(f"{record.timings[k]:.2f}" for k in ("render", "sut", "metric", "validity")),
+            str(record.renders), str(record.sut_calls), str(len(record.valid_examples)), str(record.rejected)]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -109,7 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"scene {spec.source} ({type(scene).__name__}, loaded and compiled in {load_s:.2f} s), {args.examples} "
           f"examples of "
           f"{relation.describe()} at {args.size}, ORB(500), derandomized")
-    rows = [["run", "wall s", "render s", "SUT s", "metric s", "renders", "examples", "rejected"]]
+    rows = [["run", "wall s", "render s", "SUT s", "metric s", "validity s", "renders", "SUT calls", "examples",
+             "rejected"]]
     with tempfile.TemporaryDirectory() as tmp:
         cold_cache = RenderCache(tmp)
         runs = {"cold": cold_cache, "warm-disk": RenderCache(tmp), "warm-memory": cold_cache,

@@ -124,13 +124,15 @@ class CameraStack:
     def seen(self, points: np.ndarray) -> np.ndarray:
         """For world points ``(N, 3)``: whether each lies in front of some camera and projects inside its
         image (pixel centres at integers, so the image spans ``[-0.5, width - 0.5]``)."""
-        pc = np.einsum("kij,nj->kni", self.w2c[:, :3, :3], points) + self.w2c[:, None, :3, 3]
-        z = pc[..., 2]
+        k = len(self.w2c)
+        # one matrix product for all cameras: (3K, 3) rotations times (3, N) points, as (K, 3, N)
+        pc = (self.w2c[:, :3, :3].reshape(3 * k, 3) @ points.T).reshape(k, 3, -1) + self.w2c[:, :3, 3, None]
+        x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             safe = np.where(z > 0, z, np.nan)
             fx, fy, cx, cy = (self.intrinsics[:, i, None] for i in range(4))
-            u = fx * pc[..., 0] / safe + cx
-            v = fy * pc[..., 1] / safe + cy
+            u = fx * x / safe + cx
+            v = fy * y / safe + cy
         width, height = self.size[:, 0, None], self.size[:, 1, None]
         inside = (z > 0) & (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
         return inside.any(axis=0)

@@ -29,6 +29,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
+from .keep_threads import threads_kept
 
 __all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
 
@@ -130,7 +131,8 @@ class RenderCache:
         missing = tuple(o for o in outputs if o not in arrays)
         if missing:
             self.stats.renders += 1
-            view = scene.render(c2w, camera, missing)
+            with threads_kept():  # the SUT runs next, with the thread count it chose
+                view = scene.render(c2w, camera, missing)
             for name in missing:
                 value = getattr(view, name)
                 arrays[name] = value
