@@ -5,6 +5,7 @@ in the process (the first parallel launch after torch set its count)."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -45,7 +46,7 @@ print(numba.threading_layer(), bare, torch.get_num_threads())
 
 def test_a_render_with_a_parallel_kernel_keeps_torchs_thread_count():
     done = subprocess.run([sys.executable, "-c", SCRIPT], cwd=ROOT, capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "PYTHONPATH": f"{ROOT}"})
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, check=False)
     assert done.returncode == 0, done.stderr
     layer, bare, kept = done.stdout.split()
     if bare == "1":
