@@ -252,8 +252,8 @@ class _Summary:
             f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
             f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
             f"{sum(r.inconsistencies for r in records)} inconsistent; {sum(r.renders for r in records)} renders "
-            f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs shared by calls on the same "
-            "render)"
+            f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs reused: the same SUT on the "
+            "same render)"
         )
         terminalreporter.write_line(self.time_line())
         terminalreporter.write_line(_describe(self.config, _session(self.config)))
