@@ -41,10 +41,10 @@ def exp_of_power(power):
 
 @njit(cache=True, parallel=True, fastmath={"contract"})
 def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
-                    acc_rgb, acc_depth, done, final, background, rgb_out, depth_out, opacity_out):
+                    acc_rgb, acc_depth, final, background, rgb_out, depth_out, opacity_out):
     """Composite each tile's Gaussians (``tile_ids`` into ``records`` and ``sorted_rects``, depth-ordered) front to
-    back into the pixel state (``trans``: transmittance, ``acc_rgb`` / ``acc_depth``: weighted sums, ``done``:
-    terminated), updating ``live`` (pixels of the tile not yet done).
+    back into the pixel state (``trans``: transmittance, negated once the pixel is done; ``acc_rgb`` /
+    ``acc_depth``: weighted sums), updating ``live`` (pixels of the tile not yet done).
 
     Per pixel and Gaussian (3DGS reference): ``alpha = min(ALPHA_MAX, opacity · exp(-½ dᵀ conic d))``,
     skipped below ``ALPHA_MIN``; if the transmittance after it would fall below ``t_stop`` the pixel is done
@@ -77,7 +77,7 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
         hi = np.empty(ty1 - ty0, np.int64)
         for py in range(ty0, ty1):
             lo[py - ty0], hi[py - ty0] = tx0, tx1
-            _shrink_span(done, py * width, py - ty0, lo, hi)
+            _shrink_span(trans, py * width, py - ty0, lo, hi)
         batch = np.empty((BATCH, n_fields))
         spans = np.empty((BATCH, 4), np.int64)
         for k in range(s, e):
@@ -102,7 +102,8 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
                 row = py * width
                 for px in range(max(gx0, lo[py - ty0]), min(gx1, hi[py - ty0])):
                     p = row + px
-                    if done[p]:
+                    tp = trans[p]
+                    if tp < 0.0:  # done
                         continue
                     dx = u - px
                     power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
@@ -111,12 +112,11 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
                     alpha = min(ALPHA_MAX, o * exp_of_power(power))
                     if alpha < ALPHA_MIN:
                         continue
-                    tp = trans[p]
                     after = tp * (1.0 - alpha)
                     if after < t_stop:
-                        done[p] = 1
+                        trans[p] = -tp
                         left -= 1
-                        _shrink_span(done, row, py - ty0, lo, hi)
+                        _shrink_span(trans, row, py - ty0, lo, hi)
                         continue
                     w = alpha * tp
                     acc_rgb[p, 0] += w * r
@@ -134,20 +134,22 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
 
 
 @njit(inline="always")
-def _shrink_span(done, row, r, lo, hi):
-    """Move the ends of row ``r``'s span ``lo[r] <= x < hi[r]`` (pixel ``row + x``) past the done pixels there."""
+def _shrink_span(trans, row, r, lo, hi):
+    """Move the ends of row ``r``'s span ``lo[r] <= x < hi[r]`` (pixel ``row + x``) past the done pixels there
+    (negative ``trans``)."""
     x0, x1 = lo[r], hi[r]
-    while x0 < x1 and done[row + x0]:
+    while x0 < x1 and trans[row + x0] < 0.0:
         x0 += 1
-    while x1 > x0 and done[row + x1 - 1]:
+    while x1 > x0 and trans[row + x1 - 1] < 0.0:
         x1 -= 1
     lo[r], hi[r] = x0, x1
 
 
 @njit(cache=True, parallel=True)
 def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
-    """Pixel state → ``rgb`` uint8 (over ``background``, rounded half to even like ``np.rint``), ``depth``
-    (the weighted mean z-depth; 0 where nothing contributed) and ``opacity`` (``1 - T``), flat over pixels."""
+    """Pixel state (``trans`` negated where done) → ``rgb`` uint8 (over ``background``, rounded half to even
+    like ``np.rint``), ``depth`` (the weighted mean z-depth; 0 where nothing contributed) and ``opacity``
+    (``1 - T``), flat over pixels."""
     for p in prange(trans.shape[0]):
         _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
 
@@ -155,7 +157,7 @@ def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_ou
 @njit(inline="always")
 def _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
     """:func:`finish` of pixel ``p``."""
-    tp = trans[p]
+    tp = abs(trans[p])
     for ch in range(3):
         value = acc_rgb[p, ch] + tp * background[ch]
         rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))

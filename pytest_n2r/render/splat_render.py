@@ -142,7 +142,6 @@ class SplatRenderer:
         trans = np.ones(w * h)
         acc_rgb = np.zeros((w * h, 3))
         acc_depth = np.zeros(w * h)
-        done = np.zeros(w * h, np.uint8)
         tile_start = np.empty(len(live) + 1, np.int64)
         counts = np.cumsum(sorted_tiles)
         background = np.asarray(self.background)
@@ -162,7 +161,7 @@ class SplatRenderer:
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
                 c.composite_tiles(tile_start, tile_ids, ordered, sorted_rects, w, s.tile, tiles_x, tile_order,
-                                  s.t_stop, live, trans, acc_rgb, acc_depth, done, finished, background, out_rgb,
+                                  s.t_stop, live, trans, acc_rgb, acc_depth, finished, background, out_rgb,
                                   out_depth, out_opacity)
             clock.lap("composite")
             start = stop
