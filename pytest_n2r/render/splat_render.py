@@ -53,7 +53,7 @@ class SplatSettings:
     near: float = 0.01
     t_stop: float = 1e-4
     background: tuple[float, float, float] | None = None
-    tile: int = 32
+    tile: int = 64
     max_pairs: int = 1 << 22
 
     def __post_init__(self) -> None:
