@@ -188,11 +188,11 @@ def test_only_the_outputs_asked_for_are_returned():
 @pytest.mark.slow
 def test_1080p_with_a_million_gaussians_fits_in_a_few_gigabytes():
     """Peak NumPy memory (tracemalloc) of a 1920×1080 render of 10⁶ Gaussians spread so that most are in view:
-    measured 0.45 GB for one render's buffers (a record of 120 B, a rectangle, key and tile count of 28 B per
-    Gaussian, the depth-ordered records, rectangles, counts and sort keys of 168 B per visible Gaussian, 48 B
-    of state per pixel);
-    the bound is 2 GB. The scene's own arrays (float64 means and covariances, float32 SH) add about 140 B per
-    Gaussian at SH degree 0."""
+    measured 0.40 GB for one render's buffers (a record of 88 B, pixel and tile rectangles, key and tile count
+    of 44 B per Gaussian, the depth-ordered records, rectangles, counts and sort keys of about 150 B per
+    visible Gaussian, 40 B of state per pixel); the bound is 2 GB. The scene's own arrays (float32 as read,
+    and the renderer's float64 means, covariance factors, opacities and reach) add about 170 B per Gaussian
+    at SH degree 0 (0.17 GB here)."""
     rng = np.random.default_rng(0)
     n = 1_000_000
     g = Gaussians(means=rng.uniform(-1, 1, (n, 3)), quats=rng.normal(size=(n, 4)),
