@@ -4,16 +4,15 @@ never for a mutated image, forgotten with the SUT."""
 from __future__ import annotations
 
 import gc
-from dataclasses import dataclass
-from typing import ClassVar
 
 from hypothesis import strategies as st
 
 from pytest_n2r.relation import Relation, RunSettings, check_relation
 from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs
-from pytest_n2r.strategies import Mutation, transforms
+from pytest_n2r.strategies import transforms
 from tests.plugin.fakemetrics import AbsDifference
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
+from tests.relation.test_engine import _Invert
 
 SETTINGS = RunSettings(examples=12, database=None, derandomize=True)
 
@@ -55,21 +54,6 @@ def test_another_sut_object_is_called_itself():
     check_relation(scene, a, relation, settings=SETTINGS, sut_outputs=shared)
     check_relation(scene, b, relation, settings=SETTINGS, sut_outputs=shared)
     assert a.calls == b.calls > 0, "an equal SUT of another object shares nothing"
-
-
-@dataclass(frozen=True)
-class _Invert(Mutation):
-    name: ClassVar[str] = "invert"
-
-    @property
-    def is_identity(self) -> bool:
-        return False
-
-    def _apply(self, rgb):
-        return 255 - rgb
-
-    def describe(self):
-        return "invert()"
 
 
 def test_a_mutated_image_always_runs_the_sut():
