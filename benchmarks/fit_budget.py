@@ -2,7 +2,10 @@
 for choosing, held-out views for reporting.
 
 Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--steps 500 2000]
-[--ladder default=48,96,160@0.1,0.35 --ladder fine=48,96,160,256@0.1,0.35,0.6] [--fox 10m] [--json out.json]``
+[--ladder default=48,96,160@0.1,0.35 --ladder fine=48,96,160,256@0.1,0.35,0.6] [--fox 10m] [--json out.json]``,
+or, to compare other settings of the fit at the same steps, ``--base default --variant base
+--variant tv tv=1e-4 --variant half-rays batch_rays=2048 steps=4000`` (each variant: a name, then
+``FieldConfig`` settings as ``n2r fit --config`` takes them; ``steps=N`` overrides ``--steps`` for it).
 
 Each demo scene is photographed like a phone does (:func:`pytest_n2r.demo.phone_capture.write_phone_capture`:
 mixed orientation, exposure and white balance, blur, JPEG), read with its poses, and fitted once per
@@ -32,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pytest_n2r.cli.fit import parse_duration
+from pytest_n2r.cli.fit import parse_config_override, parse_duration
 from pytest_n2r.data import ingest
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.demo import ground_truth
@@ -51,6 +54,9 @@ FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "trans
 CONFIG = FieldConfig(resolutions=(48, 96, 160), stage_fractions=(0.1, 0.35), sh_degree=0, batch_rays=4096,
                      tv=1e-4, seed=0)
 LADDERS = ("default=48,96,160@0.1,0.35", "fine=48,96,160,256@0.1,0.35,0.6")
+#: The base configs ``--base`` names: the phone benchmark's, and the library's defaults (what the fox is fitted
+#: with).
+BASES = {"phone": CONFIG, "default": FieldConfig()}
 
 
 def parse_ladder(text: str) -> tuple[str, tuple[int, ...], tuple[float, ...]]:
@@ -64,6 +70,27 @@ def parse_ladder(text: str) -> tuple[str, tuple[int, ...], tuple[float, ...]]:
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"--ladder {text!r}: expected name=48,96,160@0.1,0.35 ({exc})") from None
     return name, resolutions, stage
+
+
+def parse_variant(words: list[str]) -> tuple[str, dict, int | None]:
+    """``[name, key=value, ...]`` of ``--variant`` → (name, FieldConfig changes, steps or None)."""
+    if not words or "=" in words[0]:
+        raise argparse.ArgumentTypeError(f"--variant {' '.join(words)}: expected a name, then key=value settings")
+    changes, steps = {}, None
+    for word in words[1:]:
+        key, value = parse_config_override(word)
+        if key == "steps":
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise argparse.ArgumentTypeError(f"--variant {words[0]}: steps={value!r}: expected an integer >= 1")
+            steps = value
+        else:
+            default = getattr(FieldConfig(), key, None)
+            changes[key] = (value,) if isinstance(default, tuple) and not isinstance(value, tuple) else value
+    try:
+        CONFIG.replace(**changes)
+    except (TypeError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(f"--variant {words[0]}: {exc}") from None
+    return words[0], changes, steps
 
 
 def split_validation(capture: Capture, every: int = 8, first: int = 4) -> tuple[Capture, list, list]:
@@ -102,10 +129,16 @@ def pixels_per_voxel(capture: Capture, resolution: int) -> float:
     return float("nan") if detail is None else detail.pixels_per_voxel(resolution)
 
 
+def _progress(info: dict) -> None:
+    if info["step"] % 250 < 5:  # about every 250 steps, so a long run's log shows where it is
+        print(f"  step {info['step']}, {info['resolution']}³, {info['elapsed_s']:.0f} s", file=sys.stderr, flush=True)
+
+
 def run_fit(capture: Capture, config: FieldConfig, **limits) -> tuple[object, dict]:
-    t0 = time.perf_counter()
-    result = fit(capture, config, device="cpu", **limits)
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = fit(capture, config, device="cpu", progress=_progress, **limits)
     info = {"steps": result.report["steps"], "fit_s": round(time.perf_counter() - t0, 1),
+            "cpu_s": round(time.process_time() - c0, 1),
             "pixels_per_voxel": round(pixels_per_voxel(capture, config.resolutions[-1]), 2)}
     return result.field, info
 
@@ -117,21 +150,34 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, nargs="+", default=[500, 2000], help="optimization steps per fit")
     parser.add_argument("--ladder", type=parse_ladder, action="append", default=None, metavar="NAME=RES@FRACTIONS",
                         help=f"grid ladder to compare (repeatable; default: {' '.join(LADDERS)})")
+    parser.add_argument("--base", choices=sorted(BASES), default="phone",
+                        help="the config ladders and variants change (default: phone, the phone benchmark's)")
+    parser.add_argument("--variant", nargs="+", action="append", default=None, metavar="NAME [KEY=VALUE ...]",
+                        help="compare these settings instead of ladders (repeatable)")
     parser.add_argument("--fox", type=parse_duration, default=None, metavar="DURATION",
                         help="also fit the fox once per ladder within this time budget")
     parser.add_argument("--json", default=None, metavar="PATH")
     args = parser.parse_args(argv)
-    ladders = args.ladder or [parse_ladder(text) for text in LADDERS]
+    base = BASES[args.base]
+    if args.variant:
+        try:
+            variants = [parse_variant(words) for words in args.variant]
+        except argparse.ArgumentTypeError as exc:
+            parser.error(str(exc))
+    else:
+        variants = [(name, {"resolutions": res, "stage_fractions": stage}, None)
+                    for name, res, stage in (args.ladder or [parse_ladder(text) for text in LADDERS])]
     torch.set_num_threads(2)
     rows = []
-    print("| scene | ladder | steps | fit s | pixels/voxel | validation PSNR / SSIM / ORB "
+    print("| scene | ladder / variant | steps | fit s | CPU s | pixels/voxel | validation PSNR / SSIM / ORB "
           "| held-out PSNR / SSIM / ORB |")
-    print("|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|")
 
     def report(row: dict) -> None:
         rows.append(row)
         v, h = row["validation"], row["heldout"]
-        print(f"| {row['scene']} | {row['ladder']} | {row['steps']} | {row['fit_s']} | {row['pixels_per_voxel']} | "
+        print(f"| {row['scene']} | {row['ladder']} | {row['steps']} | {row['fit_s']} | {row['cpu_s']} | "
+              f"{row['pixels_per_voxel']} | "
               f"{v['psnr']:.2f} / {v['ssim']:.3f} / {v['orb']:.3f} ({v['n']}) | "
               f"{h['psnr']:.2f} / {h['ssim']:.3f} / {h['orb']:.3f} ({h['n']}) |", flush=True)
 
@@ -141,10 +187,9 @@ def main(argv: list[str] | None = None) -> int:
             write_phone_capture(name, tmp, PhoneSettings(size=args.size))
             capture, validation, heldout = split_validation(ingest(tmp))
         for steps in args.steps:
-            for ladder, resolutions, stage in ladders:
-                config = CONFIG.replace(resolutions=resolutions, stage_fractions=stage)
-                field, info = run_fit(capture, config, max_steps=steps)
-                report({"scene": name, "ladder": ladder, **info, "validation": score_exact(scene, field, validation),
+            for variant, changes, own_steps in variants:
+                field, info = run_fit(capture, base.replace(**changes), max_steps=own_steps or steps)
+                report({"scene": name, "ladder": variant, **info, "validation": score_exact(scene, field, validation),
                         "heldout": score_exact(scene, field, heldout)})
     if args.fox is not None:
         if not FOX.exists():
@@ -153,10 +198,10 @@ def main(argv: list[str] | None = None) -> int:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
                 capture, validation, heldout = split_validation(ingest(FOX, downscale=0.25))
-            for ladder, resolutions, stage in ladders:
-                config = FieldConfig(resolutions=resolutions, stage_fractions=stage)
+            for variant, changes, _ in variants:
+                config = FieldConfig().replace(**changes)
                 field, info = run_fit(capture, config, time_budget_s=args.fox)
-                report({"scene": "fox", "ladder": ladder, **info, "validation": score_photos(field, validation),
+                report({"scene": "fox", "ladder": variant, **info, "validation": score_photos(field, validation),
                         "heldout": score_photos(field, heldout)})
     if args.json:
         from pytest_n2r.data.atomic import atomic_write_text
