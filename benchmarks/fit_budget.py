@@ -1,8 +1,8 @@
 """What a longer fit and a finer grid buy: phone captures of the demo scenes (and the fox), a validation split
 for choosing, held-out views for reporting.
 
-Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--steps 500 2000]
-[--ladder default=48,96,160@0.1,0.35 --ladder fine=48,96,160,256@0.1,0.35,0.6] [--fox 10m] [--json out.json]``,
+Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--steps 1000]
+[--ladder default=48,96,160@0.1,0.35 --ladder planned=48,96,160,256@0.025,0.0875,0.25] [--fox 10m] [--json out.json]``,
 or, to compare other settings of the fit at the same steps, ``--base default --variant base
 --variant tv tv=1e-4 --variant half-rays batch_rays=2048 steps=4000`` (each variant: a name, then
 ``FieldConfig`` settings as ``n2r fit --config`` takes them; ``steps=N`` overrides ``--steps`` for it).
@@ -53,7 +53,7 @@ FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "trans
 #: The phone benchmark's field settings (benchmarks/phone_capture.py); only the grid ladder varies here.
 CONFIG = FieldConfig(resolutions=(48, 96, 160), stage_fractions=(0.1, 0.35), sh_degree=0, batch_rays=4096,
                      tv=1e-4, seed=0)
-LADDERS = ("default=48,96,160@0.1,0.35", "fine=48,96,160,256@0.1,0.35,0.6")
+LADDERS = ("default=48,96,160@0.1,0.35", "planned=48,96,160,256@0.025,0.0875,0.25")
 #: The base configs ``--base`` names: the phone benchmark's, and the library's defaults (what the fox is fitted
 #: with).
 BASES = {"phone": CONFIG, "default": FieldConfig()}
@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=["wall", "object"])
     parser.add_argument("--size", type=int, default=160, help="longer side of the phone photos, pixels")
-    parser.add_argument("--steps", type=int, nargs="+", default=[500, 2000], help="optimization steps per fit")
+    parser.add_argument("--steps", type=int, nargs="+", default=[1000], help="optimization steps per fit")
     parser.add_argument("--ladder", type=parse_ladder, action="append", default=None, metavar="NAME=RES@FRACTIONS",
                         help=f"grid ladder to compare (repeatable; default: {' '.join(LADDERS)})")
     parser.add_argument("--base", choices=sorted(BASES), default="phone",
