@@ -22,6 +22,7 @@ SMOKE = {
     # 160x90: at 48x27 ORB (31-px borders) finds no keypoint, and a relation with nothing to compare fails
     "plugin_relation.py": (["--scene", "demo:object", "--examples", "3", "--size", "160x90"], "warm (disk) / cold"),
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
+    "demo_compare.py": (["HEAD", "--smoke"], "| object | HEAD"),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "render_speed.py": (["demo:object", "--smoke"], "| 96×54 | adaptive=0 |"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),

@@ -1,0 +1,129 @@
+"""Render speed of the exact demo scenes at several git revisions side by side, in one run (ratios survive a
+shared machine).
+
+Run: ``python benchmarks/demo_compare.py main HEAD`` (any revisions; the first is the base of the ratios;
+``--size WxH``, default 480x270; ``--rounds R``, default 3; ``--view I``, default 5; ``--smoke`` for a
+seconds-long run on tiny input). Each revision's ``pytest_n2r`` is exported with ``git archive`` (as
+``benchmarks/splat_compare.py`` does) and renders view ``I`` of ``demo:wall`` and ``demo:object`` (RGB + depth +
+opacity) in its own process, the revisions taking turns ``R`` times, so a change in the machine's load hits every
+revision alike. Per process and scene: CPU ms per frame, the least thread CPU time of 3 renders on one numba
+thread (what an idle core takes, whatever the load), and frames/s, 1 / the best wall time of 3 renders on all
+numba threads, each after a warm-up. The table gives the median over rounds, the ratio to the first
+revision, and how far its images are from the first revision's (RGB pixels that differ and by how many grey
+levels at most, the largest relative z-depth difference, opacity pixels that differ).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from splat_compare import export
+
+#: Run in a child process whose PYTHONPATH holds one revision's package: argv = size, view, repeats, out folder.
+CHILD = r"""
+import json, sys, time
+import numba, numpy as np
+from pytest_n2r.demo import ground_truth
+w, h = (int(v) for v in sys.argv[1].split("x"))
+view, repeats, out = int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+outputs = ("rgb", "depth", "opacity")
+result = {}
+for name in ("wall", "object"):
+    scene = ground_truth(name)
+    c2w, camera = scene.views[view].c2w, scene.views[view].camera.resized(w, h)
+    frame = scene.render(c2w, camera, outputs)
+    np.savez(f"{out}/{name}.npz", rgb=frame.rgb, depth=frame.depth, opacity=frame.opacity)
+    all_threads = numba.get_num_threads()
+    numba.set_num_threads(1)  # the render then runs in this thread: its thread time is the frame's CPU time
+    cpu = []
+    for _ in range(repeats):
+        c0 = time.thread_time()
+        scene.render(c2w, camera, outputs)
+        cpu.append(time.thread_time() - c0)
+    numba.set_num_threads(all_threads)
+    scene.render(c2w, camera, outputs)
+    wall = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        scene.render(c2w, camera, outputs)
+        wall.append(time.perf_counter() - t0)
+    result[name] = {"cpu_ms": 1e3 * min(cpu), "fps": 1.0 / min(wall)}
+import pytest_n2r
+result["package"] = pytest_n2r.__file__
+print(json.dumps(result))
+"""
+
+SCENES = ("wall", "object")
+
+
+def measure(folder: Path, size: str, view: int, repeats: int, out: Path) -> dict:
+    """One round of one revision (see :data:`CHILD`), its images saved under ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, PYTHONPATH=str(folder))
+    # run in the export: `python -c` puts the working directory first on sys.path, before PYTHONPATH
+    result = subprocess.run([sys.executable, "-c", CHILD, size, str(view), str(repeats), str(out)], env=env,
+                            cwd=folder, capture_output=True, text=True, check=False)
+    if result.returncode != 0:
+        raise SystemExit(f"the render at {folder.name[:10]} failed:\n{result.stderr}")
+    measured = json.loads(result.stdout.splitlines()[-1])
+    if not Path(measured["package"]).resolve().is_relative_to(folder.resolve()):
+        raise SystemExit(f"the render of {folder.name[:10]} imported {measured['package']}, not the export")
+    return measured
+
+
+def difference(images: Path, base: Path) -> str:
+    """How far one revision's images are from the base revision's (see the module docstring)."""
+    a, b = np.load(images), np.load(base)
+    grey = np.abs(a["rgb"].astype(int) - b["rgb"].astype(int)).max(axis=2)
+    depth = float(np.max(np.abs(a["depth"].astype(float) - b["depth"]) / b["depth"]))
+    return (f"{int(np.sum(grey > 0))} px (max {int(grey.max())}) | {depth:.1e} | "
+            f"{int(np.sum(a['opacity'] != b['opacity']))} px")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("revisions", nargs="+", help="git revisions; the first is the base of the ratios")
+    parser.add_argument("--size", default="480x270", help="WxH (default 480x270)")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--view", type=int, default=5, help="the view of each scene that is rendered")
+    parser.add_argument("--smoke", action="store_true", help="tiny input, to check that the script runs")
+    args = parser.parse_args(argv)
+    size, rounds, repeats = args.size, args.rounds, 3
+    if args.smoke:
+        size, rounds, repeats = "24x14", 1, 1
+    with tempfile.TemporaryDirectory(prefix="n2r-demo-compare-") as tmp:
+        folders = {rev: export(rev, Path(tmp)) for rev in args.revisions}
+        runs: dict[str, list[dict]] = {rev: [] for rev in args.revisions}
+        for r in range(rounds):
+            for rev, folder in folders.items():
+                runs[rev].append(measure(folder, size, args.view, repeats, Path(tmp) / "images" / f"{rev}-{r}"))
+        load = os.getloadavg()
+        print(f"view {args.view} at {size}, RGB + depth + opacity, {rounds} rounds; load average at the end "
+              f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)\n")
+        print("| scene | revision | CPU ms per frame, 1 thread | ratio | frames/s, all threads | ratio | "
+              "RGB differing from the first | z-depth rel. | opacity |")
+        print("|---|---|---|---|---|---|---|---|---|")
+        first = args.revisions[0]
+        for name in SCENES:
+            base = None
+            for rev, folder in folders.items():
+                cpu = statistics.median(run[name]["cpu_ms"] for run in runs[rev])
+                fps = statistics.median(run[name]["fps"] for run in runs[rev])
+                base = base or (cpu, fps)
+                images = Path(tmp) / "images"
+                diff = difference(images / f"{rev}-0" / f"{name}.npz", images / f"{first}-0" / f"{name}.npz")
+                print(f"| {name} | {rev} ({folder.name[:10]}) | {cpu:.1f} | {cpu / base[0]:.2f} | {fps:.1f} | "
+                      f"{fps / base[1]:.2f} | {diff} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
