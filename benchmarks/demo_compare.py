@@ -16,16 +16,13 @@ levels at most, the largest relative z-depth difference, opacity pixels that dif
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-from splat_compare import export
+from splat_compare import export, run_in_export
 
 #: Run in a child process whose PYTHONPATH holds one revision's package: argv = size, view, repeats, out folder.
 CHILD = r"""
@@ -67,16 +64,7 @@ SCENES = ("wall", "object")
 def measure(folder: Path, size: str, view: int, repeats: int, out: Path) -> dict:
     """One round of one revision (see :data:`CHILD`), its images saved under ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, PYTHONPATH=str(folder))
-    # run in the export: `python -c` puts the working directory first on sys.path, before PYTHONPATH
-    result = subprocess.run([sys.executable, "-c", CHILD, size, str(view), str(repeats), str(out)], env=env,
-                            cwd=folder, capture_output=True, text=True, check=False)
-    if result.returncode != 0:
-        raise SystemExit(f"the render at {folder.name[:10]} failed:\n{result.stderr}")
-    measured = json.loads(result.stdout.splitlines()[-1])
-    if not Path(measured["package"]).resolve().is_relative_to(folder.resolve()):
-        raise SystemExit(f"the render of {folder.name[:10]} imported {measured['package']}, not the export")
-    return measured
+    return run_in_export(folder, CHILD, [size, str(view), str(repeats), str(out)], {})
 
 
 def difference(images: Path, base: Path) -> str:

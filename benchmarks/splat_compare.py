@@ -75,12 +75,17 @@ def export(revision: str, into: Path) -> Path:
 
 
 def measure(folder: Path, data: Path, size: str, repeats: int, threads: int | None) -> dict:
-    env = dict(os.environ, PYTHONPATH=str(folder))
-    if threads is not None:
-        env["NUMBA_NUM_THREADS"] = str(threads)
+    env = {} if threads is None else {"NUMBA_NUM_THREADS": str(threads)}
+    return run_in_export(folder, CHILD, [str(data), size, str(repeats)], env)
+
+
+def run_in_export(folder: Path, child: str, args: list[str], env: dict[str, str]) -> dict:
+    """Run ``child`` (Python source that prints a JSON object with the ``package`` it imported last) with
+    ``args`` on the export ``folder`` of one revision (and ``env`` added); its JSON object."""
+    env = dict(os.environ, PYTHONPATH=str(folder), **env)
     # run in the export: `python -c` puts the working directory first on sys.path, before PYTHONPATH
-    result = subprocess.run([sys.executable, "-c", CHILD, str(data), size, str(repeats)], env=env, cwd=folder,
-                            capture_output=True, text=True, check=False)
+    result = subprocess.run([sys.executable, "-c", child, *args], env=env, cwd=folder, capture_output=True,
+                            text=True, check=False)
     if result.returncode != 0:
         raise SystemExit(f"the render at {folder.name[:10]} failed:\n{result.stderr}")
     measured = json.loads(result.stdout.splitlines()[-1])
