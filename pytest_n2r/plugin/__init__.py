@@ -69,10 +69,6 @@ def pytest_configure(config: pytest.Config) -> None:
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
     config.pluginmanager.register(_Summary(config), "n2r-summary")
-    if hasattr(config, "workerinput") and is_used(config):
-        from .threads import share_cores
-
-        share_cores()  # each pytest-xdist worker renders on its share of the cores
     if is_used(config):
         session = _session(config)  # bad options fail now, before collection
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
