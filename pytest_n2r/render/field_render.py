@@ -81,19 +81,20 @@ class RenderSettings:
     backend: str = "auto"
 
     def __post_init__(self) -> None:
-        checks = {
-            "step_ratio": 0.01 <= self.step_ratio <= 8.0,
-            "far": math.isfinite(self.far) and 0.0 < self.far <= 1e6,
-            "t_stop": 0.0 <= self.t_stop < 1.0,
-            "min_alpha": 0.0 <= self.min_alpha < 1.0,
-            "scale": 0.1 <= self.scale <= 1.0,
-            "adaptive": 0.0 <= self.adaptive <= 1.0,
-            "adaptive_depth": 0.0 <= self.adaptive_depth <= 1.0,
-            "chunk_rays": isinstance(self.chunk_rays, int) and self.chunk_rays >= 1,
+        checks = {  # name: (accepted, what is expected)
+            "step_ratio": (0.01 <= self.step_ratio <= 8.0, "a value in [0.01, 8]"),
+            "far": (math.isfinite(self.far) and 0.0 < self.far <= 1e6, "a value in (0, 1e6]"),
+            "t_stop": (0.0 <= self.t_stop < 1.0, "a value in [0, 1)"),
+            "min_alpha": (0.0 <= self.min_alpha < 1.0, "a value in [0, 1)"),
+            "scale": (0.1 <= self.scale <= 1.0, "a value in [0.1, 1]"),
+            "adaptive": (0.0 <= self.adaptive <= 1.0, "a value in [0, 1] (0 traces every pixel)"),
+            "adaptive_depth": (0.0 <= self.adaptive_depth <= 1.0, "a relative depth in [0, 1]"),
+            "chunk_rays": (isinstance(self.chunk_rays, int) and self.chunk_rays >= 1, "an int >= 1"),
         }
-        for name, ok in checks.items():
+        for name, (ok, expected) in checks.items():
             if not ok:
-                raise InvalidArgument(f"RenderSettings.{name}={getattr(self, name)!r} is out of range")
+                value = getattr(self, name)
+                raise InvalidArgument(f"RenderSettings.{name}={value!r} is out of range; expected {expected}")
         if self.shell_samples is not None \
                 and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")

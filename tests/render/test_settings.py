@@ -26,6 +26,8 @@ from ..field.fields import CAMERA, named_pose, random_field
     ({"scale": 1.5}, "scale"),
     ({"chunk_rays": 0}, "chunk_rays"),
     ({"chunk_rays": 1.5}, "chunk_rays"),
+    ({"adaptive": -1.0}, "adaptive"),
+    ({"adaptive_depth": float("nan")}, "adaptive_depth"),
     ({"shell_samples": 0}, "shell_samples"),
     ({"background": (2.0, 0.0, 0.0)}, "background"),
     ({"background": (0.0, 0.0)}, "background"),
@@ -33,8 +35,9 @@ from ..field.fields import CAMERA, named_pose, random_field
 ])
 def test_bad_settings_are_named(changes, name):
     ((_, value),) = changes.items()
-    with pytest.raises(InvalidArgument, match=re.escape(f"RenderSettings.{name}={value!r}")):
+    with pytest.raises(InvalidArgument, match=re.escape(f"RenderSettings.{name}={value!r}")) as error:
         RenderSettings(**changes)
+    assert "expected" in str(error.value), f"the message does not say what is accepted: {error.value}"
 
 
 def test_auto_picks_the_compiled_backend_on_the_cpu_and_settings_round_trip():
