@@ -259,9 +259,11 @@ class _Summary:
         now = time.perf_counter()
         total = now - _LOADED
         startup = (self.first_report if self.first_report is not None else now) - _LOADED
-        t = {k: sum(r.timings.get(k, 0.0) for r in self.records)
-             for k in ("render", "sut", "metric", "validity", "total", "floor")}
-        other = max(0.0, self.phases["relations"] - t["render"] - t["sut"] - t["metric"] - t["validity"] - t["floor"])
+        from ..relation.record import MORE_TIMINGS, TIMINGS
+
+        parts = (*TIMINGS, *(k for k in MORE_TIMINGS if k != "total"))  # the parts a relation's time splits into
+        t = {k: sum(r.timings.get(k, 0.0) for r in self.records) for k in parts}
+        other = max(0.0, self.phases["relations"] - sum(t.values()))
         workers = getattr(self.config.option, "numprocesses", None) if hasattr(self.config.option, "dist") else None
         summed = f" (test times summed over the {workers} workers)" if isinstance(workers, int) and workers > 1 else ""
         return (
