@@ -7,11 +7,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import torch  # noqa: F401  (see below: torch's C extension cannot be imported a second time in one process)
 from hypothesis import settings
 
 # pytester drops the modules an inner run imported first; importing these here keeps one copy of each, so
 # an inner test's metric is an instance of the same Metric class the (cached) @metamorphic checks against,
-# and a test that patches the demo scenes patches the module the inner run reads.
+# and a test that patches the demo scenes patches the module the inner run reads. torch is imported above for
+# the same reason: an inner run that imports it first (a scene file naming a classifier) and drops it left
+# a half-initialised extension ("SystemError: ... bad call flags" when tests/plugin ran on its own).
 import pytest_n2r.demo
 import pytest_n2r.metrics
 import pytest_n2r.plugin.marker
