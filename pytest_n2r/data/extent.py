@@ -3,7 +3,7 @@
 Convention
 ----------
 A point is *seen* by a camera when it lies in front of it (z-depth > 0) and projects inside its image
-(pixel centres at integer coordinates, so inside means ``-0.5 <= u < width - 0.5``). Occlusion is not
+(:func:`~pytest_n2r.geometry.inside_image`: half-open pixel cells). Occlusion is not
 modelled. Depths are **z-depths** (along the optical axis), in world units.
 """
 
@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import IngestError
-from ..geometry import Camera, project
+from ..geometry import Camera, inside_image, project
 
 __all__ = ["seen_depths", "reference_length", "scene_bounds"]
 
@@ -29,9 +29,7 @@ def seen_depths(
     depths = []
     for camera, c2w in zip(cameras, c2ws):
         uv, z = project(points, camera, c2w)
-        with np.errstate(invalid="ignore"):
-            inside = (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] < camera.width - 0.5) \
-                & (uv[:, 1] >= -0.5) & (uv[:, 1] < camera.height - 0.5)
+        inside = (z > 0) & inside_image(uv[:, 0], uv[:, 1], camera.width, camera.height)
         depths.append(z[inside])
         seen |= inside
     return (np.concatenate(depths) if depths else np.zeros(0)), seen

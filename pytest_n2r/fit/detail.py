@@ -24,7 +24,7 @@ import numpy as np
 from ..data.capture import Capture
 from ..errors import InvalidArgument
 from ..field.space import SceneSpace
-from ..geometry import project
+from ..geometry import inside_image, project
 
 __all__ = ["CaptureDetail", "capture_detail", "fit_memory_bytes", "memory_resolution"]
 
@@ -71,9 +71,7 @@ def capture_detail(capture: Capture, space: SceneSpace, views: Sequence | None =
         if not len(points):
             break
         uv, z = project(points, view.camera, view.c2w)
-        with np.errstate(invalid="ignore"):
-            seen = (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] < view.camera.width - 0.5) \
-                & (uv[:, 1] >= -0.5) & (uv[:, 1] < view.camera.height - 0.5)
+        seen = (z > 0) & inside_image(uv[:, 0], uv[:, 1], view.camera.width, view.camera.height)
         if seen.sum() >= MIN_POINTS:
             footprints.append(float(np.median(z[seen])) / view.camera.fx / space.radius)
     if not footprints:

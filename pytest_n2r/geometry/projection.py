@@ -6,12 +6,15 @@ Convention
   (pixel centres at integer coordinates).
 - **Depth is z-depth**: the coordinate along the optical axis in the camera frame, in scene units, not
   the distance along the ray.
-- Pixel coordinates are ``(u, v)`` = (column, row), float.
+- Pixel coordinates are ``(u, v)`` = (column, row), float. Pixel centres are at integers, so pixel ``(i, j)``
+  covers ``[i - 0.5, i + 0.5) x [j - 0.5, j + 0.5)`` and a point is *inside* an image of ``W x H`` pixels when
+  ``-0.5 <= u < W - 0.5`` and ``-0.5 <= v < H - 0.5`` (half-open: every inside point has exactly one pixel).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .._validation import check_array
 from .camera import Camera
@@ -21,6 +24,8 @@ __all__ = [
     "pixel_grid",
     "camera_rays",
     "project",
+    "pixels_from_camera",
+    "inside_image",
     "backproject",
     "plane_homography",
     "rotation_homography",
@@ -66,10 +71,33 @@ def project(points_world: np.ndarray, camera: Camera, c2w: np.ndarray) -> tuple[
     w2c = invert_pose(c2w)
     pc = p @ w2c[:3, :3].T + w2c[:3, 3]
     z = pc[:, 2]
+    u, v = pixels_from_camera(pc[:, 0], pc[:, 1], z, camera.fx, camera.fy, camera.cx, camera.cy)
+    return np.stack([u, v], -1), z
+
+
+def pixels_from_camera(x: np.ndarray, y: np.ndarray, z: np.ndarray, fx: ArrayLike, fy: ArrayLike, cx: ArrayLike,
+                       cy: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-frame coordinates → pixel coordinates ``(u, v)``, NaN where ``z <= 0`` (behind the camera).
+
+    Every argument broadcasts (intrinsics in pixels), so one call projects into many cameras at once.
+
+    >>> pixels_from_camera(np.array([1.0, 1.0]), np.array([0.0, 0.0]), np.array([2.0, -2.0]), 100, 100, 50, 40)
+    (array([100.,  nan]), array([40., nan]))
+    """
     with np.errstate(divide="ignore", invalid="ignore"):
         safe = np.where(z > 0, z, np.nan)
-        uv = np.stack([camera.fx * pc[:, 0] / safe + camera.cx, camera.fy * pc[:, 1] / safe + camera.cy], -1)
-    return uv, z
+        return fx * x / safe + cx, fy * y / safe + cy
+
+
+def inside_image(u: np.ndarray, v: np.ndarray, width: ArrayLike, height: ArrayLike) -> np.ndarray:
+    """Whether pixel coordinates lie inside an image of ``width x height`` pixels (half-open, see the
+    Convention; False for NaN). Broadcasts like :func:`pixels_from_camera`.
+
+    >>> inside_image(np.array([-0.5, 9.49, 9.5, np.nan]), np.zeros(4), 10, 5)
+    array([ True,  True, False, False])
+    """
+    with np.errstate(invalid="ignore"):
+        return (u >= -0.5) & (u < np.subtract(width, 0.5)) & (v >= -0.5) & (v < np.subtract(height, 0.5))
 
 
 def backproject(uv: np.ndarray, depth: np.ndarray, camera: Camera, c2w: np.ndarray) -> np.ndarray:

@@ -37,6 +37,7 @@ from ..geometry import (
     apply_homography,
     backproject,
     camera_rays,
+    inside_image,
     plane_homography,
     project,
     rotation_homography,
@@ -49,7 +50,6 @@ __all__ = [
     "DepthMapping",
     "HomographyMapping",
     "sample_depth",
-    "inside_image",
     "check_plane",
     "DEFAULT_MIN_OPACITY",
     "DEFAULT_DEPTH_TOLERANCE",
@@ -74,13 +74,9 @@ class MappedPoints:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
-def inside_image(uv: np.ndarray, camera: Camera) -> np.ndarray:
-    """``(N,)`` bool: the points lie in ``[-0.5, W - 0.5] x [-0.5, H - 0.5]`` (False for NaN)."""
-    with np.errstate(invalid="ignore"):
-        return (
-            (uv[:, 0] >= -0.5) & (uv[:, 0] <= camera.width - 0.5)
-            & (uv[:, 1] >= -0.5) & (uv[:, 1] <= camera.height - 0.5)
-        )
+def _inside(uv: np.ndarray, camera: Camera) -> np.ndarray:
+    """``(N,)`` bool: the points ``(N, 2)`` lie inside the camera's image (False for NaN)."""
+    return inside_image(uv[:, 0], uv[:, 1], camera.width, camera.height)
 
 
 def _nearest_index(uv: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
@@ -204,14 +200,14 @@ class DepthMapping(PointMapping):
         n = len(uv)
         out = np.full((n, 2), np.nan)
         visible = np.zeros(n, dtype=bool)
-        inside_a = inside_image(uv, a.camera)
+        inside_a = _inside(uv, a.camera)
         idx = np.flatnonzero(inside_a)
         has_a, depth_a = self._surface(a, uv[idx])
         idx, depth_a = idx[has_a], depth_a[has_a]
         n_empty_a = int(np.count_nonzero(~has_a))
 
         uv_b, z_b = project(backproject(uv[idx], depth_a, a.camera, a.c2w), b.camera, b.c2w)
-        inside_b = (z_b > 0) & inside_image(uv_b, b.camera)
+        inside_b = (z_b > 0) & _inside(uv_b, b.camera)
         idx, uv_b, z_b = idx[inside_b], uv_b[inside_b], z_b[inside_b]
 
         has_b, depth_b = self._surface(b, uv_b)
@@ -292,7 +288,7 @@ class HomographyMapping(PointMapping):
     def _map(self, uv: np.ndarray, H: np.ndarray, cam_a: Camera, cam_b: Camera, forward: bool) -> MappedPoints:
         uv = check_array("uv", uv, "N 2", dtype=np.float64)
         mapped = apply_homography(H, uv)
-        visible = inside_image(uv, cam_a) & inside_image(mapped, cam_b) & self._in_front(uv, forward)
+        visible = _inside(uv, cam_a) & _inside(mapped, cam_b) & self._in_front(uv, forward)
         mapped[~visible] = np.nan
         return MappedPoints(mapped, visible, {"outside": int(np.count_nonzero(~visible))})
 

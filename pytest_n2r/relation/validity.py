@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import check_range
-from ..geometry import backproject, invert_pose
+from ..geometry import CameraStack, backproject
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
 
@@ -99,43 +99,8 @@ class Validity:
         if not solid.any():
             return 0.0
         points = backproject(uv[solid], view.depth[iv, iu][solid].astype(np.float64), cam, view.c2w)
-        stack = training_stack(scene) if cameras is None else CameraStack.of(cameras)
-        return float(stack.seen(points).mean())
-
-
-@dataclass(frozen=True)
-class CameraStack:
-    """Pinhole cameras stacked as arrays, so that points are projected into all of them in one operation:
-    ``w2c`` ``(K, 4, 4)`` world-to-camera poses, ``intrinsics`` ``(K, 4)`` (fx, fy, cx, cy, pixels) and
-    ``size`` ``(K, 2)`` (width, height, pixels)."""
-
-    w2c: np.ndarray
-    intrinsics: np.ndarray
-    size: np.ndarray
-
-    @classmethod
-    def of(cls, views: Sequence[SceneView]) -> CameraStack:
-        w2c = np.stack([invert_pose(v.c2w) for v in views]) if views else np.zeros((0, 4, 4))
-        cams = [v.camera for v in views]
-        intrinsics = np.array([[c.fx, c.fy, c.cx, c.cy] for c in cams], dtype=np.float64).reshape(-1, 4)
-        size = np.array([[c.width, c.height] for c in cams], dtype=np.float64).reshape(-1, 2)
-        return cls(w2c, intrinsics, size)
-
-    def seen(self, points: np.ndarray) -> np.ndarray:
-        """For world points ``(N, 3)``: whether each lies in front of some camera and projects inside its
-        image (pixel centres at integers, so the image spans ``[-0.5, width - 0.5]``)."""
-        k = len(self.w2c)
-        # one matrix product for all cameras: (3K, 3) rotations times (3, N) points, as (K, 3, N)
-        pc = (self.w2c[:, :3, :3].reshape(3 * k, 3) @ points.T).reshape(k, 3, -1) + self.w2c[:, :3, 3, None]
-        x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            safe = np.where(z > 0, z, np.nan)
-            fx, fy, cx, cy = (self.intrinsics[:, i, None] for i in range(4))
-            u = fx * x / safe + cx
-            v = fy * y / safe + cy
-        width, height = self.size[:, 0, None], self.size[:, 1, None]
-        inside = (z > 0) & (u >= -0.5) & (u <= width - 0.5) & (v >= -0.5) & (v <= height - 0.5)
-        return inside.any(axis=0)
+        stack = training_stack(scene) if cameras is None else _stack_of(cameras)
+        return float(stack.sees(points).any(axis=0).mean())
 
 
 _STACKS: weakref.WeakKeyDictionary[Scene, tuple[object, CameraStack]] = weakref.WeakKeyDictionary()
@@ -146,8 +111,12 @@ def training_stack(scene: Scene) -> CameraStack:
     its ``views`` are replaced)."""
     known = _STACKS.get(scene)
     if known is None or known[0] is not scene.views:
-        known = _STACKS[scene] = (scene.views, CameraStack.of(training_views(scene)))
+        known = _STACKS[scene] = (scene.views, _stack_of(training_views(scene)))
     return known[1]
+
+
+def _stack_of(views: Sequence[SceneView]) -> CameraStack:
+    return CameraStack.of([v.camera for v in views], [v.c2w for v in views])
 
 
 def training_views(scene: Scene) -> list[SceneView]:

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 
 from pytest_n2r.geometry import Camera, Transform, camera_rays
-from pytest_n2r.metrics.correspondence import inside_image, sample_depth
+from pytest_n2r.metrics.correspondence import sample_depth
 
 from .scenes import CAMERA
 
@@ -49,9 +49,3 @@ def test_one_pixel_wide_images_and_bad_depths():
     out = sample_depth(depth, np.array([[0.0, 0.0], [0.2, 1.0], [0.0, 2.0]]))
     assert out[0] == 2.0 and out[1] == 2.0 and np.isnan(out[2])
     assert np.isnan(sample_depth(np.zeros((3, 3)), np.array([[1.0, 1.0]]))[0])
-
-
-def test_inside_image_uses_pixel_borders():
-    cam = Camera(4, 3, 1.0, 1.0, 1.5, 1.0)
-    uv = np.array([[-0.5, -0.5], [3.5, 2.5], [-0.51, 0.0], [0.0, 2.51], [np.nan, 0.0]])
-    assert inside_image(uv, cam).tolist() == [True, True, False, False, False]
