@@ -16,10 +16,15 @@ from numba import njit, prange
 
 from .splat_kernels import _B, _CA, _CB, _CC, _G, _O, _R, _R2, _U, _V, _Z, ALPHA_MAX, ALPHA_MIN
 
-__all__ = ["BATCH", "composite_tiles", "exp_of_power", "finish"]
+__all__ = ["BATCH", "LANES", "composite_tiles", "exp_of_power", "finish"]
 
 #: Records a tile copies at a time before compositing them (see :func:`composite_tiles`).
 BATCH = 32
+#: Pixels of a tile row composited together (one AVX-512 vector of float64): a tile's pixel state is held in
+#: blocks of ``LANES`` pixels of a row, transmittance, R, G, B and depth each ``LANES`` values in a row.
+LANES = 8
+_T, _AR, _AG, _AB, _AD = range(5)
+_FIELDS = 5
 #: :func:`exp_of_power`'s table: ``exp(-j / _EXP_STEPS)`` for ``0 <= j <= _POWER_MIN_EXP · _EXP_STEPS``.
 _EXP_STEPS = 64
 _POWER_MIN_EXP = 6.0
@@ -62,6 +67,7 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
     n_fields = records.shape[1]
+    blocks_x = (tile + LANES - 1) // LANES
     for i in prange(n_tiles):
         t = tile_order[i]
         s, e = tile_start[t], tile_start[t + 1]
@@ -72,12 +78,14 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
         if live[t] == 0:
             e = s
         left = live[t]
+        state = np.empty(((ty1 - ty0) * blocks_x, _FIELDS, LANES))
+        _load_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x)
         # per row of the tile, the pixels lo <= x < hi hold every pixel not yet done
         lo = np.empty(ty1 - ty0, np.int64)
         hi = np.empty(ty1 - ty0, np.int64)
-        for py in range(ty0, ty1):
-            lo[py - ty0], hi[py - ty0] = tx0, tx1
-            _shrink_span(trans, py * width, py - ty0, lo, hi)
+        for r in range(ty1 - ty0):
+            lo[r], hi[r] = tx0, tx1
+            _shrink_span(state, r * blocks_x, tx0, r, lo, hi)
         batch = np.empty((BATCH, n_fields))
         spans = np.empty((BATCH, 4), np.int64)
         for k in range(s, e):
@@ -93,54 +101,86 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
             gx0, gx1 = max(span[0], tx0), min(span[1], tx1)
             gy0, gy1 = max(span[2], ty0), min(span[3], ty1)
             u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
-            r, gr, bl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
-            # alpha can reach ALPHA_MIN only where ca dx² + 2 cb dx dy + cc dy² <= r2, i.e. power >= -r2 / 2;
-            # r2 is widened, so rounding never skips a pixel the exact test would keep
+            cr, cg, cbl, z = rec[_R], rec[_G], rec[_B], rec[_Z]
             power_min = -0.5 * rec[_R2]
             for py in range(gy0, gy1):
+                r = py - ty0
+                xa, xe = max(gx0, lo[r]), min(gx1, hi[r])
+                if xa >= xe:
+                    continue
                 dy = v - py
-                row = py * width
-                for px in range(max(gx0, lo[py - ty0]), min(gx1, hi[py - ty0])):
-                    p = row + px
-                    tp = trans[p]
-                    if tp < 0.0:  # done
-                        continue
-                    dx = u - px
-                    power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
-                    if power < power_min:
-                        continue
-                    alpha = min(ALPHA_MAX, o * exp_of_power(power))
-                    if alpha < ALPHA_MIN:
-                        continue
-                    after = tp * (1.0 - alpha)
-                    if after < t_stop:
-                        trans[p] = -tp
-                        left -= 1
-                        _shrink_span(trans, row, py - ty0, lo, hi)
-                        continue
-                    w = alpha * tp
-                    acc_rgb[p, 0] += w * r
-                    acc_rgb[p, 1] += w * gr
-                    acc_rgb[p, 2] += w * bl
-                    acc_depth[p] += w * z
-                    trans[p] = after
+                done = 0
+                for bx in range((xa - tx0) // LANES, (xe - tx0 - 1) // LANES + 1):
+                    blk = state[r * blocks_x + bx]
+                    x0 = tx0 + bx * LANES
+                    for lane in range(LANES):
+                        px = x0 + lane
+                        tp = blk[_T, lane]
+                        dx = u - px
+                        power = -0.5 * (ca * dx * dx + cc * dy * dy) - cb * dx * dy
+                        alpha = min(ALPHA_MAX, o * exp_of_power(max(power, power_min)))
+                        after = tp * (1.0 - alpha)
+                        ok = (px >= xa) & (px < xe) & (tp >= 0.0) & (power >= power_min) & (alpha >= ALPHA_MIN)
+                        stop = ok & (after < t_stop)
+                        add = ok & (after >= t_stop)
+                        w = alpha * tp
+                        blk[_AR, lane] = blk[_AR, lane] + w * cr if add else blk[_AR, lane]
+                        blk[_AG, lane] = blk[_AG, lane] + w * cg if add else blk[_AG, lane]
+                        blk[_AB, lane] = blk[_AB, lane] + w * cbl if add else blk[_AB, lane]
+                        blk[_AD, lane] = blk[_AD, lane] + w * z if add else blk[_AD, lane]
+                        blk[_T, lane] = after if add else (-tp if stop else tp)
+                        done += stop
+                if done:
+                    left -= done
+                    _shrink_span(state, r * blocks_x, tx0, r, lo, hi)
             if left == 0:
                 break
         live[t] = left
         if final:
-            for py in range(ty0, ty1):
-                for p in range(py * width + tx0, py * width + tx1):
-                    _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+            for r in range(ty1 - ty0):
+                for x in range(tx1 - tx0):
+                    blk, lane = state[r * blocks_x + x // LANES], x % LANES
+                    _finish_values((ty0 + r) * width + tx0 + x, blk[_T, lane], blk[_AR, lane], blk[_AG, lane],
+                                   blk[_AB, lane], blk[_AD, lane], background, rgb_out, depth_out, opacity_out)
+        else:
+            _store_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x)
 
 
 @njit(inline="always")
-def _shrink_span(trans, row, r, lo, hi):
-    """Move the ends of row ``r``'s span ``lo[r] <= x < hi[r]`` (pixel ``row + x``) past the done pixels there
-    (negative ``trans``)."""
+def _load_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x):
+    """Copy the pixel state of the tile ``tx0 <= x < tx1, ty0 <= y < ty1`` into its blocks in ``state`` (see
+    :func:`composite_tiles`); the lanes beyond the tile's right edge are marked done."""
+    for r in range(ty1 - ty0):
+        for x in range(blocks_x * LANES):
+            blk, lane = state[r * blocks_x + x // LANES], x % LANES
+            if x < tx1 - tx0:
+                p = (ty0 + r) * width + tx0 + x
+                blk[_T, lane], blk[_AR, lane], blk[_AG, lane] = trans[p], acc_rgb[p, 0], acc_rgb[p, 1]
+                blk[_AB, lane], blk[_AD, lane] = acc_rgb[p, 2], acc_depth[p]
+            else:
+                blk[:, lane] = 0.0
+                blk[_T, lane] = -1.0
+
+
+@njit(inline="always")
+def _store_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x):
+    """Copy a tile's blocks in ``state`` back into the pixel state (the inverse of :func:`_load_tile`)."""
+    for r in range(ty1 - ty0):
+        for x in range(tx1 - tx0):
+            blk, lane = state[r * blocks_x + x // LANES], x % LANES
+            p = (ty0 + r) * width + tx0 + x
+            trans[p], acc_rgb[p, 0], acc_rgb[p, 1] = blk[_T, lane], blk[_AR, lane], blk[_AG, lane]
+            acc_rgb[p, 2], acc_depth[p] = blk[_AB, lane], blk[_AD, lane]
+
+
+@njit(inline="always")
+def _shrink_span(state, row_block, tx0, r, lo, hi):
+    """Move the ends of tile row ``r``'s span ``lo[r] <= x < hi[r]`` past the done pixels there (negative
+    transmittance; the row's blocks start at block ``row_block`` of ``state``, its first pixel is ``tx0``)."""
     x0, x1 = lo[r], hi[r]
-    while x0 < x1 and trans[row + x0] < 0.0:
+    while x0 < x1 and state[row_block + (x0 - tx0) // LANES, _T, (x0 - tx0) % LANES] < 0.0:
         x0 += 1
-    while x1 > x0 and trans[row + x1 - 1] < 0.0:
+    while x1 > x0 and state[row_block + (x1 - 1 - tx0) // LANES, _T, (x1 - 1 - tx0) % LANES] < 0.0:
         x1 -= 1
     lo[r], hi[r] = x0, x1
 
@@ -151,16 +191,17 @@ def finish(trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_ou
     like ``np.rint``), ``depth`` (the weighted mean z-depth; 0 where nothing contributed) and ``opacity``
     (``1 - T``), flat over pixels."""
     for p in prange(trans.shape[0]):
-        _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out)
+        _finish_values(p, trans[p], acc_rgb[p, 0], acc_rgb[p, 1], acc_rgb[p, 2], acc_depth[p], background, rgb_out,
+                       depth_out, opacity_out)
 
 
 @njit(inline="always")
-def _finish_pixel(p, trans, acc_rgb, acc_depth, background, rgb_out, depth_out, opacity_out):
-    """:func:`finish` of pixel ``p``."""
-    tp = abs(trans[p])
-    for ch in range(3):
-        value = acc_rgb[p, ch] + tp * background[ch]
+def _finish_values(p, trans, red, green, blue, depth, background, rgb_out, depth_out, opacity_out):
+    """:func:`finish` of pixel ``p`` with the state ``trans``, ``red``, ``green``, ``blue``, ``depth``."""
+    tp = abs(trans)
+    for ch, acc in enumerate((red, green, blue)):
+        value = acc + tp * background[ch]
         rgb_out[p, ch] = np.uint8(min(max(np.rint(value * 255.0), 0.0), 255.0))
     weight = 1.0 - tp
-    depth_out[p] = acc_depth[p] / weight if weight > 0.0 else 0.0
+    depth_out[p] = depth / weight if weight > 0.0 else 0.0
     opacity_out[p] = weight
