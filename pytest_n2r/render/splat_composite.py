@@ -45,7 +45,7 @@ def exp_of_power(power):
 
 
 @njit(cache=True, parallel=True, fastmath={"contract"})
-def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
+def composite_tiles(tile_start, pair_records, pair_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
                     acc_rgb, acc_depth, final, background, rgb_out, depth_out, opacity_out):
     """Composite each tile's Gaussians (``tile_ids`` into ``records`` and ``sorted_rects``, depth-ordered) front to
     back into the pixel state (``trans``: transmittance, negated once the pixel is done; ``acc_rgb`` /
@@ -66,7 +66,6 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
-    n_fields = records.shape[1]
     blocks_x = (tile + LANES - 1) // LANES
     for i in prange(n_tiles):
         t = tile_order[i]
@@ -77,27 +76,23 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
         ty1 = min(ty0 + tile, height)
         if live[t] == 0:
             e = s
-        left = live[t]
         state = np.empty(((ty1 - ty0) * blocks_x, _FIELDS, LANES))
         _load_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x)
         # per row of the tile, the pixels lo <= x < hi hold every pixel not yet done
         lo = np.empty(ty1 - ty0, np.int64)
         hi = np.empty(ty1 - ty0, np.int64)
-        for r in range(ty1 - ty0):
-            lo[r], hi[r] = tx0, tx1
-            _shrink_span(state, r * blocks_x, tx0, r, lo, hi)
-        batch = np.empty((BATCH, n_fields))
-        spans = np.empty((BATCH, 4), np.int64)
+        lo[:], hi[:] = tx0, tx1
         for k in range(s, e):
             if (k - s) % BATCH == 0:
-                for b in range(min(BATCH, e - k)):
-                    j = tile_ids[k + b]
-                    for f in range(n_fields):
-                        batch[b, f] = records[j, f]
-                    for f in range(4):
-                        spans[b, f] = sorted_rects[j, f]
-            rec = batch[(k - s) % BATCH]
-            span = spans[(k - s) % BATCH]
+                # the spans move past the pixels done since the last batch (here, not as pixels finish: a branch
+                # on a pixel just composited waits for its whole computation, and a mispredicted one discards it)
+                rows_left = 0
+                for r in range(ty1 - ty0):
+                    _shrink_span(state, r * blocks_x, tx0, r, lo, hi)
+                    rows_left += lo[r] < hi[r]
+                if rows_left == 0:
+                    break
+            rec, span = pair_records[k], pair_rects[k]
             gx0, gx1 = max(span[0], tx0), min(span[1], tx1)
             gy0, gy1 = max(span[2], ty0), min(span[3], ty1)
             u, v, ca, cb, cc, o = rec[_U], rec[_V], rec[_CA], rec[_CB], rec[_CC], rec[_O]
@@ -109,7 +104,6 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
                 if xa >= xe:
                     continue
                 dy = v - py
-                done = 0
                 for bx in range((xa - tx0) // LANES, (xe - tx0 - 1) // LANES + 1):
                     blk = state[r * blocks_x + bx]
                     x0 = tx0 + bx * LANES
@@ -129,13 +123,7 @@ def composite_tiles(tile_start, tile_ids, records, sorted_rects, width, tile, ti
                         blk[_AB, lane] = blk[_AB, lane] + w * cbl if add else blk[_AB, lane]
                         blk[_AD, lane] = blk[_AD, lane] + w * z if add else blk[_AD, lane]
                         blk[_T, lane] = after if add else (-tp if stop else tp)
-                        done += stop
-                if done:
-                    left -= done
-                    _shrink_span(state, r * blocks_x, tx0, r, lo, hi)
-            if left == 0:
-                break
-        live[t] = left
+        live[t] = _live_pixels(state, tx1 - tx0, ty1 - ty0, blocks_x)
         if final:
             for r in range(ty1 - ty0):
                 for x in range(tx1 - tx0):
@@ -178,11 +166,27 @@ def _shrink_span(state, row_block, tx0, r, lo, hi):
     """Move the ends of tile row ``r``'s span ``lo[r] <= x < hi[r]`` past the done pixels there (negative
     transmittance; the row's blocks start at block ``row_block`` of ``state``, its first pixel is ``tx0``)."""
     x0, x1 = lo[r], hi[r]
-    while x0 < x1 and state[row_block + (x0 - tx0) // LANES, _T, (x0 - tx0) % LANES] < 0.0:
+    while x0 < x1 and _trans_at(state, row_block, tx0, x0) < 0.0:
         x0 += 1
-    while x1 > x0 and state[row_block + (x1 - 1 - tx0) // LANES, _T, (x1 - 1 - tx0) % LANES] < 0.0:
+    while x1 > x0 and _trans_at(state, row_block, tx0, x1 - 1) < 0.0:
         x1 -= 1
     lo[r], hi[r] = x0, x1
+
+
+@njit(inline="always")
+def _trans_at(state, row_block, tx0, x):
+    """The transmittance of pixel ``x`` of the tile row whose blocks start at ``row_block`` (first pixel ``tx0``)."""
+    return state[row_block + (x - tx0) // LANES, _T, (x - tx0) % LANES]
+
+
+@njit(inline="always")
+def _live_pixels(state, width, height, blocks_x):
+    """Pixels not yet done (transmittance >= 0) of a ``width`` × ``height`` tile's blocks."""
+    n = 0
+    for r in range(height):
+        for x in range(width):
+            n += state[r * blocks_x + x // LANES, _T, x % LANES] >= 0.0
+    return n
 
 
 @njit(cache=True, parallel=True)

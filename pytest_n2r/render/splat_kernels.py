@@ -221,10 +221,16 @@ def gather(order, records, rects, tiles, ordered, sorted_rects, sorted_tiles):
 
 
 @njit(cache=True, parallel=True)
-def bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids):
-    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``sorted_rects``: their :data:`RECT`) into the
-    tiles whose pixels are not all done (``live > 0``): ``tile_ids[tile_start[t]:tile_start[t + 1]]`` lists
-    tile ``t``'s Gaussians by their positions ``j``, in depth order.
+def bin_tiles(start, stop, ordered, sorted_rects, tiles_x, live, tile_start, pair_records, pair_rects):
+    """Bin the depth-ordered Gaussians ``start <= j < stop`` (``ordered``: their :data:`RECORD`,
+    ``sorted_rects``: their :data:`RECT`) into the tiles whose pixels are not all done (``live > 0``): rows
+    ``tile_start[t]`` to ``tile_start[t + 1]`` of ``pair_records`` and ``pair_rects`` are copies of tile ``t``'s
+    Gaussians' records and pixel rectangles (the first four fields of :data:`RECT`), in depth order.
+
+    Compositing then reads each tile's records one after another in memory; read from ``ordered``, a tile's
+    records were one in about as many as there are tiles, each a cache miss, which cost compositing a third
+    of its time (measured: 18 of 46 ms at 480×270). Here they are read in order and written to one
+    sequential stream per tile.
 
     Fixed chunks of the run (their number depends on its length alone) are counted per tile in parallel,
     each chunk's slots within a tile follow the previous chunk's (a prefix sum over tiles, then chunks),
@@ -235,8 +241,8 @@ def bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids):
     chunks = min(max(n // _BIN_CHUNK, 1), _BIN_CHUNKS)
     slots = np.zeros((chunks, n_tiles), np.int64)
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tiles_x, live, slots,
-                   c, tile_ids, False)
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, ordered, sorted_rects, tiles_x, live,
+                   slots, c, pair_records, pair_rects, False)
     pos = 0
     for t in range(n_tiles):
         tile_start[t] = pos
@@ -246,14 +252,14 @@ def bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids):
             pos += count
     tile_start[n_tiles] = pos
     for c in prange(chunks):
-        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, sorted_rects, tiles_x, live, slots,
-                   c, tile_ids, True)
+        _bin_chunk(start + n * c // chunks, start + n * (c + 1) // chunks, ordered, sorted_rects, tiles_x, live,
+                   slots, c, pair_records, pair_rects, True)
 
 
 @njit(inline="always")
-def _bin_chunk(j0, j1, sorted_rects, tiles_x, live, slots, c, tile_ids, fill):
+def _bin_chunk(j0, j1, ordered, sorted_rects, tiles_x, live, slots, c, pair_records, pair_rects, fill):
     """One chunk's pass of :func:`bin_tiles`: count its Gaussians per live tile into ``slots[c]``, or (``fill``)
-    write their indices at ``slots[c]`` and advance it."""
+    copy their records and pixel rectangles to row ``slots[c]`` and advance it."""
     for j in range(j0, j1):
         rect = sorted_rects[j]
         tx0, tx1, ty0, ty1 = rect[4], rect[5], rect[6], rect[7]
@@ -261,5 +267,9 @@ def _bin_chunk(j0, j1, sorted_rects, tiles_x, live, slots, c, tile_ids, fill):
             for t in range(ty * tiles_x + tx0, ty * tiles_x + tx1):
                 if live[t] > 0:
                     if fill:
-                        tile_ids[slots[c, t]] = j
+                        slot = slots[c, t]
+                        for f in range(ordered.shape[1]):
+                            pair_records[slot, f] = ordered[j, f]
+                        for f in range(4):
+                            pair_rects[slot, f] = rect[f]
                     slots[c, t] += 1

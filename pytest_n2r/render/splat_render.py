@@ -155,15 +155,15 @@ class SplatRenderer:
         while start < len(order) and live.any():  # runs of at most max_pairs (tile, Gaussian) pairs
             base = counts[start - 1] if start else 0
             stop = max(int(np.searchsorted(counts, base + s.max_pairs, side="right")), start + 1)
-            tile_ids = np.empty(int(counts[stop - 1] - base), np.int64)
+            pair_records, pair_rects = self._pair_buffers(int(counts[stop - 1] - base))
             with parallel_chunksize(1):  # a chunk of the depth order at a time
-                k.bin_tiles(start, stop, sorted_rects, tiles_x, live, tile_start, tile_ids)
+                k.bin_tiles(start, stop, ordered, sorted_rects, tiles_x, live, tile_start, pair_records, pair_rects)
             # the busiest tiles first (a stable order of the list lengths: the same order on every run)
             tile_order = np.argsort(-np.diff(tile_start), kind="stable")
             clock.lap("bin")
             finished = stop == len(order)
             with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                c.composite_tiles(tile_start, tile_ids, ordered, sorted_rects, w, s.tile, tiles_x, tile_order,
+                c.composite_tiles(tile_start, pair_records, pair_rects, w, s.tile, tiles_x, tile_order,
                                   s.t_stop, live, trans, acc_rgb, acc_depth, finished, background, out_rgb,
                                   out_depth, out_opacity)
             clock.lap("composite")
@@ -188,6 +188,15 @@ class SplatRenderer:
                        np.empty(n, np.int64), np.empty((n, len(k.RECORD))))
             self._scratch.buffers = buffers
         return buffers
+
+    def _pair_buffers(self, pairs: int) -> tuple[np.ndarray, np.ndarray]:
+        """This thread's (tile, Gaussian) pair buffers, records (``pairs`` × ``len(RECORD)`` float64) and pixel
+        rectangles (``pairs`` × 4 int32), grown when a run needs more rows (views of the first ``pairs``)."""
+        buffers = getattr(self._scratch, "pairs", None)
+        if buffers is None or len(buffers[0]) < pairs:
+            buffers = (np.empty((pairs, len(k.RECORD))), np.empty((pairs, 4), np.int32))
+            self._scratch.pairs = buffers
+        return buffers[0][:pairs], buffers[1][:pairs]
 
 
 class _Stages:
