@@ -42,9 +42,28 @@ def with_tiles(rects, tile):
                     axis=1).astype(np.int32)
 
 
+def _bin(start, stop, rects, tile, tiles_x, live):
+    """:func:`k.bin_tiles` of ``rects`` whose records hold their position in the depth order: each tile's list of
+    positions, read back from the records it copied (and its rectangles, checked against ``rects``)."""
+    n = len(rects)
+    records = np.zeros((n, len(k.RECORD)))
+    records[:, 0] = np.arange(n)
+    pairs = int(sum((r[5] - r[4]) * (r[7] - r[6]) for r in with_tiles(rects[start:stop], tile)))
+    tile_start = np.empty(len(live) + 1, np.int64)
+    pair_records = np.full((pairs, len(k.RECORD)), -1.0)
+    pair_rects = np.full((pairs, 4), -1, np.int32)
+    k.bin_tiles(start, stop, records, with_tiles(rects, tile), tiles_x, live, tile_start, pair_records, pair_rects)
+    used = tile_start[-1]
+    positions = pair_records[:used, 0].astype(np.int64)
+    assert (pair_records[:used, 1:] == 0).all(), "a tile's copy of a record differs from the record"
+    assert (pair_rects[:used] == rects[positions]).all(), "a tile's copy of a rectangle differs from the rectangle"
+    return [positions[tile_start[t]:tile_start[t + 1]].tolist() for t in range(len(live))]
+
+
 def test_binning_in_parallel_chunks_gives_the_plain_depth_ordered_lists():
     """50 000 depth-ordered Gaussians (12 chunks) on a 100×60 image with 8-pixel tiles, some tiles already
-    done: every tile's list of positions is the plain loop's, in depth order, whatever the chunks."""
+    done: every tile's list of positions is the plain loop's, in depth order, whatever the chunks, and each
+    tile holds copies of its Gaussians' records and rectangles."""
     rng = np.random.default_rng(1)
     n, width, height, tile = 50_000, 100, 60, 8
     tiles_x, tiles_y = -(-width // tile), -(-height // tile)
@@ -53,16 +72,10 @@ def test_binning_in_parallel_chunks_gives_the_plain_depth_ordered_lists():
                       np.minimum(y0 + rng.integers(1, 20, n), height)], axis=1).astype(np.int32)
     live = rng.integers(0, 3, tiles_x * tiles_y).astype(np.int64)
     expected = _plain_bins(rects.tolist(), 0, tile, tiles_x, live)
-    tile_start = np.empty(len(live) + 1, np.int64)
-    tile_ids = np.full(sum(map(len, expected)), -1, np.int64)
-    k.bin_tiles(0, n, with_tiles(rects, tile), tiles_x, live, tile_start, tile_ids)
-    for t, want in enumerate(expected):
-        got = tile_ids[tile_start[t]:tile_start[t + 1]].tolist()
+    for t, (got, want) in enumerate(zip(_bin(0, n, rects, tile, tiles_x, live), expected)):
         assert got == want, (f"tile {t}: {len(got)} Gaussians binned, expected {len(want)}; first differences "
                              f"{[(a, b) for a, b in zip(got, want) if a != b][:3]}")
     # a run from the middle of the order bins that run alone
     expected = _plain_bins(rects[1000:9000].tolist(), 1000, tile, tiles_x, live)
-    tile_ids = np.full(sum(map(len, expected)), -1, np.int64)
-    k.bin_tiles(1000, 9000, with_tiles(rects, tile), tiles_x, live, tile_start, tile_ids)
-    assert [tile_ids[tile_start[t]:tile_start[t + 1]].tolist() for t in range(len(live))] == expected, \
+    assert _bin(1000, 9000, rects, tile, tiles_x, live) == expected, \
         "binning the run 1000..9000 differs from the plain loop's"
