@@ -12,7 +12,8 @@ The stages (driven by :class:`pytest_n2r.render.splat_render.SplatRenderer`):
    tile counts in that order, so that binning reads memory in order and compositing reads each tile's
    records from ascending addresses.
 3. :func:`bin_tiles` (parallel over fixed chunks of the depth order: a count pass, a prefix sum, a fill
-   pass): a depth-ordered run of Gaussians into per-tile lists of their depth-order positions.
+   pass): a depth-ordered run of Gaussians into per-tile lists, each a sequential copy of its Gaussians'
+   records and pixel rectangles in depth order.
 4. compositing, in :mod:`pytest_n2r.render.splat_composite`.
 
 Each pixel's result depends only on the depth-ordered Gaussians that reach it, never on the tile size, the

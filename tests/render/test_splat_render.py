@@ -188,9 +188,10 @@ def test_only_the_outputs_asked_for_are_returned():
 @pytest.mark.slow
 def test_1080p_with_a_million_gaussians_fits_in_a_few_gigabytes():
     """Peak NumPy memory (tracemalloc) of a 1920×1080 render of 10⁶ Gaussians spread so that most are in view:
-    measured 0.40 GB for one render's buffers (a record of 88 B, pixel and tile rectangles, key and tile count
+    measured 0.55 GB for one render's buffers (a record of 88 B, pixel and tile rectangles, key and tile count
     of 44 B per Gaussian, the depth-ordered records, rectangles, counts and sort keys of about 150 B per
-    visible Gaussian, 40 B of state per pixel); the bound is 2 GB. The scene's own arrays (float32 as read,
+    visible Gaussian, each tile's copy of its records and rectangles, 104 B per (tile, Gaussian) pair, 1.6
+    million pairs here, 40 B of state per pixel); the bound is 2 GB. The scene's own arrays (float32 as read,
     and the renderer's float64 means, covariance factors, opacities and reach) add about 170 B per Gaussian
     at SH degree 0 (0.17 GB here)."""
     rng = np.random.default_rng(0)
