@@ -35,6 +35,7 @@ Convention
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import warnings
@@ -83,12 +84,19 @@ class CompiledScene:
     node_par: np.ndarray
     node_child: np.ndarray
     rings: np.ndarray
-    masks: tuple
+    mask_functions: tuple
     tex_meta: np.ndarray
     texels: np.ndarray
     shading: np.ndarray
     background: np.ndarray
     cull_boxes: np.ndarray
+
+    @functools.cached_property
+    def masks(self) -> tuple:
+        """The blend masks compiled for the render kernel (:func:`~.mask_kernel.compile_mask`), on the first
+        render: casting rays needs none, and a process whose renders all come from a cache compiles none (a few
+        seconds each)."""
+        return tuple(compile_mask(fn) for fn in self.mask_functions) or (no_mask,)
 
     def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest hit of rays ``o + t d`` (``(N, 3)`` float64 each): ``t`` (``inf`` on a miss) and the index
@@ -173,7 +181,7 @@ class _Builder:
         return self.textures[id(tex)]
 
     def mask(self, fn: Any) -> int:
-        self.masks.append(compile_mask(fn))
+        self.masks.append(fn)
         return len(self.masks) - 1
 
     def material(self, mat: Material, top: bool = True) -> int:
@@ -323,7 +331,6 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
         bounds.extend(_bounds(prim) for prim in children)
     tex_meta, texels = b.texture_tables()
-    masks = tuple(b.masks) or (no_mask,)
     return CompiledScene(
         groups=np.asarray(groups, np.int64), group_box=np.asarray(boxes, np.float64),
         kinds=np.asarray(kinds, np.int64), prims=np.asarray(prims, np.float64),
@@ -331,7 +338,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         prim_mat=np.asarray(prim_mat, np.int64), node_kind=np.asarray(b.node_kind or [0], np.int64),
         node_par=np.asarray(b.node_par or [[0.0] * 6], np.float64),
         node_child=np.asarray(b.node_child or [(-1, -1)], np.int64),
-        rings=np.asarray(b.rings or [(0.0,) * 4], np.float64).reshape(-1, 4), masks=masks,
+        rings=np.asarray(b.rings or [(0.0,) * 4], np.float64).reshape(-1, 4), mask_functions=tuple(b.masks),
         tex_meta=tex_meta, texels=texels,
         shading=np.array([*np.asarray(light, np.float64), float(ambient)]),
         background=np.asarray(background, np.float32),

@@ -21,7 +21,7 @@ from ..geometry import Camera
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
-from ..scene.render_cache import RenderCache, render_key
+from ..scene.render_cache import RenderCache
 from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
@@ -101,12 +101,13 @@ class Engine:
         return view.camera if self.size is None else self.size.apply(view.camera)
 
     def render(self, c2w: np.ndarray, camera: Any, view: SceneView, outputs: tuple[str, ...],
-               role: str) -> RenderedView:
+               role: str) -> tuple[RenderedView, str]:
+        """The render (from the cache where possible) and its render key."""
         start = time.perf_counter()
         renders = self.cache.stats.renders
         with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}",
                         escape=True):
-            rendered = self.cache.render(self.scene, c2w, camera, outputs)
+            rendered = self.cache.render_keyed(self.scene, c2w, camera, outputs)
         self.run_record.timings["render"] += time.perf_counter() - start
         self.run_record.renders += self.cache.stats.renders - renders
         return rendered
@@ -180,12 +181,12 @@ class Engine:
             settings=self.render_settings, **tau.record_fields(), score=math.nan, deviation=math.nan,
             passed=False,
         )
-        source = self.render(view.c2w, camera, view, self.outputs, "source")
-        rendered: list[RenderedView] = []
+        source, source_key = self.render(view.c2w, camera, view, self.outputs, "source")
+        rendered: list[tuple[RenderedView, str]] = []
 
         def render_follow(c2w: np.ndarray) -> RenderedView:
             rendered.append(self.render(c2w, camera, view, self.follow_outputs, "follow-up"))
-            return rendered[-1]
+            return rendered[-1][0]
 
         follow = tau.follow_view(source, self.scene, render_follow)
         if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
@@ -196,8 +197,8 @@ class Engine:
                 record.status, record.reason = "rejected", verdict.reason
                 return Evaluation(record, where)
         # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
-        follow_key = render_key(self.scene, follow.c2w, camera) if rendered and follow is rendered[-1] else None
-        out_source = self.sut_on_render(source, render_key(self.scene, source.c2w, camera), "source", where)
+        follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
+        out_source = self.sut_on_render(source, source_key, "source", where)
         out_follow = self.sut_on_render(follow, follow_key, "follow-up", where)
         result = self.compute(out_source, out_follow, source, follow, where)
         if not getattr(result, "valid", True):

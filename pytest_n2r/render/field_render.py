@@ -118,6 +118,18 @@ class RenderSettings:
     def replace(self, **changes) -> RenderSettings:
         return replace(self, **changes)
 
+    def backend_on(self, device: torch.device) -> str:
+        """The backend these settings render with on ``device`` (``"auto"``: compiled on the CPU, torch
+        elsewhere); :class:`InvalidArgument` for the compiled backend off the CPU."""
+        backend = self.backend if self.backend != "auto" else ("compiled" if device.type == "cpu" else "torch")
+        if backend == "compiled" and device.type != "cpu":
+            raise InvalidArgument("backend='compiled' renders fields on the CPU only; use backend='torch' on CUDA")
+        return backend
+
+    def background_of(self, field: SceneField) -> tuple[float, float, float]:
+        """The background a render of ``field`` is composited over: these settings', else the field's."""
+        return self.background if self.background is not None else field.background
+
 
 class FieldRenderer:
     """Renders one field with fixed settings (the marching grid is prepared once).
@@ -129,9 +141,7 @@ class FieldRenderer:
         self.field = field
         self.settings = settings or RenderSettings()
         s = self.settings
-        self.backend = s.backend if s.backend != "auto" else ("compiled" if field.device.type == "cpu" else "torch")
-        if self.backend == "compiled" and field.device.type != "cpu":
-            raise InvalidArgument("backend='compiled' renders fields on the CPU only; use backend='torch' on CUDA")
+        self.backend = s.backend_on(field.device)
         occupancy = field.occupancy
         if s.min_alpha > 0:
             with torch.no_grad():
@@ -140,7 +150,7 @@ class FieldRenderer:
                 occupancy[field.occupancy] = visible  # a mask takes its cells in nonzero() order
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
-        self.background = s.background if s.background is not None else field.background
+        self.background = s.background_of(field)
         self.last_traced = 0
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 
@@ -37,8 +38,14 @@ class FieldScene(Scene):
         self.device = resolve_device(device)
         self.field = file.field.to(self.device)
         self.settings = settings or RenderSettings()
-        self._renderer = FieldRenderer(self.field, self.settings)
+        self._backend = self.settings.backend_on(self.device)  # a bad backend is an error now, not at a render
         self._hash: str | None = None
+
+    @functools.cached_property
+    def _renderer(self) -> FieldRenderer:
+        """The renderer, prepared on the first render (its marching grid takes seconds on a large field; a run
+        whose renders all come from the render cache needs none)."""
+        return FieldRenderer(self.field, self.settings)
 
     @property
     def report(self) -> dict:
@@ -48,7 +55,7 @@ class FieldScene(Scene):
     @property
     def backend(self) -> str:
         """The render backend in use (``"compiled"`` on the CPU, ``"torch"`` on CUDA)."""
-        return self._renderer.backend
+        return self._backend
 
     @property
     def content_hash(self) -> str:
@@ -56,7 +63,7 @@ class FieldScene(Scene):
         :data:`RENDER_VERSION`: anything that can change a rendered pixel."""
         if self._hash is None:
             h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{self.backend}/{self.file.field_digest}".encode())
-            settings = {**self.settings.to_dict(), "background": list(self._renderer.background)}
+            settings = {**self.settings.to_dict(), "background": list(self.settings.background_of(self.field))}
             h.update(json.dumps(settings, sort_keys=True).encode())
             h.update(np.asarray([self.reference_length, self.metres_per_unit or 0.0]).tobytes())
             for v in self.views:

@@ -113,6 +113,12 @@ class RenderCache:
     def render(self, scene: Scene, c2w: np.ndarray, camera: Camera,
                outputs: str | Iterable[str] = ("rgb",)) -> RenderedView:
         """``scene.render(c2w, camera, outputs)``, served from the cache where possible."""
+        return self.render_keyed(scene, c2w, camera, outputs)[0]
+
+    def render_keyed(self, scene: Scene, c2w: np.ndarray, camera: Camera,
+                     outputs: str | Iterable[str] = ("rgb",)) -> tuple[RenderedView, str]:
+        """:meth:`render` and the render's :func:`render_key` (which names it for the SUT outputs kept by
+        :class:`~pytest_n2r.relation.sut_outputs.SUTOutputs`: computed once, here)."""
         outputs = normalize_outputs(outputs)
         c2w = check_pose(c2w)
         key = render_key(scene, c2w, camera)
@@ -138,7 +144,7 @@ class RenderCache:
                 arrays[name] = value
                 self._memory_put(key, name, value)
                 self._disk_put(key, name, value)
-        return RenderedView(camera=camera, c2w=c2w, **arrays)
+        return RenderedView(camera=camera, c2w=c2w, **arrays), key
 
     def clear(self) -> None:
         """Forget everything, in memory and on disk."""

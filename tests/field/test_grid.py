@@ -6,9 +6,11 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from hypothesis import given
+from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument, SceneFileError
-from pytest_n2r.field.grid import SceneField, n_sh_coefficients
+from pytest_n2r.field.grid import SceneField, _cell_corners, n_sh_coefficients, used_vertex_index
 from pytest_n2r.geometry import Camera
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
@@ -86,6 +88,17 @@ def test_upsampling_keeps_occupied_cells_and_dilates_by_one_cell():
     assert torch.equal(fine.occupancy, dilated), (
         f"occupancy after upsampling is not the coarse one dilated by one fine cell "
         f"({int((fine.occupancy != dilated).sum())} cells differ)")
+
+
+@given(cells=st.integers(1, 9), fraction=st.sampled_from([0.0, 0.02, 0.3, 1.0]), seed=st.integers(0, 2**31 - 1))
+def test_used_vertices_are_exactly_the_corners_of_occupied_cells(cells, fraction, seed):
+    """The dilation that finds the used vertices gives the sorted unique corners of the occupied cells."""
+    occupancy = torch.rand((cells,) * 3, generator=torch.Generator().manual_seed(seed)) < fraction
+    expected = torch.unique(_cell_corners(occupancy))
+    got = used_vertex_index(occupancy)
+    assert got.dtype == torch.int64 and torch.equal(got, expected), (
+        f"{cells}³ cells, {int(occupancy.sum())} occupied: used vertices {got.tolist()} != corners "
+        f"{expected.tolist()}")
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1])
