@@ -29,6 +29,7 @@ from perception.detectors import detector
 
 from pytest_n2r import RenderCache, Transform
 from pytest_n2r.relation import Relation, RunSettings, replay_relation
+from pytest_n2r.relation.sut_outputs import SUTOutputs
 from pytest_n2r.report import (
     PairedComparison,
     RelationRecord,
@@ -63,29 +64,26 @@ def relations_of(prefix: str, scene_name: str) -> list[RelationRecord]:
             if nodeid.split("::")[-1].startswith(prefix) and r.scene == scene_name]
 
 
-def replay(scene: Any, sut: Any, base: RelationRecord, cache: RenderCache) -> RelationRecord:
+def replay(scene: Any, sut: Any, base: RelationRecord, cache: RenderCache,
+           sut_outputs: SUTOutputs | None = None) -> RelationRecord:
     """``sut`` on exactly the baseline's examples of one relation (nothing replayed when the scene's content
-    or the metric changed: the comparison says so)."""
+    or the metric changed: the comparison says so). ``sut_outputs``: ``sut``'s outputs on renders to reuse
+    (those of this run's relations, which ran the same detector object on the same renders)."""
     metric = METRICS.get(base.metric)
     if metric is None or base.scene_hash != scene.content_hash:
         return RelationRecord(base.nodeid, base.metric if metric is None else repr(metric), base.eps,
                               scene=scene.name, scene_hash=scene.content_hash)
     relation = Relation.build(metric, base.eps, Transform())
     return replay_relation(scene, sut, relation, replay_candidates(base), settings=RunSettings(timeout=None),
-                           cache=cache, test_id=base.nodeid)
+                           cache=cache, test_id=base.nodeid, sut_outputs=sut_outputs)
 
 
-def gate(scene: Any, sut: Any, prefix: str, cache: RenderCache, margin: float = MARGIN) -> list[PairedComparison]:
+def gate(scene: Any, sut: Any, prefix: str, cache: RenderCache, margin: float = MARGIN,
+         sut_outputs: SUTOutputs | None = None) -> list[PairedComparison]:
     """Replay every baseline relation of ``prefix`` on ``scene`` for ``sut`` and compare in pairs."""
     bases = relations_of(prefix, scene.name)
-    records = [replay(scene, sut, base, cache) for base in bases]
+    records = [replay(scene, sut, base, cache, sut_outputs) for base in bases]
     return compare_paired({b.nodeid: b for b in bases}, records, margin=margin)
-
-
-@pytest.fixture(scope="session")
-def cache(request) -> RenderCache:
-    """The suite's render cache (pytest-n2r's default folder), so the replay renders nothing twice."""
-    return RenderCache(Path(request.config.rootpath) / ".n2r-cache")
 
 
 def _skip_unknown_scene(scene: Any) -> None:
@@ -94,11 +92,13 @@ def _skip_unknown_scene(scene: Any) -> None:
 
 
 @pytest.mark.parametrize("prefix", DETECTOR_OF)
-def test_shipped_detector_is_not_worse_than_its_baseline(n2r_scene, prefix, cache):
+def test_shipped_detector_is_not_worse_than_its_baseline(n2r_scene, prefix, n2r_session):
+    """``n2r_session``: pytest-n2r's render cache (the relations' renders, already in memory) and the outputs
+    of the detectors on them: the replay renders nothing and runs a detector only where no relation did."""
     _skip_unknown_scene(n2r_scene)
     name = DETECTOR_OF[prefix]
     sut = detector(name)
-    comparisons = gate(n2r_scene, sut, prefix, cache)
+    comparisons = gate(n2r_scene, sut, prefix, n2r_session.cache, sut_outputs=n2r_session.sut_outputs)
     assert comparisons, f"no baseline relation of {prefix}* on {n2r_scene.name}"
     table = format_comparison_table(comparisons)
     print(f"{sut!r} on {n2r_scene.name} against {BASELINE.name}:\n{table}")

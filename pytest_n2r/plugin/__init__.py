@@ -139,6 +139,15 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
         pytest.fail(f"pytest-n2r: scene {spec.source}: {exc}", pytrace=False)
 
 
+@pytest.fixture(scope="session")
+def n2r_session(request: pytest.FixtureRequest) -> Any:
+    """The session's :class:`~pytest_n2r.plugin.session.N2RSession`, for tests that evaluate examples
+    themselves (a regression gate replaying a baseline): its ``cache`` is the render cache the relations use
+    (renders they read are in memory), its ``sut_outputs`` the outputs of SUT objects on renders, shared
+    with them (``replay_relation(..., sut_outputs=...)``)."""
+    return _session(request.config)
+
+
 # -- running -----------------------------------------------------------------------------------------------
 
 

@@ -106,18 +106,20 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
 
 def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Relation, examples: list[Any], *,
                     settings: RunSettings | None = None, cache: RenderCache | None = None,
-                    test_id: str = "relation") -> RelationRecord:
+                    test_id: str = "relation", sut_outputs: SUTOutputs | None = None) -> RelationRecord:
     """Evaluate exactly the recorded ``examples`` (e.g. a baseline's, see
     :func:`pytest_n2r.report.replay_candidates`) for ``sut`` on ``scene``, without a search: their records
     are the returned record's ``replayed``, in order. A verdict never raises; only the SUT's own errors do.
-    Pair them with :func:`pytest_n2r.report.compare_paired`."""
+    Pair them with :func:`pytest_n2r.report.compare_paired`. ``sut_outputs``: outputs of SUT objects on
+    renders to share (the plugin session's, so a replay does not run a SUT again on a render a relation of
+    the session already ran it on)."""
     if not isinstance(scene, Scene):
         raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
     if not isinstance(relation, Relation):
         raise InvalidType(f"relation={relation!r} must be a Relation (build one with Relation.build)")
     record = _new_record(scene, relation, test_id)
     engine = Engine(scene, sut, relation, settings or RunSettings(), cache if cache is not None else RenderCache(None),
-                    record)
+                    record, sut_outputs)
     record.replayed = engine.replay(examples)
     return record
 
