@@ -64,6 +64,11 @@ class GroundTruthScene(Scene):
         z-depth reported where nothing is hit (scene units).
     supersample:
         Rays per pixel along each axis for ``rgb`` and ``opacity``.
+    reference_length:
+        The median z-depth of the surface seen from the training views (scene units), the unit of the
+        pose transforms' translations; ``None`` measures it by casting rays 64 pixels wide (the kernel's first
+        use in a process compiles it: seconds). The built-in scenes give the measured value (a test checks
+        it), so that a process that only reads renders from a cache casts no ray.
     """
 
     is_exact = True
@@ -75,7 +80,7 @@ class GroundTruthScene(Scene):
     def __init__(
         self, name: str, primitives: Sequence[Primitive], views: Sequence[SceneView], *,
         light: Sequence[float], ambient: float, background: Sequence[float], far: float,
-        supersample: int = 2, metres_per_unit: float | None = 1.0,
+        supersample: int = 2, metres_per_unit: float | None = 1.0, reference_length: float | None = None,
     ) -> None:
         self.name = name
         self._items = tuple(primitives)
@@ -101,7 +106,7 @@ class GroundTruthScene(Scene):
         self.metres_per_unit = metres_per_unit
         self._hash: str | None = None
         self._compiled: CompiledScene | None = None
-        self.reference_length = self._median_train_depth()
+        self.reference_length = self.median_train_depth() if reference_length is None else float(reference_length)
 
     # -- Scene interface -------------------------------------------------------------------------------
     @property
@@ -220,7 +225,7 @@ class GroundTruthScene(Scene):
         return tie.reshape(camera.height, camera.width, n * n).any(axis=2)
 
     # -- helpers -----------------------------------------------------------------------------------------
-    def _median_train_depth(self, size: int = 64) -> float:
+    def median_train_depth(self, size: int = 64) -> float:
         """Median z-depth of the surface seen from the training views, rendered ``size`` pixels wide."""
         depths = []
         for v in self.views:
