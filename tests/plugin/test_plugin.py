@@ -478,3 +478,37 @@ def test_a(n2r_scene):
     assert record["nodeid"].endswith("test_a[plane]") and record["outcome"] == "passed"
     accepted = [e for e in record["examples"] if e["status"] == "accepted"]  # rejected draws are recorded too
     assert len(accepted) == 6 and record["examples"][0]["scene"] == "plane"
+
+
+def test_n2r_session_lets_a_test_replay_with_the_relations_renders_and_outputs(n2r_project):
+    """The ``n2r_session`` fixture (what the example's regression gate uses): its render cache holds the renders
+    of the relations that ran before, and a replay passed its SUT outputs calls the SUT on none of them."""
+    n2r_project.write("""
+from pytest_n2r import Relation
+from pytest_n2r.relation import replay_relation
+
+calls = []
+def counted(rgb):
+    calls.append(1)
+    return mean_colour(rgb)
+
+RUNS = {}
+
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=4), examples=10)
+def test_a_relation(n2r_scene, n2r_session):
+    RUNS["relation"] = n2r_session
+    return counted
+
+def test_replay_it(n2r_scene, n2r_session):
+    (record,) = n2r_session.records
+    assert n2r_session is RUNS["relation"], "one session object per pytest session"
+    renders, before = n2r_session.cache.stats.renders, len(calls)
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=4))
+    replayed = replay_relation(n2r_scene, counted, relation, record.valid_examples, cache=n2r_session.cache,
+                               sut_outputs=n2r_session.sut_outputs)
+    assert len(replayed.replayed) == len(record.valid_examples) > 0
+    assert n2r_session.cache.stats.renders == renders, "the replay rendered again"
+    assert len(calls) == before and replayed.sut_calls == 0, "the replay ran the SUT on renders it had run on"
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=2)

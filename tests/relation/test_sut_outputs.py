@@ -82,3 +82,20 @@ def test_outputs_are_forgotten_with_their_sut_and_capped():
     assert len(shared) == 0
     shared.put(len, "k", 1)  # a built-in takes no weak reference: held, and still told apart by identity
     assert shared.get(len, "k") == 1 and shared.get(abs, "k") is MISSING
+
+
+def test_a_replay_reuses_the_outputs_of_the_run_it_replays():
+    """A regression gate's replay (the session's outputs passed on) runs the SUT on no render the relation
+    already ran it on, and gives the same deviations as a replay that calls it on every render."""
+    from pytest_n2r.relation import replay_relation
+
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=5), examples=12)
+    shared, sut = SUTOutputs(), CountingSUT()
+    run = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    calls = sut.calls
+    replayed = replay_relation(scene, sut, relation, run.valid_examples, sut_outputs=shared)
+    assert sut.calls == calls and replayed.sut_calls == 0, f"{sut.calls - calls} SUT calls on renders it had run on"
+    alone = replay_relation(scene, CountingSUT(), relation, run.valid_examples)
+    assert [e.deviation for e in replayed.replayed] == [e.deviation for e in alone.replayed]
+    assert alone.sut_calls > 0

@@ -50,6 +50,16 @@ def test_only_missing_outputs_are_rendered(tmp_path, monkeypatch):
     assert view.rgb is not None and view.opacity is not None and view.depth is None
 
 
+def test_a_keyed_render_names_itself_by_its_render_key(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    cache = RenderCache(tmp_path)
+    for _ in range(2):  # rendered, then from memory
+        view, key = cache.render_keyed(scene, _pose(scene), camera, "rgb")
+        assert key == render_key(scene, _pose(scene), camera), "the key returned is not the render's key"
+        assert view.rgb is not None
+
+
 def test_the_key_changes_with_everything_that_changes_pixels():
     scene, other = PlaneScene(), PlaneScene(texture="ramp")
     camera = scene.views[0].camera
