@@ -10,6 +10,7 @@ and ``@pytest.mark.n2r_scene`` override them per test: marker keyword > command 
 
 from __future__ import annotations
 
+import gc
 import inspect
 import time
 from pathlib import Path
@@ -149,6 +150,20 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
 
 
 # -- running -----------------------------------------------------------------------------------------------
+
+
+@pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
+def pytest_runtest_setup(item: pytest.Item) -> Any:
+    """After the setup of a test on ``n2r_scene``, move every object alive out of the cyclic garbage
+    collector's sight (:func:`gc.freeze`): what a session loads once and keeps (imports, scenes, networks,
+    compiled kernels) is then no longer walked by every full collection. Garbage cycles are still collected
+    when they form after the freeze. Measured on the main job: the collector's time 7.1 → 2.7 s of a cold run
+    (the kernels' compilation makes many collections), 0.9 → 0.6 s of a warm one (docs/performance.md)."""
+    yield
+    if "n2r_scene" in getattr(item, "fixturenames", ()):
+        gc.freeze()
+
+
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -512,3 +512,16 @@ def test_replay_it(n2r_scene, n2r_session):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(passed=2)
+
+
+def test_what_a_session_loaded_is_frozen_out_of_the_garbage_collectors_way(n2r_project):
+    n2r_project.write("""
+import gc
+
+gc.unfreeze()  # at collection: an earlier run in this process may have frozen objects already
+
+def test_setup_froze_the_heap(n2r_scene):
+    assert gc.get_freeze_count() > 0, "nothing frozen after the setup of a test on n2r_scene"
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
