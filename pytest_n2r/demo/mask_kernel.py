@@ -18,7 +18,6 @@ Convention
 
 from __future__ import annotations
 
-import functools
 import math
 import types
 from collections.abc import Callable
@@ -82,12 +81,6 @@ def compile_mask(fn: Callable) -> Any:
     return batch
 
 
-def _no_mask(a, b, out, count):  # pragma: no cover - compiled; only pads an empty tuple of masks (never called)
+@njit(MASK_SIGNATURE, cache=True)
+def no_mask(a, b, out, count):  # pragma: no cover - compiled; only pads an empty tuple of masks (never called)
     pass
-
-
-@functools.cache
-def no_mask() -> Any:
-    """A compiled mask that is never called: it pads a scene's empty tuple of masks. Compiled (or read from
-    numba's cache) on first use, not when the module is imported: half a second a process."""
-    return njit(MASK_SIGNATURE, cache=True)(_no_mask)

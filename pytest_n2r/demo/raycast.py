@@ -96,7 +96,7 @@ class CompiledScene:
         """The blend masks compiled for the render kernel (:func:`~.mask_kernel.compile_mask`), on the first
         render: casting rays needs none, and a process whose renders all come from a cache compiles none (a few
         seconds each)."""
-        return tuple(compile_mask(fn) for fn in self.mask_functions) or (no_mask(),)
+        return tuple(compile_mask(fn) for fn in self.mask_functions) or (no_mask,)
 
     def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Nearest hit of rays ``o + t d`` (``(N, 3)`` float64 each): ``t`` (``inf`` on a miss) and the index
