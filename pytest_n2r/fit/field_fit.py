@@ -125,6 +125,44 @@ class _Appearance:
         return {name: [round(float(x), 4) for x in g] for name, g in zip(self.names, gains)}
 
 
+class _Phases:
+    """Training time by grid and phase of a step, summed over the fit: where a step's cost goes. Both the wall
+    time and the process's CPU time (all threads; on one thread it is the work done, whatever else the machine
+    runs). ``refine`` is charged to the grid refined to, ``prune`` to the grid pruned."""
+
+    NAMES = ("rays", "march", "corners", "forward", "backward", "update", "prune", "refine")
+
+    def __init__(self):
+        self.seconds: dict[int, np.ndarray] = {}  # per grid: (phase, [wall, cpu])
+        self.steps: dict[int, int] = {}
+        self.resolution = 0
+        self._last = (time.perf_counter(), time.process_time())
+
+    def start(self, resolution: int) -> None:
+        self.resolution = resolution
+        self.seconds.setdefault(resolution, np.zeros((len(self.NAMES), 2)))
+        self.steps.setdefault(resolution, 0)
+        self._last = (time.perf_counter(), time.process_time())
+
+    def lap(self, name: str) -> None:
+        """Charge the time since the last ``start`` or ``lap`` to phase ``name`` of the current grid."""
+        now = (time.perf_counter(), time.process_time())
+        self.seconds[self.resolution][self.NAMES.index(name)] += (now[0] - self._last[0], now[1] - self._last[1])
+        self._last = now
+
+    def report(self) -> dict:
+        """Per grid (and ``"all"``): its steps, and the wall and CPU milliseconds per step of each phase."""
+        out = {}
+        grids = [(str(res), self.steps[res], s) for res, s in self.seconds.items()]
+        if grids:
+            grids.append(("all", sum(self.steps.values()), sum(s for _, _, s in grids)))
+        for name, steps, seconds in grids:
+            ms = 1e3 * seconds / max(steps, 1)
+            out[name] = {"steps": steps, **{kind: {p: round(float(ms[k, j]), 3) for k, p in enumerate(self.NAMES)}
+                                           for j, kind in enumerate(("wall_ms", "cpu_ms"))}}
+        return out
+
+
 class _Trainer:
     def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False):
         train = [v for v in capture.train_views if v.image is not None]
@@ -144,6 +182,7 @@ class _Trainer:
                                       config.step_ratio, device, background)
         self.stage = 0
         self.steps = 0
+        self.phases = _Phases()
         self._reset_optimizer()
 
     def _reset_optimizer(self) -> None:
@@ -180,6 +219,9 @@ class _Trainer:
     def step(self, lr_scale: float) -> tuple[float, float]:
         """One optimization step; returns (loss, batch PSNR in dB)."""
         c, f = self.config, self.field
+        clock = self.phases
+        clock.start(f.resolution)
+        clock.steps[f.resolution] += 1
         pick = torch.randint(self.rays.n, (c.batch_rays,), generator=self.generator).to(self.device)
         o, d = self.rays.o[pick], self.rays.d[pick]
         target = self.rays.rgb[pick].float() / 255.0
@@ -187,7 +229,9 @@ class _Trainer:
             background = torch.rand(c.batch_rays, 3, generator=self.generator).to(self.device)
         else:
             background = torch.zeros(3, device=self.device)
+        clock.lap("rays")
         ray_idx, t, offsets = self.march(o, d)
+        clock.lap("march")
         unit = d / d.norm(dim=-1, keepdim=True)
         n_samples = max(t.numel(), 1)
         g = self.grid
@@ -198,6 +242,7 @@ class _Trainer:
             unique, inverse = self.row_index.unique(rows)
             unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
             sub = f.values[unique].requires_grad_(True)
+            clock.lap("corners")
             v = Interpolate.apply(sub, inverse, weights)
             rgb, alpha_sum, dist, sample_weight = Composite.apply(
                 v, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift, c.step_ratio, ALPHA_MAX,
@@ -209,6 +254,7 @@ class _Trainer:
             corners, weights = trilinear(coords, f.resolution)
             unique, inverse = torch.unique(f.vertex_rows(corners), return_inverse=True)
             sub = f.values[unique].requires_grad_(True)
+            clock.lap("corners")
             alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
                                   f.density_shift, c.step_ratio)
             out = composite(alpha, colors, t, ray_idx, offsets, o.shape[0], background)
@@ -226,8 +272,10 @@ class _Trainer:
         if not torch.isfinite(loss):
             raise FitError(f"the fit diverged at step {self.steps}: the loss is {float(loss.detach())} "
                            "(lower lr_density / lr_color; the last checkpoint is still good)")
+        clock.lap("forward")
         if t.numel():
             loss.backward()
+            clock.lap("backward")
             grad = sub.grad
             if c.tv > 0 or c.tv_density > 0:
                 grad += self.tv_weights * self._tv_gradient(unique)
@@ -236,6 +284,7 @@ class _Trainer:
             self.adam.step(unique, grad, lr_scale)
             if self.appearance is not None:
                 self.appearance.step(lr_scale)
+            clock.lap("update")
         self.steps += 1
         return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
 
@@ -337,10 +386,14 @@ def fit(
         t0 = time.perf_counter()
         frac = progress_fraction()
         if config.stage(frac) > trainer.stage:
+            trainer.phases.start(config.resolutions[trainer.stage + 1])
             trainer.refine()
+            trainer.phases.lap("refine")
         loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
         if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
+            trainer.phases.start(trainer.field.resolution)
             trainer.prune()
+            trainer.phases.lap("prune")
         train_s += time.perf_counter() - t0
         while pending_evals and train_s >= pending_evals[0]:
             e0 = time.perf_counter()
@@ -374,6 +427,7 @@ def fit(
         "time_budget_s": time_budget_s,
         "max_steps": max_steps,
         "final_loss": round(loss, 6),
+        "step_ms": trainer.phases.report(),
         "field": final.describe(),
         "detail": None if detail is None else detail.describe(final.resolution),
         "heldout": rows,
