@@ -12,13 +12,18 @@ mixed orientation, exposure and white balance, blur, JPEG), read with its poses,
 (ladder, steps) with the same config and seed. Every 8th training photo (from the 4th) is a **validation**
 view: it is not fitted, and it is where variants are compared and chosen. The demo's held-out views are
 never fitted and never used for choosing: they are what is reported. Both are scored against the exact
-render at the same pose: PSNR, SSIM and ORB repeatability (1000 points, 2 px) between the exact image and
-the field's. ``pixels/voxel``: how many training pixels one voxel of the finest grid spans where the
-cameras look closely (:mod:`pytest_n2r.fit.detail`; 1 would match the photos).
+render at the same pose: PSNR, SSIM and the repeatability (2 px) of ORB, SIFT and AKAZE between the exact
+image and the field's (a view where a detector has nothing to compare is counted apart). ``pixels/voxel``:
+how many training pixels one voxel of the finest grid spans where the cameras look closely
+(:mod:`pytest_n2r.fit.detail`; 1 would match the photos).
 
-``--fox 10m`` also fits the fox (``../shared/scenes/fox``, 1/4 resolution, every 8th photo held out, every
-8th of the rest from the 4th for validation) once per ladder within that time budget, scored against the
-photos. Fit times are wall-clock seconds on whatever machine runs this; compare ladders at equal steps.
+``--fox-steps N`` (or ``--fox 10m``, a time budget) also fits the fox (``../shared/scenes/fox``, 1/4
+resolution, every 8th photo held out, every 8th of the rest from the 4th for validation) once per ladder or
+variant (library defaults plus its settings), and scores it on the **validation** views only, as
+``benchmarks/fidelity.py`` scores a scene (photos; repeatability photo vs render at 480 px): the fox's
+held-out views are reported only for the recipe chosen, with ``benchmarks/field_fit.py`` and
+``benchmarks/fidelity.py``. Fit times are wall-clock seconds on whatever machine runs this; compare at equal
+steps.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from _scoring import defined_mean, format_repeatability, score_exact
 
 from pytest_n2r.cli.fit import parse_config_override, parse_duration
 from pytest_n2r.data import ingest
@@ -42,12 +48,8 @@ from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.fit import evaluate_views, fit
+from pytest_n2r.fit import fit
 from pytest_n2r.fit.detail import capture_detail
-from pytest_n2r.metrics import repeatability
-from pytest_n2r.metrics.image_quality import psnr, ssim
-from pytest_n2r.render.field_render import FieldRenderer
-from pytest_n2r.study.suts import resolve_sut
 
 FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"
 #: The phone benchmark's field settings (benchmarks/phone_capture.py); only the grid ladder varies here.
@@ -102,25 +104,24 @@ def split_validation(capture: Capture, every: int = 8, first: int = 4) -> tuple[
     return replace(capture, views=fitted), validation, capture.heldout_views
 
 
-def score_exact(scene, field, views) -> dict:
-    """Mean PSNR, SSIM and ORB repeatability of the field's renders against the exact ones at ``views``."""
-    renderer, orb, rep = FieldRenderer(field), resolve_sut("orb", None).fn, repeatability(px=2)
-    rows = []
-    for view in views:
-        want = scene.render(view.c2w, view.camera, ("rgb", "depth", "opacity"))
-        got = renderer.render(view.c2w, view.camera, ("rgb",))["rgb"]
-        r = rep.compute(orb(want.rgb), orb(got), want, replace(want, rgb=got))
-        rows.append((psnr(want.rgb, got), ssim(want.rgb, got), r.score if r.valid else np.nan))
-    table = np.asarray(rows, dtype=np.float64)
-    defined = table[np.isfinite(table[:, 2]), 2]  # ORB finds nothing on tiny images: no score, not 0
-    return {"psnr": round(float(table[:, 0].mean()), 2), "ssim": round(float(table[:, 1].mean()), 4),
-            "orb": round(float(defined.mean()), 3) if len(defined) else float("nan"), "n": len(rows)}
+def score_fox(field, config: FieldConfig, capture: Capture, validation: list, path: Path) -> dict:
+    """Validation scores of a fox field as :func:`pytest_n2r.study.fidelity.measure_fidelity` measures a scene
+    (PSNR / SSIM against the photos, each detector's repeatability photo vs render at 480 px): the field is
+    stored at ``path`` (a /tmp path: fox fields never go into the repository) with the validation views as its
+    held-out ones, and the real held-out views left out, so nothing here can be tuned on them."""
+    from pytest_n2r.scene import load_scene, save_scene
+    from pytest_n2r.study.fidelity import DETECTORS, measure_fidelity
+
+    marked = [replace(v, split="heldout") for v in validation]
+    save_scene(path, field, config, replace(capture, views=[*capture.views, *marked]), {})
+    report = measure_fidelity(load_scene(path, device="cpu"), size=480)
+    return {"psnr": round(report.mean("psnr"), 2), "ssim": round(report.mean("ssim"), 4), "n": len(report.images),
+            **{d: defined_mean([s.score if s.valid else float("nan")
+                                for s in report.floors[d, "repeatability"].samples]) for d in DETECTORS}}
 
 
-def score_photos(field, views) -> dict:
-    rows = evaluate_views(field, views)
-    return {"psnr": round(float(np.mean([r["psnr"] for r in rows])), 2),
-            "ssim": round(float(np.mean([r["ssim"] for r in rows])), 4), "orb": float("nan"), "n": len(rows)}
+def poses(views: list) -> list:
+    return [(v.c2w, v.camera) for v in views]
 
 
 def pixels_per_voxel(capture: Capture, resolution: int) -> float:
@@ -156,6 +157,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="compare these settings instead of ladders (repeatable)")
     parser.add_argument("--fox", type=parse_duration, default=None, metavar="DURATION",
                         help="also fit the fox once per ladder within this time budget")
+    parser.add_argument("--fox-steps", type=int, default=None, metavar="N",
+                        help="also fit the fox's validation split once per ladder / variant for N steps")
+    parser.add_argument("--fox-dir", default=None, metavar="DIR",
+                        help="keep the fox fields (validation views as held-out ones) here; a /tmp folder")
     parser.add_argument("--json", default=None, metavar="PATH")
     args = parser.parse_args(argv)
     base = BASES[args.base]
@@ -169,17 +174,20 @@ def main(argv: list[str] | None = None) -> int:
                     for name, res, stage in (args.ladder or [parse_ladder(text) for text in LADDERS])]
     torch.set_num_threads(2)
     rows = []
-    print("| scene | ladder / variant | steps | fit s | CPU s | pixels/voxel | validation PSNR / SSIM / ORB "
-          "| held-out PSNR / SSIM / ORB |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| scene | ladder / variant | steps | fit s | CPU s | pixels/voxel | validation PSNR / SSIM | "
+          "ORB / SIFT / AKAZE rep. | held-out PSNR / SSIM | ORB / SIFT / AKAZE rep. |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+
+    def cells(score: dict | None) -> str:
+        if score is None:
+            return "not scored | "
+        reps = " / ".join(format_repeatability(score[d]) for d in ("orb", "sift", "akaze"))
+        return f"{score['psnr']:.2f} / {score['ssim']:.3f} ({score['n']}) | {reps}"
 
     def report(row: dict) -> None:
         rows.append(row)
-        v, h = row["validation"], row["heldout"]
         print(f"| {row['scene']} | {row['ladder']} | {row['steps']} | {row['fit_s']} | {row['cpu_s']} | "
-              f"{row['pixels_per_voxel']} | "
-              f"{v['psnr']:.2f} / {v['ssim']:.3f} / {v['orb']:.3f} ({v['n']}) | "
-              f"{h['psnr']:.2f} / {h['ssim']:.3f} / {h['orb']:.3f} ({h['n']}) |", flush=True)
+              f"{row['pixels_per_voxel']} | {cells(row['validation'])} | {cells(row['heldout'])} |", flush=True)
 
     for name in args.scenes:
         scene = ground_truth(name)
@@ -189,20 +197,26 @@ def main(argv: list[str] | None = None) -> int:
         for steps in args.steps:
             for variant, changes, own_steps in variants:
                 field, info = run_fit(capture, base.replace(**changes), max_steps=own_steps or steps)
-                report({"scene": name, "ladder": variant, **info, "validation": score_exact(scene, field, validation),
-                        "heldout": score_exact(scene, field, heldout)})
-    if args.fox is not None:
+                report({"scene": name, "ladder": variant, **info,
+                        "validation": score_exact(scene, field, poses(validation)),
+                        "heldout": score_exact(scene, field, poses(heldout))})
+    if args.fox is not None or args.fox_steps is not None:
         if not FOX.exists():
             print(f"fox skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         else:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
-                capture, validation, heldout = split_validation(ingest(FOX, downscale=0.25))
-            for variant, changes, _ in variants:
+                capture, validation, _ = split_validation(ingest(FOX, downscale=0.25))
+            keep = Path(args.fox_dir or tempfile.mkdtemp(prefix="n2r-budget-fox-"))
+            keep.mkdir(parents=True, exist_ok=True)
+            for variant, changes, own_steps in variants:
                 config = FieldConfig().replace(**changes)
-                field, info = run_fit(capture, config, time_budget_s=args.fox)
-                report({"scene": "fox", "ladder": variant, **info, "validation": score_photos(field, validation),
-                        "heldout": score_photos(field, heldout)})
+                limits = ({"max_steps": own_steps or args.fox_steps} if args.fox_steps is not None
+                          else {"time_budget_s": args.fox})
+                field, info = run_fit(capture, config, **limits)
+                report({"scene": "fox", "ladder": variant, **info,
+                        "validation": score_fox(field, config, capture, validation, keep / f"{variant}.n2r"),
+                        "heldout": None})
     if args.json:
         from pytest_n2r.data.atomic import atomic_write_text
 

@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         env = {**os.environ, "NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": str(threads)}
         command = [sys.executable, __file__, "--child", str(threads), "--steps", str(args.steps),
                    "--capture", args.capture, "--config", *args.config]
-        out = subprocess.run(command, env=env, capture_output=True, text=True)
+        out = subprocess.run(command, check=False, env=env, capture_output=True, text=True)
         if out.returncode != 0:
             print(out.stderr, file=sys.stderr)
             return out.returncode
