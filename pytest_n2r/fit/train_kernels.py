@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import torch
 from numba import njit, prange
@@ -98,13 +99,23 @@ def _interp_forward(sub, inverse, weights, out):
 
 
 @njit(cache=True, parallel=True)
-def _interp_backward(grad_out, inverse, weights, grad_sub):
-    # One column per thread: no two threads write the same element, and the order of additions is fixed.
-    for f in prange(grad_sub.shape[1]):
+def _interp_backward(grad_out, inverse, weights, bounds, grad_sub):
+    # Each thread owns the columns bounds[g]..bounds[g + 1] and walks the samples in order, adding into its
+    # part of each corner's row: no two threads write the same element, every element gets its additions in
+    # sample and corner order whatever the thread count, and each corner's columns are written side by side.
+    for g in prange(bounds.shape[0] - 1):
+        lo, hi = bounds[g], bounds[g + 1]
         for i in range(inverse.shape[0]):
-            g = grad_out[i, f]
             for c in range(8):
-                grad_sub[inverse[i, c], f] += weights[i, c] * g
+                row, w = inverse[i, c], weights[i, c]
+                for f in range(lo, hi):
+                    grad_sub[row, f] += w * grad_out[i, f]
+
+
+def _column_bounds(columns: int) -> np.ndarray:
+    """Split ``columns`` into one contiguous group per thread (at most one group per column)."""
+    groups = max(1, min(numba.get_num_threads(), columns))
+    return np.linspace(0, columns, groups + 1).round().astype(np.int64)
 
 
 class Interpolate(torch.autograd.Function):
@@ -122,7 +133,8 @@ class Interpolate(torch.autograd.Function):
     def backward(ctx, grad_out: torch.Tensor):
         inverse, weights = ctx.saved_tensors
         grad_sub = torch.zeros(ctx.n_rows, grad_out.shape[1], dtype=grad_out.dtype)
-        _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(), grad_sub.numpy())
+        _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(),
+                         _column_bounds(grad_out.shape[1]), grad_sub.numpy())
         return grad_sub, None, None
 
 
