@@ -34,7 +34,7 @@ from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
 from .detail import capture_detail
 from .optim import RowAdam
-from .train_kernels import Composite, Interpolate, RowIndex, sample_corners, scatter_max
+from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
 
@@ -235,8 +235,8 @@ class _Trainer:
         unit = d / d.norm(dim=-1, keepdim=True)
         n_samples = max(t.numel(), 1)
         g = self.grid
-        s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
         if self.compiled:
+            s = lattice_positions(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
                                                   self.space.shell, f.resolution, self.row_map)
             unique, inverse = self.row_index.unique(rows)
@@ -249,6 +249,7 @@ class _Trainer:
                 background)
             scatter_max(cells, sample_weight.numpy(), self.cell_weight.numpy())
         else:
+            s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
             p = o[ray_idx] + t[:, None] * d[ray_idx]
             coords = grid_coords(p, self.space.shell, f.resolution)
             corners, weights = trilinear(coords, f.resolution)

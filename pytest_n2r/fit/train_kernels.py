@@ -15,8 +15,9 @@ import torch
 from numba import njit, prange
 
 from ..field.kernels import cell_of, grid_coords_xyz, vertex_row
+from ..field.lattice import lattice_counts
 
-__all__ = ["sample_corners", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
+__all__ = ["sample_corners", "lattice_positions", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
 
 
 @njit(cache=True, parallel=True)
@@ -46,6 +47,25 @@ def sample_corners(o: np.ndarray, d: np.ndarray, t: np.ndarray, ray_idx: np.ndar
     cells = np.empty(t.shape[0], dtype=np.int64)
     _sample_corners(o, d, t, ray_idx, shell, resolution, vertex_rows, rows, weights, cells)
     return rows, weights, cells
+
+
+@njit(cache=True, parallel=True)
+def _positions(t, ray_idx, t0, dt, n_inner, ts, du, step, out):
+    for i in prange(t.shape[0]):
+        r = ray_idx[i]
+        ti = np.float64(t[i])
+        index = (ti - t0[r]) / dt[r] if ti < ts[r] else n_inner[r] + (1.0 / ts[r] - 1.0 / ti) / du[r]
+        out[i] = step * index
+
+
+def lattice_positions(o: torch.Tensor, d: torch.Tensor, t: torch.Tensor, ray_idx: torch.Tensor, step: float,
+                      shell_samples: int, far: float) -> torch.Tensor:
+    """:func:`pytest_n2r.field.lattice.lattice_position` compiled (CPU; the same operations in the same
+    order, so the same float64 bits): each packed sample's position along its ray in contracted units."""
+    per_ray = [x.contiguous().numpy() for x in lattice_counts(o.double(), d.double(), step, shell_samples, far)]
+    out = np.empty(t.shape[0])
+    _positions(t.numpy(), ray_idx.numpy(), *per_ray, step, out)
+    return torch.from_numpy(out)
 
 
 @njit(cache=True)

@@ -10,10 +10,17 @@ import numpy as np
 import pytest
 import torch
 
-from pytest_n2r.field.lattice import grid_coords
+from pytest_n2r.field.lattice import grid_coords, lattice_position
 from pytest_n2r.field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from pytest_n2r.fit.optim import RowAdam
-from pytest_n2r.fit.train_kernels import Composite, Interpolate, RowIndex, adam_rows, sample_corners
+from pytest_n2r.fit.train_kernels import (
+    Composite,
+    Interpolate,
+    RowIndex,
+    adam_rows,
+    lattice_positions,
+    sample_corners,
+)
 
 TOL = 1e-10
 SHIFT, STEP_RATIO, DELTA = -2.0, 0.5, 0.03
@@ -164,6 +171,20 @@ def test_sample_corners_are_the_reference_trilinear_corners():
     base = rows[:, 0]
     expected_cells = ((base // (res * res)) * (res - 1) + (base // res) % res) * (res - 1) + base % res
     np.testing.assert_array_equal(cells, expected_cells, err_msg="sample_corners cell index is not corner 0's cell")
+
+
+def test_lattice_positions_are_the_reference_positions_to_the_bit():
+    from pytest_n2r.field.march import MarchGrid, march_dense
+
+    rng = np.random.default_rng(1)
+    o = torch.from_numpy(rng.uniform(-0.9, 0.9, (40, 3)).astype(np.float32))
+    d = torch.from_numpy(rng.normal(size=(40, 3)).astype(np.float32))
+    grid = MarchGrid(torch.ones(16, 16, 16, dtype=torch.bool), 0.25, 0.5, None, 100.0)
+    ray_idx, t, _ = march_dense(o, d, grid)  # every lattice sample: the unit cube and the contracted shell
+    want = lattice_position(o, d, t, ray_idx, grid.step, grid.shell_samples, grid.far)
+    got = lattice_positions(o, d, t, ray_idx, grid.step, grid.shell_samples, grid.far)
+    assert (t > 10.0).any() and (t < 1.0).any(), "the samples should reach from the cube far into the shell"
+    assert torch.equal(got, want), f"{int((got != want).sum())} of {len(t)} positions differ from lattice_position"
 
 
 def reference_adam(values: np.ndarray, m: np.ndarray, v: np.ndarray, rows: np.ndarray, grad: np.ndarray,
