@@ -29,6 +29,8 @@ SMOKE = {
     "splat_compare.py": (["HEAD", "--smoke"], "| 64x36 | HEAD"),
     "splat_from_field.py": (["--smoke"], "| splats from the field |"),
     "render_fingerprint.py": (["--twins", "--steps", "4"], "| short-fit/file |"),
+    "fit_profile.py": (["--capture", "wall", "--steps", "30", "--threads", "1", "--config", "resolutions=16,24",
+                        "stage_fractions=0.5", "batch_rays=256"], "| 1 | all | 30 |"),
     "fit_budget.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--base", "default", "--variant", "tiny",
                        "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256"], "| wall | tiny | 10 |"),
 }

@@ -77,22 +77,28 @@ def scatter_max(cells, values, out):
 
 @njit(cache=True)
 def _unique_rows(rows, slot, stamp, tag, unique, inverse):
-    n = 0
     flat = rows.reshape(-1)
-    inv = inverse.reshape(-1)
     for i in range(flat.shape[0]):
-        r = flat[i]
-        if stamp[r] != tag:
-            stamp[r] = tag
+        stamp[flat[i]] = tag
+    n = 0
+    for r in range(stamp.shape[0]):  # one pass over every row: the distinct ones come out ascending
+        if stamp[r] == tag:
             slot[r] = n
             unique[n] = r
             n += 1
-        inv[i] = slot[r]
+    inv = inverse.reshape(-1)
+    for i in range(flat.shape[0]):
+        inv[i] = slot[flat[i]]
     return n
 
 
 class RowIndex:
-    """Scratch space to find the unique rows of a step in one pass (``stamp`` avoids clearing)."""
+    """Scratch space to find the distinct rows of a step without sorting (``stamp`` avoids clearing).
+
+    The rows come out ascending, so the step's gather of their values and its Adam update walk the grid's
+    arrays in memory order (measured on the fox at 160³, one thread: Adam 66 -> 18 ms, the gather and this
+    pass 71 -> 31 ms, the interpolation, whose corners are then further apart, 93 -> 133 ms; 15 % off the
+    step)."""
 
     def __init__(self, n_rows: int):
         self.slot = np.zeros(n_rows, dtype=np.int32)
@@ -100,7 +106,7 @@ class RowIndex:
         self.tag = 0
 
     def unique(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(unique, inverse)``: the distinct rows in first-seen order, and ``rows`` as indices into them."""
+        """``(unique, inverse)``: the distinct rows in ascending order, and ``rows`` as indices into them."""
         self.tag += 1
         unique = np.empty(rows.size, dtype=np.int64)
         inverse = np.empty(rows.shape, dtype=np.int64)

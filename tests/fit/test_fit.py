@@ -179,3 +179,20 @@ def test_a_time_budget_stops_the_fit_after_the_step_that_spends_it(capture48):
     steps, seconds = result.report["steps"], result.report["train_seconds"]
     assert steps >= 1 and seconds >= 1.0, f"a 1 s budget stopped after {steps} steps and {seconds} s"
     assert seconds < 1.0 + max(10.0 * seconds / steps, 0.5), f"{steps} steps took {seconds} s: the budget overran"
+
+
+def test_the_report_says_where_each_grids_steps_spent_their_time(short_fit):
+    step_ms = short_fit.report["step_ms"]
+    assert set(step_ms) == {"16", "24", "all"}, f"expected one entry per grid and 'all', got {sorted(step_ms)}"
+    assert step_ms["16"]["steps"] + step_ms["24"]["steps"] == step_ms["all"]["steps"] == SHORT_STEPS
+    phases = ("rays", "march", "corners", "forward", "backward", "update", "prune", "refine")
+    for grid, row in step_ms.items():
+        for kind in ("wall_ms", "cpu_ms"):
+            assert set(row[kind]) == set(phases), f"{grid} {kind}: {sorted(row[kind])}"
+            assert all(ms >= 0 for ms in row[kind].values()), f"{grid} {kind}: {row[kind]}"
+    assert step_ms["16"]["wall_ms"]["refine"] == 0 < step_ms["24"]["wall_ms"]["refine"], "refining is charged to 24³"
+    assert step_ms["all"]["wall_ms"]["backward"] > 0 and step_ms["all"]["wall_ms"]["prune"] > 0
+    # the phases cover the training time (the rest is the loop's own bookkeeping)
+    total_s = sum(step_ms["all"]["wall_ms"].values()) * SHORT_STEPS / 1e3
+    assert 0.8 * short_fit.report["train_seconds"] <= total_s <= short_fit.report["train_seconds"] + 0.01, \
+        f"phases sum to {total_s:.3f} s of {short_fit.report['train_seconds']} s of training"

@@ -139,6 +139,7 @@ def test_interpolate_forward_and_gradient_equal_autograd(n_samples):
     rows = torch.randint(0, 40, (n_samples, 8), generator=g).numpy()
     unique, inverse = RowIndex(40).unique(rows)
     assert len(set(unique.tolist())) == len(unique), f"RowIndex.unique returned repeated rows {unique.tolist()}"
+    assert np.all(np.diff(unique) > 0), f"RowIndex.unique rows are not ascending: {unique.tolist()}"
     np.testing.assert_array_equal(unique[inverse], rows, err_msg="RowIndex.unique: unique[inverse] is not rows")
     sub = torch.randn(len(unique), 7, generator=g, dtype=torch.float64, requires_grad=True)
     weights = torch.rand(n_samples, 8, generator=g, dtype=torch.float64)
