@@ -32,8 +32,10 @@ from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basi
 from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
+from .appearance import Appearance
 from .detail import capture_detail
 from .optim import RowAdam
+from .phases import StepPhases
 from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
@@ -96,73 +98,6 @@ class _Rays:
         self.n = self.o.shape[0]
 
 
-#: Adam learning rate of the per-photo log colour gains (``appearance=True``).
-APPEARANCE_LR = 0.01
-
-
-class _Appearance:
-    """Per training photo, a colour gain per channel (exposure and white balance) that multiplies the field's
-    colour in the loss only. The gains are ``exp(a - mean(a))`` over the photos, so the field keeps the
-    capture's average exposure and white balance, which is what it renders at every pose (a render never
-    applies a gain: the correction cannot leak into new views)."""
-
-    def __init__(self, names: Sequence[str], device: torch.device):
-        self.names = list(names)
-        self.log_gain = torch.zeros(len(self.names), 3, device=device, requires_grad=True)
-        self.adam = torch.optim.Adam([self.log_gain], lr=APPEARANCE_LR)
-
-    def gains(self) -> torch.Tensor:
-        return torch.exp(self.log_gain - self.log_gain.mean(dim=0, keepdim=True))
-
-    def step(self, lr_scale: float) -> None:
-        for group in self.adam.param_groups:
-            group["lr"] = APPEARANCE_LR * lr_scale
-        self.adam.step()
-        self.adam.zero_grad(set_to_none=True)
-
-    def report(self) -> dict:
-        gains = self.gains().detach().cpu().numpy()
-        return {name: [round(float(x), 4) for x in g] for name, g in zip(self.names, gains)}
-
-
-class _Phases:
-    """Training time by grid and phase of a step, summed over the fit: where a step's cost goes. Both the wall
-    time and the process's CPU time (all threads; on one thread it is the work done, whatever else the machine
-    runs). ``refine`` is charged to the grid refined to, ``prune`` to the grid pruned."""
-
-    NAMES = ("rays", "march", "corners", "forward", "backward", "update", "prune", "refine")
-
-    def __init__(self):
-        self.seconds: dict[int, np.ndarray] = {}  # per grid: (phase, [wall, cpu])
-        self.steps: dict[int, int] = {}
-        self.resolution = 0
-        self._last = (time.perf_counter(), time.process_time())
-
-    def start(self, resolution: int) -> None:
-        self.resolution = resolution
-        self.seconds.setdefault(resolution, np.zeros((len(self.NAMES), 2)))
-        self.steps.setdefault(resolution, 0)
-        self._last = (time.perf_counter(), time.process_time())
-
-    def lap(self, name: str) -> None:
-        """Charge the time since the last ``start`` or ``lap`` to phase ``name`` of the current grid."""
-        now = (time.perf_counter(), time.process_time())
-        self.seconds[self.resolution][self.NAMES.index(name)] += (now[0] - self._last[0], now[1] - self._last[1])
-        self._last = now
-
-    def report(self) -> dict:
-        """Per grid (and ``"all"``): its steps, and the wall and CPU milliseconds per step of each phase."""
-        out = {}
-        grids = [(str(res), self.steps[res], s) for res, s in self.seconds.items()]
-        if grids:
-            grids.append(("all", sum(self.steps.values()), sum(s for _, _, s in grids)))
-        for name, steps, seconds in grids:
-            ms = 1e3 * seconds / max(steps, 1)
-            out[name] = {"steps": steps, **{kind: {p: round(float(ms[k, j]), 3) for k, p in enumerate(self.NAMES)}
-                                           for j, kind in enumerate(("wall_ms", "cpu_ms"))}}
-        return out
-
-
 class _Trainer:
     def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False):
         train = [v for v in capture.train_views if v.image is not None]
@@ -174,7 +109,7 @@ class _Trainer:
         centers = np.stack([v.c2w[:3, 3] for v in capture.views])
         self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
         self.rays = _Rays(train, self.space, device)
-        self.appearance = _Appearance([v.name for v in train], device) if appearance else None
+        self.appearance = Appearance([v.name for v in train], device) if appearance else None
         self.generator = torch.Generator().manual_seed(config.seed)
         # the field renders over the mean of the backgrounds its training rays are composited over
         background = (0.5, 0.5, 0.5) if config.random_background else (0.0, 0.0, 0.0)
@@ -182,7 +117,7 @@ class _Trainer:
                                       config.step_ratio, device, background)
         self.stage = 0
         self.steps = 0
-        self.phases = _Phases()
+        self.phases = StepPhases()
         self._reset_optimizer()
 
     def _reset_optimizer(self) -> None:
