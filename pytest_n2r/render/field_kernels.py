@@ -4,6 +4,19 @@ It samples the lattice of :mod:`pytest_n2r.field.lattice` with the field's compi
 (:mod:`pytest_n2r.field.kernels`, inlined), skips empty 8³-cell blocks in one jump and occupied-cell misses
 one by one, and stops a ray once its transmittance falls below ``t_stop`` (early ray termination). Each ray
 is independent, so results do not depend on the thread count.
+
+Colour is the costly part of a sample (docs/performance.md, "Rendering"), and two settings make it cheaper:
+
+- **colour logits baked per frame** (:func:`bake_logits`): every stored vertex's colour logits for the direction
+  from the camera to that vertex, so a sample interpolates 3 values instead of ``3·n_sh`` SH coefficients. A
+  sample then sees its corners' colours from the directions of the corners, not of its ray: they differ by at
+  most the angle a cell subtends from the camera (the logit error is at most ``SH_C1·θ·‖c₁‖``, ``c₁`` a
+  corner's degree-1 coefficients); a degree-0 field's colours do not depend on direction and stay exact.
+- **colour only where it carries weight** (``min_weight``): a sample whose compositing weight, plus the weight
+  carried from the samples before it, stays below ``min_weight`` is not coloured; its weight is carried to the
+  next coloured sample (at the ray's end: the last colour, else the background). Every carried sample weighs less
+  than ``min_weight`` and colours lie in [0, 1], so each channel is off by at most the summed weight of the ray's
+  samples lighter than ``min_weight`` (times the colour difference it is moved across).
 """
 
 from __future__ import annotations
@@ -25,12 +38,12 @@ from ..field.kernels import (
     vertex_row,
 )
 
-__all__ = ["render_rays"]
+__all__ = ["render_rays", "bake_logits"]
 
 
 @njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shell_samples, far, density_shift,
-                sigma_step, sh_degree, t_stop, background, want_depth, rgb, depth, opacity):
+def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
+                density_shift, sigma_step, sh_degree, t_stop, min_weight, background, want_depth, rgb, depth, opacity):
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
@@ -41,7 +54,9 @@ def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shel
     opacity is ``1 - exp(-σ·sigma_step)`` with ``sigma_step`` the sample spacing in voxels. The transmittance
     left when a ray ends (at the far end, or early at ``t_stop``) shows ``background``. Depth is the z-depth
     of the ray's compositing weight, ``Σ w·t / Σ w``, and the far end of the ray where it has no weight at
-    all: finite everywhere, not to be trusted where opacity is ~0.
+    all: finite everywhere, not to be trusted where opacity is ~0. ``logits`` ``(n_rows, 3)`` float32 holds the
+    colour logits baked for this frame (:func:`bake_logits`), or is empty: each sample's logits from its ray's
+    direction (exact). ``min_weight``: see the module docstring (0 colours every sample).
     """
     n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
@@ -53,6 +68,9 @@ def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shel
         # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
         b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
         coef = np.empty(12)
+        baked = logits.shape[0] > 0
+        carried = 0.0  # weight of the samples not coloured yet
+        last_r, last_g, last_b = background[0], background[1], background[2]
         trans = 1.0
         cr = cg = cb = 0.0
         zd = wsum = 0.0
@@ -91,25 +109,72 @@ def render_rays(o, d, density, values, rows, occ, blocks, res, shell, step, shel
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
-            for j in range(1, n_coef + 1):
-                coef[j - 1] = (w0 * values[v0, j] + w1 * values[v1, j] + w2 * values[v2, j]
-                               + w3 * values[v3, j] + w4 * values[v4, j] + w5 * values[v5, j]
-                               + w6 * values[v6, j] + w7 * values[v7, j])
-            lr, lg, lb = SH_C0 * coef[0], SH_C0 * coef[1], SH_C0 * coef[2]  # colour logits
-            if n_coef == 12:
-                lr += b1 * coef[3] + b2 * coef[6] + b3 * coef[9]
-                lg += b1 * coef[4] + b2 * coef[7] + b3 * coef[10]
-                lb += b1 * coef[5] + b2 * coef[8] + b3 * coef[11]
-            cr += weight / (1.0 + math.exp(-lr))
-            cg += weight / (1.0 + math.exp(-lg))
-            cb += weight / (1.0 + math.exp(-lb))
+            trans *= 1.0 - alpha
             if want_depth:
                 zd += weight * t
                 wsum += weight
-            trans *= 1.0 - alpha
+            if weight + carried < min_weight:
+                carried += weight
+                continue
+            weight += carried
+            carried = 0.0
+            if baked:
+                lr = (w0 * logits[v0, 0] + w1 * logits[v1, 0] + w2 * logits[v2, 0] + w3 * logits[v3, 0]
+                      + w4 * logits[v4, 0] + w5 * logits[v5, 0] + w6 * logits[v6, 0] + w7 * logits[v7, 0])
+                lg = (w0 * logits[v0, 1] + w1 * logits[v1, 1] + w2 * logits[v2, 1] + w3 * logits[v3, 1]
+                      + w4 * logits[v4, 1] + w5 * logits[v5, 1] + w6 * logits[v6, 1] + w7 * logits[v7, 1])
+                lb = (w0 * logits[v0, 2] + w1 * logits[v1, 2] + w2 * logits[v2, 2] + w3 * logits[v3, 2]
+                      + w4 * logits[v4, 2] + w5 * logits[v5, 2] + w6 * logits[v6, 2] + w7 * logits[v7, 2])
+            else:
+                for j in range(1, n_coef + 1):
+                    coef[j - 1] = (w0 * values[v0, j] + w1 * values[v1, j] + w2 * values[v2, j]
+                                   + w3 * values[v3, j] + w4 * values[v4, j] + w5 * values[v5, j]
+                                   + w6 * values[v6, j] + w7 * values[v7, j])
+                lr, lg, lb = SH_C0 * coef[0], SH_C0 * coef[1], SH_C0 * coef[2]  # colour logits
+                if n_coef == 12:
+                    lr += b1 * coef[3] + b2 * coef[6] + b3 * coef[9]
+                    lg += b1 * coef[4] + b2 * coef[7] + b3 * coef[10]
+                    lb += b1 * coef[5] + b2 * coef[8] + b3 * coef[11]
+            last_r = 1.0 / (1.0 + math.exp(-lr))
+            last_g = 1.0 / (1.0 + math.exp(-lg))
+            last_b = 1.0 / (1.0 + math.exp(-lb))
+            cr += weight * last_r
+            cg += weight * last_g
+            cb += weight * last_b
+        cr += carried * last_r
+        cg += carried * last_g
+        cb += carried * last_b
         rgb[r, 0] = cr + trans * background[0]
         rgb[r, 1] = cg + trans * background[1]
         rgb[r, 2] = cb + trans * background[2]
         opacity[r] = 1.0 - trans
         if want_depth:
             depth[r] = zd / wsum if trans < 1.0 else ts + far / dn
+
+
+@njit(cache=True, parallel=True)
+def bake_logits(values, vertex, res, shell, origin, sh_degree, out):
+    """Colour logits ``out (n_rows, 3)`` of every stored vertex seen from ``origin`` (the camera centre,
+    normalized space): its SH colour for the direction from ``origin`` to the vertex (to a vertex at the shell's
+    outer face, which stands for infinity, the direction of its contracted position). ``vertex`` is each row's
+    flat vertex index ``(i·R + j)·R + k``."""
+    half = 1.0 + shell
+    cell = 2.0 * half / (res - 1)
+    for r in prange(values.shape[0]):
+        lr, lg, lb = SH_C0 * values[r, 1], SH_C0 * values[r, 2], SH_C0 * values[r, 3]
+        if sh_degree == 1:
+            f = vertex[r]
+            qx, qy, qz = f // (res * res) * cell - half, (f // res) % res * cell - half, f % res * cell - half
+            m = max(abs(qx), abs(qy), abs(qz))
+            if m >= half - 1e-9:
+                ux, uy, uz = qx, qy, qz
+            else:  # uncontract (pytest_n2r.field.space): ‖q‖∞ = 1 + shell·(1 - 1/‖p‖∞)
+                s = 1.0 if m <= 1.0 else 1.0 / ((1.0 - (m - 1.0) / shell) * m)
+                ux, uy, uz = qx * s - origin[0], qy * s - origin[1], qz * s - origin[2]
+            n = math.sqrt(ux * ux + uy * uy + uz * uz)
+            if n > 0.0:  # a vertex at the camera centre keeps its direction-free colour
+                b1, b2, b3 = -SH_C1 * uy / n, SH_C1 * uz / n, -SH_C1 * ux / n
+                lr += b1 * values[r, 4] + b2 * values[r, 7] + b3 * values[r, 10]
+                lg += b1 * values[r, 5] + b2 * values[r, 8] + b3 * values[r, 11]
+                lb += b1 * values[r, 6] + b2 * values[r, 9] + b3 * values[r, 12]
+        out[r, 0], out[r, 1], out[r, 2] = lr, lg, lb
