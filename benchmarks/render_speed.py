@@ -4,16 +4,21 @@ Run: ``python benchmarks/render_speed.py [SCENE]`` with ``SCENE`` a ``.n2r`` fil
 ``benchmarks/field_fit.py`` writes) or ``demo:NAME``, the fitted twin of demo scene ``NAME``, whose held-out
 views are compared against the exact scene's renders instead of photos (a field not fitted on the fox).
 ``--sizes`` (default ``480x270,960x540,1920x1080``), ``--views`` (held-out views compared, default 3),
-``--threads`` (default 2) and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prints
+``--threads`` (default 2), ``--tables`` (which of the tables below, default all: ``speed,changes,psnr,sweep``)
+and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prints
 
-1. at each size (portrait captures: the same pixel counts, turned), RGB only: seconds and frames/s (wall
+1. ``speed``: at each size (portrait captures: the same pixel counts, turned), RGB only: seconds and frames/s (wall
    clock, best of 3 after a warm-up), CPU milliseconds a frame (all threads; the ratio that stays put on a
    shared machine) and the share of pixels traced, for the defaults, the defaults with every pixel traced
    (``adaptive=0``: the renderer before adaptive sampling, the same kernel), and the two fastest settings the
-   sweep prices (half the size upsampled, ``scale=0.5``; and that with twice the sample spacing);
-2. at each size, the PSNR of the defaults and of ``adaptive=0`` against the held-out photos (or the exact
+   sweep prices (half the size upsampled, ``scale=0.5``; and that with twice the sample spacing), and the
+   previous defaults (RENDER_VERSION 3);
+2. ``changes``: each change to the compiled renderer side by side with the one before, on ONE thread
+   (``numba.set_num_threads(1)``: two threads give little more on a 2-core VM, so this is the ratio to read):
+   CPU milliseconds a frame at each size and PSNR against the truth at the first size (mean over the views);
+3. ``psnr``: at each size, the PSNR of the defaults and of ``adaptive=0`` against the held-out photos (or the exact
    scene), mean over the views, and of the defaults against ``adaptive=0``;
-3. at the first size, a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing,
+4. ``sweep``: at the first size, a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing,
    the opacity below which cells are skipped, early ray termination, adaptive sampling's tolerance and
    render resolution — with frames/s and the PSNR of each variant against the best-quality render (finest
    spacing, no skipping, no termination, every pixel traced) and against the photos. The default is marked.
@@ -43,6 +48,15 @@ EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
+#: The defaults before RENDER_VERSION 4 (the reach skip, which changes no sample, is switched off separately).
+PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0, min_alpha=1e-4)
+#: The changes of RENDER_VERSION 4, each on top of the one before (docs/performance.md, "Rendering").
+CHANGES = (("previous defaults (RENDER_VERSION 3)", PREVIOUS, False),
+           ("+ empty-cell reach skip (same samples)", PREVIOUS, True),
+           ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex"), True),
+           ("+ min_weight=1e-2", PREVIOUS.replace(colour_direction="vertex", min_weight=1e-2), True),
+           ("+ min_alpha=1e-2 (the defaults)", DEFAULT, True))
+TABLES = ("speed", "changes", "psnr", "sweep")
 
 
 def sized(camera, pixels: int):
@@ -77,14 +91,56 @@ def cpu_ms(fn, repeats: int) -> float:
     return best * 1e3
 
 
+def with_reach(scene, reach: bool):
+    """``scene`` itself, or (``reach=False``) a copy whose renderer steps through every empty cell in occupied
+    blocks one sample at a time, as before the reach skip (an all-ones reach; the samples are the same)."""
+    if reach:
+        return scene
+    copy = scene.with_settings(scene.settings)
+    grid = copy._renderer.grid
+    grid._reach = np.ones_like(grid.reach())
+    return copy
+
+
+def changes_table(scene, views, truth, sizes, repeats: int) -> None:
+    """Table 2: each change side by side with the one before, one thread."""
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    variants = [(label, with_reach(scene.with_settings(settings), reach)) for label, settings, reach in CHANGES]
+    print(f"\neach change on top of the one before, ONE thread, CPU ms / frame (RGB; PSNR at {sizes[0][0]}x"
+          f"{sizes[0][1]}, mean over {len(views)} held-out views)\n| change | "
+          + " | ".join(f"{w}×{h} CPU ms (speed-up)" for w, h in sizes) + " | PSNR → truth | difference |\n"
+          + "|" + " --- |" * (len(sizes) + 3))
+    rows = {label: [] for label, _ in variants}
+    for w, h in sizes:
+        camera = sized(views[0].camera, w * h)
+        for label, variant in variants:
+            render = functools.partial(variant.render, views[0].c2w, camera, ("rgb",))
+            render()
+            rows[label].append(cpu_ms(render, repeats))
+    small = sized(views[0].camera, sizes[0][0] * sizes[0][1])
+    refs = [truth(v, small) for v in views]
+    first = None
+    for label, variant in variants:
+        p = float(np.mean([psnr(r, variant.render(v.c2w, small, ("rgb",)).rgb) for r, v in zip(refs, views)]))
+        first = (p, rows[label]) if first is None else first
+        print(f"| {label} | " + " | ".join(f"{ms:.0f} ({base / ms:.2f}×)" for ms, base in zip(rows[label], first[1]))
+              + f" | {p:.3f} dB | {p - first[0]:+.3f} dB |")
+    numba.set_num_threads(threads)
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scene", nargs="?", default="/tmp/n2r-bench-fox.n2r")
     parser.add_argument("--sizes", default="480x270,960x540,1920x1080")
     parser.add_argument("--views", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--tables", default=",".join(TABLES), help=f"which tables, from {','.join(TABLES)}")
     parser.add_argument("--smoke", action="store_true", help="one tiny size, one view, one timed render")
     args = parser.parse_args(argv)
+    tables = args.tables.split(",")
+    if not set(tables) <= set(TABLES):
+        parser.error(f"--tables {args.tables!r}: expected names from {','.join(TABLES)}")
     sizes = [tuple(int(v) for v in s.split("x")) for s in ("96x54" if args.smoke else args.sizes).split(",")]
     repeats = 1 if args.smoke else 3
     torch.set_num_threads(args.threads)
@@ -95,9 +151,22 @@ def main(argv: list[str]) -> int:
         return 1
     print(f"scene {args.scene}: field {scene.field.resolution}³, fit PSNR {scene.report.get('psnr')} dB, "
           f"{args.threads} threads\n")
-    variants = {"default": scene, "adaptive=0": scene.with_settings(EVERY_PIXEL),
+    variants = {"default": scene, "previous defaults": scene.with_settings(PREVIOUS),
+                "adaptive=0": scene.with_settings(EVERY_PIXEL),
                 "scale=0.5": scene.with_settings(FAST[0]), "scale=0.5, step_ratio=1": scene.with_settings(FAST[1])}
+    if "speed" in tables:
+        speed_table(variants, views, sizes, repeats)
+    if "changes" in tables:
+        changes_table(scene, views, truth, sizes, repeats)
+    if "psnr" in tables:
+        psnr_table(scene, variants, views, truth, sizes)
+    if "sweep" in tables:
+        sweep_table(scene, views, truth, sizes, repeats, args.smoke)
+    return 0
 
+
+def speed_table(variants, views, sizes, repeats: int) -> None:
+    """Table 1: frames/s and CPU ms of the defaults and the fast settings at each size."""
     print(f"| size | settings | s / frame | frames/s | CPU ms / frame | pixels traced |\n|{' --- |' * 6}")
     for w, h in sizes:
         camera = sized(views[0].camera, w * h)
@@ -108,6 +177,10 @@ def main(argv: list[str]) -> int:
             traced = variant._renderer.last_traced / (camera.width * camera.height)
             print(f"| {camera.width}×{camera.height} | {label} | {s:.3f} | {1 / s:.2f} | {ms:.0f} | {traced:.0%} |")
 
+
+
+def psnr_table(scene, variants, views, truth, sizes) -> None:
+    """Table 3: PSNR of the defaults and of adaptive=0 against the truth at each size."""
     print(f"\nmean over {len(views)} held-out views\n| size | PSNR → truth, default | PSNR → truth, adaptive=0 | "
           f"difference | PSNR default → adaptive=0 |\n|{' --- |' * 5}")
     for w, h in sizes:
@@ -121,6 +194,10 @@ def main(argv: list[str]) -> int:
         print(f"| {camera.width}×{camera.height} | {p_fast:.2f} dB | {p_full:.2f} dB | {p_fast - p_full:+.3f} dB | "
               f"{to_full:.1f} dB |")
 
+
+
+def sweep_table(scene, views, truth, sizes, repeats: int, smoke: bool) -> None:
+    """Table 4: every knob at the first size, frames/s and PSNR against the best render and the truth."""
     small = sized(views[0].camera, sizes[0][0] * sizes[0][1])
     reference = [scene.with_settings(BEST).render(v.c2w, small, ("rgb",)).rgb for v in views]
     photos = [truth(v, small) for v in views]
@@ -138,10 +215,10 @@ def main(argv: list[str]) -> int:
           f"| variant | frames/s | PSNR → best | PSNR → truth |\n|{' --- |' * 4}")
     row("best quality (reference)", BEST)
     row("defaults", DEFAULT)
-    if not args.smoke:
+    if not smoke:
         for step in (1.0, 2.0):
             row(f"step_ratio={step}", DEFAULT.replace(step_ratio=step))
-        for min_alpha in (0.0, 1e-2, 5e-2):
+        for min_alpha in (0.0, 1e-4, 5e-2):
             row(f"min_alpha={min_alpha:g}", DEFAULT.replace(min_alpha=min_alpha))
         for t_stop in (0.0, 1e-2, 1e-1):
             row(f"t_stop={t_stop:g}", DEFAULT.replace(t_stop=t_stop))
@@ -151,7 +228,9 @@ def main(argv: list[str]) -> int:
         row("scale=0.75 (render smaller, upsample)", DEFAULT.replace(scale=0.75))
         row("scale=0.5", FAST[0])
         row("scale=0.5, step_ratio=1.0", FAST[1])
-    return 0
+        for min_weight in (0.0, 3e-2):
+            row(f"min_weight={min_weight:g}", DEFAULT.replace(min_weight=min_weight))
+        row("colour_direction='ray'", DEFAULT.replace(colour_direction="ray"))
 
 
 if __name__ == "__main__":

@@ -32,6 +32,9 @@ from ..field.fields import CAMERA, named_pose, random_field
     ({"background": (2.0, 0.0, 0.0)}, "background"),
     ({"background": (0.0, 0.0)}, "background"),
     ({"backend": "cuda"}, "backend"),
+    ({"colour_direction": "camera"}, "colour_direction"),
+    ({"min_weight": 1.0}, "min_weight"),
+    ({"min_weight": float("nan")}, "min_weight"),
 ])
 def test_bad_settings_are_named(changes, name):
     ((_, value),) = changes.items()

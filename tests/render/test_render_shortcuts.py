@@ -1,0 +1,104 @@
+"""The compiled renderer's shortcuts: the empty-cell reach skip (same samples, same bits), colour logits baked
+per frame at the vertices, and colour only where a sample carries weight (each within its stated bound)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+from pytest_n2r.field.march import empty_reach, march_dense
+from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
+
+from ..field.fields import CAMERA, POSES, camera_for, named_pose, random_field
+from .test_agreement import OUTPUTS, rays_of
+
+EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0, colour_direction="ray", min_weight=0.0, adaptive=0.0,
+                       backend="compiled")
+
+
+@settings(max_examples=40, deadline=None)
+@given(cells=arrays(np.uint8, st.tuples(*[st.integers(1, 9)] * 3), elements=st.sampled_from([0, 0, 0, 0, 0, 1])),
+       cap=st.integers(1, 12))
+def test_empty_reach_is_the_capped_chebyshev_distance_to_an_occupied_cell(cells, cap):
+    reach = empty_reach(cells, cap)
+    occupied = np.argwhere(cells)
+    grid = np.stack(np.meshgrid(*[np.arange(n) for n in cells.shape], indexing="ij"), -1)
+    if occupied.size:
+        brute = np.abs(grid[..., None, :] - occupied).max(-1).min(-1)
+    else:
+        brute = np.full(cells.shape, cap)
+    expected = np.minimum(brute, cap)
+    assert np.array_equal(reach, expected), (
+        f"empty_reach differs from the brute-force distance at {int((reach != expected).sum())} cells")
+
+
+@pytest.mark.parametrize("pose_name", list(POSES))
+def test_the_reach_skip_renders_the_same_bits_as_a_sample_by_sample_march(pose_name):
+    field = random_field(resolution=40, occupied=0.02, seed=9, density_scale=4.0)
+    field.values[:, 0] += 2.0
+    renderer = FieldRenderer(field, EXACT)
+    assert renderer.grid.reach().max() > 2, "no empty cell reaches past its neighbours: nothing would be skipped"
+    skipped = renderer.render(named_pose(pose_name), camera_for(pose_name), OUTPUTS)
+    renderer.grid._reach = np.ones_like(renderer.grid.reach())  # a reach of 1 skips nothing
+    stepped = renderer.render(named_pose(pose_name), camera_for(pose_name), OUTPUTS)
+    for name in OUTPUTS:
+        assert np.array_equal(skipped[name], stepped[name]), f"pose {pose_name!r}: {name} changed with the reach skip"
+    if pose_name != "looking_away":
+        assert skipped["opacity"].max() > 0.3, f"pose {pose_name!r} sees almost nothing: the test would show little"
+
+
+@pytest.mark.parametrize("min_weight", [1e-2, 5e-2])
+@pytest.mark.parametrize("pose_name", ["inside", "outside"])
+def test_colouring_only_weighty_samples_stays_within_the_light_samples_weight(pose_name, min_weight):
+    """Each channel may move by at most the summed weight of the ray's samples lighter than ``min_weight``."""
+    field = random_field(resolution=16, density_scale=1.5, seed=4)
+    c2w = named_pose(pose_name)
+    exact = FieldRenderer(field, EXACT).render(c2w, CAMERA, ("rgb",))["rgb"].astype(np.float64)
+    fast = FieldRenderer(field, EXACT.replace(min_weight=min_weight)).render(c2w, CAMERA, ("rgb",))["rgb"]
+    reference = FieldRenderer(field, EXACT.replace(backend="torch"))
+    o, d = rays_of(field, c2w)
+    marched = march_dense(o, d, reference.grid)
+    ray_idx = marched[0]
+    with torch.no_grad():
+        weights = render_rays_torch(field, reference.grid, o, d, torch.zeros(3), False, marched)["weights"]
+    light = torch.where(weights < min_weight, weights, torch.zeros_like(weights)).double()
+    bound = torch.zeros(o.shape[0], dtype=torch.float64).index_add(0, ray_idx, light).numpy()
+    error = np.abs(fast.astype(np.float64) - exact).reshape(-1, 3).max(axis=1)
+    allowed = 255.0 * bound + 1.0  # one level of rounding on each side of the uint8 images
+    assert (error <= allowed).all(), (
+        f"min_weight={min_weight}: {int((error > allowed).sum())} pixels off by more than their bound; worst "
+        f"{error.max():.0f} levels where {allowed[error.argmax()]:.1f} were allowed")
+    assert error.max() >= 1 and bound.max() > 0.01, "no pixel changed: the bound was not put to the test"
+
+
+def test_baked_vertex_colours_match_ray_colours_where_a_cell_subtends_no_angle():
+    """From a thousand radii away (telephoto) the direction to a vertex is the ray's: within one level."""
+    field = random_field(resolution=16, sh_degree=1, seed=2)
+    c2w, camera = named_pose("far_away"), camera_for("far_away")
+    exact = FieldRenderer(field, EXACT).render(c2w, camera, ("rgb",))["rgb"].astype(np.int16)
+    baked = FieldRenderer(field, EXACT.replace(colour_direction="vertex")).render(c2w, camera, ("rgb",))["rgb"]
+    diff = np.abs(baked.astype(np.int16) - exact)
+    assert diff.max() <= 1, f"baked colours differ by up to {diff.max()} levels from a thousand radii away"
+
+
+@pytest.mark.parametrize("pose_name", ["inside", "in_shell"])
+def test_baked_colours_of_a_degree_0_field_are_exact_and_degree_1_moves_them(pose_name):
+    """A degree-0 colour has no direction. A degree-1 colour moves by the angle a cell subtends: on this 16³
+    field of unit-normal SH coefficients, seen from inside, cells subtend up to tens of degrees and the
+    renders differ by up to 9 (inside) and 8 (in the shell) levels, measured; the test allows 16. A fitted
+    field at 160³ seen from its capture poses differs far less (fox: 65.8 dB, docs/performance.md)."""
+    c2w = named_pose(pose_name)
+    flat = random_field(resolution=16, sh_degree=0, seed=6)
+    exact = FieldRenderer(flat, EXACT).render(c2w, CAMERA, ("rgb",))["rgb"].astype(np.int16)
+    baked = FieldRenderer(flat, EXACT.replace(colour_direction="vertex")).render(c2w, CAMERA, ("rgb",))["rgb"]
+    assert np.abs(baked - exact).max() <= 1, "a degree-0 field's baked colours differ from its exact ones"
+    shiny = random_field(resolution=16, sh_degree=1, seed=6)
+    exact = FieldRenderer(shiny, EXACT).render(c2w, CAMERA, ("rgb",))["rgb"].astype(np.int16)
+    baked = FieldRenderer(shiny, EXACT.replace(colour_direction="vertex")).render(c2w, CAMERA, ("rgb",))["rgb"]
+    diff = np.abs(baked - exact)
+    assert 1 < diff.max() <= 16, (f"pose {pose_name!r}: baked colours of a degree-1 field differ by up to "
+                                  f"{diff.max()} levels from exact ones; expected a visible change of at most 16")
