@@ -36,7 +36,7 @@ BACKENDS = ("auto", "compiled", "torch")
 COLOUR_DIRECTIONS = ("vertex", "ray")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 4  # 4: colour baked per frame, min_weight, min_alpha 1e-2 (docs/performance.md)
+RENDER_VERSION = 4  # 4: colour logits baked per frame, min_weight (docs/performance.md, "Rendering")
 
 
 @dataclass(frozen=True)
@@ -51,9 +51,9 @@ class RenderSettings:
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
       transmittance left shows the background, as at the far end (0.03 measured on fox 1.3× faster than
       1e-3 for 0.03 dB less PSNR against the real photos);
-    - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped (the
-      default 1e-2 was 1.1× faster than 1e-4 on the fox for 0.001 dB against the photos, and no loss on the
-      demo twins);
+    - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped (1e-2
+      was 1.1× faster on the fox for 0.001 dB, but it depends on the grid: a smooth field upsampled 16 → 31
+      lost 18 dB to its thin cells, tests/field/test_grid.py, so the default stays 1e-4);
     - ``scale``: render at this fraction of the camera's width and height, then resize to the camera
       (bilinear; depth takes the nearest rendered pixel, so it never invents a depth between a surface and
       what is behind it). A fitted field has no more detail than its grid: on the fox, 0.5 renders 3.6×
@@ -83,7 +83,7 @@ class RenderSettings:
     shell_samples: int | None = None
     far: float = 100.0
     t_stop: float = 3e-2
-    min_alpha: float = 1e-2
+    min_alpha: float = 1e-4
     scale: float = 1.0
     adaptive: float = 0.04
     adaptive_depth: float = 0.1
