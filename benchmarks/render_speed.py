@@ -48,14 +48,13 @@ EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
-#: The defaults before RENDER_VERSION 4 (the reach skip, which changes no sample, is switched off separately).
+#: The defaults before RENDER_VERSION 4.
 PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0)
 #: The changes of RENDER_VERSION 4, each on top of the one before (docs/performance.md, "Rendering").
-CHANGES = (("previous defaults (RENDER_VERSION 3)", PREVIOUS, False),
-           ("+ empty-cell reach skip (same samples)", PREVIOUS, True),
-           ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex"), True),
-           ("+ min_weight=1e-2 (the defaults)", DEFAULT, True),
-           ("+ min_alpha=1e-2 (not adopted: see RenderSettings)", DEFAULT.replace(min_alpha=1e-2), True))
+CHANGES = (("previous defaults (RENDER_VERSION 3)", PREVIOUS),
+           ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex")),
+           ("+ min_weight=1e-2 (the defaults)", DEFAULT),
+           ("+ min_alpha=1e-2 (not adopted: see RenderSettings)", DEFAULT.replace(min_alpha=1e-2)))
 TABLES = ("speed", "changes", "psnr", "sweep")
 
 
@@ -91,22 +90,11 @@ def cpu_ms(fn, repeats: int) -> float:
     return best * 1e3
 
 
-def with_reach(scene, reach: bool):
-    """``scene`` itself, or (``reach=False``) a copy whose renderer steps through every empty cell in occupied
-    blocks one sample at a time, as before the reach skip (an all-ones reach; the samples are the same)."""
-    if reach:
-        return scene
-    copy = scene.with_settings(scene.settings)
-    grid = copy._renderer.grid
-    grid._reach = np.ones_like(grid.reach())
-    return copy
-
-
 def changes_table(scene, views, truth, sizes, repeats: int) -> None:
     """Table 2: each change side by side with the one before, one thread."""
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
-    variants = [(label, with_reach(scene.with_settings(settings), reach)) for label, settings, reach in CHANGES]
+    variants = [(label, scene.with_settings(settings)) for label, settings in CHANGES]
     print(f"\neach change on top of the one before, ONE thread, CPU ms / frame (RGB; PSNR at {sizes[0][0]}x"
           f"{sizes[0][1]}, mean over {len(views)} held-out views)\n| change | "
           + " | ".join(f"{w}×{h} CPU ms (speed-up)" for w, h in sizes) + " | PSNR → truth | difference |\n"

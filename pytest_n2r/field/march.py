@@ -12,15 +12,11 @@ import math
 
 import numpy as np
 import torch
-from numba import njit, prange
 
 from . import kernels
 from .lattice import grid_coords, lattice_counts, lattice_t
 
-__all__ = ["MarchGrid", "march_compiled", "march_dense", "empty_reach"]
-
-#: The largest reach :func:`empty_reach` records, in cells (a ray crosses more in jumps of this).
-REACH_CAP = 32
+__all__ = ["MarchGrid", "march_compiled", "march_dense"]
 
 
 class MarchGrid:
@@ -38,7 +34,6 @@ class MarchGrid:
         self.shell, self.shell_samples, self.far = shell, shell_samples, far
         self._cells: np.ndarray | None = None
         self._blocks: np.ndarray | None = None
-        self._reach: np.ndarray | None = None
 
     def numpy(self) -> tuple[np.ndarray, np.ndarray]:
         """``(cells, blocks)`` as uint8 arrays for the compiled kernels (built once)."""
@@ -46,12 +41,6 @@ class MarchGrid:
             self._cells = np.ascontiguousarray(self.occupancy.cpu().numpy().astype(np.uint8))
             self._blocks = kernels.block_occupancy(self._cells)
         return self._cells, self._blocks
-
-    def reach(self) -> np.ndarray:
-        """:func:`empty_reach` of the cells (uint8, built once): how far the compiled renderer may jump."""
-        if self._reach is None:
-            self._reach = empty_reach(self.numpy()[0])
-        return self._reach
 
     def t_far(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
         """Where each ray's lattice ends (the ``t`` the remaining transmittance is placed at)."""
@@ -93,43 +82,3 @@ def march_dense(o: torch.Tensor, d: torch.Tensor, grid: MarchGrid) -> tuple[torc
     counts = torch.bincount(ray, minlength=o.shape[0])
     _, offsets = _packed(counts)
     return ray, t, offsets
-
-
-def empty_reach(cells: np.ndarray, cap: int = REACH_CAP) -> np.ndarray:
-    """Per cell, its Chebyshev (∞-norm) distance in cells to the nearest occupied cell, at most ``cap`` (uint8;
-    0 for an occupied cell, ``cap`` where none is that near, cells beyond the grid count as empty).
-
-    A point in a cell of reach ``e`` can move up to ``e - 1`` cells along every axis (∞-norm, in grid units)
-    without entering an occupied cell, whatever its position inside its cell.
-
-    >>> cells = np.zeros((1, 1, 6), dtype=np.uint8); cells[0, 0, 1] = 1
-    >>> empty_reach(cells)[0, 0].tolist()
-    [1, 0, 1, 2, 3, 4]
-    """
-    if not 1 <= cap <= 255:
-        raise ValueError(f"cap={cap}: expected 1..255")
-    reach = np.where(cells != 0, 0, cap).astype(np.uint8)
-    for axes in ((0, 1, 2), (0, 2, 1), (2, 1, 0)):  # ∞-norm distance is separable: one pass along each axis
-        line = np.ascontiguousarray(reach.transpose(axes))
-        out = np.empty_like(line)
-        _reach_along_last_axis(line, out)
-        reach = out.transpose(axes)
-    return np.ascontiguousarray(reach)
-
-
-@njit(cache=True, parallel=True)
-def _reach_along_last_axis(f, out):
-    """``out[a, b, i] = min_j max(|i - j|, f[a, b, j])`` (one axis of the ∞-norm distance transform)."""
-    n = f.shape[2]
-    for a in prange(f.shape[0]):
-        for b in range(f.shape[1]):
-            for i in range(n):
-                best = f[a, b, i]
-                r = 1
-                while r < best:  # a cell r away offers at least r
-                    if i - r >= 0:
-                        best = min(best, max(r, f[a, b, i - r]))
-                    if i + r < n:
-                        best = min(best, max(r, f[a, b, i + r]))
-                    r += 1
-                out[a, b, i] = best

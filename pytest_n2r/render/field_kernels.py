@@ -1,10 +1,9 @@
 """The fused forward renderer of a scene field, compiled for the CPU (numba): one thread per ray.
 
 It samples the lattice of :mod:`pytest_n2r.field.lattice` with the field's compiled sampling maths
-(:mod:`pytest_n2r.field.kernels`, inlined), skips empty 8³-cell blocks in one jump and, inside occupied
-blocks, as many samples past an empty cell as its reach (:func:`pytest_n2r.field.march.empty_reach`) proves
-empty (the same samples as a sample-by-sample march), and stops a ray once its transmittance falls below
-``t_stop`` (early ray termination). Each ray is independent, so results do not depend on the thread count.
+(:mod:`pytest_n2r.field.kernels`, inlined), skips empty 8³-cell blocks in one jump and occupied-cell misses
+one by one, and stops a ray once its transmittance falls below ``t_stop`` (early ray termination). Each ray
+is independent, so results do not depend on the thread count.
 
 Colour is the costly part of a sample (docs/performance.md, "Rendering"), and two settings make it cheaper:
 
@@ -43,7 +42,7 @@ __all__ = ["render_rays", "bake_logits"]
 
 
 @njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, logits, rows, occ, blocks, reach, res, shell, step, shell_samples, far,
+def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
                 density_shift, sigma_step, sh_degree, t_stop, min_weight, background, want_depth, rgb, depth, opacity):
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
@@ -66,9 +65,6 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, reach, res, sh
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        # lattice steps per cell along the ray's fastest axis (∞-norm): an empty cell of reach e lets the ray
-        # pass e - 1 cells, that many steps, without a look (the margin keeps rounding on the safe side)
-        steps_per_cell = (2.0 * (1.0 + shell) / (res - 1)) / (step * max(abs(dx), abs(dy), abs(dz)) / dn)
         # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
         b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
         coef = np.empty(12)
@@ -95,8 +91,6 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, reach, res, sh
                 continue
             k += 1
             if not occ[ci, cj, ck]:
-                if k <= n_inner:
-                    k = min(k + int((reach[ci, cj, ck] - 1 - 1e-6) * steps_per_cell), n_inner)
                 continue
             # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
             fx, fy, fz = gx - ci, gy - cj, gz - ck

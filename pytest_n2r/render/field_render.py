@@ -250,7 +250,7 @@ class FieldRenderer:
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
-            render_rays(o, d, self._density, self._values, logits, self._rows, cells, blocks, g.reach(), g.resolution,
+            render_rays(o, d, self._density, self._values, logits, self._rows, cells, blocks, g.resolution,
                         g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
                         f.sh_degree, s.t_stop, s.min_weight, np.asarray(self.background), want_depth, rgb, depth,
                         opacity)

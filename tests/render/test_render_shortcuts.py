@@ -1,54 +1,20 @@
-"""The compiled renderer's shortcuts: the empty-cell reach skip (same samples, same bits), colour logits baked
-per frame at the vertices, and colour only where a sample carries weight (each within its stated bound)."""
+"""The compiled renderer's shortcuts: colour logits baked per frame at the vertices, and colour only where a
+sample carries weight (each within its stated bound)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from hypothesis.extra.numpy import arrays
 
-from pytest_n2r.field.march import empty_reach, march_dense
+from pytest_n2r.field.march import march_dense
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
 
-from ..field.fields import CAMERA, POSES, camera_for, named_pose, random_field
-from .test_agreement import OUTPUTS, rays_of
+from ..field.fields import CAMERA, camera_for, named_pose, random_field
+from .test_agreement import rays_of
 
 EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0, colour_direction="ray", min_weight=0.0, adaptive=0.0,
                        backend="compiled")
-
-
-@settings(max_examples=40, deadline=None)
-@given(cells=arrays(np.uint8, st.tuples(*[st.integers(1, 9)] * 3), elements=st.sampled_from([0, 0, 0, 0, 0, 1])),
-       cap=st.integers(1, 12))
-def test_empty_reach_is_the_capped_chebyshev_distance_to_an_occupied_cell(cells, cap):
-    reach = empty_reach(cells, cap)
-    occupied = np.argwhere(cells)
-    grid = np.stack(np.meshgrid(*[np.arange(n) for n in cells.shape], indexing="ij"), -1)
-    if occupied.size:
-        brute = np.abs(grid[..., None, :] - occupied).max(-1).min(-1)
-    else:
-        brute = np.full(cells.shape, cap)
-    expected = np.minimum(brute, cap)
-    assert np.array_equal(reach, expected), (
-        f"empty_reach differs from the brute-force distance at {int((reach != expected).sum())} cells")
-
-
-@pytest.mark.parametrize("pose_name", list(POSES))
-def test_the_reach_skip_renders_the_same_bits_as_a_sample_by_sample_march(pose_name):
-    field = random_field(resolution=40, occupied=0.02, seed=9, density_scale=4.0)
-    field.values[:, 0] += 2.0
-    renderer = FieldRenderer(field, EXACT)
-    assert renderer.grid.reach().max() > 2, "no empty cell reaches past its neighbours: nothing would be skipped"
-    skipped = renderer.render(named_pose(pose_name), camera_for(pose_name), OUTPUTS)
-    renderer.grid._reach = np.ones_like(renderer.grid.reach())  # a reach of 1 skips nothing
-    stepped = renderer.render(named_pose(pose_name), camera_for(pose_name), OUTPUTS)
-    for name in OUTPUTS:
-        assert np.array_equal(skipped[name], stepped[name]), f"pose {pose_name!r}: {name} changed with the reach skip"
-    if pose_name != "looking_away":
-        assert skipped["opacity"].max() > 0.3, f"pose {pose_name!r} sees almost nothing: the test would show little"
 
 
 @pytest.mark.parametrize("min_weight", [1e-2, 5e-2])
