@@ -36,6 +36,8 @@ RELATION_MARKER = "n2r_relation"
 
 _SESSION = pytest.StashKey["Any"]()
 _RECORD = pytest.StashKey["dict"]()
+#: ids of the scenes after whose first setup the heap was frozen (see :func:`pytest_runtest_setup`).
+_FROZEN_SCENES = pytest.StashKey[set]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -154,16 +156,20 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
 
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_setup(item: pytest.Item) -> Any:
-    """After the setup of a test on ``n2r_scene``, move every object alive out of the cyclic garbage
-    collector's sight (:func:`gc.freeze`): what a session loads once and keeps (imports, scenes, networks,
-    compiled kernels) is then no longer walked by every full collection. Garbage cycles are still collected
-    when they form after the freeze. Measured on the main job: the collector's time 7.1 → 2.7 s of a cold run
-    (the kernels' compilation makes many collections), 0.9 → 0.6 s of a warm one (docs/performance.md)."""
+    """After the setup of the first test on each scene, collect the garbage and then move every object alive
+    out of the cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads once and keeps
+    (imports, scenes, networks, compiled kernels) is then no longer walked by every full collection. Measured
+    on the main job: the collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many
+    collections), 0.9 → 0.6 s of a warm one (docs/performance.md). The collection first, and once a scene
+    rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
+    never be freed."""
     yield
-    if "n2r_scene" in getattr(item, "fixturenames", ()):
+    scene = getattr(item, "funcargs", {}).get("n2r_scene")
+    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())
+    if scene is not None and id(scene) not in frozen:
+        frozen.add(id(scene))  # scenes live for the session (the fixture's cache), so their ids stay theirs
+        gc.collect()
         gc.freeze()
-
-
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -515,13 +515,33 @@ def test_replay_it(n2r_scene, n2r_session):
 
 
 def test_what_a_session_loaded_is_frozen_out_of_the_garbage_collectors_way(n2r_project):
+    """The heap is frozen after the first setup on a scene, but garbage is collected first: an unreachable
+    cycle that was frozen would never be freed."""
     n2r_project.write("""
 import gc
+import weakref
 
 gc.unfreeze()  # at collection: an earlier run in this process may have frozen objects already
+gc.disable()  # so that nothing but the plugin collects the cycle below
 
-def test_setup_froze_the_heap(n2r_scene):
+
+class Node:
+    pass
+
+
+def _garbage():
+    node = Node()
+    node.me = node
+    return weakref.ref(node)
+
+
+GARBAGE = _garbage()
+
+
+def test_setup_froze_the_heap_and_no_garbage(n2r_scene):
+    gc.enable()
     assert gc.get_freeze_count() > 0, "nothing frozen after the setup of a test on n2r_scene"
+    assert GARBAGE() is None, "an unreachable cycle was frozen instead of collected"
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(passed=1)
