@@ -52,3 +52,8 @@ def format_repeatability(entry: dict) -> str:
         return f"n/a (0 of {entry['n']})"
     text = f"{entry['mean']:.3f}"
     return text if entry["defined"] == entry["n"] else f"{text} ({entry['defined']} of {entry['n']})"
+
+
+def format_repeatabilities(score: dict, sep: str) -> str:
+    """Each detector's :func:`format_repeatability` in ``score``, in :data:`DETECTORS` order, joined by ``sep``."""
+    return sep.join(format_repeatability(score[name]) for name in DETECTORS)

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _scoring import defined_mean, format_repeatability, score_exact
+from _scoring import defined_mean, format_repeatabilities, score_exact
 
 from pytest_n2r.cli.fit import parse_config_override, parse_duration
 from pytest_n2r.data import ingest
@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     def cells(score: dict | None) -> str:
         if score is None:
             return "not scored | "
-        reps = " / ".join(format_repeatability(score[d]) for d in ("orb", "sift", "akaze"))
+        reps = format_repeatabilities(score, " / ")
         return f"{score['psnr']:.2f} / {score['ssim']:.3f} ({score['n']}) | {reps}"
 
     def report(row: dict) -> None:

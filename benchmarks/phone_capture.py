@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from _scoring import format_repeatability, score_exact
+from _scoring import format_repeatabilities, score_exact
 
 from pytest_n2r.data import ingest
 from pytest_n2r.demo import ground_truth
@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         for key, r in results[name].items():
             for poses in ("held out", "moved"):
                 s = r[poses]
-                reps = " | ".join(format_repeatability(s[d]) for d in ("orb", "sift", "akaze"))
+                reps = format_repeatabilities(s, " | ")
                 print(f"| {name} | {key} | {poses} ({s['n']}) | {s['psnr']:.2f} | {s['ssim']:.4f} | {reps} | "
                       f"{r['fit_s']} |")
     if args.json:
