@@ -2,7 +2,8 @@
 and AKAZE (repeatability and interest-point spread, reference image vs field render at the same held-out
 pose), per scene.
 
-Run: ``python benchmarks/fidelity.py SCENE [SCENE ...] [--size 480] [--views N] [--ceiling] [--json out.json]``
+Run: ``python benchmarks/fidelity.py SCENE [SCENE ...] [--size 480] [--views N] [--ceiling] [--bands]
+[--json out.json]``
 
 ``SCENE`` is a ``.n2r`` file (reference: the photos it stores) or ``demo:wall-field`` / ``demo:object-field``
 (reference: the exact scene's render at the same pose). Only held-out views are scored; nothing in this
@@ -11,7 +12,11 @@ script is tuned, and a scene fitted with a validation split must hold out its re
 for each detector) and prints which are met. ``--ceiling`` measures what the targets ask of a render: each
 detector's repeatability between the reference image and the reference image itself degraded as a render
 degrades it (half, a third, a quarter of its resolution, a blur, JPEG), with the render's geometry, so no
-field error enters. Results: docs/scene-field.md.
+field error enters. ``--bands`` says where a render's error is: PSNR against the reference after both are
+blurred (Gaussian, 1, 2 and 4 px: what is left is shape, placement and colour, not fine texture) and after the
+best per-channel gain and offset (exposure), on the held-out views and on as many fitted (training) views
+spread over the capture (the gap between the two is what the fit does not carry to new poses).
+Results: docs/scene-field.md.
 """
 
 from __future__ import annotations
@@ -105,6 +110,53 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
 
 
+#: ``--bands``: the Gaussian blurs (pixels) applied to both images before their PSNR.
+BAND_SIGMAS = (1.0, 2.0, 4.0)
+
+
+def _gain_offset_psnr(reference: np.ndarray, render: np.ndarray) -> float:
+    """PSNR after the render's best per-channel gain and offset (least squares) towards the reference."""
+    x, y = render.reshape(-1, 3).astype(np.float64), reference.reshape(-1, 3).astype(np.float64)
+    fitted = np.stack([np.polyval(np.polyfit(x[:, c], y[:, c], 1), x[:, c]) for c in range(3)], axis=1)
+    return psnr(y.reshape(reference.shape), np.clip(fitted, 0, 255).reshape(reference.shape), data_range=255.0)
+
+
+def bands(scene, size: str, max_views: int | None) -> dict[str, dict]:
+    """``{"held out": ..., "fitted": ...}``: the mean PSNR of the render against the reference image, plain,
+    after a Gaussian blur of both (:data:`BAND_SIGMAS`) and after a per-channel gain and offset, on the held-out
+    views and on as many training views spread over the capture. Empty without reference images."""
+    kind, _ = reference_kind(scene)
+    if kind == "none":
+        return {}
+    render_size = RenderSize.parse(size)
+    heldout = floor_views(scene, max_views)
+    train = [v for v in scene.views if v.split != "heldout" and (kind == "exact" or v.image is not None)]
+    train = [train[i] for i in np.linspace(0, len(train) - 1, min(len(heldout), len(train))).round().astype(int)]
+    out = {}
+    for label, views in (("held out", heldout), ("fitted", train)):
+        rows = []
+        for view in views:
+            camera = render_size.apply(view.camera)
+            render = scene.render(view.c2w, camera, ("rgb",)).rgb
+            image = np.asarray(reference_image(scene, view, camera, kind))
+            blurred = [psnr(cv2.GaussianBlur(image.astype(np.float32), (0, 0), sigma),
+                            cv2.GaussianBlur(render.astype(np.float32), (0, 0), sigma), data_range=255.0)
+                       for sigma in BAND_SIGMAS]
+            rows.append([psnr(image, render), *blurred, _gain_offset_psnr(image, render)])
+        out[label] = {"views": len(views), "psnr": dict(zip(["plain", *map(str, BAND_SIGMAS), "gain"],
+                                                                np.mean(rows, axis=0).tolist()))}
+    return out
+
+
+def print_bands(spec: str, table: dict[str, dict]) -> None:
+    print(f"\n{spec}: PSNR dB of the render against the reference, plain, after both are blurred, and after the "
+          "render's best per-channel gain and offset\n")
+    print("| views | n | plain | " + " | ".join(f"blur {s:g} px" for s in BAND_SIGMAS) + " | gain and offset |")
+    print("|---|---|---|" + "---|" * (len(BAND_SIGMAS) + 1))
+    for label, row in table.items():
+        print(f"| {label} | {row['views']} | " + " | ".join(f"{v:.2f}" for v in row["psnr"].values()) + " |")
+
+
 def print_ceiling(spec: str, table: dict[str, dict]) -> None:
     print(f"\n{spec}: each detector on the reference image vs on the reference degraded (no field error)\n")
     print("| reference degraded to | PSNR dB | SSIM | " + " | ".join(f"{d.upper()} rep." for d in DETECTORS) + " |")
@@ -121,10 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--targets", action="store_true", help="check issue 14's targets on every scene")
     parser.add_argument("--ceiling", action="store_true",
                         help="also score each detector on the reference image degraded (what the targets ask)")
+    parser.add_argument("--bands", action="store_true",
+                        help="also say where the render's error is (fine texture, shape, exposure; held out vs fitted)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write every number as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
-    reports, ceilings = [], {}
+    reports, ceilings, band_tables = [], {}, {}
     header = ("| scene | reference | views | PSNR dB | SSIM | "
               + " | ".join(f"{d.upper()} rep. | {d.upper()} spread" for d in DETECTORS) + " | seconds |")
     print(header)
@@ -137,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
         reports.append(report)
         if args.ceiling:
             ceilings[spec] = ceiling(scene, args.size, args.views)
+        if args.bands:
+            band_tables[spec] = bands(scene, args.size, args.views)
         if report.reference == "none":
             print(f"| {spec} | none: {report.reason} |" + " |" * (header.count("|") - 3))
             continue
@@ -159,10 +215,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {report.scene} {detector} {metric}: {per_view}")
     for spec, table in ceilings.items():
         print_ceiling(spec, table)
+    for spec, table in band_tables.items():
+        print_bands(spec, table)
     if args.json:
         from pytest_n2r.data.atomic import atomic_write_text
 
-        atomic_write_text(args.json, json.dumps([{**r.to_dict(), "ceiling": ceilings.get(spec)}
+        atomic_write_text(args.json, json.dumps([{**r.to_dict(), "ceiling": ceilings.get(spec),
+                                                  "bands": band_tables.get(spec)}
                                                  for spec, r in zip(args.scenes, reports)], indent=1))
         print(f"\nwrote {args.json}")
     return 0
