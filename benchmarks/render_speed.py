@@ -12,10 +12,10 @@ and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prin
    shared machine) and the share of pixels traced, for the defaults, the defaults with every pixel traced
    (``adaptive=0``: the renderer before adaptive sampling, the same kernel), and the two fastest settings the
    sweep prices (half the size upsampled, ``scale=0.5``; and that with twice the sample spacing), and the
-   previous defaults (RENDER_VERSION 3);
+   previous defaults (RENDER_VERSION 4: ``tail=()``);
 2. ``changes``: each change to the compiled renderer side by side with the one before, on ONE thread
    (``numba.set_num_threads(1)``: two threads give little more on a 2-core VM, so this is the ratio to read):
-   CPU milliseconds a frame at each size and PSNR against the truth at the first size (mean over the views);
+   CPU milliseconds a frame and PSNR against the truth (mean over the views) at each size;
 3. ``psnr``: at each size, the PSNR of the defaults and of ``adaptive=0`` against the held-out photos (or the exact
    scene), mean over the views, and of the defaults against ``adaptive=0``;
 4. ``sweep``: at the first size, a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing,
@@ -48,13 +48,15 @@ EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
-#: The defaults before RENDER_VERSION 4.
-PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0)
-#: The changes of RENDER_VERSION 4, each on top of the one before (docs/performance.md, "Rendering").
+#: The defaults before RENDER_VERSION 4, and before RENDER_VERSION 5.
+PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0, tail=())
+VERSION_4 = DEFAULT.replace(tail=())
+#: The changes of RENDER_VERSION 4 and 5, each on top of the one before (docs/performance.md, "Rendering").
 CHANGES = (("previous defaults (RENDER_VERSION 3)", PREVIOUS),
            ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex")),
-           ("+ min_weight=1e-2 (the defaults)", DEFAULT),
-           ("+ min_alpha=1e-2 (not adopted: see RenderSettings)", DEFAULT.replace(min_alpha=1e-2)))
+           ("+ min_weight=1e-2 (RENDER_VERSION 4)", VERSION_4),
+           ("+ tail=(0.3, 0.1) (the defaults, RENDER_VERSION 5)", DEFAULT),
+           ("+ tail=(0.5, 0.1) (not adopted)", DEFAULT.replace(tail=(0.5, 0.1))))
 TABLES = ("speed", "changes", "psnr", "sweep")
 
 
@@ -95,25 +97,26 @@ def changes_table(scene, views, truth, sizes, repeats: int) -> None:
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     variants = [(label, scene.with_settings(settings)) for label, settings in CHANGES]
-    print(f"\neach change on top of the one before, ONE thread, CPU ms / frame (RGB; PSNR at {sizes[0][0]}x"
-          f"{sizes[0][1]}, mean over {len(views)} held-out views)\n| change | "
-          + " | ".join(f"{w}×{h} CPU ms (speed-up)" for w, h in sizes) + " | PSNR → truth | difference |\n"
-          + "|" + " --- |" * (len(sizes) + 3))
-    rows = {label: [] for label, _ in variants}
+    print(f"\neach change on top of the one before, ONE thread, CPU ms / frame (RGB) and PSNR against the truth "
+          f"(mean over {len(views)} held-out views; in brackets: against the row above)\n| change | "
+          + " | ".join(f"{w}×{h} CPU ms | PSNR → truth" for w, h in sizes) + " |\n|" + " --- |" * (2 * len(sizes) + 1))
+    ms = {label: [] for label, _ in variants}
+    db = {label: [] for label, _ in variants}
     for w, h in sizes:
         camera = sized(views[0].camera, w * h)
+        refs = [truth(v, camera) for v in views]
         for label, variant in variants:
             render = functools.partial(variant.render, views[0].c2w, camera, ("rgb",))
             render()
-            rows[label].append(cpu_ms(render, repeats))
-    small = sized(views[0].camera, sizes[0][0] * sizes[0][1])
-    refs = [truth(v, small) for v in views]
-    first = None
-    for label, variant in variants:
-        p = float(np.mean([psnr(r, variant.render(v.c2w, small, ("rgb",)).rgb) for r, v in zip(refs, views)]))
-        first = (p, rows[label]) if first is None else first
-        print(f"| {label} | " + " | ".join(f"{ms:.0f} ({base / ms:.2f}×)" for ms, base in zip(rows[label], first[1]))
-              + f" | {p:.3f} dB | {p - first[0]:+.3f} dB |")
+            ms[label].append(cpu_ms(render, repeats))
+            db[label].append(float(np.mean([psnr(r, variant.render(v.c2w, camera, ("rgb",)).rgb)
+                                            for r, v in zip(refs, views)])))
+    above = variants[0][0]
+    for label, _ in variants:
+        print(f"| {label} | " + " | ".join(
+            f"{m:.0f} ({ms[above][i] / m:.2f}×) | {p:.3f} dB ({p - db[above][i]:+.3f})"
+            for i, (m, p) in enumerate(zip(ms[label], db[label]))) + " |")
+        above = label
     numba.set_num_threads(threads)
 
 
@@ -139,7 +142,7 @@ def main(argv: list[str]) -> int:
         return 1
     print(f"scene {args.scene}: field {scene.field.resolution}³, fit PSNR {scene.report.get('psnr')} dB, "
           f"{args.threads} threads\n")
-    variants = {"default": scene, "previous defaults": scene.with_settings(PREVIOUS),
+    variants = {"default": scene, "previous defaults": scene.with_settings(VERSION_4),
                 "adaptive=0": scene.with_settings(EVERY_PIXEL),
                 "scale=0.5": scene.with_settings(FAST[0]), "scale=0.5, step_ratio=1": scene.with_settings(FAST[1])}
     if "speed" in tables:

@@ -12,6 +12,12 @@ Colour is the costly part of a sample (docs/performance.md, "Rendering"), and tw
   sample then sees its corners' colours from the directions of the corners, not of its ray: they differ by at
   most the angle a cell subtends from the camera (the logit error is at most ``SH_C1·θ·‖c₁‖``, ``c₁`` a
   corner's degree-1 coefficients); a degree-0 field's colours do not depend on direction and stay exact.
+- **coarser samples behind the surface** (``tail``): each time the ray's transmittance falls below the next of
+  the ``tail`` thresholds, the ray's samples stand for twice as many lattice steps as before (one sample at the
+  middle of the steps it stands for, its opacity over their length; never across the cube's face or the
+  lattice's end). What lies behind a transmittance ``T`` adds at most
+  ``T`` to a channel in either render, so the two differ by at most the transmittance at the first threshold
+  crossed; measured, far less (docs/performance.md, "Rendering").
 - **colour only where it carries weight** (``min_weight``): a sample whose compositing weight, plus the weight
   carried from the samples before it, stays below ``min_weight`` is not coloured; its weight is carried to the
   next coloured sample (at the ray's end: the last colour, else the background). Every carried sample weighs less
@@ -38,12 +44,13 @@ from ..field.kernels import (
     vertex_row,
 )
 
-__all__ = ["render_rays", "bake_logits"]
+__all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 
 @njit(cache=True, parallel=True)
 def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
-                density_shift, sigma_step, sh_degree, t_stop, min_weight, background, want_depth, rgb, depth, opacity):
+                density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, rgb, depth,
+                opacity):
     """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
@@ -56,7 +63,8 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
     of the ray's compositing weight, ``Σ w·t / Σ w``, and the far end of the ray where it has no weight at
     all: finite everywhere, not to be trusted where opacity is ~0. ``logits`` ``(n_rows, 3)`` float32 holds the
     colour logits baked for this frame (:func:`bake_logits`), or is empty: each sample's logits from its ray's
-    direction (exact). ``min_weight``: see the module docstring (0 colours every sample).
+    direction (exact). ``tail`` (float64, decreasing) and ``min_weight``: see the module docstring (an empty
+    ``tail`` takes every lattice sample, 0 colours every sample).
     """
     n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
@@ -76,12 +84,17 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
         zd = wsum = 0.0
         u0 = 1.0 / ts
         k = 0
+        stride = 1  # lattice steps a sample stands for: doubled at each tail threshold crossed
+        crossed = 0
         total = n_inner + shell_samples
         while k < total and trans > t_stop:
+            # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
+            # taken at their middle
+            n = min(stride, (n_inner if k < n_inner else total) - k)
             if k < n_inner:
-                t = t0 + (k + 0.5) * dt
+                t = t0 + (k + 0.5 * n) * dt
             else:
-                t = 1.0 / (u0 - (k - n_inner + 0.5) * du)
+                t = 1.0 / (u0 - (k + 0.5 * n - n_inner) * du)
             gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
             ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
             if k < n_inner and blocks[ci // BLOCK, cj // BLOCK, ck // BLOCK] == 0:
@@ -89,7 +102,7 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
                 k_next = max(k + 1, int(math.ceil((t_exit - t0) / dt - 0.5)))
                 k = min(k_next, n_inner)
                 continue
-            k += 1
+            k += n
             if not occ[ci, cj, ck]:
                 continue
             # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
@@ -105,11 +118,14 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
             v6, v7 = vertex_row(rows, v + rr + res), vertex_row(rows, v + rr + res + 1)
             sigma_raw = (w0 * density[v0] + w1 * density[v1] + w2 * density[v2] + w3 * density[v3]
                          + w4 * density[v4] + w5 * density[v5] + w6 * density[v6] + w7 * density[v7])
-            alpha = sample_alpha(sigma_raw + density_shift, sigma_step)
+            alpha = _alpha(sigma_raw + density_shift, sigma_step * n)
             if alpha <= 0.0:
                 continue
             weight = trans * alpha
             trans *= 1.0 - alpha
+            while crossed < tail.shape[0] and trans < tail[crossed]:
+                crossed += 1
+                stride *= 2
             if want_depth:
                 zd += weight * t
                 wsum += weight
@@ -152,6 +168,19 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
             depth[r] = zd / wsum if trans < 1.0 else ts + far / dn
 
 
+@njit(cache=True, inline="always")
+def _alpha(x, sigma_step):
+    """:func:`~pytest_n2r.field.kernels.sample_alpha`, with the spacings of the tail's longer samples (1 and 2
+    voxels: ``1 - (1 + e^x)^-1`` and ``1 - (1 + e^x)^-2``) without a logarithm (the same value to rounding)."""
+    if x < 40.0:
+        if sigma_step == 1.0:
+            return 1.0 - 1.0 / (1.0 + math.exp(x))
+        if sigma_step == 2.0:
+            q = 1.0 / (1.0 + math.exp(x))
+            return 1.0 - q * q
+    return sample_alpha(x, sigma_step)
+
+
 @njit(cache=True, parallel=True)
 def bake_logits(values, vertex, res, shell, origin, sh_degree, out):
     """Colour logits ``out (n_rows, 3)`` of every stored vertex seen from ``origin`` (the camera centre,
@@ -178,3 +207,18 @@ def bake_logits(values, vertex, res, shell, origin, sh_degree, out):
                 lg += b1 * values[r, 5] + b2 * values[r, 8] + b3 * values[r, 11]
                 lb += b1 * values[r, 6] + b2 * values[r, 9] + b3 * values[r, 12]
         out[r, 0], out[r, 1], out[r, 2] = lr, lg, lb
+
+
+@njit(cache=True, parallel=True)
+def pixel_rays(index, width, fx, fy, cx, cy, c2w, center, radius, o, d):
+    """The normalized rays ``o, d (N, 3)`` (float32) through the centres of the pixels with flat indices ``index``
+    (``y·width + x``) of a pinhole camera at ``c2w``: :func:`pytest_n2r.geometry.camera_rays` (camera-frame
+    z-component 1, so ``t`` is z-depth) then :meth:`pytest_n2r.field.space.SceneSpace.normalize_rays` (minus
+    ``center``, over ``radius``), in float64 before the one rounding to float32, without their arrays."""
+    ox, oy, oz = (c2w[0, 3] - center[0]) / radius, (c2w[1, 3] - center[1]) / radius, (c2w[2, 3] - center[2]) / radius
+    for r in prange(index.shape[0]):
+        x = (index[r] % width - cx) / fx
+        y = (index[r] // width - cy) / fy
+        o[r, 0], o[r, 1], o[r, 2] = ox, oy, oz
+        for i in range(3):
+            d[r, i] = (x * c2w[i, 0] + y * c2w[i, 1] + c2w[i, 2]) / radius

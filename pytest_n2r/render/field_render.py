@@ -12,6 +12,7 @@ Two backends render the same lattice (:mod:`pytest_n2r.field.lattice`):
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import asdict, dataclass, replace
 
@@ -25,9 +26,9 @@ from ..field.grid import SceneField
 from ..field.lattice import grid_coords
 from ..field.march import MarchGrid, march_dense
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
-from ..geometry import Camera, camera_rays
+from ..geometry import Camera
 from .adaptive import sample_adaptively
-from .field_kernels import bake_logits, render_rays
+from .field_kernels import bake_logits, pixel_rays, render_rays
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -36,7 +37,7 @@ BACKENDS = ("auto", "compiled", "torch")
 COLOUR_DIRECTIONS = ("vertex", "ray")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 4  # 4: colour logits baked per frame, min_weight (docs/performance.md, "Rendering")
+RENDER_VERSION = 5  # 4: colour logits baked per frame, min_weight; 5: coarser tail (docs/performance.md, "Rendering")
 
 
 @dataclass(frozen=True)
@@ -51,6 +52,11 @@ class RenderSettings:
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
       transmittance left shows the background, as at the far end (0.03 measured on fox 1.3× faster than
       1e-3 for 0.03 dB less PSNR against the real photos);
+    - ``tail``: transmittances (decreasing, in (0, 1)) below which a ray's samples get coarser: at each one
+      crossed the ray takes every second lattice sample of the rest, each with the opacity of the length it
+      stands for (compiled backend). A render moves by at most the transmittance at the first one crossed
+      (what lies behind it adds at most that much); measured on the fox and the demo twins, far less
+      (docs/performance.md, "Rendering"); ``()`` takes every lattice sample;
     - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped (1e-2
       was 1.1× faster on the fox for 0.001 dB, but it depends on the grid: a smooth field upsampled 16 → 31
       lost 18 dB to its thin cells, tests/field/test_grid.py, so the default stays 1e-4);
@@ -83,6 +89,7 @@ class RenderSettings:
     shell_samples: int | None = None
     far: float = 100.0
     t_stop: float = 3e-2
+    tail: tuple[float, ...] = (0.3, 0.1)
     min_alpha: float = 1e-4
     scale: float = 1.0
     adaptive: float = 0.04
@@ -118,6 +125,12 @@ class RenderSettings:
                 and self.adaptive_stride & (self.adaptive_stride - 1) == 0):
             raise InvalidArgument(f"RenderSettings.adaptive_stride={self.adaptive_stride!r}: expected None or a "
                                   "power of two in 1..64")
+        tail = tuple(self.tail) if isinstance(self.tail, (tuple, list)) else None
+        if tail is None or not all(isinstance(v, (int, float)) and 0.0 < v < 1.0 for v in tail) \
+                or any(a <= b for a, b in itertools.pairwise(tail)):
+            raise InvalidArgument(f"RenderSettings.tail={self.tail!r}: expected a decreasing tuple of transmittances "
+                                  "in (0, 1), or () to take every lattice sample")
+        object.__setattr__(self, "tail", tuple(float(v) for v in tail))
         if self.background is not None:
             bg = as_unit_rgb(self.background)
             if bg is None:
@@ -170,6 +183,7 @@ class FieldRenderer:
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background_of(field)
         self.last_traced = 0
+        self._tail = np.asarray(s.tail, dtype=np.float64)
         if self.backend == "compiled":
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
@@ -207,8 +221,7 @@ class FieldRenderer:
             opacity = np.empty(n, dtype=np.float32)
             for start in range(0, n, self.settings.chunk_rays):
                 sl = slice(start, min(n, start + self.settings.chunk_rays))
-                uv = np.stack([index[sl] % w, index[sl] // w], -1).astype(np.float64)
-                o, d = self.field.space.normalize_rays(*camera_rays(camera, c2w, uv))
+                o, d = self._pixel_rays(index[sl], camera, c2w)
                 self._render_rays(o, d, logits, want_depth, rgb[sl], depth[sl], opacity[sl])
             return rgb, depth, opacity
 
@@ -233,6 +246,17 @@ class FieldRenderer:
             return self.settings.adaptive_stride
         return 1 << max(0, int(math.floor(math.log2(max(1.0, min(camera.width, camera.height) / 135.0)))))
 
+    def _pixel_rays(self, index: np.ndarray, camera: Camera, c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalized float32 rays ``(o, d)`` through the pixels with flat indices ``index`` (compiled; the
+        same arithmetic as ``normalize_rays(*camera_rays(...))``, tests/render/test_settings.py)."""
+        space = self.field.space
+        o = np.empty((index.size, 3), dtype=np.float32)
+        d = np.empty((index.size, 3), dtype=np.float32)
+        pixel_rays(np.ascontiguousarray(index, dtype=np.int64), camera.width, float(camera.fx), float(camera.fy),
+                   float(camera.cx), float(camera.cy), c2w, np.asarray(space.center, dtype=np.float64),
+                   float(space.radius), o, d)
+        return o, d
+
     def _bake_logits(self, c2w: np.ndarray) -> np.ndarray:
         """The compiled kernel's per-frame colour logits for a camera at ``c2w`` (``(n_rows, 3)`` float32), or an
         empty array: colour from each ray's direction."""
@@ -252,8 +276,8 @@ class FieldRenderer:
             cells, blocks = g.numpy()
             render_rays(o, d, self._density, self._values, logits, self._rows, cells, blocks, g.resolution,
                         g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
-                        f.sh_degree, s.t_stop, s.min_weight, np.asarray(self.background), want_depth, rgb, depth,
-                        opacity)
+                        f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth, rgb,
+                        depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

@@ -24,7 +24,7 @@ from .strategies import cameras, poses
 OUTPUTS = ("rgb", "depth", "opacity")
 #: One random field per SH degree for the Hypothesis test (built once).
 FIELDS = {0: random_field(sh_degree=0, occupied=0.2, seed=3), 1: random_field(sh_degree=1)}
-EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0, colour_direction="ray", min_weight=0.0)
+EXACT = RenderSettings(t_stop=0.0, tail=(), min_alpha=0.0, colour_direction="ray", min_weight=0.0)
 
 
 def render_both(field: SceneField, c2w: np.ndarray, camera: Camera = CAMERA,

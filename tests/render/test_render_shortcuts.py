@@ -7,13 +7,15 @@ import numpy as np
 import pytest
 import torch
 
+from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.march import march_dense
+from pytest_n2r.geometry import Camera
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
 
-from ..field.fields import CAMERA, camera_for, named_pose, random_field
+from ..field.fields import CAMERA, SPACE, camera_for, named_pose, pose, random_field
 from .test_agreement import rays_of
 
-EXACT = RenderSettings(t_stop=0.0, min_alpha=0.0, colour_direction="ray", min_weight=0.0, adaptive=0.0,
+EXACT = RenderSettings(t_stop=0.0, tail=(), min_alpha=0.0, colour_direction="ray", min_weight=0.0, adaptive=0.0,
                        backend="compiled")
 
 
@@ -68,3 +70,49 @@ def test_baked_colours_of_a_degree_0_field_are_exact_and_degree_1_moves_them(pos
     diff = np.abs(baked - exact)
     assert 1 < diff.max() <= 16, (f"pose {pose_name!r}: baked colours of a degree-1 field differ by up to "
                                   f"{diff.max()} levels from exact ones; expected a visible change of at most 16")
+
+
+@pytest.mark.parametrize("tail", [(0.3,), (0.3, 0.1), (0.5, 0.2, 0.05)])
+@pytest.mark.parametrize("pose_name", ["inside", "outside"])
+def test_coarser_tail_stays_within_the_transmittance_where_it_starts(pose_name, tail):
+    """Behind the first threshold crossed a ray's samples get coarser; what lies there adds at most the ray's
+    transmittance at that point to a channel (and to opacity) in either render, so that is each pixel's bound."""
+    field = random_field(resolution=16, density_scale=1.5, seed=4)
+    c2w = named_pose(pose_name)
+    outputs = ("rgb", "opacity")
+    exact = FieldRenderer(field, EXACT).render(c2w, CAMERA, outputs)
+    fast = FieldRenderer(field, EXACT.replace(tail=tail)).render(c2w, CAMERA, outputs)
+    reference = FieldRenderer(field, EXACT.replace(backend="torch"))
+    o, d = rays_of(field, c2w)
+    marched = march_dense(o, d, reference.grid)
+    with torch.no_grad():
+        weights = render_rays_torch(field, reference.grid, o, d, torch.zeros(3), False, marched)["weights"].double()
+    ray_idx, offsets = marched[0], marched[2]
+    # transmittance after each sample (1 - the ray's weight so far); the bound: the first (largest) below tail[0]
+    cumulative = torch.cumsum(weights, 0)
+    start = torch.cat([torch.zeros(1, dtype=torch.float64), cumulative])[offsets[:-1]]
+    after = 1.0 - (cumulative - start[ray_idx])
+    below = torch.where(after < tail[0], after, torch.full_like(after, -1.0))
+    bound = np.zeros(o.shape[0])
+    np.maximum.at(bound, ray_idx.numpy(), below.numpy())
+    error = np.abs(fast["rgb"].astype(np.float64) - exact["rgb"]).reshape(-1, 3).max(axis=1)
+    allowed = 255.0 * bound + 1.0  # one level of rounding on each side of the uint8 images
+    assert (error <= allowed).all(), (
+        f"tail={tail}: {int((error > allowed).sum())} pixels off by more than their bound; worst "
+        f"{error.max():.0f} levels where {allowed[error.argmax()]:.1f} were allowed")
+    opacity_error = np.abs(fast["opacity"].astype(np.float64) - exact["opacity"]).ravel()
+    assert (opacity_error <= bound + 1e-6).all(), f"tail={tail}: opacity moved by up to {opacity_error.max():.4f}"
+    assert error.max() >= 1 and bound.max() > 0.05, "no pixel changed: the bound was not put to the test"
+
+
+def test_coarser_tail_is_exact_in_a_homogeneous_field():
+    """In a field of constant density a sample standing for n lattice steps absorbs exactly what the n steps do,
+    inside the cube and in the shell, up to the lattice's end: the opacity of a ray through the whole field."""
+    flat = SceneField.empty(SPACE, 16, sh_degree=0, alpha=0.12, step_ratio=0.5)
+    camera = Camera(3, 3, 1000.0, 1000.0, 1.0, 1.0)
+    c2w = pose((0.0, 0.0, -3.0), (0.0, 0.0, 0.0))
+    exact = FieldRenderer(flat, EXACT).render(c2w, camera, ("opacity",))["opacity"]
+    fast = FieldRenderer(flat, EXACT.replace(tail=(0.5, 0.3, 0.1))).render(c2w, camera, ("opacity",))["opacity"]
+    assert exact.min() > 0.9, f"opacity {exact.min():.3f}: the ray never crossed the thresholds"
+    np.testing.assert_allclose(fast, exact, rtol=0, atol=1e-6,
+                               err_msg="a coarser tail changed the opacity of a homogeneous field")

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 
 from ..field.fields import CAMERA, named_pose, random_field
@@ -28,6 +29,9 @@ from ..field.fields import CAMERA, named_pose, random_field
     ({"chunk_rays": 1.5}, "chunk_rays"),
     ({"adaptive": -1.0}, "adaptive"),
     ({"adaptive_depth": float("nan")}, "adaptive_depth"),
+    ({"tail": (0.1, 0.3)}, "tail"),
+    ({"tail": (0.3, 1.0)}, "tail"),
+    ({"tail": 0.3}, "tail"),
     ({"shell_samples": 0}, "shell_samples"),
     ({"background": (2.0, 0.0, 0.0)}, "background"),
     ({"background": (0.0, 0.0)}, "background"),
@@ -88,3 +92,17 @@ def test_a_scaled_render_is_the_small_render_resized_and_depth_is_never_blended(
     assert set(np.unique(out["depth"]).tolist()) <= rendered, "the upsampled depth holds depths no pixel rendered"
     assert np.array_equal(out["rgb"], cv2.resize(small["rgb"], (CAMERA.width, CAMERA.height))), \
         "scaled rgb is not the small render resized bilinearly"
+
+
+def test_compiled_pixel_rays_are_the_geometry_rays_normalized():
+    """The renderer's compiled rays are ``normalize_rays(*camera_rays(...))`` to float32 rounding, for every pixel
+    of an off-centre camera at a turned pose (flat index ``y·width + x``)."""
+    field = random_field(resolution=8, seed=1)
+    camera = Camera(37, 23, 41.0, 29.0, 17.3, 12.9)
+    c2w = named_pose("outside")
+    index = np.arange(camera.width * camera.height)
+    uv = np.stack([index % camera.width, index // camera.width], -1).astype(np.float64)
+    want_o, want_d = field.space.normalize_rays(*camera_rays(camera, c2w, uv))
+    got_o, got_d = FieldRenderer(field, RenderSettings(backend="compiled"))._pixel_rays(index, camera, c2w)
+    np.testing.assert_array_equal(got_o, want_o, err_msg="compiled ray origins differ from the geometry's")
+    np.testing.assert_allclose(got_d, want_d, rtol=2 ** -23, atol=0, err_msg="compiled ray directions differ")
