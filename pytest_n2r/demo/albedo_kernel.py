@@ -17,52 +17,69 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
-__all__ = ["albedo", "bilinear", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL", "F0", "F1"]
+__all__ = ["albedo", "bilinear", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL", "F0", "F1", "META_COLUMNS"]
 
 # material kinds (node_kind)
 FLAT, TEXTURED, POSTER, BLEND, RADIAL = 0, 1, 2, 3, 4
 F0, F1 = np.float32(0.0), np.float32(1.0)
 
 
-@njit(cache=True, error_model="numpy")
-def _reflect(p, n):
-    """OpenCV's ``borderInterpolate`` for ``BORDER_REFLECT`` (``fedcba|abcdefgh|hgfedcb``)."""
-    if n == 1:
-        return 0
-    while p < 0 or p >= n:
-        p = -p - 1 if p < 0 else n - 1 - (p - n)
-    return p
+#: Columns of a texture level's row in ``tex_meta`` (see :meth:`.raycast._Builder.texture_tables`): texel offset,
+#: height, width, ``2**-level``, the mirror periods ``2 w``, ``2 h`` and their inverses, the wrap (0 mirror,
+#: 1 clamp) and the texture's level count (the last two alike in every level's row).
+OFFSET, HEIGHT, WIDTH, SCALE, PERIOD_S, PERIOD_T, INV_PERIOD_S, INV_PERIOD_T, CLAMP, LEVELS = range(10)
+META_COLUMNS = 10
 
 
-@njit(cache=True, error_model="numpy")
-def _mirror_period(x, period):
-    """``x mod period`` in ``[0, period]`` like ``np.mod`` (whose float ``fmod`` is several times slower)."""
-    r = x - period * math.floor(x / period)
+@njit(cache=True, inline="always", error_model="numpy")
+def _mirror_period(x, period, inverse):
+    """``x mod period`` in ``[0, period]``, the value ``np.mod`` gives (or ``period`` for its 0, which the mirror
+    maps to the same texels). ``floor(x * inverse)`` may be one off ``floor(x / period)`` (a division is slow):
+    ``x - period * n`` is exact for either (``period * n`` is an integer and ``|x| < 2**52``) and the correction
+    brings it into range exactly."""
+    r = x - period * math.floor(x * inverse)
     return r + period if r < 0 else (r - period if r > period else r)
 
 
-@njit(cache=True, error_model="numpy")
-def _fma32(a, b, c):
-    """``a * b + c`` rounded once to float32, as the fused multiply-add of OpenCV's vector code (the float32
-    product is exact in float64)."""
-    return np.float32(np.float64(a) * np.float64(b) + np.float64(c))
+@njit(cache=True, inline="always", error_model="numpy")
+def _reflect(p, n):
+    """OpenCV's ``borderInterpolate`` for ``BORDER_REFLECT`` (``fedcba|abcdefgh|hgfedcb``) of a texel index in
+    ``[-1, 2 n + 1]`` (all a lookup after :func:`_mirror_period` asks), branch-free."""
+    p = p if p < n else 2 * n - 1 - p
+    p = p if p >= 0 else -p - 1
+    return p if n > 1 else 0
+
+
+@intrinsic
+def _fma32(typingctx, a, b, c):
+    """``a * b + c`` of float32s rounded once to float32 (LLVM's ``fma``: one instruction), as the fused
+    multiply-add of OpenCV's vector code."""
+    def codegen(context, builder, signature, args):
+        single = ir.FloatType()
+        fma = builder.module.declare_intrinsic("llvm.fma", [single], ir.FunctionType(single, [single] * 3))
+        return builder.call(fma, args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def bilinear(tex_meta, texels, tex, level, s, t):
     """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
-    level-0 texel coordinates."""
-    offset, h, w = tex_meta[tex, level, 0], tex_meta[tex, level, 1], tex_meta[tex, level, 2]
-    scale = 1.0 / (1 << level)
+    level-0 texel coordinates; the level's constants come from its row of ``tex_meta`` (no division)."""
+    h, w = int(tex_meta[tex, level, HEIGHT]), int(tex_meta[tex, level, WIDTH])
+    scale = tex_meta[tex, level, SCALE]
     s = (s + 0.5) * scale - 0.5
     t = (t + 0.5) * scale - 0.5
-    clamp = tex_meta[tex, 0, 3] == 1
+    clamp = tex_meta[tex, level, CLAMP] == 1.0
     if clamp:
-        s, t = min(max(s, -1.0), float(w)), min(max(t, -1.0), float(h))
+        s, t = min(max(s, -1.0), tex_meta[tex, level, WIDTH]), min(max(t, -1.0), tex_meta[tex, level, HEIGHT])
     else:
-        s, t = _mirror_period(s, 2.0 * w), _mirror_period(t, 2.0 * h)
+        s = _mirror_period(s, tex_meta[tex, level, PERIOD_S], tex_meta[tex, level, INV_PERIOD_S])
+        t = _mirror_period(t, tex_meta[tex, level, PERIOD_T], tex_meta[tex, level, INV_PERIOD_T])
     s32, t32 = np.float32(s), np.float32(t)
     x0 = int(np.float64(s32) + 1.0) - 1  # floor: both are >= -1 here, and +1 is exact in float64
     y0 = int(np.float64(t32) + 1.0) - 1
@@ -73,6 +90,7 @@ def bilinear(tex_meta, texels, tex, level, s, t):
         y0, y1 = min(max(y0, 0), h - 1), min(max(y1, 0), h - 1)
     else:
         x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
+    offset = int(tex_meta[tex, level, OFFSET])
     r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
     r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
     return (_lerp2(texels[r00], texels[r01], texels[r10], texels[r11], alpha, beta),
@@ -91,9 +109,11 @@ def _lerp2(p00, p01, p10, p11, alpha, beta):
 @njit(cache=True, error_model="numpy")
 def _sample(tex_meta, texels, tex, s, t, footprint):
     """Trilinear mip-mapped colour at texel coordinates ``(s, t)`` (see :meth:`Texture.sample`)."""
-    n_levels = tex_meta[tex, 1, 3]
-    lod = min(math.log2(max(footprint, 1.0)), n_levels - 1)
-    lo = math.floor(lod)
+    if not footprint > 1.0:  # level 0 alone (log2 of max(footprint, 1) is 0)
+        return bilinear(tex_meta, texels, tex, 0, s, t)
+    n_levels = int(tex_meta[tex, 0, LEVELS])
+    lod = min(math.log2(footprint), n_levels - 1)
+    lo = int(math.floor(lod))
     r, g, b = bilinear(tex_meta, texels, tex, lo, s, t)
     f = np.float32(lod - lo)
     if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
@@ -117,7 +137,7 @@ def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, 
             a0, b0, a1, b1 = node_par[node, 1], node_par[node, 2], node_par[node, 3], node_par[node, 4]
             if a >= a0 and a <= a1 and b >= b0 and b <= b1:
                 tex = int(node_par[node, 0])
-                h, w = tex_meta[tex, 0, 1], tex_meta[tex, 0, 2]
+                h, w = tex_meta[tex, 0, HEIGHT], tex_meta[tex, 0, WIDTH]
                 k = w / (a1 - a0)
                 return _sample(tex_meta, texels, tex, (a - a0) * k - 0.5, (b - b0) * (h / (b1 - b0)) - 0.5, fp * k)
             node = node_child[node, 0]
