@@ -21,7 +21,8 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-__all__ = ["albedo", "bilinear", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL", "F0", "F1", "META_COLUMNS"]
+__all__ = ["albedo_of", "bilinear", "look_up", "plan_albedo", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL", "F0",
+           "F1", "META_COLUMNS"]
 
 # material kinds (node_kind)
 FLAT, TEXTURED, POSTER, BLEND, RADIAL = 0, 1, 2, 3, 4
@@ -67,9 +68,10 @@ def _fma32(typingctx, a, b, c):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def bilinear(tex_meta, texels, tex, level, s, t):
-    """Bilinear lookup like ``cv2.remap`` (float32 maps, ``p00 + a (p01 - p00)`` by fused multiply-adds) at
-    level-0 texel coordinates; the level's constants come from its row of ``tex_meta`` (no division)."""
+def bilinear_taps(tex_meta, tex, level, s, t):
+    """Where a bilinear lookup like ``cv2.remap`` at level-0 texel coordinates ``(s, t)`` reads: the offsets
+    of its four texels ``p00, p01, p10, p11`` in the texel array and its float32 weights ``alpha, beta``; the
+    level's constants come from its row of ``tex_meta`` (no division)."""
     h, w = int(tex_meta[tex, level, HEIGHT]), int(tex_meta[tex, level, WIDTH])
     scale = tex_meta[tex, level, SCALE]
     s = (s + 0.5) * scale - 0.5
@@ -91,11 +93,24 @@ def bilinear(tex_meta, texels, tex, level, s, t):
     else:
         x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
     offset = int(tex_meta[tex, level, OFFSET])
-    r00, r01 = offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3
-    r10, r11 = offset + (y1 * w + x0) * 3, offset + (y1 * w + x1) * 3
+    return (offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3, offset + (y1 * w + x0) * 3,
+            offset + (y1 * w + x1) * 3, alpha, beta)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def blend_taps(texels, r00, r01, r10, r11, alpha, beta):
+    """The RGB of a bilinear lookup from its taps (:func:`bilinear_taps`): ``p00 + a (p01 - p00)`` by fused
+    multiply-adds, as OpenCV's vector code."""
     return (_lerp2(texels[r00], texels[r01], texels[r10], texels[r11], alpha, beta),
             _lerp2(texels[r00 + 1], texels[r01 + 1], texels[r10 + 1], texels[r11 + 1], alpha, beta),
             _lerp2(texels[r00 + 2], texels[r01 + 2], texels[r10 + 2], texels[r11 + 2], alpha, beta))
+
+
+@njit(cache=True, error_model="numpy")
+def bilinear(tex_meta, texels, tex, level, s, t):
+    """Bilinear lookup like ``cv2.remap`` (float32 maps, fused multiply-adds) at level-0 texel coordinates."""
+    r00, r01, r10, r11, alpha, beta = bilinear_taps(tex_meta, tex, level, s, t)
+    return blend_taps(texels, r00, r01, r10, r11, alpha, beta)
 
 
 @njit(cache=True, error_model="numpy")
@@ -106,58 +121,74 @@ def _lerp2(p00, p01, p10, p11, alpha, beta):
     return _fma32(beta, v1 - v0, v0)
 
 
-@njit(cache=True, error_model="numpy")
-def _sample(tex_meta, texels, tex, s, t, footprint):
-    """Trilinear mip-mapped colour at texel coordinates ``(s, t)`` (see :meth:`Texture.sample`)."""
-    if not footprint > 1.0:  # level 0 alone (log2 of max(footprint, 1) is 0)
-        return bilinear(tex_meta, texels, tex, 0, s, t)
-    n_levels = int(tex_meta[tex, 0, LEVELS])
-    lod = min(math.log2(footprint), n_levels - 1)
-    lo = int(math.floor(lod))
-    r, g, b = bilinear(tex_meta, texels, tex, lo, s, t)
-    f = np.float32(lod - lo)
-    if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
-        r2, g2, b2 = bilinear(tex_meta, texels, tex, lo + 1, s, t)
-        r, g, b = r * (F1 - f) + r2 * f, g * (F1 - f) + g2 * f, b * (F1 - f) + b2 * f
-    return r, g, b
+@njit(cache=True, inline="always", error_model="numpy")
+def _tap(tex_meta, tex, level, s, t, slot, taps, weights, count):
+    """Append the lookup of ``(s, t)`` in ``level`` to the batch (``taps`` rows: the four texel offsets and the
+    result slot; ``weights``: alpha, beta) at ``count``; the new count."""
+    taps[0, count], taps[1, count], taps[2, count], taps[3, count], weights[0, count], weights[1, count] = \
+        bilinear_taps(tex_meta, tex, level, s, t)
+    taps[4, count] = slot
+    return count + 1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _leaf(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp):
-    """Albedo of a material without a blend (Flat, Textured, Poster, Radial), float32 RGB."""
-    while True:
+def _plan_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours, taps, weights,
+               count):
+    """Plan the albedo of a material without a blend (Flat, Textured, Poster, Radial) at ``(a, b)``: a constant
+    colour goes to ``colours[slot]``; a texture's trilinear mip-mapped sample (see :meth:`Texture.sample`)
+    appends its one or two bilinear lookups (levels ``lo`` and ``lo + 1``, results to ``slot`` and
+    ``slot + 1``). Returns the new lookup count and the weight of level ``lo + 1`` (0: one lookup)."""
+    tex = -1
+    s = t = k = 0.0
+    while tex < 0:
         kind = node_kind[node]
         if kind == FLAT:
-            return np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2])
+            colours[slot, 0], colours[slot, 1], colours[slot, 2] = (
+                np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2]))
+            return count, F0
         if kind == TEXTURED:
             k = node_par[node, 1]
-            return _sample(tex_meta, texels, int(node_par[node, 0]), (a - node_par[node, 2]) * k,
-                           (b - node_par[node, 3]) * k, fp * k)
-        if kind == POSTER:
+            tex, s, t = int(node_par[node, 0]), (a - node_par[node, 2]) * k, (b - node_par[node, 3]) * k
+        elif kind == POSTER:
             a0, b0, a1, b1 = node_par[node, 1], node_par[node, 2], node_par[node, 3], node_par[node, 4]
             if a >= a0 and a <= a1 and b >= b0 and b <= b1:
                 tex = int(node_par[node, 0])
-                h, w = tex_meta[tex, 0, HEIGHT], tex_meta[tex, 0, WIDTH]
-                k = w / (a1 - a0)
-                return _sample(tex_meta, texels, tex, (a - a0) * k - 0.5, (b - b0) * (h / (b1 - b0)) - 0.5, fp * k)
+                k = tex_meta[tex, 0, WIDTH] / (a1 - a0)
+                s, t = (a - a0) * k - 0.5, (b - b0) * (tex_meta[tex, 0, HEIGHT] / (b1 - b0)) - 0.5
+            else:
+                node = node_child[node, 0]
+        else:  # radial: the smallest ring that holds the point, else the outer material
+            r = math.hypot(a, b)
+            ring = -1
+            for i in range(int(node_par[node, 0]), int(node_par[node, 0]) + int(node_par[node, 1])):
+                if r <= rings[i, 0]:
+                    ring = i
+            if ring >= 0:
+                colours[slot, 0], colours[slot, 1], colours[slot, 2] = (
+                    np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3]))
+                return count, F0
             node = node_child[node, 0]
-            continue
-        # radial: the smallest ring that holds the point, else the outer material
-        r = math.hypot(a, b)
-        ring = -1
-        for i in range(int(node_par[node, 0]), int(node_par[node, 0]) + int(node_par[node, 1])):
-            if r <= rings[i, 0]:
-                ring = i
-        if ring >= 0:
-            return np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3])
-        node = node_child[node, 0]
+    footprint = fp * k
+    if not footprint > 1.0:  # level 0 alone (log2 of max(footprint, 1) is 0)
+        return _tap(tex_meta, tex, 0, s, t, slot, taps, weights, count), F0
+    n_levels = int(tex_meta[tex, 0, LEVELS])
+    lod = min(math.log2(footprint), n_levels - 1)
+    lo = int(math.floor(lod))
+    f = np.float32(lod - lo)
+    count = _tap(tex_meta, tex, lo, s, t, slot, taps, weights, count)
+    if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
+        return _tap(tex_meta, tex, lo + 1, s, t, slot + 1, taps, weights, count), f
+    return count, F0
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def albedo(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp, mask):
-    """Albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units), float32 RGB: a blend's
-    two materials mixed by its ``mask`` value there (only the one it shows where the mask is 0 or 1), else the
-    material's own."""
+def plan_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, mask, slot, colours, taps,
+                weights, count, mix):
+    """Plan the albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units) into the four
+    colour slots from ``slot`` (two per material, see :func:`_plan_leaf`): a blend's two materials where its
+    ``mask`` value is strictly between 0 and 1 (only the one it shows where it is 0 or 1), else the material's
+    own. ``mix[0:3, i]`` (``i = slot // 4``) get the mask value (NaN: no second material) and each material's
+    level weight; returns the new lookup count. :func:`albedo_of` turns the looked-up slots into the colour."""
     m = F0
     bottom, top = node, -1
     if node_kind[node] == BLEND:
@@ -167,14 +198,45 @@ def albedo(node, node_kind, node_par, node_child, rings, tex_meta, texels, a, b,
             bottom, top, m = top, -1, F0
         elif m == F0:  # exactly the bottom colour
             top = -1
-    r, g, b_ = F0, F0, F0
-    for leaf in (bottom, top):  # one call site: the leaf's code is inlined once
-        if leaf < 0:
-            break
-        lr, lg, lb = _leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, texels, a, b, fp)
-        if leaf == bottom:
-            r, g, b_ = lr, lg, lb
-        else:
-            keep = F1 - m
-            r, g, b_ = r * keep + lr * m, g * keep + lg * m, b_ * keep + lb * m
-    return r, g, b_
+    i = slot // 4
+    count, mix[1, i] = _plan_leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours,
+                                  taps, weights, count)
+    mix[0, i] = np.float32(math.nan)
+    if top >= 0:
+        mix[0, i] = m
+        count, mix[2, i] = _plan_leaf(top, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot + 2,
+                                      colours, taps, weights, count)
+    return count
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def look_up(texels, taps, weights, count, colours):
+    """Every planned bilinear lookup, into its colour slot: one tight loop whose texel reads (cache misses
+    on large textures) overlap."""
+    for q in range(count):
+        slot = taps[4, q]
+        colours[slot, 0], colours[slot, 1], colours[slot, 2] = blend_taps(
+            texels, taps[0, q], taps[1, q], taps[2, q], taps[3, q], weights[0, q], weights[1, q])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _leaf_colour(colours, slot, f):
+    """A material's colour from its slots: level ``lo``'s lookup, blended with level ``lo + 1``'s by ``f``."""
+    r, g, b = colours[slot, 0], colours[slot, 1], colours[slot, 2]
+    if f != F0:
+        r2, g2, b2 = colours[slot + 1, 0], colours[slot + 1, 1], colours[slot + 1, 2]
+        r, g, b = r * (F1 - f) + r2 * f, g * (F1 - f) + g2 * f, b * (F1 - f) + b2 * f
+    return r, g, b
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def albedo_of(colours, mix, i):
+    """Float32 RGB albedo of sub-ray ``i`` planned by :func:`plan_albedo` once its lookups are done
+    (:func:`look_up`): a blend's ``bottom * (1 - m) + top * m``, else the one material's colour."""
+    r, g, b = _leaf_colour(colours, 4 * i, mix[1, i])
+    m = mix[0, i]
+    if not math.isnan(m):
+        rt, gt, bt = _leaf_colour(colours, 4 * i + 2, mix[2, i])
+        keep = F1 - m
+        r, g, b = r * keep + rt * m, g * keep + gt * m, b * keep + bt * m
+    return r, g, b

@@ -51,7 +51,7 @@ from numba.extending import intrinsic
 from numba.np.arrayobj import populate_array
 
 from ..errors import InvalidArgument
-from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo
+from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, look_up, plan_albedo
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
@@ -129,7 +129,9 @@ class CompiledScene:
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
         scratch = [(np.empty((3, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
-                    np.empty((2, samples), dtype=np.int64), np.empty(_LANES)) for _ in range(threads)]
+                    np.empty((2, samples), dtype=np.int64), np.empty(_LANES), np.empty((4 * samples, 3), np.float32),
+                    np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
+                    np.empty((3, samples), np.float32)) for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
             if threads <= 1:
@@ -718,9 +720,9 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c2w, camera, n, rects, groups, group_box,
-                   kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings, masks, tex_meta, texels,
-                   shading, background, rgb, depth, opacity):
+def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, colours, taps, weights, mix, c2w, camera,
+                   n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings,
+                   masks, tex_meta, texels, shading, background, rgb, depth, opacity):
     """Rows ``first, first + step, ...`` of the image. Per pixel row: the ``n`` sub-rows of supersampling rays
     are cast first (a relief's root searched from a guess of the roots beside and above), then the depth rays
     through the pixel centres (from the mean of the pixel's sub-ray roots), then each pixel is shaded."""
@@ -745,6 +747,8 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
                                _borrowed(shade[4]))
     nodes = _borrowed(shade_int[0])
     lanes = _borrowed(lanes)
+    # each sub-ray's four colour slots, the batch of texture lookups and the blend weights (see plan_albedo)
+    colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
     for v in range(first, height, step):
         for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
             centre = row == n
@@ -774,6 +778,12 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
         if want_colour:
             _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, kinds, prims, waves, lanes,
                             prim_mat, node_kind, node_par, masks, shade, shade_int)
+            count = 0
+            for i in range(n * sub):
+                if nodes[i] >= 0:
+                    count = plan_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
+                                        sfp[i], sm[i], 4 * i, colours, taps, weights, count, mix)
+            look_up(texels, taps, weights, count, colours)
         for u in range(width):
             hits = 0
             acc_r, acc_g, acc_b = F0, F0, F0
@@ -787,8 +797,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
                         if not want_colour:
                             continue
                         i = sv * sub + j
-                        cr, cg, cb = albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, texels,
-                                             sa[i], sb[i], sfp[i], sm[i])
+                        cr, cg, cb = albedo_of(colours, mix, i)
                         light = np.float32(slight[i])
                         cr, cg, cb = cr * light, cg * light, cb * light
                     acc_r += cr
