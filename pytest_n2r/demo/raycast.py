@@ -128,7 +128,7 @@ class CompiledScene:
         threads = min(numba.get_num_threads(), height)
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
-        scratch = [(np.empty((3, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
+        scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
                     np.empty((2, samples), dtype=np.int64), np.empty(_LANES), np.empty((4 * samples, 3), np.float32),
                     np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
                     np.empty((3, samples), np.float32)) for _ in range(threads)]
@@ -563,15 +563,12 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
     0 on a miss; the gradient as :func:`_relief_hit` gives it). ``u, v``: the ray's pixel coordinates; groups
     and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
     best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
-    ix = iy = iz = math.nan
-    inverse = False  # 1 / d only for the rays that meet a box (three divisions: a tenth of a frame when eager)
+    ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
     n_groups = groups.shape[0]
     for g in range(n_groups):
         if u < rects[g, 0] or u > rects[g, 1] or v < rects[g, 2] or v > rects[g, 3]:
             continue
         if groups[g, 2]:
-            if not inverse:
-                ix, iy, iz, inverse = 1.0 / dx, 1.0 / dy, 1.0 / dz, True
             t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
                                   group_box[g, 3], group_box[g, 4], group_box[g, 5])
             if not (t_near <= t_far and t_far > T_MIN):
@@ -580,8 +577,6 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
             r = n_groups + k
             if u < rects[r, 0] or u > rects[r, 1] or v < rects[r, 2] or v > rects[r, 3]:
                 continue
-            if kinds[k] == _BOX and not inverse:
-                ix, iy, iz, inverse = 1.0 / dx, 1.0 / dy, 1.0 / dz, True
             t, gx, gz, have = _hit(kinds[k], prims, k, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
                 best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
@@ -671,13 +666,13 @@ def _centre_guess(ts, ks, kinds, n, u, have_rows):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, kinds, prims, waves, lanes, prim_mat,
-                    node_kind, node_par, masks, shade, shade_int):
+def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves, lanes,
+                    prim_mat, node_kind, node_par, masks, shade, shade_int):
     """For each sub-ray ``i = row * n * width + j`` of pixel row ``v`` that hit: surface coordinates ``a, b``,
     footprint, light factor and material node (``shade[0:4, i]``, ``shade_int[0, i]``; node -1 on a miss), then
     every blend mask over all the sub-rays it covers in one call (``shade[4, i]``; a compiled mask is a
     vectorized loop over a batch, see :mod:`.mask_kernel`)."""
-    fx, fy, cx, cy = camera[0], camera[1], camera[2], camera[3]
+    fx, fy, cy = camera[0], camera[1], camera[3]
     ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
     lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
     scale_fp = 0.5 * (fx + fy) * n
@@ -693,8 +688,7 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, 
             if not math.isfinite(t):
                 nodes[i] = -1
                 continue
-            u = j // n
-            xc = (u + ((j - u * n + 0.5) / n - 0.5) - cx) / fx
+            xc = xcs[0, j]
             dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
             dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
             dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
@@ -741,6 +735,16 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
     # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
     # and the primitive hit, whether the gradient is the hit's (in the caller's buffers: see _borrowed)
     ts, gxs, gzs = _borrowed(scratch[0]), _borrowed(scratch[1]), _borrowed(scratch[2])
+    # each ray's pixel column and camera-frame x (row 0: the sub-rays, row n: the pixel centres), alike in every
+    # pixel row: taken once, not per ray (a division and an integer division)
+    uss, xcs = _borrowed(scratch[3]), _borrowed(scratch[4])
+    for j in range(sub):
+        u = j // n
+        uss[0, j] = u + ((j - u * n + 0.5) / n - 0.5)
+        xcs[0, j] = (uss[0, j] - cx) / fx
+    for j in range(width):
+        uss[n, j] = float(j)
+        xcs[n, j] = (uss[n, j] - cx) / fx
     ks, haves = _borrowed(scratch_int[0]), _borrowed(scratch_int[1])
     # each sub-ray's surface coordinates, footprint, light, material and mask value (see _shading_inputs)
     sa, sb, sfp, slight, sm = (_borrowed(shade[0]), _borrowed(shade[1]), _borrowed(shade[2]), _borrowed(shade[3]),
@@ -754,17 +758,15 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
             centre = row == n
             vs = float(v) if centre else v + ((row + 0.5) / n - 0.5)
             yc = (vs - cy) / fy
+            table = n if centre else 0
             for j in range(width if centre else sub):
                 if centre:
-                    us = float(j)
                     guess = _centre_guess(ts, ks, kinds, n, j, want_hits)
                     if math.isnan(guess):
                         guess = _predict(ts, ks, kinds, n, j, False)
                 else:
-                    u = j // n
-                    us = u + ((j - u * n + 0.5) / n - 0.5)
                     guess = _predict(ts, ks, kinds, row, j, row > 0)
-                xc = (us - cx) / fx
+                us, xc = uss[table, j], xcs[table, j]
                 dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
                 dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
                 dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
@@ -776,8 +778,8 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
         if not want_hits:
             continue
         if want_colour:
-            _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, c2w, camera, shading, kinds, prims, waves, lanes,
-                            prim_mat, node_kind, node_par, masks, shade, shade_int)
+            _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves,
+                            lanes, prim_mat, node_kind, node_par, masks, shade, shade_int)
             count = 0
             for i in range(n * sub):
                 if nodes[i] >= 0:
