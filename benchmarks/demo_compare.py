@@ -8,9 +8,12 @@ seconds-long run on tiny input). Each revision's ``pytest_n2r`` is exported with
 opacity) in its own process, the revisions taking turns ``R`` times, so a change in the machine's load hits every
 revision alike. Per process and scene: CPU ms per frame, the least thread CPU time of 3 renders on one numba
 thread (what an idle core takes, whatever the load), and frames/s, 1 / the best wall time of 3 renders on all
-numba threads, each after a warm-up. The table gives the median over rounds, the ratio to the first
-revision, and how far its images are from the first revision's (RGB pixels that differ and by how many grey
-levels at most, the largest relative z-depth difference, opacity pixels that differ).
+numba threads, each after a warm-up. Each revision has its own numba cache folder, empty in the first round: that
+round's first render of each scene (process CPU seconds) is the cold compile a fresh clone pays; later rounds'
+first renders load the kernels from the cache (and compile the blend masks, which are not cached). The table
+gives the median over rounds, the ratio to the first revision, and how far its images are from the first
+revision's (RGB pixels that differ and by how many grey levels at most, the largest relative z-depth difference,
+opacity pixels that differ).
 """
 
 from __future__ import annotations
@@ -36,7 +39,9 @@ result = {}
 for name in ("wall", "object"):
     scene = ground_truth(name)
     c2w, camera = scene.views[view].c2w, scene.views[view].camera.resized(w, h)
+    c0 = time.process_time()
     frame = scene.render(c2w, camera, outputs)
+    first = time.process_time() - c0
     np.savez(f"{out}/{name}.npz", rgb=frame.rgb, depth=frame.depth, opacity=frame.opacity)
     all_threads = numba.get_num_threads()
     numba.set_num_threads(1)  # the render then runs in this thread: its thread time is the frame's CPU time
@@ -52,7 +57,7 @@ for name in ("wall", "object"):
         t0 = time.perf_counter()
         scene.render(c2w, camera, outputs)
         wall.append(time.perf_counter() - t0)
-    result[name] = {"cpu_ms": 1e3 * min(cpu), "fps": 1.0 / min(wall)}
+    result[name] = {"cpu_ms": 1e3 * min(cpu), "fps": 1.0 / min(wall), "first_s": first}
 import pytest_n2r
 result["package"] = pytest_n2r.__file__
 print(json.dumps(result))
@@ -61,10 +66,11 @@ print(json.dumps(result))
 SCENES = ("wall", "object")
 
 
-def measure(folder: Path, size: str, view: int, repeats: int, out: Path) -> dict:
-    """One round of one revision (see :data:`CHILD`), its images saved under ``out``."""
+def measure(folder: Path, size: str, view: int, repeats: int, out: Path, cache: Path) -> dict:
+    """One round of one revision (see :data:`CHILD`) with its numba cache in ``cache``, its images saved under
+    ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    return run_in_export(folder, CHILD, [size, str(view), str(repeats), str(out)], {})
+    return run_in_export(folder, CHILD, [size, str(view), str(repeats), str(out)], {"NUMBA_CACHE_DIR": str(cache)})
 
 
 def difference(images: Path, base: Path) -> str:
@@ -92,13 +98,15 @@ def main(argv: list[str] | None = None) -> int:
         runs: dict[str, list[dict]] = {rev: [] for rev in args.revisions}
         for r in range(rounds):
             for rev, folder in folders.items():
-                runs[rev].append(measure(folder, size, args.view, repeats, Path(tmp) / "images" / f"{rev}-{r}"))
+                runs[rev].append(measure(folder, size, args.view, repeats, Path(tmp) / "images" / f"{rev}-{r}",
+                                         Path(tmp) / "numba" / rev))
         load = os.getloadavg()
         print(f"view {args.view} at {size}, RGB + depth + opacity, {rounds} rounds; load average at the end "
               f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)\n")
         print("| scene | revision | CPU ms per frame, 1 thread | ratio | frames/s, all threads | ratio | "
-              "RGB differing from the first | z-depth rel. | opacity |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              "RGB differing from the first | z-depth rel. | opacity | first render, empty numba cache (CPU s) | "
+              "first render, later rounds |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         first = args.revisions[0]
         for name in SCENES:
             base = None
@@ -108,8 +116,10 @@ def main(argv: list[str] | None = None) -> int:
                 base = base or (cpu, fps)
                 images = Path(tmp) / "images"
                 diff = difference(images / f"{rev}-0" / f"{name}.npz", images / f"{first}-0" / f"{name}.npz")
+                warm = [run[name]["first_s"] for run in runs[rev][1:]]
+                later = f"{statistics.median(warm):.1f}" if warm else "(one round)"
                 print(f"| {name} | {rev} ({folder.name[:10]}) | {cpu:.1f} | {cpu / base[0]:.2f} | {fps:.1f} | "
-                      f"{fps / base[1]:.2f} | {diff} |")
+                      f"{fps / base[1]:.2f} | {diff} | {runs[rev][0][name]['first_s']:.1f} | {later} |")
     return 0
 
 
