@@ -45,7 +45,8 @@ from typing import Any
 
 import numba
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
 from numba.np.arrayobj import populate_array
@@ -373,6 +374,19 @@ def _borrowed(typingctx, array):
 
 
 
+@intrinsic
+def _opaque(typingctx, x):
+    """``x`` itself, through an empty asm statement that LLVM may not move: a division of it stays in the branch that
+    needs it. (LLVM hoists a division out of a loop when its inputs are invariant, even out of a branch: the
+    three of ``1 / d`` went to every ray, a tenth of an object frame, though only rays that meet a box use them.)"""
+    def codegen(context, builder, signature, args):
+        double = ir.DoubleType()
+        barrier = ir.InlineAsm(ir.FunctionType(double, [double]), "", "=x,0", side_effect=True)
+        return builder.call(barrier, args)
+
+    return types.float64(types.float64), codegen
+
+
 @njit(cache=True, error_model="numpy")
 def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
     """Entry and exit ``t`` of a ray (inverse direction ``1 / d``) through a box, NaN-safe like ``np.fmin`` /
@@ -563,11 +577,14 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
     0 on a miss; the gradient as :func:`_relief_hit` gives it). ``u, v``: the ray's pixel coordinates; groups
     and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
     best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
-    ix, iy, iz = 1.0 / dx, 1.0 / dy, 1.0 / dz
+    ix = iy = iz = math.nan
+    inverse = False  # 1 / d only for rays that meet a box (see _opaque)
     n_groups = groups.shape[0]
     for g in range(n_groups):
         if u < rects[g, 0] or u > rects[g, 1] or v < rects[g, 2] or v > rects[g, 3]:
             continue
+        if groups[g, 2] and not inverse:
+            ix, iy, iz, inverse = 1.0 / _opaque(dx), 1.0 / _opaque(dy), 1.0 / _opaque(dz), True
         if groups[g, 2]:
             t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
                                   group_box[g, 3], group_box[g, 4], group_box[g, 5])
@@ -577,6 +594,8 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
             r = n_groups + k
             if u < rects[r, 0] or u > rects[r, 1] or v < rects[r, 2] or v > rects[r, 3]:
                 continue
+            if kinds[k] == _BOX and not inverse:
+                ix, iy, iz, inverse = 1.0 / _opaque(dx), 1.0 / _opaque(dy), 1.0 / _opaque(dz), True
             t, gx, gz, have = _hit(kinds[k], prims, k, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
             if t < best:
                 best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
@@ -696,7 +715,15 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
             nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, lanes, x, y, z, gxs[sv, j], gzs[sv, j],
                                               haves[sv, j])
             norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-            cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
+            # n . (d / |d|); along an axis (grounds, boxes) the other two terms are zeros, which add nothing
+            if nx == 0.0 and ny == 0.0:
+                cos = abs(nz * (_opaque(dz) / norm))
+            elif ny == 0.0 and nz == 0.0:
+                cos = abs(nx * (_opaque(dx) / norm))
+            elif nx == 0.0 and nz == 0.0:
+                cos = abs(ny * (_opaque(dy) / norm))
+            else:
+                cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
             sa[i], sb[i], sfp[i] = a, b, t / scale_fp / max(cos, 0.2)
             slight[i] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
             nodes[i] = prim_mat[k, face]
