@@ -126,6 +126,24 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         metafunc.parametrize("n2r_scene", [None], ids=["no-scene"], indirect=True, scope="session")
 
 
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Tell the n2r session which scenes the collected tests use, in order: on its first render it starts a
+    helper compiling the kernels of the renderers it reaches later (:mod:`pytest_n2r.plugin.precompile`)."""
+    planned: list[Any] = []
+    for item in session.items:
+        spec = getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")
+        if spec is not None and spec not in planned:
+            planned.append(spec)
+    if planned:  # else an unused plugin stays unbuilt
+        _session(session.config).planned = planned
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    session = config.stash.get(_SESSION, None)
+    if session is not None:
+        session.close()
+
+
 @pytest.fixture(scope="session")
 def n2r_scene(request: pytest.FixtureRequest) -> Any:
     """The scene under test (a :class:`pytest_n2r.Scene`), loaded once per session; tests that use it

@@ -17,7 +17,7 @@ import re
 import shutil
 import tempfile
 from collections import OrderedDict
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +29,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
+from .first_render import first_render
 from .keep_threads import threads_kept
 
 __all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
@@ -91,7 +92,9 @@ class RenderCache:
 
     ``directory=None`` keeps the cache in memory only. ``memory_bytes`` and ``disk_bytes`` cap the two
     levels; the disk level evicts the least recently used renders (by modification time, which a hit
-    refreshes) down to 80 % of its cap.
+    refreshes) down to 80 % of its cap. A process's first render of each renderer kind holds a lock file in
+    ``directory`` (:mod:`~pytest_n2r.scene.first_render`): processes sharing the directory compile a kernel
+    once.
     """
 
     def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,
@@ -103,6 +106,8 @@ class RenderCache:
         self._memory: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
         self._memory_used = 0
         self._written_since_trim = 0
+        #: Called with the scene just before this cache's first render (a session starts its kernel helper).
+        self.on_first_render: Callable[[Scene], None] | None = None
 
     def __repr__(self) -> str:
         where = str(self.directory) if self.directory else "memory only"
@@ -136,8 +141,11 @@ class RenderCache:
                 arrays[name] = value
         missing = tuple(o for o in outputs if o not in arrays)
         if missing:
+            if self.stats.renders == 0 and self.on_first_render is not None:
+                self.on_first_render(scene)
             self.stats.renders += 1
-            with threads_kept():  # the SUT runs next, with the thread count it chose
+            # threads_kept: the SUT runs next, with the thread count it chose
+            with first_render(self.directory, scene), threads_kept():
                 view = scene.render(c2w, camera, missing)
             for name in missing:
                 value = getattr(view, name)

@@ -1,0 +1,129 @@
+"""Compile the kernels of a session's other renderers in a helper process while the session renders.
+
+In a fresh checkout (numba's cache empty) each renderer compiles its kernels on its first render: on the
+example project 15 s for the demo ray caster, then 12 s for the scene field's marcher when the first fitted
+twin is rendered, one after the other, while the session's other core is mostly idle. When a session
+renders for the first time it starts this helper (:func:`start_helper`), which loads the session's scenes in
+the order the tests use them (built-in demo scenes and scene files; never a ``module:function`` scene: it
+runs no user code) and renders a tiny view of one scene of each renderer kind the session is not rendering
+itself, under the kind's lock (:mod:`pytest_n2r.scene.first_render`): numba writes the kernels to
+its cache, and the session, reaching that kind later, waits for the helper if it is still compiling and
+then loads them.
+
+Only the kernels cross from the helper to the session (through numba's on-disk cache); the helper's renders
+are thrown away. One helper runs per render cache directory at a time (pytest-xdist workers share one); a
+session without a render cache directory, or on a system without ``fcntl``, starts none.
+
+Run as ``python -m pytest_n2r.plugin.precompile`` with its job as JSON on stdin (:func:`start_helper`).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..scene.first_render import claim_kind, renderer_kind
+from .scenes import SceneSpec
+
+__all__ = ["HELPER_KIND", "family", "helper_specs", "start_helper", "run_job"]
+
+#: The lock a running helper holds for its whole life (one helper per render cache directory).
+HELPER_KIND = "precompile-helper"
+#: Longer side of the helper's renders (pixels): the kernels compiled do not depend on the size.
+TINY = 32
+#: The helper's output, for a user wondering what it did: in the lock directory of the render cache.
+LOG_NAME = "precompile.log"
+
+
+def family(spec: SceneSpec) -> str | None:
+    """A guess, from the spec alone, at which scenes share a renderer: the helper loads one scene per family
+    (loading a fitted field takes seconds). ``None`` for a ``module:function`` scene: the helper runs no
+    user code. A wrong guess costs only time: a kind the helper did not compile is compiled by the session,
+    as without the helper."""
+    if spec.kind == "demo":
+        from ..demo.fitted import FIELD_SUFFIX
+
+        return "demo-field" if spec.name.endswith(FIELD_SUFFIX) else "demo"
+    if spec.kind == "file":
+        return "file" + Path(spec.source).suffix.lower()
+    return None
+
+
+def helper_specs(planned: list[SceneSpec], rendering: SceneSpec | None) -> list[SceneSpec]:
+    """One scene of each :func:`family` in ``planned`` (in order) other than the family of ``rendering`` (the
+    scene the session is about to render first): what the helper should compile; empty when there is none."""
+    seen = {None, family(rendering)} if rendering is not None else {None}
+    out = []
+    for spec in planned:
+        if family(spec) not in seen:
+            seen.add(family(spec))
+            out.append(spec)
+    return out
+
+
+def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path | None, device: str,
+                 render_scale: float) -> subprocess.Popen | None:
+    """Start the helper on ``specs`` (in the order the session uses them), leaving out scenes of
+    ``skip_kind`` (the session is compiling those now); ``None`` without a cache directory or scenes."""
+    from ..scene.first_render import fcntl
+
+    if cache_dir is None or fcntl is None or not specs:
+        return None
+    job = {"scenes": [[s.name, s.kind, s.source] for s in specs], "skip": skip_kind, "cache_dir": str(cache_dir),
+           "device": device, "render_scale": render_scale, "sys_path": list(sys.path)}
+    log_dir = Path(cache_dir) / "kernel-locks"
+    try:
+        log_dir.mkdir(parents=True, exist_ok=True)
+        log = open(log_dir / LOG_NAME, "w")  # noqa: SIM115 - handed to the child, closed below
+    except OSError:
+        return None
+    with log:
+        proc = subprocess.Popen([sys.executable, "-m", "pytest_n2r.plugin.precompile"], stdin=subprocess.PIPE,
+                                stdout=log, stderr=subprocess.STDOUT)
+    assert proc.stdin is not None
+    proc.stdin.write(json.dumps(job).encode())
+    proc.stdin.close()
+    return proc
+
+
+def run_job(job: dict[str, Any]) -> list[str]:
+    """The helper's work: returns the renderer kinds it compiled (or loaded from numba's cache)."""
+    from .session import N2RSession
+
+    session = N2RSession(device=job["device"], render_scale=job["render_scale"])
+    done: list[str] = []
+    with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held:
+        if not held:
+            print("another helper is compiling for this cache directory", flush=True)
+            return done
+        seen = {job["skip"]}
+        for name, kind, source in job["scenes"]:
+            scene = session.load(SceneSpec(name, kind, source))
+            scene_kind = renderer_kind(scene)
+            if scene_kind in seen:
+                continue
+            seen.add(scene_kind)
+            with claim_kind(job["cache_dir"], scene_kind, wait=False) as mine:
+                if not mine:  # a session process is compiling it now
+                    print(f"{scene_kind}: another process holds it", flush=True)
+                    continue
+                view = scene.views[0]
+                camera = view.camera.scaled(TINY / max(view.camera.width, view.camera.height))
+                scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
+                done.append(scene_kind)
+                print(f"{scene_kind}: compiled (scene {name})", flush=True)
+    return done
+
+
+def main() -> int:
+    job = json.loads(sys.stdin.read())
+    sys.path[:] = job["sys_path"]
+    run_job(job)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

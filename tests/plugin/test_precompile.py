@@ -1,0 +1,31 @@
+"""Which scenes the kernel helper loads: one of each family the session reaches after its first render, never
+a ``module:function`` scene (the helper runs no user code)."""
+
+from __future__ import annotations
+
+from pytest_n2r.plugin.precompile import family, helper_specs
+from pytest_n2r.plugin.scenes import SceneSpec
+
+WALL, OBJECT = SceneSpec("wall", "demo", "demo:wall"), SceneSpec("object", "demo", "demo:object")
+WALL_FIELD = SceneSpec("wall-field", "demo", "demo:wall-field")
+OBJECT_FIELD = SceneSpec("object-field", "demo", "demo:object-field")
+FOX, SPLATS = SceneSpec("fox", "file", "/s/fox.n2r"), SceneSpec("room", "file", "/s/room.PLY")
+USER = SceneSpec("mine", "python", "mymodule:scene")
+
+
+def test_families_follow_the_spec():
+    assert [family(s) for s in (WALL, OBJECT, WALL_FIELD, FOX, SPLATS, USER)] == \
+        ["demo", "demo", "demo-field", "file.n2r", "file.ply", None]
+
+
+def test_the_helper_gets_one_scene_of_each_other_family_in_order():
+    planned = [WALL, OBJECT, WALL_FIELD, OBJECT_FIELD, USER, FOX, SPLATS]
+    assert helper_specs(planned, WALL) == [WALL_FIELD, FOX, SPLATS]
+    assert helper_specs(planned, FOX) == [WALL, WALL_FIELD, SPLATS]
+    assert helper_specs(planned, None) == [WALL, WALL_FIELD, FOX, SPLATS]
+
+
+def test_nothing_for_the_helper_when_every_scene_shares_the_first_family():
+    assert helper_specs([WALL, OBJECT], WALL) == []
+    assert helper_specs([USER], USER) == []
+    assert helper_specs([], None) == []
