@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import importlib.resources
+import io
 from collections.abc import Callable
 from pathlib import Path
 
@@ -70,7 +71,10 @@ def classifier(name: str) -> Callable[[np.ndarray], np.ndarray]:
     path = weights_path(name)
     torch.set_num_threads(1)
     net = _network(name)
-    net.load_state_dict(torch.load(path, map_location="cpu", weights_only=True), strict=True)
+    # read whole, then parsed from memory: MobileNetV2's checkpoint is in torch's legacy format, read one
+    # tensor at a time from a file (0.5-0.7 s) but in 0.2 s from memory; the same tensors either way
+    state = torch.load(io.BytesIO(path.read_bytes()), map_location="cpu", weights_only=True)
+    net.load_state_dict(state, strict=True)
     net.eval()
     _, _, mean, std = CLASSIFIERS[name]
     mean_a, std_a = np.asarray(mean, np.float32), np.asarray(std, np.float32)

@@ -159,6 +159,8 @@ class _KeypointMetric(Metric):
             return MetricResult.undefined(self.name, "the SUT found no keypoint in either view (nothing to compare)",
                                           n_source=0, n_follow=0)
         for which, points, view in (("source", c.source, source), ("follow-up", c.follow, follow)):
+            if not _may_cover(len(points), view.camera, self.tolerance):
+                continue  # too few discs to cover MAX_COVERAGE of the image: no need to paint them
             covered = float(coverage_mask(points, view.camera, self.tolerance).mean())
             if covered >= MAX_COVERAGE:
                 return MetricResult.undefined(
@@ -237,6 +239,14 @@ class Repeatability(_KeypointMetric):
 #: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
 #: flip a pixel centre lying exactly on the circle.
 _DISC_SLACK = 1e-6
+
+
+def _may_cover(n_points: int, camera: Camera, radius: float) -> bool:
+    """Whether ``n_points`` discs of ``radius`` pixels could cover :data:`MAX_COVERAGE` of the image: a disc
+    holds at most ``(floor(2 r) + 1)²`` pixel centres (at most that many columns and rows fit in its width),
+    so fewer discs than the share needs cannot reach it, wherever they lie."""
+    per_disc = (int(np.floor(2 * (radius + _DISC_SLACK))) + 1) ** 2
+    return n_points * per_disc >= MAX_COVERAGE * camera.width * camera.height
 
 
 def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarray:

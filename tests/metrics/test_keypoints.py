@@ -15,7 +15,7 @@ from pytest_n2r.errors import InvalidArgument, InvalidType, MetricUndefined, SUT
 from pytest_n2r.geometry import Transform
 from pytest_n2r.metrics._matching import mutual_nearest
 from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping
-from pytest_n2r.metrics.keypoints import coverage_mask, interest_point_spread, repeatability
+from pytest_n2r.metrics.keypoints import MAX_COVERAGE, _may_cover, coverage_mask, interest_point_spread, repeatability
 
 from .scenes import CAMERA, WALL, Plane, pair, pixels_of, render_planes, world_points_on_wall
 
@@ -280,6 +280,19 @@ def test_coverage_mask_equals_the_brute_force_definition(points, radius):
     d2 = (u[..., None] - pts[:, 0]) ** 2 + (v[..., None] - pts[:, 1]) ** 2
     expected = np.any(d2 <= (radius + 1e-6) ** 2, axis=-1)
     np.testing.assert_array_equal(coverage_mask(pts, CAMERA, radius), expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(u=st.floats(-2, 162), v=st.floats(-2, 122), radius=st.floats(0.1, 12),
+       step=st.sampled_from([0.0, 0.5, 0.25]))
+def test_a_disc_holds_no_more_pixels_than_the_coverage_bound_counts(u, v, radius, step):
+    """The metric skips painting discs when ``_may_cover`` says they cannot reach MAX_COVERAGE: its count of
+    pixel centres per disc must be an upper bound wherever the disc lies (pixel-aligned centres included)."""
+    centre = np.array([[np.round(u) + step, np.round(v) + step]])
+    held = int(coverage_mask(centre, CAMERA, radius).sum())
+    bound = (int(np.floor(2 * (radius + 1e-6))) + 1) ** 2
+    assert held <= bound, f"a disc of radius {radius} at {centre[0].tolist()} holds {held} pixels > bound {bound}"
+    assert _may_cover(1, CAMERA, radius) == (bound >= MAX_COVERAGE * CAMERA.width * CAMERA.height)
 
 
 @pytest.mark.parametrize(
