@@ -166,6 +166,18 @@ class Engine:
             )
         return result
 
+    def compute_on_renders(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
+                           source_key: str, follow_key: str | None, where: str) -> MetricResult:
+        """:meth:`compute`, or its result kept from an earlier evaluation of the same SUT and metric objects on
+        the same two renders (a replayed example); ``follow_key=None`` (a mutated image): always computed."""
+        if follow_key is None:
+            return self.compute(out_source, out_follow, source, follow, where)
+        result = self.sut_outputs.result(self.sut, self.metric, source_key, follow_key)
+        if result is MISSING:
+            result = self.compute(out_source, out_follow, source, follow, where)
+            self.sut_outputs.put_result(self.sut, self.metric, source_key, follow_key, result)
+        return result
+
     # -- one example ------------------------------------------------------------------------------------
 
     def evaluate(self, view: SceneView, tau: FollowUp, camera: Any = None) -> Evaluation:
@@ -200,7 +212,7 @@ class Engine:
         follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
         out_source = self.sut_on_render(source, source_key, "source", where)
         out_follow = self.sut_on_render(follow, follow_key, "follow-up", where)
-        result = self.compute(out_source, out_follow, source, follow, where)
+        result = self.compute_on_renders(out_source, out_follow, source, follow, source_key, follow_key, where)
         if not getattr(result, "valid", True):
             record.status, record.reason = "undefined", str(result.details.get("reason", "metric undefined"))
         else:

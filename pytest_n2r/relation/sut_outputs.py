@@ -9,6 +9,11 @@ again, before the first failure counts); under that assumption a kept output is 
 give. The determinism check itself always calls the SUT.
 
 Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render.
+
+The metric's result on a pair of renders is kept beside the SUT's outputs (:meth:`SUTOutputs.result`): the
+same SUT object and the same metric object on the same two renders compare the same two outputs, so a
+replay of an example the session already evaluated (a regression gate's baseline) gets its result again
+without computing it. The metric is named by its object identity, checked on every lookup.
 """
 
 from __future__ import annotations
@@ -63,6 +68,20 @@ class SUTOutputs:
         while len(self._outputs) > self.max_outputs:
             self._outputs.popitem(last=False)
 
+    def result(self, sut: Callable[..., Any], metric: Any, source_key: str, follow_key: str) -> Any:
+        """The kept result of ``metric`` on ``sut``'s outputs on the renders ``source_key`` and ``follow_key``,
+        or :data:`MISSING`."""
+        kept = self.get(sut, _pair_key(source_key, follow_key))
+        if kept is MISSING or kept[0] is not metric:
+            return MISSING
+        return kept[1]
+
+    def put_result(self, sut: Callable[..., Any], metric: Any, source_key: str, follow_key: str,
+                   result: Any) -> None:
+        """Keep ``metric``'s ``result`` on ``sut``'s outputs on the two renders (held with the metric object,
+        so a result is never returned for another metric that reused its id)."""
+        self.put(sut, _pair_key(source_key, follow_key), (metric, result))
+
     def _knows(self, sut: Any) -> bool:
         held = self._suts.get(id(sut))
         if held is None:
@@ -74,3 +93,7 @@ class SUTOutputs:
         for k in [k for k in self._outputs if k[0] == ident]:
             del self._outputs[k]
 
+
+def _pair_key(source_key: str, follow_key: str) -> str:
+    """A metric result's key: two render keys (hex digests) cannot collide with one."""
+    return f"metric:{source_key}:{follow_key}"

@@ -99,3 +99,51 @@ def test_a_replay_reuses_the_outputs_of_the_run_it_replays():
     alone = replay_relation(scene, CountingSUT(), relation, run.valid_examples)
     assert [e.deviation for e in replayed.replayed] == [e.deviation for e in alone.replayed]
     assert alone.sut_calls > 0
+
+
+class CountingDifference(AbsDifference):
+    """``AbsDifference`` counting its computations."""
+
+    def __init__(self) -> None:
+        self.computed = 0
+
+    def compute(self, out_source, out_follow, source, follow):
+        self.computed += 1
+        return super().compute(out_source, out_follow, source, follow)
+
+
+def test_a_replay_of_evaluated_examples_reuses_the_metric_results_of_the_same_objects():
+    from pytest_n2r.relation import replay_relation
+    from pytest_n2r.report import replay_candidates
+
+    scene = PlaneScene(texture="ramp")
+    metric, sut, shared = CountingDifference(), CountingSUT(), SUTOutputs()
+    relation = Relation.build(metric, 255, transforms(yaw=5), examples=12)
+    record = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    computed, calls = metric.computed, sut.calls
+    examples = replay_candidates(record)
+    replayed = replay_relation(scene, sut, relation, examples, settings=SETTINGS, sut_outputs=shared)
+    assert [e.deviation for e in replayed.replayed] == [e.deviation for e in examples]
+    assert (metric.computed, sut.calls) == (computed, calls), "the same objects on the same renders: nothing again"
+    pairs = len({(e.view, tuple(sorted(e.transform.items()))) for e in examples})  # a pair drawn twice: once
+    other = CountingDifference()
+    again = replay_relation(scene, sut, Relation.build(other, 255, transforms(yaw=5)), examples, settings=SETTINGS,
+                            sut_outputs=shared)
+    assert other.computed == pairs, "another metric object computes its own results"
+    assert [e.deviation for e in again.replayed] == [e.deviation for e in examples]
+    fresh = CountingSUT()
+    replay_relation(scene, fresh, relation, examples, settings=SETTINGS, sut_outputs=shared)
+    assert fresh.calls > 0 and metric.computed == computed + pairs, "another SUT object: computed anew"
+
+
+def test_a_kept_result_is_only_returned_for_its_own_metric_object():
+    shared = SUTOutputs()
+
+    def sut(rgb):
+        return 0
+
+    first, second = AbsDifference(), AbsDifference()
+    shared.put_result(sut, first, "s", "f", "result")
+    assert shared.result(sut, first, "s", "f") == "result"
+    assert shared.result(sut, second, "s", "f") is MISSING
+    assert shared.result(sut, first, "f", "s") is MISSING
