@@ -7,10 +7,17 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import numba.core.boxing  # noqa: F401  (see below)
 import pytest
 from hypothesis import settings
 
 pytest_plugins = ["pytester"]
+
+# numba imports numba.core.boxing on its first compile of a function with a Python wrapper. When that first
+# compile happens inside an in-process pytester run (a plugin test rendering a demo scene), pytester's module
+# snapshot drops the module afterwards, and the next compile imports it again: numba's global registry then
+# raises "duplicate registration for <class 'numba.core.types.scalars.Boolean'>" (seen in a -n 2 run whose
+# workers got the tests in another order). Imported here, before any inner run, it stays.
 
 # Our own property tests: "dev" draws new examples on every run (how most of our edge cases were found);
 # "ci" draws the same examples on every run, so a red CI run is a change in the code, never the luck of a
