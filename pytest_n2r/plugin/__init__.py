@@ -10,6 +10,7 @@ and ``@pytest.mark.n2r_scene`` override them per test: marker keyword > command 
 
 from __future__ import annotations
 
+import functools
 import gc
 import inspect
 import time
@@ -47,14 +48,17 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def _build_session(config: pytest.Config) -> Any:
     """Parse and check every option (a bad value is a usage error naming the option)."""
     from ..relation import RunSettings
+    from .precompile import start_for_session
     from .session import N2RSession
 
     values = read_options(config)
     settings = RunSettings(examples=values["examples"], size=values["size"], derandomize=values["derandomize"],
                            timeout=values["timeout"] or None, artifacts=values["artifacts"])
-    return N2RSession(settings=settings, scenes=values["scene"] or [], device=values["device"],
-                      render_scale=values["render_scale"], cache_dir=values["cache_dir"],
-                      cache_bytes=values["cache_size"])
+    session = N2RSession(settings=settings, scenes=values["scene"] or [], device=values["device"],
+                         render_scale=values["render_scale"], cache_dir=values["cache_dir"],
+                         cache_bytes=values["cache_size"])
+    session.on_first_render = functools.partial(start_for_session, session)
+    return session
 
 
 def _session(config: pytest.Config) -> Any:

@@ -27,8 +27,9 @@ from typing import Any
 
 from ..scene.first_render import claim_kind, renderer_kind
 from .scenes import SceneSpec
+from .session import N2RSession
 
-__all__ = ["HELPER_KIND", "family", "helper_specs", "start_helper", "run_job"]
+__all__ = ["HELPER_KIND", "family", "helper_specs", "start_helper", "start_for_session", "run_job"]
 
 #: The lock a running helper holds for its whole life (one helper per render cache directory).
 HELPER_KIND = "precompile-helper"
@@ -89,10 +90,17 @@ def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path |
     return proc
 
 
+def start_for_session(session: N2RSession, scene: Any) -> None:
+    """Before ``session``'s first render (of ``scene``): start the helper on the planned scenes of the other
+    families (the session's ``on_first_render``, set by the plugin); it is kept as ``session.helper``."""
+    specs = helper_specs(session.planned, session.spec_of(scene))
+    if specs and session.helper is None:
+        session.helper = start_helper(specs, renderer_kind(scene), session.cache_dir, session.device,
+                                      session.render_scale)
+
+
 def run_job(job: dict[str, Any]) -> list[str]:
     """The helper's work: returns the renderer kinds it compiled (or loaded from numba's cache)."""
-    from .session import N2RSession
-
     session = N2RSession(device=job["device"], render_scale=job["render_scale"])
     done: list[str] = []
     with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held:

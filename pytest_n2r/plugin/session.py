@@ -37,37 +37,34 @@ class N2RSession:
     records: list[RelationRecord] = field(default_factory=list)
     #: The SUTs' outputs on renders, shared by the relations that run one SUT object on one render.
     sut_outputs: SUTOutputs = field(default_factory=SUTOutputs, repr=False)
-    #: The scenes the session's tests use, in order (the plugin sets it after collection): on its first
-    #: render the session starts a helper compiling the kernels of the others (:mod:`.precompile`).
+    #: The scenes the session's tests use, in order (the plugin sets it after collection), for the kernel
+    #: helper (:mod:`.precompile`).
     planned: list[SceneSpec] = field(default_factory=list)
+    #: Called with the scene before the render cache's first render (the plugin starts the kernel helper).
+    on_first_render: Callable[[Scene], None] | None = field(default=None, repr=False)
+    #: The kernel helper process, once started; :meth:`close` ends it.
+    helper: subprocess.Popen | None = field(default=None, repr=False)
     _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
     _cache: RenderCache | None = field(default=None, repr=False)
-    _helper: subprocess.Popen | None = field(default=None, repr=False)
 
     @property
     def cache(self) -> RenderCache:
         """The render cache (created on first use, so an unused session touches no file)."""
         if self._cache is None:
             self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes)
-            self._cache.on_first_render = self._start_helper
+            self._cache.on_first_render = self.on_first_render
         return self._cache
 
-    def _start_helper(self, scene: Scene) -> None:
-        """Before the session's first render: compile the other renderers' kernels in a helper process."""
-        from ..scene.first_render import renderer_kind
-        from .precompile import helper_specs, start_helper
-
-        rendering = next((s for s in self.planned if self._loaded.get(s.source) is scene), None)
-        specs = helper_specs(self.planned, rendering)
-        if specs:
-            self._helper = start_helper(specs, renderer_kind(scene), self.cache_dir, self.device, self.render_scale)
+    def spec_of(self, scene: Scene) -> SceneSpec | None:
+        """The planned spec this session loaded ``scene`` from, if any."""
+        return next((s for s in self.planned if self._loaded.get(s.source) is scene), None)
 
     def close(self) -> None:
         """End the kernel helper if it still runs (its work only saves time)."""
-        if self._helper is not None and self._helper.poll() is None:
-            self._helper.terminate()
-            self._helper.wait()
-        self._helper = None
+        if self.helper is not None and self.helper.poll() is None:
+            self.helper.terminate()
+            self.helper.wait()
+        self.helper = None
 
     def scene_specs(self, pins: list[str] | None = None, base: str | os.PathLike = ".") -> list[SceneSpec]:
         """The scenes a test runs on: ``pins`` (scene names or scene entries from an

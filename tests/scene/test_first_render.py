@@ -123,19 +123,23 @@ def test_the_helper_compiles_a_kind_nobody_holds_and_skips_held_ones(tmp_path, t
 
 
 def test_a_session_starts_the_helper_on_its_first_render(tmp_path, tiny_scene_file):
+    from functools import partial
+
+    from pytest_n2r.plugin.precompile import start_for_session
     from pytest_n2r.plugin.scenes import SceneSpec
     from pytest_n2r.plugin.session import N2RSession
 
     session = N2RSession(cache_dir=tmp_path, device="cpu", render_scale=1.0,
                          planned=[SceneSpec("object", "file", str(tiny_scene_file))])
+    session.on_first_render = partial(start_for_session, session)
     plane = PlaneScene(width=16, height=12)
     session.cache.render(plane, plane.views[0].c2w, plane.views[0].camera)
-    helper = session._helper
+    helper = session.helper
     assert helper is not None, "a first render with a scene of another family planned starts the helper"
     assert helper.wait(timeout=120) == 0
     log = (tmp_path / "kernel-locks" / "precompile.log").read_text()
     assert "FieldScene" in log and "compiled" in log, log
     session.cache.render(plane, plane.views[1].c2w, plane.views[1].camera)
-    assert session._helper is helper, "the helper starts once per session"
+    assert session.helper is helper, "the helper starts once per session"
     session.close()
-    assert session._helper is None
+    assert session.helper is None
