@@ -36,34 +36,33 @@ def test_no_directory_means_no_lock():
         assert held is False
 
 
-def _hold(directory, kind, seconds, ready):
-    with fr.claim_kind(directory, kind, wait=False) as held:
-        assert held
-        ready.set()
-        time.sleep(seconds)
+def _wait_while_held(directory, scene, kind, seconds) -> float:
+    """Seconds ``first_render`` of ``scene`` waited while another thread held ``kind``'s lock for ``seconds``."""
+    ready = threading.Event()
+
+    def hold():
+        with fr.claim_kind(directory, kind, wait=False) as held:
+            assert held
+            ready.set()
+            time.sleep(seconds)
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    ready.wait()
+    start = time.perf_counter()
+    with fr.first_render(directory, scene):
+        waited = time.perf_counter() - start
+    holder.join()
+    return waited
 
 
 def test_the_first_render_waits_for_another_holder_and_later_ones_do_not(tmp_path):
     scene = PlaneScene(width=16, height=12)
     kind = fr.renderer_kind(scene)
-    ready = threading.Event()
-    holder = threading.Thread(target=_hold, args=(tmp_path, kind, 0.5, ready))
-    holder.start()
-    ready.wait()
-    start = time.perf_counter()
-    with fr.first_render(tmp_path, scene):
-        waited = time.perf_counter() - start
-    holder.join()
+    waited = _wait_while_held(tmp_path, scene, kind, 0.5)
     assert waited >= 0.4, f"the first render of {kind} went ahead after {waited:.2f} s while the lock was held"
     assert fr.rendered(kind)
-    ready.clear()
-    holder = threading.Thread(target=_hold, args=(tmp_path, kind, 1.0, ready))
-    holder.start()
-    ready.wait()
-    start = time.perf_counter()
-    with fr.first_render(tmp_path, scene):
-        waited = time.perf_counter() - start
-    holder.join()
+    waited = _wait_while_held(tmp_path, scene, kind, 1.0)
     assert waited < 0.3, f"a later render of {kind} waited {waited:.2f} s for the lock it no longer needs"
 
 
