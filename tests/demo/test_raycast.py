@@ -84,6 +84,25 @@ def test_texture_lookups_equal_opencv_remap_bit_for_bit(wrap):
         np.testing.assert_array_equal(got, want, err_msg=f"{wrap} level {level}")
 
 
+def test_texture_lookups_at_whole_mirror_periods_equal_opencv_remap():
+    """The kernel takes ``s mod 2w`` with a multiplication by ``1 / 2w``, which can land one period off: at and
+    next to whole periods (where that happens) its lookups must still be OpenCV's, bit for bit."""
+    texture = Texture.photo("brick", wrap="mirror")
+    builder = _Builder()
+    index = builder.texture(texture)
+    meta, texels = builder.texture_tables()
+    for level, img in enumerate(texture.levels[:4]):
+        h, w = img.shape[:2]
+        at = np.array([m * 2.0 * size + e for size in (w, h) for m in range(-3, 4)
+                       for e in (0.0, 1e-9, -1e-9, 1e-13, -1e-13)])  # this level's coordinates
+        s = (at + 0.5) * 2.0 ** level - 0.5  # level-0 coordinates that map to them
+        grid_s, grid_t = np.meshgrid(s, s[::-1])
+        want = texture._bilinear(level, grid_s.ravel(), grid_t.ravel())
+        got = np.array([bilinear(meta, texels, index, level, a, b) for a, b in zip(grid_s.ravel(), grid_t.ravel())],
+                       np.float32)
+        np.testing.assert_array_equal(got, want, err_msg=f"level {level}: a lookup at a whole period differs")
+
+
 def test_output_does_not_depend_on_the_thread_count():
     import numba
 
