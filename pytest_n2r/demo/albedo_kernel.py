@@ -169,16 +169,19 @@ def _plan_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp,
                 return count, F0
             node = node_child[node, 0]
     footprint = fp * k
-    if not footprint > 1.0:  # level 0 alone (log2 of max(footprint, 1) is 0)
-        return _tap(tex_meta, tex, 0, s, t, slot, taps, weights, count), F0
-    n_levels = int(tex_meta[tex, 0, LEVELS])
-    lod = min(math.log2(footprint), n_levels - 1)
-    lo = int(math.floor(lod))
-    f = np.float32(lod - lo)
-    count = _tap(tex_meta, tex, lo, s, t, slot, taps, weights, count)
-    if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
-        return _tap(tex_meta, tex, lo + 1, s, t, slot + 1, taps, weights, count), f
-    return count, F0
+    lo, f, levels = 0, F0, 1
+    if footprint > 1.0:  # else level 0 alone (log2 of max(footprint, 1) is 0)
+        n_levels = int(tex_meta[tex, 0, LEVELS])
+        lod = min(math.log2(footprint), n_levels - 1)
+        lo = int(math.floor(lod))
+        f = np.float32(lod - lo)
+        if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
+            levels = 2
+        else:
+            f = F0
+    for q in range(levels):  # one call site: the lookup's code is inlined once (compile time)
+        count = _tap(tex_meta, tex, lo + q, s, t, slot + q, taps, weights, count)
+    return count, f
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -199,13 +202,13 @@ def plan_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp
         elif m == F0:  # exactly the bottom colour
             top = -1
     i = slot // 4
-    count, mix[1, i] = _plan_leaf(bottom, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours,
-                                  taps, weights, count)
-    mix[0, i] = np.float32(math.nan)
-    if top >= 0:
-        mix[0, i] = m
-        count, mix[2, i] = _plan_leaf(top, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot + 2,
-                                      colours, taps, weights, count)
+    mix[0, i] = m if top >= 0 else np.float32(math.nan)
+    for which in range(2):  # one call site: the leaf's code is inlined once (compile time)
+        leaf = bottom if which == 0 else top
+        if leaf < 0:
+            break
+        count, mix[1 + which, i] = _plan_leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, a, b, fp,
+                                              slot + 2 * which, colours, taps, weights, count)
     return count
 
 
