@@ -38,6 +38,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import platform
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -374,14 +375,30 @@ def _borrowed(typingctx, array):
 
 
 
+def barrier_constraint(machine: str) -> str | None:
+    """The inline-asm constraint that keeps a float64 in place in a vector register on ``machine`` (as
+    ``platform.machine()`` names it): ``"=x,0"`` on x86-64; ``None`` elsewhere, where :func:`_opaque` is the
+    plain value (the same images; LLVM may then hoist the divisions again). Other architectures spell the
+    register class differently, and an unknown letter would fail the kernel's compile.
+
+    >>> barrier_constraint("x86_64"), barrier_constraint("AMD64"), barrier_constraint("arm64")
+    ('=x,0', '=x,0', None)
+    """
+    return "=x,0" if machine.lower() in ("x86_64", "amd64") else None
+
+
 @intrinsic
 def _opaque(typingctx, x):
     """``x`` itself, through an empty asm statement that LLVM may not move: a division of it stays in the branch that
     needs it. (LLVM hoists a division out of a loop when its inputs are invariant, even out of a branch: the
-    three of ``1 / d`` went to every ray, a tenth of an object frame, though only rays that meet a box use them.)"""
+    three of ``1 / d`` went to every ray, a tenth of an object frame, though only rays that meet a box use them.)
+    Only where :func:`barrier_constraint` knows the machine."""
     def codegen(context, builder, signature, args):
+        constraint = barrier_constraint(platform.machine())
+        if constraint is None:
+            return args[0]
         double = ir.DoubleType()
-        barrier = ir.InlineAsm(ir.FunctionType(double, [double]), "", "=x,0", side_effect=True)
+        barrier = ir.InlineAsm(ir.FunctionType(double, [double]), "", constraint, side_effect=True)
         return builder.call(barrier, args)
 
     return types.float64(types.float64), codegen

@@ -176,3 +176,22 @@ def test_a_forked_child_renders_with_its_own_threads():
 def _render_rgb(index: int, camera) -> np.ndarray:
     scene = ground_truth("object")
     return scene.render(scene.views[index].c2w, camera, "rgb").rgb
+
+
+@pytest.mark.parametrize(("machine", "has_barrier"), [("x86_64", True), ("aarch64", False), ("riscv64", False)])
+def test_the_division_barrier_is_inline_asm_only_where_its_constraint_is_known(monkeypatch, machine, has_barrier):
+    """The barrier's asm constraint names an x86 register class: on another machine it must compile to the plain
+    value, or the exact renderer would not compile there at all."""
+    from numba import njit
+
+    from pytest_n2r.demo import raycast
+
+    monkeypatch.setattr(raycast.platform, "machine", lambda: machine)
+
+    @njit
+    def halve(x):
+        return raycast._opaque(x) / 2.0
+
+    assert halve(3.0) == 1.5
+    ir = halve.inspect_llvm(halve.signatures[0])
+    assert ("asm sideeffect" in ir) == has_barrier, f"on {machine}: barrier in the IR is {'asm sideeffect' in ir}"
