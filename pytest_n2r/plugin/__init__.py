@@ -57,7 +57,8 @@ def _build_session(config: pytest.Config) -> Any:
     session = N2RSession(settings=settings, scenes=values["scene"] or [], device=values["device"],
                          render_scale=values["render_scale"], cache_dir=values["cache_dir"],
                          cache_bytes=values["cache_size"])
-    session.on_first_render = functools.partial(start_for_session, session)
+    if values["precompile"]:
+        session.on_first_render = functools.partial(start_for_session, session)
     return session
 
 

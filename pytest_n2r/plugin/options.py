@@ -175,6 +175,13 @@ def _derandomize(value: str, where: Where) -> bool:
     return text in ("yes", "true", "1") or (text == "auto" and bool(os.environ.get("CI")))
 
 
+def _yes_no(value: str, where: Where) -> bool:
+    text = str(value).strip().lower()
+    if text not in ("yes", "no", "true", "false", "1", "0"):
+        raise InvalidArgument(f"{text!r}; expected yes or no")
+    return text in ("yes", "true", "1")
+
+
 def _scenes(entries: list[str], where: Where) -> list[Any]:
     """Scene specs; each scene file is opened and checked now, so a broken one is a usage error."""
     from .scenes import parse_scene_specs
@@ -254,6 +261,9 @@ OPTIONS: tuple[Option, ...] = (
     Option("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
            "draw the same examples every run; 'auto' means yes when the CI environment variable is set "
            "(default: {default})", default="auto", parse=_derandomize),
+    Option("--n2r-precompile", "n2r_precompile", "yes|no",
+           "on the first render, compile the kernels of the other renderers the tests use in a helper process, "
+           "on an idle core (default: {default})", default="yes", parse=_yes_no),
     Option("--n2r-cache-clear", None, None, "empty the render cache before the run", action="store_true"),
     Option("--n2r-save-baseline", None, "PATH",
            "write every relation's drawn examples (all a replay needs, and their deviations) to PATH",

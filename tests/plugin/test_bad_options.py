@@ -48,6 +48,8 @@ OPTION_CASES: list[tuple[str, list[str], str]] = [
     ("render scale 2", ["--n2r-scene", PLANE, "--n2r-render-scale", "2"], r"'2' is not a fraction in \[0\.1, 1\]"),
     ("render scale nan", ["--n2r-scene", PLANE, "--n2r-render-scale", "nan"], r"'nan' is not a fraction"),
     ("derandomize maybe", ["--n2r-scene", PLANE, "--n2r-derandomize", "maybe"], r"'maybe'; expected auto, yes or no"),
+    ("precompile auto", ["--n2r-scene", PLANE, "--n2r-precompile", "auto"],
+     r"--n2r-precompile / ini n2r_precompile: 'auto'; expected yes or no"),
 ]
 
 

@@ -3,6 +3,8 @@ a ``module:function`` scene (the helper runs no user code)."""
 
 from __future__ import annotations
 
+import pytest
+
 from pytest_n2r.plugin.precompile import family, helper_specs
 from pytest_n2r.plugin.scenes import SceneSpec
 
@@ -29,3 +31,12 @@ def test_nothing_for_the_helper_when_every_scene_shares_the_first_family():
     assert helper_specs([WALL, OBJECT], WALL) == []
     assert helper_specs([USER], USER) == []
     assert helper_specs([], None) == []
+
+
+@pytest.mark.parametrize(("value", "starts"), [("yes", True), ("no", False)])
+def test_precompile_no_leaves_the_session_without_a_helper(pytester, value, starts):
+    from pytest_n2r.plugin import _build_session
+
+    session = _build_session(pytester.parseconfig("--n2r-precompile", value))
+    assert (session.on_first_render is not None) == starts, \
+        f"--n2r-precompile {value}: the session {'would not' if starts else 'would'} start the kernel helper"
