@@ -168,18 +168,20 @@ def _byte_size(value: str, where: Where) -> int:
     return parse_size(str(value), "n2r_cache_size")
 
 
+def _switch(text: str, expected: str) -> bool:
+    """``yes`` / ``no`` (or ``true`` / ``false``, ``1`` / ``0``) as a bool; else an error saying ``expected``."""
+    if text not in ("yes", "no", "true", "false", "1", "0"):
+        raise InvalidArgument(f"{text!r}; expected {expected}")
+    return text in ("yes", "true", "1")
+
+
 def _derandomize(value: str, where: Where) -> bool:
     text = str(value).strip().lower()
-    if text not in ("auto", "yes", "no", "true", "false", "1", "0"):
-        raise InvalidArgument(f"{text!r}; expected auto, yes or no")
-    return text in ("yes", "true", "1") or (text == "auto" and bool(os.environ.get("CI")))
+    return bool(os.environ.get("CI")) if text == "auto" else _switch(text, "auto, yes or no")
 
 
 def _yes_no(value: str, where: Where) -> bool:
-    text = str(value).strip().lower()
-    if text not in ("yes", "no", "true", "false", "1", "0"):
-        raise InvalidArgument(f"{text!r}; expected yes or no")
-    return text in ("yes", "true", "1")
+    return _switch(str(value).strip().lower(), "yes or no")
 
 
 def _scenes(entries: list[str], where: Where) -> list[Any]:
