@@ -1,0 +1,91 @@
+"""Compiled blend masks in numba's on-disk cache: a second process loads them, and a changed mask is compiled
+again under another name."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+
+from pytest_n2r.demo.mask_kernel import compile_mask, mask_fingerprint
+
+#: Compiles the demo scenes' masks and prints, per mask, whether numba loaded it from its cache.
+_CHILD = """
+import json
+from pytest_n2r.demo.mask_kernel import compile_mask
+from pytest_n2r.demo.scenes import _growth_mask, _road_mask
+print(json.dumps({m.__name__: sum(compile_mask(m).stats.cache_hits.values()) for m in (_growth_mask, _road_mask)}))
+"""
+
+
+def _cache_hits(numba_cache: Path) -> dict[str, int]:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(numba_cache)}
+    done = subprocess.run([sys.executable, "-c", _CHILD], env=env, capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def test_a_second_process_loads_the_demo_masks_from_numbas_cache(tmp_path):
+    assert _cache_hits(tmp_path) == {"_growth_mask": 0, "_road_mask": 0}, "a fresh cache held the masks already"
+    assert _cache_hits(tmp_path) == {"_growth_mask": 1, "_road_mask": 1}, "the second process compiled a mask again"
+
+
+_MASK_SOURCE = """
+import numpy as np
+
+SHARPNESS = {sharpness}
+
+def edge(x):
+    return np.minimum(np.maximum(SHARPNESS * x, 0.0), 1.0)
+
+def mask(a, b):
+    return edge(np.sin(a) * np.cos(b) + {offset})
+"""
+
+
+def _mask_module(folder: Path, name: str, sharpness: float = 2.0, offset: float = 0.0):
+    path = folder / f"{name}.py"
+    path.write_text(_MASK_SOURCE.format(sharpness=sharpness, offset=offset))
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_masks_name_follows_its_code_its_helpers_and_their_globals(tmp_path):
+    base = _mask_module(tmp_path, "base")
+    assert mask_fingerprint(base.mask) == mask_fingerprint(_mask_module(tmp_path, "base").mask), \
+        "the same file gave another name"
+    names = {mask_fingerprint(base.mask)}
+    for label, changed in (("the mask's code", _mask_module(tmp_path, "base", offset=0.5).mask),
+                           ("a helper's global", _mask_module(tmp_path, "base", sharpness=3.0).mask)):
+        assert mask_fingerprint(changed) not in names, f"a change of {label} kept the compiled mask's name"
+        names.add(mask_fingerprint(changed))
+    module = _mask_module(tmp_path, "patched")
+    before = mask_fingerprint(module.mask)
+    module.SHARPNESS = 5.0  # a global changed at run time: numba freezes the value it compiles with
+    assert mask_fingerprint(module.mask) != before, "a changed global kept the compiled mask's name"
+
+
+def test_masks_without_a_stable_name_compile_in_every_process_and_still_work():
+    table = np.linspace(0, 1, 4)
+    code = compile("def typed(a, b):\n    return 0.5 + 0.5 * np.sin(a) * np.cos(b)\n", "<prompt>", "exec")
+    typed = types.FunctionType(code.co_consts[0], {"np": np})  # as if typed into a prompt: no source file
+
+    def closure(a, b):
+        return table[0] + a * b
+
+    assert mask_fingerprint(typed) is None, "a mask without a source file got a name on disk"
+    assert mask_fingerprint(closure) is None, "a mask closing over an array got a name on disk"
+    a, b = np.linspace(-3, 3, 7), np.linspace(2, -2, 7)
+    for fn in (typed, closure):
+        out = np.empty(7)
+        compile_mask(fn)(a, b, out, 7)
+        np.testing.assert_allclose(out, fn(a, b), rtol=0, atol=1e-15, err_msg=f"{fn.__name__} compiled wrong")
