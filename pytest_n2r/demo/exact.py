@@ -131,6 +131,11 @@ class GroundTruthScene(Scene):
             self._compiled = compile_scene(list(self._items), self.light, self.ambient, self.background)
         return self._compiled
 
+    def compile_apart(self) -> bool:
+        """The scene's blend masks (:attr:`~.raycast.CompiledScene.masks`), which a first render compiles after
+        the ray caster's kernel (or loads, when this ran meanwhile in another process)."""
+        return bool(self.compiled.masks and self.compiled.mask_functions)
+
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         return self.compiled.render(c2w, camera.fx, camera.fy, camera.cx, camera.cy, camera.height, camera.width,
                                     self.supersample, self.far, outputs)

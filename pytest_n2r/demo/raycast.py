@@ -97,7 +97,7 @@ class CompiledScene:
     def masks(self) -> tuple:
         """The blend masks compiled for the render kernel (:func:`~.mask_kernel.compile_mask`), on the first
         render: casting rays needs none, and a process whose renders all come from a cache compiles none (a few
-        seconds each)."""
+        seconds each, unless numba's cache has them)."""
         return tuple(compile_mask(fn) for fn in self.mask_functions) or (no_mask,)
 
     def cast(self, o: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,7 +115,20 @@ class CompiledScene:
     def render(self, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float, height: int, width: int,
                supersample: int, far: float, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """The ``outputs`` (``rgb``, ``depth``, ``opacity``) of the pinhole view at pose ``c2w`` (see
-        :mod:`.exact` for their definitions)."""
+        :mod:`.exact` for their definitions).
+
+        The first render compiles (or loads) the kernel before the blend masks, on an empty image with
+        placeholder masks of the same type: a process compiling the kernel leaves the masks to another process
+        meanwhile (:mod:`pytest_n2r.plugin.precompile`, through numba's cache), and loads them afterwards."""
+        view = (c2w, fx, fy, cx, cy)
+        if "masks" not in self.__dict__:
+            self._render_with(view, 0, 0, supersample, far, outputs, (no_mask,) * max(len(self.mask_functions), 1))
+        return self._render_with(view, height, width, supersample, far, outputs, self.masks)
+
+    def _render_with(self, view: tuple, height: int, width: int, supersample: int, far: float,
+                     outputs: tuple[str, ...], masks: tuple) -> dict[str, np.ndarray]:
+        """:meth:`render` with the compiled ``masks``; ``view`` is ``(c2w, fx, fy, cx, cy)``."""
+        c2w, fx, fy, cx, cy = view
         want_rgb, want_depth, want_opacity = ("rgb" in outputs), ("depth" in outputs), ("opacity" in outputs)
         rgb = np.empty((height, width, 3) if want_rgb else (0, 0, 3), dtype=np.uint8)
         depth = np.empty((height, width) if want_depth else (0, 0), dtype=np.float32)
@@ -125,9 +138,9 @@ class CompiledScene:
         rects = screen_rects(self.cull_boxes, c2w, fx, fy, cx, cy)
         args = (c2w, camera, int(supersample), rects, self.groups,
                 self.group_box, self.kinds, self.prims, self.waves, self.prim_mat, self.node_kind, self.node_par,
-                self.node_child, self.rings, self.masks, self.tex_meta, self.texels, self.shading,
+                self.node_child, self.rings, masks, self.tex_meta, self.texels, self.shading,
                 self.background, rgb, depth, opacity)
-        threads = min(numba.get_num_threads(), height)
+        threads = max(1, min(numba.get_num_threads(), height))
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
         scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),

@@ -8,7 +8,9 @@ the order the tests use them (built-in demo scenes and scene files; never a ``mo
 runs no user code) and renders a tiny view of one scene of each renderer kind the session is not rendering
 itself, under the kind's lock (:mod:`pytest_n2r.scene.first_render`): numba writes the kernels to
 its cache, and the session, reaching that kind later, waits for the helper if it is still compiling and
-then loads them.
+then loads them. Before that it compiles what the scenes of the session's first family compile apart from
+their kernels (:meth:`~pytest_n2r.scene.base.Scene.compile_apart`: the exact demo scenes' blend masks, which
+the session's first render loads after compiling the ray caster), for the families in :data:`APART_FAMILIES`.
 
 Only the kernels cross from the helper to the session (through numba's on-disk cache); the helper's renders
 are thrown away. One helper runs per render cache directory at a time (pytest-xdist workers share one); a
@@ -29,7 +31,8 @@ from ..scene.first_render import claim_kind, renderer_kind
 from .scenes import SceneSpec
 from .session import N2RSession
 
-__all__ = ["HELPER_KIND", "family", "helper_specs", "start_helper", "start_for_session", "run_job"]
+__all__ = ["APART_FAMILIES", "HELPER_KIND", "apart_specs", "family", "helper_specs", "start_helper",
+           "start_for_session", "run_job"]
 
 #: The lock a running helper holds for its whole life (one helper per render cache directory).
 HELPER_KIND = "precompile-helper"
@@ -37,6 +40,8 @@ HELPER_KIND = "precompile-helper"
 TINY = 32
 #: The helper's output, for a user wondering what it did: in the lock directory of the render cache.
 LOG_NAME = "precompile.log"
+#: Families whose scenes load in well under a second and compile parts apart from their kernels.
+APART_FAMILIES = frozenset({"demo"})
 
 
 def family(spec: SceneSpec) -> str | None:
@@ -65,16 +70,25 @@ def helper_specs(planned: list[SceneSpec], rendering: SceneSpec | None) -> list[
     return out
 
 
+def apart_specs(planned: list[SceneSpec], rendering: SceneSpec | None) -> list[SceneSpec]:
+    """The scenes of ``planned`` in the family of ``rendering`` (in order) when it is one of
+    :data:`APART_FAMILIES`: what the helper compiles apart while the session compiles their kernels."""
+    first = family(rendering) if rendering is not None else None
+    return [spec for spec in planned if first in APART_FAMILIES and family(spec) == first]
+
+
 def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path | None, device: str,
-                 render_scale: float) -> subprocess.Popen | None:
+                 render_scale: float, apart: list[SceneSpec] | None = None) -> subprocess.Popen | None:
     """Start the helper on ``specs`` (in the order the session uses them), leaving out scenes of
-    ``skip_kind`` (the session is compiling those now); ``None`` without a cache directory or scenes."""
+    ``skip_kind`` (the session is compiling those now), after compiling the parts of the ``apart`` scenes
+    (:func:`apart_specs`); ``None`` without a cache directory or scenes."""
     from ..scene.first_render import fcntl
 
-    if cache_dir is None or fcntl is None or not specs:
+    if cache_dir is None or fcntl is None or not (specs or apart):
         return None
     job = {"scenes": [[s.name, s.kind, s.source] for s in specs], "skip": skip_kind, "cache_dir": str(cache_dir),
-           "device": device, "render_scale": render_scale, "sys_path": list(sys.path)}
+           "device": device, "render_scale": render_scale, "sys_path": list(sys.path),
+           "apart": [[s.name, s.kind, s.source] for s in apart or ()]}
     log_dir = Path(cache_dir) / "kernel-locks"
     try:
         log_dir.mkdir(parents=True, exist_ok=True)
@@ -93,20 +107,26 @@ def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path |
 def start_for_session(session: N2RSession, scene: Any) -> None:
     """Before ``session``'s first render (of ``scene``): start the helper on the planned scenes of the other
     families (the session's ``on_first_render``, set by the plugin); it is kept as ``session.helper``."""
-    specs = helper_specs(session.planned, session.spec_of(scene))
-    if specs and session.helper is None:
+    rendering = session.spec_of(scene)
+    specs, apart = helper_specs(session.planned, rendering), apart_specs(session.planned, rendering)
+    if (specs or apart) and session.helper is None:
         session.helper = start_helper(specs, renderer_kind(scene), session.cache_dir, session.device,
-                                      session.render_scale)
+                                      session.render_scale, apart)
 
 
 def run_job(job: dict[str, Any]) -> list[str]:
-    """The helper's work: returns the renderer kinds it compiled (or loaded from numba's cache)."""
+    """The helper's work: returns the scenes whose parts it compiled apart (``apart:NAME``) and the renderer
+    kinds it compiled (or loaded from numba's cache)."""
     session = N2RSession(device=job["device"], render_scale=job["render_scale"])
     done: list[str] = []
     with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held:
         if not held:
             print("another helper is compiling for this cache directory", flush=True)
             return done
+        for name, kind, source in job.get("apart", ()):
+            if session.load(SceneSpec(name, kind, source)).compile_apart():
+                done.append(f"apart:{name}")
+                print(f"{name}: compiled apart from its kernels", flush=True)
         seen = {job["skip"]}
         for name, kind, source in job["scenes"]:
             scene = session.load(SceneSpec(name, kind, source))

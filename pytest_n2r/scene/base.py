@@ -78,6 +78,13 @@ class Scene(ABC):
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """Render the validated ``outputs`` (canonical order) and return them by name."""
 
+    def compile_apart(self) -> bool:
+        """Compile the parts of this scene's renderer that compile apart from its kernels' first render (into
+        numba's on-disk cache, where a process rendering the scene loads them); ``False`` when there are none,
+        the default. The kernel helper calls it while the session compiles the kernels
+        (:mod:`pytest_n2r.plugin.precompile`)."""
+        return False
+
     def render(self, c2w: np.ndarray, camera: Camera, outputs: str | Iterable[str] = ("rgb",)) -> RenderedView:
         """Render the view of ``camera`` at camera-to-world pose ``c2w`` (OpenCV axes, scene units).
 

@@ -1,5 +1,5 @@
-"""Compiled blend masks in numba's on-disk cache: a second process loads them, and a changed mask is compiled
-again under another name."""
+"""Compiled blend masks in numba's on-disk cache: a second process loads them, a changed mask is compiled again
+under another name, and a first render compiles them after the kernel (another process may have meanwhile)."""
 
 from __future__ import annotations
 
@@ -89,3 +89,32 @@ def test_masks_without_a_stable_name_compile_in_every_process_and_still_work():
         out = np.empty(7)
         compile_mask(fn)(a, b, out, 7)
         np.testing.assert_allclose(out, fn(a, b), rtol=0, atol=1e-15, err_msg=f"{fn.__name__} compiled wrong")
+
+
+def test_a_first_render_runs_the_kernel_before_it_compiles_the_masks(monkeypatch):
+    """So that another process can compile the masks meanwhile (the kernel helper: compile_apart)."""
+    from pytest_n2r.demo import raycast
+    from pytest_n2r.demo.scenes import wall_scene
+
+    events: list[str] = []
+    kernel, compile_one = raycast._render_kernel, raycast.compile_mask
+
+    def kernel_call(*args):
+        events.append("kernel, placeholder masks" if args[25][0] is raycast.no_mask else "kernel")
+        return kernel(*args)
+
+    def mask_call(fn):
+        events.append(f"mask {fn.__name__}")
+        return compile_one(fn)
+
+    monkeypatch.setattr(raycast, "_render_kernel", kernel_call)
+    monkeypatch.setattr(raycast, "compile_mask", mask_call)
+    monkeypatch.setattr(raycast.numba, "get_num_threads", lambda: 1)
+    scene = wall_scene()
+    view = scene.views[0]
+    first = scene.render(view.c2w, view.camera.resized(16, 9), ("rgb",))
+    scene.render(view.c2w, view.camera.resized(16, 9), ("rgb",))
+    assert events == ["kernel, placeholder masks", "mask _growth_mask", "kernel", "kernel"], events
+    again = wall_scene()
+    assert again.compile_apart() and events[-1] == "mask _growth_mask", "compile_apart did not compile the mask"
+    np.testing.assert_array_equal(again.render(view.c2w, view.camera.resized(16, 9), ("rgb",)).rgb, first.rgb)

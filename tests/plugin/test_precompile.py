@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from pytest_n2r.plugin.precompile import family, helper_specs
+from pytest_n2r.plugin.precompile import apart_specs, family, helper_specs
 from pytest_n2r.plugin.scenes import SceneSpec
 
 WALL, OBJECT = SceneSpec("wall", "demo", "demo:wall"), SceneSpec("object", "demo", "demo:object")
@@ -31,6 +31,13 @@ def test_nothing_for_the_helper_when_every_scene_shares_the_first_family():
     assert helper_specs([WALL, OBJECT], WALL) == []
     assert helper_specs([USER], USER) == []
     assert helper_specs([], None) == []
+
+
+def test_the_helper_compiles_apart_the_scenes_of_the_first_family_when_it_can():
+    planned = [WALL, WALL_FIELD, OBJECT, USER, FOX]
+    assert apart_specs(planned, WALL) == [WALL, OBJECT], "the exact demo scenes' masks were not left to the helper"
+    assert apart_specs(planned, WALL_FIELD) == [], "a fitted twin was loaded for nothing"
+    assert apart_specs(planned, FOX) == [] and apart_specs(planned, USER) == [] and apart_specs(planned, None) == []
 
 
 @pytest.mark.parametrize(("value", "starts"), [("yes", True), ("no", False)])
