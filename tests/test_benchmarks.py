@@ -23,6 +23,7 @@ SMOKE = {
     "plugin_relation.py": (["--scene", "demo:object", "--examples", "3", "--size", "160x90"], "warm (disk) / cold"),
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
     "demo_compare.py": (["HEAD", "--smoke"], "| object | HEAD"),
+    "kernel_compile.py": (["--masks-only"], "with the cache the first process left"),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "render_speed.py": (["demo:object", "--smoke"], "| 96×54 | adaptive=0 |"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),

@@ -1,0 +1,117 @@
+"""What the exact demo renderer's first render compiles, and what each compilation costs (CPU seconds).
+
+Run: ``python benchmarks/kernel_compile.py`` (``--scene wall|object``, default wall; ``--masks-only``: compile the
+scene's blend masks alone, :meth:`~pytest_n2r.scene.base.Scene.compile_apart`, seconds long; ``--rounds R``,
+default 1). Each round runs in a child process with an empty numba cache (its own temporary folder) and one numba
+thread, renders one 32-pixel view of the scene (the kernels do not depend on the size) and reports, from numba's
+``numba:compile`` events, every function compiled with its CPU time inclusive and exclusive of the functions it
+compiled in turn; for the ray caster's kernel the CPU time of numba's compiler passes (``pipeline_times``:
+inlining, type inference, lowering...) and of LLVM (the ``llvm_lock`` timer). A last child renders again with the
+cache the first left: what a second process pays. Compilation runs on one thread: the child's CPU time is its
+duration on an idle core, whatever the machine's load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Run in a child process: argv = scene name, "masks" or "render". Prints one JSON object.
+CHILD = r"""
+import json, sys, time
+from collections import defaultdict
+from numba.core import event
+
+stack, inclusive, exclusive, count = [], defaultdict(float), defaultdict(float), defaultdict(int)
+
+
+class Compiles(event.Listener):
+    def on_start(self, ev):
+        stack.append([ev.data["dispatcher"].py_func.__qualname__, time.process_time(), 0.0])
+
+    def on_end(self, ev):
+        name, start, children = stack.pop()
+        spent = time.process_time() - start
+        inclusive[name] += spent
+        exclusive[name] += spent - children
+        count[name] += 1
+        if stack:
+            stack[-1][2] += spent
+
+
+event.register("numba:compile", Compiles())
+from pytest_n2r.demo import ground_truth, raycast
+
+scene = ground_truth(sys.argv[1])
+view = scene.views[0]
+start = time.process_time()
+if sys.argv[2] == "masks":
+    scene.compile_apart()
+else:
+    camera = view.camera.scaled(32 / max(view.camera.width, view.camera.height))
+    scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
+total = time.process_time() - start
+passes, llvm = {}, None
+for compiled in raycast._render_kernel.overloads.values():
+    llvm = compiled.metadata["timers"]["llvm_lock"]
+    for pipeline in compiled.metadata["pipeline_times"].values():
+        for name, t in pipeline.items():
+            passes[name.split("_", 1)[1]] = t.init + t.run + t.finalize
+print(json.dumps({"total": total, "inclusive": inclusive, "exclusive": exclusive, "count": count, "passes": passes,
+                  "llvm": llvm}))
+"""
+
+
+def run_child(scene: str, what: str, cache: Path) -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    done = subprocess.run([sys.executable, "-c", CHILD, scene, what], env=env, capture_output=True, text=True,
+                          check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"the child failed:\n{done.stderr}")
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scene", default="wall", choices=["wall", "object"])
+    parser.add_argument("--masks-only", action="store_true", help="compile the scene's blend masks alone")
+    parser.add_argument("--rounds", type=int, default=1)
+    args = parser.parse_args(argv)
+    what = "masks" if args.masks_only else "render"
+    with tempfile.TemporaryDirectory(prefix="n2r-kernel-compile-") as tmp:
+        runs = [run_child(args.scene, what, Path(tmp) / f"numba-{r}") for r in range(args.rounds)]
+        again = run_child(args.scene, what, Path(tmp) / f"numba-{args.rounds - 1}")
+    median = statistics.median
+    print(f"demo:{args.scene}, {'blend masks alone' if args.masks_only else 'first render (32 px)'}, empty numba "
+          f"cache, one thread, {args.rounds} round(s), medians; load average at the end "
+          f"{os.getloadavg()[0]:.1f}\n")
+    print(f"CPU seconds: {median(r['total'] for r in runs):.2f} with an empty cache, {again['total']:.2f} with the "
+          "cache the first process left\n")
+    print("| function compiled | times | CPU s, inclusive | CPU s, exclusive |")
+    print("|---|---|---|---|")
+    names = sorted(runs[0]["exclusive"], key=lambda n: -runs[0]["exclusive"][n])
+    for name in names[:15]:
+        print(f"| {name} | {runs[0]['count'][name]} | {median(r['inclusive'].get(name, 0.0) for r in runs):.2f} | "
+              f"{median(r['exclusive'].get(name, 0.0) for r in runs):.2f} |")
+    if runs[0]["passes"]:
+        print("\nThe ray caster's kernel (`_render_kernel`): numba's compiler passes (seconds of wall time on one "
+              f"thread), and LLVM {median(r['llvm'] for r in runs):.2f} s\n")
+        print("| pass | s |")
+        print("|---|---|")
+        passes = runs[0]["passes"]
+        for name in sorted(passes, key=lambda n: -passes[n])[:8]:
+            print(f"| {name} | {median(r['passes'].get(name, 0.0) for r in runs):.2f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
