@@ -61,6 +61,8 @@ else:
 total = time.process_time() - start
 passes, llvm = {}, None
 for compiled in raycast._render_kernel.overloads.values():
+    if compiled.metadata is None:  # loaded from numba's cache: nothing was compiled
+        continue
     llvm = compiled.metadata["timers"]["llvm_lock"]
     for pipeline in compiled.metadata["pipeline_times"].values():
         for name, t in pipeline.items():
