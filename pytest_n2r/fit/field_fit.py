@@ -25,7 +25,7 @@ from ..data.capture import Capture, CapturedView
 from ..errors import FitError, InvalidArgument
 from ..field.config import FieldConfig
 from ..field.device import resolve_device
-from ..field.grid import SceneField, vertex_ijk
+from ..field.grid import SceneField
 from ..field.lattice import grid_coords, lattice_position
 from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
@@ -36,6 +36,7 @@ from .appearance import Appearance
 from .detail import capture_detail
 from .optim import RowAdam
 from .phases import StepPhases
+from .prior import add_tv_gradient, tv_gradient
 from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
@@ -214,7 +215,11 @@ class _Trainer:
             clock.lap("backward")
             grad = sub.grad
             if c.tv > 0 or c.tv_density > 0:
-                grad += self.tv_weights * self._tv_gradient(unique)
+                if self.compiled:
+                    add_tv_gradient(f.values, unique, self.flat_of_row, self.row_map, f.resolution,
+                                    self.tv_weights, grad)
+                else:
+                    grad += self.tv_weights * tv_gradient(f, self.flat_of_row, unique)
             if not torch.isfinite(grad.sum()):
                 raise FitError(f"the fit diverged at step {self.steps}: non-finite gradients")
             self.adam.step(unique, grad, lr_scale)
@@ -223,23 +228,6 @@ class _Trainer:
             clock.lap("update")
         self.steps += 1
         return float(loss.detach()), -10.0 * math.log10(max(float(mse.detach()), 1e-10))
-
-    @torch.no_grad()
-    def _tv_gradient(self, unique: torch.Tensor) -> torch.Tensor:
-        """The gradient by the ``unique`` rows of ``mean_rows Σ_neighbours (v_row - v_neighbour)²`` (the
-        neighbours held fixed): a pull of each row towards its stored neighbours along x, y and z."""
-        f, res = self.field, self.field.resolution
-        flat = self.flat_of_row[unique]
-        ijk = vertex_ijk(flat, res)
-        grad = torch.zeros(unique.numel(), f.values.shape[1], device=f.device)
-        mine = f.values[unique]
-        for axis, stride in enumerate((res * res, res, 1)):
-            for sign in (-1, 1):
-                inside = (ijk[:, axis] + sign >= 0) & (ijk[:, axis] + sign < res)
-                rows = f.vertex_rows(torch.where(inside, flat + sign * stride, flat))
-                stored = inside & (rows >= 0)
-                grad += torch.where(stored[:, None], mine - f.values[rows.clamp(min=0)], 0.0)
-        return grad * (2.0 / max(unique.numel(), 1))
 
     @torch.no_grad()
     def prune(self) -> None:
