@@ -1,7 +1,7 @@
 """What a longer fit and a finer grid buy: phone captures of the demo scenes (and the fox), a validation split
 for choosing, held-out views for reporting.
 
-Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--steps 1000]
+Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--steps 1000 | --time 3m]
 [--ladder default=48,96,160@0.1,0.35 --ladder planned=48,96,160,256@0.025,0.0875,0.25] [--fox 10m] [--json out.json]``,
 or, to compare other settings of the fit at the same steps, ``--base default --variant base
 --variant tv tv=1e-4 --variant half-rays batch_rays=2048 steps=4000`` (each variant: a name, then
@@ -149,6 +149,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", nargs="*", default=["wall", "object"])
     parser.add_argument("--size", type=int, default=160, help="longer side of the phone photos, pixels")
     parser.add_argument("--steps", type=int, nargs="+", default=[1000], help="optimization steps per fit")
+    parser.add_argument("--time", type=parse_duration, default=None, metavar="DURATION",
+                        help="fit each demo scene within this training time instead of --steps (variants at "
+                             "equal time: compare their CPU s and steps)")
     parser.add_argument("--ladder", type=parse_ladder, action="append", default=None, metavar="NAME=RES@FRACTIONS",
                         help=f"grid ladder to compare (repeatable; default: {' '.join(LADDERS)})")
     parser.add_argument("--base", choices=sorted(BASES), default="phone",
@@ -194,9 +197,10 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix="n2r-budget-") as tmp:
             write_phone_capture(name, tmp, PhoneSettings(size=args.size))
             capture, validation, heldout = split_validation(ingest(tmp))
-        for steps in args.steps:
+        for steps in [None] if args.time else args.steps:
             for variant, changes, own_steps in variants:
-                field, info = run_fit(capture, base.replace(**changes), max_steps=own_steps or steps)
+                limits = {"time_budget_s": args.time} if args.time else {"max_steps": own_steps or steps}
+                field, info = run_fit(capture, base.replace(**changes), **limits)
                 report({"scene": name, "ladder": variant, **info,
                         "validation": score_exact(scene, field, poses(validation)),
                         "heldout": score_exact(scene, field, poses(heldout))})
