@@ -48,7 +48,8 @@ class FieldConfig:
         the density of the vertices a step touches (the mean over them of the squared differences to their
         stored grid neighbours): on fine grids, where a vertex is seen by few rays, it fills in what the
         rays leave free from the neighbourhood instead of from noise. On the density it also thins surfaces
-        seen only at grazing angles, which haze pruning can then cut open.
+        seen only at grazing angles, which haze pruning can then cut open. Defaults ``1e-4`` and ``2e-5``:
+        they won at equal training time on the fox's validation views and a phone capture of the wall.
     ``seed``: seeds ray sampling, so a fit with ``max_steps`` is reproducible.
     """
 
@@ -70,8 +71,8 @@ class FieldConfig:
     prune_weight: float = 1e-3
     prune_every: int = 25
     prune_after: int = 25
-    tv: float = 0.0
-    tv_density: float = 0.0
+    tv: float = 1e-4
+    tv_density: float = 2e-5
     seed: int = 0
 
     def __post_init__(self) -> None:
