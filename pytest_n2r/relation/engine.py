@@ -21,6 +21,8 @@ from ..geometry import Camera
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView, normalize_outputs
+from ..scene.first_render import rendered as kind_rendered
+from ..scene.first_render import renderer_kind
 from ..scene.render_cache import RenderCache
 from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
@@ -105,8 +107,10 @@ class Engine:
         """The render (from the cache where possible) and its render key."""
         start = time.perf_counter()
         renders = self.cache.stats.renders
-        with time_limit(self.settings.timeout, f"rendering the {role} view of {view.name!r}",
-                        escape=True):
+        # a process's first render of a renderer kind compiles its kernels or waits for another process that
+        # compiles them (seconds, minutes on a loaded machine): no hang, so the limit holds from the next one
+        limit = self.settings.timeout if kind_rendered(renderer_kind(self.scene)) else None
+        with time_limit(limit, f"rendering the {role} view of {view.name!r}", escape=True):
             rendered = self.cache.render_keyed(self.scene, c2w, camera, outputs)
         self.run_record.timings["render"] += time.perf_counter() - start
         self.run_record.renders += self.cache.stats.renders - renders

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import time
 
 import numpy as np
 
@@ -92,3 +93,24 @@ def decode_ramp_x(rgb: np.ndarray, half_width: float = 2.0) -> np.ndarray:
     """World X of each pixel of a ``ramp`` render (inverse of the red/green encoding)."""
     u = rgb[..., 0].astype(np.int64) * 256 + rgb[..., 1].astype(np.int64)
     return u / 65535 * 2 * half_width - half_width
+
+
+class SlowPlaneScene(PlaneScene):
+    """:class:`PlaneScene` whose renders sleep ``first_s`` seconds on the first call (as a kernel's compilation)
+    and ``later_s`` on every later one (a renderer kind of its own)."""
+
+    def __init__(self, first_s: float, later_s: float) -> None:
+        super().__init__(name="slow-plane")
+        self.first_s, self.later_s = first_s, later_s
+
+    def _render(self, c2w, camera, outputs):
+        time.sleep(self.first_s if self.calls == 0 else self.later_s)
+        return super()._render(c2w, camera, outputs)
+
+
+def slow_first_render() -> SlowPlaneScene:
+    return SlowPlaneScene(first_s=3.0, later_s=0.0)
+
+
+def slow_later_renders() -> SlowPlaneScene:
+    return SlowPlaneScene(first_s=0.0, later_s=3.0)

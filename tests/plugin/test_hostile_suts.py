@@ -38,6 +38,25 @@ def test_hang(n2r_scene):
     assert result.duration < 5, f"the time-out was retried: {result.duration:.1f} s for a 2 s limit"
 
 
+@pytest.mark.parametrize(("scene", "fails"), [("slow_first_render", False), ("slow_later_renders", True)])
+def test_the_time_limit_spares_a_renderers_first_render_only(n2r_project, monkeypatch, scene, fails):
+    """A renderer kind's first render in a process compiles its kernels (or waits for another process's): not a
+    hang, whatever the limit; a later render as slow is one."""
+    from pytest_n2r.scene import first_render
+
+    monkeypatch.setattr(first_render, "_RENDERED", set())  # the inner run is in this process: no kind rendered
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=2), examples=2)
+def test_slow(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+""")
+    result = n2r_project.run("--n2r-scene", f"tests.plugin.fakescene:{scene}", "--n2r-timeout", "1",
+                             "--n2r-cache-dir", "none")
+    result.assert_outcomes(failed=int(fails), passed=int(not fails))
+    if fails:
+        result.stdout.fnmatch_lines(["*rendering the * view of * did not finish within 1 s*"])
+
+
 def test_a_non_deterministic_sut_is_named_with_both_outputs(n2r_project):
     n2r_project.write("""
 _rng = np.random.default_rng()
