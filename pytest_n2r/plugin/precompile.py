@@ -22,10 +22,12 @@ Run as ``python -m pytest_n2r.plugin.precompile`` with its job as JSON on stdin 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import time
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from ..scene.first_render import claim_kind, renderer_kind
 from .scenes import SceneSpec
@@ -77,6 +79,23 @@ def apart_specs(planned: list[SceneSpec], rendering: SceneSpec | None) -> list[S
     return [spec for spec in planned if first in APART_FAMILIES and family(spec) == first]
 
 
+def open_log(cache_dir: str | Path) -> IO[str]:
+    """The helper log of ``cache_dir`` (``kernel-locks/precompile.log``), opened for appending: every xdist worker
+    starts a helper, and the one that finds another at work says so below that one's lines instead of erasing them."""
+    log_dir = Path(cache_dir) / "kernel-locks"
+    log_dir.mkdir(parents=True, exist_ok=True)
+    return open(log_dir / LOG_NAME, "a")
+
+
+def _restart_log(cache_dir: str | Path) -> None:
+    """Empty the log for the helper that holds the lock (it keeps one session's lines, not every session's)."""
+    try:
+        with open(Path(cache_dir) / "kernel-locks" / LOG_NAME, "r+") as log:
+            log.truncate(0)
+    except OSError:  # no log (the helper was started by hand) or none writable: nothing to empty
+        pass
+
+
 def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path | None, device: str,
                  render_scale: float, apart: list[SceneSpec] | None = None) -> subprocess.Popen | None:
     """Start the helper on ``specs`` (in the order the session uses them), leaving out scenes of
@@ -89,10 +108,8 @@ def start_helper(specs: list[SceneSpec], skip_kind: str, cache_dir: str | Path |
     job = {"scenes": [[s.name, s.kind, s.source] for s in specs], "skip": skip_kind, "cache_dir": str(cache_dir),
            "device": device, "render_scale": render_scale, "sys_path": list(sys.path),
            "apart": [[s.name, s.kind, s.source] for s in apart or ()]}
-    log_dir = Path(cache_dir) / "kernel-locks"
     try:
-        log_dir.mkdir(parents=True, exist_ok=True)
-        log = open(log_dir / LOG_NAME, "w")  # noqa: SIM115 - handed to the child, closed below
+        log = open_log(cache_dir)
     except OSError:
         return None
     with log:
@@ -121,8 +138,10 @@ def run_job(job: dict[str, Any]) -> list[str]:
     done: list[str] = []
     with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held:
         if not held:
-            print("another helper is compiling for this cache directory", flush=True)
+            print(f"helper {os.getpid()}: another helper is compiling for this cache directory", flush=True)
             return done
+        _restart_log(job["cache_dir"])
+        print(f"helper {os.getpid()} started at {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
         for name, kind, source in job.get("apart", ()):
             if session.load(SceneSpec(name, kind, source)).compile_apart():
                 done.append(f"apart:{name}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from pytest_n2r.plugin.precompile import apart_specs, family, helper_specs
+from pytest_n2r.plugin.precompile import HELPER_KIND, LOG_NAME, apart_specs, family, helper_specs, open_log, run_job
 from pytest_n2r.plugin.scenes import SceneSpec
 
 WALL, OBJECT = SceneSpec("wall", "demo", "demo:wall"), SceneSpec("object", "demo", "demo:object")
@@ -47,3 +47,34 @@ def test_precompile_no_leaves_the_session_without_a_helper(pytester, value, star
     session = _build_session(pytester.parseconfig("--n2r-precompile", value))
     assert (session.on_first_render is not None) == starts, \
         f"--n2r-precompile {value}: the session {'would not' if starts else 'would'} start the kernel helper"
+
+
+def _job(cache_dir) -> dict:
+    return {"scenes": [], "apart": [], "skip": "none", "cache_dir": str(cache_dir), "device": "cpu",
+            "render_scale": 1.0}
+
+
+def test_a_second_helper_adds_to_the_log_instead_of_erasing_the_first_ones(tmp_path):
+    with open_log(tmp_path) as first:
+        first.write("first helper's line\n")
+        first.flush()
+        with open_log(tmp_path) as second:
+            second.write("second helper's line\n")
+    text = (tmp_path / "kernel-locks" / LOG_NAME).read_text()
+    assert text == "first helper's line\nsecond helper's line\n", f"one helper's lines were lost: {text!r}"
+
+
+def test_the_helper_holding_the_lock_starts_the_log_afresh_and_one_without_it_leaves_it(tmp_path, capsys):
+    from pytest_n2r.scene.first_render import claim_kind
+
+    with open_log(tmp_path) as log:
+        log.write("the previous session's helper\n")
+    path = tmp_path / "kernel-locks" / LOG_NAME
+    with claim_kind(tmp_path, HELPER_KIND, wait=False) as held:
+        assert held
+        assert run_job(_job(tmp_path)) == []
+        assert path.read_text() == "the previous session's helper\n", "a helper without the lock emptied the log"
+        assert "another helper is compiling" in capsys.readouterr().out
+    assert run_job(_job(tmp_path)) == []
+    assert path.read_text() == "", "the helper holding the lock kept the previous session's lines"
+    assert "started at" in capsys.readouterr().out
