@@ -68,6 +68,8 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
     """
     n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
+    half = 1.0 + shell
+    scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
     for r in prange(o.shape[0]):
         ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
@@ -87,15 +89,20 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
         stride = 1  # lattice steps a sample stands for: doubled at each tail threshold crossed
         crossed = 0
         total = n_inner + shell_samples
+        # inside the cube the contraction is the identity: vertex coordinates are affine in the lattice index
+        gx0, gy0, gz0 = ((ox + t0 * dx + half) * scale, (oy + t0 * dy + half) * scale, (oz + t0 * dz + half) * scale)
+        gdx, gdy, gdz = dt * dx * scale, dt * dy * scale, dt * dz * scale
         while k < total and trans > t_stop:
             # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
             # taken at their middle
             n = min(stride, (n_inner if k < n_inner else total) - k)
             if k < n_inner:
-                t = t0 + (k + 0.5 * n) * dt
+                m = k + 0.5 * n
+                t = t0 + m * dt
+                gx, gy, gz = gx0 + m * gdx, gy0 + m * gdy, gz0 + m * gdz
             else:
                 t = 1.0 / (u0 - (k + 0.5 * n - n_inner) * du)
-            gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
+                gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
             ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
             if k < n_inner and blocks[ci // BLOCK, cj // BLOCK, ck // BLOCK] == 0:
                 t_exit = block_exit(ox, oy, oz, dx, dy, dz, ci // BLOCK, cj // BLOCK, ck // BLOCK, shell, res)

@@ -1,0 +1,109 @@
+"""Fitted-field render speed and error of several git revisions side by side, in one run (ratios survive a
+shared machine).
+
+Run: ``python benchmarks/field_compare.py SCENE main HEAD`` (``SCENE`` a ``.n2r`` file or ``demo:NAME``, the
+fitted twin of demo scene ``NAME``; any revisions, the first is the base of the ratios; ``--sizes``, default
+``480x270,960x540,1920x1080``; ``--views`` held-out views compared, default 3; ``--rounds R``, default 3;
+``--smoke`` for a seconds-long run on tiny input). Each revision's ``pytest_n2r`` is exported with ``git archive``
+(as ``benchmarks/splat_compare.py`` does) and renders the scene with its default settings (RGB) in its own
+process with ``NUMBA_NUM_THREADS=1``, the revisions taking turns ``R`` times, so a change in the machine's load
+hits every revision alike. Per process and size: CPU ms per frame, the least thread CPU time of 3 renders of the
+first held-out view after a warm-up (what an idle core takes, whatever the load), and the PSNR against the truth
+— the held-out photos resized (``INTER_AREA``), or the exact demo scene's render — mean over the views. The
+table gives the median CPU ms over rounds, its ratio to the first revision (> 1: faster), the PSNR and its
+difference to the first revision's, and how many RGB values differ from the first revision's render.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from splat_compare import export, run_in_export
+
+#: Run in a child process whose PYTHONPATH holds one revision's package: argv = scene, sizes, views, repeats, out.
+CHILD = r"""
+import json, sys, time
+import cv2, numpy as np
+from pytest_n2r.metrics.image_quality import psnr
+spec, sizes, n_views, repeats, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
+if spec.startswith("demo:"):
+    from pytest_n2r.demo import load_demo
+    name = spec.removeprefix("demo:").removesuffix("-field")
+    scene, exact = load_demo(name + "-field", device="cpu"), load_demo(name)
+    views = [v for v in scene.views if v.split == "heldout"][:n_views]
+    truth = lambda view, camera: exact.render(view.c2w, camera, ("rgb",)).rgb
+else:
+    from pytest_n2r.scene import load_scene
+    scene = load_scene(spec, device="cpu")
+    views = [v for v in scene.views if v.split == "heldout" and v.image is not None][:n_views]
+    truth = lambda view, camera: cv2.resize(view.image, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
+result = {}
+for size in sizes.split(","):
+    w, h = (int(v) for v in size.split("x"))
+    base = views[0].camera
+    s = (w * h / (base.width * base.height)) ** 0.5  # about w·h pixels, the capture's aspect ratio
+    camera = base.resized(round(base.width * s), round(base.height * s))
+    images = [scene.render(v.c2w, camera, ("rgb",)).rgb for v in views]
+    np.save(f"{out}/{size}.npy", np.stack(images))
+    cpu = []
+    for _ in range(repeats):
+        c0 = time.thread_time()
+        scene.render(views[0].c2w, camera, ("rgb",))
+        cpu.append(time.thread_time() - c0)
+    db = [psnr(truth(v, camera), image) for v, image in zip(views, images)]
+    result[size] = {"cpu_ms": 1e3 * min(cpu), "psnr": float(np.mean(db)), "shape": f"{camera.width}x{camera.height}"}
+import pytest_n2r
+result["package"] = pytest_n2r.__file__
+print(json.dumps(result))
+"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("scene", help="a .n2r file or demo:NAME (the fitted twin of demo scene NAME)")
+    parser.add_argument("revisions", nargs="+", help="git revisions; the first is the base of the ratios")
+    parser.add_argument("--sizes", default="480x270,960x540,1920x1080")
+    parser.add_argument("--views", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--smoke", action="store_true", help="tiny input, to check that the script runs")
+    args = parser.parse_args(argv)
+    sizes, views, rounds, repeats = args.sizes, args.views, args.rounds, 3
+    if args.smoke:
+        sizes, views, rounds, repeats = "96x54", 1, 1, 1
+    with tempfile.TemporaryDirectory(prefix="n2r-field-compare-") as tmp:
+        folders = {rev: export(rev, Path(tmp)) for rev in args.revisions}
+        runs: dict[str, list[dict]] = {rev: [] for rev in args.revisions}
+        for r in range(rounds):
+            for rev, folder in folders.items():
+                out = Path(tmp) / "images" / f"{rev}-{r}"
+                out.mkdir(parents=True, exist_ok=True)
+                runs[rev].append(run_in_export(folder, CHILD, [args.scene, sizes, str(views), str(repeats), str(out)],
+                                               {"NUMBA_NUM_THREADS": "1", "NUMBA_CACHE_DIR": str(Path(tmp) / rev)}))
+        load = os.getloadavg()
+        print(f"{args.scene}, default settings, RGB, one thread, {rounds} rounds, {views} held-out views; load average "
+              f"at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)\n")
+        print("| size | revision | CPU ms per frame | speed-up | PSNR → truth | difference | RGB values differing |")
+        print("|---|---|---|---|---|---|---|")
+        first = args.revisions[0]
+        for size in sizes.split(","):
+            base_ms = statistics.median(run[size]["cpu_ms"] for run in runs[first])
+            base_db = runs[first][0][size]["psnr"]
+            base_images = np.load(Path(tmp) / "images" / f"{first}-0" / f"{size}.npy")
+            for rev, folder in folders.items():
+                ms = statistics.median(run[size]["cpu_ms"] for run in runs[rev])
+                db = runs[rev][0][size]["psnr"]
+                images = np.load(Path(tmp) / "images" / f"{rev}-0" / f"{size}.npy")
+                differing = int(np.sum(images != base_images))
+                print(f"| {runs[rev][0][size]['shape']} | {rev} ({folder.name[:10]}) | {ms:.0f} | "
+                      f"{base_ms / ms:.2f}× | {db:.3f} dB | {db - base_db:+.3f} dB | {differing} of {images.size} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
