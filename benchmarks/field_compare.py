@@ -6,11 +6,12 @@ fitted twin of demo scene ``NAME``; any revisions, the first is the base of the 
 ``480x270,960x540,1920x1080``; ``--views`` held-out views compared, default 3; ``--rounds R``, default 3;
 ``--smoke`` for a seconds-long run on tiny input). Each revision's ``pytest_n2r`` is exported with ``git archive``
 (as ``benchmarks/splat_compare.py`` does) and renders the scene with its default settings (RGB) in its own
-process with ``NUMBA_NUM_THREADS=1``, the revisions taking turns ``R`` times, so a change in the machine's load
-hits every revision alike. Per process and size: CPU ms per frame, the least thread CPU time of 3 renders of the
-first held-out view after a warm-up (what an idle core takes, whatever the load), and the PSNR against the truth
-— the held-out photos resized (``INTER_AREA``), or the exact demo scene's render — mean over the views. The
-table gives the median CPU ms over rounds, its ratio to the first revision (> 1: faster), the PSNR and its
+process, the revisions taking turns ``R`` times, so a change in the machine's load hits every revision alike. Per
+process and size: CPU ms per frame, the least thread CPU time of 3 renders of the first held-out view on one
+numba thread after a warm-up (what an idle core takes, whatever the load); frames/s, 1 / the best wall time of 3
+renders on ``--threads`` numba threads (default 2: read it only from a quiet or locked run); and the PSNR against
+the truth — the held-out photos resized (``INTER_AREA``), or the exact demo scene's render — mean over the views. The
+table gives the medians over rounds, their ratios to the first revision (> 1: faster), the PSNR and its
 difference to the first revision's, and how many RGB values differ from the first revision's render.
 """
 
@@ -29,7 +30,7 @@ from splat_compare import export, run_in_export
 #: Run in a child process whose PYTHONPATH holds one revision's package: argv = scene, sizes, views, repeats, out.
 CHILD = r"""
 import json, sys, time
-import cv2, numpy as np
+import cv2, numba, numpy as np
 from pytest_n2r.metrics.image_quality import psnr
 spec, sizes, n_views, repeats, out = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]
 if spec.startswith("demo:"):
@@ -51,13 +52,22 @@ for size in sizes.split(","):
     camera = base.resized(round(base.width * s), round(base.height * s))
     images = [scene.render(v.c2w, camera, ("rgb",)).rgb for v in views]
     np.save(f"{out}/{size}.npy", np.stack(images))
-    cpu = []
+    all_threads = numba.get_num_threads()
+    numba.set_num_threads(1)  # the render then runs in this thread: its thread time is the frame's CPU time
+    cpu, wall = [], []
     for _ in range(repeats):
         c0 = time.thread_time()
         scene.render(views[0].c2w, camera, ("rgb",))
         cpu.append(time.thread_time() - c0)
+    numba.set_num_threads(all_threads)
+    scene.render(views[0].c2w, camera, ("rgb",))
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        scene.render(views[0].c2w, camera, ("rgb",))
+        wall.append(time.perf_counter() - t0)
     db = [psnr(truth(v, camera), image) for v, image in zip(views, images)]
-    result[size] = {"cpu_ms": 1e3 * min(cpu), "psnr": float(np.mean(db)), "shape": f"{camera.width}x{camera.height}"}
+    result[size] = {"cpu_ms": 1e3 * min(cpu), "fps": 1.0 / min(wall), "psnr": float(np.mean(db)),
+                    "shape": f"{camera.width}x{camera.height}"}
 import pytest_n2r
 result["package"] = pytest_n2r.__file__
 print(json.dumps(result))
@@ -71,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sizes", default="480x270,960x540,1920x1080")
     parser.add_argument("--views", type=int, default=3)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--threads", type=int, default=2, help="numba threads of the frames/s column")
     parser.add_argument("--smoke", action="store_true", help="tiny input, to check that the script runs")
     args = parser.parse_args(argv)
     sizes, views, rounds, repeats = args.sizes, args.views, args.rounds, 3
@@ -83,25 +94,30 @@ def main(argv: list[str] | None = None) -> int:
             for rev, folder in folders.items():
                 out = Path(tmp) / "images" / f"{rev}-{r}"
                 out.mkdir(parents=True, exist_ok=True)
+                env = {"NUMBA_NUM_THREADS": str(args.threads), "NUMBA_CACHE_DIR": str(Path(tmp) / rev)}
                 runs[rev].append(run_in_export(folder, CHILD, [args.scene, sizes, str(views), str(repeats), str(out)],
-                                               {"NUMBA_NUM_THREADS": "1", "NUMBA_CACHE_DIR": str(Path(tmp) / rev)}))
+                                               env))
         load = os.getloadavg()
-        print(f"{args.scene}, default settings, RGB, one thread, {rounds} rounds, {views} held-out views; load average "
-              f"at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)\n")
-        print("| size | revision | CPU ms per frame | speed-up | PSNR → truth | difference | RGB values differing |")
-        print("|---|---|---|---|---|---|---|")
+        print(f"{args.scene}, default settings, RGB, {rounds} rounds, {views} held-out views; load average at the end "
+              f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min)\n")
+        print(f"| size | revision | CPU ms per frame, 1 thread | speed-up | frames/s, {args.threads} threads | ratio | "
+              "PSNR → truth | difference | RGB values differing |")
+        print("|---|---|---|---|---|---|---|---|---|")
         first = args.revisions[0]
         for size in sizes.split(","):
             base_ms = statistics.median(run[size]["cpu_ms"] for run in runs[first])
+            base_fps = statistics.median(run[size]["fps"] for run in runs[first])
             base_db = runs[first][0][size]["psnr"]
             base_images = np.load(Path(tmp) / "images" / f"{first}-0" / f"{size}.npy")
             for rev, folder in folders.items():
                 ms = statistics.median(run[size]["cpu_ms"] for run in runs[rev])
+                fps = statistics.median(run[size]["fps"] for run in runs[rev])
                 db = runs[rev][0][size]["psnr"]
                 images = np.load(Path(tmp) / "images" / f"{rev}-0" / f"{size}.npy")
                 differing = int(np.sum(images != base_images))
                 print(f"| {runs[rev][0][size]['shape']} | {rev} ({folder.name[:10]}) | {ms:.0f} | "
-                      f"{base_ms / ms:.2f}× | {db:.3f} dB | {db - base_db:+.3f} dB | {differing} of {images.size} |")
+                      f"{base_ms / ms:.2f}× | {fps:.2f} | {fps / base_fps:.2f}× | {db:.3f} dB | "
+                      f"{db - base_db:+.3f} dB | {differing} of {images.size} |")
     return 0
 
 
