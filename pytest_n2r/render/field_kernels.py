@@ -93,9 +93,9 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
     half = 1.0 + shell
     scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
     order = _interleaved(o.shape[0])
-    for j in prange(order.shape[0]):  # numba gives each thread a contiguous range of j: groups all over the image
+    for q in prange(order.shape[0]):  # numba gives each thread a contiguous range of q: groups all over the image
         coef = np.empty(12)  # a ray's SH coefficients (colour from the ray's direction), one allocation a group
-        for r in range(order[j] * RAY_GROUP, min(o.shape[0], (order[j] + 1) * RAY_GROUP)):
+        for r in range(order[q] * RAY_GROUP, min(o.shape[0], (order[q] + 1) * RAY_GROUP)):
             ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
             dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
             t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
