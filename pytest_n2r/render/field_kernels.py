@@ -47,28 +47,6 @@ from ..field.kernels import (
 __all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 
-#: Rays a thread renders in a row (neighbouring pixels share cells, so they share cache lines).
-RAY_GROUP = 64
-#: The groups of rays are taken in this many interleaved stripes (see :func:`_interleaved`).
-STRIPES = 16
-
-
-@njit(cache=True)
-def _interleaved(n):
-    """The groups of ``RAY_GROUP`` rays of ``n`` in stripe order (``g % STRIPES``, then ``g``): numba's ``prange``
-    gives each thread one contiguous range of iterations, and rays in neighbouring pixels cost alike (a part of
-    the image is sky, another the object), so a contiguous split of the rays themselves leaves a thread idle while
-    the other finishes the costly part; in stripe order every thread's range spans the whole image."""
-    groups = (n + RAY_GROUP - 1) // RAY_GROUP
-    order = np.empty(groups, dtype=np.int64)
-    j = 0
-    for stripe in range(STRIPES):
-        for g in range(stripe, groups, STRIPES):
-            order[j] = g
-            j += 1
-    return order
-
-
 @njit(cache=True, parallel=True)
 def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
                 density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, rgb, depth,
@@ -88,115 +66,114 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
     direction (exact). ``tail`` (float64, decreasing) and ``min_weight``: see the module docstring (an empty
     ``tail`` takes every lattice sample, 0 colours every sample).
     """
-    n_coef = 12 if sh_degree == 1 else 3
     rr = res * res
     half = 1.0 + shell
     scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
-    order = _interleaved(o.shape[0])
-    for q in prange(order.shape[0]):  # numba gives each thread a contiguous range of q: groups all over the image
-        coef = np.empty(12)  # a ray's SH coefficients (colour from the ray's direction), one allocation a group
-        for r in range(order[q] * RAY_GROUP, min(o.shape[0], (order[q] + 1) * RAY_GROUP)):
-            ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
-            dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
-            t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
-            dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-            # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
-            b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
-            baked = logits.shape[0] > 0
-            carried = 0.0  # weight of the samples not coloured yet
-            last_r, last_g, last_b = background[0], background[1], background[2]
-            trans = 1.0
-            cr = cg = cb = 0.0
-            zd = wsum = 0.0
-            u0 = 1.0 / ts
-            k = 0
-            stride = 1  # lattice steps a sample stands for: doubled at each tail threshold crossed
-            crossed = 0
-            total = n_inner + shell_samples
-            # inside the cube the contraction is the identity: vertex coordinates are affine in the lattice index
-            gx0, gy0, gz0 = (ox + t0 * dx + half) * scale, (oy + t0 * dy + half) * scale, (oz + t0 * dz + half) * scale
-            gdx, gdy, gdz = dt * dx * scale, dt * dy * scale, dt * dz * scale
-            while k < total and trans > t_stop:
-                # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
-                # taken at their middle
-                n = min(stride, (n_inner if k < n_inner else total) - k)
-                if k < n_inner:
-                    m = k + 0.5 * n
-                    t = t0 + m * dt
-                    gx, gy, gz = gx0 + m * gdx, gy0 + m * gdy, gz0 + m * gdz
-                else:
-                    t = 1.0 / (u0 - (k + 0.5 * n - n_inner) * du)
-                    gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
-                ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
-                if k < n_inner and blocks[ci // BLOCK, cj // BLOCK, ck // BLOCK] == 0:
-                    t_exit = block_exit(ox, oy, oz, dx, dy, dz, ci // BLOCK, cj // BLOCK, ck // BLOCK, shell, res)
-                    k_next = max(k + 1, int(math.ceil((t_exit - t0) / dt - 0.5)))
-                    k = min(k_next, n_inner)
-                    continue
-                k += n
-                if not occ[ci, cj, ck]:
-                    continue
-                # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
-                fx, fy, fz = gx - ci, gy - cj, gz - ck
-                ex, ey, ez = 1.0 - fx, 1.0 - fy, 1.0 - fz
-                a00, a01, a10, a11 = ex * ey, ex * fy, fx * ey, fx * fy
-                w0, w1, w2, w3 = a00 * ez, a00 * fz, a01 * ez, a01 * fz
-                w4, w5, w6, w7 = a10 * ez, a10 * fz, a11 * ez, a11 * fz
-                v = (ci * res + cj) * res + ck
-                v0, v1 = vertex_row(rows, v), vertex_row(rows, v + 1)
-                v2, v3 = vertex_row(rows, v + res), vertex_row(rows, v + res + 1)
-                v4, v5 = vertex_row(rows, v + rr), vertex_row(rows, v + rr + 1)
-                v6, v7 = vertex_row(rows, v + rr + res), vertex_row(rows, v + rr + res + 1)
-                sigma_raw = (w0 * density[v0] + w1 * density[v1] + w2 * density[v2] + w3 * density[v3]
-                             + w4 * density[v4] + w5 * density[v5] + w6 * density[v6] + w7 * density[v7])
-                alpha = _alpha(sigma_raw + density_shift, sigma_step * n)
-                if alpha <= 0.0:
-                    continue
-                weight = trans * alpha
-                trans *= 1.0 - alpha
-                while crossed < tail.shape[0] and trans < tail[crossed]:
-                    crossed += 1
-                    stride *= 2
-                if want_depth:
-                    zd += weight * t
-                    wsum += weight
-                if weight + carried < min_weight:
-                    carried += weight
-                    continue
-                weight += carried
-                carried = 0.0
-                if baked:
-                    lr = (w0 * logits[v0, 0] + w1 * logits[v1, 0] + w2 * logits[v2, 0] + w3 * logits[v3, 0]
-                          + w4 * logits[v4, 0] + w5 * logits[v5, 0] + w6 * logits[v6, 0] + w7 * logits[v7, 0])
-                    lg = (w0 * logits[v0, 1] + w1 * logits[v1, 1] + w2 * logits[v2, 1] + w3 * logits[v3, 1]
-                          + w4 * logits[v4, 1] + w5 * logits[v5, 1] + w6 * logits[v6, 1] + w7 * logits[v7, 1])
-                    lb = (w0 * logits[v0, 2] + w1 * logits[v1, 2] + w2 * logits[v2, 2] + w3 * logits[v3, 2]
-                          + w4 * logits[v4, 2] + w5 * logits[v5, 2] + w6 * logits[v6, 2] + w7 * logits[v7, 2])
-                else:
-                    for j in range(1, n_coef + 1):
-                        coef[j - 1] = (w0 * values[v0, j] + w1 * values[v1, j] + w2 * values[v2, j]
-                                       + w3 * values[v3, j] + w4 * values[v4, j] + w5 * values[v5, j]
-                                       + w6 * values[v6, j] + w7 * values[v7, j])
-                    lr, lg, lb = SH_C0 * coef[0], SH_C0 * coef[1], SH_C0 * coef[2]  # colour logits
-                    if n_coef == 12:
-                        lr += b1 * coef[3] + b2 * coef[6] + b3 * coef[9]
-                        lg += b1 * coef[4] + b2 * coef[7] + b3 * coef[10]
-                        lb += b1 * coef[5] + b2 * coef[8] + b3 * coef[11]
-                last_r = 1.0 / (1.0 + math.exp(-lr))
-                last_g = 1.0 / (1.0 + math.exp(-lg))
-                last_b = 1.0 / (1.0 + math.exp(-lb))
-                cr += weight * last_r
-                cg += weight * last_g
-                cb += weight * last_b
-            cr += carried * last_r
-            cg += carried * last_g
-            cb += carried * last_b
-            rgb[r, 0] = cr + trans * background[0]
-            rgb[r, 1] = cg + trans * background[1]
-            rgb[r, 2] = cb + trans * background[2]
-            opacity[r] = 1.0 - trans
+    for r in prange(o.shape[0]):
+        ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
+        dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
+        t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
+        dn = math.sqrt(dx * dx + dy * dy + dz * dz)
+        # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
+        b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
+        baked = logits.shape[0] > 0
+        carried = 0.0  # weight of the samples not coloured yet
+        last_r, last_g, last_b = background[0], background[1], background[2]
+        trans = 1.0
+        cr = cg = cb = 0.0
+        zd = wsum = 0.0
+        u0 = 1.0 / ts
+        k = 0
+        stride = 1  # lattice steps a sample stands for: doubled at each tail threshold crossed
+        crossed = 0
+        total = n_inner + shell_samples
+        # inside the cube the contraction is the identity: vertex coordinates are affine in the lattice index
+        gx0, gy0, gz0 = ((ox + t0 * dx + half) * scale, (oy + t0 * dy + half) * scale, (oz + t0 * dz + half) * scale)
+        gdx, gdy, gdz = dt * dx * scale, dt * dy * scale, dt * dz * scale
+        while k < total and trans > t_stop:
+            # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
+            # taken at their middle
+            n = min(stride, (n_inner if k < n_inner else total) - k)
+            if k < n_inner:
+                m = k + 0.5 * n
+                t = t0 + m * dt
+                gx, gy, gz = gx0 + m * gdx, gy0 + m * gdy, gz0 + m * gdz
+            else:
+                t = 1.0 / (u0 - (k + 0.5 * n - n_inner) * du)
+                gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
+            ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
+            if k < n_inner and blocks[ci // BLOCK, cj // BLOCK, ck // BLOCK] == 0:
+                t_exit = block_exit(ox, oy, oz, dx, dy, dz, ci // BLOCK, cj // BLOCK, ck // BLOCK, shell, res)
+                k_next = max(k + 1, int(math.ceil((t_exit - t0) / dt - 0.5)))
+                k = min(k_next, n_inner)
+                continue
+            k += n
+            if not occ[ci, cj, ck]:
+                continue
+            # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
+            fx, fy, fz = gx - ci, gy - cj, gz - ck
+            ex, ey, ez = 1.0 - fx, 1.0 - fy, 1.0 - fz
+            a00, a01, a10, a11 = ex * ey, ex * fy, fx * ey, fx * fy
+            w0, w1, w2, w3 = a00 * ez, a00 * fz, a01 * ez, a01 * fz
+            w4, w5, w6, w7 = a10 * ez, a10 * fz, a11 * ez, a11 * fz
+            v = (ci * res + cj) * res + ck
+            v0, v1 = vertex_row(rows, v), vertex_row(rows, v + 1)
+            v2, v3 = vertex_row(rows, v + res), vertex_row(rows, v + res + 1)
+            v4, v5 = vertex_row(rows, v + rr), vertex_row(rows, v + rr + 1)
+            v6, v7 = vertex_row(rows, v + rr + res), vertex_row(rows, v + rr + res + 1)
+            sigma_raw = (w0 * density[v0] + w1 * density[v1] + w2 * density[v2] + w3 * density[v3]
+                         + w4 * density[v4] + w5 * density[v5] + w6 * density[v6] + w7 * density[v7])
+            alpha = _alpha(sigma_raw + density_shift, sigma_step * n)
+            if alpha <= 0.0:
+                continue
+            weight = trans * alpha
+            trans *= 1.0 - alpha
+            while crossed < tail.shape[0] and trans < tail[crossed]:
+                crossed += 1
+                stride *= 2
             if want_depth:
-                depth[r] = zd / wsum if trans < 1.0 else ts + far / dn
+                zd += weight * t
+                wsum += weight
+            if weight + carried < min_weight:
+                carried += weight
+                continue
+            weight += carried
+            carried = 0.0
+            vs, ws = (v0, v1, v2, v3, v4, v5, v6, v7), (w0, w1, w2, w3, w4, w5, w6, w7)
+            if baked:
+                lr, lg, lb = _at(logits, 0, vs, ws), _at(logits, 1, vs, ws), _at(logits, 2, vs, ws)
+            else:  # the SH colour: coefficient l·3 + channel is column 1 + l·3 + channel
+                lr = SH_C0 * _at(values, 1, vs, ws)
+                lg = SH_C0 * _at(values, 2, vs, ws)
+                lb = SH_C0 * _at(values, 3, vs, ws)
+                if sh_degree == 1:
+                    lr += b1 * _at(values, 4, vs, ws) + b2 * _at(values, 7, vs, ws) + b3 * _at(values, 10, vs, ws)
+                    lg += b1 * _at(values, 5, vs, ws) + b2 * _at(values, 8, vs, ws) + b3 * _at(values, 11, vs, ws)
+                    lb += b1 * _at(values, 6, vs, ws) + b2 * _at(values, 9, vs, ws) + b3 * _at(values, 12, vs, ws)
+            last_r = 1.0 / (1.0 + math.exp(-lr))
+            last_g = 1.0 / (1.0 + math.exp(-lg))
+            last_b = 1.0 / (1.0 + math.exp(-lb))
+            cr += weight * last_r
+            cg += weight * last_g
+            cb += weight * last_b
+        cr += carried * last_r
+        cg += carried * last_g
+        cb += carried * last_b
+        rgb[r, 0] = cr + trans * background[0]
+        rgb[r, 1] = cg + trans * background[1]
+        rgb[r, 2] = cb + trans * background[2]
+        opacity[r] = 1.0 - trans
+        if want_depth:
+            depth[r] = zd / wsum if trans < 1.0 else ts + far / dn
+
+
+@njit(cache=True, inline="always")
+def _at(table, column, rows, weights):
+    """The trilinear interpolation of ``table[:, column]`` at a sample: its 8 corner ``rows`` and ``weights``."""
+    return (weights[0] * table[rows[0], column] + weights[1] * table[rows[1], column]
+            + weights[2] * table[rows[2], column] + weights[3] * table[rows[3], column]
+            + weights[4] * table[rows[4], column] + weights[5] * table[rows[5], column]
+            + weights[6] * table[rows[6], column] + weights[7] * table[rows[7], column])
 
 
 @njit(cache=True, inline="always")
