@@ -29,6 +29,7 @@ from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .field_kernels import bake_logits, pixel_rays, render_rays
+from .ray_order import tile_order
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -216,14 +217,19 @@ class FieldRenderer:
 
         def trace(index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             n = index.size
+            order = tile_order(index, w)  # traced tile by tile (render/ray_order.py), returned in index's order
+            tiled = index[order]
             rgb = np.empty((n, 3), dtype=np.float32)
             depth = np.empty(n, dtype=np.float32)
             opacity = np.empty(n, dtype=np.float32)
             for start in range(0, n, self.settings.chunk_rays):
                 sl = slice(start, min(n, start + self.settings.chunk_rays))
-                o, d = self._pixel_rays(index[sl], camera, c2w)
+                o, d = self._pixel_rays(tiled[sl], camera, c2w)
                 self._render_rays(o, d, logits, want_depth, rgb[sl], depth[sl], opacity[sl])
-            return rgb, depth, opacity
+            out = np.empty_like(rgb), np.empty_like(depth), np.empty_like(opacity)
+            for result, traced in zip(out, (rgb, depth, opacity)):
+                result[order] = traced
+            return out
 
         if adaptive:
             rgb, depth, opacity, self.last_traced = sample_adaptively(
