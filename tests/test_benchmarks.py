@@ -24,6 +24,7 @@ SMOKE = {
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
     "demo_compare.py": (["HEAD", "--smoke"], "| object | HEAD"),
     "kernel_compile.py": (["--masks-only"], "with the cache the first process left"),
+    "field_compare.py": (["demo:object", "HEAD", "--smoke"], "| HEAD ("),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "render_speed.py": (["demo:object", "--smoke"], "| 96×54 | adaptive=0 |"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),
