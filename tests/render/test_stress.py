@@ -163,6 +163,23 @@ def test_extreme_field_values_give_a_valid_view(magnitude, backend):
 @settings(max_examples=12, deadline=None)
 @given(eye_target=poses(), camera=cameras(max_side=5))
 def test_scaling_the_scene_and_the_pose_gives_the_same_image(scale, eye_target, camera):
+    assert_scale_invariant(scale, eye_target, camera)
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "found by Hypothesis on 2 December 2026, not fixed. Measured: the compiled renderer's opacity is 0.9627 "
+    "at scale 1 (and 1e4) and 0.9697 at 1e-4; with tail=() both are 0.9811 (the torch reference 0.9903 at "
+    "every scale), and an eye just inside the cube (y=-0.9999) is scale-invariant. So the tail's coarser "
+    "samples (RenderSettings.tail) depend on the length of the normalized ray direction (0.5 against 5000) "
+    "for an eye outside the cube; suspected, not shown: a rounding in the block jump's lattice step shifts "
+    "where the doubled samples start"))
+def test_the_tails_samples_keep_the_scale_invariance_for_an_eye_on_the_cube_face():
+    assert_scale_invariant(1e-4, ((0.0, -1.0, 0.0), (0.0, 0.0, 0.0)), Camera(1, 1, 1.0, 1.0, 0.0, 0.0))
+
+
+def assert_scale_invariant(scale: float, eye_target: tuple, camera: Camera) -> None:
+    """The view of the stress field scaled by ``scale`` (scene and pose) is the unscaled view: rgb within one
+    level, opacity to 1e-4, depth times ``scale``."""
     scaled_space = SceneSpace(tuple(np.asarray(SPACE.center) * scale), SPACE.radius * scale, SPACE.shell)
     scaled = stress_field(scaled_space)
     c2w = pose(*eye_target)
