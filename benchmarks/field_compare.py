@@ -84,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=2, help="numba threads of the frames/s column")
     parser.add_argument("--smoke", action="store_true", help="tiny input, to check that the script runs")
     args = parser.parse_args(argv)
+    if not args.scene.startswith("demo:") and not Path(args.scene).is_file():
+        parser.error(f"scene {args.scene!r}: no such file; expected a .n2r scene file or demo:NAME")
     sizes, views, rounds, repeats = args.sizes, args.views, args.rounds, 3
     if args.smoke:
         sizes, views, rounds, repeats = "96x54", 1, 1, 1
