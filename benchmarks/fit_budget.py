@@ -172,6 +172,10 @@ def main(argv: list[str] | None = None) -> int:
             variants = [parse_variant(words) for words in args.variant]
         except argparse.ArgumentTypeError as exc:
             parser.error(str(exc))
+        timed = [name for name, _, own_steps in variants if own_steps and args.time]
+        if timed:
+            parser.error(f"--variant {timed[0]}: steps=N with --time (the demo scenes' fits stop at the time; "
+                         "leave steps out, or use --steps)")
     else:
         variants = [(name, {"resolutions": res, "stage_fractions": stage}, None)
                     for name, res, stage in (args.ladder or [parse_ladder(text) for text in LADDERS])]

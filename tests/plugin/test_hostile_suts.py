@@ -46,6 +46,7 @@ def test_the_time_limit_spares_a_renderers_first_render_only(n2r_project, monkey
 
     monkeypatch.setattr(first_render, "_RENDERED", set())  # the inner run is in this process: no kind rendered
     n2r_project.write("""
+# eps 255: no example fails the metric; what passes or fails here is the time limit
 @metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=2), examples=2)
 def test_slow(n2r_scene):
     return lambda rgb: float(rgb.mean())
