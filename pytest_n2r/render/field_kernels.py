@@ -89,7 +89,9 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
         total = n_inner + shell_samples
         # inside the cube the contraction is the identity: vertex coordinates are affine in the lattice index
         gx0, gy0, gz0 = ((ox + t0 * dx + half) * scale, (oy + t0 * dy + half) * scale, (oz + t0 * dz + half) * scale)
-        gdx, gdy, gdz = dt * dx * scale, dt * dy * scale, dt * dz * scale
+        # a lattice step in vertex units from the unit direction: not from dt·d, whose rounding depends on d's
+        # length, and moves a sample that lies on a cell face to the other cell at another scene scale
+        gdx, gdy, gdz = dx / dn * (step * scale), dy / dn * (step * scale), dz / dn * (step * scale)
         while k < total and trans > t_stop:
             # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
             # taken at their middle

@@ -166,14 +166,12 @@ def test_scaling_the_scene_and_the_pose_gives_the_same_image(scale, eye_target, 
     assert_scale_invariant(scale, eye_target, camera)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "found by Hypothesis on 2 December 2026, not fixed. Measured: the compiled renderer's opacity is 0.9627 "
-    "at scale 1 (and 1e4) and 0.9697 at 1e-4; with tail=() both are 0.9811 (the torch reference 0.9903 at "
-    "every scale), and an eye just inside the cube (y=-0.9999) is scale-invariant. So the tail's coarser "
-    "samples (RenderSettings.tail) depend on the length of the normalized ray direction (0.5 against 5000) "
-    "for an eye outside the cube; suspected, not shown: a rounding in the block jump's lattice step shifts "
-    "where the doubled samples start"))
 def test_the_tails_samples_keep_the_scale_invariance_for_an_eye_on_the_cube_face():
+    """Found by Hypothesis (2 December 2026): this ray runs along a lattice axis from the cube's face, and the
+    tail's doubled samples (taken at the middle of two lattice steps) lie exactly on cell faces. The kernel
+    stepped in vertex units by ``dt·d``, whose rounding depends on the length of ``d`` (0.5 here, 5000 at scale
+    1e-4), so such a sample fell into the occupied cell at one scale and the empty one beside it at the other
+    (opacity 0.9627 against 0.9697). It now steps by the unit direction times the step."""
     assert_scale_invariant(1e-4, ((0.0, -1.0, 0.0), (0.0, 0.0, 0.0)), Camera(1, 1, 1.0, 1.0, 0.0, 0.0))
 
 
