@@ -5,16 +5,20 @@ A fitted field has no more detail than its grid, so at most image sizes neighbou
 last column and row, so every pixel lies in a cell whose four corners are traced). A cell whose corners agree
 (colour and opacity within ``tolerance``, z-depth within ``depth_tolerance`` relatively) is filled by bilinear
 interpolation of its corners; any other cell is split in four: the grid of half the spacing is traced inside it
-and its sub-cells are judged the same way, down to single pixels, which are all traced. Edges, occlusion
-boundaries and texture are therefore traced pixel by pixel; flat colour, sky and slowly shaded surfaces are
-interpolated. A pixel interpolated to opacity 0 is traced too (its ray sees nothing, which is cheap, and its
-depth is its own ray's far end).
+and its sub-cells are judged the same way, down to single pixels. At that last split (cells of 2×2 pixels) the
+pixels left are leaves, never judged again: one in the middle of a cell's edge is interpolated between the
+edge's two traced ends when those two agree (the same test on two pixels), and every other one is traced.
+Edges, occlusion boundaries and texture are therefore traced pixel by pixel across them (along an edge, its
+sides' pixels are interpolated); flat colour, sky and slowly shaded surfaces are interpolated. A pixel
+interpolated to opacity 0 is traced too (its ray sees nothing, which is cheap, and its depth is its own ray's
+far end).
 
 Convention: pixel ``(x, y)`` (column, row) has flat index ``y·width + x`` and is traced at its centre, exactly
 as a full render traces it, so every traced pixel holds the full render's value to the bit. The result
 depends only on the traced values (not on the thread count or on the order of the work): deterministic.
-A feature narrower than the spacing of the coarsest grid that lies between its traced pixels can be missed;
-the stride is therefore chosen by image size (docs/performance.md measures the error).
+A feature narrower than the spacing of the coarsest grid that lies between its traced pixels can be missed,
+and at the last split a feature of one pixel between two agreeing pixels; the stride is therefore chosen by
+image size (docs/performance.md measures the error).
 """
 
 from __future__ import annotations
@@ -40,6 +44,21 @@ def grid_axis(n: int, stride: int) -> np.ndarray:
     return axis if axis[-1] == n - 1 else np.append(axis, n - 1)
 
 
+@njit(cache=True, inline="always")
+def _agree(i00, i01, i10, i11, rgb, depth, opacity, tolerance, depth_tolerance):
+    """Whether pixels ``i00, i01, i10, i11`` agree: colour and opacity spread within ``tolerance``, z-depth within
+    ``depth_tolerance`` of the smallest (two pixels: pass each twice)."""
+    for c in range(3):
+        v00, v01, v10, v11 = rgb[i00, c], rgb[i01, c], rgb[i10, c], rgb[i11, c]
+        if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
+            return False
+    v00, v01, v10, v11 = opacity[i00], opacity[i01], opacity[i10], opacity[i11]
+    if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
+        return False
+    v00, v01, v10, v11 = depth[i00], depth[i01], depth[i10], depth[i11]
+    return max(v00, v01, v10, v11) - min(v00, v01, v10, v11) <= depth_tolerance * min(v00, v01, v10, v11)
+
+
 @njit(cache=True)
 def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split):
     """For each active cell: ``split`` it where its corners disagree, else interpolate its untraced pixels."""
@@ -51,18 +70,7 @@ def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, 
                 continue
             x0, x1 = xs[b], xs[b + 1]
             i00, i01, i10, i11 = y0 * width + x0, y0 * width + x1, y1 * width + x0, y1 * width + x1
-            smooth = True
-            for c in range(3):
-                v00, v01, v10, v11 = rgb[i00, c], rgb[i01, c], rgb[i10, c], rgb[i11, c]
-                if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
-                    smooth = False
-            v00, v01, v10, v11 = opacity[i00], opacity[i01], opacity[i10], opacity[i11]
-            if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
-                smooth = False
-            v00, v01, v10, v11 = depth[i00], depth[i01], depth[i10], depth[i11]
-            if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > depth_tolerance * min(v00, v01, v10, v11):
-                smooth = False
-            if not smooth:
+            if not _agree(i00, i01, i10, i11, rgb, depth, opacity, tolerance, depth_tolerance):
                 split[a, b] = True
                 continue
             for y in range(y0, y1 + 1):
@@ -80,19 +88,36 @@ def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, 
 
 
 @njit(cache=True)
-def _pixels_to_trace(ys, xs, split, stride, height, width, traced):
-    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells."""
+def _pixels_to_trace(ys, xs, split, stride, height, width, traced, rgb, depth, opacity, tolerance, depth_tolerance):
+    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells. At
+    ``stride`` 1 (the last split) a pixel in the middle of a split cell's edge whose two ends agree is
+    interpolated between them instead (they are traced: a split cell's corners are)."""
     want = np.zeros(height * width, dtype=np.bool_)
     for a in range(ys.shape[0] - 1):
+        y0, y1 = ys[a], ys[a + 1]
         for b in range(xs.shape[0] - 1):
             if not split[a, b]:
                 continue
-            for y in range(ys[a], ys[a + 1] + 1):
+            x0, x1 = xs[b], xs[b + 1]
+            for y in range(y0, y1 + 1):
                 if y % stride != 0 and y != height - 1:
                     continue
-                for x in range(xs[b], xs[b + 1] + 1):
-                    if (x % stride == 0 or x == width - 1) and not traced[y * width + x]:
+                for x in range(x0, x1 + 1):
+                    if not (x % stride == 0 or x == width - 1) or traced[y * width + x]:
+                        continue
+                    p, q, f = -1, -1, 0.0  # the ends of the edge the pixel lies on (if it lies on one), and where
+                    if stride == 1 and (y == y0 or y == y1) and x0 < x < x1:
+                        p, q, f = y * width + x0, y * width + x1, (x - x0) / (x1 - x0)
+                    elif stride == 1 and (x == x0 or x == x1) and y0 < y < y1:
+                        p, q, f = y0 * width + x, y1 * width + x, (y - y0) / (y1 - y0)
+                    if p < 0 or not _agree(p, q, p, q, rgb, depth, opacity, tolerance, depth_tolerance):
                         want[y * width + x] = True
+                        continue
+                    i = y * width + x
+                    for c in range(3):
+                        rgb[i, c] = (1 - f) * rgb[p, c] + f * rgb[q, c]
+                    depth[i] = (1 - f) * depth[p] + f * depth[q]
+                    opacity[i] = (1 - f) * opacity[p] + f * opacity[q]
     return np.flatnonzero(want)
 
 
@@ -126,7 +151,8 @@ def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, toler
         if not split.any():
             break
         finer = stride // 2
-        trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced))
+        trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced, rgb, depth, opacity, tolerance,
+                                     depth_tolerance))
         fine_ys, fine_xs = grid_axis(height, finer), grid_axis(width, finer)
         active = split[(fine_ys[:-1] // stride)[:, None], (fine_xs[:-1] // stride)[None, :]]
         ys, xs, stride = fine_ys, fine_xs, finer
