@@ -254,4 +254,5 @@ def fitted_scene(name: str, device: str = "auto") -> FieldScene:
     from ..scene.field_scene import FieldScene
     from ..scene.file import read_scene_file
 
-    return FieldScene(read_scene_file(fitted_path(name)), device=device, name=name + FIELD_SUFFIX)
+    # the field decoded on first use: a run that takes every render of the twin from the cache needs none
+    return FieldScene(read_scene_file(fitted_path(name), lazy_field=True), device=device, name=name + FIELD_SUFFIX)

@@ -5,16 +5,20 @@ against a size cap before it is inflated, so a corrupt or hostile archive is ref
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import io
 import json
+import struct
 import zipfile
 import zlib
+from pathlib import Path
 from typing import Any
 
 from ..errors import SceneFileError
 from . import schema
 
-__all__ = ["MAX_JSON_BYTES", "zip_bytes", "read_member", "read_scene_json"]
+__all__ = ["MAX_JSON_BYTES", "StoredMember", "zip_bytes", "read_member", "read_scene_json"]
 
 #: Every member's timestamp (the earliest a zip can hold), so the bytes do not depend on when they were written.
 ZIP_TIME = (1980, 1, 1, 0, 0, 0)
@@ -36,9 +40,8 @@ def zip_bytes(entries: list[tuple[str, bytes, int, int | None]]) -> bytes:
     return buffer.getvalue()
 
 
-def read_member(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: str) -> bytes:
-    """The bytes of member ``name``, or a :class:`SceneFileError` saying it is missing, corrupt or inflates
-    to more than ``limit`` bytes (``why``: what the limit follows from), checked before inflating it."""
+def _member_info(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: str) -> zipfile.ZipInfo:
+    """The entry of member ``name``, refused when missing or declaring more than ``limit`` bytes."""
     try:
         info = archive.getinfo(name)
     except KeyError:
@@ -46,6 +49,13 @@ def read_member(archive: zipfile.ZipFile, name: str, source: str, limit: int, wh
     if info.file_size > limit:
         raise SceneFileError(f"{source}: {name!r} inflates to {info.file_size:,} bytes, more than the {limit:,} "
                              f"bytes {why} allows; the file is corrupt or was not written by pytest-n2r")
+    return info
+
+
+def read_member(archive: zipfile.ZipFile, name: str, source: str, limit: int, why: str) -> bytes:
+    """The bytes of member ``name``, or a :class:`SceneFileError` saying it is missing, corrupt or inflates
+    to more than ``limit`` bytes (``why``: what the limit follows from), checked before inflating it."""
+    info = _member_info(archive, name, source, limit, why)
     try:
         with archive.open(info) as fh:
             data = fh.read(limit + 1)
@@ -54,6 +64,77 @@ def read_member(archive: zipfile.ZipFile, name: str, source: str, limit: int, wh
     if len(data) > limit:  # pragma: no cover - zipfile stops at the declared size
         raise SceneFileError(f"{source}: {name!r} inflates past its declared size")
     return data
+
+
+#: The fixed part of a zip local file header: signature, then fields up to the name and extra lengths.
+_LOCAL_HEADER = struct.Struct("<4s22xHH")
+
+
+class StoredMember:
+    """One member of a zip archive as it is stored (compressed), read once: its :attr:`digest` names its
+    content without inflating it, and :meth:`inflate` gives its bytes later, from the same stored bytes (so
+    what is inflated is what the digest names, even if the file changes on disk meanwhile). Only deflated and
+    stored members, not encrypted (what pytest-n2r writes); :meth:`read` says ``None`` for others."""
+
+    def __init__(self, info: zipfile.ZipInfo, stored: bytes, source: str):
+        self.info, self.stored, self.source = info, stored, source
+
+    @classmethod
+    def read(cls, archive: zipfile.ZipFile, path: Path, name: str, source: str, limit: int,
+             why: str) -> StoredMember:
+        """Member ``name`` of ``archive`` (the file at ``path``) as stored, refused as :func:`read_member`
+        refuses it (missing, corrupt, or inflating to more than ``limit`` bytes). A member compressed
+        otherwise than pytest-n2r writes is inflated now and kept as if stored uncompressed."""
+        info = _member_info(archive, name, source, limit, why)
+        stored = cls._stored_bytes(path, info, source)
+        if stored is None:
+            data = read_member(archive, name, source, limit, why)
+            info = copy.copy(info)
+            info.compress_type, info.compress_size, info.flag_bits = zipfile.ZIP_STORED, len(data), 0
+            return cls(info, data, source)
+        return cls(info, stored, source)
+
+    @staticmethod
+    def _stored_bytes(path: Path, info: zipfile.ZipInfo, source: str) -> bytes | None:
+        """The stored bytes of ``info`` in the archive at ``path``; ``None`` for a member this class does not
+        inflate; a :class:`SceneFileError` when its local header or data is cut short."""
+        if info.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) or info.flag_bits & 0x1:
+            return None
+        try:
+            with open(path, "rb") as fh:
+                fh.seek(info.header_offset)
+                signature, name_length, extra_length = _LOCAL_HEADER.unpack(fh.read(_LOCAL_HEADER.size))
+                if signature != b"PK\x03\x04":
+                    raise ValueError("no local file header where the central directory points")
+                fh.seek(info.header_offset + _LOCAL_HEADER.size + name_length + extra_length)
+                stored = fh.read(info.compress_size)
+        except (OSError, ValueError, struct.error) as exc:
+            raise SceneFileError(f"{source}: {info.filename!r} is corrupt or truncated ({exc})") from None
+        if len(stored) != info.compress_size:
+            raise SceneFileError(f"{source}: {info.filename!r} is corrupt or truncated ({len(stored):,} of "
+                                 f"{info.compress_size:,} stored bytes)")
+        return stored
+
+    @property
+    def digest(self) -> str:
+        """Hex SHA-256 of the member as stored, with its compression method, size and CRC-32."""
+        i = self.info
+        h = hashlib.sha256(f"{i.compress_type}/{i.file_size}/{i.CRC}/".encode())
+        h.update(self.stored)
+        return h.hexdigest()
+
+    def inflate(self) -> bytes:
+        """The member's bytes; a :class:`SceneFileError` when they do not inflate to its size and CRC-32."""
+        i = self.info
+        try:
+            data = self.stored if i.compress_type == zipfile.ZIP_STORED else \
+                zlib.decompressobj(-zlib.MAX_WBITS).decompress(self.stored, i.file_size + 1)
+        except zlib.error as exc:
+            raise SceneFileError(f"{self.source}: {i.filename!r} is corrupt or truncated ({exc})") from None
+        if len(data) != i.file_size or zlib.crc32(data) != i.CRC:
+            raise SceneFileError(f"{self.source}: {i.filename!r} is corrupt or truncated (it does not inflate to "
+                                 f"its {i.file_size:,} bytes and CRC-32)")
+        return data
 
 
 def _not_strict_json(token: str) -> Any:

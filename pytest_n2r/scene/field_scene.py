@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from ..field.device import resolve_device
+from ..field.grid import SceneField
 from ..geometry import Camera
 from ..render.field_render import RENDER_VERSION, FieldRenderer, RenderSettings
 from .base import Scene
@@ -36,10 +37,15 @@ class FieldScene(Scene):
         self.reference_length = file.reference_length
         self.metres_per_unit = file.metres_per_unit
         self.device = resolve_device(device)
-        self.field = file.field.to(self.device)
         self.settings = settings or RenderSettings()
         self._backend = self.settings.backend_on(self.device)  # a bad backend is an error now, not at a render
         self._hash: str | None = None
+
+    @functools.cached_property
+    def field(self) -> SceneField:
+        """The scene field on :attr:`device` (decoded on first use when the file was read with
+        ``lazy_field=True``: a run whose renders all come from the render cache decodes none)."""
+        return self.file.field.to(self.device)
 
     @functools.cached_property
     def _renderer(self) -> FieldRenderer:
@@ -59,11 +65,12 @@ class FieldScene(Scene):
 
     @property
     def content_hash(self) -> str:
-        """SHA-256 of the stored field bytes, the views, the render settings and backend, and
+        """SHA-256 of the stored field member, the views, the render settings and backend, and
         :data:`RENDER_VERSION`: anything that can change a rendered pixel."""
         if self._hash is None:
             h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{self.backend}/{self.file.field_digest}".encode())
-            settings = {**self.settings.to_dict(), "background": list(self.settings.background_of(self.field))}
+            background = self.settings.background if self.settings.background is not None else self.file.background
+            settings = {**self.settings.to_dict(), "background": list(background)}
             h.update(json.dumps(settings, sort_keys=True).encode())
             h.update(np.asarray([self.reference_length, self.metres_per_unit or 0.0]).tobytes())
             for v in self.views:

@@ -9,26 +9,28 @@ names and shapes and the images, raising :class:`~pytest_n2r.errors.SceneFileErr
 
 from __future__ import annotations
 
-import hashlib
+import dataclasses
+import functools
 import json
 import math
 import os
 import zipfile
 import zlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._validation import as_unit_rgb
 from ..data.atomic import atomic_write_bytes
 from ..data.capture import Capture
 from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
 from ..field.grid import SceneField
 from . import schema
-from .archive import read_member, read_scene_json, zip_bytes
+from .archive import StoredMember, read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
@@ -40,21 +42,30 @@ class SceneFile:
     ``views`` carry their real photos (H×W×3 uint8 RGB) when the file stores them and they were read;
     ``bounds`` is the ``(2, 3)`` box ``[min, max]`` of the captured region and ``reference_length`` the
     median z-depth of the surface seen by the training cameras, both in scene units; ``field_digest`` is the
-    SHA-256 of the stored ``field.safetensors`` bytes; ``size_bytes`` the size of the file.
+    SHA-256 of the stored ``field.safetensors`` member (as stored in the archive, with its compression method,
+    size and CRC-32: a digest that needs no inflating); ``background`` the field's (RGB in [0, 1]);
+    ``size_bytes`` the size of the file. :attr:`field` is decoded from the member's stored bytes when first
+    used (at once unless the file was read with ``lazy_field=True``).
     """
 
     path: Path
     version: int
     views: tuple[SceneView, ...]
-    field: SceneField
     config: FieldConfig
     report: dict
     reference_length: float
     metres_per_unit: float | None
     bounds: np.ndarray
     field_digest: str
+    background: tuple[float, float, float]
     size_bytes: int
     images_stored: int
+    decode_field: Callable[[], SceneField] = dataclasses.field(repr=False)
+
+    @functools.cached_property
+    def field(self) -> SceneField:
+        """The scene field (decoded and checked on first use; a :class:`SceneFileError` if it does not check)."""
+        return self.decode_field()
 
 
 def save_scene(
@@ -334,16 +345,15 @@ def check_scene_file(path: str | os.PathLike) -> None:
         _field_limit(archive, field_meta, str(path))
 
 
-def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFile:
+def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field: bool = False) -> SceneFile:
     """Read and check the scene file ``path``; ``images=False`` skips decoding the stored photos.
 
     Raises :class:`~pytest_n2r.errors.SceneFileError` when the file is missing, not a zip or truncated, has
     no ``scene.json``, is of another format or version, lacks keys, or holds missing or mis-shaped tensors
-    or an image that does not decode.
+    or an image that does not decode. ``lazy_field=True`` leaves inflating and checking the field's tensors
+    to the first use of :attr:`SceneFile.field` (which raises then): a session whose renders all come from
+    the render cache needs only the scene's views and content hash (on the demo twins 0.3-0.5 s a scene).
     """
-    import safetensors
-    import safetensors.torch
-
     path = Path(path)
     source = str(path)
     archive = _open(path)
@@ -351,19 +361,18 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
     with archive:
         data = read_scene_json(archive, source)
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
-        payload = read_member(archive, schema.FIELD_FILE, source, _field_limit(archive, field_meta, source),
-                          "its safetensors header")
-        try:
-            tensors = safetensors.torch.load(payload)
-        except safetensors.SafetensorError as exc:
-            raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
+        limit = _field_limit(archive, field_meta, source)
+        stored = StoredMember.read(archive, path, schema.FIELD_FILE, source, limit, "its safetensors header")
         if "background" not in field_meta:
             # written before fields stored their background: a fit whose config has random_background on was
             # composited over random colours (mid-grey in expectation), an older one over black
             grey = data["config"].get("random_background") is True
             field_meta = {**field_meta, "background": [0.5 if grey else 0.0] * 3}
-        field = SceneField.from_tensors({**field_meta, "space": data["normalization"]}, tensors,
-                                        f"{source}: {schema.FIELD_FILE}")
+        field_meta = {**field_meta, "space": data["normalization"]}
+        background = as_unit_rgb(field_meta["background"])
+        if background is None:
+            raise SceneFileError(f"{source}: {schema.FIELD_FILE}: field background {field_meta['background']!r} "
+                                 "is not three values in [0, 1]")
         views = []
         for index, (name, camera, c2w, split, member) in enumerate(frames):
             image = None
@@ -373,9 +382,25 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True) -> SceneFil
                                        f"a {camera.width}x{camera.height} photo")
                 image = _decode_jpeg(payload_jpeg, member, name, source, camera.width, camera.height)
             views.append(SceneView(index, name, camera, c2w, split, image))
-    return SceneFile(
-        path=path, version=schema.FORMAT_VERSION, views=tuple(views), field=field, config=config,
-        report=data["report"], reference_length=reference_length, metres_per_unit=metres_per_unit,
-        bounds=bounds, field_digest=hashlib.sha256(payload).hexdigest(), size_bytes=size,
+    scene = SceneFile(
+        path=path, version=schema.FORMAT_VERSION, views=tuple(views), config=config, report=data["report"],
+        reference_length=reference_length, metres_per_unit=metres_per_unit, bounds=bounds,
+        field_digest=stored.digest, background=background, size_bytes=size,
         images_stored=sum(m is not None for *_, m in frames),
+        decode_field=functools.partial(_decode_field, stored, field_meta, source),
     )
+    if not lazy_field:
+        scene.field  # noqa: B018 - decoded and checked now: a bad field fails the read
+    return scene
+
+
+def _decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneField:
+    """The field of a scene file from its stored ``field.safetensors`` member, checked."""
+    import safetensors
+    import safetensors.torch
+
+    try:
+        tensors = safetensors.torch.load(stored.inflate())
+    except safetensors.SafetensorError as exc:
+        raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
+    return SceneField.from_tensors(field_meta, tensors, f"{source}: {schema.FIELD_FILE}")

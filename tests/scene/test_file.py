@@ -248,6 +248,35 @@ def test_a_corrupt_member_is_named(tmp_path):
         read_scene_file(bad)
 
 
+@pytest.mark.parametrize("case", ["missing tensor", "mis-shaped tensor"])
+def test_a_lazy_read_checks_the_field_on_first_use(tmp_path, case):
+    """``lazy_field=True``: the same views, digest and background as a full read, the field decoded (bit for bit
+    the same) only when used; a bad field is the same error then."""
+    good = write(tmp_path / "good.n2r")
+    eager, lazy = read_scene_file(good), read_scene_file(good, lazy_field=True)
+    assert "field" not in vars(lazy), "a lazy read decoded the field"
+    assert (lazy.field_digest, lazy.background, len(lazy.views)) == \
+        (eager.field_digest, eager.background, len(eager.views))
+    assert lazy.background == eager.field.background, "the file's background is not its field's"
+    for name, tensor in eager.field.tensors().items():
+        assert torch.equal(tensor, lazy.field.tensors()[name]), f"tensor {name!r} differs when decoded lazily"
+    make, message = BAD_FILES[case]
+    bad = tmp_path / "bad.n2r"
+    make(good, bad)
+    scene = read_scene_file(bad, lazy_field=True)
+    with pytest.raises(SceneFileError, match=message):
+        scene.field  # noqa: B018
+
+
+def test_the_field_digest_names_the_stored_member(tmp_path):
+    """Another field gives another digest, the same field written twice the same one (no inflating needed)."""
+    field = random_field()
+    first, again = write(tmp_path / "a.n2r", field), write(tmp_path / "b.n2r", field)
+    other = write(tmp_path / "c.n2r", random_field(seed=1))
+    digests = [read_scene_file(p, lazy_field=True).field_digest for p in (first, again, other)]
+    assert digests[0] == digests[1] != digests[2], f"digests {digests}"
+
+
 def test_photos_in_subfolders_with_the_same_name_keep_their_own_copy(tmp_path):
     views = [type(v)(v.index, name, v.camera, v.c2w, v.split, v.image)
              for v, name in zip(tiny_views(3), ["left/img 1.png", "right/img 1.png", "img_1"])]
