@@ -15,7 +15,6 @@ import json
 import math
 import os
 import zipfile
-import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +31,7 @@ from ..field.grid import SceneField
 from . import schema
 from .archive import StoredMember, read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
+from .field_member import decode_field, field_limit
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 
@@ -175,10 +175,6 @@ def _encode_jpeg(image: np.ndarray, quality: int, name: str) -> bytes:
     return encoded.tobytes()
 
 
-#: The most bytes a safetensors header may take (three tensors take under 300 bytes).
-_MAX_TENSOR_HEADER_BYTES = 2**20
-
-
 def _jpeg_size(payload: bytes) -> tuple[int, int] | None:
     """``(width, height)`` from a JPEG's start-of-frame marker, read before decoding (so a photo claiming
     60 000 × 60 000 pixels is refused without inflating it); ``None`` when no marker is found."""
@@ -208,50 +204,6 @@ def _decode_jpeg(payload: bytes, member: str, name: str, source: str, width: int
         raise SceneFileError(f"{source}: {member} is {image.shape[1]}x{image.shape[0]} pixels; frame {name!r} has "
                              f"a {width}x{height} camera")
     return np.ascontiguousarray(image[:, :, ::-1])  # BGR → RGB
-
-
-def _field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
-    """The size of ``field.safetensors`` by its own header, once that is checked against the most the grid
-    ``field_meta`` declares can take (the occupancy: one byte per cell; at most every vertex stored, an int64
-    index and float16 values each). Only the header is read, so a member that would inflate to gigabytes
-    is refused before it is."""
-    from ..field.grid import n_sh_coefficients
-
-    res, sh_degree = field_meta.get("resolution"), field_meta.get("sh_degree")
-    if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.resolution={res!r}; expected an integer in "
-                             "4..2048 (grid vertices per axis)")
-    if sh_degree not in (0, 1) or isinstance(sh_degree, bool):
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0 or 1")
-    width = 1 + 3 * n_sh_coefficients(sh_degree)
-    where = f"{source}: {schema.FIELD_FILE}"
-    try:
-        info = archive.getinfo(schema.FIELD_FILE)
-        with archive.open(info) as fh:
-            head = fh.read(8)
-            length = int.from_bytes(head, "little") if len(head) == 8 else -1
-            if not 2 <= length <= _MAX_TENSOR_HEADER_BYTES:
-                raise SceneFileError(f"{where} is not a valid safetensors file (its header claims {length:,} "
-                                     f"bytes; at most {_MAX_TENSOR_HEADER_BYTES:,} expected)")
-            header = json.loads(fh.read(length))
-    except KeyError:
-        raise SceneFileError(f"{source}: the archive has no {schema.FIELD_FILE!r}") from None
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
-        raise SceneFileError(f"{source}: {schema.FIELD_FILE!r} is corrupt or truncated ({exc})") from None
-    except (ValueError, RecursionError) as exc:
-        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not JSON: {exc})") from None
-    if not isinstance(header, dict):
-        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not a JSON object)")
-    try:
-        end = max([int(entry["data_offsets"][1]) for name, entry in header.items() if name != "__metadata__"],
-                  default=0)
-    except (TypeError, KeyError, IndexError, ValueError):
-        raise SceneFileError(f"{where} is not a valid safetensors file (a tensor without data_offsets)") from None
-    total = 8 + length + end
-    if end > (res - 1) ** 3 + res ** 3 * (8 + 2 * width):  # names, shapes, dtypes: checked once loaded
-        raise SceneFileError(f"{where}: its tensors claim {end:,} bytes, more than the declared {res}³ grid of "
-                             f"SH degree {sh_degree} can hold; the file is corrupt or not written by `n2r fit`")
-    return total
 
 
 #: How far the field's normalization may stray from the scene's own scale, in reference lengths: a fit
@@ -342,7 +294,7 @@ def check_scene_file(path: str | os.PathLike) -> None:
         if isinstance(data, dict) and data.get("representation") == "splats":  # `n2r import`: its reader checks it
             return
         field_meta = _check_json(data, str(path))[-1]
-        _field_limit(archive, field_meta, str(path))
+        field_limit(archive, field_meta, str(path))
 
 
 def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field: bool = False) -> SceneFile:
@@ -361,7 +313,7 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
     with archive:
         data = read_scene_json(archive, source)
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
-        limit = _field_limit(archive, field_meta, source)
+        limit = field_limit(archive, field_meta, source)
         stored = StoredMember.read(archive, path, schema.FIELD_FILE, source, limit, "its safetensors header")
         if "background" not in field_meta:
             # written before fields stored their background: a fit whose config has random_background on was
@@ -387,20 +339,8 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
         reference_length=reference_length, metres_per_unit=metres_per_unit, bounds=bounds,
         field_digest=stored.digest, background=background, size_bytes=size,
         images_stored=sum(m is not None for *_, m in frames),
-        decode_field=functools.partial(_decode_field, stored, field_meta, source),
+        decode_field=functools.partial(decode_field, stored, field_meta, source),
     )
     if not lazy_field:
         scene.field  # noqa: B018 - decoded and checked now: a bad field fails the read
     return scene
-
-
-def _decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneField:
-    """The field of a scene file from its stored ``field.safetensors`` member, checked."""
-    import safetensors
-    import safetensors.torch
-
-    try:
-        tensors = safetensors.torch.load(stored.inflate())
-    except safetensors.SafetensorError as exc:
-        raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
-    return SceneField.from_tensors(field_meta, tensors, f"{source}: {schema.FIELD_FILE}")

@@ -1,0 +1,72 @@
+"""The field member of a scene file (``field.safetensors``): its size, refused by its header before it is
+inflated, and the checked :class:`~pytest_n2r.field.grid.SceneField` decoded from it."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+import zlib
+
+from ..errors import SceneFileError
+from ..field.grid import SceneField, n_sh_coefficients
+from . import schema
+from .archive import StoredMember
+
+__all__ = ["decode_field", "field_limit"]
+
+#: The most bytes a safetensors header may take (three tensors take under 300 bytes).
+_MAX_TENSOR_HEADER_BYTES = 2**20
+
+
+def field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
+    """The size of ``field.safetensors`` by its own header, once that is checked against the most the grid
+    ``field_meta`` declares can take (the occupancy: one byte per cell; at most every vertex stored, an int64
+    index and float16 values each). Only the header is read, so a member that would inflate to gigabytes
+    is refused before it is."""
+    res, sh_degree = field_meta.get("resolution"), field_meta.get("sh_degree")
+    if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.resolution={res!r}; expected an integer in "
+                             "4..2048 (grid vertices per axis)")
+    if sh_degree not in (0, 1) or isinstance(sh_degree, bool):
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0 or 1")
+    width = 1 + 3 * n_sh_coefficients(sh_degree)
+    where = f"{source}: {schema.FIELD_FILE}"
+    try:
+        info = archive.getinfo(schema.FIELD_FILE)
+        with archive.open(info) as fh:
+            head = fh.read(8)
+            length = int.from_bytes(head, "little") if len(head) == 8 else -1
+            if not 2 <= length <= _MAX_TENSOR_HEADER_BYTES:
+                raise SceneFileError(f"{where} is not a valid safetensors file (its header claims {length:,} "
+                                     f"bytes; at most {_MAX_TENSOR_HEADER_BYTES:,} expected)")
+            header = json.loads(fh.read(length))
+    except KeyError:
+        raise SceneFileError(f"{source}: the archive has no {schema.FIELD_FILE!r}") from None
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
+        raise SceneFileError(f"{source}: {schema.FIELD_FILE!r} is corrupt or truncated ({exc})") from None
+    except (ValueError, RecursionError) as exc:
+        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not JSON: {exc})") from None
+    if not isinstance(header, dict):
+        raise SceneFileError(f"{where} is not a valid safetensors file (its header is not a JSON object)")
+    try:
+        end = max([int(entry["data_offsets"][1]) for name, entry in header.items() if name != "__metadata__"],
+                  default=0)
+    except (TypeError, KeyError, IndexError, ValueError):
+        raise SceneFileError(f"{where} is not a valid safetensors file (a tensor without data_offsets)") from None
+    total = 8 + length + end
+    if end > (res - 1) ** 3 + res ** 3 * (8 + 2 * width):  # names, shapes, dtypes: checked once loaded
+        raise SceneFileError(f"{where}: its tensors claim {end:,} bytes, more than the declared {res}³ grid of "
+                             f"SH degree {sh_degree} can hold; the file is corrupt or not written by `n2r fit`")
+    return total
+
+
+def decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneField:
+    """The field of a scene file from its stored ``field.safetensors`` member, checked."""
+    import safetensors
+    import safetensors.torch
+
+    try:
+        tensors = safetensors.torch.load(stored.inflate())
+    except safetensors.SafetensorError as exc:
+        raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
+    return SceneField.from_tensors(field_meta, tensors, f"{source}: {schema.FIELD_FILE}")
