@@ -1,6 +1,6 @@
 """How many training pixels a voxel spans: the fox and the demo captures against the grids they are fitted with.
 
-Run: ``python benchmarks/capture_detail.py [--fox-grid 160] [--demo-grid 384] [--demo-size 240x135]``
+Run: ``python benchmarks/capture_detail.py [--fox-grid 192] [--demo-grid 384] [--demo-size 240x135]``
 
 For each capture, :func:`pytest_n2r.fit.detail.capture_detail` in the space a fit would build: the
 training views' pixel footprint (z-depth / fx at the median depth of the sparse points each sees) where
@@ -21,6 +21,7 @@ import numpy as np
 from pytest_n2r.data import ingest
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.demo import capture as demo_capture
+from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.space import SceneSpace
 from pytest_n2r.fit.detail import capture_detail
 
@@ -40,7 +41,8 @@ def row(name: str, capture: Capture, grid: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fox-grid", type=int, default=160, help="the fox fit's finest grid (default fit: 160)")
+    finest = FieldConfig().resolutions[-1]
+    parser.add_argument("--fox-grid", type=int, default=finest, help=f"the fox fit's finest grid (default: {finest})")
     parser.add_argument("--demo-grid", type=int, default=384, help="the demo twins' finest grid (shipped: 384)")
     parser.add_argument("--demo-size", default="240x135", help="the demo captures' photo size (shipped: 240x135)")
     args = parser.parse_args(argv)
