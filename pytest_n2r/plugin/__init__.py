@@ -24,8 +24,9 @@ from .options import add_options, is_used, read_options
 #: When pytest loaded the plugin (early in its start-up: before conftest files and test modules are imported).
 _LOADED = time.perf_counter()
 
-#: Baselines, CI gating and reports live in their own plugin module, loaded (and disabled) with this one.
-pytest_plugins = ["pytest_n2r.plugin.report"]
+#: Baselines, CI gating and reports, and the order of tests under pytest-xdist, live in their own plugin modules,
+#: loaded (and disabled) with this one.
+pytest_plugins = ["pytest_n2r.plugin.report", "pytest_n2r.plugin.schedule"]
 
 SCENE_MARKER = "n2r_scene"
 #: Attribute holding the Relation on a ``@metamorphic`` test function (set by pytest_n2r.plugin.marker).

@@ -1,0 +1,59 @@
+"""Under pytest-xdist the tests on fitted scenes run first and tests are handed out one at a time; a serial
+run keeps pytest's order (pytest_n2r.plugin.schedule)."""
+
+from __future__ import annotations
+
+import pytest
+
+#: Inner tests that log the order they ran in, per process; the last one is on a fitted demo twin.
+ORDERED = """
+import os
+import pytest
+
+
+def _log(request):
+    with open({log!r}, "a") as f:
+        f.write(os.environ.get("PYTEST_XDIST_WORKER", "serial") + " " + request.node.name + "\\n")
+
+
+@pytest.mark.parametrize("k", range(6))
+def test_exact(n2r_scene, k, request):
+    _log(request)
+
+
+@pytest.mark.n2r_scene("demo:wall-field")
+def test_fitted(n2r_scene, request):
+    _log(request)
+"""
+
+
+def _runs(log) -> dict[str, list[str]]:
+    by_process: dict[str, list[str]] = {}
+    for line in log.read_text().splitlines():
+        process, name = line.split(" ", 1)
+        by_process.setdefault(process, []).append(name)
+    log.unlink()
+    return by_process
+
+
+def test_the_tests_on_fitted_scenes_run_first_under_xdist_only(pytester):
+    pytest.importorskip("xdist")
+    log = pytester.path / "order.log"
+    pytester.makepyfile(test_order=ORDERED.format(log=str(log)))
+    args = ("-p", "no:cacheprovider", "-p", "no:benchmark", "--n2r-scene", "demo:wall")
+    pytester.runpytest(*args).assert_outcomes(passed=7)
+    assert _runs(log)["serial"][-1] == "test_fitted[wall-field]", "a serial run must keep pytest's order"
+    pytester.runpytest(*args, "-n", "2").assert_outcomes(passed=7)
+    runs = _runs(log)
+    first = [names[0] for names in runs.values()]
+    assert "test_fitted[wall-field]" in first, f"the fitted-scene test did not run first in its worker: {runs}"
+
+
+def test_xdist_hands_out_one_test_at_a_time_unless_told(pytester):
+    pytest.importorskip("xdist")
+    pytester.makeini("[pytest]\nn2r_scenes = demo:wall\n")
+    # "--dist load" is what xdist's command line sets for "-n 2" before pytest_configure (parseconfigure skips it)
+    assert pytester.parseconfigure("-n", "2", "--dist", "load").option.maxschedchunk == 1
+    assert pytester.parseconfigure("-n", "2", "--dist", "load", "--maxschedchunk", "4").option.maxschedchunk == 4, \
+        "a chunk size the user gave must stay"
+    assert pytester.parseconfigure().option.maxschedchunk is None, "a serial run must not be touched"
