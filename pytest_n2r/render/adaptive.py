@@ -7,9 +7,10 @@ last column and row, so every pixel lies in a cell whose four corners are traced
 interpolation of its corners; any other cell is split in four: the grid of half the spacing is traced inside it
 and its sub-cells are judged the same way, down to single pixels. At that last split (cells of 2×2 pixels) the
 pixels left are leaves, never judged again: one in the middle of a cell's edge is interpolated between the
-edge's two traced ends when those two agree (the same test on two pixels), and every other one is traced.
-Edges, occlusion boundaries and texture are therefore traced pixel by pixel across them (along an edge, its
-sides' pixels are interpolated); flat colour, sky and slowly shaded surfaces are interpolated. A pixel
+edge's two traced ends when those two agree (the same test on two pixels); then the cell's centre, between its
+two traced neighbours on its row, or else on its column, when they agree; every other leaf is traced. Edges,
+occlusion boundaries and texture are therefore traced pixel by pixel across them (along an edge, its sides'
+pixels are interpolated); flat colour, sky and slowly shaded surfaces are interpolated. A pixel
 interpolated to opacity 0 is traced too (its ray sees nothing, which is cheap, and its depth is its own ray's
 far end).
 
@@ -87,11 +88,26 @@ def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, 
                     opacity[i] = w00 * opacity[i00] + w01 * opacity[i01] + w10 * opacity[i10] + w11 * opacity[i11]
 
 
+@njit(cache=True, inline="always")
+def _between(i, p, q, f, traced, rgb, depth, opacity, tolerance, depth_tolerance):
+    """Whether traced pixels ``p`` and ``q`` agree; if so, pixel ``i`` is set to their mix at ``f`` (0 at ``p``)."""
+    if not (traced[p] and traced[q] and _agree(p, q, p, q, rgb, depth, opacity, tolerance, depth_tolerance)):
+        return False
+    for c in range(3):
+        rgb[i, c] = (1 - f) * rgb[p, c] + f * rgb[q, c]
+    depth[i] = (1 - f) * depth[p] + f * depth[q]
+    opacity[i] = (1 - f) * opacity[p] + f * opacity[q]
+    return True
+
+
 @njit(cache=True)
-def _pixels_to_trace(ys, xs, split, stride, height, width, traced, rgb, depth, opacity, tolerance, depth_tolerance):
-    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells. At
-    ``stride`` 1 (the last split) a pixel in the middle of a split cell's edge whose two ends agree is
-    interpolated between them instead (they are traced: a split cell's corners are)."""
+def _pixels_to_trace(ys, xs, split, stride, height, width, traced, rgb, depth, opacity, tolerance, depth_tolerance,
+                     inside):
+    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells.
+
+    At ``stride`` 1 (the last split) they are leaves, taken in two rounds: those on the cells' edges (``inside``
+    False), then those inside the cells. A leaf whose two pixels across the cell on its row, or else on its
+    column, are traced and agree is interpolated between them instead (an edge's ends are corners: traced)."""
     want = np.zeros(height * width, dtype=np.bool_)
     for a in range(ys.shape[0] - 1):
         y0, y1 = ys[a], ys[a + 1]
@@ -103,21 +119,20 @@ def _pixels_to_trace(ys, xs, split, stride, height, width, traced, rgb, depth, o
                 if y % stride != 0 and y != height - 1:
                     continue
                 for x in range(x0, x1 + 1):
-                    if not (x % stride == 0 or x == width - 1) or traced[y * width + x]:
-                        continue
-                    p, q, f = -1, -1, 0.0  # the ends of the edge the pixel lies on (if it lies on one), and where
-                    if stride == 1 and (y == y0 or y == y1) and x0 < x < x1:
-                        p, q, f = y * width + x0, y * width + x1, (x - x0) / (x1 - x0)
-                    elif stride == 1 and (x == x0 or x == x1) and y0 < y < y1:
-                        p, q, f = y0 * width + x, y1 * width + x, (y - y0) / (y1 - y0)
-                    if p < 0 or not _agree(p, q, p, q, rgb, depth, opacity, tolerance, depth_tolerance):
-                        want[y * width + x] = True
-                        continue
                     i = y * width + x
-                    for c in range(3):
-                        rgb[i, c] = (1 - f) * rgb[p, c] + f * rgb[q, c]
-                    depth[i] = (1 - f) * depth[p] + f * depth[q]
-                    opacity[i] = (1 - f) * opacity[p] + f * opacity[q]
+                    if not (x % stride == 0 or x == width - 1) or traced[i]:
+                        continue
+                    if stride == 1:
+                        across, down = x0 < x < x1, y0 < y < y1
+                        if (across and down) != inside:
+                            continue
+                        if across and _between(i, y * width + x0, y * width + x1, (x - x0) / (x1 - x0), traced, rgb,
+                                               depth, opacity, tolerance, depth_tolerance):
+                            continue
+                        if down and _between(i, y0 * width + x, y1 * width + x, (y - y0) / (y1 - y0), traced, rgb,
+                                             depth, opacity, tolerance, depth_tolerance):
+                            continue
+                    want[i] = True
     return np.flatnonzero(want)
 
 
@@ -151,8 +166,9 @@ def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, toler
         if not split.any():
             break
         finer = stride // 2
-        trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced, rgb, depth, opacity, tolerance,
-                                     depth_tolerance))
+        for inside in (False, True) if finer == 1 else (False,):  # leaves inside a cell: after those on its edges
+            trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced, rgb, depth, opacity, tolerance,
+                                        depth_tolerance, inside))
         fine_ys, fine_xs = grid_axis(height, finer), grid_axis(width, finer)
         active = split[(fine_ys[:-1] // stride)[:, None], (fine_xs[:-1] // stride)[None, :]]
         ys, xs, stride = fine_ys, fine_xs, finer

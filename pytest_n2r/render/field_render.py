@@ -39,7 +39,7 @@ COLOUR_DIRECTIONS = ("vertex", "ray")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
 RENDER_VERSION = 6  # 4: colour logits baked per frame, min_weight; 5: coarser tail; 6: adaptive sampling interpolates
-#  the last split's edge pixels between agreeing ends (docs/performance.md, "Rendering")
+#  the last split's pixels between two agreeing traced ones (docs/performance.md, "Rendering")
 
 
 @dataclass(frozen=True)
@@ -69,7 +69,7 @@ class RenderSettings:
     - ``adaptive``: adaptive pixel sampling (:mod:`pytest_n2r.render.adaptive`): trace a coarse grid of
       pixels and interpolate each grid cell whose corners agree within this (colour and opacity in [0, 1];
       z-depth within ``adaptive_depth`` relatively), tracing the pixels of every other cell; 0 traces every
-      pixel. The default 0.04 traced 50 % / 28 % / 14 % of the fox's pixels at 480×270 / 960×540 / 1080p
+      pixel. The default 0.04 traced 45 % / 26 % / 13 % of the fox's pixels at 480×270 / 960×540 / 1080p
       and stayed within 0.08 dB of tracing every pixel against the photos and the demo twins' exact scenes
       (docs/performance.md);
     - ``adaptive_stride``: the spacing of the coarsest grid in pixels (a power of two), ``None``: by image

@@ -83,20 +83,19 @@ def test_a_step_edge_is_traced_pixel_by_pixel_and_flat_colour_interpolated(h, w,
 
 @settings(max_examples=40, deadline=None)
 @given(h=st.integers(2, 24), w=st.integers(2, 24))
-def test_at_the_last_split_a_pixel_between_two_agreeing_ends_of_an_edge_is_interpolated_and_the_rest_traced(h, w):
-    """Colour quadratic in x, constant in y: every 2×2 cell splits; a pixel between two traced pixels of one
-    column (same colour) is interpolated, exactly; every other pixel, where interpolation along x would be
-    wrong, is traced."""
+def test_at_the_last_split_a_pixel_between_two_agreeing_traced_pixels_is_interpolated_and_the_rest_traced(h, w):
+    """Colour quadratic in x, constant in y: every 2×2 cell splits; its edge pixels on a traced column are
+    interpolated (their ends agree), those on a traced row traced (interpolation along x would be wrong), and
+    then its centre is interpolated between the two traced pixels above and below it: every pixel of the rows
+    between traced rows is interpolated, exactly, and every other pixel traced."""
     image = np.full((h, w, 5), 0.5)
     image[..., 0] = 0.05 * np.arange(w)[None, :] ** 2
     tracer = ImageTracer(image)
     out = tracer.sample(2, tolerance=0.05)
     assert np.array_equal(out, tracer.image), f"{w}×{h}: {int((out != tracer.image).any(-1).sum())} pixels are wrong"
-    rows, columns = grid_axis(h, 2), grid_axis(w, 2)
-    between = np.zeros((h, w), dtype=bool)  # on a traced column, between two traced rows
-    between[np.setdiff1d(np.arange(h), rows)[:, None], columns[None, :]] = True
+    between = ~np.isin(np.arange(h), grid_axis(h, 2))[:, None] & np.ones(w, dtype=bool)
     assert np.array_equal(tracer.traced, ~between), (f"{w}×{h}: traced {tracer.traced.sum()} pixels; expected "
-                                                     f"every one but the {between.sum()} between agreeing ends")
+                                                     f"every one but the {between.sum()} on rows between traced rows")
 
 
 def test_a_thin_line_between_coarse_pixels_can_be_missed_and_stride_1_traces_everything():
@@ -135,14 +134,15 @@ def test_adaptive_renders_keep_every_traced_pixel_of_the_full_render(backend):
     assert renderer.last_traced < CAMERA.width * CAMERA.height, "nothing was interpolated: the test tests nothing"
     assert same.sum() >= renderer.last_traced, (f"only {same.sum()} pixels equal the full render; "
                                                 f"{renderer.last_traced} were traced")
-    # Bounds measured on this field (seeds 2-5, strides 2 and 4): an interpolated pixel at most 12-15 levels from
-    # the full render and the image 50.0-52.8 dB from it, since the last split interpolates the pixels between two
-    # agreeing ends of an edge (before: 2-13 levels, 56-71 dB); the fox lost 0.015 dB to that against its photos
-    # (docs/performance.md, "Rendering"). A pixel off by more than twice the tolerance, or 48 dB, is a fault.
+    # Bounds measured on this field (seeds 2-5, strides 2 and 4): an interpolated pixel at most 12-16 levels from
+    # the full render and the image 48.4-50.0 dB from it (seed 2: 12 levels, 50.0 dB), since the last split
+    # interpolates a pixel between two agreeing traced pixels of its row or column (before: 2-13 levels, 56-71 dB);
+    # the fox lost 0.02 dB to that against its photos (docs/performance.md, "Rendering"). A pixel off by more than
+    # twice the tolerance, or an image below 46 dB, is a fault.
     error = out["rgb"].astype(float) - full["rgb"]
     diff, db = np.abs(error).max(), 10 * np.log10(255.0**2 / np.mean(error**2))
     assert diff <= 2 * 0.04 * 255 + 1, f"an interpolated pixel is {diff:.0f} levels from the full render"
-    assert db >= 48.0, f"the adaptive render is {db:.1f} dB from the full render; expected >= 48 dB"
+    assert db >= 46.0, f"the adaptive render is {db:.1f} dB from the full render; expected >= 46 dB"
     rgb_only = renderer.render(c2w, CAMERA, ("rgb",))["rgb"]
     assert np.array_equal(rgb_only, out["rgb"]), "rgb alone differs from rgb rendered with depth and opacity"
 
