@@ -35,6 +35,7 @@ from .settings import RunSettings
 from .spec import Relation
 from .sut_outputs import MISSING, SUTOutputs
 from .timeout import time_limit
+from .validity import Verdict
 
 __all__ = ["Engine", "Evaluation", "recorded_view"]
 
@@ -182,6 +183,20 @@ class Engine:
             self.sut_outputs.put_result(self.sut, self.metric, source_key, follow_key, result)
         return result
 
+    def validity(self, follow: RenderedView, source: RenderedView, source_key: str,
+                 follow_key: str | None) -> Verdict:
+        """The relation's validity verdict on a follow-up render, or the one kept from an earlier check with the
+        same thresholds of the same two renders (a replayed example: a regression gate's); ``follow_key=None``
+        (not a render): always checked. The scene is in the keys (its content hash)."""
+        validity = self.relation.validity
+        if follow_key is None:
+            return validity.check(follow, self.scene, source)
+        verdict = self.sut_outputs.verdict(validity, source_key, follow_key)
+        if verdict is MISSING:
+            verdict = validity.check(follow, self.scene, source)
+            self.sut_outputs.put_verdict(validity, source_key, follow_key, verdict)
+        return verdict
+
     # -- one example ------------------------------------------------------------------------------------
 
     def evaluate(self, view: SceneView, tau: FollowUp, camera: Any = None) -> Evaluation:
@@ -205,15 +220,15 @@ class Engine:
             return rendered[-1][0]
 
         follow = tau.follow_view(source, self.scene, render_follow)
+        # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
+        follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
         if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
             start = time.perf_counter()
-            verdict = self.relation.validity.check(follow, self.scene, source)
+            verdict = self.validity(follow, source, source_key, follow_key)
             self.run_record.timings["validity"] += time.perf_counter() - start
             if not verdict.valid:
                 record.status, record.reason = "rejected", verdict.reason
                 return Evaluation(record, where)
-        # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
-        follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
         out_source = self.sut_on_render(source, source_key, "source", where)
         out_follow = self.sut_on_render(follow, follow_key, "follow-up", where)
         result = self.compute_on_renders(out_source, out_follow, source, follow, source_key, follow_key, where)

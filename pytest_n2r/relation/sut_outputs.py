@@ -10,6 +10,10 @@ give. The determinism check itself always calls the SUT.
 
 Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render.
 
+The validity verdict on a follow-up render is kept too (:meth:`SUTOutputs.verdict`), by the validity
+thresholds and the two render keys: it does not depend on the SUT, so a replayed example (a regression
+gate's) is not judged again.
+
 The metric's result on a pair of renders is kept beside the SUT's outputs (:meth:`SUTOutputs.result`): the
 same SUT object and the same metric object on the same two renders compare the same two outputs, so a
 replay of an example the session already evaluated (a regression gate's baseline) gets its result again
@@ -41,6 +45,7 @@ class SUTOutputs:
         self.max_outputs = max_outputs
         self._outputs: OrderedDict[tuple[int, str], Any] = OrderedDict()
         self._suts: dict[int, Any] = {}  # id -> weak reference (or the object), so an id is never reused
+        self._verdicts: OrderedDict[tuple[Any, str, str], Any] = OrderedDict()
         self.hits = 0
 
     def __len__(self) -> int:
@@ -81,6 +86,22 @@ class SUTOutputs:
         """Keep ``metric``'s ``result`` on ``sut``'s outputs on the two renders (held with the metric object,
         so a result is never returned for another metric that reused its id)."""
         self.put(sut, _pair_key(source_key, follow_key), (metric, result))
+
+    def verdict(self, validity: Any, source_key: str, follow_key: str) -> Any:
+        """The kept verdict of ``validity`` (a frozen, hashable set of thresholds) on the follow-up render
+        ``follow_key`` of the source render ``source_key``, or :data:`MISSING`."""
+        key = (validity, source_key, follow_key)
+        verdict = self._verdicts.get(key, MISSING)
+        if verdict is not MISSING:
+            self._verdicts.move_to_end(key)
+        return verdict
+
+    def put_verdict(self, validity: Any, source_key: str, follow_key: str, verdict: Any) -> None:
+        key = (validity, source_key, follow_key)
+        self._verdicts[key] = verdict
+        self._verdicts.move_to_end(key)
+        while len(self._verdicts) > self.max_outputs:
+            self._verdicts.popitem(last=False)
 
     def _knows(self, sut: Any) -> bool:
         held = self._suts.get(id(sut))

@@ -147,3 +147,22 @@ def test_a_kept_result_is_only_returned_for_its_own_metric_object():
     assert shared.result(sut, first, "s", "f") == "result"
     assert shared.result(sut, second, "s", "f") is MISSING
     assert shared.result(sut, first, "f", "s") is MISSING
+
+
+def test_a_replay_reuses_the_validity_verdicts_of_the_same_renders(monkeypatch):
+    from pytest_n2r.relation import replay_relation
+    from pytest_n2r.relation.validity import Validity
+    from pytest_n2r.report import replay_candidates
+
+    checks = []
+    check = Validity.check
+    monkeypatch.setattr(Validity, "check", lambda self, *a, **k: checks.append(a) or check(self, *a, **k))
+    scene, sut, shared = PlaneScene(texture="ramp"), CountingSUT(), SUTOutputs()
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=30, x=0.5), examples=12)
+    record = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    checked, examples = len(checks), replay_candidates(record)
+    replayed = replay_relation(scene, sut, relation, examples, settings=SETTINGS, sut_outputs=shared)
+    assert len(checks) == checked > 0, "the same two renders under the same thresholds were judged again"
+    alone = replay_relation(scene, sut, relation, examples, settings=SETTINGS)
+    assert len(checks) > checked, "a replay without the session's kept verdicts judges its follow-ups"
+    assert [(e.status, e.reason) for e in replayed.replayed] == [(e.status, e.reason) for e in alone.replayed]
