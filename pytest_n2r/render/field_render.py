@@ -38,8 +38,8 @@ BACKENDS = ("auto", "compiled", "torch")
 COLOUR_DIRECTIONS = ("vertex", "ray")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
-RENDER_VERSION = 6  # 4: colour logits baked per frame, min_weight; 5: coarser tail; 6: adaptive sampling interpolates
-#  the last split's pixels between two agreeing traced ones (docs/performance.md, "Rendering")
+RENDER_VERSION = 7  # 4: colour logits baked per frame, min_weight; 5: coarser tail; 6: adaptive sampling interpolates
+#  the last split's edge pixels between agreeing ends; 7: and its centres (docs/performance.md, "Rendering")
 
 
 @dataclass(frozen=True)
