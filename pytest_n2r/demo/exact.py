@@ -74,8 +74,10 @@ class GroundTruthScene(Scene):
     is_exact = True
     #: Keys the render cache (see :attr:`Scene.renderer_version`): "2" predicts relief roots from neighbouring
     #: rays, which moves a few pixels by one grey level and depths by about 1e-7 relative; "3" takes the relief's
-    #: and the masks' sines from :mod:`.trig` (a pixel in a million by one grey level, depths by 2e-7 relative).
-    renderer_version = "3"
+    #: and the masks' sines from :mod:`.trig` (a pixel in a million by one grey level, depths by 2e-7 relative);
+    #: "4" predicts relief roots from the rows of rays above in bands of rows (:mod:`.relief_kernel`: a few
+    #: pixels in 100 000 by one grey level, depths by 1e-7 relative).
+    renderer_version = "4"
 
     def __init__(
         self, name: str, primitives: Sequence[Primitive], views: Sequence[SceneView], *,

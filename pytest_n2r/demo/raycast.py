@@ -9,20 +9,19 @@ rounding (tested against them, ``tests/demo/test_raycast.py``).
 
 What makes it fast (measured in ``docs/performance.md``):
 
-- Per image row, all sub-pixel rays of a sub-row are cast before any pixel is shaded, so a relief's root
-  search starts from a prediction of the roots already found beside and above (one evaluation of the relief
-  per ray instead of two or three, see :func:`_relief_hit`); the depth ray through a pixel's centre starts
-  from the mean of the pixel's sub-ray roots.
+- Each row of rays (a sub-row of sub-pixel rays, or the pixel centres) is cast as a batch: first a relief's
+  hits for all its rays at once, Newton's method in lockstep with the waves evaluated eight rays to a vector
+  (:mod:`.relief_kernel`), each root searched from the roots of the rows above (extrapolated; a depth ray's
+  from the mean of its pixel's sub-ray roots), then each ray's nearest hit over the primitives.
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
   a ray tests only what may lie under its pixel.
 - The hot helpers are inlined and receive views of the kernel's arrays without reference counts
   (:func:`_borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
-- No sine goes to the C library: a relief's waves take theirs in one vectorized loop (:func:`_relief`), and
-  the blend masks run once per pixel row over all its sub-rays, each a vectorized loop (:mod:`.mask_kernel`),
-  both with :mod:`.trig`'s inlined polynomials.
+- No sine goes to the C library: a relief's waves and the blend masks (once per pixel row over all its
+  sub-rays, :mod:`.mask_kernel`) take theirs from :mod:`.trig`'s inlined polynomials, in vectorized loops.
 
-Threads take every n-th image row, and each pixel depends only on its own row: results do not depend on
-the thread count.
+Threads take every n-th band of :data:`BAND` image rows, and each pixel depends only on its own band: results
+do not depend on the thread count.
 
 Convention
 ----------
@@ -57,8 +56,8 @@ from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTUR
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
+from .relief_kernel import LANES, RELIEF_COLUMNS, SLOT, STATE_ROWS, WAVES_PER_PASS, relief_at, relief_hits
 from .textures import Texture
-from .trig import sincos
 
 __all__ = ["CompiledScene", "compile_scene"]
 
@@ -108,7 +107,7 @@ class CompiledScene:
         t = np.empty(len(o))
         which = np.empty(len(o), dtype=np.int64)
         everywhere = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(self.cull_boxes), 1))
-        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, np.empty(_LANES), everywhere,
+        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, np.empty(LANES), everywhere,
                    t, which)
         return t, which
 
@@ -140,18 +139,22 @@ class CompiledScene:
                 self.group_box, self.kinds, self.prims, self.waves, self.prim_mat, self.node_kind, self.node_par,
                 self.node_child, self.rings, masks, self.tex_meta, self.texels, self.shading,
                 self.background, rgb, depth, opacity)
-        threads = max(1, min(numba.get_num_threads(), height))
+        threads = max(1, min(numba.get_num_threads(), -(-height // BAND)))
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
+        reliefs = max(1, int(np.sum(self.kinds == _RELIEF)))
         scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
-                    np.empty((2, samples), dtype=np.int64), np.empty(_LANES), np.empty((4 * samples, 3), np.float32),
+                    np.empty((2, samples), dtype=np.int64), np.empty(LANES), np.empty((4, rays[1])),
+                    np.empty((STATE_ROWS, rays[1])), np.empty((3, rays[1])), np.empty((3, rays[1])),
+                    np.empty((reliefs, _RELIEF_ROWS, rays[1])),
+                    np.empty((4 * samples, 3), np.float32),
                     np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
                     np.empty((3, samples), np.float32)) for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
             if threads <= 1:
                 _render_kernel(0, 1, *scratch[0], *args)
-            else:  # every thread-th row per thread: rows of sky and of wall interleave (the kernel drops the GIL)
+            else:  # every thread-th band per thread: bands of sky and of wall interleave (the kernel drops the GIL)
                 list(_pool().map(lambda first: _render_kernel(first, threads, *scratch[first], *args), range(threads)))
         out = {}
         if want_rgb:
@@ -190,6 +193,7 @@ class _Builder:
         self.textures: dict[int, int] = {}
         self.texture_list: list[Texture] = []
         self.nodes: dict[int, int] = {}
+        self.reliefs = 0
 
     def texture(self, tex: Texture) -> int:
         if id(tex) not in self.textures:
@@ -279,9 +283,6 @@ def _bounds(prim: Primitive) -> list[float]:
     return [x0, prim.y0 - prim.depth, z0, x1, prim.y0, z1]
 
 
-#: How far a relief's gradient may change between Newton's last evaluation and its last step (see
-#: :func:`_relief_hit`): 1e-5 turns a normal by at most 1e-5 rad, a colour by a few thousandths of a grey level.
-_GRADIENT_TOLERANCE = 1e-5
 #: Screen rectangles are widened by this many pixels (their corners' projections round, the rays' too).
 _RECT_MARGIN = 1.0
 
@@ -323,9 +324,11 @@ def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list
         par[:6] = [*prim.centre, "xyz".index(prim.axis), prim.radius, prim.half_length]
         return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
     if isinstance(prim, ReliefWall):
-        par[:13] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w), prim.newton,
-                    prim.steps, prim.bisections, _curvature_bound(prim)]
-        waves.extend(prim._w.astype(np.float32).tolist())
+        padded = -(-len(prim._w) // WAVES_PER_PASS) * WAVES_PER_PASS  # zero waves add exactly 0
+        par[:RELIEF_COLUMNS] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), padded, prim.newton,
+                                prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs]
+        b.reliefs += 1
+        waves.extend(prim._w.astype(np.float32).tolist() + [[0.0] * 5] * (padded - len(prim._w)))
         return _RELIEF, par, [b.material(prim.material)] * 6
     raise InvalidArgument(f"primitive {type(prim).__name__} has no compiled form; expected one of Disc, Box, "
                           "Cylinder, ReliefWall")
@@ -433,121 +436,6 @@ def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
     return t_near, t_far
 
 
-#: Waves evaluated at once by :func:`_relief`; its ``lanes`` buffer holds 6 of this many float64.
-_WAVE_CHUNK = 4
-_LANES = 6 * _WAVE_CHUNK
-
-
-@njit(cache=True, error_model="numpy")
-def _relief(waves, lanes, first, count, depth, x, z):
-    """``h``, ``dh/dx``, ``dh/dz`` of a relief at ``(x, z)``, in float32 like :meth:`ReliefWall.height_and_gradient`.
-
-    The sines and cosines of up to :data:`_WAVE_CHUNK` waves' two phases are taken in one loop over the
-    ``lanes`` buffer (float64, :data:`_LANES` long, the caller's), which LLVM vectorizes (:func:`.trig.sincos`);
-    each is rounded to float32, NumPy's float32 result but in rare ties (see :mod:`.trig`)."""
-    x32, z32 = np.float32(x), np.float32(z)
-    h = np.float32(0.5)
-    gx = np.float32(0.0)
-    gz = np.float32(0.0)
-    n = _WAVE_CHUNK
-    for start in range(first, first + count, n):
-        used = min(n, first + count - start)
-        for lane in range(n):  # phases of x, then of z; the unused lanes repeat the last wave
-            k = start + min(lane, used - 1)
-            lanes[lane] = np.float64(waves[k, 1] * x32 + waves[k, 2])
-            lanes[n + lane] = np.float64(waves[k, 3] * z32 + waves[k, 4])
-        for lane in range(2 * n):
-            lanes[2 * n + lane], lanes[4 * n + lane] = sincos(lanes[lane])
-        for lane in range(used):
-            k = start + lane
-            amp, fx, fz = waves[k, 0], waves[k, 1], waves[k, 3]
-            sx, sz = np.float32(lanes[2 * n + lane]), np.float32(lanes[3 * n + lane])
-            cx, cz = np.float32(lanes[4 * n + lane]), np.float32(lanes[5 * n + lane])
-            h += amp * sx * sz
-            gx += amp * fx * cx * sz
-            gz += amp * fz * sx * cz
-    return depth * np.float64(h), depth * np.float64(gx), depth * np.float64(gz)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _relief_hit(prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, guess):
-    """First hit ``t`` of a :class:`ReliefWall` (``inf`` on a miss), with ``dh/dx``, ``dh/dz`` there when the
-    root search ended on an evaluation at ``t`` (``have``), so the normal needs no second one.
-
-    Newton's method stops where the residual is below ``1e-7`` (like :meth:`ReliefWall._newton`) or where its
-    step is so short that the gradient cannot change by more than :data:`_GRADIENT_TOLERANCE` over it
-    (``curvature * |d_xz| * |step| <= tolerance``): then the residual after the step is below
-    ``curvature * |d_xz|² step² / 2``, far below ``1e-7``, and the gradient of the last evaluation serves as
-    the normal's. From a guess of a neighbouring ray's root this takes one evaluation instead of two."""
-    y0, x0, x1, z0, z1 = prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3], prims[row, 4]
-    depth, slope, first, count = prims[row, 5], prims[row, 6], int(prims[row, 7]), int(prims[row, 8])
-    newton, steps, bisections = int(prims[row, 9]), int(prims[row, 10]), int(prims[row, 11])
-    curvature = prims[row, 12]
-    t_in = (y0 - depth - oy) / dy
-    t_out = (y0 - oy) / dy
-    gx = gz = 0.0
-    have = False
-    if not (dy > 0 and t_out > T_MIN):
-        return math.inf, gx, gz, have
-    lo, hi = max(t_in, T_MIN), t_out
-    across = math.sqrt(dx * dx + dz * dz)  # not hypot (several times slower): only picks the search below
-    if dy > 1.05 * slope * across:  # monotonic residual: safeguarded Newton
-        a, b = lo, hi
-        t = guess if (guess > a and guess < b) else 0.5 * (a + b)
-        short = _GRADIENT_TOLERANCE / (curvature * across + 1e-300)
-        for _ in range(newton):
-            h, gx, gz = _relief(waves, lanes, first, count, depth, ox + t * dx, oz + t * dz)
-            f = oy + t * dy - y0 + h
-            if abs(f) <= 1e-7:
-                have = True
-                break
-            df = dy + gx * dx + gz * dz
-            if f < 0:
-                a = t
-            else:
-                b = t
-            step = t - f / df
-            if step > a and step < b:
-                if abs(step - t) <= short:
-                    t, have = step, True
-                    break
-                t = step
-            else:
-                t = 0.5 * (a + b)
-    else:
-        t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections)
-    px, pz = ox + t * dx, oz + t * dz
-    if math.isfinite(t) and px >= x0 and px <= x1 and pz >= z0 and pz <= z1:
-        return t, gx, gz, have
-    return math.inf, gx, gz, have
-
-
-@njit(cache=True, error_model="numpy")
-def _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections):
-    """The first root of a grazing ray's residual in ``[lo, hi]`` (which may not be monotonic there): march
-    ``steps`` samples to the first sign change, then bisect ``bisections`` times; ``inf`` if there is none.
-    Apart from the Newton search so that only the common case is inlined into the kernel."""
-    t_prev = lo
-    found = oy + lo * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
-    a = b = lo
-    if not found:
-        for s in range(1, steps + 1):
-            t = lo + (hi - lo) * (s / steps)
-            if oy + t * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
-                a, b, found = t_prev, t, True
-                break
-            t_prev = t
-    if not found:
-        return math.inf
-    for _ in range(bisections):
-        m = 0.5 * (a + b)
-        if oy + m * dy - (y0 - _relief(waves, lanes, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
-            b = m
-        else:
-            a = m
-    return 0.5 * (a + b)
-
-
 @njit(cache=True, inline="always", error_model="numpy")
 def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
     """First hit of a capped :class:`Cylinder`, ``inf`` on a miss."""
@@ -580,11 +468,12 @@ def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _hit(kind, prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess):
-    """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there (see
-    :func:`_relief_hit`)."""
+def _hit(kind, prims, row, reliefs, j, ox, oy, oz, dx, dy, dz, ix, iy, iz):
+    """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there: a relief's hits
+    are found beforehand for a whole batch of rays (``reliefs[slot, 0:4, j]``, :func:`.relief_kernel.relief_hits`)."""
     if kind == _RELIEF:
-        return _relief_hit(prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, guess)
+        slot = int(prims[row, SLOT])
+        return reliefs[slot, 0, j], reliefs[slot, 1, j], reliefs[slot, 2, j], reliefs[slot, 3, j] != 0.0
     t = math.inf
     if kind == _DISC:
         t = (prims[row, 0] - oz) / dz
@@ -602,9 +491,10 @@ def _hit(kind, prims, row, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, gue
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz, dx, dy, dz, guess):
-    """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of a ray over all groups (``t = inf`` and primitive
-    0 on a miss; the gradient as :func:`_relief_hit` gives it). ``u, v``: the ray's pixel coordinates; groups
+def _cast(groups, group_box, kinds, prims, reliefs, j, rects, u, v, ox, oy, oz, dx, dy, dz):
+    """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of ray ``j`` of a batch over all groups (``t = inf`` and
+    primitive 0 on a miss; a relief's hit and gradient from ``reliefs``, see :func:`_hit`). ``u, v``: the ray's
+    pixel coordinates; groups
     and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
     best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
     ix = iy = iz = math.nan
@@ -626,7 +516,7 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
                 continue
             if kinds[k] == _BOX and not inverse:
                 ix, iy, iz, inverse = 1.0 / _opaque(dx), 1.0 / _opaque(dy), 1.0 / _opaque(dz), True
-            t, gx, gz, have = _hit(kinds[k], prims, k, waves, lanes, ox, oy, oz, dx, dy, dz, ix, iy, iz, guess)
+            t, gx, gz, have = _hit(kinds[k], prims, k, reliefs, j, ox, oy, oz, dx, dy, dz, ix, iy, iz)
             if t < best:
                 best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
     return best, which, best_gx, best_gz, best_have
@@ -634,9 +524,28 @@ def _cast(groups, group_box, kinds, prims, waves, lanes, rects, u, v, ox, oy, oz
 
 @njit(cache=True, error_model="numpy")
 def _cast_rays(o, d, groups, group_box, kinds, prims, waves, lanes, rects, t_out, which_out):
-    for r in range(o.shape[0]):  # serial: used for small batches, and a parallel loop compiles slowly
-        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, waves, lanes, rects, 0.0, 0.0,
-                                                o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2], math.nan)
+    """:meth:`CompiledScene.cast`: one ray at a time (each its own origin), serial (used for small batches)."""
+    ds, no_guess, pixel = np.empty((3, 1)), np.full(1, math.nan), np.zeros(1)
+    state, sums, spare = np.empty((STATE_ROWS, 1)), np.empty((3, 1)), np.empty((3, 1))
+    reliefs = np.empty((_relief_count(kinds), 4, 1))
+    everywhere = rects[0]
+    for r in range(o.shape[0]):
+        ds[0, 0], ds[1, 0], ds[2, 0] = d[r, 0], d[r, 1], d[r, 2]
+        for k in range(kinds.shape[0]):
+            if kinds[k] == _RELIEF:
+                relief_hits(prims, k, waves, lanes, o[r, 0], o[r, 1], o[r, 2], ds, no_guess, 1, pixel, 0.0,
+                            everywhere, state, sums, spare, reliefs[int(prims[k, SLOT])])
+        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, reliefs, 0, rects, 0.0, 0.0,
+                                                o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _relief_count(kinds):
+    """How many reliefs a scene has (at least 1: the size of the kernels' relief buffers)."""
+    count = 0
+    for k in range(kinds.shape[0]):
+        count += kinds[k] == _RELIEF
+    return max(count, 1)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -672,7 +581,7 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
         n[j] = q[j] / radius
         return n[0], n[1], n[2], math.atan2(q[j], q[i]) * radius, q[k], 0
     if not have:
-        _, gx, gz = _relief(waves, lanes, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
+        _, gx, gz = relief_at(waves, lanes, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
     norm = math.sqrt(gx * gx + 1.0 + gz * gz)
     return -gx / norm, -1.0 / norm, -gz / norm, x, -z, 0
 
@@ -680,31 +589,32 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
 # -- the image kernel ----------------------------------------------------------------------------------------
 
 
+#: Image rows per band: a thread renders whole bands (every thread-th), and a relief's root search starts from
+#: the roots of the rows of rays above it in the same band (so images do not depend on the thread count).
+BAND = 16
+#: Rows of ``reliefs[slot]``: the batch's hits (:func:`.relief_kernel.relief_hits`), then the roots of the last
+#: three rows of sub-pixel rays and of the last three rows of pixel-centre rays (the newest last).
+_HITS, _SUB_HISTORY, _CENTRE_HISTORY, _RELIEF_ROWS = 0, 4, 7, 10
+
+
 @njit(cache=True, inline="always", error_model="numpy")
-def _predict(ts, ks, kinds, row, j, above):
-    """A guess of a relief root at sub-ray ``j`` of sub-row ``row`` from the roots already found in this pixel row:
-    ``t[j-1] + t_above[j] - t_above[j-1]`` where the sub-row above hit the same relief, else the linear
-    extrapolation ``2 t[j-1] - t[j-2]``, else ``t[j-1]``; NaN where the last sub-ray hit no relief."""
-    if j == 0 or kinds[ks[row, j - 1]] != _RELIEF or not math.isfinite(ts[row, j - 1]):
+def _extrapolate(history, rows, j):
+    """A guess of a relief root at ray ``j`` of the next row of rays from the relief's roots at ray ``j`` of the
+    last ``rows`` rows (``history[0:3]``, the newest last; fewer than three at a band's start): the quadratic
+    extrapolation where all three hit it, else the linear, else the last root; NaN where the last row missed."""
+    if rows < 1 or not math.isfinite(history[2, j]):
         return math.nan
-    k = ks[row, j - 1]
-    if above and ks[row - 1, j] == k and ks[row - 1, j - 1] == k and math.isfinite(ts[row - 1, j]) \
-            and math.isfinite(ts[row - 1, j - 1]):
-        return ts[row, j - 1] + (ts[row - 1, j] - ts[row - 1, j - 1])
-    if j >= 2 and ks[row, j - 2] == k and math.isfinite(ts[row, j - 2]):
-        return 2.0 * ts[row, j - 1] - ts[row, j - 2]
-    return ts[row, j - 1]
+    if rows >= 2 and math.isfinite(history[1, j]):
+        if rows >= 3 and math.isfinite(history[0, j]):
+            return 3.0 * (history[2, j] - history[1, j]) + history[0, j]
+        return 2.0 * history[2, j] - history[1, j]
+    return history[2, j]
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _centre_guess(ts, ks, kinds, n, u, have_rows):
-    """The mean of pixel ``u``'s sub-ray roots where they all lie on one relief (a guess of the root through the
+def _centre_guess(ts, ks, k, n, u):
+    """The mean of pixel ``u``'s sub-ray roots where all lie on primitive ``k`` (a guess of the root through the
     pixel centre), else NaN."""
-    if not have_rows:
-        return math.nan
-    k = ks[0, u * n]
-    if kinds[k] != _RELIEF:
-        return math.nan
     total = 0.0
     for row in range(n):
         for j in range(u * n, u * n + n):
@@ -771,12 +681,15 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, colours, taps, weights, mix, c2w, camera,
-                   n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings,
-                   masks, tex_meta, texels, shading, background, rgb, depth, opacity):
-    """Rows ``first, first + step, ...`` of the image. Per pixel row: the ``n`` sub-rows of supersampling rays
-    are cast first (a relief's root searched from a guess of the roots beside and above), then the depth rays
-    through the pixel centres (from the mean of the pixel's sub-ray roots), then each pixel is shaded."""
+def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, rays, state, sums, spare, reliefs,
+                   colours, taps, weights, mix, c2w, camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat,
+                   node_kind, node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth,
+                   opacity):
+    """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the ``n`` sub-rows of
+    supersampling rays are cast first, then the depth rays through the pixel centres, then each pixel is shaded.
+    Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (its root searched
+    from the roots of the rows above, a depth ray's from the mean of its pixel's sub-ray roots), then the
+    nearest hit of each ray."""
     fx, fy, cx, cy, far = camera[0], camera[1], camera[2], camera[3], camera[4]
     rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
     prims, waves, prim_mat, node_kind = _borrowed(prims), _borrowed(waves), _borrowed(prim_mat), _borrowed(node_kind)
@@ -804,67 +717,96 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, c
         xcs[n, j] = (uss[n, j] - cx) / fx
     ks, haves = _borrowed(scratch_int[0]), _borrowed(scratch_int[1])
     # each sub-ray's surface coordinates, footprint, light, material and mask value (see _shading_inputs)
-    sa, sb, sfp, slight, sm = (_borrowed(shade[0]), _borrowed(shade[1]), _borrowed(shade[2]), _borrowed(shade[3]),
-                               _borrowed(shade[4]))
-    nodes = _borrowed(shade_int[0])
+    shade, shade_int = _borrowed(shade), _borrowed(shade_int)
+    sa, sb, sfp, slight, sm, nodes = shade[0], shade[1], shade[2], shade[3], shade[4], shade_int[0]
     lanes = _borrowed(lanes)
+    # one row of rays: directions and the guesses of a relief's roots; a relief search's state; per relief its
+    # hits and the roots of the rows above (see _HITS)
+    ds, guesses, reliefs = _borrowed(rays[0:3]), _borrowed(rays[3]), _borrowed(reliefs)
+    state, sums, spare = _borrowed(state), _borrowed(sums), _borrowed(spare)
+    n_groups = groups.shape[0]
     # each sub-ray's four colour slots, the batch of texture lookups and the blend weights (see plan_albedo)
     colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
-    for v in range(first, height, step):
-        for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
-            centre = row == n
-            vs = float(v) if centre else v + ((row + 0.5) / n - 0.5)
-            yc = (vs - cy) / fy
-            table = n if centre else 0
-            for j in range(width if centre else sub):
+    for band in range(first, (height + BAND - 1) // BAND, step):
+        sub_rows = centre_rows = 0  # rows of rays cast in this band
+        for v in range(band * BAND, min(height, band * BAND + BAND)):
+            for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
+                centre = row == n
+                vs = float(v) if centre else v + ((row + 0.5) / n - 0.5)
+                yc = (vs - cy) / fy
+                table = n if centre else 0
+                count = width if centre else sub
+                for j in range(count):
+                    xc = xcs[table, j]
+                    ds[0, j] = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+                    ds[1, j] = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+                    ds[2, j] = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
+                for k in range(kinds.shape[0]):
+                    if kinds[k] == _RELIEF:
+                        _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], vs,
+                                    rects[n_groups + k], state, sums, spare, reliefs[int(prims[k, SLOT])], ts,
+                                    ks, n,
+                                    centre and want_hits, centre_rows if centre else sub_rows, centre)
                 if centre:
-                    guess = _centre_guess(ts, ks, kinds, n, j, want_hits)
-                    if math.isnan(guess):
-                        guess = _predict(ts, ks, kinds, n, j, False)
+                    centre_rows += 1
                 else:
-                    guess = _predict(ts, ks, kinds, row, j, row > 0)
-                us, xc = uss[table, j], xcs[table, j]
-                dx = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
-                dy = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
-                dz = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
-                    groups, group_box, kinds, prims, waves, lanes, rects, us, vs, ox, oy, oz, dx, dy, dz, guess)
-            if centre:
-                for u in range(width):
-                    depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
-        if not want_hits:
-            continue
-        if want_colour:
-            _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves,
-                            lanes, prim_mat, node_kind, node_par, masks, shade, shade_int)
-            count = 0
-            for i in range(n * sub):
-                if nodes[i] >= 0:
-                    count = plan_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
-                                        sfp[i], sm[i], 4 * i, colours, taps, weights, count, mix)
-            look_up(texels, taps, weights, count, colours)
-        for u in range(width):
-            hits = 0
-            acc_r, acc_g, acc_b = F0, F0, F0
-            for sv in range(n):
-                for su in range(n):
-                    j = u * n + su
-                    if not math.isfinite(ts[sv, j]):
-                        cr, cg, cb = background[0], background[1], background[2]
-                    else:
-                        hits += 1
-                        if not want_colour:
-                            continue
-                        i = sv * sub + j
-                        cr, cg, cb = albedo_of(colours, mix, i)
-                        light = np.float32(slight[i])
-                        cr, cg, cb = cr * light, cg * light, cb * light
-                    acc_r += cr
-                    acc_g += cg
-                    acc_b += cb
-            if opacity.shape[0] > 0:
-                opacity[v, u] = np.float32(hits / (n * n))
+                    sub_rows += 1
+                for j in range(count):
+                    ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
+                        groups, group_box, kinds, prims, reliefs, j, rects, uss[table, j], vs, ox, oy, oz, ds[0, j],
+                        ds[1, j], ds[2, j])
+                if centre:
+                    for u in range(width):
+                        depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
+            if not want_hits:
+                continue
             if want_colour:
-                for c, value in ((0, acc_r), (1, acc_g), (2, acc_b)):
-                    level = np.rint(value / inv_count * np.float32(255.0))
-                    rgb[v, u, c] = np.uint8(min(max(level, F0), np.float32(255.0)))
+                _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves,
+                                lanes, prim_mat, node_kind, node_par, masks, shade, shade_int)
+                count = 0
+                for i in range(n * sub):
+                    if nodes[i] >= 0:
+                        count = plan_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
+                                            sfp[i], sm[i], 4 * i, colours, taps, weights, count, mix)
+                look_up(texels, taps, weights, count, colours)
+            for u in range(width):
+                hits = 0
+                acc_r, acc_g, acc_b = F0, F0, F0
+                for sv in range(n):
+                    for su in range(n):
+                        j = u * n + su
+                        if not math.isfinite(ts[sv, j]):
+                            cr, cg, cb = background[0], background[1], background[2]
+                        else:
+                            hits += 1
+                            if not want_colour:
+                                continue
+                            i = sv * sub + j
+                            cr, cg, cb = albedo_of(colours, mix, i)
+                            light = np.float32(slight[i])
+                            cr, cg, cb = cr * light, cg * light, cb * light
+                        acc_r += cr
+                        acc_g += cg
+                        acc_b += cb
+                if opacity.shape[0] > 0:
+                    opacity[v, u] = np.float32(hits / (n * n))
+                if want_colour:
+                    for c, value in ((0, acc_r), (1, acc_g), (2, acc_b)):
+                        level = np.rint(value / inv_count * np.float32(255.0))
+                        rgb[v, u, c] = np.uint8(min(max(level, F0), np.float32(255.0)))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, rect, state, sums, spare, relief, ts,
+                ks, n, from_pixels, rows, centre):
+    """Relief ``k``'s hits along one row of ``count`` rays (``relief[_HITS:_HITS + 4]``), each root searched from
+    the mean of its pixel's sub-ray roots (``from_pixels``: a row of pixel-centre rays after its sub-rows) or
+    extrapolated from the ``rows`` rows of the same kind above (:func:`_extrapolate`); then this row's roots join
+    that history."""
+    history = relief[_CENTRE_HISTORY:_CENTRE_HISTORY + 3] if centre else relief[_SUB_HISTORY:_SUB_HISTORY + 3]
+    for j in range(count):
+        guess = _centre_guess(ts, ks, k, n, j) if from_pixels else math.nan
+        guesses[j] = _extrapolate(history, rows, j) if math.isnan(guess) else guess
+    relief_hits(prims, k, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, rect, state, sums, spare, relief)
+    for j in range(count):
+        history[0, j], history[1, j], history[2, j] = history[1, j], history[2, j], relief[_HITS, j]

@@ -1,0 +1,231 @@
+"""A relief wall's hits for a batch of rays (numba): Newton's method in lockstep over the rays of one sub-row of
+pixels, the relief's waves evaluated for all of the batch's rays in one loop that LLVM vectorizes.
+
+The arithmetic is :meth:`.primitives.ReliefWall.height_and_gradient` and its safeguarded Newton search,
+operation for operation (float32 waves, float64 roots); what changes is the order: one ray's chain of
+evaluations was latency-bound (its sines in one 8-lane vector, then a chain of float32 sums and Newton's
+division), so each evaluation of the waves now runs for every ray of the batch still searching, eight rays to
+a vector, and only the Newton update is per ray. Rays that converge leave the batch (it is compacted after
+each round).
+
+Convention
+----------
+- A relief's row of ``prims`` holds the columns named below (:func:`.raycast._primitive_row`); its waves are
+  rows ``amp, fx, px, fz, pz`` (float32) of ``waves``, padded with zero-amplitude waves to a multiple of
+  :data:`WAVES_PER_PASS` (a zero wave adds exactly 0 to the sums).
+- Rays ``o + t d`` share their origin ``o`` (a camera's centre), world frame, scene units.
+- Roots end where the residual is below ``1e-7`` or Newton's step is so short that the relief's gradient cannot
+  change by more than :data:`GRADIENT_TOLERANCE` over it (``curvature * |d_xz| * |step|``); the gradient of the
+  last evaluation then serves as the normal's (``have``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .primitives import T_MIN
+from .trig import sincos
+
+__all__ = ["GRADIENT_TOLERANCE", "LANES", "RELIEF_COLUMNS", "STATE_ROWS", "WAVES_PER_PASS", "relief_at",
+           "relief_hits"]
+
+#: Columns of a relief's row in ``prims``: the wall's plane and extent, relief depth, slope bound, first wave
+#: and wave count, Newton iterations, march steps, bisections, curvature bound, the relief's slot among the
+#: scene's reliefs (see :func:`relief_hits`).
+Y0, X0, X1, Z0, Z1, DEPTH, SLOPE, FIRST, COUNT, NEWTON, STEPS, BISECTIONS, CURVATURE, SLOT = range(14)
+RELIEF_COLUMNS = 14
+#: How far a relief's gradient may change between Newton's last evaluation and its last step: 1e-5 turns a
+#: normal by at most 1e-5 rad, a colour by a few thousandths of a grey level.
+GRADIENT_TOLERANCE = 1e-5
+#: Waves evaluated in one pass over a batch (a scene's waves are padded to a multiple of it).
+WAVES_PER_PASS = 3
+#: Rows of a batch's search state (``state[:, i]`` for its ray ``i``): bracket ``a, b``, ``t``, direction, the
+#: step that is short enough, the ray's index; the last evaluation's float32 ``h``, ``dh/dx``, ``dh/dz`` (before
+#: ``depth``) go to rows of another array (``sums``: were they rows of ``state``, LLVM could not tell that the
+#: loop's stores do not overlap its loads, and would not vectorize it).
+_A, _B, _T, _DX, _DY, _DZ, _SHORT, _RAY = range(8)
+_H, _GX, _GZ = range(3)
+STATE_ROWS = 8
+#: Waves evaluated at once by :func:`relief_at`; its ``lanes`` buffer holds 6 of this many float64.
+_WAVE_CHUNK = 4
+LANES = 6 * _WAVE_CHUNK
+_F0 = np.float32(0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def relief_at(waves, lanes, first, count, depth, x, z):
+    """``h``, ``dh/dx``, ``dh/dz`` of a relief at one point ``(x, z)``, in float32 like
+    :meth:`ReliefWall.height_and_gradient`: the sines of up to :data:`_WAVE_CHUNK` waves' two phases in one
+    loop over the ``lanes`` buffer (float64, :data:`LANES` long, the caller's), which LLVM vectorizes."""
+    x32, z32 = np.float32(x), np.float32(z)
+    h = np.float32(0.5)
+    gx = np.float32(0.0)
+    gz = np.float32(0.0)
+    n = _WAVE_CHUNK
+    for start in range(first, first + count, n):
+        used = min(n, first + count - start)
+        for lane in range(n):  # phases of x, then of z; the unused lanes repeat the last wave
+            k = start + min(lane, used - 1)
+            lanes[lane] = np.float64(waves[k, 1] * x32 + waves[k, 2])
+            lanes[n + lane] = np.float64(waves[k, 3] * z32 + waves[k, 4])
+        for lane in range(2 * n):
+            lanes[2 * n + lane], lanes[4 * n + lane] = sincos(lanes[lane])
+        for lane in range(used):
+            k = start + lane
+            amp, fx, fz = waves[k, 0], waves[k, 1], waves[k, 3]
+            sx, sz = np.float32(lanes[2 * n + lane]), np.float32(lanes[3 * n + lane])
+            cx, cz = np.float32(lanes[4 * n + lane]), np.float32(lanes[5 * n + lane])
+            h += amp * sx * sz
+            gx += amp * fx * cx * sz
+            gz += amp * fz * sx * cz
+    return depth * np.float64(h), depth * np.float64(gx), depth * np.float64(gz)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _wave(amp, fx, px, fz, pz, x32, z32, h, gx, gz):
+    """One wave's terms added to the float32 sums ``h, gx, gz`` at ``(x32, z32)``."""
+    sx, cx = sincos(np.float64(fx * x32 + px))
+    sz, cz = sincos(np.float64(fz * z32 + pz))
+    sx32, cx32, sz32, cz32 = np.float32(sx), np.float32(cx), np.float32(sz), np.float32(cz)
+    return h + amp * sx32 * sz32, gx + amp * fx * cx32 * sz32, gz + amp * fz * sx32 * cz32
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _evaluate(waves, first, count, ox, oz, state, sums, spare, live):
+    """The waves' float32 sums at ``o + t d`` of the first ``live`` rays of the batch, into ``sums``: passes of
+    :data:`WAVES_PER_PASS` waves, each one loop over the rays that LLVM vectorizes. A pass adds to the sums of
+    the one before it, from one array into the other (``sums`` and ``spare`` by turns, the last pass into
+    ``sums``): LLVM vectorizes a loop whose loads and stores are in different arrays."""
+    passes = count // WAVES_PER_PASS
+    for p in range(passes):
+        start = first + p * WAVES_PER_PASS
+        into_sums = (passes - 1 - p) % 2 == 0
+        dst, src = (sums, spare) if into_sums else (spare, sums)
+        a0, fx0, px0, fz0, pz0 = waves[start, 0], waves[start, 1], waves[start, 2], waves[start, 3], waves[start, 4]
+        a1, fx1, px1 = waves[start + 1, 0], waves[start + 1, 1], waves[start + 1, 2]
+        fz1, pz1 = waves[start + 1, 3], waves[start + 1, 4]
+        a2, fx2, px2 = waves[start + 2, 0], waves[start + 2, 1], waves[start + 2, 2]
+        fz2, pz2 = waves[start + 2, 3], waves[start + 2, 4]
+        fresh = p == 0
+        for i in range(live):
+            x32 = np.float32(ox + state[_T, i] * state[_DX, i])
+            z32 = np.float32(oz + state[_T, i] * state[_DZ, i])
+            h, gx, gz = np.float32(0.5), _F0, _F0
+            if not fresh:
+                h, gx, gz = np.float32(src[_H, i]), np.float32(src[_GX, i]), np.float32(src[_GZ, i])
+            h, gx, gz = _wave(a0, fx0, px0, fz0, pz0, x32, z32, h, gx, gz)
+            h, gx, gz = _wave(a1, fx1, px1, fz1, pz1, x32, z32, h, gx, gz)
+            h, gx, gz = _wave(a2, fx2, px2, fz2, pz2, x32, z32, h, gx, gz)
+            dst[_H, i], dst[_GX, i], dst[_GZ, i] = np.float64(h), np.float64(gx), np.float64(gz)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _finish(prims, row, hits, j, ox, oz, dx, dz, t, gx, gz, have):
+    """A ray's result: its root where it lies within the wall's extent, else a miss (``t = inf``)."""
+    px, pz = ox + t * dx, oz + t * dz
+    if math.isfinite(t) and px >= prims[row, X0] and px <= prims[row, X1] and pz >= prims[row, Z0] \
+            and pz <= prims[row, Z1]:
+        hits[0, j], hits[1, j], hits[2, j], hits[3, j] = t, gx, gz, 1.0 if have else 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rect, state, sums, spare, hits):
+    """First hits of the relief in ``prims[row]`` along rays ``j < m`` from ``(ox, oy, oz)`` in directions
+    ``ds[0:3, j]``: ``hits[0:4, j]`` = ``t`` (``inf`` on a miss), ``dh/dx``, ``dh/dz`` there and whether they are
+    the last evaluation's at ``t`` (1.0) or not (0.0: the caller evaluates the relief again for the normal).
+
+    ``guesses[j]``: a predicted root (NaN: none; a guess outside the ray's bracket is not used). Rays whose pixel
+    coordinates ``(us[j], v)`` lie outside ``rect`` (``u_lo, u_hi, v_lo, v_hi``) miss. ``state``, ``sums`` and
+    ``spare`` are the caller's scratch (:data:`STATE_ROWS`, 3 and 3 rows of ``m``, three arrays). Steep rays (a
+    monotonic residual) search by Newton's method in lockstep; grazing ones march (:func:`_relief_march`)."""
+    y0, depth, slope, curvature = prims[row, Y0], prims[row, DEPTH], prims[row, SLOPE], prims[row, CURVATURE]
+    first, count, newton = int(prims[row, FIRST]), int(prims[row, COUNT]), int(prims[row, NEWTON])
+    live = 0
+    for j in range(m):
+        hits[0, j], hits[1, j], hits[2, j], hits[3, j] = math.inf, 0.0, 0.0, 0.0
+        if us[j] < rect[0] or us[j] > rect[1] or v < rect[2] or v > rect[3]:
+            continue
+        dx, dy, dz = ds[0, j], ds[1, j], ds[2, j]
+        t_in = (y0 - depth - oy) / dy
+        t_out = (y0 - oy) / dy
+        if not (dy > 0 and t_out > T_MIN):
+            continue
+        lo, hi = max(t_in, T_MIN), t_out
+        across = math.sqrt(dx * dx + dz * dz)  # not hypot (several times slower): only picks the search below
+        if dy > 1.05 * slope * across:  # monotonic residual: safeguarded Newton
+            guess = guesses[j]
+            state[_A, live], state[_B, live] = lo, hi
+            state[_T, live] = guess if (guess > lo and guess < hi) else 0.5 * (lo + hi)
+            state[_DX, live], state[_DY, live], state[_DZ, live] = dx, dy, dz
+            state[_SHORT, live] = GRADIENT_TOLERANCE / (curvature * across + 1e-300)
+            state[_RAY, live] = j
+            sums[_H, live] = sums[_GX, live] = sums[_GZ, live] = 0.0
+            live += 1
+        else:
+            t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi,
+                              int(prims[row, STEPS]), int(prims[row, BISECTIONS]))
+            _finish(prims, row, hits, j, ox, oz, dx, dz, t, 0.0, 0.0, False)
+    for _ in range(newton):
+        if live == 0:
+            break
+        _evaluate(waves, first, count, ox, oz, state, sums, spare, live)
+        kept = 0
+        for i in range(live):
+            a, b, t = state[_A, i], state[_B, i], state[_T, i]
+            dx, dy, dz = state[_DX, i], state[_DY, i], state[_DZ, i]
+            gx, gz = depth * sums[_GX, i], depth * sums[_GZ, i]
+            f = oy + t * dy - y0 + depth * sums[_H, i]
+            done = abs(f) <= 1e-7
+            if not done:
+                df = dy + gx * dx + gz * dz
+                if f < 0:
+                    a = t
+                else:
+                    b = t
+                step = t - f / df
+                if step > a and step < b:
+                    done = abs(step - t) <= state[_SHORT, i]
+                    t = step
+                else:
+                    t = 0.5 * (a + b)
+            if done:
+                _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, dx, dz, t, gx, gz, True)
+                continue
+            for r in range(STATE_ROWS):
+                state[r, kept] = state[r, i]
+            for r in range(3):
+                sums[r, kept] = sums[r, i]
+            state[_A, kept], state[_B, kept], state[_T, kept] = a, b, t
+            kept += 1
+        live = kept
+    for i in range(live):  # out of iterations: the last step's root, without its gradient
+        _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, state[_DX, i], state[_DZ, i], state[_T, i],
+                depth * sums[_GX, i], depth * sums[_GZ, i], False)
+
+
+@njit(cache=True, error_model="numpy")
+def _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi, steps, bisections):
+    """The first root of a grazing ray's residual in ``[lo, hi]`` (which may not be monotonic there): march
+    ``steps`` samples to the first sign change, then bisect ``bisections`` times; ``inf`` if there is none."""
+    t_prev = lo
+    found = oy + lo * dy - (y0 - relief_at(waves, lanes, first, count, depth, ox + lo * dx, oz + lo * dz)[0]) >= 0
+    a = b = lo
+    if not found:
+        for s in range(1, steps + 1):
+            t = lo + (hi - lo) * (s / steps)
+            if oy + t * dy - (y0 - relief_at(waves, lanes, first, count, depth, ox + t * dx, oz + t * dz)[0]) >= 0:
+                a, b, found = t_prev, t, True
+                break
+            t_prev = t
+    if not found:
+        return math.inf
+    for _ in range(bisections):
+        m = 0.5 * (a + b)
+        if oy + m * dy - (y0 - relief_at(waves, lanes, first, count, depth, ox + m * dx, oz + m * dz)[0]) >= 0:
+            b = m
+        else:
+            a = m
+    return 0.5 * (a + b)
