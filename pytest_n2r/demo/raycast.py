@@ -56,7 +56,7 @@ from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTUR
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
-from .relief_kernel import LANES, RELIEF_COLUMNS, SLOT, STATE_ROWS, WAVES_PER_PASS, relief_at, relief_hits
+from .relief_kernel import LANES, RELIEF_COLUMNS, SLOT, STATE_ROWS, relief_at, relief_hits
 from .textures import Texture
 
 __all__ = ["CompiledScene", "compile_scene"]
@@ -324,11 +324,10 @@ def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list
         par[:6] = [*prim.centre, "xyz".index(prim.axis), prim.radius, prim.half_length]
         return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
     if isinstance(prim, ReliefWall):
-        padded = -(-len(prim._w) // WAVES_PER_PASS) * WAVES_PER_PASS  # zero waves add exactly 0
-        par[:RELIEF_COLUMNS] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), padded, prim.newton,
-                                prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs]
+        par[:RELIEF_COLUMNS] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w),
+                                prim.newton, prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs]
         b.reliefs += 1
-        waves.extend(prim._w.astype(np.float32).tolist() + [[0.0] * 5] * (padded - len(prim._w)))
+        waves.extend(prim._w.astype(np.float32).tolist())
         return _RELIEF, par, [b.material(prim.material)] * 6
     raise InvalidArgument(f"primitive {type(prim).__name__} has no compiled form; expected one of Disc, Box, "
                           "Cylinder, ReliefWall")
@@ -681,6 +680,42 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _cast_row(row, n, v, from_pixels, rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds, prims, waves,
+              lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves):
+    """Cast row ``row`` of a pixel row's rays (``row < n``: a sub-row of sub-pixel rays at image row ``v``;
+    ``row == n``: the pixel centres) into ``ts, ks, gxs, gzs, haves[row]``: their directions, each relief's hits
+    for all of them at once (:func:`_relief_row`, after ``rows`` rows of the same kind in this band; a centre's
+    from its pixel's sub-rays when ``from_pixels``), then each ray's nearest hit. Compiled apart from the kernel
+    and called once per row of rays (the kernel's compile grows with each helper inlined into it); its helpers
+    receive views of its arrays without reference counts, as the kernel's (:func:`_borrowed`)."""
+    fy, cy = camera[1], camera[3]
+    ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
+    rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
+    prims, waves, lanes, reliefs = _borrowed(prims), _borrowed(waves), _borrowed(lanes), _borrowed(reliefs)
+    uss, xcs, rays, ts, ks = _borrowed(uss), _borrowed(xcs), _borrowed(rays), _borrowed(ts), _borrowed(ks)
+    gxs, gzs, haves = _borrowed(gxs), _borrowed(gzs), _borrowed(haves)
+    centre = row == n
+    table = n if centre else 0
+    count = ts.shape[1] // n if centre else ts.shape[1]
+    ds, guesses = rays[0:3], rays[3]
+    yc = (v - cy) / fy
+    for j in range(count):
+        xc = xcs[table, j]
+        ds[0, j] = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
+        ds[1, j] = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
+        ds[2, j] = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
+    for k in range(kinds.shape[0]):
+        if kinds[k] == _RELIEF:
+            _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], v,
+                        rects[groups.shape[0] + k], state, sums, spare, reliefs[int(prims[k, SLOT])], ts, ks, n,
+                        from_pixels, rows, centre)
+    for j in range(count):
+        ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
+            groups, group_box, kinds, prims, reliefs, j, rects, uss[table, j], v, ox, oy, oz, ds[0, j], ds[1, j],
+            ds[2, j])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, rays, state, sums, spare, reliefs,
                    colours, taps, weights, mix, c2w, camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat,
                    node_kind, node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth,
@@ -690,7 +725,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (its root searched
     from the roots of the rows above, a depth ray's from the mean of its pixel's sub-ray roots), then the
     nearest hit of each ray."""
-    fx, fy, cx, cy, far = camera[0], camera[1], camera[2], camera[3], camera[4]
+    fx, cx, far = camera[0], camera[2], camera[4]
     rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
     prims, waves, prim_mat, node_kind = _borrowed(prims), _borrowed(waves), _borrowed(prim_mat), _borrowed(node_kind)
     node_par, node_child, rings = _borrowed(node_par), _borrowed(node_child), _borrowed(rings)
@@ -699,7 +734,6 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     width = max(rgb.shape[1], depth.shape[1], opacity.shape[1])
     want_colour = rgb.shape[0] > 0
     want_hits = want_colour or opacity.shape[0] > 0
-    ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
     inv_count = np.float32(n * n)
     sub = n * width
     # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
@@ -720,11 +754,10 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     shade, shade_int = _borrowed(shade), _borrowed(shade_int)
     sa, sb, sfp, slight, sm, nodes = shade[0], shade[1], shade[2], shade[3], shade[4], shade_int[0]
     lanes = _borrowed(lanes)
-    # one row of rays: directions and the guesses of a relief's roots; a relief search's state; per relief its
-    # hits and the roots of the rows above (see _HITS)
-    ds, guesses, reliefs = _borrowed(rays[0:3]), _borrowed(rays[3]), _borrowed(reliefs)
-    state, sums, spare = _borrowed(state), _borrowed(sums), _borrowed(spare)
-    n_groups = groups.shape[0]
+    # one row of rays (see _cast_row): directions and the guesses of a relief's roots; a relief search's state;
+    # per relief its hits and the roots of the rows above (see _HITS)
+    rays, state, sums, spare, reliefs = (_borrowed(rays), _borrowed(state), _borrowed(sums), _borrowed(spare),
+                                         _borrowed(reliefs))
     # each sub-ray's four colour slots, the batch of texture lookups and the blend weights (see plan_albedo)
     colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
     for band in range(first, (height + BAND - 1) // BAND, step):
@@ -732,32 +765,15 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
         for v in range(band * BAND, min(height, band * BAND + BAND)):
             for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
                 centre = row == n
-                vs = float(v) if centre else v + ((row + 0.5) / n - 0.5)
-                yc = (vs - cy) / fy
-                table = n if centre else 0
-                count = width if centre else sub
-                for j in range(count):
-                    xc = xcs[table, j]
-                    ds[0, j] = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
-                    ds[1, j] = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
-                    ds[2, j] = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-                for k in range(kinds.shape[0]):
-                    if kinds[k] == _RELIEF:
-                        _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], vs,
-                                    rects[n_groups + k], state, sums, spare, reliefs[int(prims[k, SLOT])], ts,
-                                    ks, n,
-                                    centre and want_hits, centre_rows if centre else sub_rows, centre)
+                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), centre and want_hits,
+                          centre_rows if centre else sub_rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds,
+                          prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
                 if centre:
                     centre_rows += 1
-                else:
-                    sub_rows += 1
-                for j in range(count):
-                    ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = _cast(
-                        groups, group_box, kinds, prims, reliefs, j, rects, uss[table, j], vs, ox, oy, oz, ds[0, j],
-                        ds[1, j], ds[2, j])
-                if centre:
                     for u in range(width):
                         depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
+                else:
+                    sub_rows += 1
             if not want_hits:
                 continue
             if want_colour:

@@ -11,8 +11,7 @@ each round).
 Convention
 ----------
 - A relief's row of ``prims`` holds the columns named below (:func:`.raycast._primitive_row`); its waves are
-  rows ``amp, fx, px, fz, pz`` (float32) of ``waves``, padded with zero-amplitude waves to a multiple of
-  :data:`WAVES_PER_PASS` (a zero wave adds exactly 0 to the sums).
+  rows ``amp, fx, px, fz, pz`` (float32) of ``waves``.
 - Rays ``o + t d`` share their origin ``o`` (a camera's centre), world frame, scene units.
 - Roots end where the residual is below ``1e-7`` or Newton's step is so short that the relief's gradient cannot
   change by more than :data:`GRADIENT_TOLERANCE` over it (``curvature * |d_xz| * |step|``); the gradient of the
@@ -29,7 +28,7 @@ from numba import njit
 from .primitives import T_MIN
 from .trig import sincos
 
-__all__ = ["GRADIENT_TOLERANCE", "LANES", "RELIEF_COLUMNS", "STATE_ROWS", "WAVES_PER_PASS", "relief_at",
+__all__ = ["GRADIENT_TOLERANCE", "LANES", "RELIEF_COLUMNS", "STATE_ROWS", "relief_at",
            "relief_hits"]
 
 #: Columns of a relief's row in ``prims``: the wall's plane and extent, relief depth, slope bound, first wave
@@ -40,8 +39,6 @@ RELIEF_COLUMNS = 14
 #: How far a relief's gradient may change between Newton's last evaluation and its last step: 1e-5 turns a
 #: normal by at most 1e-5 rad, a colour by a few thousandths of a grey level.
 GRADIENT_TOLERANCE = 1e-5
-#: Waves evaluated in one pass over a batch (a scene's waves are padded to a multiple of it).
-WAVES_PER_PASS = 3
 #: Rows of a batch's search state (``state[:, i]`` for its ray ``i``): bracket ``a, b``, ``t``, direction, the
 #: step that is short enough, the ray's index; the last evaluation's float32 ``h``, ``dh/dx``, ``dh/dz`` (before
 #: ``depth``) go to rows of another array (``sums``: were they rows of ``state``, LLVM could not tell that the
@@ -85,41 +82,28 @@ def relief_at(waves, lanes, first, count, depth, x, z):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _wave(amp, fx, px, fz, pz, x32, z32, h, gx, gz):
-    """One wave's terms added to the float32 sums ``h, gx, gz`` at ``(x32, z32)``."""
-    sx, cx = sincos(np.float64(fx * x32 + px))
-    sz, cz = sincos(np.float64(fz * z32 + pz))
-    sx32, cx32, sz32, cz32 = np.float32(sx), np.float32(cx), np.float32(sz), np.float32(cz)
-    return h + amp * sx32 * sz32, gx + amp * fx * cx32 * sz32, gz + amp * fz * sx32 * cz32
-
-
-@njit(cache=True, inline="always", error_model="numpy")
 def _evaluate(waves, first, count, ox, oz, state, sums, spare, live):
-    """The waves' float32 sums at ``o + t d`` of the first ``live`` rays of the batch, into ``sums``: passes of
-    :data:`WAVES_PER_PASS` waves, each one loop over the rays that LLVM vectorizes. A pass adds to the sums of
-    the one before it, from one array into the other (``sums`` and ``spare`` by turns, the last pass into
-    ``sums``): LLVM vectorizes a loop whose loads and stores are in different arrays."""
-    passes = count // WAVES_PER_PASS
-    for p in range(passes):
-        start = first + p * WAVES_PER_PASS
-        into_sums = (passes - 1 - p) % 2 == 0
+    """The waves' float32 sums at ``o + t d`` of the first ``live`` rays of the batch, into ``sums``: one pass
+    over the rays per wave, a loop that LLVM vectorizes. Each pass adds its wave to the sums of the pass before,
+    from one array into the other (``spare`` and ``sums`` by turns, the last pass into ``sums``): LLVM
+    vectorizes a loop whose stores go to another array than its loads."""
+    for k in range(first, first + count):
+        into_sums = (first + count - 1 - k) % 2 == 0
         dst, src = (sums, spare) if into_sums else (spare, sums)
-        a0, fx0, px0, fz0, pz0 = waves[start, 0], waves[start, 1], waves[start, 2], waves[start, 3], waves[start, 4]
-        a1, fx1, px1 = waves[start + 1, 0], waves[start + 1, 1], waves[start + 1, 2]
-        fz1, pz1 = waves[start + 1, 3], waves[start + 1, 4]
-        a2, fx2, px2 = waves[start + 2, 0], waves[start + 2, 1], waves[start + 2, 2]
-        fz2, pz2 = waves[start + 2, 3], waves[start + 2, 4]
-        fresh = p == 0
+        amp, fx, px, fz, pz = waves[k, 0], waves[k, 1], waves[k, 2], waves[k, 3], waves[k, 4]
+        fresh = k == first
         for i in range(live):
             x32 = np.float32(ox + state[_T, i] * state[_DX, i])
             z32 = np.float32(oz + state[_T, i] * state[_DZ, i])
             h, gx, gz = np.float32(0.5), _F0, _F0
             if not fresh:
                 h, gx, gz = np.float32(src[_H, i]), np.float32(src[_GX, i]), np.float32(src[_GZ, i])
-            h, gx, gz = _wave(a0, fx0, px0, fz0, pz0, x32, z32, h, gx, gz)
-            h, gx, gz = _wave(a1, fx1, px1, fz1, pz1, x32, z32, h, gx, gz)
-            h, gx, gz = _wave(a2, fx2, px2, fz2, pz2, x32, z32, h, gx, gz)
-            dst[_H, i], dst[_GX, i], dst[_GZ, i] = np.float64(h), np.float64(gx), np.float64(gz)
+            sx, cx = sincos(np.float64(fx * x32 + px))
+            sz, cz = sincos(np.float64(fz * z32 + pz))
+            sx32, cx32, sz32, cz32 = np.float32(sx), np.float32(cx), np.float32(sz), np.float32(cz)
+            dst[_H, i] = np.float64(h + amp * sx32 * sz32)
+            dst[_GX, i] = np.float64(gx + amp * fx * cx32 * sz32)
+            dst[_GZ, i] = np.float64(gz + amp * fz * sx32 * cz32)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
