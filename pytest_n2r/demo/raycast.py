@@ -761,19 +761,16 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     # each sub-ray's four colour slots, the batch of texture lookups and the blend weights (see plan_albedo)
     colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
     for band in range(first, (height + BAND - 1) // BAND, step):
-        sub_rows = centre_rows = 0  # rows of rays cast in this band
         for v in range(band * BAND, min(height, band * BAND + BAND)):
+            above = v - band * BAND  # pixel rows of this band above this one (their rays guess this row's roots)
             for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
                 centre = row == n
                 _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), centre and want_hits,
-                          centre_rows if centre else sub_rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds,
-                          prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
-                if centre:
-                    centre_rows += 1
-                    for u in range(width):
-                        depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
-                else:
-                    sub_rows += 1
+                          above if centre else above * n + row, c2w, camera, uss, xcs, rects, groups, group_box,
+                          kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
+            if depth.shape[0] > 0:
+                for u in range(width):
+                    depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)
             if not want_hits:
                 continue
             if want_colour:
