@@ -212,8 +212,9 @@ def test_one_and_two_pixel_images(size, backend):
 def test_a_1080p_render_is_memory_bounded_and_its_chunks_line_up(adaptive):
     """1920×1080 in chunks of 32768 rays (17 rows). Measured with tracemalloc (NumPy buffers): 56 bytes per
     pixel in chunks of 4096 or 32768 rays (the output buffers and the uint8 conversion), 156 in one chunk;
-    the bound is 80, for the render's buffers: the kernels are loaded before memory is traced. With every pixel traced (``adaptive=0``) a crop across chunk boundaries must
-    equal the render of the crop's own camera, byte for byte."""
+    the bound is 80, for the render's buffers: the kernels are loaded before memory is traced. With every pixel
+    traced (``adaptive=0``) a crop across chunk boundaries must equal the render of the crop's own camera, byte
+    for byte."""
     field = random_field(resolution=16, occupied=0.0)
     field.occupancy[6:9, 6:9, 6:9] = True  # little to sample: the test is about buffers, not samples
     field.values[:, 0] += 4.0
