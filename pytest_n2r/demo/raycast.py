@@ -10,7 +10,7 @@ rounding (tested against them, ``tests/demo/test_raycast.py``).
 What makes it fast (measured in ``docs/performance.md``):
 
 - Each row of rays (a sub-row of sub-pixel rays, or the pixel centres) is cast as a batch: first a relief's
-  hits for all its rays at once, Newton's method in lockstep with the waves evaluated eight rays to a vector
+  hits for all its rays at once, Newton's method in lockstep with the waves evaluated four rays to a vector
   (:mod:`.relief_kernel`), each root searched from the roots of the rows above (extrapolated; a depth ray's
   from the mean of its pixel's sub-ray roots), then each ray's nearest hit over the primitives.
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):

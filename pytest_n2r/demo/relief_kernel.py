@@ -4,7 +4,7 @@ pixels, the relief's waves evaluated for all of the batch's rays in one loop tha
 The arithmetic is :meth:`.primitives.ReliefWall.height_and_gradient` and its safeguarded Newton search,
 operation for operation (float32 waves, float64 roots); what changes is the order: one ray's chain of
 evaluations was latency-bound (its sines in one 8-lane vector, then a chain of float32 sums and Newton's
-division), so each evaluation of the waves now runs for every ray of the batch still searching, eight rays to
+division), so each evaluation of the waves now runs for every ray of the batch still searching, four rays to
 a vector, and only the Newton update is per ray. Rays that converge leave the batch (it is compacted after
 each round).
 
