@@ -32,7 +32,7 @@ from ..errors import InvalidArgument, SceneFileError
 from .query import trilinear
 from .space import SceneSpace
 
-__all__ = ["SceneField", "n_sh_coefficients", "used_vertex_index", "vertex_ijk", "FIELD_TENSORS"]
+__all__ = ["SceneField", "n_sh_coefficients", "opacity", "used_vertex_index", "vertex_ijk", "FIELD_TENSORS"]
 
 #: The largest |density_shift| a scene file may hold: a fit's shift is -14.5..69 for alpha_init 1e-6..0.999
 #: over steps of 0.1..2 voxels (-8.5 by default); beyond ±100, every sample is empty or opaque alike.
@@ -52,6 +52,11 @@ def density_shift_for(alpha: float, step_ratio: float) -> float:
     """The shift that makes a raw density of 0 give opacity ``alpha`` over one sample of ``step_ratio`` voxels."""
     sigma = -math.log1p(-alpha) / step_ratio
     return float(sigma + math.log(-math.expm1(-sigma)))  # softplus⁻¹(σ)
+
+
+def opacity(raw: torch.Tensor, density_shift: float, step_ratio: float) -> torch.Tensor:
+    """The opacity of one sample of ``step_ratio`` voxels at raw density ``raw``."""
+    return -torch.expm1(-F.softplus(raw + density_shift) * step_ratio)
 
 
 def inverse_softplus(y: torch.Tensor) -> torch.Tensor:
@@ -160,14 +165,14 @@ class SceneField:
         """``(R-1)³`` opacity over one sample of ``step_ratio`` voxels at each cell's densest (stored)
         corner."""
         corner_max = F.max_pool3d(self.density_grid()[None, None], kernel_size=2, stride=1)[0, 0]
-        return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
+        return opacity(corner_max, self.density_shift, step_ratio)
 
     def occupied_cell_alpha(self, step_ratio: float) -> torch.Tensor:
         """:meth:`cell_alpha` of the occupied cells only, in ``occupancy.nonzero()`` order (the same values,
         without a dense grid of them: a render needs no more)."""
         rows = self._stored_rows(_cell_corners(self.occupancy))
         corner_max = self.values[rows, 0].reshape(-1, 8).amax(dim=1)
-        return -torch.expm1(-F.softplus(corner_max + self.density_shift) * step_ratio)
+        return opacity(corner_max, self.density_shift, step_ratio)
 
     def upsampled(self, resolution: int) -> SceneField:
         """The same field on a finer grid, sparse: occupancy carried over with one cell of dilation, values

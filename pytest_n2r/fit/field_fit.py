@@ -37,6 +37,7 @@ from .detail import capture_detail
 from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient
+from .prune import pruned_occupancy, pruned_occupancy_dense
 from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
@@ -235,12 +236,12 @@ class _Trainer:
         (hidden behind surfaces or clear air): one cell of dilation keeps what is left free to grow."""
         c = self.config
         threshold = c.final_prune_alpha if self.stage == len(c.resolutions) - 1 else c.prune_alpha
-        keep = self.field.cell_alpha(c.step_ratio) >= threshold
-        seen = self.cell_weight.reshape(keep.shape)
-        keep &= (seen < 0) | (seen >= self.config.prune_weight)
+        if self.compiled:
+            occupancy = pruned_occupancy(self.field, self.grid.numpy()[0], self.row_map, self.cell_weight,
+                                         threshold, c.prune_weight, c.step_ratio)
+        else:
+            occupancy = pruned_occupancy_dense(self.field, self.cell_weight, threshold, c.prune_weight, c.step_ratio)
         self._reset_visibility()
-        keep = F.max_pool3d(keep[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
-        occupancy = self.field.occupancy & keep
         if not occupancy.any():  # nothing has formed yet (a very short fit): pruning would leave no field
             return
         self.field.occupancy = occupancy
