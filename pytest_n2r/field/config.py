@@ -29,7 +29,8 @@ class FieldConfig:
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
     Optimizer (Adam on the rows a step touches)
-        ``lr_density``, ``lr_color``: learning rates, decayed exponentially to ``lr_final_ratio`` of them.
+        ``lr_density``, ``lr_color``: learning rates, decayed exponentially to ``lr_final_ratio`` of them;
+        twice the earlier 0.2 and 0.1 won at equal training time on both scenes the priors were chosen on.
     Initialization and regularization
         ``random_background``: every training ray is composited over its own random colour, so the field
         cannot let a constant background stand in for dark or distant parts of the scene: each ray must
@@ -60,8 +61,8 @@ class FieldConfig:
     sh_degree: int = 1
     step_ratio: float = 0.5
     batch_rays: int = 4096
-    lr_density: float = 0.2
-    lr_color: float = 0.1
+    lr_density: float = 0.4
+    lr_color: float = 0.2
     lr_final_ratio: float = 0.1
     random_background: bool = True
     distortion: float = 1e-3
