@@ -36,8 +36,11 @@ def _runs(log) -> dict[str, list[str]]:
     return by_process
 
 
-def test_the_tests_on_fitted_scenes_run_first_under_xdist_only(pytester):
+def test_the_tests_on_fitted_scenes_run_first_under_xdist_only(pytester, monkeypatch):
     pytest.importorskip("xdist")
+    # the serial run is in this process: where this suite itself runs under xdist, its worker's name is not the
+    # inner run's (the inner tests log "serial" only without it)
+    monkeypatch.delenv("PYTEST_XDIST_WORKER", raising=False)
     log = pytester.path / "order.log"
     pytester.makepyfile(test_order=ORDERED.format(log=str(log)))
     args = ("-p", "no:cacheprovider", "-p", "no:benchmark", "--n2r-scene", "demo:wall")
