@@ -9,9 +9,10 @@ from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.fit import FitResult
 
 #: Two small grids, small batches and an initial opacity the first prune keeps (0.01 per sample).
-#: Measured on the 48×27 capture: 80 steps take about 1 s and reach 18.2 dB held-out PSNR (18.6 dB without the
-#: total-variation priors, which became defaults on 2 December 2026 and pull harder on grids this small; with a random
-#: background a field needs more steps to become opaque: 14.5 dB after 40 steps, 16.8 dB with a black one).
+#: Measured on the 48×27 capture: 80 steps take about 1 s and reach 21.2 dB held-out PSNR at the default learning
+#: rates (0.4 / 0.2 since 2 December 2026; 18.2 dB at the earlier 0.2 / 0.1, and 18.6 dB at those without the
+#: total-variation priors, which pull harder on grids this small; with a random background a field needs more steps
+#: to become opaque: 14.5 dB after 40 steps, 16.8 dB with a black one, both at the earlier rates).
 SHORT_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=20,
                            alpha_init=0.01)
 SHORT_STEPS = 80
