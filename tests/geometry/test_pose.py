@@ -147,6 +147,23 @@ def test_check_pose_names_the_problem():
         check_pose(np.eye(3))
 
 
+@settings(deadline=None)
+@given(poses(), st.integers(0, 15), st.sampled_from([0.0, 1e-9, 2e-9, 1e-6, 1.1e-5, 1e-3, -1e-9, -2e-9, -1e-6]))
+def test_check_pose_accepts_what_its_allclose_definition_accepts(c2w, entry, delta):
+    """``check_pose``'s written-out tests are ``np.allclose`` on the last row (atol 1e-9) and ``np.linalg.det``."""
+    M = np.array(c2w, dtype=np.float64)
+    M.flat[entry] += delta
+    R = M[:3, :3]
+    expected = bool(np.allclose(M[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9)
+                    and np.abs(R.T @ R - np.eye(3)).max() <= 1e-5 and np.linalg.det(R) >= 0)
+    try:
+        check_pose(M)
+        accepted = True
+    except InvalidArgument:
+        accepted = False
+    assert accepted == expected, f"entry {entry} moved by {delta}: accepted {accepted}, np.allclose says {expected}"
+
+
 def test_from_matrix_rejects_bad_length():
     with pytest.raises(ValueError, match="length"):
         Transform.from_matrix(np.eye(4), length=0.0)

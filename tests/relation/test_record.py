@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 
 from hypothesis import given
 from hypothesis import strategies as st
@@ -57,6 +58,21 @@ def test_the_record_round_trips_through_json_with_every_field():
     assert json.dumps(again.to_dict()) == text, "NaN scores of rejected examples included"
     assert again.renders == 9 and again.shrink_examples == 4 and again.minimal.view == "view2"
     assert again.to_dict()["stats"]["max"] == 0.3 and again.summary_line() == run.summary_line()
+
+
+def test_to_dict_is_asdict_with_every_container_copied():
+    """The hand-written conversion (a quarter of ``asdict``'s time) gives ``asdict``'s dict, nothing shared."""
+    run = _run()
+    run.replayed, run.minimal = [_example(7)], _example(2, deviation=0.3)
+    run.floor = {"line": "floor", "floor": {"mean": 0.4, "views": [1, 2]}, "pair": (0.5, "x")}
+    run.examples[0].settings = {"steps": [1, 2], "tile": (16, 16), "name": None}
+    expected = asdict(run)
+    expected["stats"] = run.stats()
+    got = run.to_dict()
+    assert json.dumps(got) == json.dumps(expected) and repr(got) == repr(expected)
+    assert got["examples"][0]["camera"] is not run.examples[0].camera, "the camera dict is shared"
+    assert got["floor"]["floor"]["views"] is not run.floor["floor"]["views"], "a nested list is shared"
+    assert run.examples[0].to_dict() == asdict(run.examples[0])
 
 
 @given(st.lists(st.floats(0, 10), min_size=1, max_size=50), st.floats(0, 10))
