@@ -21,8 +21,10 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-__all__ = ["albedo_of", "bilinear", "look_up", "plan_albedo", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL", "F0",
-           "F1", "META_COLUMNS"]
+from .borrow import borrowed
+
+__all__ = ["albedo_of", "albedo_row", "bilinear", "log2", "look_up", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL",
+           "F0", "F1", "META_COLUMNS"]
 
 # material kinds (node_kind)
 FLAT, TEXTURED, POSTER, BLEND, RADIAL = 0, 1, 2, 3, 4
@@ -42,7 +44,7 @@ def _mirror_period(x, period, inverse):
     maps to the same texels). ``floor(x * inverse)`` may be one off ``floor(x / period)`` (a division is slow):
     ``x - period * n`` is exact for either (``period * n`` is an integer and ``|x| < 2**52``) and the correction
     brings it into range exactly."""
-    r = x - period * math.floor(x * inverse)
+    r = x - period * np.floor(x * inverse)  # np.floor: a float, no round trip through an integer
     return r + period if r < 0 else (r - period if r > period else r)
 
 
@@ -67,6 +69,56 @@ def _fma32(typingctx, a, b, c):
     return types.float32(types.float32, types.float32, types.float32), codegen
 
 
+@intrinsic
+def _bits(typingctx, x):
+    """The bits of a float64 as an int64."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _float_of_bits(typingctx, bits):
+    """The float64 whose bits are ``bits`` (an int64)."""
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.int64), codegen
+
+
+# fdlibm's __ieee754_log: Reme's polynomial for log(1 + f) on [sqrt(2)/2 - 1, sqrt(2) - 1] (|error| < 2**-58.45)
+_LG1, _LG2, _LG3, _LG4 = 6.666666666666735130e-01, 3.999999999940941908e-01, 2.857142874366239149e-01, \
+    2.222219843214978396e-01
+_LG5, _LG6, _LG7 = 1.818357216161805012e-01, 1.531383769920937332e-01, 1.479819860511658591e-01
+_MANTISSA, _EXPONENT_ONE, _SQRT2_BITS = (1 << 52) - 1, 1023 << 52, 0x3FF6A09E667F3BCD
+_INV_LN2 = 1.4426950408889634
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def log2(x):
+    """``log2 x`` of a normal positive float64 (a mip level), inlined instead of the C library's call:
+    ``x = 2**k m`` with ``m`` in ``[sqrt(2)/2, sqrt(2))`` from its bits, fdlibm's ``log(m)`` polynomial, times
+    ``1 / ln 2``. Within 2 units in the last place of ``math.log2`` (tested).
+
+    >>> log2(8.0), round(log2(3.0), 12)
+    (3.0, 1.584962500721)
+    """
+    bits = _bits(x)
+    k = (bits >> 52) - 1023
+    m_bits = (bits & _MANTISSA) | _EXPONENT_ONE
+    if m_bits > _SQRT2_BITS:  # m / 2 in [sqrt(2)/2, 1): one more in the exponent
+        m_bits -= 1 << 52
+        k += 1
+    f = _float_of_bits(m_bits) - 1.0
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    r = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7))) + w * (_LG2 + w * (_LG4 + w * _LG6))
+    half_f2 = 0.5 * f * f
+    return k + (f - (half_f2 - s * (half_f2 + r))) * _INV_LN2
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def bilinear_taps(tex_meta, tex, level, s, t):
     """Where a bilinear lookup like ``cv2.remap`` at level-0 texel coordinates ``(s, t)`` reads: the offsets
@@ -83,9 +135,9 @@ def bilinear_taps(tex_meta, tex, level, s, t):
         s = _mirror_period(s, tex_meta[tex, level, PERIOD_S], tex_meta[tex, level, INV_PERIOD_S])
         t = _mirror_period(t, tex_meta[tex, level, PERIOD_T], tex_meta[tex, level, INV_PERIOD_T])
     s32, t32 = np.float32(s), np.float32(t)
-    x0 = int(np.float64(s32) + 1.0) - 1  # floor: both are >= -1 here, and +1 is exact in float64
-    y0 = int(np.float64(t32) + 1.0) - 1
-    alpha, beta = s32 - np.float32(x0), t32 - np.float32(y0)
+    xf, yf = np.floor(np.float64(s32)), np.floor(np.float64(t32))  # integers in [-1, 2 w], exact in float32
+    alpha, beta = s32 - np.float32(xf), t32 - np.float32(yf)
+    x0, y0 = int(xf), int(yf)
     x1, y1 = x0 + 1, y0 + 1
     if clamp:
         x0, x1 = min(max(x0, 0), w - 1), min(max(x1, 0), w - 1)
@@ -121,23 +173,19 @@ def _lerp2(p00, p01, p10, p11, alpha, beta):
     return _fma32(beta, v1 - v0, v0)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _tap(tex_meta, tex, level, s, t, slot, taps, weights, count):
-    """Append the lookup of ``(s, t)`` in ``level`` to the batch (``taps`` rows: the four texel offsets and the
-    result slot; ``weights``: alpha, beta) at ``count``; the new count."""
-    taps[0, count], taps[1, count], taps[2, count], taps[3, count], weights[0, count], weights[1, count] = \
-        bilinear_taps(tex_meta, tex, level, s, t)
-    taps[4, count] = slot
-    return count + 1
+#: Rows of a pixel row's texture requests (``requests[:, r]``, see :func:`albedo_row`): level-0 texel coordinates
+#: ``s, t``, the footprint in texels and the texture's level count; ``request_slots[:, r]``: texture, colour slot;
+#: ``lods[:, r]``: the mip level's floor and the float32 weight of the level above.
+_S, _T, _FOOTPRINT, _LEVELS = range(4)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _plan_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours, taps, weights,
-               count):
-    """Plan the albedo of a material without a blend (Flat, Textured, Poster, Radial) at ``(a, b)``: a constant
-    colour goes to ``colours[slot]``; a texture's trilinear mip-mapped sample (see :meth:`Texture.sample`)
-    appends its one or two bilinear lookups (levels ``lo`` and ``lo + 1``, results to ``slot`` and
-    ``slot + 1``). Returns the new lookup count and the weight of level ``lo + 1`` (0: one lookup)."""
+def _request_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours, requests,
+                  request_slots, count):
+    """Resolve a material without a blend (Flat, Textured, Poster, Radial) at ``(a, b)``: a constant colour goes to
+    ``colours[slot]``; a texture's trilinear mip-mapped sample (see :meth:`Texture.sample`) is appended to the
+    row's requests at ``count`` (its colour to ``slot`` and, from the level above, ``slot + 1``). Returns the new
+    request count."""
     tex = -1
     s = t = k = 0.0
     while tex < 0:
@@ -145,7 +193,7 @@ def _plan_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp,
         if kind == FLAT:
             colours[slot, 0], colours[slot, 1], colours[slot, 2] = (
                 np.float32(node_par[node, 0]), np.float32(node_par[node, 1]), np.float32(node_par[node, 2]))
-            return count, F0
+            return count
         if kind == TEXTURED:
             k = node_par[node, 1]
             tex, s, t = int(node_par[node, 0]), (a - node_par[node, 2]) * k, (b - node_par[node, 3]) * k
@@ -166,32 +214,22 @@ def _plan_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp,
             if ring >= 0:
                 colours[slot, 0], colours[slot, 1], colours[slot, 2] = (
                     np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3]))
-                return count, F0
+                return count
             node = node_child[node, 0]
-    footprint = fp * k
-    lo, f, levels = 0, F0, 1
-    if footprint > 1.0:  # else level 0 alone (log2 of max(footprint, 1) is 0)
-        n_levels = int(tex_meta[tex, 0, LEVELS])
-        lod = min(math.log2(footprint), n_levels - 1)
-        lo = int(math.floor(lod))
-        f = np.float32(lod - lo)
-        if lo + 1 < n_levels and f != F0:  # with f = 0 the blend is c * 1 + c2 * 0: c itself
-            levels = 2
-        else:
-            f = F0
-    for q in range(levels):  # one call site: the lookup's code is inlined once (compile time)
-        count = _tap(tex_meta, tex, lo + q, s, t, slot + q, taps, weights, count)
-    return count, f
+    requests[_S, count], requests[_T, count], requests[_FOOTPRINT, count] = s, t, fp * k
+    requests[_LEVELS, count] = tex_meta[tex, 0, LEVELS]
+    request_slots[0, count], request_slots[1, count] = tex, slot
+    return count + 1
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def plan_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, mask, slot, colours, taps,
-                weights, count, mix):
-    """Plan the albedo of a surface's material at ``(a, b)`` with footprint ``fp`` (scene units) into the four
-    colour slots from ``slot`` (two per material, see :func:`_plan_leaf`): a blend's two materials where its
-    ``mask`` value is strictly between 0 and 1 (only the one it shows where it is 0 or 1), else the material's
-    own. ``mix[0:3, i]`` (``i = slot // 4``) get the mask value (NaN: no second material) and each material's
-    level weight; returns the new lookup count. :func:`albedo_of` turns the looked-up slots into the colour."""
+def _request_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, mask, slot, colours, mix,
+                    requests, request_slots, count):
+    """Resolve the material of a surface at ``(a, b)`` with footprint ``fp`` (scene units) into the four colour
+    slots from ``slot`` (two per material, see :func:`_request_leaf`): a blend's two materials where its ``mask``
+    value is strictly between 0 and 1 (only the one it shows where it is 0 or 1), else the material's own.
+    ``mix[0, i]`` (``i = slot // 4``) gets the mask value (NaN: no second material), ``mix[1:3, i]`` the level
+    weights (0 until :func:`albedo_row` sets a texture's); returns the new request count."""
     m = F0
     bottom, top = node, -1
     if node_kind[node] == BLEND:
@@ -207,8 +245,9 @@ def plan_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp
         leaf = bottom if which == 0 else top
         if leaf < 0:
             break
-        count, mix[1 + which, i] = _plan_leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, a, b, fp,
-                                              slot + 2 * which, colours, taps, weights, count)
+        mix[1 + which, i] = F0
+        count = _request_leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot + 2 * which,
+                              colours, requests, request_slots, count)
     return count
 
 
@@ -220,6 +259,51 @@ def look_up(texels, taps, weights, count, colours):
         slot = taps[4, q]
         colours[slot, 0], colours[slot, 1], colours[slot, 2] = blend_taps(
             texels, taps[0, q], taps[1, q], taps[2, q], taps[3, q], weights[0, q], weights[1, q])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, tex_meta, texels, colours, mix,
+               requests, request_slots, lods, taps, weights):
+    """The albedo of a pixel row's ``samples`` sub-rays (sub-ray ``i`` hit material node ``nodes[i]``, -1: none;
+    surface coordinates, footprint and mask value in ``shade[0, 1, 2, 4]``, see :mod:`.raycast`) into four colour
+    slots each (``colours[4 i:4 i + 4]``) and ``mix[:, i]``, for :func:`albedo_of`.
+
+    In passes over the row, each a short loop whose iterations overlap (one sub-ray's chain through its material,
+    mip level and texel addresses was latency-bound): the materials resolved (constant colours written, texture
+    samples requested), then every request's mip level, then every request's one or two bilinear lookups planned
+    (texel offsets and weights, levels ``lo`` and ``lo + 1``), then all lookups read in one loop whose texel
+    reads (cache misses on large textures) overlap. Compiled apart from the render kernel (its compile time); its
+    helpers receive views of its arrays without reference counts (:func:`.borrow.borrowed`)."""
+    nodes, shade, node_kind, node_par, node_child = (borrowed(nodes), borrowed(shade), borrowed(node_kind),
+                                                     borrowed(node_par), borrowed(node_child))
+    rings, tex_meta, texels, colours, mix = (borrowed(rings), borrowed(tex_meta), borrowed(texels), borrowed(colours),
+                                             borrowed(mix))
+    requests, request_slots, lods = borrowed(requests), borrowed(request_slots), borrowed(lods)
+    taps, weights = borrowed(taps), borrowed(weights)
+    sa, sb, sfp, sm = shade[0], shade[1], shade[2], shade[4]
+    count = 0
+    for i in range(samples):
+        if nodes[i] >= 0:
+            count = _request_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
+                                    sfp[i], sm[i], 4 * i, colours, mix, requests, request_slots, count)
+    footprints, levels, lo_row, f_row = requests[_FOOTPRINT], requests[_LEVELS], lods[0], lods[1]
+    for r in range(count):  # log2 of max(footprint, 1): level 0 alone at a footprint of at most one texel
+        lod = min(log2(max(footprints[r], 1.0)), levels[r] - 1.0)
+        lo_f = np.floor(lod)
+        lo_row[r] = lo_f
+        f_row[r] = np.float32(lod - lo_f)
+    lookups = 0
+    for r in range(count):
+        tex, slot = request_slots[0, r], request_slots[1, r]
+        lo, f = int(lo_row[r]), np.float32(f_row[r])
+        two = lo + 1 < levels[r] and f != F0  # with f = 0 the blend is c * 1 + c2 * 0: c itself
+        mix[1 + (slot >> 1 & 1), slot >> 2] = f if two else F0
+        for q in range(2 if two else 1):  # one call site: the lookup's code is inlined once (compile time)
+            taps[0, lookups], taps[1, lookups], taps[2, lookups], taps[3, lookups], weights[0, lookups], \
+                weights[1, lookups] = bilinear_taps(tex_meta, tex, lo + q, requests[_S, r], requests[_T, r])
+            taps[4, lookups] = slot + q
+            lookups += 1
+    look_up(texels, taps, weights, lookups, colours)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

@@ -16,7 +16,7 @@ What makes it fast (measured in ``docs/performance.md``):
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
   a ray tests only what may lie under its pixel.
 - The hot helpers are inlined and receive views of the kernel's arrays without reference counts
-  (:func:`_borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
+  (:func:`.borrow.borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
 - No sine goes to the C library: a relief's waves and the blend masks (once per pixel row over all its
   sub-rays, :mod:`.mask_kernel`) take theirs from :mod:`.trig`'s inlined polynomials, in vectorized loops.
 
@@ -49,10 +49,10 @@ from llvmlite import ir
 from numba import njit, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
-from numba.np.arrayobj import populate_array
 
 from ..errors import InvalidArgument
-from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, look_up, plan_albedo
+from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, albedo_row
+from .borrow import borrowed as _borrowed
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
@@ -149,7 +149,8 @@ class CompiledScene:
                     np.empty((reliefs, _RELIEF_ROWS, rays[1])),
                     np.empty((4 * samples, 3), np.float32),
                     np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
-                    np.empty((3, samples), np.float32)) for _ in range(threads)]
+                    np.empty((3, samples), np.float32), np.empty((4, 2 * samples)),
+                    np.empty((2, 2 * samples), np.int64), np.empty((2, 2 * samples))) for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
             if threads <= 1:
@@ -368,26 +369,6 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
 
 
 # -- geometry ------------------------------------------------------------------------------------------------
-
-
-@intrinsic
-def _borrowed(typingctx, array):
-    """A view of ``array`` without a reference count, valid while the caller holds ``array``.
-
-    numba counts references to an array each time a helper it inlines receives one (an atomic increment
-    and decrement per call, per array): in the per-ray loops that was about half of a render's time. The
-    kernel passes views of its own arguments to its helpers instead, which are alive for the whole call.
-    Never borrow an array the kernel allocates itself: numba frees it after its last named use, and the
-    view would outlive it."""
-    def codegen(context, builder, signature, args):
-        source = context.make_array(signature.args[0])(context, builder, value=args[0])
-        view = context.make_array(signature.return_type)(context, builder)
-        populate_array(view, data=source.data, shape=source.shape, strides=source.strides,
-                       itemsize=source.itemsize, meminfo=None)
-        return view._getvalue()
-
-    return array(array), codegen
-
 
 
 def barrier_constraint(machine: str) -> str | None:
@@ -717,9 +698,9 @@ def _cast_row(row, n, v, from_pixels, rows, c2w, camera, uss, xcs, rects, groups
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, rays, state, sums, spare, reliefs,
-                   colours, taps, weights, mix, c2w, camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat,
-                   node_kind, node_par, node_child, rings, masks, tex_meta, texels, shading, background, rgb, depth,
-                   opacity):
+                   colours, taps, weights, mix, requests, request_slots, lods, c2w, camera, n, rects, groups, group_box,
+                   kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings, masks, tex_meta, texels,
+                   shading, background, rgb, depth, opacity):
     """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the ``n`` sub-rows of
     supersampling rays are cast first, then the depth rays through the pixel centres, then each pixel is shaded.
     Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (its root searched
@@ -752,14 +733,15 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     ks, haves = _borrowed(scratch_int[0]), _borrowed(scratch_int[1])
     # each sub-ray's surface coordinates, footprint, light, material and mask value (see _shading_inputs)
     shade, shade_int = _borrowed(shade), _borrowed(shade_int)
-    sa, sb, sfp, slight, sm, nodes = shade[0], shade[1], shade[2], shade[3], shade[4], shade_int[0]
+    slight, nodes = shade[3], shade_int[0]
     lanes = _borrowed(lanes)
     # one row of rays (see _cast_row): directions and the guesses of a relief's roots; a relief search's state;
     # per relief its hits and the roots of the rows above (see _HITS)
     rays, state, sums, spare, reliefs = (_borrowed(rays), _borrowed(state), _borrowed(sums), _borrowed(spare),
                                          _borrowed(reliefs))
-    # each sub-ray's four colour slots, the batch of texture lookups and the blend weights (see plan_albedo)
+    # each sub-ray's four colour slots and blend weights, the row's texture requests and lookups (see albedo_row)
     colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
+    requests, request_slots, lods = _borrowed(requests), _borrowed(request_slots), _borrowed(lods)
     for band in range(first, (height + BAND - 1) // BAND, step):
         for v in range(band * BAND, min(height, band * BAND + BAND)):
             above = v - band * BAND  # pixel rows of this band above this one (their rays guess this row's roots)
@@ -776,12 +758,8 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
             if want_colour:
                 _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves,
                                 lanes, prim_mat, node_kind, node_par, masks, shade, shade_int)
-                count = 0
-                for i in range(n * sub):
-                    if nodes[i] >= 0:
-                        count = plan_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
-                                            sfp[i], sm[i], 4 * i, colours, taps, weights, count, mix)
-                look_up(texels, taps, weights, count, colours)
+                albedo_row(n * sub, nodes, shade, node_kind, node_par, node_child, rings, tex_meta, texels, colours,
+                           mix, requests, request_slots, lods, taps, weights)
             for u in range(width):
                 hits = 0
                 acc_r, acc_g, acc_b = F0, F0, F0

@@ -7,9 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
+from numba import njit
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
-from pytest_n2r.demo.albedo_kernel import bilinear
+from pytest_n2r.demo.albedo_kernel import bilinear, log2
 from pytest_n2r.demo.exact import GroundTruthScene
 from pytest_n2r.demo.materials import Blend, Flat, Material, Poster
 from pytest_n2r.demo.raycast import _Builder
@@ -82,6 +83,27 @@ def test_texture_lookups_equal_opencv_remap_bit_for_bit(wrap):
         want = texture._bilinear(level, s, t)
         got = np.array([bilinear(meta, texels, index, level, a, b) for a, b in zip(s, t)], np.float32)
         np.testing.assert_array_equal(got, want, err_msg=f"{wrap} level {level}")
+
+
+@njit(cache=True)
+def _log2_array(x):
+    out = np.empty_like(x)
+    for i in range(x.size):
+        out[i] = log2(x[i])
+    return out
+
+
+def test_the_mip_levels_log2_is_within_two_ulp_of_the_c_librarys():
+    """The kernel's inlined ``log2`` picks mip levels (footprints from 1 to a few thousand texels)."""
+    rng = np.random.default_rng(5)
+    x = np.concatenate([np.exp2(rng.uniform(0.0, 14.0, 200_000)), np.exp2(rng.uniform(-30.0, 30.0, 20_000)),
+                        2.0 ** np.arange(-20.0, 21.0), np.nextafter(2.0 ** np.arange(-20.0, 21.0), 0.0),
+                        [np.sqrt(2.0), np.nextafter(np.sqrt(2.0), 2.0), np.nextafter(np.sqrt(2.0), 0.0)]])
+    got, want = _log2_array(x), np.log2(x)
+    ulp = np.abs(got - want) / np.spacing(np.maximum(np.abs(want), 1.0))
+    assert ulp.max() <= 2, f"log2 off by {ulp.max():.1f} ulp at x={x[ulp.argmax()]!r}"
+    exact = 2.0 ** np.arange(-20.0, 21.0)
+    np.testing.assert_array_equal(_log2_array(exact), np.arange(-20.0, 21.0), err_msg="log2 of a power of two")
 
 
 def test_texture_lookups_at_whole_mirror_periods_equal_opencv_remap():

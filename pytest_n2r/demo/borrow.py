@@ -1,0 +1,30 @@
+"""Views of arrays without reference counts, for the demo renderer's compiled kernels (numba).
+
+numba counts references to an array each time a helper it inlines receives one (an atomic increment and decrement
+per call, per array): in the ray caster's per-ray loops that was about half of a render's time
+(``docs/performance.md``). A kernel passes views of its own arguments to its helpers instead, which are alive for
+the whole call.
+"""
+
+from __future__ import annotations
+
+from numba.extending import intrinsic
+from numba.np.arrayobj import populate_array
+
+__all__ = ["borrowed"]
+
+
+@intrinsic
+def borrowed(typingctx, array):
+    """A view of ``array`` without a reference count, valid while the caller holds ``array``.
+
+    Never borrow an array the kernel allocates itself: numba frees it after its last named use, and the view
+    would outlive it."""
+    def codegen(context, builder, signature, args):
+        source = context.make_array(signature.args[0])(context, builder, value=args[0])
+        view = context.make_array(signature.return_type)(context, builder)
+        populate_array(view, data=source.data, shape=source.shape, strides=source.strides,
+                       itemsize=source.itemsize, meminfo=None)
+        return view._getvalue()
+
+    return array(array), codegen
