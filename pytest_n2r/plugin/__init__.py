@@ -40,6 +40,8 @@ _SESSION = pytest.StashKey["Any"]()
 _RECORD = pytest.StashKey["dict"]()
 #: ids of the scenes after whose first setup the heap was frozen (see :func:`pytest_runtest_setup`).
 _FROZEN_SCENES = pytest.StashKey[set]()
+#: True while the cyclic garbage collector is off for the session's start-up (see :func:`_pause_collector`).
+_GC_PAUSED = pytest.StashKey[bool]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -79,9 +81,35 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
     config.pluginmanager.register(_Summary(config), "n2r-summary")
     if is_used(config):
-        session = _session(config)  # bad options fail now, before collection
+        _pause_collector(config)  # before the engine's imports
+        try:
+            session = _session(config)  # bad options fail now, before collection
+        except BaseException:
+            _resume_collector(config)
+            raise
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
             session.cache.clear()  # the controller clears before xdist workers start
+
+
+def _pause_collector(config: pytest.Config) -> None:
+    """Turn the cyclic garbage collector off until the end of the first test's setup, where
+    :func:`pytest_runtest_setup` collects once, freezes the heap and turns it back on. The start-up (the engine's
+    imports, the test modules', a network's in its fixture) allocates millions of objects that live for the session
+    and few cycles, and the collector walked them all in each of its full collections: five in a warm main job,
+    0.27 s of CPU (docs/performance.md). Not in a pytest-xdist controller (it runs no test), nor when the collector
+    was off already; :func:`pytest_unconfigure` turns it back on in a session that ran no test."""
+    if gc.isenabled() and (hasattr(config, "workerinput") or getattr(config.option, "dist", "no") == "no"):
+        gc.disable()
+        config.stash[_GC_PAUSED] = True
+
+
+def _resume_collector(config: pytest.Config) -> bool:
+    """Turn the collector back on if :func:`_pause_collector` turned it off; whether it did."""
+    if not config.stash.get(_GC_PAUSED, False):
+        return False
+    config.stash[_GC_PAUSED] = False
+    gc.enable()
+    return True
 
 
 def pytest_report_header(config: pytest.Config) -> list[str] | None:
@@ -145,6 +173,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
+    _resume_collector(config)
     session = config.stash.get(_SESSION, None)
     if session is not None:
         session.close()
@@ -186,12 +215,16 @@ def pytest_runtest_setup(item: pytest.Item) -> Any:
     on the main job: the collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many
     collections), 0.9 → 0.6 s of a warm one (docs/performance.md). The collection first, and once a scene
     rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
-    never be freed."""
+    never be freed. After the session's first setup too, when the start-up ran with the collector off
+    (:func:`_pause_collector`), which turns it back on."""
     yield
+    resumed = _resume_collector(item.config)
     scene = getattr(item, "funcargs", {}).get("n2r_scene")
     frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())
-    if scene is not None and id(scene) not in frozen:
+    new_scene = scene is not None and id(scene) not in frozen
+    if new_scene:
         frozen.add(id(scene))  # scenes live for the session (the fixture's cache), so their ids stay theirs
+    if new_scene or resumed:
         gc.collect()
         gc.freeze()
 

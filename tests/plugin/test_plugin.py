@@ -515,6 +515,28 @@ def test_replay_it(n2r_scene, n2r_session):
     result.assert_outcomes(passed=2)
 
 
+def test_the_start_up_runs_without_the_cyclic_collector_which_the_first_setup_turns_on_again(n2r_project):
+    """The collector is off from the plugin's configuration to the end of the first test's setup (the start-up's
+    imports make few cycles), on again after it, and on again after a session that ran no test."""
+    import gc
+
+    n2r_project.write("""
+import gc
+
+AT_IMPORT = gc.isenabled()
+
+
+def test_first(n2r_scene):
+    assert not AT_IMPORT, "the collector was on while the test modules were imported"
+    assert gc.isenabled(), "the collector is still off after the first setup"
+""")
+    assert gc.isenabled(), "the outer session runs with the collector on"
+    n2r_project.run("--n2r-scene", PLANE).assert_outcomes(passed=1)
+    assert gc.isenabled(), "the collector is off after the session"
+    n2r_project.run("--n2r-scene", PLANE, "--collect-only")
+    assert gc.isenabled(), "the collector is off after a session that ran no test"
+
+
 def test_what_a_session_loaded_is_frozen_out_of_the_garbage_collectors_way(n2r_project):
     """The heap is frozen after the first setup on a scene, but garbage is collected first: an unreachable
     cycle that was frozen would never be freed."""
