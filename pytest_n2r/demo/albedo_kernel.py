@@ -23,8 +23,8 @@ from numba.extending import intrinsic
 
 from .borrow import borrowed
 
-__all__ = ["albedo_of", "albedo_row", "bilinear", "log2", "look_up", "FLAT", "TEXTURED", "POSTER", "BLEND", "RADIAL",
-           "F0", "F1", "META_COLUMNS"]
+__all__ = ["albedo_of", "albedo_row", "bilinear", "level_constants", "log2", "look_up", "taps_at", "FLAT", "TEXTURED",
+           "POSTER", "BLEND", "RADIAL", "F0", "F1", "META_COLUMNS"]
 
 # material kinds (node_kind)
 FLAT, TEXTURED, POSTER, BLEND, RADIAL = 0, 1, 2, 3, 4
@@ -120,20 +120,26 @@ def log2(x):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def bilinear_taps(tex_meta, tex, level, s, t):
-    """Where a bilinear lookup like ``cv2.remap`` at level-0 texel coordinates ``(s, t)`` reads: the offsets
-    of its four texels ``p00, p01, p10, p11`` in the texel array and its float32 weights ``alpha, beta``; the
-    level's constants come from its row of ``tex_meta`` (no division)."""
-    h, w = int(tex_meta[tex, level, HEIGHT]), int(tex_meta[tex, level, WIDTH])
-    scale = tex_meta[tex, level, SCALE]
+def level_constants(tex_meta, tex, level):
+    """What :func:`taps_at` needs of a texture's mip level, from its row of ``tex_meta``: height, width, scale from
+    level 0, clamp (else mirror), the mirror periods and their inverses, the texel offset."""
+    return (int(tex_meta[tex, level, HEIGHT]), int(tex_meta[tex, level, WIDTH]), tex_meta[tex, level, SCALE],
+            tex_meta[tex, level, CLAMP] == 1.0, tex_meta[tex, level, PERIOD_S], tex_meta[tex, level, PERIOD_T],
+            tex_meta[tex, level, INV_PERIOD_S], tex_meta[tex, level, INV_PERIOD_T], int(tex_meta[tex, level, OFFSET]))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def taps_at(level, s, t):
+    """Where a bilinear lookup like ``cv2.remap`` at level-0 texel coordinates ``(s, t)`` in a mip level (its
+    :func:`level_constants`) reads: the offsets of its four texels ``p00, p01, p10, p11`` in the texel array and
+    its float32 weights ``alpha, beta`` (no division, no branch but on the level's wrap)."""
+    h, w, scale, clamp, period_s, period_t, inverse_s, inverse_t, offset = level
     s = (s + 0.5) * scale - 0.5
     t = (t + 0.5) * scale - 0.5
-    clamp = tex_meta[tex, level, CLAMP] == 1.0
     if clamp:
-        s, t = min(max(s, -1.0), tex_meta[tex, level, WIDTH]), min(max(t, -1.0), tex_meta[tex, level, HEIGHT])
+        s, t = min(max(s, -1.0), float(w)), min(max(t, -1.0), float(h))
     else:
-        s = _mirror_period(s, tex_meta[tex, level, PERIOD_S], tex_meta[tex, level, INV_PERIOD_S])
-        t = _mirror_period(t, tex_meta[tex, level, PERIOD_T], tex_meta[tex, level, INV_PERIOD_T])
+        s, t = _mirror_period(s, period_s, inverse_s), _mirror_period(t, period_t, inverse_t)
     s32, t32 = np.float32(s), np.float32(t)
     xf, yf = np.floor(np.float64(s32)), np.floor(np.float64(t32))  # integers in [-1, 2 w], exact in float32
     alpha, beta = s32 - np.float32(xf), t32 - np.float32(yf)
@@ -144,14 +150,13 @@ def bilinear_taps(tex_meta, tex, level, s, t):
         y0, y1 = min(max(y0, 0), h - 1), min(max(y1, 0), h - 1)
     else:
         x0, x1, y0, y1 = _reflect(x0, w), _reflect(x1, w), _reflect(y0, h), _reflect(y1, h)
-    offset = int(tex_meta[tex, level, OFFSET])
     return (offset + (y0 * w + x0) * 3, offset + (y0 * w + x1) * 3, offset + (y1 * w + x0) * 3,
             offset + (y1 * w + x1) * 3, alpha, beta)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def blend_taps(texels, r00, r01, r10, r11, alpha, beta):
-    """The RGB of a bilinear lookup from its taps (:func:`bilinear_taps`): ``p00 + a (p01 - p00)`` by fused
+    """The RGB of a bilinear lookup from its taps (:func:`taps_at`): ``p00 + a (p01 - p00)`` by fused
     multiply-adds, as OpenCV's vector code."""
     return (_lerp2(texels[r00], texels[r01], texels[r10], texels[r11], alpha, beta),
             _lerp2(texels[r00 + 1], texels[r01 + 1], texels[r10 + 1], texels[r11 + 1], alpha, beta),
@@ -161,7 +166,7 @@ def blend_taps(texels, r00, r01, r10, r11, alpha, beta):
 @njit(cache=True, error_model="numpy")
 def bilinear(tex_meta, texels, tex, level, s, t):
     """Bilinear lookup like ``cv2.remap`` (float32 maps, fused multiply-adds) at level-0 texel coordinates."""
-    r00, r01, r10, r11, alpha, beta = bilinear_taps(tex_meta, tex, level, s, t)
+    r00, r01, r10, r11, alpha, beta = taps_at(level_constants(tex_meta, tex, level), s, t)
     return blend_taps(texels, r00, r01, r10, r11, alpha, beta)
 
 
@@ -253,33 +258,50 @@ def _request_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b
 
 @njit(cache=True, inline="always", error_model="numpy")
 def look_up(texels, taps, weights, count, colours):
-    """Every planned bilinear lookup, into its colour slot: one tight loop whose texel reads (cache misses
-    on large textures) overlap."""
+    """Every planned bilinear lookup (rows of ``taps``: four texel offsets and the colour slot, -1: none; of
+    ``weights``: alpha, beta), into its colour slot: one tight loop whose texel reads (cache misses on large
+    textures) overlap."""
     for q in range(count):
         slot = taps[4, q]
-        colours[slot, 0], colours[slot, 1], colours[slot, 2] = blend_taps(
-            texels, taps[0, q], taps[1, q], taps[2, q], taps[3, q], weights[0, q], weights[1, q])
+        if slot >= 0:
+            colours[slot, 0], colours[slot, 1], colours[slot, 2] = blend_taps(
+                texels, taps[0, q], taps[1, q], taps[2, q], taps[3, q], weights[0, q], weights[1, q])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _plan_bucket(level, s_row, t_row, f_row, slot_row, upper, p00, p01, p10, p11, slots, alphas, betas):
+    """The lookups of queued requests (level-0 texel coordinates ``s_row, t_row``, all of one texture and mip level)
+    in ``level`` (its :func:`level_constants`): texel offsets, colour slots and weights. ``upper``: the level above
+    the requests' own, looked up only where its weight (``f_row``) is not 0 (slot -1 elsewhere). Compiled apart
+    and called with each output row as its own array: LLVM vectorizes the loop (four lookups to a vector; rows of
+    one array it cannot tell apart, numba passing no ``noalias``)."""
+    for p in range(s_row.shape[0]):
+        p00[p], p01[p], p10[p], p11[p], alphas[p], betas[p] = taps_at(level, s_row[p], t_row[p])
+        slot = int(slot_row[p])
+        slots[p] = (slot + 1 if f_row[p] != 0.0 else -1) if upper else slot
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, tex_meta, texels, colours, mix,
-               requests, request_slots, lods, taps, weights):
+               requests, request_slots, lods, queue, buckets, taps, weights):
     """The albedo of a pixel row's ``samples`` sub-rays (sub-ray ``i`` hit material node ``nodes[i]``, -1: none;
     surface coordinates, footprint and mask value in ``shade[0, 1, 2, 4]``, see :mod:`.raycast`) into four colour
     slots each (``colours[4 i:4 i + 4]``) and ``mix[:, i]``, for :func:`albedo_of`.
 
     In passes over the row, each a short loop whose iterations overlap (one sub-ray's chain through its material,
     mip level and texel addresses was latency-bound): the materials resolved (constant colours written, texture
-    samples requested), then every request's mip level, then every request's one or two bilinear lookups planned
-    (texel offsets and weights, levels ``lo`` and ``lo + 1``), then all lookups read in one loop whose texel
-    reads (cache misses on large textures) overlap. Compiled apart from the render kernel (its compile time); its
+    samples requested), then every request's mip level, then the requests bucketed by texture and level (a
+    counting sort into ``queue``) and each bucket's bilinear lookups planned in one vectorized loop (texel offsets
+    and weights, :func:`_plan_bucket`: level ``lo`` into ``taps[:, p]``, ``lo + 1`` where weighted into
+    ``taps[:, count + p]``), then all lookups read in one loop whose texel reads (cache misses on large textures)
+    overlap. Compiled apart from the render kernel (its compile time); its
     helpers receive views of its arrays without reference counts (:func:`.borrow.borrowed`)."""
     nodes, shade, node_kind, node_par, node_child = (borrowed(nodes), borrowed(shade), borrowed(node_kind),
                                                      borrowed(node_par), borrowed(node_child))
     rings, tex_meta, texels, colours, mix = (borrowed(rings), borrowed(tex_meta), borrowed(texels), borrowed(colours),
                                              borrowed(mix))
-    requests, request_slots, lods = borrowed(requests), borrowed(request_slots), borrowed(lods)
-    taps, weights = borrowed(taps), borrowed(weights)
+    requests, request_slots, lods, queue = borrowed(requests), borrowed(request_slots), borrowed(lods), borrowed(queue)
+    buckets, taps, weights = borrowed(buckets), borrowed(taps), borrowed(weights)
     sa, sb, sfp, sm = shade[0], shade[1], shade[2], shade[4]
     count = 0
     for i in range(samples):
@@ -292,18 +314,38 @@ def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, te
         lo_f = np.floor(lod)
         lo_row[r] = lo_f
         f_row[r] = np.float32(lod - lo_f)
-    lookups = 0
+    # the requests bucketed by texture and mip level (a counting sort), so that each bucket's lookups are planned
+    # in one vectorized loop with its level's constants loop-invariant (:func:`_plan_bucket`)
+    n_levels = tex_meta.shape[1]
+    starts, cursor = buckets[0], buckets[1]
+    starts[:] = 0
     for r in range(count):
-        tex, slot = request_slots[0, r], request_slots[1, r]
-        lo, f = int(lo_row[r]), np.float32(f_row[r])
-        two = lo + 1 < levels[r] and f != F0  # with f = 0 the blend is c * 1 + c2 * 0: c itself
+        starts[request_slots[0, r] * n_levels + int(lo_row[r]) + 1] += 1
+    for key in range(buckets.shape[1] - 1):
+        starts[key + 1] += starts[key]
+        cursor[key] = starts[key]
+    for r in range(count):
+        key = request_slots[0, r] * n_levels + int(lo_row[r])
+        p = cursor[key]
+        cursor[key] = p + 1
+        slot, f = request_slots[1, r], np.float32(f_row[r])
+        two = lo_row[r] + 1.0 < levels[r] and f != F0  # with f = 0 the blend is c * 1 + c2 * 0: c itself
         mix[1 + (slot >> 1 & 1), slot >> 2] = f if two else F0
-        for q in range(2 if two else 1):  # one call site: the lookup's code is inlined once (compile time)
-            taps[0, lookups], taps[1, lookups], taps[2, lookups], taps[3, lookups], weights[0, lookups], \
-                weights[1, lookups] = bilinear_taps(tex_meta, tex, lo + q, requests[_S, r], requests[_T, r])
-            taps[4, lookups] = slot + q
-            lookups += 1
-    look_up(texels, taps, weights, lookups, colours)
+        queue[0, p], queue[1, p], queue[2, p], queue[3, p] = requests[_S, r], requests[_T, r], f if two else F0, slot
+    for key in range(buckets.shape[1] - 1):
+        start, end = starts[key], starts[key + 1]
+        if end == start:
+            continue
+        tex, lo = key // n_levels, key % n_levels
+        for q in range(2):  # level lo into taps[p], level lo + 1 (where weighted) into taps[count + p]
+            if q == 1 and lo + 1 >= tex_meta[tex, 0, LEVELS]:
+                taps[4, count + start:count + end] = -1
+            else:
+                a, b = q * count + start, q * count + end
+                _plan_bucket(level_constants(tex_meta, tex, lo + q), queue[0, start:end], queue[1, start:end],
+                             queue[2, start:end], queue[3, start:end], q == 1, taps[0, a:b], taps[1, a:b],
+                             taps[2, a:b], taps[3, a:b], taps[4, a:b], weights[0, a:b], weights[1, a:b])
+    look_up(texels, taps, weights, 2 * count, colours)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -318,7 +360,7 @@ def _leaf_colour(colours, slot, f):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def albedo_of(colours, mix, i):
-    """Float32 RGB albedo of sub-ray ``i`` planned by :func:`plan_albedo` once its lookups are done
+    """Float32 RGB albedo of sub-ray ``i`` planned by :func:`albedo_row` once its lookups are done
     (:func:`look_up`): a blend's ``bottom * (1 - m) + top * m``, else the one material's colour."""
     r, g, b = _leaf_colour(colours, 4 * i, mix[1, i])
     m = mix[0, i]
