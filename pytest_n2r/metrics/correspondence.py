@@ -46,6 +46,7 @@ from ..render.view import RenderedView
 
 __all__ = [
     "MappedPoints",
+    "LiftedPoints",
     "PointMapping",
     "DepthMapping",
     "HomographyMapping",
@@ -72,6 +73,21 @@ class MappedPoints:
     uv: np.ndarray
     visible: np.ndarray
     rejected: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LiftedPoints:
+    """``n`` points of one view lifted into the world through its depth, half of a :class:`DepthMapping`.
+
+    ``index`` ``(M,)`` are the points with a surface under them, ``world`` ``(M, 3)`` their world positions
+    (scene units); ``outside`` points lay outside the image and ``empty`` on no surface (``low_opacity``).
+    """
+
+    n: int
+    index: np.ndarray
+    world: np.ndarray
+    outside: int
+    empty: int
 
 
 def _inside(uv: np.ndarray, camera: Camera) -> np.ndarray:
@@ -195,32 +211,39 @@ class DepthMapping(PointMapping):
         depth = sample_depth(view.depth, uv, self.depth_tolerance)
         return (view.opacity[rows, cols] >= self.min_opacity) & np.isfinite(depth), depth
 
-    def _map(self, uv: np.ndarray, a: RenderedView, b: RenderedView) -> MappedPoints:
+    def lift(self, uv: np.ndarray, view: RenderedView) -> LiftedPoints:
+        """Points ``uv`` ``(N, 2)`` of ``view`` (the source or the follow-up) lifted into the world: the half
+        of the mapping that does not depend on the other view, so a caller may keep it for several pairs."""
         uv = check_array("uv", uv, "N 2", dtype=np.float64)
-        n = len(uv)
-        out = np.full((n, 2), np.nan)
-        visible = np.zeros(n, dtype=bool)
-        inside_a = _inside(uv, a.camera)
-        idx = np.flatnonzero(inside_a)
-        has_a, depth_a = self._surface(a, uv[idx])
-        idx, depth_a = idx[has_a], depth_a[has_a]
-        n_empty_a = int(np.count_nonzero(~has_a))
+        inside = _inside(uv, view.camera)
+        idx = np.flatnonzero(inside)
+        has, depth = self._surface(view, uv[idx])
+        idx = idx[has]
+        return LiftedPoints(len(uv), idx, backproject(uv[idx], depth[has], view.camera, view.c2w),
+                            int(np.count_nonzero(~inside)), int(np.count_nonzero(~has)))
 
-        uv_b, z_b = project(backproject(uv[idx], depth_a, a.camera, a.c2w), b.camera, b.c2w)
-        inside_b = (z_b > 0) & _inside(uv_b, b.camera)
-        idx, uv_b, z_b = idx[inside_b], uv_b[inside_b], z_b[inside_b]
+    def land(self, lifted: LiftedPoints, view: RenderedView) -> MappedPoints:
+        """``lifted`` points projected into ``view``, kept where it sees them (see the module's rules)."""
+        out = np.full((lifted.n, 2), np.nan)
+        visible = np.zeros(lifted.n, dtype=bool)
+        uv_b, z_b = project(lifted.world, view.camera, view.c2w)
+        inside_b = (z_b > 0) & _inside(uv_b, view.camera)
+        idx, uv_b, z_b = lifted.index[inside_b], uv_b[inside_b], z_b[inside_b]
 
-        has_b, depth_b = self._surface(b, uv_b)
+        has_b, depth_b = self._surface(view, uv_b)
         with np.errstate(invalid="ignore"):
             agrees = has_b & (np.abs(z_b - depth_b) <= self.depth_tolerance * depth_b)
         out[idx[agrees]] = uv_b[agrees]
         visible[idx[agrees]] = True
         rejected = {
-            "outside": int(np.count_nonzero(~inside_a) + np.count_nonzero(~inside_b)),
-            "low_opacity": n_empty_a + int(np.count_nonzero(~has_b)),
+            "outside": lifted.outside + int(np.count_nonzero(~inside_b)),
+            "low_opacity": lifted.empty + int(np.count_nonzero(~has_b)),
             "occluded": int(np.count_nonzero(has_b & ~agrees)),
         }
         return MappedPoints(out, visible, rejected)
+
+    def _map(self, uv: np.ndarray, a: RenderedView, b: RenderedView) -> MappedPoints:
+        return self.land(self.lift(uv, a), b)
 
     def __repr__(self) -> str:
         return f"DepthMapping(min_opacity={self.min_opacity!r}, depth_tolerance={self.depth_tolerance!r})"

@@ -25,7 +25,9 @@ detector reporting one location at several octaves) count once.
 
 from __future__ import annotations
 
+import weakref
 from abc import abstractmethod
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -43,6 +45,8 @@ from .correspondence import (
     DEFAULT_MIN_OPACITY,
     DepthMapping,
     HomographyMapping,
+    LiftedPoints,
+    MappedPoints,
     PointMapping,
     check_plane,
 )
@@ -60,6 +64,9 @@ _FORMS = ("schmid", "symmetric")
 #: shipped OpenCV detectors cover at most 0.67 (SIFT on the wall), ORB 0.35; a grid of points every 8 px
 #: covers 1.0 and scored 0.99 interest-point spread under any motion before this rule.
 MAX_COVERAGE = 0.9
+#: Source renders whose lifted keypoints a metric keeps (least recently used first out): a relation's
+#: examples draw their source from a few views, and a warm main job's 714 keypoint pairs come from far fewer.
+_KEPT_SOURCES = 32
 
 
 def _unique_rows(points: np.ndarray) -> np.ndarray:
@@ -84,7 +91,8 @@ class KeypointCorrespondences:
     their own images; ``source_in_follow`` ``(n_s, 2)`` are the source points mapped into the follow-up
     image (NaN where not visible in both views); ``source_visible`` / ``follow_visible`` say which points
     count; ``matches`` ``(M, 2)`` holds index pairs ``(i, j)`` into ``source`` / ``follow`` of the mutual
-    nearest neighbours within the tolerance (empty for metrics that do not match points).
+    nearest neighbours within the tolerance (empty for metrics that do not match points). With the depth
+    mapping ``source`` is read-only: the metric keeps it for later pairs on the same (cached) source render.
     """
 
     source: np.ndarray
@@ -112,6 +120,7 @@ class _KeypointMetric(Metric):
         self.min_opacity = check_range("min_opacity", min_opacity, 0.0, 1.0)
         self.depth_tolerance = check_range("depth_tolerance", depth_tolerance, 0.0)
         self.needs = ("depth", "opacity") if mapping == "depth" else ()
+        self._kept: OrderedDict[tuple[Any, ...], tuple[Any, ...]] = OrderedDict()
 
     def point_mapping(self, source: Any, follow: Any) -> PointMapping:
         """The mapping between the two views this metric was configured with."""
@@ -128,15 +137,21 @@ class _KeypointMetric(Metric):
     def correspondences(self, out_source: Any, out_follow: Any, source: Any, follow: Any) -> KeypointCorrespondences:
         """Which keypoints count, where the source points land in the follow-up image, and (for
         repeatability) which ones match: what :meth:`compute` scores, for overlays."""
+        raw = as_keypoints(out_source, "source")
         # exact duplicates (one location reported at several scales) are one detection
-        p = _unique_rows(as_keypoints(out_source, "source"))
         q = _unique_rows(as_keypoints(out_follow, "follow-up"))
-        if len(p) == 0 and len(q) == 0:
+        if len(raw) == 0 and len(q) == 0:
             empty = np.zeros((0, 2))
-            return KeypointCorrespondences(p, q, empty, np.zeros(0, bool), np.zeros(0, bool),
+            return KeypointCorrespondences(empty, q, empty, np.zeros(0, bool), np.zeros(0, bool),
                                            np.zeros((0, 2), np.intp))
         mapping = self.point_mapping(source, follow)
-        fwd, bwd = mapping.to_follow(p), mapping.to_source(q)
+        if isinstance(mapping, DepthMapping):
+            p, lifted = self._lifted_source(raw, source, mapping)
+            fwd: MappedPoints = mapping.land(lifted, follow)
+        else:
+            p = _unique_rows(raw)
+            fwd = mapping.to_follow(p)
+        bwd = mapping.to_source(q)
         rejected = {key: fwd.rejected.get(key, 0) + bwd.rejected.get(key, 0)
                     for key in sorted(set(fwd.rejected) | set(bwd.rejected))}
         matches = np.zeros((0, 2), np.intp)
@@ -145,6 +160,30 @@ class _KeypointMetric(Metric):
             pairs = self._match(fwd.uv[i_vis], q[j_vis])
             matches = np.stack([i_vis[pairs[:, 0]], j_vis[pairs[:, 1]]], axis=1)
         return KeypointCorrespondences(p, q, fwd.uv, fwd.visible, bwd.visible, matches, rejected)
+
+    def _lifted_source(self, raw: np.ndarray, source: RenderedView,
+                       mapping: DepthMapping) -> tuple[np.ndarray, LiftedPoints]:
+        """The source's distinct keypoints (read-only) and their world points, kept for the next pairs on the
+        same source render: a cached render's depth and opacity are read-only arrays, so the same two arrays,
+        camera, pose, keypoints and mapping parameters give the same points (views with writeable arrays are
+        never kept)."""
+        key = (id(source.depth), source.camera, np.asarray(source.c2w, dtype=np.float64).tobytes(), raw.shape,
+               raw.tobytes(), mapping.min_opacity, mapping.depth_tolerance)
+        kept = self._kept.get(key)
+        if kept is not None and kept[0]() is source.depth and kept[1]() is source.opacity:
+            self._kept.move_to_end(key)
+            return kept[2], kept[3]
+        p = _unique_rows(raw)
+        p.setflags(write=False)
+        lifted = mapping.lift(p, source)
+        if not (source.depth.flags.writeable or source.opacity.flags.writeable):
+            self._kept[key] = (weakref.ref(source.depth), weakref.ref(source.opacity), p, lifted)
+            while len(self._kept) > _KEPT_SOURCES:
+                self._kept.popitem(last=False)
+        return p, lifted
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_kept": OrderedDict()}  # weak references do not pickle
 
     def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
         """``(M, 2)`` index pairs of matched points (none unless the metric matches points)."""

@@ -141,6 +141,35 @@ def test_occluded_points_are_excluded():
     assert naive.score == pytest.approx(2 * len(q) / (len(p) + len(q))), naive
 
 
+def _read_only(view):
+    """``view`` as the render cache hands it out: depth and opacity read-only."""
+    view.depth.setflags(write=False)
+    view.opacity.setflags(write=False)
+    return view
+
+
+@pytest.mark.parametrize("make", [repeatability, interest_point_spread], ids=lambda f: f.__name__)
+def test_a_kept_source_render_scores_as_a_new_metric_would(make):
+    """A metric keeps the source keypoints' world points per read-only source render: later pairs on it score
+    as a new metric's, and another render at the same pose (a nearer wall) is never served the kept points."""
+    tau = Transform(yaw=4, x=0.3)
+    far, near = (tuple(map(_read_only, pair(tau, planes))) for planes in ([WALL], [Plane((0.0, 0.0, 1.0), -2.0)]))
+    p = grid_points()
+    q = DepthMapping(*far).to_follow(p).uv  # where the far wall's points land: the near wall's land elsewhere
+    q = q[np.isfinite(q).all(axis=1)]
+    kept = make()
+    results = {}
+    for name, (source, follow) in [("far", far), ("near", near)] * 2:
+        result, expected = kept(p, q, source, follow), make()(p, q, source, follow)
+        assert (result.score, result.details) == (expected.score, expected.details), name
+        results[name] = (result.score, result.details)
+    assert results["far"] != results["near"], results
+    assert len(kept._kept) == 2, "one kept source side per read-only source render"
+    writeable = pair(tau)
+    kept(p, q, *writeable)
+    assert len(kept._kept) == 2, "a view with writeable arrays may change under the metric: never kept"
+
+
 def test_low_opacity_points_are_rejected():
     patch = Plane((0.0, 0.0, 1.0), -4.0, centre=(0.0, 0.0, 4.0), half=1.0)  # a finite wall; sky around it
     source, follow = pair(Transform(yaw=8), [patch])
