@@ -518,8 +518,10 @@ def _nearest_hits(groups, group_box, kinds, prims, reliefs, rects, us, v, ox, oy
         g0, g1 = np.searchsorted(columns, rects[g, 0], "left"), np.searchsorted(columns, rects[g, 1], "right")
         if g1 <= g0:
             continue
-        if groups[g, 2]:  # rays that miss the group's box skip its primitives
-            _hits_along(_BOX, group_box, g, ox, oy, oz, ds[0, g0:g1], ds[1, g0:g1], ds[2, g0:g1], spare[1, g0:g1])
+        if groups[g, 2]:  # rays that miss the group's box skip its primitives (_BOX as a run-time value: numba
+            # would compile _hits_along once more for a literal kind)
+            _hits_along(groups[g, 2] * _BOX, group_box, g, ox, oy, oz, ds[0, g0:g1], ds[1, g0:g1], ds[2, g0:g1],
+                        spare[1, g0:g1])
         else:
             spare[1, g0:g1] = 0.0
         for k in range(groups[g, 0], groups[g, 1]):
