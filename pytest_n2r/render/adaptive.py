@@ -31,8 +31,9 @@ from numba import njit
 
 __all__ = ["sample_adaptively", "grid_axis"]
 
-#: ``trace(index)`` → ``(rgb (M, 3), depth (M,), opacity (M,))`` float32 of the pixels with flat indices ``index``.
-Tracer = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+#: ``trace(want, rgb, depth, opacity)`` traces the pixels where ``want`` (``(H·W,)`` bool, row-major) is set into
+#: ``rgb (H·W, 3)``, ``depth (H·W,)`` and ``opacity (H·W,)`` (float32), leaving the others as they are.
+Tracer = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def grid_axis(n: int, stride: int) -> np.ndarray:
@@ -101,39 +102,80 @@ def _between(i, p, q, f, traced, rgb, depth, opacity, tolerance, depth_tolerance
 
 
 @njit(cache=True)
-def _pixels_to_trace(ys, xs, split, stride, height, width, traced, rgb, depth, opacity, tolerance, depth_tolerance,
-                     inside):
-    """Flat indices (ascending) of the untraced pixels of the grid of spacing ``stride`` inside split cells.
-
-    At ``stride`` 1 (the last split) they are leaves, taken in two rounds: those on the cells' edges (``inside``
-    False), then those inside the cells. A leaf whose two pixels across the cell on its row, or else on its
-    column, are traced and agree is interpolated between them instead (an edge's ends are corners: traced)."""
-    want = np.zeros(height * width, dtype=np.bool_)
+def _grid_to_trace(ys, xs, split, stride, traced):
+    """The mask of the untraced pixels of the grid of spacing ``stride`` inside split cells (their corners
+    included)."""
+    width = xs[-1] + 1
+    want = np.zeros((ys[-1] + 1) * width, dtype=np.bool_)
     for a in range(ys.shape[0] - 1):
         y0, y1 = ys[a], ys[a + 1]
         for b in range(xs.shape[0] - 1):
             if not split[a, b]:
                 continue
             x0, x1 = xs[b], xs[b + 1]
-            for y in range(y0, y1 + 1):
-                if y % stride != 0 and y != height - 1:
-                    continue
-                for x in range(x0, x1 + 1):
+            # the grid's lines in the cell: y0 (a multiple of 2·stride), y0 + stride, ... and y1 (the next
+            # multiple, or the image's last row), the same across
+            y = y0
+            while True:
+                x = x0
+                while True:
                     i = y * width + x
-                    if not (x % stride == 0 or x == width - 1) or traced[i]:
-                        continue
-                    if stride == 1:
-                        across, down = x0 < x < x1, y0 < y < y1
-                        if (across and down) != inside:
-                            continue
-                        if across and _between(i, y * width + x0, y * width + x1, (x - x0) / (x1 - x0), traced, rgb,
-                                               depth, opacity, tolerance, depth_tolerance):
-                            continue
-                        if down and _between(i, y0 * width + x, y1 * width + x, (y - y0) / (y1 - y0), traced, rgb,
-                                             depth, opacity, tolerance, depth_tolerance):
-                            continue
-                    want[i] = True
-    return np.flatnonzero(want)
+                    want[i] = not traced[i]
+                    if x == x1:
+                        break
+                    x = min(x + stride, x1)
+                if y == y1:
+                    break
+                y = min(y + stride, y1)
+    return want
+
+
+@njit(cache=True)
+def _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance, inside):
+    """The mask of the leaves to trace in split cells of the last split (cells of at most 2×2 pixels; their
+    corners traced): those on the cells' edges (``inside`` False), or those inside them.
+
+    A leaf whose two pixels across its cell on its row, or else on its column, are traced and agree is
+    interpolated between them instead (an edge's ends are corners). A leaf on an edge that two split cells share
+    is judged once: both would judge it alike."""
+    width = xs[-1] + 1
+    state = np.zeros((ys[-1] + 1) * width, dtype=np.uint8)  # 0: not judged, 1: to trace, 2: interpolated
+    for a in range(ys.shape[0] - 1):
+        y0, y1 = ys[a], ys[a + 1]
+        for b in range(xs.shape[0] - 1):
+            if not split[a, b]:
+                continue
+            x0, x1 = xs[b], xs[b + 1]
+            if inside:  # across the cell on the row, or else on the column
+                for y in range(y0 + 1, y1):
+                    for x in range(x0 + 1, x1):
+                        _judge_leaf(y * width + x, y * width + x0, y * width + x1, y0 * width + x, y1 * width + x,
+                                    traced, rgb, depth, opacity, tolerance, depth_tolerance, state)
+                continue
+            for y in (y0, y1):  # its top and bottom edges: across the cell on the row
+                for x in range(x0 + 1, x1):
+                    i = y * width + x
+                    _judge_leaf(i, y * width + x0, y * width + x1, i, i, traced, rgb, depth, opacity, tolerance,
+                                depth_tolerance, state)
+            for y in range(y0 + 1, y1):  # its left and right edges: across the cell on the column
+                for x in (x0, x1):
+                    i = y * width + x
+                    _judge_leaf(i, i, i, y0 * width + x, y1 * width + x, traced, rgb, depth, opacity, tolerance,
+                                depth_tolerance, state)
+    return state == 1
+
+
+@njit(cache=True)
+def _judge_leaf(i, left, right, up, down, traced, rgb, depth, opacity, tolerance, depth_tolerance, state):
+    """Leaf ``i``: interpolated between ``left`` and ``right``, or else between ``up`` and ``down``, where the two are
+    traced and agree (a pair ``i, i``: not a pair), else marked to trace. A leaf lies half way between its pair (the
+    cells of the last split are 2 pixels wide, or 1 at the last row or column: no leaf inside)."""
+    if traced[i] or state[i]:
+        return
+    across = left != i and _between(i, left, right, 0.5, traced, rgb, depth, opacity, tolerance, depth_tolerance)
+    along = not across and up != i and _between(i, up, down, 0.5, traced, rgb, depth, opacity, tolerance,
+                                                  depth_tolerance)
+    state[i] = 2 if across or along else 1
 
 
 def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, tolerance: float,
@@ -152,13 +194,14 @@ def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, toler
     opacity = np.zeros(n, dtype=np.float32)
     traced = np.zeros(n, dtype=np.bool_)
 
-    def trace_into(index: np.ndarray) -> None:
-        if index.size:
-            rgb[index], depth[index], opacity[index] = trace(index)
-            traced[index] = True
+    def trace_into(want: np.ndarray) -> None:
+        trace(want, rgb, depth, opacity)
+        np.logical_or(traced, want, out=traced)
 
     ys, xs = grid_axis(height, stride), grid_axis(width, stride)
-    trace_into((ys[:, None] * width + xs[None, :]).reshape(-1))
+    coarse = np.zeros((height, width), dtype=np.bool_)
+    coarse[ys[:, None], xs[None, :]] = True
+    trace_into(coarse.reshape(-1))
     active = np.ones((ys.size - 1, xs.size - 1), dtype=np.bool_)
     while stride > 1 and active.size:
         split = np.empty_like(active)
@@ -167,10 +210,10 @@ def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, toler
             break
         finer = stride // 2
         for inside in (False, True) if finer == 1 else (False,):  # leaves inside a cell: after those on its edges
-            trace_into(_pixels_to_trace(ys, xs, split, finer, height, width, traced, rgb, depth, opacity, tolerance,
-                                        depth_tolerance, inside))
+            trace_into(_grid_to_trace(ys, xs, split, finer, traced) if finer > 1 else
+                       _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance, inside))
         fine_ys, fine_xs = grid_axis(height, finer), grid_axis(width, finer)
         active = split[(fine_ys[:-1] // stride)[:, None], (fine_xs[:-1] // stride)[None, :]]
         ys, xs, stride = fine_ys, fine_xs, finer
-    trace_into(np.flatnonzero((opacity == 0.0) & ~traced))  # a ray that sees nothing ends at its own far end
-    return rgb, depth, opacity, int(traced.sum())
+    trace_into((opacity == 0.0) & ~traced)  # a ray that sees nothing ends at its own far end
+    return rgb, depth, opacity, int(np.count_nonzero(traced))

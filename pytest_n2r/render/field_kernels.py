@@ -49,9 +49,10 @@ __all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 @njit(cache=True, parallel=True)
 def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
-                density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, rgb, depth,
-                opacity):
-    """Volume-render every ray into ``rgb (N, 3)``, ``depth (N,)`` and ``opacity (N,)`` (float32).
+                density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, slot, rgb,
+                depth, opacity):
+    """Volume-render every ray ``r`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and ``opacity[slot[r]]``
+    (float32; ``slot`` int64, say the flat pixel index of each ray).
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
     (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a
@@ -161,12 +162,13 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
         cr += carried * last_r
         cg += carried * last_g
         cb += carried * last_b
-        rgb[r, 0] = cr + trans * background[0]
-        rgb[r, 1] = cg + trans * background[1]
-        rgb[r, 2] = cb + trans * background[2]
-        opacity[r] = 1.0 - trans
+        i = slot[r]
+        rgb[i, 0] = cr + trans * background[0]
+        rgb[i, 1] = cg + trans * background[1]
+        rgb[i, 2] = cb + trans * background[2]
+        opacity[i] = 1.0 - trans
         if want_depth:
-            depth[r] = zd / wsum if trans < 1.0 else ts + far / dn
+            depth[i] = zd / wsum if trans < 1.0 else ts + far / dn
 
 
 @njit(cache=True, inline="always")

@@ -29,7 +29,7 @@ from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .field_kernels import bake_logits, pixel_rays, render_rays
-from .ray_order import tile_order
+from .ray_order import tiled_pixels
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -216,27 +216,20 @@ class FieldRenderer:
         want_depth = adaptive or "depth" in outputs  # the adaptive sampler compares depths
         logits = self._bake_logits(c2w)
 
-        def trace(index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            n = index.size
-            order = tile_order(index, w)  # traced tile by tile (render/ray_order.py), returned in index's order
-            tiled = index[order]
-            rgb = np.empty((n, 3), dtype=np.float32)
-            depth = np.empty(n, dtype=np.float32)
-            opacity = np.empty(n, dtype=np.float32)
-            for start in range(0, n, self.settings.chunk_rays):
-                sl = slice(start, min(n, start + self.settings.chunk_rays))
-                o, d = self._pixel_rays(tiled[sl], camera, c2w)
-                self._render_rays(o, d, logits, want_depth, rgb[sl], depth[sl], opacity[sl])
-            out = np.empty_like(rgb), np.empty_like(depth), np.empty_like(opacity)
-            for result, traced in zip(out, (rgb, depth, opacity)):
-                result[order] = traced
-            return out
+        def trace(want: np.ndarray, rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
+            index = tiled_pixels(want, w)  # traced tile by tile (render/ray_order.py)
+            for start in range(0, index.size, self.settings.chunk_rays):
+                chunk = index[start:start + self.settings.chunk_rays]
+                o, d = self._pixel_rays(chunk, camera, c2w)
+                self._render_rays(o, d, logits, want_depth, chunk, rgb, depth, opacity)
 
         if adaptive:
             rgb, depth, opacity, self.last_traced = sample_adaptively(
                 trace, h, w, self.stride(camera), self.settings.adaptive, self.settings.adaptive_depth)
         else:
-            rgb, depth, opacity = trace(np.arange(h * w))
+            rgb, depth, opacity = (np.empty((h * w, 3), dtype=np.float32), np.empty(h * w, dtype=np.float32),
+                                   np.empty(h * w, dtype=np.float32))
+            trace(np.ones(h * w, dtype=np.bool_), rgb, depth, opacity)
             self.last_traced = h * w
         out: dict[str, np.ndarray] = {}
         if "rgb" in outputs:
@@ -276,24 +269,25 @@ class FieldRenderer:
                     logits)
         return logits
 
-    def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, rgb: np.ndarray,
-                     depth: np.ndarray, opacity: np.ndarray) -> None:
+    def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, index: np.ndarray,
+                     rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
+        """Render rays ``o, d`` into the pixels ``index`` of the flat images ``rgb``, ``depth`` and ``opacity``."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
             cells, blocks = g.numpy()
             render_rays(o, d, self._density, self._values, logits, self._rows, cells, blocks, g.resolution,
                         g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
-                        f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth, rgb,
-                        depth, opacity)
+                        f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth,
+                        index, rgb, depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)
             dt = torch.from_numpy(d).to(f.device)
             out = render_rays_torch(f, g, ot, dt, torch.tensor(self.background, device=f.device), want_depth)
-        rgb[:] = out["rgb"].cpu().numpy()
-        opacity[:] = out["opacity"].cpu().numpy()
+        rgb[index] = out["rgb"].cpu().numpy()
+        opacity[index] = out["opacity"].cpu().numpy()
         if want_depth:
-            depth[:] = out["depth"].cpu().numpy()
+            depth[index] = out["depth"].cpu().numpy()
 
 
 def render_rays_torch(field: SceneField, grid: MarchGrid, o: torch.Tensor, d: torch.Tensor,

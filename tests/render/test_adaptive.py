@@ -26,11 +26,11 @@ class ImageTracer:
         self.image = image.astype(np.float32)
         self.traced = np.zeros(image.shape[:2], dtype=bool)
 
-    def __call__(self, index: np.ndarray):
-        assert not self.traced.reshape(-1)[index].any(), "a pixel was traced twice"
-        self.traced.reshape(-1)[index] = True
-        flat = self.image.reshape(-1, 5)[index]
-        return flat[:, :3], flat[:, 3], flat[:, 4]
+    def __call__(self, want: np.ndarray, rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
+        assert not self.traced.reshape(-1)[want].any(), "a pixel was traced twice"
+        self.traced.reshape(-1)[want] = True
+        flat = self.image.reshape(-1, 5)[want]
+        rgb[want], depth[want], opacity[want] = flat[:, :3], flat[:, 3], flat[:, 4]
 
     def sample(self, stride: int, tolerance: float, depth_tolerance: float = 0.1) -> np.ndarray:
         h, w = self.image.shape[:2]
