@@ -27,7 +27,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 __all__ = ["sample_adaptively", "grid_axis"]
 
@@ -61,10 +61,13 @@ def _agree(i00, i01, i10, i11, rgb, depth, opacity, tolerance, depth_tolerance):
     return max(v00, v01, v10, v11) - min(v00, v01, v10, v11) <= depth_tolerance * min(v00, v01, v10, v11)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split):
-    """For each active cell: ``split`` it where its corners disagree, else interpolate its untraced pixels."""
-    for a in range(ys.shape[0] - 1):
+    """For each active cell: ``split`` it where its corners disagree, else interpolate its untraced pixels.
+
+    Rows of cells in parallel: a cell reads only its traced corners, and a pixel on the edge two agreeing cells
+    share gets the same value from both (its weights on the far corners are exactly 0)."""
+    for a in prange(ys.shape[0] - 1):
         y0, y1 = ys[a], ys[a + 1]
         for b in range(xs.shape[0] - 1):
             split[a, b] = False
@@ -130,52 +133,54 @@ def _grid_to_trace(ys, xs, split, stride, traced):
     return want
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance, inside):
-    """The mask of the leaves to trace in split cells of the last split (cells of at most 2×2 pixels; their
-    corners traced): those on the cells' edges (``inside`` False), or those inside them.
+    """The mask of the leaves to trace in the split cells of the last split (``ys, xs`` the grid of spacing 2: cells
+    of 2×2 pixels, or 2×1 at the image's last row or column, corners traced): those on the cells' edges
+    (``inside`` False: the pixels between two corners), or those inside them (the cells' centres).
 
     A leaf whose two pixels across its cell on its row, or else on its column, are traced and agree is
-    interpolated between them instead (an edge's ends are corners). A leaf on an edge that two split cells share
-    is judged once: both would judge it alike."""
-    width = xs[-1] + 1
-    state = np.zeros((ys[-1] + 1) * width, dtype=np.uint8)  # 0: not judged, 1: to trace, 2: interpolated
-    for a in range(ys.shape[0] - 1):
-        y0, y1 = ys[a], ys[a + 1]
-        for b in range(xs.shape[0] - 1):
-            if not split[a, b]:
+    interpolated half way between them instead. Each leaf is judged once, as every split cell it belongs to would
+    judge it, and reads only pixels of the round before: rows in parallel, the same result."""
+    height, width = ys[-1] + 1, xs[-1] + 1
+    rows, cols = split.shape
+    want = np.zeros(height * width, dtype=np.bool_)
+    for y in prange(height):
+        row = y * width
+        if y % 2 == 0 or y == height - 1:  # a grid row: the pixels between two corners on it, in split cells
+            if inside:
                 continue
-            x0, x1 = xs[b], xs[b + 1]
-            if inside:  # across the cell on the row, or else on the column
-                for y in range(y0 + 1, y1):
-                    for x in range(x0 + 1, x1):
-                        _judge_leaf(y * width + x, y * width + x0, y * width + x1, y0 * width + x, y1 * width + x,
-                                    traced, rgb, depth, opacity, tolerance, depth_tolerance, state)
-                continue
-            for y in (y0, y1):  # its top and bottom edges: across the cell on the row
-                for x in range(x0 + 1, x1):
-                    i = y * width + x
-                    _judge_leaf(i, y * width + x0, y * width + x1, i, i, traced, rgb, depth, opacity, tolerance,
-                                depth_tolerance, state)
-            for y in range(y0 + 1, y1):  # its left and right edges: across the cell on the column
-                for x in (x0, x1):
-                    i = y * width + x
-                    _judge_leaf(i, i, i, y0 * width + x, y1 * width + x, traced, rgb, depth, opacity, tolerance,
-                                depth_tolerance, state)
-    return state == 1
+            g = y // 2 if y % 2 == 0 else rows  # its index in ys
+            for b in range(cols):
+                x = xs[b] + 1
+                if x < xs[b + 1] and ((g > 0 and split[g - 1, b]) or (g < rows and split[g, b])):
+                    _judge_leaf(row + x, row + x - 1, row + x + 1, -1, -1, traced, rgb, depth, opacity, tolerance,
+                                depth_tolerance, want)
+            continue
+        a = y // 2  # the cell row whose middle this is: ys[a] = y - 1, ys[a + 1] = y + 1
+        for g in range(cols + 1):
+            x = xs[g]
+            if not inside and ((g > 0 and split[a, g - 1]) or (g < cols and split[a, g])):  # between two corners
+                _judge_leaf(row + x, -1, -1, row + x - width, row + x + width, traced, rgb, depth, opacity,
+                            tolerance, depth_tolerance, want)
+            if inside and g < cols and x + 1 < xs[g + 1] and split[a, g]:  # a cell's centre
+                i = row + x + 1
+                _judge_leaf(i, i - 1, i + 1, i - width, i + width, traced, rgb, depth, opacity, tolerance,
+                            depth_tolerance, want)
+    return want
 
 
-@njit(cache=True)
-def _judge_leaf(i, left, right, up, down, traced, rgb, depth, opacity, tolerance, depth_tolerance, state):
-    """Leaf ``i``: interpolated between ``left`` and ``right``, or else between ``up`` and ``down``, where the two are
-    traced and agree (a pair ``i, i``: not a pair), else marked to trace. A leaf lies half way between its pair (the
-    cells of the last split are 2 pixels wide, or 1 at the last row or column: no leaf inside)."""
-    if traced[i] or state[i]:
+@njit(cache=True, inline="always")
+def _judge_leaf(i, left, right, up, down, traced, rgb, depth, opacity, tolerance, depth_tolerance, want):
+    """Leaf ``i``: interpolated half way between ``left`` and ``right``, or else ``up`` and ``down``, where the two
+    are traced and agree (``-1``: no such pair); else ``want[i]`` is set."""
+    if traced[i]:
         return
-    across = left != i and _between(i, left, right, 0.5, traced, rgb, depth, opacity, tolerance, depth_tolerance)
-    along = not across and up != i and _between(i, up, down, 0.5, traced, rgb, depth, opacity, tolerance,
-                                                  depth_tolerance)
-    state[i] = 2 if across or along else 1
+    if left >= 0 and _between(i, left, right, 0.5, traced, rgb, depth, opacity, tolerance, depth_tolerance):
+        return
+    if up >= 0 and _between(i, up, down, 0.5, traced, rgb, depth, opacity, tolerance, depth_tolerance):
+        return
+    want[i] = True
 
 
 def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, tolerance: float,
