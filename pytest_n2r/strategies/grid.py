@@ -7,6 +7,7 @@ step: a SUT that breaks beyond 5° of yaw is reported at ``yaw=5.01``, not at th
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -76,6 +77,14 @@ def grid_step(lo: float, hi: float) -> float:
     return 10.0 ** max(exponent, _MIN_EXPONENT)
 
 
+@functools.lru_cache(maxsize=4096)
+def _integers(lo: int, hi: int) -> st.SearchStrategy[int]:
+    """``st.integers(lo, hi)``, built once and unwrapped: Hypothesis's cache of built strategies (a heap it
+    rebalances on every look-up) and its unwrapping of a lazy strategy on every draw cost more than the draw."""
+    strategy = st.integers(lo, hi)
+    return getattr(strategy, "wrapped_strategy", strategy)
+
+
 def _draw_steps(draw: Any, n: int) -> int:
     """An integer in ``[0, n]``, spread over the whole range, that shrinks to the smallest failing value.
 
@@ -86,9 +95,9 @@ def _draw_steps(draw: Any, n: int) -> int:
     widened range, then binary-searches the smaller value: the result is the smallest failing integer.
     """
     if n <= _BUCKET:
-        return draw(st.integers(0, n))
-    start = draw(st.integers(0, _BUCKETS - 1)) * n // _BUCKETS
-    return min(draw(st.integers(start, n)), draw(st.integers(start, n)))
+        return draw(_integers(0, n))
+    start = draw(_integers(0, _BUCKETS - 1)) * n // _BUCKETS
+    return min(draw(_integers(start, n)), draw(_integers(start, n)))
 
 
 def draw_axis(draw: Any, lo: float, hi: float) -> float:
@@ -104,7 +113,7 @@ def draw_axis(draw: Any, lo: float, hi: float) -> float:
         n = math.floor(abs(end - origin) / step + 1e-9)
         if abs(end - origin) > 0:
             sides.append((sign, n + (abs(origin + sign * n * step - end) > 1e-12), end))
-    sign, n, end = sides[draw(st.integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
+    sign, n, end = sides[draw(_integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
     k = _draw_steps(draw, n)
     value = origin + sign * k * step
     if sign * (value - end) >= 0 or k == n:

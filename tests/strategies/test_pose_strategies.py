@@ -122,3 +122,22 @@ def test_draws_spread_over_the_whole_bound():
     collect()
     far = np.mean(np.asarray(drawn) > 40)
     assert far > 0.3, f"only {far:.0%} of draws had |yaw| > 40 for a bound of 80: draws crowd near 0"
+
+
+def test_the_grid_draws_what_hypothesis_integers_draw():
+    """The grid draws from ``st.integers`` built once and unwrapped (cheaper per draw, docs/performance.md):
+    the same values as ``st.integers`` itself, seed for seed, so the drawn examples stay the same."""
+    from pytest_n2r.strategies.grid import _integers
+
+    def drawn(integers):
+        values = []
+
+        @settings(max_examples=50, derandomize=True, database=None)
+        @given(st.data())
+        def collect(data):
+            values.append([data.draw(integers(lo, hi)) for lo, hi in ((0, 1), (0, 63), (17, 255), (1000, 4000))])
+
+        collect()
+        return values
+
+    assert drawn(_integers) == drawn(st.integers), "the built-once strategies drew other values than st.integers"
