@@ -37,6 +37,7 @@ from .. import __version__
 from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
 from .scenes import SCENES
+from .user_cache import cache_dir
 
 if TYPE_CHECKING:
     from ..scene.field_scene import FieldScene
@@ -204,17 +205,6 @@ def packaged_path(name: str) -> Path:
     """Where the shipped fitted file of demo scene ``name`` lives (it may be absent in a source checkout)."""
     _recipe(name)
     return DATA_DIR / f"{name}.n2r"
-
-
-def cache_dir() -> Path:
-    """The user cache folder of fitted demo scenes: ``$N2R_CACHE_DIR`` when set, else the platform's user
-    cache dir for ``pytest-n2r`` (``~/.cache/pytest-n2r`` on Linux)."""
-    env = os.environ.get("N2R_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("pytest-n2r", appauthor=False))
 
 
 def find_fitted(name: str) -> tuple[Path | None, Path]:

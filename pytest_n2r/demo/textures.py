@@ -9,17 +9,26 @@ Convention
 - ``footprint`` is the size of the area one sample covers, in texels; the sampler picks the mip level
   ``log2(footprint)`` and interpolates between the two nearest levels, so distant, grazing surfaces are
   filtered instead of aliased.
+- A texture of a bundled photo (:meth:`Texture.photo`) reads and processes the photo on first use of its
+  texels; until then its :meth:`~Texture.digest` comes from the user cache (:func:`_photo_digest`), so a
+  process that takes every render from the render cache reads no photo.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import json
+import os
+import tempfile
 from dataclasses import dataclass, field
-from typing import Literal
+from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 
 from ..errors import InvalidArgument
+from .user_cache import cache_dir
 
 __all__ = ["Texture", "sample_photo"]
 
@@ -71,22 +80,36 @@ class Texture:
         contrast: float = 1.0, wrap: Literal["mirror", "clamp"] = "mirror", quarter_turns: int = 0,
     ) -> Texture:
         """A bundled photo turned by ``quarter_turns`` × 90° counter-clockwise, contrast-stretched about its
-        mean, then multiplied by ``gain * tint``."""
-        img = np.rot90(sample_photo(name), quarter_turns)
-        mean = img.mean(axis=(0, 1), keepdims=True)
-        img = np.clip((mean + (img - mean) * contrast) * gain * np.asarray(tint, np.float32), 0.0, 1.0)
-        return cls(img, wrap)
+        mean, then multiplied by ``gain * tint`` (read and processed on first use of ``image`` or ``levels``)."""
+        if name not in PHOTOS:
+            raise InvalidArgument(f"photo={name!r} is not a bundled sample; expected one of {PHOTOS}")
+        if wrap not in ("mirror", "clamp"):
+            raise InvalidArgument(f"wrap={wrap!r}; expected 'mirror' or 'clamp'")
+        texture = cls.__new__(cls)
+        texture.wrap = wrap
+        texture._recipe = (name, tint, gain, contrast, quarter_turns)
+        return texture
+
+    def __getattr__(self, name: str) -> Any:
+        """A photo's ``image`` and ``levels``, built on first use (only called for attributes not set yet)."""
+        recipe = self.__dict__.get("_recipe")
+        if name not in ("image", "levels") or recipe is None or "image" in self.__dict__:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self.image = _photo_image(*recipe)
+        self.__post_init__()
+        return self.__dict__[name]
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.image.shape[0], self.image.shape[1]
 
     def digest(self) -> str:
-        """SHA-256 of the texels and the wrap mode (part of a scene's content hash)."""
-        h = hashlib.sha256(self.wrap.encode())
-        h.update(str(self.image.shape).encode())
-        h.update(self.image.tobytes())
-        return h.hexdigest()
+        """SHA-256 of the texels and the wrap mode (part of a scene's content hash); a photo's texels that
+        were not read yet are not read for it when the user cache holds their digest (:func:`_photo_digest`)."""
+        recipe = self.__dict__.get("_recipe")
+        if recipe is not None and "image" not in self.__dict__:
+            return _photo_digest(self, recipe)
+        return _texel_digest(self.image, self.wrap)
 
     def _bilinear(self, level: int, s: np.ndarray, t: np.ndarray) -> np.ndarray:
         """Bilinear lookup in mip ``level`` at level-0 texel coordinates (OpenCV ``remap``, 1/32-texel steps)."""
@@ -129,3 +152,71 @@ class Texture:
                 colour = colour * (1 - f) + self._bilinear(int(level) + 1, s[sel], t[sel]) * f
             out[sel] = colour
         return out
+
+
+def _photo_image(name: str, tint: tuple[float, float, float], gain: float, contrast: float,
+                 quarter_turns: int) -> np.ndarray:
+    """The texels of :meth:`Texture.photo` with these arguments."""
+    img = np.rot90(sample_photo(name), quarter_turns)
+    mean = img.mean(axis=(0, 1), keepdims=True)
+    return np.clip((mean + (img - mean) * contrast) * gain * np.asarray(tint, np.float32), 0.0, 1.0)
+
+
+def _texel_digest(image: np.ndarray, wrap: str) -> str:
+    """SHA-256 of ``image``'s texels and the ``wrap`` mode."""
+    h = hashlib.sha256(wrap.encode())
+    h.update(str(image.shape).encode())
+    h.update(image.tobytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def _photo_file(name: str) -> Path | None:
+    """The file scikit-image reads bundled photo ``name`` from, or ``None`` when it does not say (a private
+    function of scikit-image: without it, every digest is taken from the texels)."""
+    try:
+        from skimage.data._fetchers import _fetch, registry
+
+        (entry,) = [key for key in registry if key.rsplit(".", 1)[0] == f"data/{name}"]
+        return Path(_fetch(entry)).resolve()
+    except (ImportError, AttributeError, KeyError, ValueError, OSError):
+        return None
+
+
+@functools.cache
+def _code_digest() -> str:
+    """What else the texels depend on: this module's source and the numpy and scikit-image versions."""
+    import skimage
+
+    return hashlib.sha256(Path(__file__).read_bytes() + f"{np.__version__}/{skimage.__version__}".encode()).hexdigest()
+
+
+def _photo_digest(texture: Texture, recipe: tuple[Any, ...]) -> str:
+    """:meth:`Texture.digest` of a photo's texture whose texels were not read, from the user cache
+    (``<cache dir>/texture-digests/``). An entry is keyed by the photo file's resolved path, size and
+    modification time, the recipe and :func:`_code_digest`, so an edited photo or processing gets a new
+    entry; a missing, unreadable or malformed entry is computed from the texels and written (atomically)."""
+    photo = _photo_file(recipe[0])
+    try:
+        stat = photo.stat() if photo is not None else None
+    except OSError:
+        stat = None
+    if stat is None:
+        return _texel_digest(texture.image, texture.wrap)
+    key = json.dumps([str(photo), stat.st_size, stat.st_mtime_ns, repr(recipe), texture.wrap, _code_digest()])
+    path = cache_dir() / "texture-digests" / hashlib.sha256(key.encode()).hexdigest()
+    try:
+        digest = path.read_text()
+        if len(digest) == 64 and all(c in "0123456789abcdef" for c in digest):
+            return digest
+    except (OSError, UnicodeDecodeError):
+        pass
+    digest = _texel_digest(texture.image, texture.wrap)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as out:
+            out.write(digest)
+        os.replace(out.name, path)
+    except OSError:
+        pass  # a read-only cache: the digest is computed again next time
+    return digest
