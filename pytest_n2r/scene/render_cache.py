@@ -11,6 +11,7 @@ the same view and the second rename wins with identical bytes (rendering is dete
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import re
@@ -73,6 +74,26 @@ def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
     h = hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode())
     h.update(np.ascontiguousarray(c2w, dtype="<f8").tobytes())
     return h.hexdigest()
+
+
+#: The header ``np.save`` writes for the little-endian C-order arrays of renders (version 1.0), read without
+#: ``np.load``'s general parser of headers: a warm main job reads about 2 000 entries (docs/performance.md).
+_NPY_HEADER = re.compile(rb"\{'descr': '(<f4|<f8|\|u1|\|b1)', 'fortran_order': False, "
+                         rb"'shape': \((\d+(?:, \d+)*),?\), \} *\n")
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    """The read-only array of the ``.npy`` file ``path`` (any header that is not a render's goes to ``np.load``);
+    :class:`ValueError` when the file is truncated or malformed."""
+    data = path.read_bytes()
+    size = int.from_bytes(data[8:10], "little") if data[:8] == b"\x93NUMPY\x01\x00" else 0
+    match = _NPY_HEADER.fullmatch(data, 10, 10 + size) if size and len(data) >= 10 + size else None
+    if match is None:
+        value = np.load(io.BytesIO(data), allow_pickle=False)
+        value.setflags(write=False)
+        return value
+    shape = tuple(int(n) for n in match.group(2).split(b", "))
+    return np.frombuffer(data, dtype=match.group(1).decode(), offset=10 + size).reshape(shape)
 
 
 @dataclass
@@ -197,7 +218,7 @@ class RenderCache:
             return None
         path = self._path(key, name)
         try:
-            value = np.load(path, allow_pickle=False)
+            value = _read_npy(path)
         except FileNotFoundError:
             return None
         except (OSError, ValueError):  # unreadable (disk trouble, another version's format): re-render

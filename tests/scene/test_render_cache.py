@@ -82,6 +82,30 @@ def test_a_corrupt_entry_is_rendered_again(tmp_path):
     assert scene.calls == 2 and view.rgb.shape == (72, 96, 3)
 
 
+def test_an_entry_cut_short_in_its_pixels_is_rendered_again(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth")
+    (entry,) = (tmp_path / "renders").glob("*/*.depth.npy")
+    entry.write_bytes(entry.read_bytes()[:-8])  # the header intact, two pixels missing
+    view = RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth")
+    assert scene.calls == 2 and view.depth.shape == (72, 96)
+
+
+@pytest.mark.parametrize("dtype", [">f4", "<i4"])
+def test_an_entry_with_another_header_is_read_as_numpy_reads_it(tmp_path, dtype):
+    """Entries are read without numpy's header parser when their header is a render's; any other valid
+    ``.npy`` file (here big-endian floats, or integers) is read by ``np.load``."""
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    depth = RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth").depth
+    (entry,) = (tmp_path / "renders").glob("*/*.depth.npy")
+    np.save(entry, depth.astype(dtype))
+    cached = RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth").depth
+    assert scene.calls == 1 and cached.dtype == np.dtype(dtype) and not cached.flags.writeable
+    np.testing.assert_array_equal(cached, depth.astype(dtype))
+
+
 def test_disk_cap_evicts_least_recently_used(tmp_path):
     scene = PlaneScene()
     camera = scene.views[0].camera
