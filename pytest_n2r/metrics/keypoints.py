@@ -50,6 +50,7 @@ from .correspondence import (
     PointMapping,
     check_plane,
 )
+from .coverage import DISC_SLACK, coverage_bound, coverage_mask
 
 __all__ = [
     "Repeatability", "InterestPointSpread", "KeypointCorrespondences", "repeatability", "interest_point_spread",
@@ -198,8 +199,9 @@ class _KeypointMetric(Metric):
             return MetricResult.undefined(self.name, "the SUT found no keypoint in either view (nothing to compare)",
                                           n_source=0, n_follow=0)
         for which, points, view in (("source", c.source, source), ("follow-up", c.follow, follow)):
-            if not _may_cover(len(points), view.camera, self.tolerance):
-                continue  # too few discs to cover MAX_COVERAGE of the image: no need to paint them
+            if not _may_cover(len(points), view.camera, self.tolerance) or (
+                    coverage_bound(points, view.camera, self.tolerance) < MAX_COVERAGE):
+                continue  # the discs cannot cover MAX_COVERAGE of the image: no need to paint them
             covered = float(coverage_mask(points, view.camera, self.tolerance).mean())
             if covered >= MAX_COVERAGE:
                 return MetricResult.undefined(
@@ -275,44 +277,12 @@ class Repeatability(_KeypointMetric):
         return f"repeatability(px={self.px!r}{form}, {self._mapping_repr()})"
 
 
-#: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
-#: flip a pixel centre lying exactly on the circle.
-_DISC_SLACK = 1e-6
-
-
 def _may_cover(n_points: int, camera: Camera, radius: float) -> bool:
     """Whether ``n_points`` discs of ``radius`` pixels could cover :data:`MAX_COVERAGE` of the image: a disc
     holds at most ``(floor(2 r) + 1)²`` pixel centres (at most that many columns and rows fit in its width),
     so fewer discs than the share needs cannot reach it, wherever they lie."""
-    per_disc = (int(np.floor(2 * (radius + _DISC_SLACK))) + 1) ** 2
+    per_disc = (int(np.floor(2 * (radius + DISC_SLACK))) + 1) ** 2
     return n_points * per_disc >= MAX_COVERAGE * camera.width * camera.height
-
-
-def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
-    """``H x W`` bool mask of the pixel centres within ``radius`` pixels (inclusive) of any point.
-
-    ``points`` is ``(N, 2)`` ``(u, v)`` in pixels of ``camera``'s image; discs are exact at sub-pixel
-    positions and clipped to the image. Each disc is painted as one horizontal run per pixel row
-    (a difference array summed along the rows), so the cost is ``N * (2 radius + 1)`` plus one pass
-    over the image.
-    """
-    radius = check_positive("radius", radius) + _DISC_SLACK
-    h, w = camera.height, camera.width
-    if len(points) == 0:
-        return np.zeros((h, w), dtype=bool)
-    r = int(np.ceil(radius))
-    rows = np.floor(points[:, 1] + 0.5).astype(np.intp)[:, None] + np.arange(-r, r + 1)[None, :]
-    dy2 = (rows - points[:, 1, None]) ** 2
-    ok = (dy2 <= radius * radius) & (rows >= 0) & (rows < h)
-    half = np.sqrt(np.maximum(radius * radius - dy2, 0.0))
-    u = np.broadcast_to(points[:, 0, None], rows.shape)
-    first = np.clip(np.ceil(u - half), 0, w).astype(np.intp)
-    last = np.clip(np.floor(u + half) + 1, 0, w).astype(np.intp)  # one past the run's last column
-    ok &= first < last
-    rows, first, last = rows[ok], first[ok], last[ok]
-    diff = np.bincount(rows * (w + 1) + first, minlength=h * (w + 1))
-    diff -= np.bincount(rows * (w + 1) + last, minlength=h * (w + 1))
-    return np.cumsum(diff.reshape(h, w + 1), axis=1)[:, :w] > 0
 
 
 class InterestPointSpread(_KeypointMetric):

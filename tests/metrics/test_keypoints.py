@@ -15,6 +15,7 @@ from pytest_n2r.errors import InvalidArgument, InvalidType, MetricUndefined, SUT
 from pytest_n2r.geometry import Transform
 from pytest_n2r.metrics._matching import mutual_nearest
 from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping
+from pytest_n2r.metrics.coverage import coverage_bound
 from pytest_n2r.metrics.keypoints import MAX_COVERAGE, _may_cover, coverage_mask, interest_point_spread, repeatability
 
 from .scenes import CAMERA, WALL, Plane, pair, pixels_of, render_planes, world_points_on_wall
@@ -309,6 +310,15 @@ def test_coverage_mask_equals_the_brute_force_definition(points, radius):
     d2 = (u[..., None] - pts[:, 0]) ** 2 + (v[..., None] - pts[:, 1]) ** 2
     expected = np.any(d2 <= (radius + 1e-6) ** 2, axis=-1)
     np.testing.assert_array_equal(coverage_mask(pts, CAMERA, radius), expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(points=st.lists(st.tuples(st.floats(-30, 190), st.floats(-30, 150)), max_size=200), radius=st.floats(0.1, 40))
+def test_the_coverage_bound_is_never_below_the_coverage(points, radius):
+    """The metric skips painting discs when ``coverage_bound`` is below MAX_COVERAGE: it must bound the share."""
+    pts = np.array(points, dtype=np.float64).reshape(-1, 2)
+    covered, bound = coverage_mask(pts, CAMERA, radius).mean(), coverage_bound(pts, CAMERA, radius)
+    assert covered <= bound <= 1.0, f"coverage {covered} of {len(pts)} discs of radius {radius}, bound {bound}"
 
 
 @settings(max_examples=60, deadline=None)

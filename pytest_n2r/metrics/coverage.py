@@ -1,0 +1,75 @@
+"""Coverage of an image by discs around points (the keypoint metrics' chance-match rule and interest-point
+spread): the exact mask of covered pixel centres, and a cheap upper bound of its share.
+
+Convention
+----------
+- Points are ``(N, 2)`` ``(u, v)`` pixels of a camera's image (OpenCV pixel centres at integer coordinates);
+  a pixel centre is covered when it lies within ``radius`` pixels of a point (inclusive, plus
+  :data:`DISC_SLACK`); discs are clipped to the image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import check_positive
+from ..geometry import Camera
+
+__all__ = ["DISC_SLACK", "coverage_mask", "coverage_bound"]
+
+#: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
+#: flip a pixel centre lying exactly on the circle.
+DISC_SLACK = 1e-6
+#: Side (pixels) of the cells :func:`coverage_bound` counts.
+_CELL = 4
+
+
+def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
+    """``H x W`` bool mask of the pixel centres within ``radius`` pixels (inclusive) of any point.
+
+    ``points`` is ``(N, 2)`` ``(u, v)`` in pixels of ``camera``'s image; discs are exact at sub-pixel
+    positions and clipped to the image. Each disc is painted as one horizontal run per pixel row
+    (a difference array summed along the rows), so the cost is ``N * (2 radius + 1)`` plus one pass
+    over the image.
+    """
+    radius = check_positive("radius", radius) + DISC_SLACK
+    h, w = camera.height, camera.width
+    if len(points) == 0:
+        return np.zeros((h, w), dtype=bool)
+    r = int(np.ceil(radius))
+    rows = np.floor(points[:, 1] + 0.5).astype(np.intp)[:, None] + np.arange(-r, r + 1)[None, :]
+    dy2 = (rows - points[:, 1, None]) ** 2
+    ok = (dy2 <= radius * radius) & (rows >= 0) & (rows < h)
+    half = np.sqrt(np.maximum(radius * radius - dy2, 0.0))
+    u = np.broadcast_to(points[:, 0, None], rows.shape)
+    first = np.clip(np.ceil(u - half), 0, w).astype(np.intp)
+    last = np.clip(np.floor(u + half) + 1, 0, w).astype(np.intp)  # one past the run's last column
+    ok &= first < last
+    rows, first, last = rows[ok], first[ok], last[ok]
+    diff = np.bincount(rows * (w + 1) + first, minlength=h * (w + 1))
+    diff -= np.bincount(rows * (w + 1) + last, minlength=h * (w + 1))
+    return np.cumsum(diff.reshape(h, w + 1), axis=1)[:, :w] > 0
+
+
+def coverage_bound(points: np.ndarray, camera: Camera, radius: float) -> float:
+    """An upper bound of ``coverage_mask(points, camera, radius).mean()`` at a fraction of its cost: the share
+    of the image's pixels in the cells of ``_CELL`` × ``_CELL`` pixels that the bounding box of some disc's
+    pixel centres (clipped to the image) touches. On the 757 point sets whose discs a warm main job painted
+    (320×180, radius 3 and 8 px): shares 0.12–0.35, bounds 0.17–0.46."""
+    radius = check_positive("radius", radius) + DISC_SLACK
+    h, w = camera.height, camera.width
+    lo, hi = np.ceil(points - radius), np.floor(points + radius)  # (N, 2): the box of each disc's pixel centres
+    limit = np.array([w - 1, h - 1])
+    inside = np.all((hi >= 0) & (lo <= limit), axis=1)
+    lo = (np.clip(lo[inside], 0, limit) // _CELL).astype(np.intp)
+    hi = (np.clip(hi[inside], 0, limit) // _CELL).astype(np.intp) + 1  # one past the box's last cell
+    cols, rows = -(-w // _CELL), -(-h // _CELL)
+    corners = np.zeros((rows + 1, cols + 1), np.int64)  # a 2-D difference array of the boxes' cells
+    np.add.at(corners, (lo[:, 1], lo[:, 0]), 1)
+    np.add.at(corners, (lo[:, 1], hi[:, 0]), -1)
+    np.add.at(corners, (hi[:, 1], lo[:, 0]), -1)
+    np.add.at(corners, (hi[:, 1], hi[:, 0]), 1)
+    touched = (corners.cumsum(axis=0).cumsum(axis=1)[:rows, :cols] > 0).astype(np.int64)
+    widths = np.minimum(_CELL, w - _CELL * np.arange(cols))
+    heights = np.minimum(_CELL, h - _CELL * np.arange(rows))
+    return float(heights @ touched @ widths) / (w * h)
