@@ -48,7 +48,7 @@ __all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 
 @njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, step, shell_samples, far,
+def render_rays(o, d, density, values, logits, rows, occ, reach, res, shell, step, shell_samples, far,
                 density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, slot, rgb,
                 depth, opacity):
     """Volume-render every ray ``r`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and ``opacity[slot[r]]``
@@ -66,6 +66,14 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
     colour logits baked for this frame (:func:`bake_logits`), or is empty: each sample's logits from its ray's
     direction (exact). ``tail`` (float64, decreasing) and ``min_weight``: see the module docstring (an empty
     ``tail`` takes every lattice sample, 0 colours every sample).
+
+    ``occ`` is the cells' occupancy (uint8 ``(R-1)³``) and ``reach`` its blocks' (:mod:`pytest_n2r.render.block_reach`):
+    a ray whose sample lies in an empty block jumps to the first lattice step whose middle is past where it leaves
+    the box of empty blocks around that block. Every step skipped lies in an empty block, and block by block the
+    ray would land on the same step (the first one in an occupied block), so the samples taken are the same as
+    one block at a time. That holds while each sample is one step; once the tail has doubled a ray's samples, a
+    jump lands on a step but the sample is taken at the middle of the next ones, so a longer jump would move the
+    samples after it, and the ray jumps one block at a time.
     """
     rr = res * res
     half = 1.0 + shell
@@ -105,8 +113,13 @@ def render_rays(o, d, density, values, logits, rows, occ, blocks, res, shell, st
                 t = 1.0 / (u0 - (k + 0.5 * n - n_inner) * du)
                 gx, gy, gz = grid_coords_xyz(ox + t * dx, oy + t * dy, oz + t * dz, shell, res)
             ci, cj, ck = cell_of(gx, res), cell_of(gy, res), cell_of(gz, res)
-            if k < n_inner and blocks[ci // BLOCK, cj // BLOCK, ck // BLOCK] == 0:
-                t_exit = block_exit(ox, oy, oz, dx, dy, dz, ci // BLOCK, cj // BLOCK, ck // BLOCK, shell, res)
+            bi, bj, bk = ci // BLOCK, cj // BLOCK, ck // BLOCK
+            if k < n_inner and reach[bi, bj, bk] >= 0:
+                # an empty block: jump to where the ray leaves the box of empty blocks around it (one sample a
+                # step: see the docstring), or this block alone
+                e = np.int64(reach[bi, bj, bk]) if stride == 1 else 0
+                t_exit = block_exit(ox, oy, oz, dx, dy, dz, bi + (e if dx > 0.0 else -e), bj + (e if dy > 0.0 else -e),
+                                    bk + (e if dz > 0.0 else -e), shell, res)
                 k_next = max(k + 1, int(math.ceil((t_exit - t0) / dt - 0.5)))
                 k = min(k_next, n_inner)
                 continue
