@@ -1,7 +1,7 @@
 """The fused forward renderer of a scene field, compiled for the CPU (numba): one thread per ray.
 
 It samples the lattice of :mod:`pytest_n2r.field.lattice` with the field's compiled sampling maths
-(:mod:`pytest_n2r.field.kernels`, inlined), skips empty 8³-cell blocks in one jump and occupied-cell misses
+(:mod:`pytest_n2r.field.kernels`, inlined), skips boxes of empty 8³-cell blocks in one jump and empty cells
 one by one, and stops a ray once its transmittance falls below ``t_stop`` (early ray termination). Each ray
 is independent, so results do not depend on the thread count.
 
@@ -73,7 +73,7 @@ def render_rays(o, d, density, values, logits, rows, occ, reach, res, shell, ste
     ray would land on the same step (the first one in an occupied block), so the samples taken are the same as
     one block at a time. That holds while each sample is one step; once the tail has doubled a ray's samples, a
     jump lands on a step but the sample is taken at the middle of the next ones, so a longer jump would move the
-    samples after it, and the ray jumps one block at a time.
+    samples after it (on the fox, 19 of 388 800 RGB values), and the ray jumps one block at a time.
     """
     rr = res * res
     half = 1.0 + shell
