@@ -603,6 +603,27 @@ def _relief_count(kinds):
     return max(count, 1)
 
 
+@njit(cache=True, error_model="numpy")
+def _cylinder_surface(prims, row, qx, qy, qz):
+    """:func:`_surface` of a :class:`Cylinder` at ``q`` = the hit point less its centre: the axis's component
+    of the normal and ``q`` picked by name, not by indexing a list (a list is a heap allocation per hit)."""
+    k = int(prims[row, 3])
+    if k == 0:  # (i, j, k) = the two cross axes and the axis
+        qi, qj, qk = qy, qz, qx
+    elif k == 1:
+        qi, qj, qk = qx, qz, qy
+    else:
+        qi, qj, qk = qx, qy, qz
+    radius, half = prims[row, 4], prims[row, 5]
+    radial = math.hypot(qi, qj)
+    if abs(abs(qk) - half) < 1e-7 * max(1.0, half) and radial < radius * (1 - 1e-9):
+        nk = 1.0 if qk > 0 else (-1.0 if qk < 0 else 0.0)
+        return (nk if k == 0 else 0.0), (nk if k == 1 else 0.0), (nk if k == 2 else 0.0), qi, qj, 1
+    ni, nj = qi / radius, qj / radius
+    nx, ny, nz = (0.0, ni, nj) if k == 0 else ((ni, 0.0, nj) if k == 1 else (ni, nj, 0.0))
+    return nx, ny, nz, math.atan2(qj, qi) * radius, qk, 0
+
+
 @njit(cache=True, inline="always", error_model="numpy")
 def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
@@ -623,18 +644,7 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
             return sign, 0.0, 0.0, y * sign, -z, face
         return 0.0, sign, 0.0, -x * sign, -z, face
     if kind == _CYLINDER:
-        q = (x - prims[row, 0], y - prims[row, 1], z - prims[row, 2])
-        k = int(prims[row, 3])
-        i, j = (1, 2) if k == 0 else ((0, 2) if k == 1 else (0, 1))
-        radius, half = prims[row, 4], prims[row, 5]
-        radial = math.hypot(q[i], q[j])
-        n = [0.0, 0.0, 0.0]
-        if abs(abs(q[k]) - half) < 1e-7 * max(1.0, half) and radial < radius * (1 - 1e-9):
-            n[k] = 1.0 if q[k] > 0 else (-1.0 if q[k] < 0 else 0.0)
-            return n[0], n[1], n[2], q[i], q[j], 1
-        n[i] = q[i] / radius
-        n[j] = q[j] / radius
-        return n[0], n[1], n[2], math.atan2(q[j], q[i]) * radius, q[k], 0
+        return _cylinder_surface(prims, row, x - prims[row, 0], y - prims[row, 1], z - prims[row, 2])
     if not have:
         _, gx, gz = relief_at(waves, lanes, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
     norm = math.sqrt(gx * gx + 1.0 + gz * gz)
