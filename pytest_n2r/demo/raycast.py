@@ -143,7 +143,7 @@ class CompiledScene:
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
         reliefs = max(1, int(np.sum(self.kinds == _RELIEF)))
-        scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((8, samples)),
+        scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((15, samples)),
                     np.empty((2, samples), dtype=np.int64), np.empty(LANES), np.empty((4, rays[1])),
                     np.empty((STATE_ROWS, rays[1])), np.empty((3, rays[1])), np.empty((3, rays[1])),
                     np.empty((reliefs, _RELIEF_ROWS, rays[1])),
@@ -703,6 +703,7 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
     sub = n * width
     sa, sb, sfp, slight, sm = shade[0], shade[1], shade[2], shade[3], shade[4]
     batch_a, batch_b, batch_m = shade[5], shade[6], shade[7]
+    st, sdx, sdy, sdz, snx, sny, snz = shade[8], shade[9], shade[10], shade[11], shade[12], shade[13], shade[14]
     nodes, where = shade_int[0], shade_int[1]
     for sv in range(n):
         yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
@@ -719,19 +720,10 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
             x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
             nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, lanes, x, y, z, gxs[sv, j], gzs[sv, j],
                                               haves[sv, j])
-            norm = math.sqrt(dx * dx + dy * dy + dz * dz)
-            # n . (d / |d|); along an axis (grounds, boxes) the other two terms are zeros, which add nothing
-            if nx == 0.0 and ny == 0.0:
-                cos = abs(nz * (_opaque(dz) / norm))
-            elif ny == 0.0 and nz == 0.0:
-                cos = abs(nx * (_opaque(dx) / norm))
-            elif nx == 0.0 and nz == 0.0:
-                cos = abs(ny * (_opaque(dy) / norm))
-            else:
-                cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
-            sa[i], sb[i], sfp[i] = a, b, t / scale_fp / max(cos, 0.2)
-            slight[i] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
+            sa[i], sb[i], st[i] = a, b, t
+            sdx[i], sdy[i], sdz[i], snx[i], sny[i], snz[i] = dx, dy, dz, nx, ny, nz
             nodes[i] = prim_mat[k, face]
+    _light_and_footprint(n * sub, scale_fp, ambient, lx, ly, lz, st, sdx, sdy, sdz, snx, sny, snz, sfp, slight)
     for mask in range(len(masks)):
         count = 0
         for i in range(n * sub):
@@ -743,6 +735,22 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
             masks[mask](batch_a, batch_b, batch_m, count)
             for c in range(count):
                 sm[where[c]] = batch_m[c]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _light_and_footprint(count, scale, ambient, lx, ly, lz, ts, dxs, dys, dzs, nxs, nys, nzs, footprints, lights):
+    """Footprint ``t / scale / max(|n . d / |d||, 0.2)`` (pixels) and light factor of hits ``i < count`` at ``t =
+    ts[i]`` along ``d = dxs[i], dys[i], dzs[i]`` with unit normal ``nxs[i], nys[i], nzs[i]`` (light direction ``lx,
+    ly, lz``, ``ambient``), into ``footprints[i]``, ``lights[i]``. Compiled apart and called with each row as its
+    own array, so that LLVM vectorizes the loop (its divisions and square root four rays to a vector; a ray's
+    chain of them was latency-bound); where a normal lies along an axis, its zero terms add nothing to the dot
+    product, bit for bit."""
+    for i in range(count):
+        dx, dy, dz, nx, ny, nz = dxs[i], dys[i], dzs[i], nxs[i], nys[i], nzs[i]
+        norm = math.sqrt(dx * dx + dy * dy + dz * dz)
+        cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
+        footprints[i] = ts[i] / scale / max(cos, 0.2)
+        lights[i] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
