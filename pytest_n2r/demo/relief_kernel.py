@@ -115,6 +115,59 @@ def _finish(prims, row, hits, j, ox, oz, dx, dz, t, gx, gz, have):
         hits[0, j], hits[1, j], hits[2, j], hits[3, j] = t, gx, gz, 1.0 if have else 0.0
 
 
+#: A ray's search (:func:`_brackets`): none (it misses the relief's slab or its screen rectangle), Newton's method
+#: (a monotonic residual) or a march (a grazing ray).
+_NONE, _NEWTON, _MARCH = 0.0, 1.0, 2.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _brackets(m, us, v, rect, oy, y0, depth, slope, curvature, dxs, dys, dzs, los, his, shorts, searches):
+    """Each ray ``j < m``'s bracket ``los[j], his[j]`` of ``t`` across the relief's slab ``y0 - depth <= y <= y0``,
+    the step short enough to end its Newton search (``shorts[j]``, see the module *Convention*) and its search
+    (``searches[j]``: :data:`_NONE`, :data:`_NEWTON` or :data:`_MARCH`), for rays from height ``oy`` in directions
+    ``dxs[j], dys[j], dzs[j]`` at pixel ``(us[j], v)`` (outside ``rect``: none). Compiled apart and called with each
+    row as its own array, so that LLVM vectorizes the loop (its three divisions and square root four rays to a
+    vector; per ray, in the loop that fills the search state, they were a latency-bound chain)."""
+    for j in range(m):
+        dx, dy, dz = dxs[j], dys[j], dzs[j]
+        t_in = (y0 - depth - oy) / dy
+        t_out = (y0 - oy) / dy
+        across = math.sqrt(dx * dx + dz * dz)  # not hypot (several times slower): only picks the search below
+        los[j], his[j] = max(t_in, T_MIN), t_out
+        shorts[j] = GRADIENT_TOLERANCE / (curvature * across + 1e-300)
+        inside = not (us[j] < rect[0] or us[j] > rect[1] or v < rect[2] or v > rect[3]) and dy > 0 and t_out > T_MIN
+        searches[j] = (_NEWTON if dy > 1.05 * slope * across else _MARCH) if inside else _NONE
+
+
+#: How a Newton step ended (:func:`_newton_steps`): converged, or the root lies above the last ``t`` (which becomes
+#: the bracket's ``a``), or below it (its ``b``).
+_DONE, _ABOVE, _BELOW = 0.0, 1.0, 2.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _newton_steps(live, oy, y0, depth, as_, bs, ts, dxs, dys, dzs, shorts, hs, gxs, gzs, steps, sides):
+    """One safeguarded Newton step of each ray ``i < live`` of a search (bracket ``as_[i], bs[i]``, root ``ts[i]``,
+    direction ``dxs[i], dys[i], dzs[i]``, the step that ends it ``shorts[i]``; the waves' sums at ``ts[i]`` in
+    ``hs, gxs, gzs``, see :func:`_evaluate`): the next root into ``steps[i]`` and into ``sides[i]`` whether the
+    search ended (:data:`_DONE`: the residual is below 1e-7, ``steps[i]`` is ``ts[i]``, or the step was short) or
+    which end of the bracket ``ts[i]`` replaces. Compiled apart and called with each row as its own array, so that
+    LLVM vectorizes the loop (Newton's division four rays to a vector)."""
+    for i in range(live):
+        a, b, t = as_[i], bs[i], ts[i]
+        dx, dy, dz = dxs[i], dys[i], dzs[i]
+        gx, gz = depth * gxs[i], depth * gzs[i]
+        f = oy + t * dy - y0 + depth * hs[i]
+        converged = abs(f) <= 1e-7
+        df = dy + gx * dx + gz * dz
+        above = f < 0
+        a, b = (t, b) if above else (a, t)
+        step = t - f / df
+        inside = step > a and step < b
+        short = inside and abs(step - t) <= shorts[i]
+        steps[i] = t if converged else (step if inside else 0.5 * (a + b))
+        sides[i] = _DONE if converged or short else (_ABOVE if above else _BELOW)
+
+
 @njit(cache=True, error_model="numpy")
 def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rect, state, sums, spare, hits):
     """First hits of the relief in ``prims[row]`` along rays ``j < m`` from ``(ox, oy, oz)`` in directions
@@ -127,62 +180,46 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
     monotonic residual) search by Newton's method in lockstep; grazing ones march (:func:`_relief_march`)."""
     y0, depth, slope, curvature = prims[row, Y0], prims[row, DEPTH], prims[row, SLOPE], prims[row, CURVATURE]
     first, count, newton = int(prims[row, FIRST]), int(prims[row, COUNT]), int(prims[row, NEWTON])
+    _brackets(m, us, v, rect, oy, y0, depth, slope, curvature, ds[0], ds[1], ds[2], spare[0], spare[1], spare[2],
+              hits[0])
     live = 0
     for j in range(m):
+        search = hits[0, j]
         hits[0, j], hits[1, j], hits[2, j], hits[3, j] = math.inf, 0.0, 0.0, 0.0
-        if us[j] < rect[0] or us[j] > rect[1] or v < rect[2] or v > rect[3]:
-            continue
-        dx, dy, dz = ds[0, j], ds[1, j], ds[2, j]
-        t_in = (y0 - depth - oy) / dy
-        t_out = (y0 - oy) / dy
-        if not (dy > 0 and t_out > T_MIN):
-            continue
-        lo, hi = max(t_in, T_MIN), t_out
-        across = math.sqrt(dx * dx + dz * dz)  # not hypot (several times slower): only picks the search below
-        if dy > 1.05 * slope * across:  # monotonic residual: safeguarded Newton
-            guess = guesses[j]
+        if search == _NEWTON:  # monotonic residual: safeguarded Newton
+            lo, hi, guess = spare[0, j], spare[1, j], guesses[j]
             state[_A, live], state[_B, live] = lo, hi
             state[_T, live] = guess if (guess > lo and guess < hi) else 0.5 * (lo + hi)
-            state[_DX, live], state[_DY, live], state[_DZ, live] = dx, dy, dz
-            state[_SHORT, live] = GRADIENT_TOLERANCE / (curvature * across + 1e-300)
+            state[_DX, live], state[_DY, live], state[_DZ, live] = ds[0, j], ds[1, j], ds[2, j]
+            state[_SHORT, live] = spare[2, j]
             state[_RAY, live] = j
             sums[_H, live] = sums[_GX, live] = sums[_GZ, live] = 0.0
             live += 1
-        else:
-            t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, lo, hi,
+        elif search == _MARCH:
+            dx, dy, dz = ds[0, j], ds[1, j], ds[2, j]
+            t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, spare[0, j], spare[1, j],
                               int(prims[row, STEPS]), int(prims[row, BISECTIONS]))
             _finish(prims, row, hits, j, ox, oz, dx, dz, t, 0.0, 0.0, False)
     for _ in range(newton):
         if live == 0:
             break
         _evaluate(waves, first, count, ox, oz, state, sums, spare, live)
+        _newton_steps(live, oy, y0, depth, state[_A], state[_B], state[_T], state[_DX], state[_DY], state[_DZ],
+                      state[_SHORT], sums[_H], sums[_GX], sums[_GZ], spare[0], spare[1])
         kept = 0
         for i in range(live):
-            a, b, t = state[_A, i], state[_B, i], state[_T, i]
-            dx, dy, dz = state[_DX, i], state[_DY, i], state[_DZ, i]
-            gx, gz = depth * sums[_GX, i], depth * sums[_GZ, i]
-            f = oy + t * dy - y0 + depth * sums[_H, i]
-            done = abs(f) <= 1e-7
-            if not done:
-                df = dy + gx * dx + gz * dz
-                if f < 0:
-                    a = t
-                else:
-                    b = t
-                step = t - f / df
-                if step > a and step < b:
-                    done = abs(step - t) <= state[_SHORT, i]
-                    t = step
-                else:
-                    t = 0.5 * (a + b)
-            if done:
-                _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, dx, dz, t, gx, gz, True)
+            t, side = spare[0, i], spare[1, i]
+            if side == _DONE:
+                _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, state[_DX, i], state[_DZ, i], t,
+                        depth * sums[_GX, i], depth * sums[_GZ, i], True)
                 continue
+            before = state[_T, i]
             for r in range(STATE_ROWS):
                 state[r, kept] = state[r, i]
             for r in range(3):
                 sums[r, kept] = sums[r, i]
-            state[_A, kept], state[_B, kept], state[_T, kept] = a, b, t
+            state[_A if side == _ABOVE else _B, kept] = before
+            state[_T, kept] = t
             kept += 1
         live = kept
     for i in range(live):  # out of iterations: the last step's root, without its gradient
