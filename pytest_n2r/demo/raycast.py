@@ -143,7 +143,7 @@ class CompiledScene:
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
         reliefs = max(1, int(np.sum(self.kinds == _RELIEF)))
-        scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((15, samples)),
+        scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((11, samples)),
                     np.empty((2, samples), dtype=np.int64), np.empty(LANES), np.empty((4, rays[1])),
                     np.empty((STATE_ROWS, rays[1])), np.empty((3, rays[1])), np.empty((3, rays[1])),
                     np.empty((reliefs, _RELIEF_ROWS, rays[1])),
@@ -703,7 +703,8 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
     sub = n * width
     sa, sb, sfp, slight, sm = shade[0], shade[1], shade[2], shade[3], shade[4]
     batch_a, batch_b, batch_m = shade[5], shade[6], shade[7]
-    st, sdx, sdy, sdz, snx, sny, snz = shade[8], shade[9], shade[10], shade[11], shade[12], shade[13], shade[14]
+    snx, sny, snz = shade[8], shade[9], shade[10]
+    rotation = (c2w[0, 0], c2w[0, 1], c2w[0, 2], c2w[1, 0], c2w[1, 1], c2w[1, 2], c2w[2, 0], c2w[2, 1], c2w[2, 2])
     nodes, where = shade_int[0], shade_int[1]
     for sv in range(n):
         yc = (v + ((sv + 0.5) / n - 0.5) - cy) / fy
@@ -720,10 +721,11 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
             x, y, z = ox + t * dx, oy + t * dy, oz + t * dz
             nx, ny, nz, a, b, face = _surface(kinds[k], prims, k, waves, lanes, x, y, z, gxs[sv, j], gzs[sv, j],
                                               haves[sv, j])
-            sa[i], sb[i], st[i] = a, b, t
-            sdx[i], sdy[i], sdz[i], snx[i], sny[i], snz[i] = dx, dy, dz, nx, ny, nz
+            sa[i], sb[i], snx[i], sny[i], snz[i] = a, b, nx, ny, nz
             nodes[i] = prim_mat[k, face]
-    _light_and_footprint(n * sub, scale_fp, ambient, lx, ly, lz, st, sdx, sdy, sdz, snx, sny, snz, sfp, slight)
+        row = slice(sv * sub, sv * sub + sub)
+        _light_and_footprint(rotation, yc, scale_fp, (lx, ly, lz, ambient), xcs[0], ts[sv], snx[row], sny[row],
+                             snz[row], sfp[row], slight[row])
     for mask in range(len(masks)):
         count = 0
         for i in range(n * sub):
@@ -738,19 +740,25 @@ def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shad
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _light_and_footprint(count, scale, ambient, lx, ly, lz, ts, dxs, dys, dzs, nxs, nys, nzs, footprints, lights):
-    """Footprint ``t / scale / max(|n . d / |d||, 0.2)`` (pixels) and light factor of hits ``i < count`` at ``t =
-    ts[i]`` along ``d = dxs[i], dys[i], dzs[i]`` with unit normal ``nxs[i], nys[i], nzs[i]`` (light direction ``lx,
-    ly, lz``, ``ambient``), into ``footprints[i]``, ``lights[i]``. Compiled apart and called with each row as its
-    own array, so that LLVM vectorizes the loop (its divisions and square root four rays to a vector; a ray's
-    chain of them was latency-bound); where a normal lies along an axis, its zero terms add nothing to the dot
-    product, bit for bit."""
-    for i in range(count):
-        dx, dy, dz, nx, ny, nz = dxs[i], dys[i], dzs[i], nxs[i], nys[i], nzs[i]
+def _light_and_footprint(rotation, yc, scale, light, xcs, ts, nxs, nys, nzs, footprints, lights):
+    """Footprint ``t / scale / max(|n . d / |d||, 0.2)`` (pixels) and light factor of the hits ``j`` of one row of
+    sub-rays (``t = ts[j]``, ``inf`` on a miss: then anything) in camera-frame directions ``(xcs[j], yc, 1)``
+    (``rotation``: camera to world, row-major) with unit normal ``nxs[j], nys[j], nzs[j]`` (``light``: direction
+    and ambient), into ``footprints[j]``, ``lights[j]``. Compiled apart and called with each row as its own array,
+    so that LLVM vectorizes the loop (its divisions and square root four rays to a vector; a ray's chain of them
+    was latency-bound); where a normal lies along an axis, its zero terms add nothing to the dot product, bit for
+    bit."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation
+    lx, ly, lz, ambient = light
+    for j in range(ts.shape[0]):
+        xc, nx, ny, nz = xcs[j], nxs[j], nys[j], nzs[j]
+        dx = xc * r00 + yc * r01 + r02
+        dy = xc * r10 + yc * r11 + r12
+        dz = xc * r20 + yc * r21 + r22
         norm = math.sqrt(dx * dx + dy * dy + dz * dz)
         cos = abs(nx * (dx / norm) + ny * (dy / norm) + nz * (dz / norm))
-        footprints[i] = ts[i] / scale / max(cos, 0.2)
-        lights[i] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
+        footprints[j] = ts[j] / scale / max(cos, 0.2)
+        lights[j] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
