@@ -13,6 +13,8 @@ What makes it fast (measured in ``docs/performance.md``):
   hits for all its rays at once, Newton's method in lockstep with the waves evaluated four rays to a vector
   (:mod:`.relief_kernel`), each root searched from the roots of the rows above (extrapolated; a depth ray's
   from the mean of its pixel's sub-ray roots), then each ray's nearest hit over the primitives.
+- Per-ray chains of divisions (the light and footprint of the shading inputs, a relief's brackets and Newton
+  steps) run in loops compiled apart over a row's arrays, one array per row, which LLVM vectorizes.
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
   a ray tests only what may lie under its pixel.
 - The hot helpers are inlined and receive views of the kernel's arrays without reference counts
@@ -549,8 +551,8 @@ def _nearest_hits(groups, group_box, kinds, prims, reliefs, rects, us, v, ox, oy
 def _cast(groups, group_box, kinds, prims, reliefs, j, rects, u, v, ox, oy, oz, dx, dy, dz):
     """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of ray ``j`` of a batch over all groups (``t = inf`` and
     primitive 0 on a miss; a relief's hit and gradient from ``reliefs``, see :func:`_hit`). ``u, v``: the ray's
-    pixel coordinates; groups
-    and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold them are skipped."""
+    pixel coordinates; groups and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold
+    them are skipped."""
     best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
     ix = iy = iz = math.nan
     inverse = False  # 1 / d only for rays that meet a box (see _opaque)
@@ -605,18 +607,12 @@ def _relief_count(kinds):
 
 @njit(cache=True, error_model="numpy")
 def _cylinder_surface(prims, row, qx, qy, qz):
-    """:func:`_surface` of a :class:`Cylinder` at ``q`` = the hit point less its centre: the axis's component
-    of the normal and ``q`` picked by name, not by indexing a list (a list is a heap allocation per hit)."""
-    k = int(prims[row, 3])
-    if k == 0:  # (i, j, k) = the two cross axes and the axis
-        qi, qj, qk = qy, qz, qx
-    elif k == 1:
-        qi, qj, qk = qx, qz, qy
-    else:
-        qi, qj, qk = qx, qy, qz
+    """:func:`_surface` of a :class:`Cylinder` at ``q`` = the hit point less its centre (the axes by name, not by
+    indexing a list: a list is a heap allocation per hit)."""
+    k = int(prims[row, 3])  # (i, j, k) = the two cross axes and the axis
+    qi, qj, qk = (qy, qz, qx) if k == 0 else ((qx, qz, qy) if k == 1 else (qx, qy, qz))
     radius, half = prims[row, 4], prims[row, 5]
-    radial = math.hypot(qi, qj)
-    if abs(abs(qk) - half) < 1e-7 * max(1.0, half) and radial < radius * (1 - 1e-9):
+    if abs(abs(qk) - half) < 1e-7 * max(1.0, half) and math.hypot(qi, qj) < radius * (1 - 1e-9):
         nk = 1.0 if qk > 0 else (-1.0 if qk < 0 else 0.0)
         return (nk if k == 0 else 0.0), (nk if k == 1 else 0.0), (nk if k == 2 else 0.0), qi, qj, 1
     ni, nj = qi / radius, qj / radius
@@ -693,9 +689,9 @@ def _centre_guess(ts, ks, k, n, u):
 def _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves, lanes,
                     prim_mat, node_kind, node_par, masks, shade, shade_int):
     """For each sub-ray ``i = row * n * width + j`` of pixel row ``v`` that hit: surface coordinates ``a, b``,
-    footprint, light factor and material node (``shade[0:4, i]``, ``shade_int[0, i]``; node -1 on a miss), then
-    every blend mask over all the sub-rays it covers in one call (``shade[4, i]``; a compiled mask is a
-    vectorized loop over a batch, see :mod:`.mask_kernel`)."""
+    footprint, light factor (:func:`_light_and_footprint`, per row of sub-rays) and material node (``shade[0:4,
+    i]``, ``shade_int[0, i]``; node -1 on a miss), then every blend mask over all the sub-rays it covers in one
+    call (``shade[4, i]``; a compiled mask is a vectorized loop over a batch, see :mod:`.mask_kernel`)."""
     fx, fy, cy = camera[0], camera[1], camera[3]
     ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
     lx, ly, lz, ambient = shading[0], shading[1], shading[2], shading[3]
