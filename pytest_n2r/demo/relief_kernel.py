@@ -121,14 +121,14 @@ _NONE, _NEWTON, _MARCH = 0.0, 1.0, 2.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _brackets(m, us, v, rect, oy, y0, depth, slope, curvature, dxs, dys, dzs, los, his, shorts, searches):
-    """Each ray ``j < m``'s bracket ``los[j], his[j]`` of ``t`` across the relief's slab ``y0 - depth <= y <= y0``,
+def _brackets(us, v, rect, oy, y0, depth, slope, curvature, dxs, dys, dzs, los, his, shorts, searches):
+    """Each ray ``j``'s bracket ``los[j], his[j]`` of ``t`` across the relief's slab ``y0 - depth <= y <= y0``,
     the step short enough to end its Newton search (``shorts[j]``, see the module *Convention*) and its search
     (``searches[j]``: :data:`_NONE`, :data:`_NEWTON` or :data:`_MARCH`), for rays from height ``oy`` in directions
     ``dxs[j], dys[j], dzs[j]`` at pixel ``(us[j], v)`` (outside ``rect``: none). Compiled apart and called with each
     row as its own array, so that LLVM vectorizes the loop (its three divisions and square root four rays to a
     vector; per ray, in the loop that fills the search state, they were a latency-bound chain)."""
-    for j in range(m):
+    for j in range(dxs.shape[0]):  # a length, not a count argument: numba would compile once more for a literal
         dx, dy, dz = dxs[j], dys[j], dzs[j]
         t_in = (y0 - depth - oy) / dy
         t_out = (y0 - oy) / dy
@@ -145,14 +145,14 @@ _DONE, _ABOVE, _BELOW = 0.0, 1.0, 2.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _newton_steps(live, oy, y0, depth, as_, bs, ts, dxs, dys, dzs, shorts, hs, gxs, gzs, steps, sides):
-    """One safeguarded Newton step of each ray ``i < live`` of a search (bracket ``as_[i], bs[i]``, root ``ts[i]``,
+def _newton_steps(oy, y0, depth, as_, bs, ts, dxs, dys, dzs, shorts, hs, gxs, gzs, steps, sides):
+    """One safeguarded Newton step of each ray ``i`` of a search (bracket ``as_[i], bs[i]``, root ``ts[i]``,
     direction ``dxs[i], dys[i], dzs[i]``, the step that ends it ``shorts[i]``; the waves' sums at ``ts[i]`` in
     ``hs, gxs, gzs``, see :func:`_evaluate`): the next root into ``steps[i]`` and into ``sides[i]`` whether the
     search ended (:data:`_DONE`: the residual is below 1e-7, ``steps[i]`` is ``ts[i]``, or the step was short) or
     which end of the bracket ``ts[i]`` replaces. Compiled apart and called with each row as its own array, so that
     LLVM vectorizes the loop (Newton's division four rays to a vector)."""
-    for i in range(live):
+    for i in range(ts.shape[0]):
         a, b, t = as_[i], bs[i], ts[i]
         dx, dy, dz = dxs[i], dys[i], dzs[i]
         gx, gz = depth * gxs[i], depth * gzs[i]
@@ -180,8 +180,8 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
     monotonic residual) search by Newton's method in lockstep; grazing ones march (:func:`_relief_march`)."""
     y0, depth, slope, curvature = prims[row, Y0], prims[row, DEPTH], prims[row, SLOPE], prims[row, CURVATURE]
     first, count, newton = int(prims[row, FIRST]), int(prims[row, COUNT]), int(prims[row, NEWTON])
-    _brackets(m, us, v, rect, oy, y0, depth, slope, curvature, ds[0], ds[1], ds[2], spare[0], spare[1], spare[2],
-              hits[0])
+    _brackets(us[:m], v, rect, oy, y0, depth, slope, curvature, ds[0, :m], ds[1, :m], ds[2, :m], spare[0, :m],
+              spare[1, :m], spare[2, :m], hits[0, :m])
     live = 0
     for j in range(m):
         search = hits[0, j]
@@ -204,8 +204,9 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
         if live == 0:
             break
         _evaluate(waves, first, count, ox, oz, state, sums, spare, live)
-        _newton_steps(live, oy, y0, depth, state[_A], state[_B], state[_T], state[_DX], state[_DY], state[_DZ],
-                      state[_SHORT], sums[_H], sums[_GX], sums[_GZ], spare[0], spare[1])
+        _newton_steps(oy, y0, depth, state[_A, :live], state[_B, :live], state[_T, :live], state[_DX, :live],
+                      state[_DY, :live], state[_DZ, :live], state[_SHORT, :live], sums[_H, :live], sums[_GX, :live],
+                      sums[_GZ, :live], spare[0, :live], spare[1, :live])
         kept = 0
         for i in range(live):
             t, side = spare[0, i], spare[1, i]
