@@ -19,14 +19,13 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 
+from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument
 from .user_cache import cache_dir
 
@@ -213,10 +212,7 @@ def _photo_digest(texture: Texture, recipe: tuple[Any, ...]) -> str:
         pass
     digest = _texel_digest(texture.image, texture.wrap)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as out:
-            out.write(digest)
-        os.replace(out.name, path)
+        atomic_write_text(path, digest)
     except OSError:
         pass  # a read-only cache: the digest is computed again next time
     return digest
