@@ -43,12 +43,13 @@ from ..field.kernels import (
     sample_alpha,
     vertex_row,
 )
+from .cell_bits import cell_occupied
 
 __all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 
 @njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, logits, rows, occ, reach, res, shell, step, shell_samples, far,
+def render_rays(o, d, density, values, logits, rows, bits, reach, res, shell, step, shell_samples, far,
                 density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, slot, rgb,
                 depth, opacity):
     """Volume-render every ray ``r`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and ``opacity[slot[r]]``
@@ -67,7 +68,8 @@ def render_rays(o, d, density, values, logits, rows, occ, reach, res, shell, ste
     direction (exact). ``tail`` (float64, decreasing) and ``min_weight``: see the module docstring (an empty
     ``tail`` takes every lattice sample, 0 colours every sample).
 
-    ``occ`` is the cells' occupancy (uint8 ``(R-1)³``) and ``reach`` its blocks' (:mod:`pytest_n2r.render.block_reach`):
+    ``bits`` is the cells' occupancy (:mod:`pytest_n2r.render.cell_bits`) and ``reach`` its blocks'
+    (:mod:`pytest_n2r.render.block_reach`):
     a ray whose sample lies in an empty block jumps to the first lattice step whose middle is past where it leaves
     the box of empty blocks around that block. Every step skipped lies in an empty block, and block by block the
     ray would land on the same step (the first one in an occupied block), so the samples taken are the same as
@@ -124,7 +126,7 @@ def render_rays(o, d, density, values, logits, rows, occ, reach, res, shell, ste
                 k = min(k_next, n_inner)
                 continue
             k += n
-            if not occ[ci, cj, ck]:
+            if not cell_occupied(bits, bi, bj, bk, ci, cj, ck):
                 continue
             # trilinear weights of the cell's corners v0..v7 (bits i, j, k of the corner index), computed once
             fx, fy, fz = gx - ci, gy - cj, gz - ck

@@ -29,6 +29,7 @@ from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .block_reach import block_reach
+from .cell_bits import cell_bits
 from .field_kernels import bake_logits, pixel_rays, render_rays
 from .ray_order import tiled_pixels
 
@@ -191,7 +192,9 @@ class FieldRenderer:
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
             self._rows = field.kernel_rows()
-            self._reach = block_reach(self.grid.numpy()[1])
+            cells, blocks = self.grid.numpy()
+            self._reach = block_reach(blocks)
+            self._bits = cell_bits(cells)
             self._vertex = None
             if s.colour_direction == "vertex":
                 self._vertex = np.arange(self._values.shape[0], dtype=np.int64)  # each row's flat vertex index
@@ -276,7 +279,7 @@ class FieldRenderer:
         """Render rays ``o, d`` into the pixels ``index`` of the flat images ``rgb``, ``depth`` and ``opacity``."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
-            render_rays(o, d, self._density, self._values, logits, self._rows, g.numpy()[0], self._reach, g.resolution,
+            render_rays(o, d, self._density, self._values, logits, self._rows, self._bits, self._reach, g.resolution,
                         g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
                         f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth,
                         index, rgb, depth, opacity)
