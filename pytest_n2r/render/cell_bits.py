@@ -44,5 +44,6 @@ def cell_bits(cells: np.ndarray) -> np.ndarray:
 def cell_occupied(bits, bi, bj, bk, ci, cj, ck):
     """Whether cell ``(ci, cj, ck)`` (of block ``(bi, bj, bk)``, its indices over ``BLOCK``) is occupied (``bits``
     from :func:`cell_bits`; indices >= 0)."""
-    m = BLOCK - 1
-    return (bits[bi, bj, bk, ci & m] >> ((cj & m) * BLOCK + (ck & m))) & 1 != 0
+    m = BLOCK - 1  # unsigned indices: no wraparound code (pytest_n2r.render.field_kernels._row)
+    word = bits[np.uint64(bi), np.uint64(bj), np.uint64(bk), np.uint64(ci & m)]
+    return (word >> ((cj & m) * BLOCK + (ck & m))) & 1 != 0

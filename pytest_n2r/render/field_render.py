@@ -178,11 +178,11 @@ class FieldRenderer:
         s = self.settings
         self.backend = s.backend_on(field.device)
         occupancy = field.occupancy
+        with torch.no_grad():  # also checks that the field stores every corner of its occupied cells (the kernel
+            alpha = field.occupied_cell_alpha(s.step_ratio)  # reads them without a check)
         if s.min_alpha > 0:
-            with torch.no_grad():
-                visible = field.occupied_cell_alpha(s.step_ratio) >= s.min_alpha
-                occupancy = occupancy.clone()
-                occupancy[field.occupancy] = visible  # a mask takes its cells in nonzero() order
+            occupancy = occupancy.clone()
+            occupancy[field.occupancy] = alpha >= s.min_alpha  # a mask takes its cells in nonzero() order
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background_of(field)
