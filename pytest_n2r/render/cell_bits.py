@@ -10,6 +10,9 @@ crosses in an occupied block share one 64-byte line, and the whole grid is an ei
 Convention: ``bits[bi, bj, bk, li]`` (int64, block indices as :func:`pytest_n2r.field.kernels.block_occupancy`'s
 grid) holds the cells ``(8·bi + li, 8·bj + lj, 8·bk + lk)`` of block ``(bi, bj, bk)``: bit ``8·lj + lk`` is set
 where that cell is occupied. Cells beyond the grid (the last block's padding) are empty.
+
+numba's cache checks a kernel's own file only (numba/numba#1833): after editing :func:`cell_occupied`, delete the
+``__pycache__`` folder of ``pytest_n2r/render``, whose cached renderer inlines it.
 """
 
 from __future__ import annotations
