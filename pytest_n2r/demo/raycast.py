@@ -9,10 +9,11 @@ rounding (tested against them, ``tests/demo/test_raycast.py``).
 
 What makes it fast (measured in ``docs/performance.md``):
 
-- Each row of rays (a sub-row of sub-pixel rays, or the pixel centres) is cast as a batch: first a relief's
-  hits for all its rays at once, Newton's method in lockstep with the waves evaluated four rays to a vector
-  (:mod:`.relief_kernel`), each root searched from the roots of the rows above (extrapolated; a depth ray's
-  from the mean of its pixel's sub-ray roots), then each ray's nearest hit over the primitives.
+- Each row of rays (the pixel centres, then each sub-row of sub-pixel rays) is cast as a batch: first a
+  relief's hits for all its rays at once, Newton's method in lockstep with the waves evaluated four rays to a
+  vector (:mod:`.relief_kernel`), each centre's root searched from the roots of the rows above (extrapolated),
+  each sub-ray's taken from the relief's second-order expansion at its pixel centre's hit where that is as
+  accurate as a search (:mod:`.relief_rows`), then each ray's nearest hit over the primitives.
 - Per-ray chains of divisions (the light and footprint of the shading inputs, a relief's brackets and Newton
   steps) run in loops compiled apart over a row's arrays, one array per row, which LLVM vectorizes.
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
@@ -58,7 +59,18 @@ from .borrow import borrowed as _borrowed
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
-from .relief_kernel import LANES, RELIEF_COLUMNS, SLOT, STATE_ROWS, relief_at, relief_hits
+from .relief_kernel import (
+    HIT_ROWS,
+    LANES,
+    MODEL_ROWS,
+    RELIEF_COLUMNS,
+    SLOT,
+    STATE_ROWS,
+    SUM_ROWS,
+    relief_at,
+    relief_hits,
+)
+from .relief_rows import RELIEF_ROWS, relief_row
 from .textures import Texture
 
 __all__ = ["CompiledScene", "compile_scene"]
@@ -147,8 +159,8 @@ class CompiledScene:
         reliefs = max(1, int(np.sum(self.kinds == _RELIEF)))
         scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((11, samples)),
                     np.empty((2, samples), dtype=np.int64), np.empty(LANES), np.empty((4, rays[1])),
-                    np.empty((STATE_ROWS, rays[1])), np.empty((3, rays[1])), np.empty((3, rays[1])),
-                    np.empty((reliefs, _RELIEF_ROWS, rays[1])),
+                    np.empty((STATE_ROWS, rays[1])), np.empty((SUM_ROWS, rays[1])), np.empty((SUM_ROWS, rays[1])),
+                    np.empty((reliefs, RELIEF_ROWS, rays[1])),
                     np.empty((4 * samples, 3), np.float32),
                     np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
                     np.empty((3, samples), np.float32), np.empty((4, 2 * samples)),
@@ -273,6 +285,13 @@ def _curvature_bound(relief: ReliefWall) -> float:
     return float(relief.depth * np.sum(np.abs(w[:, 0]) * (w[:, 1] ** 2 + w[:, 3] ** 2)))
 
 
+def _third_bound(relief: ReliefWall) -> float:
+    """A bound of the relief's third derivatives along any unit direction, ``depth * sum |amp| (fx² + fz²)^1.5``
+    (1 / scene units²): the error of its second-order expansion (:func:`.relief_kernel.set_models`)."""
+    w = relief._w
+    return float(relief.depth * np.sum(np.abs(w[:, 0]) * (w[:, 1] ** 2 + w[:, 3] ** 2) ** 1.5))
+
+
 def _bounds(prim: Primitive) -> list[float]:
     """``lo, hi`` of an axis-aligned box that holds every hit of ``prim``."""
     if isinstance(prim, Disc):
@@ -330,7 +349,8 @@ def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list
         return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
     if isinstance(prim, ReliefWall):
         par[:RELIEF_COLUMNS] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w),
-                                prim.newton, prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs]
+                                prim.newton, prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs,
+                                _third_bound(prim)]
         b.reliefs += 1
         waves.extend(prim._w.astype(np.float32).tolist())
         return _RELIEF, par, [b.material(prim.material)] * 6
@@ -583,15 +603,15 @@ def _cast(groups, group_box, kinds, prims, reliefs, j, rects, u, v, ox, oy, oz, 
 def _cast_rays(o, d, groups, group_box, kinds, prims, waves, lanes, rects, t_out, which_out):
     """:meth:`CompiledScene.cast`: one ray at a time (each its own origin), serial (used for small batches)."""
     ds, no_guess, pixel = np.empty((3, 1)), np.full(1, math.nan), np.zeros(1)
-    state, sums, spare = np.empty((STATE_ROWS, 1)), np.empty((3, 1)), np.empty((3, 1))
-    reliefs = np.empty((_relief_count(kinds), 4, 1))
+    state, sums, spare = np.empty((STATE_ROWS, 1)), np.empty((SUM_ROWS, 1)), np.empty((SUM_ROWS, 1))
+    reliefs, model = np.empty((_relief_count(kinds), HIT_ROWS, 1)), np.empty((MODEL_ROWS, 1))
     everywhere = rects[0]
     for r in range(o.shape[0]):
         ds[0, 0], ds[1, 0], ds[2, 0] = d[r, 0], d[r, 1], d[r, 2]
         for k in range(kinds.shape[0]):
             if kinds[k] == _RELIEF:
                 relief_hits(prims, k, waves, lanes, o[r, 0], o[r, 1], o[r, 2], ds, no_guess, 1, pixel, 0.0,
-                            everywhere, state, sums, spare, reliefs[int(prims[k, SLOT])])
+                            everywhere, state, sums, spare, reliefs[int(prims[k, SLOT])], model, False)
         t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, reliefs, 0, rects, 0.0, 0.0,
                                                 o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
 
@@ -653,36 +673,6 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
 #: Image rows per band: a thread renders whole bands (every thread-th), and a relief's root search starts from
 #: the roots of the rows of rays above it in the same band (so images do not depend on the thread count).
 BAND = 16
-#: Rows of ``reliefs[slot]``: the batch's hits (:func:`.relief_kernel.relief_hits`), then the roots of the last
-#: three rows of sub-pixel rays and of the last three rows of pixel-centre rays (the newest last).
-_HITS, _SUB_HISTORY, _CENTRE_HISTORY, _RELIEF_ROWS = 0, 4, 7, 10
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _extrapolate(history, rows, j):
-    """A guess of a relief root at ray ``j`` of the next row of rays from the relief's roots at ray ``j`` of the
-    last ``rows`` rows (``history[0:3]``, the newest last; fewer than three at a band's start): the quadratic
-    extrapolation where all three hit it, else the linear, else the last root; NaN where the last row missed."""
-    if rows < 1 or not math.isfinite(history[2, j]):
-        return math.nan
-    if rows >= 2 and math.isfinite(history[1, j]):
-        if rows >= 3 and math.isfinite(history[0, j]):
-            return 3.0 * (history[2, j] - history[1, j]) + history[0, j]
-        return 2.0 * history[2, j] - history[1, j]
-    return history[2, j]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _centre_guess(ts, ks, k, n, u):
-    """The mean of pixel ``u``'s sub-ray roots where all lie on primitive ``k`` (a guess of the root through the
-    pixel centre), else NaN."""
-    total = 0.0
-    for row in range(n):
-        for j in range(u * n, u * n + n):
-            if ks[row, j] != k or not math.isfinite(ts[row, j]):
-                return math.nan
-            total += ts[row, j]
-    return total / (n * n)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -758,12 +748,12 @@ def _light_and_footprint(rotation, yc, scale, light, xcs, ts, nxs, nys, nzs, foo
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _cast_row(row, n, v, from_pixels, rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds, prims, waves,
+def _cast_row(row, n, v, rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds, prims, waves,
               lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves):
     """Cast row ``row`` of a pixel row's rays (``row < n``: a sub-row of sub-pixel rays at image row ``v``;
     ``row == n``: the pixel centres) into ``ts, ks, gxs, gzs, haves[row]``: their directions, each relief's hits
-    for all of them at once (:func:`_relief_row`, after ``rows`` rows of the same kind in this band; a centre's
-    from its pixel's sub-rays when ``from_pixels``), then each ray's nearest hit. Compiled apart from the kernel
+    for all of them at once (:func:`.relief_rows.relief_row`, after ``rows`` rows of the same kind in this band; a
+    sub-row's after its pixel row's centres), then each ray's nearest hit. Compiled apart from the kernel
     and called once per row of rays (the kernel's compile grows with each helper inlined into it); its helpers
     receive views of its arrays without reference counts, as the kernel's (:func:`_borrowed`)."""
     fy, cy = camera[1], camera[3]
@@ -784,9 +774,8 @@ def _cast_row(row, n, v, from_pixels, rows, c2w, camera, uss, xcs, rects, groups
         ds[2, j] = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
     for k in range(kinds.shape[0]):
         if kinds[k] == _RELIEF:
-            _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], v,
-                        rects[groups.shape[0] + k], state, sums, spare, reliefs[int(prims[k, SLOT])], ts, ks, n,
-                        from_pixels, rows, centre)
+            relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], v,
+                       rects[groups.shape[0] + k], state, sums, spare, reliefs[int(prims[k, SLOT])], n, rows, centre)
     _nearest_hits(groups, group_box, kinds, prims, reliefs, rects, uss[table], v, ox, oy, oz, ds, count, row, ts, ks,
                   gxs, gzs, haves, spare)
 
@@ -796,11 +785,11 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
                    colours, taps, weights, mix, requests, request_slots, lods, queue, buckets, c2w, camera, n, rects,
                    groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings, masks,
                    tex_meta, texels, shading, background, rgb, depth, opacity):
-    """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the ``n`` sub-rows of
-    supersampling rays are cast first, then the depth rays through the pixel centres, then each pixel is shaded.
-    Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (its root searched
-    from the roots of the rows above, a depth ray's from the mean of its pixel's sub-ray roots), then the
-    nearest hit of each ray."""
+    """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the rays through the pixel
+    centres are cast first (the depth rays), then the ``n`` sub-rows of supersampling rays, then each pixel is
+    shaded. Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (a
+    centre's root searched from the roots of the rows above, a sub-ray's from its pixel centre's hit, see
+    :mod:`.relief_rows`), then the nearest hit of each ray."""
     fx, cx, far = camera[0], camera[2], camera[4]
     rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
     prims, waves, prim_mat, node_kind = _borrowed(prims), _borrowed(waves), _borrowed(prim_mat), _borrowed(node_kind)
@@ -831,7 +820,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     slight, nodes = shade[3], shade_int[0]
     lanes = _borrowed(lanes)
     # one row of rays (see _cast_row): directions and the guesses of a relief's roots; a relief search's state;
-    # per relief its hits and the roots of the rows above (see _HITS)
+    # per relief its hits, the roots of the rows above and the models at the centres' hits (see .relief_rows)
     rays, state, sums, spare, reliefs = (_borrowed(rays), _borrowed(state), _borrowed(sums), _borrowed(spare),
                                          _borrowed(reliefs))
     # each sub-ray's four colour slots and blend weights, the row's texture requests and lookups (see albedo_row)
@@ -841,9 +830,10 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     for band in range(first, (height + BAND - 1) // BAND, step):
         for v in range(band * BAND, min(height, band * BAND + BAND)):
             above = v - band * BAND  # pixel rows of this band above this one (their rays guess this row's roots)
-            for row in range(0 if want_hits else n, n + 1 if depth.shape[0] > 0 else n):
+            for order in range(n + 1 if want_hits else 1):  # the centres first: the sub-rays' relief needs them
+                row = n if order == 0 else order - 1
                 centre = row == n
-                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), centre and want_hits,
+                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5),
                           above if centre else above * n + row, c2w, camera, uss, xcs, rects, groups, group_box,
                           kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
             if depth.shape[0] > 0:
@@ -881,19 +871,3 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
                     for c, value in ((0, acc_r), (1, acc_g), (2, acc_b)):
                         level = np.rint(value / inv_count * np.float32(255.0))
                         rgb[v, u, c] = np.uint8(min(max(level, F0), np.float32(255.0)))
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, rect, state, sums, spare, relief, ts,
-                ks, n, from_pixels, rows, centre):
-    """Relief ``k``'s hits along one row of ``count`` rays (``relief[_HITS:_HITS + 4]``), each root searched from
-    the mean of its pixel's sub-ray roots (``from_pixels``: a row of pixel-centre rays after its sub-rows) or
-    extrapolated from the ``rows`` rows of the same kind above (:func:`_extrapolate`); then this row's roots join
-    that history."""
-    history = relief[_CENTRE_HISTORY:_CENTRE_HISTORY + 3] if centre else relief[_SUB_HISTORY:_SUB_HISTORY + 3]
-    for j in range(count):
-        guess = _centre_guess(ts, ks, k, n, j) if from_pixels else math.nan
-        guesses[j] = _extrapolate(history, rows, j) if math.isnan(guess) else guess
-    relief_hits(prims, k, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, rect, state, sums, spare, relief)
-    for j in range(count):
-        history[0, j], history[1, j], history[2, j] = history[1, j], history[2, j], relief[_HITS, j]

@@ -28,14 +28,14 @@ from numba import njit
 from .primitives import T_MIN
 from .trig import sincos
 
-__all__ = ["GRADIENT_TOLERANCE", "LANES", "RELIEF_COLUMNS", "STATE_ROWS", "relief_at",
-           "relief_hits"]
+__all__ = ["GRADIENT_TOLERANCE", "HIT_ROWS", "LANES", "MODEL_GRADIENT_TOLERANCE", "MODEL_ROWS", "RELIEF_COLUMNS",
+           "STATE_ROWS", "SUM_ROWS", "relief_at", "relief_hits", "set_models"]
 
 #: Columns of a relief's row in ``prims``: the wall's plane and extent, relief depth, slope bound, first wave
 #: and wave count, Newton iterations, march steps, bisections, curvature bound, the relief's slot among the
-#: scene's reliefs (see :func:`relief_hits`).
-Y0, X0, X1, Z0, Z1, DEPTH, SLOPE, FIRST, COUNT, NEWTON, STEPS, BISECTIONS, CURVATURE, SLOT = range(14)
-RELIEF_COLUMNS = 14
+#: scene's reliefs (see :func:`relief_hits`), the bound of its third derivatives (see :func:`_model_roots`).
+Y0, X0, X1, Z0, Z1, DEPTH, SLOPE, FIRST, COUNT, NEWTON, STEPS, BISECTIONS, CURVATURE, SLOT, THIRD = range(15)
+RELIEF_COLUMNS = 15
 #: How far a relief's gradient may change between Newton's last evaluation and its last step: 1e-5 turns a
 #: normal by at most 1e-5 rad, a colour by a few thousandths of a grey level.
 GRADIENT_TOLERANCE = 1e-5
@@ -44,8 +44,21 @@ GRADIENT_TOLERANCE = 1e-5
 #: ``depth``) go to rows of another array (``sums``: were they rows of ``state``, LLVM could not tell that the
 #: loop's stores do not overlap its loads, and would not vectorize it).
 _A, _B, _T, _DX, _DY, _DZ, _SHORT, _RAY = range(8)
-_H, _GX, _GZ = range(3)
+_H, _GX, _GZ, _HXX, _HXZ, _HZZ = range(6)
 STATE_ROWS = 8
+#: Rows of a batch's wave sums (``sums``, and of the scratch ``spare``, see :func:`relief_hits`).
+SUM_ROWS = 6
+#: Rows of a batch's hits (``hits[:, j]``, see :func:`relief_hits`): ``t``, ``dh/dx``, ``dh/dz``, whether they are
+#: the last evaluation's, and the second derivatives there (times ``depth``).
+HIT_ROWS = 7
+#: Rows of a relief's models at the hits of a row of pixel-centre rays (``model[:, u]``, see :func:`set_models`):
+#: the hit's ``x``, ``z`` (NaN: no model), gradient, second derivatives, and ``t (d_y + g . d)`` of its ray.
+_MX, _MZ, _MGX, _MGZ, _MXX, _MXZ, _MZZ, _MN = range(8)
+MODEL_ROWS = 8
+#: Where a sub-pixel ray's hit is taken from its pixel centre's model (:func:`_model_roots`): while the model's
+#: bound of its error in the height is at most the residual that ends a search (1e-7), and in the gradient at most
+#: ``MODEL_GRADIENT_TOLERANCE`` (1e-4 turns a normal by at most 1e-4 rad, a colour by at most 0.02 grey levels).
+MODEL_GRADIENT_TOLERANCE = 1e-4
 #: Waves evaluated at once by :func:`relief_at`; its ``lanes`` buffer holds 6 of this many float64.
 _WAVE_CHUNK = 4
 LANES = 6 * _WAVE_CHUNK
@@ -83,7 +96,8 @@ def relief_at(waves, lanes, first, count, depth, x, z):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _evaluate(waves, first, count, ox, oz, state, sums, spare, live):
-    """The waves' float32 sums at ``o + t d`` of the first ``live`` rays of the batch, into ``sums``: one pass
+    """The waves' float32 sums (height, gradient, second derivatives) at ``o + t d`` of the first ``live`` rays of
+    the batch, into ``sums``: one pass
     over the rays per wave, a loop that LLVM vectorizes. Each pass adds its wave to the sums of the pass before,
     from one array into the other (``spare`` and ``sums`` by turns, the last pass into ``sums``): LLVM
     vectorizes a loop whose stores go to another array than its loads."""
@@ -95,24 +109,29 @@ def _evaluate(waves, first, count, ox, oz, state, sums, spare, live):
         for i in range(live):
             x32 = np.float32(ox + state[_T, i] * state[_DX, i])
             z32 = np.float32(oz + state[_T, i] * state[_DZ, i])
-            h, gx, gz = np.float32(0.5), _F0, _F0
+            h, gx, gz, hxx, hxz, hzz = np.float32(0.5), _F0, _F0, _F0, _F0, _F0
             if not fresh:
                 h, gx, gz = np.float32(src[_H, i]), np.float32(src[_GX, i]), np.float32(src[_GZ, i])
+                hxx, hxz, hzz = np.float32(src[_HXX, i]), np.float32(src[_HXZ, i]), np.float32(src[_HZZ, i])
             sx, cx = sincos(np.float64(fx * x32 + px))
             sz, cz = sincos(np.float64(fz * z32 + pz))
             sx32, cx32, sz32, cz32 = np.float32(sx), np.float32(cx), np.float32(sz), np.float32(cz)
             dst[_H, i] = np.float64(h + amp * sx32 * sz32)
             dst[_GX, i] = np.float64(gx + amp * fx * cx32 * sz32)
             dst[_GZ, i] = np.float64(gz + amp * fz * sx32 * cz32)
+            dst[_HXX, i] = np.float64(hxx - amp * fx * fx * sx32 * sz32)
+            dst[_HXZ, i] = np.float64(hxz + amp * fx * fz * cx32 * cz32)
+            dst[_HZZ, i] = np.float64(hzz - amp * fz * fz * sx32 * sz32)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _finish(prims, row, hits, j, ox, oz, dx, dz, t, gx, gz, have):
+def _finish(prims, row, hits, j, ox, oz, dx, dz, t, gx, gz, have, hxx, hxz, hzz):
     """A ray's result: its root where it lies within the wall's extent, else a miss (``t = inf``)."""
     px, pz = ox + t * dx, oz + t * dz
     if math.isfinite(t) and px >= prims[row, X0] and px <= prims[row, X1] and pz >= prims[row, Z0] \
             and pz <= prims[row, Z1]:
         hits[0, j], hits[1, j], hits[2, j], hits[3, j] = t, gx, gz, 1.0 if have else 0.0
+        hits[4, j], hits[5, j], hits[6, j] = hxx, hxz, hzz
 
 
 #: A ray's search (:func:`_brackets`): none (it misses the relief's slab or its screen rectangle), Newton's method
@@ -168,24 +187,87 @@ def _newton_steps(oy, y0, depth, as_, bs, ts, dxs, dys, dzs, shorts, hs, gxs, gz
         sides[i] = _DONE if converged or short else (_ABOVE if above else _BELOW)
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _model_roots(third, ox, oz, dxs, dys, dzs, los, his, xf, zf, mgx, mgz, mxx, mxz, mzz, mn, ts, gxs, gzs):
+    """Each ray ``j``'s root and gradient (``ts[j], gxs[j], gzs[j]``, the gradient times ``depth``) from the model
+    of the relief at its pixel centre's hit (column ``j`` of the model's rows, as :func:`set_models` fills them):
+    the second-order Taylor expansion of the height about that hit, its tangent plane's root refined by one
+    Newton step on the expansion (its derivative taken as the plane's: the step is some 1e-6 scene units, the
+    second-order term changes it by under 1 %). ``ts[j]`` is NaN where there is no model, where the root lies
+    outside ``[los[j], his[j]]``, or where the bound of the expansion's error (``third``: of the relief's third
+    derivatives) exceeds the residual that ends a search (1e-7) in the height or
+    :data:`MODEL_GRADIENT_TOLERANCE` in the gradient. Rays whose residual is monotonic across the slab (steep
+    ones) have one root, so the root near their pixel centre's is theirs. Compiled apart and called with each
+    row as its own array, so that LLVM vectorizes the loop (its division four rays to a vector)."""
+    for j in range(dxs.shape[0]):
+        dx, dy, dz = dxs[j], dys[j], dzs[j]
+        gx, gz, hxx, hxz, hzz = mgx[j], mgz[j], mxx[j], mxz[j], mzz[j]
+        inverse = 1.0 / (dy + gx * dx + gz * dz)
+        t = mn[j] * inverse  # the tangent plane's root: t_f (d_y + g . d) of the centre over the ray's
+        ex, ez = ox + t * dx - xf[j], oz + t * dz - zf[j]
+        t -= 0.5 * (ex * (hxx * ex + hxz * ez) + ez * (hxz * ex + hzz * ez)) * inverse
+        ex, ez = ox + t * dx - xf[j], oz + t * dz - zf[j]
+        reach = ex * ex + ez * ez
+        ok = t > los[j] and t < his[j] and third * third * reach * reach * reach <= 3.6e-13 \
+            and third * reach <= 2.0 * MODEL_GRADIENT_TOLERANCE
+        ts[j] = t if ok else math.nan
+        gxs[j] = gx + hxx * ex + hxz * ez
+        gzs[j] = gz + hxz * ex + hzz * ez
+
+
 @njit(cache=True, error_model="numpy")
-def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rect, state, sums, spare, hits):
+def set_models(hits, ox, oz, ds, m, n, model):
+    """The models of the relief at the hits ``hits[:, u]`` of a row of ``m`` pixel-centre rays in directions
+    ``ds[0:3, u]`` (:func:`relief_hits`), for the ``n`` sub-pixel rays along a row of each of those pixels
+    (columns ``u n`` to ``u n + n - 1``, :func:`_model_roots`): the hit's
+    ``x, z``, the gradient and second derivatives of the relief's last evaluation, and ``t (d_y + g . d)``; NaN in
+    ``x`` where the ray found no root by Newton's method (a miss, a march, or out of iterations).
+
+    The model of a hit ``p_f`` is ``y0 - depth h(p) = y_f - g . e - e H e / 2`` with ``e = p - p_f``: the last
+    evaluation lies a step that changes the gradient by at most :data:`GRADIENT_TOLERANCE` from ``p_f``, and its
+    tangent plane goes through ``p_f`` (Newton's step)."""
+    for u in range(m):
+        t, dx, dy, dz = hits[0, u], ds[0, u], ds[1, u], ds[2, u]
+        have = math.isfinite(t) and hits[3, u] != 0.0
+        gx, gz = hits[1, u], hits[2, u]
+        x, z, numerator = (ox + t * dx if have else math.nan), oz + t * dz, t * (dy + gx * dx + gz * dz)
+        for j in range(u * n, u * n + n):
+            model[_MX, j], model[_MZ, j], model[_MGX, j], model[_MGZ, j] = x, z, gx, gz
+            model[_MXX, j], model[_MXZ, j], model[_MZZ, j] = hits[4, u], hits[5, u], hits[6, u]
+            model[_MN, j] = numerator
+
+
+@njit(cache=True, error_model="numpy")
+def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rect, state, sums, spare, hits, model,
+                models):
     """First hits of the relief in ``prims[row]`` along rays ``j < m`` from ``(ox, oy, oz)`` in directions
     ``ds[0:3, j]``: ``hits[0:4, j]`` = ``t`` (``inf`` on a miss), ``dh/dx``, ``dh/dz`` there and whether they are
-    the last evaluation's at ``t`` (1.0) or not (0.0: the caller evaluates the relief again for the normal).
+    the last evaluation's at ``t`` (1.0) or not (0.0: the caller evaluates the relief again for the normal);
+    ``hits[4:7, j]`` the second derivatives there (where 1.0).
 
     ``guesses[j]``: a predicted root (NaN: none; a guess outside the ray's bracket is not used). Rays whose pixel
     coordinates ``(us[j], v)`` lie outside ``rect`` (``u_lo, u_hi, v_lo, v_hi``) miss. ``state``, ``sums`` and
-    ``spare`` are the caller's scratch (:data:`STATE_ROWS`, 3 and 3 rows of ``m``, three arrays). Steep rays (a
-    monotonic residual) search by Newton's method in lockstep; grazing ones march (:func:`_relief_march`)."""
+    ``spare`` are the caller's scratch (:data:`STATE_ROWS`, :data:`SUM_ROWS` and :data:`SUM_ROWS` rows of ``m``,
+    three arrays). Steep rays (a monotonic residual) take their root from their pixel centre's model where it is
+    accurate (where ``models``: ray ``j``'s is ``model[:, j]``, see :func:`_model_roots`), else search by Newton's
+    method in lockstep; grazing ones march (:func:`_relief_march`)."""
     y0, depth, slope, curvature = prims[row, Y0], prims[row, DEPTH], prims[row, SLOPE], prims[row, CURVATURE]
     first, count, newton = int(prims[row, FIRST]), int(prims[row, COUNT]), int(prims[row, NEWTON])
+    third = prims[row, THIRD]
     _brackets(us[:m], v, rect, oy, y0, depth, slope, curvature, ds[0, :m], ds[1, :m], ds[2, :m], spare[0, :m],
               spare[1, :m], spare[2, :m], hits[0, :m])
+    if models:
+        _model_roots(third, ox, oz, ds[0, :m], ds[1, :m], ds[2, :m], spare[0, :m], spare[1, :m],
+                     model[_MX], model[_MZ], model[_MGX], model[_MGZ], model[_MXX], model[_MXZ], model[_MZZ],
+                     model[_MN], spare[3, :m], spare[4, :m], spare[5, :m])
     live = 0
     for j in range(m):
         search = hits[0, j]
         hits[0, j], hits[1, j], hits[2, j], hits[3, j] = math.inf, 0.0, 0.0, 0.0
+        if search == _NEWTON and models and not math.isnan(spare[3, j]):
+            _finish(prims, row, hits, j, ox, oz, ds[0, j], ds[2, j], spare[3, j], spare[4, j], spare[5, j], True,
+                    model[_MXX, j], model[_MXZ, j], model[_MZZ, j])
+            continue
         if search == _NEWTON:  # monotonic residual: safeguarded Newton
             lo, hi, guess = spare[0, j], spare[1, j], guesses[j]
             state[_A, live], state[_B, live] = lo, hi
@@ -199,7 +281,7 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
             dx, dy, dz = ds[0, j], ds[1, j], ds[2, j]
             t = _relief_march(waves, lanes, first, count, depth, y0, ox, oy, oz, dx, dy, dz, spare[0, j], spare[1, j],
                               int(prims[row, STEPS]), int(prims[row, BISECTIONS]))
-            _finish(prims, row, hits, j, ox, oz, dx, dz, t, 0.0, 0.0, False)
+            _finish(prims, row, hits, j, ox, oz, dx, dz, t, 0.0, 0.0, False, 0.0, 0.0, 0.0)
     for _ in range(newton):
         if live == 0:
             break
@@ -212,7 +294,8 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
             t, side = spare[0, i], spare[1, i]
             if side == _DONE:
                 _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, state[_DX, i], state[_DZ, i], t,
-                        depth * sums[_GX, i], depth * sums[_GZ, i], True)
+                        depth * sums[_GX, i], depth * sums[_GZ, i], True, depth * sums[_HXX, i],
+                        depth * sums[_HXZ, i], depth * sums[_HZZ, i])
                 continue
             before = state[_T, i]
             for r in range(STATE_ROWS):
@@ -225,7 +308,7 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
         live = kept
     for i in range(live):  # out of iterations: the last step's root, without its gradient
         _finish(prims, row, hits, int(state[_RAY, i]), ox, oz, state[_DX, i], state[_DZ, i], state[_T, i],
-                depth * sums[_GX, i], depth * sums[_GZ, i], False)
+                depth * sums[_GX, i], depth * sums[_GZ, i], False, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True, error_model="numpy")
