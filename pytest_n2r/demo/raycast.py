@@ -752,10 +752,10 @@ def _cast_row(row, n, v, rows, c2w, camera, uss, xcs, rects, groups, group_box, 
               lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves):
     """Cast row ``row`` of a pixel row's rays (``row < n``: a sub-row of sub-pixel rays at image row ``v``;
     ``row == n``: the pixel centres) into ``ts, ks, gxs, gzs, haves[row]``: their directions, each relief's hits
-    for all of them at once (:func:`.relief_rows.relief_row`, after ``rows`` rows of the same kind in this band; a
-    sub-row's after its pixel row's centres), then each ray's nearest hit. Compiled apart from the kernel
-    and called once per row of rays (the kernel's compile grows with each helper inlined into it); its helpers
-    receive views of its arrays without reference counts, as the kernel's (:func:`_borrowed`)."""
+    for all of them at once (:func:`.relief_rows.relief_row`: a centre's after the ``rows`` rows of centres above
+    in this band, a sub-row's after its pixel row's centres), then each ray's nearest hit. Compiled apart from
+    the kernel and called once per row of rays (the kernel's compile grows with each helper inlined into it); its
+    helpers receive views of its arrays without reference counts, as the kernel's (:func:`_borrowed`)."""
     fy, cy = camera[1], camera[3]
     ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
     rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
@@ -834,7 +834,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
                 row = n if order == 0 else order - 1
                 centre = row == n
                 _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5),
-                          above if centre else above * n + row, c2w, camera, uss, xcs, rects, groups, group_box,
+                          above, c2w, camera, uss, xcs, rects, groups, group_box,
                           kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
             if depth.shape[0] > 0:
                 for u in range(width):

@@ -193,12 +193,13 @@ def _model_roots(third, ox, oz, dxs, dys, dzs, los, his, xf, zf, mgx, mgz, mxx, 
     of the relief at its pixel centre's hit (column ``j`` of the model's rows, as :func:`set_models` fills them):
     the second-order Taylor expansion of the height about that hit, its tangent plane's root refined by one
     Newton step on the expansion (its derivative taken as the plane's: the step is some 1e-6 scene units, the
-    second-order term changes it by under 1 %). ``ts[j]`` is NaN where there is no model, where the root lies
-    outside ``[los[j], his[j]]``, or where the bound of the expansion's error (``third``: of the relief's third
-    derivatives) exceeds the residual that ends a search (1e-7) in the height or
-    :data:`MODEL_GRADIENT_TOLERANCE` in the gradient. Rays whose residual is monotonic across the slab (steep
-    ones) have one root, so the root near their pixel centre's is theirs. Compiled apart and called with each
-    row as its own array, so that LLVM vectorizes the loop (its division four rays to a vector)."""
+    second-order term changes it by under 1 %). NaN where there is no model; where the root lies outside
+    ``[los[j], his[j]]`` or the bound of the expansion's error (``third``: of the relief's third derivatives)
+    exceeds the residual that ends a search (1e-7) in the height or :data:`MODEL_GRADIENT_TOLERANCE` in the
+    gradient, the gradient is NaN and the root is a guess for a search. Rays whose residual is monotonic across
+    the slab (steep ones) have one root, so the root near their pixel centre's is theirs. Compiled apart and
+    called with each row as its own array, so that LLVM vectorizes the loop (its division four rays to a
+    vector)."""
     for j in range(dxs.shape[0]):
         dx, dy, dz = dxs[j], dys[j], dzs[j]
         gx, gz, hxx, hxz, hzz = mgx[j], mgz[j], mxx[j], mxz[j], mzz[j]
@@ -210,8 +211,8 @@ def _model_roots(third, ox, oz, dxs, dys, dzs, los, his, xf, zf, mgx, mgz, mxx, 
         reach = ex * ex + ez * ez
         ok = t > los[j] and t < his[j] and third * third * reach * reach * reach <= 3.6e-13 \
             and third * reach <= 2.0 * MODEL_GRADIENT_TOLERANCE
-        ts[j] = t if ok else math.nan
-        gxs[j] = gx + hxx * ex + hxz * ez
+        ts[j] = t
+        gxs[j] = gx + hxx * ex + hxz * ez if ok else math.nan
         gzs[j] = gz + hxz * ex + hzz * ez
 
 
@@ -245,7 +246,8 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
     the last evaluation's at ``t`` (1.0) or not (0.0: the caller evaluates the relief again for the normal);
     ``hits[4:7, j]`` the second derivatives there (where 1.0).
 
-    ``guesses[j]``: a predicted root (NaN: none; a guess outside the ray's bracket is not used). Rays whose pixel
+    ``guesses[j]``: a predicted root (NaN: none; a guess outside the ray's bracket is not used; where ``models``,
+    the model's root instead). Rays whose pixel
     coordinates ``(us[j], v)`` lie outside ``rect`` (``u_lo, u_hi, v_lo, v_hi``) miss. ``state``, ``sums`` and
     ``spare`` are the caller's scratch (:data:`STATE_ROWS`, :data:`SUM_ROWS` and :data:`SUM_ROWS` rows of ``m``,
     three arrays). Steep rays (a monotonic residual) take their root from their pixel centre's model where it is
@@ -264,12 +266,12 @@ def relief_hits(prims, row, waves, lanes, ox, oy, oz, ds, guesses, m, us, v, rec
     for j in range(m):
         search = hits[0, j]
         hits[0, j], hits[1, j], hits[2, j], hits[3, j] = math.inf, 0.0, 0.0, 0.0
-        if search == _NEWTON and models and not math.isnan(spare[3, j]):
+        if search == _NEWTON and models and not math.isnan(spare[4, j]):
             _finish(prims, row, hits, j, ox, oz, ds[0, j], ds[2, j], spare[3, j], spare[4, j], spare[5, j], True,
                     model[_MXX, j], model[_MXZ, j], model[_MZZ, j])
             continue
         if search == _NEWTON:  # monotonic residual: safeguarded Newton
-            lo, hi, guess = spare[0, j], spare[1, j], guesses[j]
+            lo, hi, guess = spare[0, j], spare[1, j], spare[3, j] if models else guesses[j]
             state[_A, live], state[_B, live] = lo, hi
             state[_T, live] = guess if (guess > lo and guess < hi) else 0.5 * (lo + hi)
             state[_DX, live], state[_DY, live], state[_DZ, live] = ds[0, j], ds[1, j], ds[2, j]

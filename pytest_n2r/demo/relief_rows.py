@@ -12,9 +12,9 @@ Convention
 ----------
 - A relief's buffer (``relief``, one per relief of the scene, ``_RELIEF_ROWS`` rows of the widest row of rays)
   holds the batch's hits (:data:`.relief_kernel.HIT_ROWS` rows from :data:`_HITS`), the roots of the last three
-  rows of sub-pixel rays and of the last three rows of pixel-centre rays (the newest last), and the models at
-  the last row of pixel-centre hits (:data:`.relief_kernel.MODEL_ROWS` rows from :data:`_MODEL`).
-- Histories restart at each band of image rows (``rows``: the rows of the same kind above in this band), so
+  rows of pixel-centre rays (the newest last), and the models at the last row of pixel-centre hits, each
+  repeated for the sub-pixel rays of its pixel (:data:`.relief_kernel.MODEL_ROWS` rows from :data:`_MODEL`).
+- The history restarts at each band of image rows (``rows``: the rows of centres above in this band), so
   that images do not depend on the thread count (see :mod:`.raycast`).
 """
 
@@ -29,9 +29,8 @@ from .relief_kernel import HIT_ROWS, MODEL_ROWS, relief_hits, set_models
 __all__ = ["RELIEF_ROWS", "relief_row"]
 
 _HITS = 0
-_SUB_HISTORY = _HITS + HIT_ROWS
-_CENTRE_HISTORY = _SUB_HISTORY + 3
-_MODEL = _CENTRE_HISTORY + 3
+_HISTORY = _HITS + HIT_ROWS
+_MODEL = _HISTORY + 3
 #: Rows of a relief's buffer (see the module *Convention*).
 RELIEF_ROWS = _MODEL + MODEL_ROWS
 
@@ -55,16 +54,17 @@ def relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, re
                rows, centre):
     """Relief ``k``'s hits along one row of ``count`` rays (``relief[_HITS:_HITS + 4]``, see
     :func:`.relief_kernel.relief_hits`): pixel-centre rays (``centre``) searched from the roots of the ``rows``
-    rows of centres above (:func:`_extrapolate`), their hits then the models of their pixels' sub-pixel rays;
-    a row of sub-pixel rays (``n`` to a pixel along the row) from those models, or searched from the roots of
-    the rows of sub-pixel rays above. Then this row's roots join its kind's history."""
-    history = relief[_CENTRE_HISTORY:_CENTRE_HISTORY + 3] if centre else relief[_SUB_HISTORY:_SUB_HISTORY + 3]
-    for j in range(count):
-        guesses[j] = _extrapolate(history, rows, j)
+    rows of centres above (:func:`_extrapolate`; then their roots join that history), their hits then the
+    models of their pixels' sub-pixel rays; a row of sub-pixel rays (``n`` to a pixel along the row) from those
+    models, or searched from the models' roots."""
+    history = relief[_HISTORY:_HISTORY + 3]
+    if centre:
+        for j in range(count):
+            guesses[j] = _extrapolate(history, rows, j)
     hits, model = relief[_HITS:_HITS + HIT_ROWS], relief[_MODEL:_MODEL + MODEL_ROWS]
     relief_hits(prims, k, waves, lanes, ox, oy, oz, ds, guesses, count, us, v, rect, state, sums, spare, hits, model,
                 not centre)
     if centre:
         set_models(hits, ox, oz, ds, count, n, model)
-    for j in range(count):
-        history[0, j], history[1, j], history[2, j] = history[1, j], history[2, j], relief[_HITS, j]
+        for j in range(count):
+            history[0, j], history[1, j], history[2, j] = history[1, j], history[2, j], relief[_HITS, j]
