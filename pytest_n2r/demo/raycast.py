@@ -799,6 +799,9 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     width = max(rgb.shape[1], depth.shape[1], opacity.shape[1])
     want_colour = rgb.shape[0] > 0
     want_hits = want_colour or opacity.shape[0] > 0
+    relief = False
+    for k in range(kinds.shape[0]):
+        relief = relief or kinds[k] == _RELIEF
     inv_count = np.float32(n * n)
     sub = n * width
     # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
@@ -830,12 +833,13 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     for band in range(first, (height + BAND - 1) // BAND, step):
         for v in range(band * BAND, min(height, band * BAND + BAND)):
             above = v - band * BAND  # pixel rows of this band above this one (their rays guess this row's roots)
-            for order in range(n + 1 if want_hits else 1):  # the centres first: the sub-rays' relief needs them
+            # the centres first (a relief's sub-ray hits come from them), where depth or a relief needs them
+            for order in range(0 if depth.shape[0] > 0 or (want_hits and relief) else 1, n + 1 if want_hits else 1):
                 row = n if order == 0 else order - 1
                 centre = row == n
-                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5),
-                          above, c2w, camera, uss, xcs, rects, groups, group_box,
-                          kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves)
+                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), above, c2w, camera, uss, xcs,
+                          rects, groups, group_box, kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts,
+                          ks, gxs, gzs, haves)
             if depth.shape[0] > 0:
                 for u in range(width):
                     depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)

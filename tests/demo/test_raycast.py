@@ -143,6 +143,21 @@ def test_output_does_not_depend_on_the_thread_count():
         assert getattr(one, out).tobytes() == getattr(many, out).tobytes(), f"{out} depends on the thread count"
 
 
+@pytest.mark.parametrize("name", demo_scene_names())
+def test_each_output_alone_equals_its_part_of_all_three(name):
+    """A render casts the rays an output needs (depth: the pixel centres; RGB and opacity: the sub-rays, and the
+    centres where a relief's sub-ray hits come from theirs): any subset of outputs gives the same bytes."""
+    scene = ground_truth(name)
+    view = scene.views[9]
+    camera = view.camera.resized(120, 68)
+    full = scene.render(view.c2w, camera, OUTPUTS)
+    for outputs in (("rgb",), ("depth",), ("opacity",), ("rgb", "opacity"), ("depth", "opacity")):
+        part = scene.render(view.c2w, camera, outputs)
+        for out in outputs:
+            assert getattr(part, out).tobytes() == getattr(full, out).tobytes(), \
+                f"{name}: {out} rendered with {outputs} differs from {out} rendered with all three"
+
+
 def test_an_unknown_material_is_named():
     class Glow(Material):
         def albedo(self, a, b, footprint):
