@@ -78,7 +78,7 @@ class GroundTruthScene(Scene):
     #: "4" predicts relief roots from the rows of rays above in bands of rows (:mod:`.relief_kernel`: a few
     #: pixels in 100 000 by one grey level, depths by 1e-7 relative); "5" takes a sub-pixel ray's relief hit from
     #: the relief's second-order expansion at its pixel centre's hit (:mod:`.relief_rows`: 0.03 % of the wall's
-    #: pixels by one grey level, depths by 2.6e-7 relative, opacity unchanged; 24 captured and 36 moved poses).
+    #: pixels by one grey level, depths by 2.3e-7 relative, opacity unchanged, ``demo_compare.py --poses 24``).
     renderer_version = "5"
 
     def __init__(
