@@ -26,13 +26,17 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView
 from .primitives import T_MIN, Group, Primitive, slab_hits
-from .raycast import CompiledScene, compile_scene
+
+if TYPE_CHECKING:  # the ray caster (numba and its kernels) is imported by the first render, not with the scene: a
+    # run that takes every render from the cache compiles and loads none of it
+    from .raycast import CompiledScene
 
 __all__ = ["GroundTruthScene"]
 
@@ -132,6 +136,8 @@ class GroundTruthScene(Scene):
     def compiled(self) -> CompiledScene:
         """The scene's tables for the compiled kernel (built on first use)."""
         if self._compiled is None:
+            from .raycast import compile_scene
+
             self._compiled = compile_scene(list(self._items), self.light, self.ambient, self.background)
         return self._compiled
 

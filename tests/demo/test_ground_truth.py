@@ -126,6 +126,18 @@ def test_rendering_is_deterministic(name):
         assert getattr(a, out).tobytes() == getattr(b, out).tobytes(), f"{name}: {out} differs between renders"
 
 
+def test_a_scene_built_and_hashed_loads_no_ray_caster():
+    """A run that takes every render from the cache only builds the scenes and hashes them: the ray caster (its
+    kernels and numba's compiler, about 0.2 s of CPU) is imported by the first render, not before."""
+    import subprocess
+    import sys
+
+    code = ("import sys, pytest_n2r.demo as d; [d.ground_truth(n).content_hash for n in d.demo_scene_names()]; "
+            "print(sorted(m for m in sys.modules if m.endswith(('raycast', 'mask_kernel', 'albedo_kernel'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", f"building and hashing the demo scenes imported {out.strip()}"
+
+
 def test_content_hash_changes_with_the_scene():
     wall, obj = ground_truth("wall"), ground_truth("object")
     assert wall.content_hash != obj.content_hash
