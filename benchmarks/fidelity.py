@@ -3,7 +3,7 @@ and AKAZE (repeatability and interest-point spread, reference image vs field ren
 pose), per scene.
 
 Run: ``python benchmarks/fidelity.py SCENE [SCENE ...] [--size 480] [--views N] [--ceiling] [--bands]
-[--json out.json]``
+[--placement] [--json out.json]``
 
 ``SCENE`` is a ``.n2r`` file (reference: the photos it stores) or ``demo:wall-field`` / ``demo:object-field``
 (reference: the exact scene's render at the same pose). Only held-out views are scored; nothing in this
@@ -12,10 +12,14 @@ script is tuned, and a scene fitted with a validation split must hold out its re
 for each detector) and prints which are met. ``--ceiling`` measures what the targets ask of a render: each
 detector's repeatability between the reference image and the reference image itself degraded as a render
 degrades it (half, a third, a quarter of its resolution, a blur, JPEG), with the render's geometry, so no
-field error enters. ``--bands`` says where a render's error is: PSNR against the reference after both are
-blurred (Gaussian, 1, 2 and 4 px: what is left is shape, placement and colour, not fine texture) and after the
-best per-channel gain and offset (exposure), on the held-out views and on as many fitted (training) views
-spread over the capture (the gap between the two is what the fit does not carry to new poses).
+field error enters; and whether the metric measures the field or the detector's own noise (the image sampled
+half a pixel off, with and without the mapping knowing it; sensor noise). ``--bands`` says where a render's
+error is: PSNR against the reference after both are blurred (Gaussian, 1, 2 and 4 px: what is left is shape,
+placement and colour, not fine texture) and after the best per-channel gain and offset (exposure), on the
+held-out views and on as many fitted (training) views spread over the capture (the gap between the two is
+what the fit does not carry to new poses).
+``--placement`` says where the render's texture lands: its global shift against the reference per view, and
+the fidelity of the field rendered without its view-dependent colour.
 Results: docs/scene-field.md.
 """
 
@@ -25,6 +29,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -63,15 +68,45 @@ def _rescaled(factor: int):
     return degrade
 
 
+class _Shifted:
+    """The image moved by ``(du, dv)`` pixels (Lanczos resampling, edges reflected): the same scene sampled on
+    another pixel grid. ``known``: the mapping is told (its principal point moves with the image), so a
+    detector's points are compared where they should land; otherwise the shift is an error the metric sees, as
+    a pose that is off by that much."""
+
+    def __init__(self, du: float, dv: float, known: bool):
+        self.offset = (du, dv) if known else (0.0, 0.0)
+        self.matrix = np.array([[1.0, 0.0, du], [0.0, 1.0, dv]])
+
+    def __call__(self, image: np.ndarray) -> np.ndarray:
+        h, w = image.shape[:2]
+        return cv2.warpAffine(image, self.matrix, (w, h), flags=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REFLECT)
+
+
+def _noisy(sigma: float):
+    """The image with Gaussian noise of ``sigma`` grey levels (a fixed seed), as a sensor adds."""
+    def degrade(image: np.ndarray) -> np.ndarray:
+        noise = np.random.default_rng(0).normal(0.0, sigma, image.shape)
+        return np.clip(np.rint(image + noise), 0, 255).astype(np.uint8)
+    return degrade
+
+
 def _jpeg(image: np.ndarray, quality: int = 90) -> np.ndarray:
     _, encoded = cv2.imencode(".jpg", np.ascontiguousarray(image[..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, quality])
     return np.ascontiguousarray(cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1])
 
 
 #: ``--ceiling``: how the reference image is degraded (name → H×W×3 uint8 RGB → same). The first is the image
-#: itself: every detector must find all of its points again (repeatability 1), or the mapping is wrong.
+#: itself: every detector must find all of its points again (repeatability 1), or the mapping is wrong; so must
+#: the second (a whole-pixel shift the mapping is told of resamples nothing), or the shifts' convention is wrong.
+#: The rows up to the noise ask whether the metric measures the field or the detector's own noise: the scene
+#: sampled half a pixel off, a pose error of half a pixel, sensor noise.
 DEGRADATIONS = {
     "the reference itself": np.array,
+    "shifted 1 px right and down, mapping told": _Shifted(1.0, 1.0, known=True),
+    "shifted 0.5 px right and down, mapping told": _Shifted(0.5, 0.5, known=True),
+    "shifted 0.5 px right and down, mapping not told": _Shifted(0.5, 0.5, known=False),
+    "Gaussian noise, sigma 2 grey levels": _noisy(2.0),
     "JPEG quality 90": _jpeg,
     "Gaussian blur, sigma 1 px": lambda image: cv2.GaussianBlur(image, (0, 0), 1.0),
     "1/2 resolution": _rescaled(2),
@@ -99,8 +134,9 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
         outputs = {d: sut.fn(image) for d, sut in suts.items()}
         for name, degrade in DEGRADATIONS.items():
             worse = degrade(image)
-            other = RenderedView(rendered.camera, rendered.c2w, rgb=worse, depth=rendered.depth,
-                                 opacity=rendered.opacity)
+            du, dv = getattr(degrade, "offset", (0.0, 0.0))
+            moved = replace(rendered.camera, cx=rendered.camera.cx + du, cy=rendered.camera.cy + dv)
+            other = RenderedView(moved, rendered.c2w, rgb=worse, depth=rendered.depth, opacity=rendered.opacity)
             rows[name]["psnr"].append(psnr(image, worse))
             rows[name]["ssim"].append(ssim(image, worse))
             for d, sut in suts.items():
@@ -148,6 +184,52 @@ def bands(scene, size: str, max_views: int | None) -> dict[str, dict]:
     return out
 
 
+def _offset(reference: np.ndarray, render: np.ndarray) -> tuple[float, float]:
+    """The render's global shift ``(du, dv)`` in pixels against the reference (phase correlation of the grey
+    images under a Hann window: where the render's texture lands as a whole)."""
+    grey = [cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY).astype(np.float64)
+            for image in (reference, render)]
+    window = cv2.createHanningWindow(grey[0].shape[::-1], cv2.CV_64F)
+    (du, dv), _ = cv2.phaseCorrelate(grey[0], grey[1], window)
+    return float(du), float(dv)
+
+
+def placement(spec: str, size: str, max_views: int | None) -> dict:
+    """Where a render's texture lands at the held-out poses: per view, its global shift against the reference
+    image (:func:`_offset`); and the fidelity of the same field rendered without its view-dependent colour
+    (degree-1 spherical harmonics zeroed: each point's mean colour over directions), which says whether view
+    dependence puts detail where the reference has none. Empty without reference images."""
+    scene = load(spec)
+    kind, _ = reference_kind(scene)
+    if kind == "none":
+        return {}
+    render_size = RenderSize.parse(size)
+    offsets = {}
+    for view in floor_views(scene, max_views):
+        camera = render_size.apply(view.camera)
+        render = scene.render(view.c2w, camera, ("rgb",)).rgb
+        offsets[view.name.rsplit("/", 1)[-1]] = _offset(np.asarray(reference_image(scene, view, camera, kind)), render)
+    plain = load(spec)  # a fresh field: the renderer is built on the first render, after the change
+    if plain.field.sh_degree == 0:
+        return {"offsets": offsets, "no_view_dependence": None}
+    plain.field.values[:, 4:] = 0.0
+    report = measure_fidelity(plain, size=size, max_views=max_views)
+    return {"offsets": offsets, "no_view_dependence": {
+        "psnr": report.mean("psnr"), "ssim": report.mean("ssim"),
+        **{d: report.score(d, "repeatability") for d in DETECTORS}}}
+
+
+def print_placement(spec: str, table: dict) -> None:
+    shifts = table["offsets"]
+    print(f"\n{spec}: the render's global shift against the reference (phase correlation, px, u right / v down): "
+          + ", ".join(f"{name} ({du:+.2f}, {dv:+.2f})" for name, (du, dv) in shifts.items())
+          + f"; mean length {np.mean([np.hypot(*s) for s in shifts.values()]):.2f} px")
+    row = table["no_view_dependence"]
+    if row is not None:
+        print(f"{spec} without view-dependent colour: PSNR {row['psnr']:.2f} dB, SSIM {row['ssim']:.4f}, "
+              + ", ".join(f"{d.upper()} rep. {row[d]:.3f}" for d in DETECTORS))
+
+
 def print_bands(spec: str, table: dict[str, dict]) -> None:
     print(f"\n{spec}: PSNR dB of the render against the reference, plain, after both are blurred, and after the "
           "render's best per-channel gain and offset\n")
@@ -175,10 +257,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="also score each detector on the reference image degraded (what the targets ask)")
     parser.add_argument("--bands", action="store_true",
                         help="also say where the render's error is (fine texture, shape, exposure; held out vs fitted)")
+    parser.add_argument("--placement", action="store_true",
+                        help="also say where the render's texture lands (global shift; without view dependence)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write every number as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
-    reports, ceilings, band_tables = [], {}, {}
+    reports, ceilings, band_tables, placements = [], {}, {}, {}
     header = ("| scene | reference | views | PSNR dB | SSIM | "
               + " | ".join(f"{d.upper()} rep. | {d.upper()} spread" for d in DETECTORS) + " | seconds |")
     print(header)
@@ -193,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
             ceilings[spec] = ceiling(scene, args.size, args.views)
         if args.bands:
             band_tables[spec] = bands(scene, args.size, args.views)
+        if args.placement:
+            placements[spec] = placement(spec, args.size, args.views)
         if report.reference == "none":
             print(f"| {spec} | none: {report.reason} |" + " |" * (header.count("|") - 3))
             continue
@@ -217,11 +303,15 @@ def main(argv: list[str] | None = None) -> int:
         print_ceiling(spec, table)
     for spec, table in band_tables.items():
         print_bands(spec, table)
+    for spec, table in placements.items():
+        if table:
+            print_placement(spec, table)
     if args.json:
         from pytest_n2r.data.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps([{**r.to_dict(), "ceiling": ceilings.get(spec),
-                                                  "bands": band_tables.get(spec)}
+                                                  "bands": band_tables.get(spec),
+                                                  "placement": placements.get(spec)}
                                                  for spec, r in zip(args.scenes, reports)], indent=1))
         print(f"\nwrote {args.json}")
     return 0
