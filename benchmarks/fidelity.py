@@ -19,7 +19,7 @@ placement and colour, not fine texture) and after the best per-channel gain and 
 held-out views and on as many fitted (training) views spread over the capture (the gap between the two is
 what the fit does not carry to new poses).
 ``--placement`` says where the render's texture lands: its global shift against the reference per view, and
-the fidelity of the field rendered without its view-dependent colour.
+the fidelity of the field with its view-dependent colour frozen at the capture's mean viewing direction.
 Results: docs/scene-field.md.
 """
 
@@ -146,6 +146,29 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
 
 
+def crowding(scene, size: str, max_views: int | None) -> dict[str, float]:
+    """Per detector: the mean share of its points on the reference images that have another of its points within
+    the repeatability metric's tolerance. The metric matches points one to one (mutual nearest neighbours), so
+    where this share is high a point that moves a little pairs with a neighbour's counterpart and counts as lost
+    (``--ceiling``'s whole-pixel shift shows what that costs). Empty without reference images."""
+    from scipy.spatial import cKDTree
+
+    kind, _ = reference_kind(scene)
+    if kind == "none":
+        return {}
+    render_size = RenderSize.parse(size)
+    suts = {name: resolve_sut(name, None) for name in DETECTORS}
+    shares: dict[str, list[float]] = {d: [] for d in DETECTORS}
+    for view in floor_views(scene, max_views):
+        image = np.asarray(reference_image(scene, view, render_size.apply(view.camera), kind))
+        for d, sut in suts.items():
+            points = np.unique(np.round(np.asarray(sut.fn(image), dtype=np.float64)[:, :2], 6), axis=0)
+            if len(points) > 1:
+                distance, _ = cKDTree(points).query(points, k=2)
+                shares[d].append(float(np.mean(distance[:, 1] <= sut.metrics()["repeatability"].px)))
+    return {d: float(np.mean(v)) if v else float("nan") for d, v in shares.items()}
+
+
 #: ``--bands``: the Gaussian blurs (pixels) applied to both images before their PSNR.
 BAND_SIGMAS = (1.0, 2.0, 4.0)
 
@@ -194,11 +217,26 @@ def _offset(reference: np.ndarray, render: np.ndarray) -> tuple[float, float]:
     return float(du), float(dv)
 
 
+def _frozen_view_dependence(scene) -> np.ndarray:
+    """Fold each vertex's degree-1 spherical harmonics into its constant term at the capture's mean viewing
+    direction (the mean of the views' optical axes) and zero them, in place: the field's colour as seen from
+    that direction, at every pose. Returns the direction (world axes)."""
+    from pytest_n2r.field.kernels import SH_C0, SH_C1
+
+    axes = np.stack([v.c2w[:3, 2] for v in scene.views])
+    x, y, z = axes.mean(axis=0) / np.linalg.norm(axes.mean(axis=0))
+    coeff = scene.field.values[:, 1:].view(-1, 4, 3)  # a view: the changes land in the field
+    basis = torch.tensor([-SH_C1 * y, SH_C1 * z, -SH_C1 * x], dtype=coeff.dtype)
+    coeff[:, 0] += torch.einsum("l,nlc->nc", basis, coeff[:, 1:]) / SH_C0
+    coeff[:, 1:] = 0.0
+    return np.array([x, y, z])
+
+
 def placement(spec: str, size: str, max_views: int | None) -> dict:
     """Where a render's texture lands at the held-out poses: per view, its global shift against the reference
-    image (:func:`_offset`); and the fidelity of the same field rendered without its view-dependent colour
-    (degree-1 spherical harmonics zeroed: each point's mean colour over directions), which says whether view
-    dependence puts detail where the reference has none. Empty without reference images."""
+    image (:func:`_offset`); and the fidelity of the same field with its view dependence frozen
+    (:func:`_frozen_view_dependence`), which says whether view-dependent colour puts detail where the reference
+    has none. Empty without reference images."""
     scene = load(spec)
     kind, _ = reference_kind(scene)
     if kind == "none":
@@ -209,13 +247,13 @@ def placement(spec: str, size: str, max_views: int | None) -> dict:
         camera = render_size.apply(view.camera)
         render = scene.render(view.c2w, camera, ("rgb",)).rgb
         offsets[view.name.rsplit("/", 1)[-1]] = _offset(np.asarray(reference_image(scene, view, camera, kind)), render)
-    plain = load(spec)  # a fresh field: the renderer is built on the first render, after the change
-    if plain.field.sh_degree == 0:
-        return {"offsets": offsets, "no_view_dependence": None}
-    plain.field.values[:, 4:] = 0.0
-    report = measure_fidelity(plain, size=size, max_views=max_views)
-    return {"offsets": offsets, "no_view_dependence": {
-        "psnr": report.mean("psnr"), "ssim": report.mean("ssim"),
+    frozen = load(spec)  # a fresh field: the renderer is built on the first render, after the change
+    if frozen.field.sh_degree == 0:
+        return {"offsets": offsets, "frozen": None}
+    direction = _frozen_view_dependence(frozen)
+    report = measure_fidelity(frozen, size=size, max_views=max_views)
+    return {"offsets": offsets, "frozen": {
+        "direction": direction.round(3).tolist(), "psnr": report.mean("psnr"), "ssim": report.mean("ssim"),
         **{d: report.score(d, "repeatability") for d in DETECTORS}}}
 
 
@@ -224,9 +262,10 @@ def print_placement(spec: str, table: dict) -> None:
     print(f"\n{spec}: the render's global shift against the reference (phase correlation, px, u right / v down): "
           + ", ".join(f"{name} ({du:+.2f}, {dv:+.2f})" for name, (du, dv) in shifts.items())
           + f"; mean length {np.mean([np.hypot(*s) for s in shifts.values()]):.2f} px")
-    row = table["no_view_dependence"]
+    row = table["frozen"]
     if row is not None:
-        print(f"{spec} without view-dependent colour: PSNR {row['psnr']:.2f} dB, SSIM {row['ssim']:.4f}, "
+        print(f"{spec} with view-dependent colour frozen at the mean viewing direction {row['direction']}: "
+              f"PSNR {row['psnr']:.2f} dB, SSIM {row['ssim']:.4f}, "
               + ", ".join(f"{d.upper()} rep. {row[d]:.3f}" for d in DETECTORS))
 
 
@@ -258,11 +297,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--bands", action="store_true",
                         help="also say where the render's error is (fine texture, shape, exposure; held out vs fitted)")
     parser.add_argument("--placement", action="store_true",
-                        help="also say where the render's texture lands (global shift; without view dependence)")
+                        help="also say where the render's texture lands (global shift; view dependence frozen)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write every number as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
-    reports, ceilings, band_tables, placements = [], {}, {}, {}
+    reports, ceilings, crowded, band_tables, placements = [], {}, {}, {}, {}
     header = ("| scene | reference | views | PSNR dB | SSIM | "
               + " | ".join(f"{d.upper()} rep. | {d.upper()} spread" for d in DETECTORS) + " | seconds |")
     print(header)
@@ -275,6 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         reports.append(report)
         if args.ceiling:
             ceilings[spec] = ceiling(scene, args.size, args.views)
+            crowded[spec] = crowding(scene, args.size, args.views)
         if args.bands:
             band_tables[spec] = bands(scene, args.size, args.views)
         if args.placement:
@@ -301,6 +341,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {report.scene} {detector} {metric}: {per_view}")
     for spec, table in ceilings.items():
         print_ceiling(spec, table)
+        if crowded.get(spec):
+            print("\npoints with another point of the same detector within the metric's tolerance (one-to-one matching "
+                  "loses such points when they move): "
+                  + ", ".join(f"{d.upper()} {share:.2f}" for d, share in crowded[spec].items()))
     for spec, table in band_tables.items():
         print_bands(spec, table)
     for spec, table in placements.items():
@@ -310,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
         from pytest_n2r.data.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps([{**r.to_dict(), "ceiling": ceilings.get(spec),
-                                                  "bands": band_tables.get(spec),
+                                                  "crowding": crowded.get(spec), "bands": band_tables.get(spec),
                                                   "placement": placements.get(spec)}
                                                  for spec, r in zip(args.scenes, reports)], indent=1))
         print(f"\nwrote {args.json}")
