@@ -146,11 +146,33 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
 
 
-def crowding(scene, size: str, max_views: int | None) -> dict[str, float]:
-    """Per detector: the mean share of its points on the reference images that have another of its points within
-    the repeatability metric's tolerance. The metric matches points one to one (mutual nearest neighbours), so
-    where this share is high a point that moves a little pairs with a neighbour's counterpart and counts as lost
-    (``--ceiling``'s whole-pixel shift shows what that costs). Empty without reference images."""
+def _found_again(a: np.ndarray, b: np.ndarray, px: float) -> tuple[float, float]:
+    """Points ``a`` and ``b`` of one pose (identity mapping): the share found again within ``px`` one to one
+    (mutual nearest neighbours over the smaller set, as the metric counts) and plainly (each point of ``a`` with a
+    point of ``b`` within ``px``)."""
+    from scipy.spatial import cKDTree
+
+    from pytest_n2r.metrics._matching import mutual_nearest
+
+    one_to_one = len(mutual_nearest(a, b, px)) / max(min(len(a), len(b)), 1)
+    return one_to_one, float(np.mean(cKDTree(b).query(a)[0] <= px)) if len(a) and len(b) else float("nan")
+
+
+def _inner_points(detect, rgb: np.ndarray, shift: int = 0, border: int = 16) -> np.ndarray:
+    """The distinct points ``detect`` finds on ``rgb``, moved back by ``shift`` px along both axes, without those
+    within ``border`` px of the image's edges."""
+    h, w = rgb.shape[:2]
+    p = np.unique(np.round(np.asarray(detect(rgb), dtype=np.float64)[:, :2], 6), axis=0) - shift
+    return p[(p[:, 0] > border) & (p[:, 1] > border) & (p[:, 0] < w - 1 - border) & (p[:, 1] < h - 1 - border)]
+
+
+def crowding(scene, size: str, max_views: int | None) -> dict[str, dict[str, float]]:
+    """Per detector, on the held-out views: ``crowded``, the share of its points on the reference image that have
+    another of its points within the repeatability metric's tolerance; and the share of points found again one to
+    one and plainly (:func:`_found_again`) in the reference moved by one whole pixel (nothing resampled) and in
+    the render. Where points crowd, one-to-one matching pairs a point that moved a little with a neighbour's
+    counterpart and counts both as lost. Points within 16 px of the border are left out. Empty without reference
+    images."""
     from scipy.spatial import cKDTree
 
     kind, _ = reference_kind(scene)
@@ -158,15 +180,27 @@ def crowding(scene, size: str, max_views: int | None) -> dict[str, float]:
         return {}
     render_size = RenderSize.parse(size)
     suts = {name: resolve_sut(name, None) for name in DETECTORS}
-    shares: dict[str, list[float]] = {d: [] for d in DETECTORS}
+    rows: dict[str, dict[str, list]] = {d: {"crowded": [], "moved": [], "render": []} for d in DETECTORS}
     for view in floor_views(scene, max_views):
-        image = np.asarray(reference_image(scene, view, render_size.apply(view.camera), kind))
-        for d, sut in suts.items():
-            points = np.unique(np.round(np.asarray(sut.fn(image), dtype=np.float64)[:, :2], 6), axis=0)
-            if len(points) > 1:
-                distance, _ = cKDTree(points).query(points, k=2)
-                shares[d].append(float(np.mean(distance[:, 1] <= sut.metrics()["repeatability"].px)))
-    return {d: float(np.mean(v)) if v else float("nan") for d, v in shares.items()}
+        camera = render_size.apply(view.camera)
+        image = np.asarray(reference_image(scene, view, camera, kind))
+        images = {"moved": np.pad(image, ((1, 0), (1, 0), (0, 0)), mode="reflect")[:-1, :-1],
+                  "render": scene.render(view.c2w, camera, ("rgb",)).rgb}
+        for d in DETECTORS:
+            px = suts[d].metrics()["repeatability"].px
+            mine = _inner_points(suts[d].fn, image)
+            if len(mine) > 1:
+                rows[d]["crowded"].append(float(np.mean(cKDTree(mine).query(mine, k=2)[0][:, 1] <= px)))
+            for name, other in images.items():
+                rows[d][name].append(_found_again(mine, _inner_points(suts[d].fn, other, int(name == "moved")), px))
+    def mean(values: list[float]) -> float:
+        finite = [v for v in values if np.isfinite(v)]
+        return float(np.mean(finite)) if finite else float("nan")
+
+    return {d: {"crowded": mean(r["crowded"]),
+                **{f"{name} {how}": mean([x[k] for x in r[name]])
+                   for name in ("moved", "render") for k, how in enumerate(("one to one", "plain"))}}
+            for d, r in rows.items()}
 
 
 #: ``--bands``: the Gaussian blurs (pixels) applied to both images before their PSNR.
@@ -342,9 +376,15 @@ def main(argv: list[str] | None = None) -> int:
     for spec, table in ceilings.items():
         print_ceiling(spec, table)
         if crowded.get(spec):
-            print("\npoints with another point of the same detector within the metric's tolerance (one-to-one matching "
-                  "loses such points when they move): "
-                  + ", ".join(f"{d.upper()} {share:.2f}" for d, share in crowded[spec].items()))
+            print("\nthe reference's points with another point of the same detector within the metric's tolerance, "
+                  "and the share found again one to one (as the metric counts) and plainly (nearest within the "
+                  "tolerance), in the reference moved by 1 whole pixel and in the render (same pose, 16 px borders "
+                  "left out)\n")
+            columns = list(next(iter(crowded[spec].values())))
+            print("| detector | " + " | ".join(columns) + " |")
+            print("|---|" + "---|" * len(columns))
+            for d, row in crowded[spec].items():
+                print(f"| {d.upper()} | " + " | ".join(f"{row[c]:.3f}" for c in columns) + " |")
     for spec, table in band_tables.items():
         print_bands(spec, table)
     for spec, table in placements.items():
