@@ -49,3 +49,17 @@ def test_one_pixel_wide_images_and_bad_depths():
     out = sample_depth(depth, np.array([[0.0, 0.0], [0.2, 1.0], [0.0, 2.0]]))
     assert out[0] == 2.0 and out[1] == 2.0 and np.isnan(out[2])
     assert np.isnan(sample_depth(np.zeros((3, 3)), np.array([[1.0, 1.0]]))[0])
+
+
+def test_a_float32_depth_map_samples_as_its_float64_widening():
+    """Renders store depth as float32; the four depths are read and then widened, which must give what the whole
+    map widened first gives (holes, edges and non-finite depths included)."""
+    rng = np.random.default_rng(7)
+    depth = rng.uniform(0.5, 6.0, (40, 60)).astype(np.float32)
+    depth[rng.integers(0, 40, 80), rng.integers(0, 60, 80)] = np.inf
+    depth[rng.integers(0, 40, 80), rng.integers(0, 60, 80)] = 0.0
+    depth[10:20, 30:] *= np.float32(1.5)  # a depth edge
+    uv = rng.uniform([-0.5, -0.5], [59.5, 39.5], (500, 2))
+    got, widened = sample_depth(depth, uv), sample_depth(depth.astype(np.float64), uv)
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got, widened)
