@@ -8,7 +8,10 @@ one fixture's object do. A relation assumes its SUT is deterministic (the engine
 again, before the first failure counts); under that assumption a kept output is the one a new call would
 give. The determinism check itself always calls the SUT.
 
-Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render.
+Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render. A
+follow-up whose pixels equal its source's byte for byte (a mutation of size zero, an identity pose change
+whose pose differs from the source's in its last bits) takes the SUT's output on the source
+(:meth:`~pytest_n2r.relation.engine.Engine.sut_on_render`): the same SUT object on the same input.
 
 The validity verdict on a follow-up render is kept too (:meth:`SUTOutputs.verdict`), by the validity
 thresholds and the two render keys: it does not depend on the SUT, so a replayed example (a regression

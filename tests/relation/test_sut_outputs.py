@@ -1,5 +1,5 @@
 """The SUT's outputs shared between relations: one call per SUT object and render, never across SUT objects,
-never for a mutated image, forgotten with the SUT."""
+never for a mutated image that changed a pixel, forgotten with the SUT."""
 
 from __future__ import annotations
 
@@ -66,6 +66,29 @@ def test_a_mutated_image_always_runs_the_sut():
     views = len({e.view for e in record.examples})
     assert record.sut_calls == accepted + views, "the sources once each, every mutated follow-up"
     assert again.sut_calls == accepted and again.sut_shared == accepted, "the sources shared, mutations called"
+
+
+class _Keep(_Invert):
+    """A mutation that changes no pixel (as a patch of size zero does), copying the image."""
+
+    name = "keep"
+
+    def _apply(self, rgb):
+        return rgb.copy()
+
+    def describe(self):
+        return "keep()"
+
+
+def test_a_follow_up_with_its_sources_pixels_takes_the_sources_output():
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 300, st.just(_Keep()), examples=5)
+    sut = CountingSUT()
+    record = check_relation(scene, sut, relation, settings=SETTINGS)
+    views = len({e.view for e in record.examples})
+    assert sut.calls == record.sut_calls == views, "the sources once each; their unchanged copies not again"
+    assert record.sut_shared == 2 * len(record.valid_examples) - views
+    assert all(e.deviation == 0 for e in record.valid_examples)
 
 
 def test_outputs_are_forgotten_with_their_sut_and_capped():
