@@ -194,14 +194,23 @@ class Engine:
     def validity(self, follow: RenderedView, source: RenderedView, source_key: str,
                  follow_key: str | None) -> Verdict:
         """The relation's validity verdict on a follow-up render, or the one kept from an earlier check with the
-        same thresholds of the same two renders (a replayed example: a regression gate's); ``follow_key=None``
-        (not a render): always checked. The scene is in the keys (its content hash)."""
+        same thresholds of the same two renders against the same training cameras: in this session (a
+        replayed example: a regression gate's) or in the render cache, beside the renders (a warm run);
+        ``follow_key=None`` (not a render): always checked. The scene is in the keys (its content hash)."""
         validity = self.relation.validity
         if follow_key is None:
             return validity.check(follow, self.scene, source)
         verdict = self.sut_outputs.verdict(validity, source_key, follow_key)
         if verdict is MISSING:
-            verdict = validity.check(follow, self.scene, source)
+            stored_key = validity.verdict_key(self.scene, source_key, follow_key)
+            stored = self.cache.decision(stored_key)
+            try:
+                verdict = Verdict.from_dict(stored) if stored is not None else None
+            except (KeyError, TypeError):  # another shape of decision under the key: checked again
+                verdict = None
+            if verdict is None:
+                verdict = validity.check(follow, self.scene, source)
+                self.cache.put_decision(stored_key, verdict.to_dict())
             self.sut_outputs.put_verdict(validity, source_key, follow_key, verdict)
         return verdict
 

@@ -14,9 +14,11 @@ that disagrees there is not inconsistent, the input is. Two checks, both on the 
 
 from __future__ import annotations
 
+import hashlib
+import json
 import weakref
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -29,6 +31,9 @@ __all__ = ["Validity", "Verdict"]
 
 #: A verdict's reason when the view passed.
 VALID = "valid"
+#: Part of every :meth:`Validity.verdict_key`: bump it when the checks' arithmetic changes, so that verdicts a
+#: render cache kept from the old checks are not served.
+CHECKS_VERSION = "1"
 
 
 @dataclass(frozen=True)
@@ -39,6 +44,13 @@ class Verdict:
     valid: bool
     reason: str = VALID
     detail: str = ""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Verdict:
+        return cls(bool(data["valid"]), str(data["reason"]), str(data["detail"]))
 
 
 @dataclass(frozen=True)
@@ -87,6 +99,15 @@ class Validity:
                            f"(min {self.min_coverage:.0%})")
         return Verdict(True)
 
+    def verdict_key(self, scene: Scene, source_key: str, follow_key: str) -> str:
+        """Hex SHA-256 naming the verdict of :meth:`check` on the follow-up render ``follow_key`` of the source
+        render ``source_key`` (render keys: scene content, renderer, camera, pose) against ``scene``'s training
+        cameras (not part of a scene's content hash), with these thresholds and :data:`CHECKS_VERSION`: a
+        render cache keeps the verdict under it (:meth:`~pytest_n2r.scene.render_cache.RenderCache.decision`)."""
+        spec = {"checks": CHECKS_VERSION, "thresholds": asdict(self), "source": source_key, "follow": follow_key,
+                "cameras": _training_digest(scene)}
+        return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+
     def coverage(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> float:
         """Fraction of the view's sampled surface points inside some training camera's image (``cameras``,
         default: the scene's :func:`training_views`), all cameras projected in one array operation."""
@@ -103,16 +124,29 @@ class Validity:
         return float(stack.sees(points).any(axis=0).mean())
 
 
-_STACKS: weakref.WeakKeyDictionary[Scene, tuple[object, CameraStack]] = weakref.WeakKeyDictionary()
+_STACKS: weakref.WeakKeyDictionary[Scene, tuple[object, CameraStack, str]] = weakref.WeakKeyDictionary()
 
 
 def training_stack(scene: Scene) -> CameraStack:
     """The :class:`CameraStack` of a scene's :func:`training_views`, built once per scene (and again when
     its ``views`` are replaced)."""
+    return _training(scene)[1]
+
+
+def _training_digest(scene: Scene) -> str:
+    """Hex SHA-256 of the bytes of :func:`training_stack` (poses, intrinsics, sizes)."""
+    return _training(scene)[2]
+
+
+def _training(scene: Scene) -> tuple[object, CameraStack, str]:
     known = _STACKS.get(scene)
     if known is None or known[0] is not scene.views:
-        known = _STACKS[scene] = (scene.views, _stack_of(training_views(scene)))
-    return known[1]
+        stack = _stack_of(training_views(scene))
+        digest = hashlib.sha256()
+        for array in (stack.w2c, stack.intrinsics, stack.size):
+            digest.update(np.ascontiguousarray(array, dtype="<f8").tobytes())
+        known = _STACKS[scene] = (scene.views, stack, digest.hexdigest())
+    return known
 
 
 def _stack_of(views: Sequence[SceneView]) -> CameraStack:

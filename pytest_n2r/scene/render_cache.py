@@ -2,10 +2,12 @@
 
 A render is identified by everything that determines its pixels: the scene's content hash (which covers its
 render settings), its renderer's version, the pose (exact float64 bytes), the camera and the package version.
-Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs
-renders only the missing ones. Files are written under a temporary name and renamed into place, so
-concurrent pytest-xdist workers sharing one directory never see a torn file: at worst two workers render
-the same view and the second rename wins with identical bytes (rendering is deterministic).
+Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs renders
+only the missing ones. Beside the renders the disk store keeps *decisions*: small JSON objects that a check
+computed from renders alone (a follow-up's validity verdict), under a key that names those renders. Files are
+written under a temporary name and renamed into place, so concurrent pytest-xdist workers sharing one directory
+never see a torn file: at worst two workers render the same view and the second rename wins with identical bytes
+(rendering is deterministic).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ DEFAULT_MEMORY_BYTES = 512 * 2**20
 #: Check the disk size cap after this many bytes were written (a directory scan is not free).
 _TRIM_EVERY_BYTES = 64 * 2**20
 _SUBDIR = "renders"
+_DECISIONS = "decisions"
 
 _UNITS = {"": 1, "b": 1, "k": 2**10, "kb": 2**10, "kib": 2**10, "m": 2**20, "mb": 2**20, "mib": 2**20,
           "g": 2**30, "gb": 2**30, "gib": 2**30}
@@ -175,12 +178,44 @@ class RenderCache:
                 self._disk_put(key, name, value)
         return RenderedView(camera=camera, c2w=c2w, **arrays), key
 
+    def decision(self, key: str) -> dict | None:
+        """The decision :meth:`put_decision` stored under ``key`` (a hex digest of what it was decided from: render
+        keys, thresholds) in this or an earlier session, or ``None`` (none, unreadable, or a memory-only cache)."""
+        if self.directory is None:
+            return None
+        path = self._decision_path(key)
+        try:
+            value = json.loads(path.read_bytes())
+        except FileNotFoundError:
+            return None
+        except (OSError, ValueError):  # torn by a crash or disk trouble: decided again
+            path.unlink(missing_ok=True)
+            return None
+        return value if isinstance(value, dict) else None
+
+    def put_decision(self, key: str, value: dict) -> None:
+        """Store the JSON object ``value`` under ``key`` on disk (nothing for a memory-only cache); decisions
+        older than the renders :meth:`trim` evicts go with them."""
+        if self.directory is None:
+            return
+        path = self._decision_path(key)
+        self._prepare_directory(path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(value, f, sort_keys=True)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
     def clear(self) -> None:
         """Forget everything, in memory and on disk."""
         self._memory.clear()
         self._memory_used = 0
-        if self.directory is not None and (self.directory / _SUBDIR).exists():
-            shutil.rmtree(self.directory / _SUBDIR, ignore_errors=True)
+        for sub in (_SUBDIR, _DECISIONS):
+            if self.directory is not None and (self.directory / sub).exists():
+                shutil.rmtree(self.directory / sub, ignore_errors=True)
 
     def disk_usage(self) -> int:
         """Bytes the disk store holds now."""
@@ -212,6 +247,10 @@ class RenderCache:
     def _path(self, key: str, name: str) -> Path:
         assert self.directory is not None
         return self.directory / _SUBDIR / key[:2] / f"{key}.{name}.npy"
+
+    def _decision_path(self, key: str) -> Path:
+        assert self.directory is not None
+        return self.directory / _DECISIONS / key[:2] / f"{key}.json"
 
     def _disk_get(self, key: str, name: str) -> np.ndarray | None:
         if self.directory is None:
@@ -271,18 +310,27 @@ class RenderCache:
         return found
 
     def trim(self) -> int:
-        """Evict least recently used renders until the disk store is at most 80 % of its cap; returns the
-        number of bytes freed. Safe to run from several workers at once."""
+        """Evict least recently used renders until the disk store is at most 80 % of its cap, and the decisions
+        written before the last render it evicted; returns the number of render bytes freed. Safe to run from
+        several workers at once."""
         files = self._disk_files()
         total = sum(size for _, _, size in files)
         if total <= self.disk_bytes:
             return 0
-        freed = 0
+        freed, evicted_until = 0, 0.0
         target = 0.8 * self.disk_bytes
-        for _, path, size in sorted(files):
+        for mtime, path, size in sorted(files):
             if total - freed <= target:
                 break
             path.unlink(missing_ok=True)
             freed += size
+            evicted_until = mtime
+        assert self.directory is not None
+        for path in (self.directory / _DECISIONS).glob("*/*.json"):
+            try:
+                if path.stat().st_mtime <= evicted_until:
+                    path.unlink(missing_ok=True)
+            except FileNotFoundError:  # removed by another worker meanwhile
+                continue
         return freed
 

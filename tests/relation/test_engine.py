@@ -120,6 +120,19 @@ def test_the_sut_runs_once_per_render():
     assert record.sut_shared == 2 * len(record.valid_examples) - len(renders) > 0
 
 
+def test_a_second_session_takes_the_validity_verdicts_from_the_render_cache(tmp_path, monkeypatch):
+    scene = PlaneScene()
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=40), examples=12)
+    settings = RunSettings(derandomize=True, database=None)
+    first = check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=RenderCache(tmp_path))
+    assert first.rejected > 0 and first.valid_examples, "the test needs valid and invalid follow-ups"
+    checked = []
+    monkeypatch.setattr(Validity, "check", lambda *a, **k: checked.append(1))
+    again = check_relation(scene, lambda rgb: 0.0, relation, settings=settings, cache=RenderCache(tmp_path))
+    assert checked == [] and [(e.status, e.reason) for e in again.examples] == [
+        (e.status, e.reason) for e in first.examples]
+
+
 def test_shared_cache_makes_a_rerun_render_nothing():
     scene = PlaneScene()
     cache = RenderCache(None)

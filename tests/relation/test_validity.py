@@ -30,3 +30,13 @@ def test_validity_rejects_empty_and_uncovered_views():
 def test_validity_thresholds_are_checked():
     with pytest.raises(InvalidArgument, match=r"max_empty_increase=1.5 is out of range"):
         Validity(max_empty_increase=1.5)
+
+
+def test_a_verdict_key_names_the_thresholds_the_renders_and_the_training_cameras():
+    scene, source, follow = PlaneScene(), "1" * 64, "2" * 64
+    key = Validity().verdict_key(scene, source, follow)
+    assert key == Validity().verdict_key(PlaneScene(), source, follow)
+    others = {Validity(min_coverage=0.7).verdict_key(scene, source, follow),
+              Validity().verdict_key(scene, follow, source),
+              Validity().verdict_key(PlaneScene(n_views=6), source, follow)}
+    assert key not in others and len(others) == 3

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import multiprocessing
+import os
 
 import numpy as np
 import pytest
@@ -175,3 +176,36 @@ def test_parse_size_names_the_option():
     with pytest.raises(InvalidArgument, match=r"n2r_cache_size='lots' is not a size"):
         parse_size("lots", "n2r_cache_size")
 
+
+
+def test_a_decision_is_kept_on_disk_beside_the_renders(tmp_path):
+    key = "ab" + "0" * 62
+    assert RenderCache(None).decision(key) is None and RenderCache(tmp_path).decision(key) is None
+    RenderCache(None).put_decision(key, {"valid": True})  # a memory-only cache keeps none
+    RenderCache(tmp_path).put_decision(key, {"valid": False, "reason": "empty view"})
+    assert RenderCache(tmp_path).decision(key) == {"valid": False, "reason": "empty view"}
+    path = tmp_path / "decisions" / "ab" / f"{key}.json"
+    path.write_text('{"valid": tr')  # torn: decided again, and the file goes
+    assert RenderCache(tmp_path).decision(key) is None and not path.exists()
+    cache = RenderCache(tmp_path)
+    cache.put_decision(key, {"valid": True})
+    cache.clear()
+    assert cache.decision(key) is None and not (tmp_path / "decisions").exists()
+
+
+def test_trimming_evicts_the_decisions_older_than_the_renders_it_evicts(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    cache = RenderCache(tmp_path, disk_bytes=100 * one)
+    old, new = "a" * 64, "b" * 64
+    cache.put_decision(old, {"valid": True})
+    for yaw in range(4):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    cache.put_decision(new, {"valid": True})
+    renders = sorted((tmp_path / "renders").glob("*/*.npy"))
+    for age, path in enumerate([tmp_path / "decisions" / "aa" / f"{old}.json", *renders]):
+        os.utime(path, (1000.0 + age, 1000.0 + age))  # the old decision, then the renders, oldest first
+    cache.disk_bytes = 2 * one
+    assert cache.trim() > 0
+    assert cache.decision(old) is None and cache.decision(new) == {"valid": True}
