@@ -14,6 +14,7 @@ that disagrees there is not inconsistent, the input is. Two checks, both on the 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import weakref
@@ -104,9 +105,13 @@ class Validity:
         render ``source_key`` (render keys: scene content, renderer, camera, pose) against ``scene``'s training
         cameras (not part of a scene's content hash), with these thresholds and :data:`CHECKS_VERSION`: a
         render cache keeps the verdict under it (:meth:`~pytest_n2r.scene.render_cache.RenderCache.decision`)."""
-        spec = {"checks": CHECKS_VERSION, "thresholds": asdict(self), "source": source_key, "follow": follow_key,
-                "cameras": _training_digest(scene)}
-        return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+        spec = f"{self._checks}|{_training_digest(scene)}|{source_key}|{follow_key}"
+        return hashlib.sha256(spec.encode()).hexdigest()
+
+    @functools.cached_property
+    def _checks(self) -> str:
+        """:data:`CHECKS_VERSION` and the thresholds, as they name a verdict (:meth:`verdict_key`)."""
+        return json.dumps({"checks": CHECKS_VERSION, "thresholds": asdict(self)}, sort_keys=True)
 
     def coverage(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> float:
         """Fraction of the view's sampled surface points inside some training camera's image (``cameras``,
