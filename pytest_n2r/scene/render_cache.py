@@ -23,6 +23,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -198,16 +199,7 @@ class RenderCache:
         older than the renders :meth:`trim` evicts go with them."""
         if self.directory is None:
             return
-        path = self._decision_path(key)
-        self._prepare_directory(path.parent)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                json.dump(value, f, sort_keys=True)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        self._replace(self._decision_path(key), lambda f: f.write(json.dumps(value, sort_keys=True).encode()))
 
     def clear(self) -> None:
         """Forget everything, in memory and on disk."""
@@ -272,21 +264,24 @@ class RenderCache:
     def _disk_put(self, key: str, name: str, value: np.ndarray) -> None:
         if self.directory is None or value.nbytes > self.disk_bytes:
             return
-        path = self._path(key, name)
-        self._prepare_directory(path.parent)
-        # temporary name + rename (no fsync: a cache entry lost in a power cut is just re-rendered)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.save(f, np.ascontiguousarray(value), allow_pickle=False)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        self._replace(self._path(key, name), lambda f: np.save(f, np.ascontiguousarray(value), allow_pickle=False))
         self._written_since_trim += value.nbytes
         if self._written_since_trim >= min(_TRIM_EVERY_BYTES, self.disk_bytes // 10 + 1):
             self._written_since_trim = 0
             self.trim()
+
+    def _replace(self, path: Path, write: Callable[[BinaryIO], object]) -> None:
+        """Write a cache file under a temporary name in its folder, then rename it into place (no fsync, unlike
+        :func:`~pytest_n2r.data.atomic.atomic_write_bytes`: an entry lost in a power cut is just computed again)."""
+        self._prepare_directory(path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                write(f)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
 
     def _prepare_directory(self, leaf: Path) -> None:
         assert self.directory is not None
