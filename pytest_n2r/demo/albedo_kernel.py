@@ -186,11 +186,13 @@ _S, _T, _FOOTPRINT, _LEVELS = range(4)
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _request_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot, colours, requests,
-                  request_slots, count):
+                  request_slots, count, direct, sizes):
     """Resolve a material without a blend (Flat, Textured, Poster, Radial) at ``(a, b)``: a constant colour goes to
     ``colours[slot]``; a texture's trilinear mip-mapped sample (see :meth:`Texture.sample`) is appended to the
-    row's requests at ``count`` (its colour to ``slot`` and, from the level above, ``slot + 1``). Returns the new
-    request count."""
+    row's requests at ``count`` (its colour to ``slot`` and, from the level above, ``slot + 1``), or where its
+    footprint is at most one texel (level 0 alone) to its texture's list of level-0 lookups (``direct[:, tex *
+    capacity + sizes[tex]]``: ``s, t`` and the slot; ``capacity = direct.shape[1] // sizes.shape[0]``), which
+    need no mip level and no sort. Returns the new request count."""
     tex = -1
     s = t = k = 0.0
     while tex < 0:
@@ -221,7 +223,14 @@ def _request_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, 
                     np.float32(rings[ring, 1]), np.float32(rings[ring, 2]), np.float32(rings[ring, 3]))
                 return count
             node = node_child[node, 0]
-    requests[_S, count], requests[_T, count], requests[_FOOTPRINT, count] = s, t, fp * k
+    footprint = fp * k
+    if footprint <= 1.0:  # log2(max(footprint, 1)) = 0: level 0, and no weight on the level above
+        p = sizes[tex]
+        sizes[tex] = p + 1
+        p += tex * (direct.shape[1] // sizes.shape[0])
+        direct[0, p], direct[1, p], direct[2, p] = s, t, slot
+        return count
+    requests[_S, count], requests[_T, count], requests[_FOOTPRINT, count] = s, t, footprint
     requests[_LEVELS, count] = tex_meta[tex, 0, LEVELS]
     request_slots[0, count], request_slots[1, count] = tex, slot
     return count + 1
@@ -229,7 +238,7 @@ def _request_leaf(node, node_kind, node_par, node_child, rings, tex_meta, a, b, 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _request_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, mask, slot, colours, mix,
-                    requests, request_slots, count):
+                    requests, request_slots, count, direct, sizes):
     """Resolve the material of a surface at ``(a, b)`` with footprint ``fp`` (scene units) into the four colour
     slots from ``slot`` (two per material, see :func:`_request_leaf`): a blend's two materials where its ``mask``
     value is strictly between 0 and 1 (only the one it shows where it is 0 or 1), else the material's own.
@@ -252,7 +261,7 @@ def _request_albedo(node, node_kind, node_par, node_child, rings, tex_meta, a, b
             break
         mix[1 + which, i] = F0
         count = _request_leaf(leaf, node_kind, node_par, node_child, rings, tex_meta, a, b, fp, slot + 2 * which,
-                              colours, requests, request_slots, count)
+                              colours, requests, request_slots, count, direct, sizes)
     return count
 
 
@@ -283,17 +292,18 @@ def _plan_bucket(level, s_row, t_row, f_row, slot_row, upper, p00, p01, p10, p11
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, tex_meta, texels, colours, mix,
-               requests, request_slots, lods, queue, buckets, taps, weights):
+               requests, request_slots, lods, queue, buckets, direct, sizes, taps, weights):
     """The albedo of a pixel row's ``samples`` sub-rays (sub-ray ``i`` hit material node ``nodes[i]``, -1: none;
     surface coordinates, footprint and mask value in ``shade[0, 1, 2, 4]``, see :mod:`.raycast`) into four colour
     slots each (``colours[4 i:4 i + 4]``) and ``mix[:, i]``, for :func:`albedo_of`.
 
     In passes over the row, each a short loop whose iterations overlap (one sub-ray's chain through its material,
     mip level and texel addresses was latency-bound): the materials resolved (constant colours written, texture
-    samples requested), then every request's mip level, then the requests bucketed by texture and level (a
-    counting sort into ``queue``) and each bucket's bilinear lookups planned in one vectorized loop (texel offsets
-    and weights, :func:`_plan_bucket`: level ``lo`` into ``taps[:, p]``, ``lo + 1`` where weighted into
-    ``taps[:, count + p]``), then all lookups read in one loop whose texel reads (cache misses on large textures)
+    samples requested; those of a footprint within one texel, level 0 alone, straight into their texture's list,
+    ``direct``), then every other request's mip level, then those requests bucketed by texture and level (a
+    counting sort into ``queue``), then each list's and bucket's bilinear lookups planned in one vectorized loop
+    (texel offsets and weights, :func:`_plan_bucket`: level ``lo``, then ``lo + 1`` where it exists, into the next
+    columns of ``taps``), then all lookups read in one loop whose texel reads (cache misses on large textures)
     overlap. Compiled apart from the render kernel (its compile time); its
     helpers receive views of its arrays without reference counts (:func:`.borrow.borrowed`)."""
     nodes, shade, node_kind, node_par, node_child = (borrowed(nodes), borrowed(shade), borrowed(node_kind),
@@ -302,12 +312,14 @@ def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, te
                                              borrowed(mix))
     requests, request_slots, lods, queue = borrowed(requests), borrowed(request_slots), borrowed(lods), borrowed(queue)
     buckets, taps, weights = borrowed(buckets), borrowed(taps), borrowed(weights)
+    direct, sizes = borrowed(direct), borrowed(sizes)
     sa, sb, sfp, sm = shade[0], shade[1], shade[2], shade[4]
+    sizes[:] = 0
     count = 0
     for i in range(samples):
         if nodes[i] >= 0:
             count = _request_albedo(nodes[i], node_kind, node_par, node_child, rings, tex_meta, sa[i], sb[i],
-                                    sfp[i], sm[i], 4 * i, colours, mix, requests, request_slots, count)
+                                    sfp[i], sm[i], 4 * i, colours, mix, requests, request_slots, count, direct, sizes)
     footprints, levels, lo_row, f_row = requests[_FOOTPRINT], requests[_LEVELS], lods[0], lods[1]
     for r in range(count):  # log2 of max(footprint, 1): level 0 alone at a footprint of at most one texel
         lod = min(log2(max(footprints[r], 1.0)), levels[r] - 1.0)
@@ -332,20 +344,24 @@ def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, te
         two = lo_row[r] + 1.0 < levels[r] and f != F0  # with f = 0 the blend is c * 1 + c2 * 0: c itself
         mix[1 + (slot >> 1 & 1), slot >> 2] = f if two else F0
         queue[0, p], queue[1, p], queue[2, p], queue[3, p] = requests[_S, r], requests[_T, r], f if two else F0, slot
-    for key in range(buckets.shape[1] - 1):
-        start, end = starts[key], starts[key + 1]
-        if end == start:
-            continue
-        tex, lo = key // n_levels, key % n_levels
-        for q in range(2):  # level lo into taps[p], level lo + 1 (where weighted) into taps[count + p]
-            if q == 1 and lo + 1 >= tex_meta[tex, 0, LEVELS]:
-                taps[4, count + start:count + end] = -1
-            else:
-                a, b = q * count + start, q * count + end
-                _plan_bucket(level_constants(tex_meta, tex, lo + q), queue[0, start:end], queue[1, start:end],
-                             queue[2, start:end], queue[3, start:end], q == 1, taps[0, a:b], taps[1, a:b],
-                             taps[2, a:b], taps[3, a:b], taps[4, a:b], weights[0, a:b], weights[1, a:b])
-    look_up(texels, taps, weights, 2 * count, colours)
+    planned, textures = 0, sizes.shape[0]
+    capacity = direct.shape[1] // textures
+    for key in range(textures + buckets.shape[1] - 1):  # each texture's level-0 list, then each bucket
+        listed = key < textures
+        if listed:
+            tex, lo, rows, start, end = key, 0, direct, key * capacity, key * capacity + sizes[key]
+        else:
+            tex, lo, rows = (key - textures) // n_levels, (key - textures) % n_levels, queue
+            start, end = starts[key - textures], starts[key - textures + 1]
+        for q in range(1 if listed else 2):  # level lo, then lo + 1 where it exists (slot -1 where unweighted)
+            if end == start or (q == 1 and lo + 1 >= tex_meta[tex, 0, LEVELS]):
+                break
+            a, b = planned, planned + end - start
+            _plan_bucket(level_constants(tex_meta, tex, lo + q), rows[0, start:end], rows[1, start:end],
+                         rows[2, start:end], rows[-1, start:end], q == 1, taps[0, a:b], taps[1, a:b], taps[2, a:b],
+                         taps[3, a:b], taps[4, a:b], weights[0, a:b], weights[1, a:b])
+            planned = b
+    look_up(texels, taps, weights, planned, colours)
 
 
 @njit(cache=True, inline="always", error_model="numpy")

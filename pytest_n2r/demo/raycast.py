@@ -165,7 +165,8 @@ class CompiledScene:
                     np.empty((5, 4 * samples), np.int64), np.empty((2, 4 * samples), np.float32),
                     np.empty((3, samples), np.float32), np.empty((4, 2 * samples)),
                     np.empty((2, 2 * samples), np.int64), np.empty((2, 2 * samples)), np.empty((4, 2 * samples)),
-                    np.empty((2, self.tex_meta.shape[0] * self.tex_meta.shape[1] + 1), np.int64))
+                    np.empty((2, self.tex_meta.shape[0] * self.tex_meta.shape[1] + 1), np.int64),
+                    np.empty((3, self.tex_meta.shape[0] * 2 * samples)), np.empty(self.tex_meta.shape[0], np.int64))
                    for _ in range(threads)]
         with warnings.catch_warnings():  # masks are passed as first-class functions: numba calls it experimental
             warnings.simplefilter("ignore", NumbaExperimentalFeatureWarning)
@@ -782,9 +783,9 @@ def _cast_row(row, n, v, rows, c2w, camera, uss, xcs, rects, groups, group_box, 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, rays, state, sums, spare, reliefs,
-                   colours, taps, weights, mix, requests, request_slots, lods, queue, buckets, c2w, camera, n, rects,
-                   groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child, rings, masks,
-                   tex_meta, texels, shading, background, rgb, depth, opacity):
+                   colours, taps, weights, mix, requests, request_slots, lods, queue, buckets, direct, sizes, c2w,
+                   camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child,
+                   rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
     """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the rays through the pixel
     centres are cast first (the depth rays), then the ``n`` sub-rows of supersampling rays, then each pixel is
     shaded. Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (a
@@ -829,7 +830,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     # each sub-ray's four colour slots and blend weights, the row's texture requests and lookups (see albedo_row)
     colours, taps, weights, mix = _borrowed(colours), _borrowed(taps), _borrowed(weights), _borrowed(mix)
     requests, request_slots, lods = _borrowed(requests), _borrowed(request_slots), _borrowed(lods)
-    queue, buckets = _borrowed(queue), _borrowed(buckets)
+    queue, buckets, direct, sizes = _borrowed(queue), _borrowed(buckets), _borrowed(direct), _borrowed(sizes)
     for band in range(first, (height + BAND - 1) // BAND, step):
         for v in range(band * BAND, min(height, band * BAND + BAND)):
             above = v - band * BAND  # pixel rows of this band above this one (their rays guess this row's roots)
@@ -849,7 +850,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
                 _shading_inputs(v, n, width, ts, ks, gxs, gzs, haves, xcs, c2w, camera, shading, kinds, prims, waves,
                                 lanes, prim_mat, node_kind, node_par, masks, shade, shade_int)
                 albedo_row(n * sub, nodes, shade, node_kind, node_par, node_child, rings, tex_meta, texels, colours,
-                           mix, requests, request_slots, lods, queue, buckets, taps, weights)
+                           mix, requests, request_slots, lods, queue, buckets, direct, sizes, taps, weights)
             for u in range(width):
                 hits = 0
                 acc_r, acc_g, acc_b = F0, F0, F0
