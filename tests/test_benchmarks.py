@@ -22,6 +22,9 @@ SMOKE = {
     # 160x90: at 48x27 ORB (31-px borders) finds no keypoint, and a relation with nothing to compare fails
     "plugin_relation.py": (["--scene", "demo:object", "--examples", "3", "--size", "160x90"], "warm (disk) / cold"),
     "demo_render_speed.py": (["--poses", "1", "--size", "24x14"], "| object |"),
+    # one relation that skips on the wall: the export, the caches and the table, without a cold kernel compile
+    "main_job_compare.py": (["HEAD", "--warm", "1", "--", "-k", "test_cosine_similarity_tau1 and wall"],
+                            "| HEAD ("),
     "demo_compare.py": (["HEAD", "--smoke"], "| object | HEAD"),
     "kernel_compile.py": (["--masks-only"], "with the cache the first process left"),
     "field_compare.py": (["demo:object", "HEAD", "--smoke"], "| HEAD ("),
