@@ -22,13 +22,11 @@ import shutil
 import statistics
 import subprocess
 import sys
-import tarfile
 import tempfile
 import time
-from io import BytesIO
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from splat_compare import export
 
 _SPLIT = re.compile(r"render (?P<render>[\d.]+) s / SUT (?P<sut>[\d.]+) s / metric (?P<metric>[\d.]+) s")
 _VERDICT = re.compile(r"^(PASSED|FAILED|SKIPPED|ERROR) ")
@@ -37,14 +35,9 @@ _VERDICT = re.compile(r"^(PASSED|FAILED|SKIPPED|ERROR) ")
 def export_tree(revision: str, into: Path) -> tuple[str, Path]:
     """The whole tree of ``revision`` (``git archive``) under ``into / <commit>``, its example project copied to
     ``ex`` beside it; the short commit and the folder."""
-    commit = subprocess.run(["git", "rev-parse", "--verify", f"{revision}^{{commit}}"], cwd=ROOT, check=True,
-                            capture_output=True, text=True).stdout.strip()
-    folder = into / commit
-    archive = subprocess.run(["git", "archive", commit], cwd=ROOT, check=True, capture_output=True).stdout
-    with tarfile.open(fileobj=BytesIO(archive)) as tar:
-        tar.extractall(folder, filter="data")
+    folder = export(revision, into, paths=())
     shutil.copytree(folder / "example_project", folder / "ex")
-    return commit[:7], folder
+    return folder.name[:7], folder
 
 
 def _environment(folder: Path, no_bytecode: bool) -> dict[str, str]:

@@ -61,13 +61,14 @@ print(json.dumps({"fps": statistics.median(rates), "cpu_ms": 1e3 * statistics.me
 """
 
 
-def export(revision: str, into: Path) -> Path:
-    """``pytest_n2r`` of ``revision`` (``git archive``) under ``into / <commit>``; the folder to put on the path."""
+def export(revision: str, into: Path, paths: tuple[str, ...] = ("pytest_n2r",)) -> Path:
+    """``paths`` of ``revision`` (``git archive``; ``()``: the whole tree) under ``into / <commit>``; the folder to
+    put on the path."""
     commit = subprocess.run(["git", "rev-parse", "--verify", f"{revision}^{{commit}}"], cwd=ROOT, check=True,
                             capture_output=True, text=True).stdout.strip()
     folder = into / commit
     if not folder.exists():
-        archive = subprocess.run(["git", "archive", commit, "pytest_n2r"], cwd=ROOT, check=True,
+        archive = subprocess.run(["git", "archive", commit, *paths], cwd=ROOT, check=True,
                                  capture_output=True).stdout
         with tarfile.open(fileobj=BytesIO(archive)) as tar:
             tar.extractall(folder, filter="data")
