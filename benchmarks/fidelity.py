@@ -3,7 +3,7 @@ and AKAZE (repeatability and interest-point spread, reference image vs field ren
 pose), per scene.
 
 Run: ``python benchmarks/fidelity.py SCENE [SCENE ...] [--size 480] [--views N] [--ceiling] [--bands]
-[--placement] [--json out.json]``
+[--placement] [--neighbours] [--json out.json]``
 
 ``SCENE`` is a ``.n2r`` file (reference: the photos it stores) or ``demo:wall-field`` / ``demo:object-field``
 (reference: the exact scene's render at the same pose). Only held-out views are scored; nothing in this
@@ -18,6 +18,10 @@ error is: PSNR against the reference after both are blurred (Gaussian, 1, 2 and 
 placement and colour, not fine texture) and after the best per-channel gain and offset (exposure), on the
 held-out views and on as many fitted (training) views spread over the capture (the gap between the two is
 what the fit does not carry to new poses).
+``--neighbours`` scores, beside the render, the nearest other fitted photo brought to each pose through the
+field's depth, and the same aligned onto the reference by optical flow (``_neighbours``): what a real image
+taken nearby scores against the reference, the yardstick the targets are read against; on the held-out views
+and on as many fitted views.
 ``--placement`` says where the render's texture lands: its global shift against the reference per view, and
 the fidelity of the field with its view-dependent colour frozen at the capture's mean viewing direction.
 Results: docs/scene-field.md.
@@ -34,6 +38,7 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import torch
+from _neighbours import aligned_onto, brought_to, nearest_other
 from _scoring import defined_mean, format_repeatabilities
 
 from pytest_n2r.metrics.image_quality import psnr, ssim
@@ -139,11 +144,83 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
             other = RenderedView(moved, rendered.c2w, rgb=worse, depth=rendered.depth, opacity=rendered.opacity)
             rows[name]["psnr"].append(psnr(image, worse))
             rows[name]["ssim"].append(ssim(image, worse))
-            for d, sut in suts.items():
-                sample = shift_sample(sut.metrics()["repeatability"], outputs[d], sut.fn(worse), real, other, view.name)
-                rows[name][d].append(sample.score if sample.valid else float("nan"))
+            for d, score in _repeatabilities(suts, outputs, real, other, view.name).items():
+                rows[name][d].append(score)
     return {name: {"psnr": float(np.mean(row["psnr"])), "ssim": float(np.mean(row["ssim"])),
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
+
+
+def _repeatabilities(suts: dict, outputs: dict, real: RenderedView, other: RenderedView, view: str) -> dict[str, float]:
+    """Each detector's repeatability between the reference image (``real``, the detectors' ``outputs`` on it) and
+    ``other`` (its image and the mapping between the two); NaN where the metric is undefined."""
+    scores = {}
+    for d, sut in suts.items():
+        sample = shift_sample(sut.metrics()["repeatability"], outputs[d], sut.fn(other.rgb), real, other, view)
+        scores[d] = sample.score if sample.valid else float("nan")
+    return scores
+
+
+#: ``--neighbours``: the images scored against each view's reference (see :mod:`_neighbours`).
+NEIGHBOUR_ROWS = ("the field's render", "the nearest other photo, brought to the pose by the field's depth",
+                  "the same, aligned onto the reference by optical flow")
+#: ``--neighbours``: the fitted views are also grouped by how far (degrees between optical axes) their nearest
+#: other photo is, since what a photo taken nearby scores falls with the angle.
+NEIGHBOUR_ANGLE_BINS = ((0.0, 2.0), (2.0, 4.0), (4.0, 180.0))
+
+
+def _neighbour_record(scene, view, fitted: list, render_size: RenderSize, kind: str, suts: dict) -> dict:
+    """One view's :func:`neighbours` measurements: the nearest other photo's angle, distance and share of pixels
+    brought, and PSNR and each detector's repeatability of each of :data:`NEIGHBOUR_ROWS`."""
+    camera = render_size.apply(view.camera)
+    rendered = scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
+    reference = np.asarray(reference_image(scene, view, camera, kind))
+    other, degrees, distance = nearest_other(view.c2w, fitted, scene.reference_length)
+    other_camera = render_size.apply(other.camera)
+    brought, share = brought_to(camera, view.c2w, rendered.depth, rendered.opacity, rendered.rgb,
+                                np.asarray(reference_image(scene, other, other_camera, kind)), other.c2w,
+                                scene.render(other.c2w, other_camera, ("depth",)).depth, other_camera)
+    real = replace(rendered, rgb=reference)
+    outputs = {d: sut.fn(reference) for d, sut in suts.items()}
+    scores = {}
+    for name, image in zip(NEIGHBOUR_ROWS, (rendered.rgb, brought, aligned_onto(reference, brought))):
+        scores[name] = {"psnr": psnr(reference, image),
+                        **_repeatabilities(suts, outputs, real, replace(rendered, rgb=image), view.name)}
+    return {"view": view.name, "degrees": degrees, "reference lengths": distance, "share brought": share,
+            "scores": scores}
+
+
+def neighbours(scene, size: str, max_views: int | None) -> dict[str, dict]:
+    """What a real image taken nearby scores against each view's reference, beside the field's render: per group
+    of views (the held-out ones; as many fitted ones spread over the capture, and those again by the angle to
+    their nearest other photo, :data:`NEIGHBOUR_ANGLE_BINS`), PSNR and each detector's repeatability of each of
+    :data:`NEIGHBOUR_ROWS` against the reference, and how far the nearest other photo (of the fitted views) was
+    (medians). Empty without reference images."""
+    kind, _ = reference_kind(scene)
+    if kind == "none":
+        return {}
+    render_size = RenderSize.parse(size)
+    suts = {name: resolve_sut(name, None) for name in DETECTORS}
+    fitted = [v for v in scene.views if v.split == "train"]
+    spread = fitted if max_views is None or len(fitted) <= max_views else [
+        fitted[i] for i in np.linspace(0, len(fitted) - 1, max_views).round().astype(int)]
+    held = [_neighbour_record(scene, v, fitted, render_size, kind, suts) for v in floor_views(scene, max_views)]
+    fits = [_neighbour_record(scene, v, fitted, render_size, kind, suts) for v in spread]
+    groups = {"held out": held, "fitted": fits}
+    for low, high in NEIGHBOUR_ANGLE_BINS:
+        groups[f"fitted, nearest {low:g}–{high:g}°" if high < 180 else f"fitted, nearest over {low:g}°"] = [
+            r for r in fits if low <= r["degrees"] < high]
+    out = {}
+    for group, records in groups.items():
+        if not records:
+            continue
+        out[group] = {"views": len(records),
+                      "nearest": {k: float(np.median([r[k] for r in records]))
+                                  for k in ("degrees", "reference lengths", "share brought")},
+                      "rows": {name: {"psnr": float(np.mean([r["scores"][name]["psnr"] for r in records])),
+                                      **{d: defined_mean([r["scores"][name][d] for r in records]) for d in DETECTORS}}
+                               for name in NEIGHBOUR_ROWS},
+                      "per view": records}
+    return out
 
 
 def _found_again(a: np.ndarray, b: np.ndarray, px: float) -> tuple[float, float]:
@@ -320,6 +397,21 @@ def print_ceiling(spec: str, table: dict[str, dict]) -> None:
         print(f"| {name} | {row['psnr']:.2f} | {row['ssim']:.4f} | {format_repeatabilities(row, ' | ')} |")
 
 
+def print_neighbours(spec: str, table: dict[str, dict]) -> None:
+    print(f"\n{spec}: each detector on the reference image vs on the field's render and on the nearest other photo "
+          "brought to the same pose\n")
+    print("| views | n | nearest other photo (median) | image scored | PSNR dB | "
+          + " | ".join(f"{d.upper()} rep." for d in DETECTORS) + " |")
+    print("|---|---|---|---|---|" + "---|" * len(DETECTORS))
+    for group, part in table.items():
+        gap = part["nearest"]
+        where = (f"{gap['degrees']:.1f}°, {gap['reference lengths']:.3f} ref. lengths, "
+                 f"{100 * gap['share brought']:.0f} % of pixels brought")
+        for name, row in part["rows"].items():
+            print(f"| {group} | {part['views']} | {where} | {name} | {row['psnr']:.2f} | "
+                  f"{format_repeatabilities(row, ' | ')} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenes", nargs="+", metavar="SCENE", help=".n2r file or demo:<name>-field")
@@ -332,10 +424,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="also say where the render's error is (fine texture, shape, exposure; held out vs fitted)")
     parser.add_argument("--placement", action="store_true",
                         help="also say where the render's texture lands (global shift; view dependence frozen)")
+    parser.add_argument("--neighbours", action="store_true",
+                        help="also score the nearest other photo brought to each pose (a real image nearby)")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write every number as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
-    reports, ceilings, crowded, band_tables, placements = [], {}, {}, {}, {}
+    reports, ceilings, crowded, band_tables, placements, nearby = [], {}, {}, {}, {}, {}
     header = ("| scene | reference | views | PSNR dB | SSIM | "
               + " | ".join(f"{d.upper()} rep. | {d.upper()} spread" for d in DETECTORS) + " | seconds |")
     print(header)
@@ -353,6 +447,8 @@ def main(argv: list[str] | None = None) -> int:
             band_tables[spec] = bands(scene, args.size, args.views)
         if args.placement:
             placements[spec] = placement(spec, args.size, args.views)
+        if args.neighbours:
+            nearby[spec] = neighbours(scene, args.size, args.views)
         if report.reference == "none":
             print(f"| {spec} | none: {report.reason} |" + " |" * (header.count("|") - 3))
             continue
@@ -390,12 +486,16 @@ def main(argv: list[str] | None = None) -> int:
     for spec, table in placements.items():
         if table:
             print_placement(spec, table)
+    for spec, table in nearby.items():
+        if table:
+            print_neighbours(spec, table)
     if args.json:
         from pytest_n2r.data.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps([{**r.to_dict(), "ceiling": ceilings.get(spec),
                                                   "crowding": crowded.get(spec), "bands": band_tables.get(spec),
-                                                  "placement": placements.get(spec)}
+                                                  "placement": placements.get(spec),
+                                                  "neighbours": nearby.get(spec)}
                                                  for spec, r in zip(args.scenes, reports)], indent=1))
         print(f"\nwrote {args.json}")
     return 0
