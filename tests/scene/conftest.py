@@ -16,6 +16,8 @@ from pytest_n2r.fit import FitResult
 from pytest_n2r.geometry import Camera
 from pytest_n2r.scene import SceneView
 
+from ..data.synthetic import look_at
+
 #: The config of the tiny fits: two small grids, small batches (a 30-step fit takes about two seconds).
 TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=10,
                           alpha_init=1e-2)  # the default 1e-4 shows nothing after 30 steps: a black field
@@ -33,17 +35,11 @@ def random_field(resolution: int = 12, seed: int = 0) -> SceneField:
 
 
 def looking_at_origin(distance: float, yaw_deg: float) -> np.ndarray:
-    """A camera-to-world pose (OpenCV axes) on a circle of ``distance`` in the x-z plane, facing the origin."""
+    """A camera-to-world pose (OpenCV axes) on a circle of ``distance`` in the x-z plane, facing the origin,
+    image-down along -y."""
     a = np.radians(yaw_deg)
     eye = np.array([distance * np.sin(a), 0.0, -distance * np.cos(a)])
-    forward = -eye / np.linalg.norm(eye)
-    right = np.cross(np.array([0.0, -1.0, 0.0]), forward)
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    c2w = np.eye(4)
-    c2w[:3, :3] = np.stack([right, down, forward], axis=1)
-    c2w[:3, 3] = eye
-    return c2w
+    return look_at(eye, np.zeros(3), up=np.array([0.0, 1.0, 0.0]))
 
 
 def tiny_views(n: int = 4, with_images: bool = True) -> list[SceneView]:
