@@ -19,7 +19,8 @@ placement and colour, not fine texture) and after the best per-channel gain and 
 held-out views and on as many fitted (training) views spread over the capture (the gap between the two is
 what the fit does not carry to new poses).
 ``--neighbours`` scores, beside the render, the nearest other fitted photo brought to each pose through the
-field's depth, and the same aligned onto the reference by optical flow (``_neighbours``): what a real image
+field's depth (:mod:`pytest_n2r.study.nearby`), and the same aligned onto the reference by optical flow
+(:func:`aligned_onto`): what a real image
 taken nearby scores against the reference, the yardstick the targets are read against; on the held-out views
 and on as many fitted views.
 ``--placement`` says where the render's texture lands: its global shift against the reference per view, and
@@ -38,14 +39,14 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import torch
-from _neighbours import aligned_onto, brought_to, nearest_other
 from _scoring import defined_mean, format_repeatabilities
 
 from pytest_n2r.metrics.image_quality import psnr, ssim
-from pytest_n2r.relation.floor.reference import floor_views, reference_image, reference_kind, shift_sample
+from pytest_n2r.relation.floor.reference import floor_views, reference_image, reference_kind
 from pytest_n2r.render.size import RenderSize
-from pytest_n2r.render.view import RenderedView
-from pytest_n2r.study.fidelity import DETECTORS, measure_fidelity
+from pytest_n2r.render.view import OUTPUTS, RenderedView
+from pytest_n2r.study.fidelity import DETECTORS, detector_repeatabilities, measure_fidelity
+from pytest_n2r.study.nearby import nearby_image
 from pytest_n2r.study.suts import resolve_sut
 
 #: Issue 14's targets on the fox (10-minute CPU fit): held-out PSNR and each detector's repeatability.
@@ -144,23 +145,24 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
             other = RenderedView(moved, rendered.c2w, rgb=worse, depth=rendered.depth, opacity=rendered.opacity)
             rows[name]["psnr"].append(psnr(image, worse))
             rows[name]["ssim"].append(ssim(image, worse))
-            for d, score in _repeatabilities(suts, outputs, real, other, view.name).items():
+            for d, score in detector_repeatabilities(real, other, view.name, outputs).items():
                 rows[name][d].append(score)
     return {name: {"psnr": float(np.mean(row["psnr"])), "ssim": float(np.mean(row["ssim"])),
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
 
 
-def _repeatabilities(suts: dict, outputs: dict, real: RenderedView, other: RenderedView, view: str) -> dict[str, float]:
-    """Each detector's repeatability between the reference image (``real``, the detectors' ``outputs`` on it) and
-    ``other`` (its image and the mapping between the two); NaN where the metric is undefined."""
-    scores = {}
-    for d, sut in suts.items():
-        sample = shift_sample(sut.metrics()["repeatability"], outputs[d], sut.fn(other.rgb), real, other, view)
-        scores[d] = sample.score if sample.valid else float("nan")
-    return scores
+def aligned_onto(reference: np.ndarray, image: np.ndarray) -> np.ndarray:
+    """``image`` moved onto ``reference`` (both H×W×3 uint8 RGB) by the dense optical flow between their grey
+    images (OpenCV's DIS, medium preset), resampled bilinearly: what placement error is left, taken out."""
+    grey = [cv2.cvtColor(np.ascontiguousarray(x), cv2.COLOR_RGB2GRAY) for x in (reference, image)]
+    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(grey[0], grey[1], None)
+    h, w = grey[0].shape
+    u, v = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return cv2.remap(np.ascontiguousarray(image), u + flow[..., 0], v + flow[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
 
 
-#: ``--neighbours``: the images scored against each view's reference (see :mod:`_neighbours`).
+#: ``--neighbours``: the images scored against each view's reference (see :mod:`pytest_n2r.study.nearby`).
 NEIGHBOUR_ROWS = ("the field's render", "the nearest other photo, brought to the pose by the field's depth",
                   "the same, aligned onto the reference by optical flow")
 #: ``--neighbours``: the fitted views are also grouped by how far (degrees between optical axes) their nearest
@@ -168,25 +170,18 @@ NEIGHBOUR_ROWS = ("the field's render", "the nearest other photo, brought to the
 NEIGHBOUR_ANGLE_BINS = ((0.0, 2.0), (2.0, 4.0), (4.0, 180.0))
 
 
-def _neighbour_record(scene, view, fitted: list, render_size: RenderSize, kind: str, suts: dict) -> dict:
+def _neighbour_record(scene, view, render_size: RenderSize, kind: str) -> dict:
     """One view's :func:`neighbours` measurements: the nearest other photo's angle, distance and share of pixels
     brought, and PSNR and each detector's repeatability of each of :data:`NEIGHBOUR_ROWS`."""
-    camera = render_size.apply(view.camera)
-    rendered = scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
-    reference = np.asarray(reference_image(scene, view, camera, kind))
-    other, degrees, distance = nearest_other(view.c2w, fitted, scene.reference_length)
-    other_camera = render_size.apply(other.camera)
-    brought, share = brought_to(camera, view.c2w, rendered.depth, rendered.opacity, rendered.rgb,
-                                np.asarray(reference_image(scene, other, other_camera, kind)), other.c2w,
-                                scene.render(other.c2w, other_camera, ("depth",)).depth, other_camera)
-    real = replace(rendered, rgb=reference)
-    outputs = {d: sut.fn(reference) for d, sut in suts.items()}
+    near = nearby_image(scene, view, render_size, kind, lambda s, c2w, cam: s.render(c2w, cam, OUTPUTS))
+    real = replace(near.rendered, rgb=near.reference)
+    outputs = {d: resolve_sut(d, None).fn(near.reference) for d in DETECTORS}
     scores = {}
-    for name, image in zip(NEIGHBOUR_ROWS, (rendered.rgb, brought, aligned_onto(reference, brought))):
-        scores[name] = {"psnr": psnr(reference, image),
-                        **_repeatabilities(suts, outputs, real, replace(rendered, rgb=image), view.name)}
-    return {"view": view.name, "degrees": degrees, "reference lengths": distance, "share brought": share,
-            "scores": scores}
+    for name, image in zip(NEIGHBOUR_ROWS, (near.rendered.rgb, near.image, aligned_onto(near.reference, near.image))):
+        scores[name] = {"psnr": psnr(near.reference, image),
+                        **detector_repeatabilities(real, replace(near.rendered, rgb=image), view.name, outputs)}
+    return {"view": view.name, "degrees": near.degrees, "reference lengths": near.distance,
+            "share brought": near.share, "scores": scores}
 
 
 def neighbours(scene, size: str, max_views: int | None) -> dict[str, dict]:
@@ -199,12 +194,11 @@ def neighbours(scene, size: str, max_views: int | None) -> dict[str, dict]:
     if kind == "none":
         return {}
     render_size = RenderSize.parse(size)
-    suts = {name: resolve_sut(name, None) for name in DETECTORS}
     fitted = [v for v in scene.views if v.split == "train"]
     spread = fitted if max_views is None or len(fitted) <= max_views else [
         fitted[i] for i in np.linspace(0, len(fitted) - 1, max_views).round().astype(int)]
-    held = [_neighbour_record(scene, v, fitted, render_size, kind, suts) for v in floor_views(scene, max_views)]
-    fits = [_neighbour_record(scene, v, fitted, render_size, kind, suts) for v in spread]
+    held = [_neighbour_record(scene, v, render_size, kind) for v in floor_views(scene, max_views)]
+    fits = [_neighbour_record(scene, v, render_size, kind) for v in spread]
     groups = {"held out": held, "fitted": fits}
     for low, high in NEIGHBOUR_ANGLE_BINS:
         groups[f"fitted, nearest {low:g}–{high:g}°" if high < 180 else f"fitted, nearest over {low:g}°"] = [

@@ -4,23 +4,37 @@ render at the same held-out pose). ``n2r info --shift`` and ``benchmarks/fidelit
 
 The reference image is the stored photo, or the exact render for a fitted demo scene
 (:func:`pytest_n2r.relation.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
-``1 - score`` is the field floor a relation with that detector and metric inherits.
+``1 - score`` is the field floor a relation with that detector and metric inherits. Beside it, the yardstick:
+each detector's repeatability on the capture's nearest other photo brought to the same pose
+(:mod:`pytest_n2r.study.nearby`), what a real image taken nearby scores against the reference.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..geometry import Camera
 from ..metrics.image_quality import psnr, ssim
-from ..relation.floor import FieldFloor, FloorStore, floor_views, measure_floor, reference_image, reference_kind
+from ..relation.floor import (
+    FieldFloor,
+    FloorStore,
+    floor_views,
+    measure_floor,
+    reference_image,
+    reference_kind,
+    shift_sample,
+)
 from ..render.size import RenderSize
+from ..render.view import RenderedView
 from ..scene.base import Scene
 from ..scene.render_cache import RenderCache
+from .nearby import nearby_image
 from .suts import resolve_sut
 
-__all__ = ["DETECTORS", "FidelityReport", "measure_fidelity"]
+__all__ = ["DETECTORS", "FidelityReport", "detector_repeatabilities", "measure_fidelity"]
 
 #: The detectors the fidelity report measures (built-in SUTs of ``n2r study``).
 DETECTORS = ("orb", "sift", "akaze")
@@ -31,7 +45,10 @@ class FidelityReport:
     """``images``: per held-out view, PSNR (dB) and SSIM of the render against the reference image;
     ``floors``: a :class:`~pytest_n2r.relation.floor.FieldFloor` per detector and metric name (``("orb",
     "repeatability")``, ...); ``reference``: the
-    reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``)."""
+    reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``); ``nearby``: per detector, the mean
+    repeatability of the nearest other photo brought to each view's pose (NaN where undefined; empty when the
+    scene has no other fitted view with a reference image), and ``nearby_gap`` how far those photos were
+    (median ``"degrees"`` between optical axes and ``"reference lengths"`` between centres)."""
 
     scene: str
     size: str
@@ -39,6 +56,8 @@ class FidelityReport:
     reason: str
     images: tuple[dict, ...]
     floors: dict[tuple[str, str], FieldFloor]
+    nearby: dict[str, float] = field(default_factory=dict)
+    nearby_gap: dict[str, float] = field(default_factory=dict)
 
     def mean(self, key: str) -> float:
         values = [row[key] for row in self.images if np.isfinite(row[key])]
@@ -55,7 +74,9 @@ class FidelityReport:
                 "images": list(self.images), "psnr": self.mean("psnr"), "ssim": self.mean("ssim"),
                 "detectors": {d: {m: self.score(d, m) for m in ("repeatability", "ip_spread")}
                               for d in DETECTORS},
-                "floors": [{"detector": d, "metric": m, **f.to_dict()} for (d, m), f in self.floors.items()]}
+                "floors": [{"detector": d, "metric": m, **f.to_dict()} for (d, m), f in self.floors.items()],
+                "nearby": {d: (None if math.isnan(v) else v) for d, v in self.nearby.items()},
+                "nearby_gap": self.nearby_gap}
 
     def format(self) -> str:
         """Plain-text table (what ``n2r info --shift`` prints)."""
@@ -66,9 +87,19 @@ class FidelityReport:
         lines = [(f"reality-to-field shift: each detector on {against} vs on the render at the same held-out "
                  f"pose ({self.size} px, mean of {n} view{'s' if n != 1 else ''}; 1 is ideal)"),
                  f"  render vs reference   PSNR {self.mean('psnr'):.2f} dB, SSIM {self.mean('ssim'):.4f}",
-                 f"  {'detector':<10}{'repeatability':>15}{'spread':>9}"]
+                 f"  {'detector':<10}{'repeatability':>15}{'spread':>9}{'nearest photo':>15}"]
         for d in DETECTORS:
-            lines.append(f"  {d:<10}{self.score(d, 'repeatability'):>15.3f}{self.score(d, 'ip_spread'):>9.3f}")
+            value = self.nearby.get(d, math.nan)
+            yardstick = f"{value:>15.3f}" if math.isfinite(value) else f"{'undefined' if self.nearby else 'n/a':>15}"
+            lines.append(f"  {d:<10}{self.score(d, 'repeatability'):>15.3f}{self.score(d, 'ip_spread'):>9.3f}"
+                         f"{yardstick}")
+        if self.nearby:
+            other = "photo" if self.reference == "photo" else "exact render"
+            lines.append(f"  nearest photo: the nearest other fitted {other} (median {self.nearby_gap['degrees']:.1f}° "
+                         "away) brought to the same pose through the field's depth,\n"
+                         "  scored like the render: what an image taken nearby scores")
+        else:
+            lines.append("  nearest photo n/a: no other fitted view with a reference image")
         return "\n".join(lines)
 
 
@@ -94,4 +125,47 @@ def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: i
         for key, metric in sut.metrics().items():
             floors[name, key] = measure_floor(scene, sut.fn, metric, size=render_size, cache=cache, store=store,
                                               name=name, max_views=max_views)
-    return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors)
+    nearby, gap = _nearby(scene, kind, render_size, max_views, cache)
+    return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors, nearby, gap)
+
+
+def detector_repeatabilities(reference: RenderedView, other: RenderedView, view: str,
+                             outputs: dict | None = None) -> dict[str, float]:
+    """Each of :data:`DETECTORS`' repeatability between ``reference`` (a view's reference image with its render's
+    geometry; ``outputs``: the detectors' outputs on it, if already computed) and ``other`` (another image of the
+    same pose with the same geometry); NaN where the metric is undefined."""
+    scores = {}
+    for d in DETECTORS:
+        sut = resolve_sut(d, None)
+        out = outputs[d] if outputs is not None else sut.fn(reference.rgb)
+        sample = shift_sample(sut.metrics()["repeatability"], out, sut.fn(other.rgb), reference, other, view)
+        scores[d] = sample.score if sample.valid else math.nan
+    return scores
+
+
+def _nearby(scene: Scene, kind: str, render_size: RenderSize | None, max_views: int | None,
+            cache: RenderCache) -> tuple[dict[str, float], dict[str, float]]:
+    """Each detector's mean repeatability of the nearest other photo brought to each held-out pose, against the
+    reference there (:mod:`~pytest_n2r.study.nearby`), and the median gap to those photos; empty without one."""
+    def render(s: Scene, c2w: np.ndarray, camera: Camera) -> RenderedView:
+        return cache.render(s, c2w, camera, ("rgb", "depth", "opacity"))
+
+    scores: dict[str, list[float]] = {d: [] for d in DETECTORS}
+    gaps: dict[str, list[float]] = {"degrees": [], "reference lengths": []}
+    for view in floor_views(scene, max_views):
+        try:
+            near = nearby_image(scene, view, render_size, kind, render)
+        except ValueError:
+            return {}, {}
+        gaps["degrees"].append(near.degrees)
+        gaps["reference lengths"].append(near.distance)
+        real, brought = replace(near.rendered, rgb=near.reference), replace(near.rendered, rgb=near.image)
+        for d, score in detector_repeatabilities(real, brought, view.name).items():
+            scores[d].append(score)
+    if not gaps["degrees"]:
+        return {}, {}
+    means = {}
+    for d, values in scores.items():
+        finite = [v for v in values if math.isfinite(v)]
+        means[d] = float(np.mean(finite)) if finite else math.nan
+    return means, {k: float(np.median(v)) for k, v in gaps.items()}

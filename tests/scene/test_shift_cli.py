@@ -23,6 +23,9 @@ def test_info_shift_prints_psnr_and_each_detectors_shift(tiny_scene_file, capsys
     assert "mean of 6 views" in out and "render vs reference   PSNR" in out
     for detector in ("orb", "sift", "akaze"):
         assert any(line.split()[:1] == [detector] for line in out.splitlines()), out
+    header = next(line for line in out.splitlines() if line.split()[:1] == ["detector"])
+    assert header.split()[-2:] == ["nearest", "photo"], f"no yardstick column: {header!r}"
+    assert "nearest photo: the nearest other fitted photo (median " in out, out
     assert list((tmp_path / "cache" / "floors").glob("*.json")), "the floors are cached"
 
     assert main(["info", str(tiny_scene_file), "--shift", "--size", "64", "--json"]) == 0
@@ -30,6 +33,9 @@ def test_info_shift_prints_psnr_and_each_detectors_shift(tiny_scene_file, capsys
     assert shift["reference"] == "photo" and len(shift["images"]) == 6
     assert set(shift["detectors"]) == {"orb", "sift", "akaze"}
     assert math.isfinite(shift["psnr"]) and 0 < shift["ssim"] <= 1
+    assert set(shift["nearby"]) == {"orb", "sift", "akaze"}, shift["nearby"]
+    assert all(v is None or 0 <= v <= 1 for v in shift["nearby"].values()), shift["nearby"]
+    assert shift["nearby_gap"]["degrees"] > 0 and shift["nearby_gap"]["reference lengths"] > 0
 
 
 def test_info_shift_without_photos_says_why(tiny_capture, tiny_fit, tmp_path, capsys, monkeypatch):
@@ -96,3 +102,18 @@ def test_the_fidelity_benchmark_scores_the_nearest_photo_beside_the_render(fidel
         # the exact neighbour brought through the field's depth, then aligned by the flow: each closer to the
         # exact reference than the one before (the field's render is blurred; the depth leaves a misplacement)
         assert field["psnr"] < brought["psnr"] < aligned["psnr"], f"{group}: {field}, {brought}, {aligned}"
+
+
+def test_optical_flow_alignment_undoes_a_shift(fidelity_benchmark):
+    import cv2
+    import numpy as np
+
+    from pytest_n2r.metrics.image_quality import psnr
+
+    texture = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    smooth = cv2.GaussianBlur(texture, (0, 0), 2.0)  # texture the flow can follow
+    shifted = np.roll(smooth, 2, axis=1)
+    aligned = fidelity_benchmark.aligned_onto(smooth, shifted)
+    inner = (slice(8, -8), slice(8, -8))
+    assert psnr(smooth[inner], aligned[inner]) > psnr(smooth[inner], shifted[inner]) + 10, (
+        f"aligned {psnr(smooth[inner], aligned[inner]):.1f} dB, shifted {psnr(smooth[inner], shifted[inner]):.1f} dB")

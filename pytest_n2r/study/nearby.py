@@ -1,0 +1,112 @@
+"""The capture's nearest other photo brought to a view's pose: what a real image taken nearby gives a detector,
+the yardstick a render's reality-to-field shift is read against (``n2r info --shift``, ``benchmarks/fidelity.py``).
+
+Convention
+----------
+- "Nearest" is by camera distance in reference lengths plus the angle between the optical axes in radians,
+  among the scene's fitted (training) views; a view at the very same pose is never its own neighbour.
+- "Brought to the pose": every pixel centre of the view is mapped into the neighbour through the rendered
+  z-depth of both, by the same :class:`~pytest_n2r.metrics.correspondence.DepthMapping` the keypoint metrics map
+  points with (a point needs a surface under it in both views, opacity ≥ 0.5, and depths that agree within 5 %);
+  where it lands, the pixel takes the neighbour's image there (bilinear); elsewhere (what the neighbour does not
+  see) it keeps the view's render. So the image has the neighbour's real texture placed by the field's geometry.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import Camera, pixel_grid
+from ..metrics.correspondence import DepthMapping
+from ..relation.floor import reference_image
+from ..render.size import RenderSize
+from ..render.view import RenderedView
+from ..scene.base import Scene, SceneView
+
+__all__ = ["NearbyImage", "nearest_fitted_view", "brought_to_view", "nearby_image"]
+
+
+def nearest_fitted_view(scene: Scene, c2w: np.ndarray,
+                        usable: Callable[[SceneView], bool] = lambda view: True) -> tuple[SceneView, float, float]:
+    """The fitted view of ``scene`` nearest to pose ``c2w`` (see the Convention) among those ``usable`` says yes
+    to, with the angle between their optical axes (degrees) and the distance between their centres (reference
+    lengths); a ``ValueError`` when there is none.
+
+    >>> from types import SimpleNamespace
+    >>> at = lambda x: np.array([[1, 0, 0, x], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+    >>> views = [SimpleNamespace(name=str(x), split="train", c2w=at(x)) for x in (0.0, 0.5, -0.2)]
+    >>> scene = SimpleNamespace(views=views, reference_length=2.0)
+    >>> view, degrees, distance = nearest_fitted_view(scene, at(0.0))
+    >>> view.name, degrees, distance
+    ('-0.2', 0.0, 0.1)
+    """
+    c2w = np.asarray(c2w, dtype=np.float64)
+
+    def gap(view: SceneView) -> tuple[float, float]:
+        other = np.asarray(view.c2w, dtype=np.float64)
+        degrees = float(np.degrees(np.arccos(np.clip(other[:3, 2] @ c2w[:3, 2], -1.0, 1.0))))
+        return degrees, float(np.linalg.norm(other[:3, 3] - c2w[:3, 3])) / float(scene.reference_length)
+
+    candidates = [v for v in scene.views if v.split == "train" and usable(v) and not np.array_equal(v.c2w, c2w)]
+    if not candidates:
+        raise ValueError(f"scene {getattr(scene, 'name', '?')!r} has no other fitted view to bring to this pose")
+    nearest = min(candidates, key=lambda v: np.radians(gap(v)[0]) + gap(v)[1])
+    return (nearest, *gap(nearest))
+
+
+def brought_to_view(view: RenderedView, image: np.ndarray, image_view: RenderedView) -> tuple[np.ndarray, float]:
+    """``image`` (H'×W'×3 uint8 RGB, seen from ``image_view``, which has its rendered depth and opacity) brought
+    to ``view`` (rendered with RGB, depth and opacity) through both depths; and the share of ``view``'s pixels
+    that took their colour from ``image`` (the rest keep ``view.rgb``)."""
+    import cv2
+
+    view.require("rgb", "depth", "opacity")
+    if image.shape[:2] != image_view.depth.shape:
+        raise ValueError(f"image is {image.shape[1]}x{image.shape[0]} pixels but its view's depth is "
+                         f"{image_view.depth.shape[1]}x{image_view.depth.shape[0]}")
+    mapped = DepthMapping(view, image_view).to_follow(pixel_grid(view.camera).reshape(-1, 2))
+    h, w = view.depth.shape
+    where = np.nan_to_num(mapped.uv, nan=-1e6).astype(np.float32).reshape(h, w, 2)
+    colour = cv2.remap(np.ascontiguousarray(image), where[..., 0], where[..., 1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+    seen = mapped.visible.reshape(h, w)
+    return np.where(seen[..., None], colour, view.rgb), float(seen.mean())
+
+
+
+@dataclass(frozen=True, eq=False)
+class NearbyImage:
+    """A view's reference image, its render, and the nearest other fitted view's reference image brought to its
+    pose (:func:`nearby_image`): ``rendered`` (RGB, depth, opacity), ``reference`` and ``image`` (H×W×3 uint8
+    RGB), the ``other`` view, how far it is (``degrees`` between optical axes, ``distance`` in reference lengths)
+    and the ``share`` of pixels that took its colour."""
+
+    rendered: RenderedView
+    reference: np.ndarray
+    image: np.ndarray
+    other: SceneView
+    degrees: float
+    distance: float
+    share: float
+
+
+def nearby_image(scene: Scene, view: SceneView, size: RenderSize | None, kind: str,
+                 render: Callable[[Scene, np.ndarray, Camera], RenderedView]) -> NearbyImage:
+    """The nearest other fitted view's reference image (a stored photo for ``kind="photo"``, the exact render for
+    ``"exact"``) brought to ``view``'s pose at ``size`` (``None``: each view's camera), beside ``view``'s reference
+    and render; ``render(scene, c2w, camera)`` renders RGB, depth and opacity (a render cache's, say). A
+    ``ValueError`` when the scene has no other fitted view with a reference image."""
+    def sized(camera: Camera) -> Camera:
+        return camera if size is None else size.apply(camera)
+
+    usable = (lambda v: v.image is not None) if kind == "photo" else (lambda v: True)
+    other, degrees, distance = nearest_fitted_view(scene, view.c2w, usable)
+    camera, other_camera = sized(view.camera), sized(other.camera)
+    rendered = render(scene, view.c2w, camera)
+    image, share = brought_to_view(rendered, np.asarray(reference_image(scene, other, other_camera, kind, render)),
+                                   render(scene, other.c2w, other_camera))
+    return NearbyImage(rendered, np.asarray(reference_image(scene, view, camera, kind, render)), image, other,
+                       degrees, distance, share)
