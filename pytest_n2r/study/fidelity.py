@@ -82,24 +82,26 @@ class FidelityReport:
         """Plain-text table (what ``n2r info --shift`` prints)."""
         if self.reference == "none":
             return f"reality-to-field shift n/a: {self.reason}"
-        against = "the stored photo" if self.reference == "photo" else "the exact render"
+        photo = self.reference == "photo"
+        against = "the stored photo" if photo else "the exact render"
+        column = "nearest photo" if photo else "nearest view"
         n = len(self.images)
         lines = [(f"reality-to-field shift: each detector on {against} vs on the render at the same held-out "
                  f"pose ({self.size} px, mean of {n} view{'s' if n != 1 else ''}; 1 is ideal)"),
                  f"  render vs reference   PSNR {self.mean('psnr'):.2f} dB, SSIM {self.mean('ssim'):.4f}",
-                 f"  {'detector':<10}{'repeatability':>15}{'spread':>9}{'nearest photo':>15}"]
+                 f"  {'detector':<10}{'repeatability':>15}{'spread':>9}{column:>15}"]
         for d in DETECTORS:
             value = self.nearby.get(d, math.nan)
             yardstick = f"{value:>15.3f}" if math.isfinite(value) else f"{'undefined' if self.nearby else 'n/a':>15}"
             lines.append(f"  {d:<10}{self.score(d, 'repeatability'):>15.3f}{self.score(d, 'ip_spread'):>9.3f}"
                          f"{yardstick}")
         if self.nearby:
-            other = "photo" if self.reference == "photo" else "exact render"
-            lines.append(f"  nearest photo: the nearest other fitted {other} (median {self.nearby_gap['degrees']:.1f}° "
+            other = "photo" if photo else "view's exact render"
+            lines.append(f"  {column}: the nearest other fitted {other} (median {self.nearby_gap['degrees']:.1f}° "
                          "away) brought to the same pose through the field's depth,\n"
                          "  scored like the render: what an image taken nearby scores")
         else:
-            lines.append("  nearest photo n/a: no other fitted view with a reference image")
+            lines.append(f"  {column} n/a: no other fitted view with a reference image")
         return "\n".join(lines)
 
 

@@ -117,3 +117,16 @@ def test_optical_flow_alignment_undoes_a_shift(fidelity_benchmark):
     inner = (slice(8, -8), slice(8, -8))
     assert psnr(smooth[inner], aligned[inner]) > psnr(smooth[inner], shifted[inner]) + 10, (
         f"aligned {psnr(smooth[inner], aligned[inner]):.1f} dB, shifted {psnr(smooth[inner], shifted[inner]):.1f} dB")
+
+
+def test_the_shift_table_names_its_yardstick_and_says_when_it_has_none():
+    from pytest_n2r.study.fidelity import FidelityReport
+
+    exact = FidelityReport("wall", "480", "exact", "", (), {}, {"orb": 0.5, "sift": math.nan, "akaze": 0.7},
+                           {"degrees": 3.0, "reference lengths": 0.1}).format().splitlines()
+    assert exact[2].split()[-2:] == ["nearest", "view"], exact
+    assert exact[3].split()[-1] == "0.500" and exact[4].split()[-1] == "undefined", exact
+    assert exact[6].startswith("  nearest view: the nearest other fitted view's exact render (median 3.0° away)")
+    lonely = FidelityReport("fox", "480", "photo", "", (), {}).format().splitlines()
+    assert [line.split()[-1] for line in lonely[3:6]] == ["n/a"] * 3, lonely
+    assert lonely[6] == "  nearest photo n/a: no other fitted view with a reference image", lonely
