@@ -2,23 +2,34 @@
 
 from __future__ import annotations
 
+import functools
+from typing import Any
+
 import numpy as np
 
 __all__ = ["mutual_nearest", "nearest_within"]
 
-try:  # scipy comes with scikit-image; the numpy path keeps the metrics working without it
-    from scipy.spatial import cKDTree as _KDTree
-except ImportError:  # pragma: no cover - exercised through use_scipy=False in the tests
-    _KDTree = None
+
+@functools.cache
+def _kd_tree() -> Any:
+    """SciPy's ``cKDTree``, imported on the first match (0.2-0.3 s: a warm main job that takes every keypoint
+    metric's result from the render cache needs none), or ``None`` without SciPy."""
+    try:  # scipy comes with scikit-image; the numpy path keeps the metrics working without it
+        from scipy.spatial import cKDTree
+    except ImportError:  # pragma: no cover - exercised through use_scipy=False in the tests
+        return None
+    return cKDTree
+
 
 def nearest_within(queries: np.ndarray, points: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
     """Index into ``points`` of each query's nearest point, or ``-1`` when none lies within ``radius``
     (Euclidean distance, inclusive)."""
     if len(points) == 0 or len(queries) == 0:
         return np.full(len(queries), -1, dtype=np.intp)
-    if use_scipy and _KDTree is not None:
+    tree = _kd_tree() if use_scipy else None
+    if tree is not None:
         # distance_upper_bound is exclusive; nudge it so a point exactly at `radius` still counts
-        dist, idx = _KDTree(points).query(queries, k=1, distance_upper_bound=np.nextafter(radius, np.inf))
+        dist, idx = tree(points).query(queries, k=1, distance_upper_bound=np.nextafter(radius, np.inf))
         return np.where(np.isfinite(dist) & (dist <= radius), idx, -1).astype(np.intp)
     return _nearest_within_grid(queries, points, radius)
 

@@ -61,6 +61,12 @@ class Metric(ABC):
     #: True when an output that is entirely NaN means "the SUT gave no answer" (the pair is undefined)
     #: rather than a bug (a :class:`~pytest_n2r.errors.SUTOutputError`).
     nan_means_no_output: ClassVar[bool] = False
+    #: The version of the metric's arithmetic, declared by a metric class whose result depends on nothing but
+    #: its ``repr`` (every parameter), the two SUT outputs and the two renders, and costs more to compute than to
+    #: read back: a render cache then keeps its results across sessions
+    #: (:mod:`~pytest_n2r.relation.kept_results`). Bump it when the arithmetic changes. Only the class that
+    #: declares it is kept, not its subclasses; ``None``: always computed.
+    result_version: ClassVar[str | None] = None
 
     @abstractmethod
     def compute(

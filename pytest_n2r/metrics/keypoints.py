@@ -250,6 +250,7 @@ class Repeatability(_KeypointMetric):
 
     name = "repeatability"
     ideal = 1.0
+    result_version = "1"
 
     def __init__(
         self, px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
@@ -295,6 +296,7 @@ class InterestPointSpread(_KeypointMetric):
 
     name = "interest_point_spread"
     ideal = 1.0
+    result_version = "1"
 
     def __init__(
         self, radius: float = 8.0, mapping: Mapping = "depth", *,

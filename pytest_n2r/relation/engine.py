@@ -29,6 +29,7 @@ from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
 from .failure import MAX_UNDEFINED, RelationFailure, failure_message
+from .kept_results import result_from_dict, result_key, result_to_dict
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
@@ -182,12 +183,27 @@ class Engine:
     def compute_on_renders(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
                            source_key: str, follow_key: str | None, where: str) -> MetricResult:
         """:meth:`compute`, or its result kept from an earlier evaluation of the same SUT and metric objects on
-        the same two renders (a replayed example); ``follow_key=None`` (a mutated image): always computed."""
+        the same two renders (a replayed example), or from an earlier session's evaluation of the same metric on
+        the same two outputs and renders, in the render cache (a warm run; :mod:`.kept_results`);
+        ``follow_key=None`` (a mutated image): always computed."""
         if follow_key is None:
             return self.compute(out_source, out_follow, source, follow, where)
         result = self.sut_outputs.result(self.sut, self.metric, source_key, follow_key)
         if result is MISSING:
-            result = self.compute(out_source, out_follow, source, follow, where)
+            start = time.perf_counter()
+            stored_key = None if self.cache.directory is None else \
+                result_key(self.metric, source_key, follow_key, out_source, out_follow)
+            stored = self.cache.decision(stored_key) if stored_key is not None else None
+            try:
+                result = result_from_dict(stored) if stored is not None else None
+            except (KeyError, TypeError, ValueError):  # another shape of decision under the key: computed again
+                result = None
+            self.run_record.timings["metric"] += time.perf_counter() - start
+            if result is None:
+                result = self.compute(out_source, out_follow, source, follow, where)
+                kept = result_to_dict(result) if stored_key is not None else None
+                if stored_key is not None and kept is not None:
+                    self.cache.put_decision(stored_key, kept)
             self.sut_outputs.put_result(self.sut, self.metric, source_key, follow_key, result)
         return result
 

@@ -1,0 +1,96 @@
+"""A keypoint metric's results kept in the render cache: a second session takes them instead of computing them,
+only for the same metric, outputs and renders, and the records are the same."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import cv2
+import numpy as np
+
+from pytest_n2r.metrics import repeatability
+from pytest_n2r.metrics.base import MetricResult
+from pytest_n2r.metrics.keypoints import Repeatability
+from pytest_n2r.relation import Relation, RunSettings, check_relation
+from pytest_n2r.relation.kept_results import output_digest, result_from_dict, result_key, result_to_dict
+from pytest_n2r.scene.render_cache import RenderCache
+from pytest_n2r.strategies import transforms
+from tests.plugin.fakescene import PlaneScene
+
+SETTINGS = RunSettings(derandomize=True, database=None)
+
+
+def corners(rgb: np.ndarray) -> np.ndarray:
+    """A deterministic detector: the checkerboard's strongest corners, ``(N, 2)`` float32."""
+    found = cv2.goodFeaturesToTrack(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY), 40, 0.01, 3)
+    return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2).astype(np.float32)
+
+
+def _records(record):
+    return [(e.view, e.status, e.reason, e.score, e.deviation) for e in record.examples]
+
+
+def _counting(monkeypatch) -> list[int]:
+    computed: list[int] = []
+    original = Repeatability.compute
+    monkeypatch.setattr(Repeatability, "compute", lambda self, *a: computed.append(1) or original(self, *a))
+    return computed
+
+
+def test_a_second_session_takes_the_keypoint_metrics_results_from_the_render_cache(tmp_path, monkeypatch):
+    scene = PlaneScene()
+    relation = Relation.build(repeatability(px=2), 0.9, transforms(yaw=3, x=0.05), examples=12)
+    computed = _counting(monkeypatch)
+    first = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed and first.valid_examples, "the test needs evaluated examples"
+    computed.clear()
+    again = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed == [] and _records(again) == _records(first)
+
+
+def test_other_outputs_or_another_metric_are_computed_again(tmp_path, monkeypatch):
+    scene = PlaneScene()
+    relation = Relation.build(repeatability(px=2), 0.9, transforms(yaw=3, x=0.05), examples=8)
+    check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
+    computed = _counting(monkeypatch)
+    shifted = check_relation(scene, lambda rgb: corners(rgb) + np.float32(0.5), relation, settings=SETTINGS,
+                             cache=RenderCache(tmp_path))
+    assert len(computed) == len(shifted.examples) - shifted.rejected > 0, "new outputs: every result computed"
+    computed.clear()
+    wider = Relation.build(repeatability(px=3), 0.9, transforms(yaw=3, x=0.05), examples=8)
+    check_relation(scene, corners, wider, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed, "another tolerance is another metric"
+
+
+def test_only_the_class_that_declares_a_result_version_is_kept():
+    class Mine(Repeatability):  # a user's subclass may compute anything: never kept under its parent's version
+        pass
+
+    points = np.zeros((3, 2), np.float32)
+    assert result_key(repeatability(), "a", "b", points, points) is not None
+    assert result_key(Mine(), "a", "b", points, points) is None
+    assert result_key(repeatability(), "a", "b", points, [cv2.KeyPoint(1, 2, 3)]) is None
+    assert result_key(repeatability(), "a", "b", points, points) != result_key(repeatability(), "a", "c", points,
+                                                                              points)
+
+
+def test_output_digests_name_values_types_and_shapes_exactly():
+    a = np.arange(6, dtype=np.float32).reshape(3, 2)
+    same = [a, a.copy(), np.asfortranarray(a)]
+    assert len({output_digest(x) for x in same}) == 1
+    others = [a.reshape(2, 3), a.astype(np.float64), a + np.float32(1e-6), a[:2], a.tolist(), tuple(a.tolist())]
+    assert len({output_digest(x) for x in [a, *others]}) == 1 + len(others)
+    assert output_digest({"points": a, "n": 3}) == output_digest({"n": 3, "points": a.copy()})
+    assert output_digest(np.array([object()])) is None and output_digest({1: a}) is None
+
+
+def test_a_kept_result_reads_back_exactly():
+    results = [MetricResult("repeatability", 0.1 + 0.2, 1 - (0.1 + 0.2), {"n_source": 3, "coverage": 0.917}),
+               MetricResult.undefined("repeatability", "nothing to compare", n_source=0, n_follow=0)]
+    for result in results:
+        back = result_from_dict(json.loads(json.dumps(result_to_dict(result), sort_keys=True)))
+        assert (back.metric, back.valid, back.details) == (result.metric, result.valid, result.details)
+        for x, y in ((back.score, result.score), (back.deviation, result.deviation)):
+            assert x == y or (math.isnan(x) and math.isnan(y)), (x, y)
+    assert result_to_dict(MetricResult("m", 1.0, 0.0, {"points": np.zeros(2)})) is None, "not plain: not kept"
