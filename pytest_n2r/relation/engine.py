@@ -29,7 +29,7 @@ from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
 from .failure import MAX_UNDEFINED, RelationFailure, failure_message
-from .kept_results import result_from_dict, result_key, result_to_dict
+from .kept_results import repainted_key, result_from_dict, result_key, result_to_dict
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
@@ -185,7 +185,7 @@ class Engine:
         """:meth:`compute`, or its result kept from an earlier evaluation of the same SUT and metric objects on
         the same two renders (a replayed example), or from an earlier session's evaluation of the same metric on
         the same two outputs and renders, in the render cache (a warm run; :mod:`.kept_results`);
-        ``follow_key=None`` (a mutated image): always computed."""
+        ``follow_key=None`` (an image that is no render, nor a render with other pixels): always computed."""
         if follow_key is None:
             return self.compute(out_source, out_follow, source, follow, where)
         result = self.sut_outputs.result(self.sut, self.metric, source_key, follow_key)
@@ -264,7 +264,9 @@ class Engine:
                 return Evaluation(record, where)
         out_source = self.sut_on_render(source, source_key, "source", where)
         out_follow = self.sut_on_render(follow, follow_key, "follow-up", where, source=(source.rgb, out_source))
-        result = self.compute_on_renders(out_source, out_follow, source, follow, source_key, follow_key, where)
+        # a mutation's follow-up is its source render with other pixels: its metric result is kept under both
+        result = self.compute_on_renders(out_source, out_follow, source, follow, source_key,
+                                         follow_key or repainted_key(source, source_key, follow), where)
         if not getattr(result, "valid", True):
             record.status, record.reason = "undefined", str(result.details.get("reason", "metric undefined"))
         else:

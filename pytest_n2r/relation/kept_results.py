@@ -29,8 +29,9 @@ import numpy as np
 
 from .. import __version__
 from ..metrics.base import Metric, MetricResult
+from ..render.view import RenderedView
 
-__all__ = ["output_digest", "result_key", "result_to_dict", "result_from_dict"]
+__all__ = ["output_digest", "result_key", "result_to_dict", "result_from_dict", "repainted_key"]
 
 _PLAIN = (bool, int, float, str, type(None))
 
@@ -70,6 +71,24 @@ def _feed(digest: Any, value: Any) -> bool:
         digest.update(f"dict{len(value)}{{".encode())
         return all(_feed(digest, k) and _feed(digest, value[k]) for k in sorted(value))
     return False
+
+
+def repainted_key(source: RenderedView, source_key: str, follow: RenderedView) -> str | None:
+    """A key naming ``follow`` when it is the render ``source_key`` with other pixels (a mutation's follow-up:
+    the same camera, pose, depth and opacity arrays, its own ``rgb``), from the source's key and a digest of its
+    pixels; ``None`` for any other view.
+
+    >>> from pytest_n2r.geometry import Camera
+    >>> view = RenderedView(Camera(2, 1, 1, 1, 0.5, 0), np.eye(4), rgb=np.zeros((1, 2, 3), np.uint8))
+    >>> brighter = RenderedView(view.camera, view.c2w, rgb=view.rgb + 1)
+    >>> repainted_key(view, "k", brighter) != repainted_key(view, "k", view), repainted_key(view, "k", view)[:7]
+    (True, 'painted')
+    """
+    if not (follow.depth is source.depth and follow.opacity is source.opacity and follow.camera == source.camera
+            and np.array_equal(follow.c2w, source.c2w)) or follow.rgb is None:
+        return None
+    pixels = output_digest(follow.rgb)
+    return None if pixels is None else f"painted {source_key} {pixels}"
 
 
 def result_key(metric: Metric, source_key: str, follow_key: str, out_source: Any, out_follow: Any) -> str | None:

@@ -15,7 +15,7 @@ from pytest_n2r.metrics.keypoints import Repeatability
 from pytest_n2r.relation import Relation, RunSettings, check_relation
 from pytest_n2r.relation.kept_results import output_digest, result_from_dict, result_key, result_to_dict
 from pytest_n2r.scene.render_cache import RenderCache
-from pytest_n2r.strategies import transforms
+from pytest_n2r.strategies import brightness, noise_patch, transforms
 from tests.plugin.fakescene import PlaneScene
 
 SETTINGS = RunSettings(derandomize=True, database=None)
@@ -47,6 +47,20 @@ def test_a_second_session_takes_the_keypoint_metrics_results_from_the_render_cac
     computed.clear()
     again = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
     assert computed == [] and _records(again) == _records(first)
+
+
+def test_a_mutations_results_are_kept_under_its_source_render_and_its_pixels(tmp_path, monkeypatch):
+    scene = PlaneScene()
+    relation = Relation.build(repeatability(px=2), 0.9, brightness(max_levels=40), examples=10)
+    computed = _counting(monkeypatch)
+    first = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed and first.valid_examples, "the test needs evaluated examples"
+    computed.clear()
+    again = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed == [] and _records(again) == _records(first)
+    other = Relation.build(repeatability(px=2), 0.9, noise_patch(max_size=0.3, min_size=0.1), examples=5)
+    check_relation(scene, corners, other, settings=SETTINGS, cache=RenderCache(tmp_path))
+    assert computed, "other pixels: computed"
 
 
 def test_other_outputs_or_another_metric_are_computed_again(tmp_path, monkeypatch):
