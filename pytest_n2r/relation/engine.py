@@ -29,7 +29,7 @@ from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
 from .failure import MAX_UNDEFINED, RelationFailure, failure_message
-from .kept_results import repainted_key, result_from_dict, result_key, result_to_dict
+from .kept_results import kept_result, repainted_key
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
@@ -190,20 +190,10 @@ class Engine:
             return self.compute(out_source, out_follow, source, follow, where)
         result = self.sut_outputs.result(self.sut, self.metric, source_key, follow_key)
         if result is MISSING:
-            start = time.perf_counter()
-            stored_key = None if self.cache.directory is None else \
-                result_key(self.metric, source_key, follow_key, out_source, out_follow)
-            stored = self.cache.decision(stored_key) if stored_key is not None else None
-            try:
-                result = result_from_dict(stored) if stored is not None else None
-            except (KeyError, TypeError, ValueError):  # another shape of decision under the key: computed again
-                result = None
-            self.run_record.timings["metric"] += time.perf_counter() - start
-            if result is None:
-                result = self.compute(out_source, out_follow, source, follow, where)
-                kept = result_to_dict(result) if stored_key is not None else None
-                if stored_key is not None and kept is not None:
-                    self.cache.put_decision(stored_key, kept)
+            before, start = self.run_record.timings["metric"], time.perf_counter()
+            result = kept_result(self.cache, self.metric, source_key, follow_key, out_source, out_follow,
+                                 lambda: self.compute(out_source, out_follow, source, follow, where))
+            self.run_record.timings["metric"] = before + time.perf_counter() - start  # the look-up's time too
             self.sut_outputs.put_result(self.sut, self.metric, source_key, follow_key, result)
         return result
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,8 +31,9 @@ import numpy as np
 from .. import __version__
 from ..metrics.base import Metric, MetricResult
 from ..render.view import RenderedView
+from ..scene.render_cache import RenderCache
 
-__all__ = ["output_digest", "result_key", "result_to_dict", "result_from_dict", "repainted_key"]
+__all__ = ["kept_result", "output_digest", "result_key", "result_to_dict", "result_from_dict", "repainted_key"]
 
 _PLAIN = (bool, int, float, str, type(None))
 
@@ -71,6 +73,25 @@ def _feed(digest: Any, value: Any) -> bool:
         digest.update(f"dict{len(value)}{{".encode())
         return all(_feed(digest, k) and _feed(digest, value[k]) for k in sorted(value))
     return False
+
+
+def kept_result(cache: RenderCache, metric: Metric, source_key: str, follow_key: str, out_source: Any,
+                out_follow: Any, compute: Callable[[], MetricResult]) -> MetricResult:
+    """``metric``'s result on the two outputs and renders as ``cache`` keeps it from an earlier session, else
+    ``compute()``'s, kept in ``cache`` when it can be (see the module's Convention); an exception of ``compute``
+    goes to the caller and nothing is kept."""
+    key = None if cache.directory is None else result_key(metric, source_key, follow_key, out_source, out_follow)
+    stored = cache.decision(key) if key is not None else None
+    try:
+        result = result_from_dict(stored) if stored is not None else None
+    except (KeyError, TypeError, ValueError):  # another shape of decision under the key: computed again
+        result = None
+    if result is None:
+        result = compute()
+        kept = result_to_dict(result) if key is not None else None
+        if key is not None and kept is not None:
+            cache.put_decision(key, kept)
+    return result
 
 
 def repainted_key(source: RenderedView, source_key: str, follow: RenderedView) -> str | None:

@@ -9,13 +9,17 @@ import math
 import cv2
 import numpy as np
 
+from pytest_n2r.demo import load_demo
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.metrics.keypoints import Repeatability
 from pytest_n2r.relation import Relation, RunSettings, check_relation
+from pytest_n2r.relation.floor import compare_exact
 from pytest_n2r.relation.kept_results import output_digest, result_from_dict, result_key, result_to_dict
+from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.render_cache import RenderCache
 from pytest_n2r.strategies import brightness, noise_patch, transforms
+from pytest_n2r.study import resolve_sut
 from tests.plugin.fakescene import PlaneScene
 
 SETTINGS = RunSettings(derandomize=True, database=None)
@@ -108,3 +112,15 @@ def test_a_kept_result_reads_back_exactly():
         for x, y in ((back.score, result.score), (back.deviation, result.deviation)):
             assert x == y or (math.isnan(x) and math.isnan(y)), (x, y)
     assert result_to_dict(MetricResult("m", 1.0, 0.0, {"points": np.zeros(2)})) is None, "not plain: not kept"
+
+
+def test_the_exact_replay_of_a_fitted_demo_scene_takes_the_kept_results(tmp_path, monkeypatch):
+    scene, camera_of = load_demo("wall-field", "cpu"), lambda v: RenderSize.parse(160).apply(v.camera)
+    orb = resolve_sut("orb", None).fn
+    relation = Relation.build(repeatability(px=2), 0.9, transforms(yaw=2), examples=4, size="160")
+    records = check_relation(scene, orb, relation, settings=SETTINGS).examples
+    first = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
+    assert first is not None and first.pairs, "the test needs replayed pairs"
+    computed = _counting(monkeypatch)
+    again = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
+    assert computed == [] and again == first

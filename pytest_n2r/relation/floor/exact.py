@@ -68,14 +68,16 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
                   cache: RenderCache | None = None, limit: int = EXACT_REPLAY_EXAMPLES) -> ExactComparison | None:
     """Replay the first ``limit`` accepted ``records`` of a relation on ``scene`` (source view by name, pose
     change in its recorded units, deviation) on the scene's exact twin; ``None`` when ``scene`` has none.
-    ``camera_of`` gives the render camera of a source view."""
+    ``camera_of`` gives the render camera of a source view. A keypoint metric's results on the exact renders are
+    kept in ``cache`` (:func:`~pytest_n2r.relation.kept_results.kept_result`): a later session takes them when the
+    SUT's outputs are the same."""
     twin = exact_twin(scene)
     if twin is None:
         return None
     render_cache = cache if cache is not None else RenderCache(None)
     outputs = normalize_outputs(("rgb", *(getattr(metric, "needs", ()) or ())))
     by_name = {v.name: v for v in scene.views}
-    sources: dict[str, tuple[RenderedView, Any]] = {}
+    sources: dict[str, tuple[RenderedView, str, Any]] = {}
     pairs, undefined, skipped = [], 0, 0
     accepted = [r for r in records if r.valid]  # the draws that were tests
     for record in accepted[:limit]:
@@ -85,13 +87,14 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             skipped += 1
             continue
         if view.name not in sources:
-            rendered = render_cache.render(twin, view.c2w, camera_of(view), outputs)
-            sources[view.name] = (rendered, sut(rendered.rgb))
-        source, out_source = sources[view.name]
+            rendered, key = render_cache.render_keyed(twin, view.c2w, camera_of(view), outputs)
+            sources[view.name] = (rendered, key, sut(rendered.rgb))
+        source, source_key, out_source = sources[view.name]
         tau = record.follow_up()
         follow_c2w = tau.apply(view.c2w, scene.length_scale(tau.units))
-        follow = render_cache.render(twin, follow_c2w, camera_of(view), outputs)
-        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name)
+        follow, follow_key = render_cache.render_keyed(twin, follow_c2w, camera_of(view), outputs)
+        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name,
+                              kept=(render_cache, source_key, follow_key))
         if sample.valid:
             pairs.append((float(record.deviation), sample.deviation))
         else:

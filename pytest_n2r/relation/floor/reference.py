@@ -13,9 +13,11 @@ import numpy as np
 
 from ...errors import MetricUndefined
 from ...geometry import Camera
-from ...metrics.base import Metric
+from ...metrics.base import Metric, MetricResult
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView
+from ...scene.render_cache import RenderCache
+from ..kept_results import kept_result
 
 __all__ = ["ShiftSample", "exact_twin", "floor_views", "reference_image", "reference_kind", "shift_sample"]
 
@@ -33,11 +35,18 @@ class ShiftSample:
 
 
 def shift_sample(metric: Metric, out_reference: Any, out_render: Any, reference: RenderedView,
-                 render: RenderedView, view: str) -> ShiftSample:
+                 render: RenderedView, view: str, *, kept: tuple[RenderCache, str, str] | None = None) -> ShiftSample:
     """Score the SUT's output on the reference image (``reference``, the render's geometry with the real
-    pixels) against its output on the ``render`` of the same pose, as a relation's source and follow-up."""
+    pixels) against its output on the ``render`` of the same pose, as a relation's source and follow-up.
+    ``kept``: a render cache and the render keys of ``reference`` and ``render`` when both are renders, so the
+    result an earlier session kept there is taken (:func:`~pytest_n2r.relation.kept_results.kept_result`)."""
+
+    def compute() -> MetricResult:
+        return metric.compute(out_reference, out_render, reference, render)
+
     try:
-        result = metric.compute(out_reference, out_render, reference, render)
+        result = compute() if kept is None else kept_result(kept[0], metric, kept[1], kept[2], out_reference,
+                                                             out_render, compute)
     except MetricUndefined as exc:
         return ShiftSample(view, math.nan, math.nan, False, str(exc))
     if not result.valid:
