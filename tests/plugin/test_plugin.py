@@ -568,3 +568,24 @@ def test_setup_froze_the_heap_and_no_garbage(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(passed=1)
+
+
+def test_the_collector_paused_for_the_start_up_resumes_after_the_freeze(n2r_project):
+    """The start-up runs with the collector off; the first setup collects and freezes before turning it back on,
+    so no young collection walks everything the start-up made just before the full one."""
+    n2r_project.write("""
+import gc
+
+COLLECTIONS = []
+gc.callbacks.append(lambda phase, info: phase == "start" and COLLECTIONS.append(info["generation"]))
+PAUSED_AT_COLLECTION = not gc.isenabled()
+ALLOCATED = [[] for _ in range(100_000)]  # far past the young generation's threshold
+
+
+def test_collected_once_then_on(n2r_scene):
+    assert PAUSED_AT_COLLECTION, "the start-up did not run with the collector off"
+    assert gc.isenabled(), "the collector is still off after the first setup"
+    assert COLLECTIONS[:1] == [2], f"collections before the freeze: {COLLECTIONS}"
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
