@@ -315,23 +315,43 @@ _RECT_MARGIN = 1.0
 def screen_rects(boxes: np.ndarray, c2w: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     """``(M, 4)`` pixel rectangles ``u_lo, u_hi, v_lo, v_hi`` that hold the projection of each box ``lo, hi``
     (rows of ``boxes (M, 6)``, world frame) seen from ``c2w``: a ray whose pixel coordinates lie outside a box's
-    rectangle cannot hit anything inside the box. A box with a corner at or behind the camera plane (or a
-    row of NaN: no box) gets the whole plane.
+    rectangle cannot hit anything inside the box. A row of NaN (no box) gets the whole plane; a box wholly at
+    or behind the camera plane an empty rectangle.
 
-    The projection of a convex body in front of the camera is the convex hull of its corners' projections;
-    the margin covers the rounding of both."""
+    The rays that meet a box are the cone its corners span from the camera; their pixels, the cone's section by
+    the plane ``z = 1`` (camera frame), are the convex hull of the projections of the corners in front of the
+    camera plus the cone's directions along that plane, which combine a corner in front with one at or behind
+    it (``z_i c_j - z_j c_i``): a side is unbounded where such a direction points out of it (a seabed that
+    reaches behind the camera still ends at its far edge). The margin covers the rounding of both.
+
+    >>> boxes = np.array([[-1.0, -1, 5, 1, 1, 6], [-10.0, 2, -10, 10, 2, 10], [-1.0, -1, -3, 1, 1, -2]])
+    >>> screen_rects(boxes, np.eye(4), 100, 100, 0, 0).tolist()  # in front; a floor from behind; behind
+    [[-21.0, 21.0, -21.0, 21.0], [-inf, inf, 19.0, inf], [inf, -inf, inf, -inf]]
+    """
     rects = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(boxes), 1))
     lo, hi = boxes[:, None, :3], boxes[:, None, 3:]
     pick = np.array([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=bool)  # 8 corners
     corners = np.where(pick[None], hi, lo)  # M 8 3
     cam = (corners - c2w[:3, 3]) @ c2w[:3, :3]  # world -> camera frame (R^T (p - o))
     z = cam[..., 2]
-    ok = np.all(z > 1e-6, axis=1) & np.all(np.isfinite(boxes), axis=1)
-    if ok.any():
-        u = fx * cam[ok, :, 0] / z[ok] + cx
-        v = fy * cam[ok, :, 1] / z[ok] + cy
-        rects[ok] = np.stack([u.min(1) - _RECT_MARGIN, u.max(1) + _RECT_MARGIN,
-                              v.min(1) - _RECT_MARGIN, v.max(1) + _RECT_MARGIN], axis=1)
+    boxed = np.all(np.isfinite(boxes), axis=1)
+    front = z > 1e-6  # a corner nearer the camera plane counts as at it: a direction along the plane
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.where(front, fx * cam[..., 0] / z + cx, np.nan)
+        v = np.where(front, fy * cam[..., 1] / z + cy, np.nan)
+    # the directions along the plane z = 1 (pairs: a corner in front, one not): where they point, a side is open
+    along = z[:, :, None, None] * cam[:, None, :, :2] - z[:, None, :, None] * cam[:, :, None, :2]  # M i j 2
+    pair = front[:, :, None] & ~front[:, None, :]
+    slack = 1e-9 * np.linalg.norm(along, axis=-1)
+    opens = [np.any(pair & (along[..., a] * sign < slack), axis=(1, 2)) for a in (0, 1) for sign in (1, -1)]
+    some = boxed & front.any(axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows of boxes without a corner in front
+        bounds = [np.nanmin(u, axis=1) - _RECT_MARGIN, np.nanmax(u, axis=1) + _RECT_MARGIN,
+                  np.nanmin(v, axis=1) - _RECT_MARGIN, np.nanmax(v, axis=1) + _RECT_MARGIN]
+    for side, (bound, open_, unbounded) in enumerate(zip(bounds, opens, (-math.inf, math.inf) * 2)):
+        rects[some, side] = np.where(open_, unbounded, bound)[some]
+    rects[boxed & ~front.any(axis=1)] = [math.inf, -math.inf, math.inf, -math.inf]
     return rects
 
 
