@@ -335,22 +335,24 @@ def screen_rects(boxes: np.ndarray, c2w: np.ndarray, fx: float, fy: float, cx: f
     cam = (corners - c2w[:3, 3]) @ c2w[:3, :3]  # world -> camera frame (R^T (p - o))
     z = cam[..., 2]
     boxed = np.all(np.isfinite(boxes), axis=1)
-    front = z > 1e-6  # a corner nearer the camera plane counts as at it: a direction along the plane
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = np.where(front, fx * cam[..., 0] / z + cx, np.nan)
-        v = np.where(front, fy * cam[..., 1] / z + cy, np.nan)
-    # the directions along the plane z = 1 (pairs: a corner in front, one not): where they point, a side is open
-    along = z[:, :, None, None] * cam[:, None, :, :2] - z[:, None, :, None] * cam[:, :, None, :2]  # M i j 2
-    pair = front[:, :, None] & ~front[:, None, :]
-    slack = 1e-9 * np.linalg.norm(along, axis=-1)
-    opens = [np.any(pair & (along[..., a] * sign < slack), axis=(1, 2)) for a in (0, 1) for sign in (1, -1)]
+    front = z > 0.5 * T_MIN  # nearer the camera plane: at it (a direction along it); no ray hits so near
     some = boxed & front.any(axis=1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows of boxes without a corner in front
-        bounds = [np.nanmin(u, axis=1) - _RECT_MARGIN, np.nanmax(u, axis=1) + _RECT_MARGIN,
-                  np.nanmin(v, axis=1) - _RECT_MARGIN, np.nanmax(v, axis=1) + _RECT_MARGIN]
-    for side, (bound, open_, unbounded) in enumerate(zip(bounds, opens, (-math.inf, math.inf) * 2)):
-        rects[some, side] = np.where(open_, unbounded, bound)[some]
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        u, v = fx * cam[..., 0] / z + cx, fy * cam[..., 1] / z + cy
+    rects[some] = np.stack([np.where(front, u, math.inf).min(1) - _RECT_MARGIN,
+                            np.where(front, u, -math.inf).max(1) + _RECT_MARGIN,
+                            np.where(front, v, math.inf).min(1) - _RECT_MARGIN,
+                            np.where(front, v, -math.inf).max(1) + _RECT_MARGIN], axis=1)[some]
+    cross = some & ~front.all(axis=1)  # the directions along the plane z = 1 (a corner in front, one not) open sides
+    if cross.any():
+        c, f = cam[cross], front[cross]
+        along = c[:, :, None, 2, None] * c[:, None, :, :2] - c[:, None, :, 2, None] * c[:, :, None, :2]  # i j 2
+        pair = (f[:, :, None] & ~f[:, None, :])[..., None]
+        slack = 1e-9 * np.abs(along).sum(axis=-1, keepdims=True)
+        rects[np.flatnonzero(cross)[:, None], [0, 2]] = np.where(np.any(pair & (along < slack), axis=(1, 2)),
+                                                                 -math.inf, rects[cross][:, [0, 2]])
+        rects[np.flatnonzero(cross)[:, None], [1, 3]] = np.where(np.any(pair & (along > -slack), axis=(1, 2)),
+                                                                 math.inf, rects[cross][:, [1, 3]])
     rects[boxed & ~front.any(axis=1)] = [math.inf, -math.inf, math.inf, -math.inf]
     return rects
 

@@ -7,6 +7,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.demo.primitives import T_MIN
 from pytest_n2r.demo.raycast import screen_rects
 from pytest_n2r.demo.scenes import look_at
 
@@ -18,17 +19,18 @@ extent = st.floats(0.0, 8.0, allow_nan=False)  # 0: a flat box, as a disc's
 
 
 def rays_meet_box(c2w: np.ndarray, us: np.ndarray, vs: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Whether the ray through each pixel ``(us, vs)`` meets the closed box ``lo, hi`` at ``t > 0`` (slabs)."""
+    """Whether the ray through each pixel ``(us, vs)`` meets the closed box ``lo, hi`` at ``t > T_MIN`` (slabs), as
+    the ray caster's hits do."""
     d = np.stack([(us - CX) / FX, (vs - CY) / FY, np.ones_like(us)], axis=-1) @ c2w[:3, :3].T
     o = c2w[:3, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         t0, t1 = (lo - o) / d, (hi - o) / d
     # a direction along a slab's plane: inside it for all t, or never
     along = d == 0
     inside = (o >= lo) & (o <= hi)
     near = np.where(along, np.where(inside, -np.inf, np.inf), np.minimum(t0, t1)).max(axis=-1)
     far = np.where(along, np.where(inside, np.inf, -np.inf), np.maximum(t0, t1)).min(axis=-1)
-    return (near <= far) & (far > 0)
+    return (near <= far) & (far > T_MIN)
 
 
 @settings(max_examples=150, deadline=None)
