@@ -2,7 +2,8 @@
 one cold run each, then warm runs taking turns (ratios survive a shared machine; a warm run's spread is ~2 s).
 
 Run: ``python benchmarks/main_job_compare.py a5c3b54 main`` (any revisions; the first is the base of the ratios;
-``--warm N``, default 3; ``--no-bytecode`` sets ``PYTHONDONTWRITEBYTECODE=1``; trailing ``-- ARGS`` go to pytest,
+``--warm N``, default 3; ``--no-bytecode`` sets ``PYTHONDONTWRITEBYTECODE=1`` and no prefix, so every run reads the
+installed packages' own bytecode and compiles the export's modules; trailing ``-- ARGS`` go to pytest,
 e.g. ``-- -k orb``). Each revision is exported whole with ``git archive`` into a temporary folder, its example
 project copied to ``ex`` there, and run as a user runs it: ``python -m pytest ex -p no:cacheprovider -q -rA`` from
 the export's root with the export first on ``PYTHONPATH``, its own empty render cache (``N2R_CACHE_DIR``), numba
@@ -42,11 +43,13 @@ def export_tree(revision: str, into: Path) -> tuple[str, Path]:
 
 def _environment(folder: Path, no_bytecode: bool) -> dict[str, str]:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(folder), str(folder / "example_project")]),
-               N2R_CACHE_DIR=str(folder / ".n2r"), NUMBA_CACHE_DIR=str(folder / ".numba"),
-               PYTHONPYCACHEPREFIX=str(folder / ".pyc"))
+               N2R_CACHE_DIR=str(folder / ".n2r"), NUMBA_CACHE_DIR=str(folder / ".numba"))
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    if no_bytecode:
+    env.pop("PYTHONPYCACHEPREFIX", None)
+    if no_bytecode:  # the installed packages' own __pycache__ is read; an empty prefix would compile torch every run
         env["PYTHONDONTWRITEBYTECODE"] = "1"
+    else:
+        env["PYTHONPYCACHEPREFIX"] = str(folder / ".pyc")
     return env
 
 
