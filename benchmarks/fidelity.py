@@ -42,11 +42,11 @@ import torch
 from _scoring import defined_mean, format_repeatabilities
 
 from pytest_n2r.metrics.image_quality import psnr, ssim
-from pytest_n2r.relation.floor.reference import floor_views, reference_image, reference_kind
+from pytest_n2r.relation.floor.nearby import nearby_image
+from pytest_n2r.relation.floor.reference import floor_views, reference_image, reference_kind, shift_sample
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.render.view import OUTPUTS, RenderedView
-from pytest_n2r.study.fidelity import DETECTORS, detector_repeatabilities, measure_fidelity
-from pytest_n2r.study.nearby import nearby_image
+from pytest_n2r.study.fidelity import DETECTORS, measure_fidelity
 from pytest_n2r.study.suts import resolve_sut
 
 #: Issue 14's targets on the fox (10-minute CPU fit): held-out PSNR and each detector's repeatability.
@@ -145,10 +145,22 @@ def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
             other = RenderedView(moved, rendered.c2w, rgb=worse, depth=rendered.depth, opacity=rendered.opacity)
             rows[name]["psnr"].append(psnr(image, worse))
             rows[name]["ssim"].append(ssim(image, worse))
-            for d, score in detector_repeatabilities(real, other, view.name, outputs).items():
+            for d, score in _repeatabilities(real, other, view.name, outputs).items():
                 rows[name][d].append(score)
     return {name: {"psnr": float(np.mean(row["psnr"])), "ssim": float(np.mean(row["ssim"])),
                    **{d: defined_mean(row[d]) for d in DETECTORS}} for name, row in rows.items()}
+
+
+def _repeatabilities(reference: RenderedView, other: RenderedView, view: str, outputs: dict) -> dict[str, float]:
+    """Each detector's repeatability between ``reference`` (a view's reference image with its render's geometry;
+    ``outputs``: the detectors' outputs on it) and ``other`` (another image of the same pose, same geometry);
+    NaN where the metric is undefined."""
+    scores = {}
+    for d in DETECTORS:
+        sut = resolve_sut(d, None)
+        sample = shift_sample(sut.metrics()["repeatability"], outputs[d], sut.fn(other.rgb), reference, other, view)
+        scores[d] = sample.score if sample.valid else float("nan")
+    return scores
 
 
 def aligned_onto(reference: np.ndarray, image: np.ndarray) -> np.ndarray:
@@ -173,13 +185,19 @@ NEIGHBOUR_ANGLE_BINS = ((0.0, 2.0), (2.0, 4.0), (4.0, 180.0))
 def _neighbour_record(scene, view, render_size: RenderSize, kind: str) -> dict:
     """One view's :func:`neighbours` measurements: the nearest other photo's angle, distance and share of pixels
     brought, and PSNR and each detector's repeatability of each of :data:`NEIGHBOUR_ROWS`."""
-    near = nearby_image(scene, view, render_size, kind, lambda s, c2w, cam: s.render(c2w, cam, OUTPUTS))
-    real = replace(near.rendered, rgb=near.reference)
-    outputs = {d: resolve_sut(d, None).fn(near.reference) for d in DETECTORS}
+    def render(s, c2w: np.ndarray, camera) -> RenderedView:
+        return s.render(c2w, camera, OUTPUTS if s is scene else ("rgb",))
+
+    camera = render_size.apply(view.camera)
+    rendered = render(scene, view.c2w, camera)
+    reference = np.asarray(reference_image(scene, view, camera, kind, render))
+    near = nearby_image(scene, view, rendered, render_size, kind, render)
+    real = replace(rendered, rgb=reference)
+    outputs = {d: resolve_sut(d, None).fn(reference) for d in DETECTORS}
     scores = {}
-    for name, image in zip(NEIGHBOUR_ROWS, (near.rendered.rgb, near.image, aligned_onto(near.reference, near.image))):
-        scores[name] = {"psnr": psnr(near.reference, image),
-                        **detector_repeatabilities(real, replace(near.rendered, rgb=image), view.name, outputs)}
+    for name, image in zip(NEIGHBOUR_ROWS, (rendered.rgb, near.image, aligned_onto(reference, near.image))):
+        scores[name] = {"psnr": psnr(reference, image),
+                        **_repeatabilities(real, replace(rendered, rgb=image), view.name, outputs)}
     return {"view": view.name, "degrees": near.degrees, "reference lengths": near.distance,
             "share brought": near.share, "scores": scores}
 

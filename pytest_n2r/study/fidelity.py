@@ -6,35 +6,33 @@ The reference image is the stored photo, or the exact render for a fitted demo s
 (:func:`pytest_n2r.relation.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
 ``1 - score`` is the field floor a relation with that detector and metric inherits. Beside it, the yardstick:
 each detector's repeatability on the capture's nearest other photo brought to the same pose
-(:mod:`pytest_n2r.study.nearby`), what a real image taken nearby scores against the reference.
+(:mod:`pytest_n2r.relation.floor.nearby`), what a real image taken nearby scores against the reference.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Camera
 from ..metrics.image_quality import psnr, ssim
 from ..relation.floor import (
     FieldFloor,
     FloorStore,
+    ShiftSample,
     floor_views,
+    json_number,
     measure_floor,
     reference_image,
     reference_kind,
-    shift_sample,
 )
 from ..render.size import RenderSize
-from ..render.view import RenderedView
 from ..scene.base import Scene
 from ..scene.render_cache import RenderCache
-from .nearby import nearby_image
 from .suts import resolve_sut
 
-__all__ = ["DETECTORS", "FidelityReport", "detector_repeatabilities", "measure_fidelity"]
+__all__ = ["DETECTORS", "FidelityReport", "measure_fidelity"]
 
 #: The detectors the fidelity report measures (built-in SUTs of ``n2r study``).
 DETECTORS = ("orb", "sift", "akaze")
@@ -44,11 +42,8 @@ DETECTORS = ("orb", "sift", "akaze")
 class FidelityReport:
     """``images``: per held-out view, PSNR (dB) and SSIM of the render against the reference image;
     ``floors``: a :class:`~pytest_n2r.relation.floor.FieldFloor` per detector and metric name (``("orb",
-    "repeatability")``, ...); ``reference``: the
-    reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``); ``nearby``: per detector, the mean
-    repeatability of the nearest other photo brought to each view's pose (NaN where undefined; empty when the
-    scene has no other fitted view with a reference image), and ``nearby_gap`` how far those photos were
-    (median ``"degrees"`` between optical axes and ``"reference lengths"`` between centres)."""
+    "repeatability")``, ...), each with its nearest-photo samples beside the render's; ``reference``: the
+    reference kind (``"photo"``, ``"exact"``, or ``"none"`` with ``reason``)."""
 
     scene: str
     size: str
@@ -56,8 +51,6 @@ class FidelityReport:
     reason: str
     images: tuple[dict, ...]
     floors: dict[tuple[str, str], FieldFloor]
-    nearby: dict[str, float] = field(default_factory=dict)
-    nearby_gap: dict[str, float] = field(default_factory=dict)
 
     def mean(self, key: str) -> float:
         values = [row[key] for row in self.images if np.isfinite(row[key])]
@@ -66,8 +59,18 @@ class FidelityReport:
     def score(self, detector: str, metric: str) -> float:
         """Mean score of ``detector`` under ``metric`` (``"repeatability"`` or ``"ip_spread"``)."""
         floor = self.floors.get((detector, metric))
-        scores = [s.score for s in floor.samples if s.valid] if floor is not None else []
-        return float(np.mean(scores)) if scores else float("nan")
+        return _mean_score(floor.samples if floor is not None else ())
+
+    def nearby_score(self, detector: str) -> float:
+        """Mean repeatability of ``detector`` on the nearest other photo brought to each view's pose (the floors'
+        ``nearby`` samples), NaN when undefined or when the scene has no other fitted view to bring."""
+        floor = self.floors.get((detector, "repeatability"))
+        return _mean_score(floor.nearby if floor is not None else ())
+
+    @property
+    def nearby_degrees(self) -> float:
+        """How far the nearest other photos were: the median angle between optical axes (NaN without them)."""
+        return next((f.nearby_degrees for f in self.floors.values() if f.nearby), float("nan"))
 
     def to_dict(self) -> dict:
         return {"scene": self.scene, "size": self.size, "reference": self.reference, "reason": self.reason,
@@ -75,8 +78,8 @@ class FidelityReport:
                 "detectors": {d: {m: self.score(d, m) for m in ("repeatability", "ip_spread")}
                               for d in DETECTORS},
                 "floors": [{"detector": d, "metric": m, **f.to_dict()} for (d, m), f in self.floors.items()],
-                "nearby": {d: (None if math.isnan(v) else v) for d, v in self.nearby.items()},
-                "nearby_gap": self.nearby_gap}
+                "nearby": {d: json_number(self.nearby_score(d)) for d in DETECTORS},
+                "nearby_degrees": json_number(self.nearby_degrees)}
 
     def format(self) -> str:
         """Plain-text table (what ``n2r info --shift`` prints)."""
@@ -90,19 +93,25 @@ class FidelityReport:
                  f"pose ({self.size} px, mean of {n} view{'s' if n != 1 else ''}; 1 is ideal)"),
                  f"  render vs reference   PSNR {self.mean('psnr'):.2f} dB, SSIM {self.mean('ssim'):.4f}",
                  f"  {'detector':<10}{'repeatability':>15}{'spread':>9}{column:>15}"]
+        have = math.isfinite(self.nearby_degrees)
         for d in DETECTORS:
-            value = self.nearby.get(d, math.nan)
-            yardstick = f"{value:>15.3f}" if math.isfinite(value) else f"{'undefined' if self.nearby else 'n/a':>15}"
+            value = self.nearby_score(d)
+            yardstick = f"{value:>15.3f}" if math.isfinite(value) else f"{'undefined' if have else 'n/a':>15}"
             lines.append(f"  {d:<10}{self.score(d, 'repeatability'):>15.3f}{self.score(d, 'ip_spread'):>9.3f}"
                          f"{yardstick}")
-        if self.nearby:
+        if have:
             other = "photo" if photo else "view's exact render"
-            lines.append(f"  {column}: the nearest other fitted {other} (median {self.nearby_gap['degrees']:.1f}° "
+            lines.append(f"  {column}: the nearest other fitted {other} (median {self.nearby_degrees:.1f}° "
                          "away) brought to the same pose through the field's depth,\n"
                          "  scored like the render: what an image taken nearby scores")
         else:
             lines.append(f"  {column} n/a: no other fitted view with a reference image")
         return "\n".join(lines)
+
+
+def _mean_score(samples: tuple[ShiftSample, ...]) -> float:
+    scores = [s.score for s in samples if s.valid]
+    return float(np.mean(scores)) if scores else float("nan")
 
 
 def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: int | None = None,
@@ -127,47 +136,4 @@ def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: i
         for key, metric in sut.metrics().items():
             floors[name, key] = measure_floor(scene, sut.fn, metric, size=render_size, cache=cache, store=store,
                                               name=name, max_views=max_views)
-    nearby, gap = _nearby(scene, kind, render_size, max_views, cache)
-    return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors, nearby, gap)
-
-
-def detector_repeatabilities(reference: RenderedView, other: RenderedView, view: str,
-                             outputs: dict | None = None) -> dict[str, float]:
-    """Each of :data:`DETECTORS`' repeatability between ``reference`` (a view's reference image with its render's
-    geometry; ``outputs``: the detectors' outputs on it, if already computed) and ``other`` (another image of the
-    same pose with the same geometry); NaN where the metric is undefined."""
-    scores = {}
-    for d in DETECTORS:
-        sut = resolve_sut(d, None)
-        out = outputs[d] if outputs is not None else sut.fn(reference.rgb)
-        sample = shift_sample(sut.metrics()["repeatability"], out, sut.fn(other.rgb), reference, other, view)
-        scores[d] = sample.score if sample.valid else math.nan
-    return scores
-
-
-def _nearby(scene: Scene, kind: str, render_size: RenderSize | None, max_views: int | None,
-            cache: RenderCache) -> tuple[dict[str, float], dict[str, float]]:
-    """Each detector's mean repeatability of the nearest other photo brought to each held-out pose, against the
-    reference there (:mod:`~pytest_n2r.study.nearby`), and the median gap to those photos; empty without one."""
-    def render(s: Scene, c2w: np.ndarray, camera: Camera) -> RenderedView:
-        return cache.render(s, c2w, camera, ("rgb", "depth", "opacity"))
-
-    scores: dict[str, list[float]] = {d: [] for d in DETECTORS}
-    gaps: dict[str, list[float]] = {"degrees": [], "reference lengths": []}
-    for view in floor_views(scene, max_views):
-        try:
-            near = nearby_image(scene, view, render_size, kind, render)
-        except ValueError:
-            return {}, {}
-        gaps["degrees"].append(near.degrees)
-        gaps["reference lengths"].append(near.distance)
-        real, brought = replace(near.rendered, rgb=near.reference), replace(near.rendered, rgb=near.image)
-        for d, score in detector_repeatabilities(real, brought, view.name).items():
-            scores[d].append(score)
-    if not gaps["degrees"]:
-        return {}, {}
-    means = {}
-    for d, values in scores.items():
-        finite = [v for v in values if math.isfinite(v)]
-        means[d] = float(np.mean(finite)) if finite else math.nan
-    return means, {k: float(np.median(v)) for k, v in gaps.items()}
+    return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors)

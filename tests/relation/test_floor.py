@@ -70,7 +70,7 @@ def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
     scene = BlurredPlane(blur=1.5, width=160, height=120)
     first = Counting(corners)
     a = measure_floor(scene, first, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
-    assert first.calls == 4, "photo and render of each of the 2 held-out views"
+    assert first.calls == 6, "photo, render and the nearest other photo brought there, for each of the 2 held-out views"
     again = Counting(corners)
     b = measure_floor(scene, again, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
     assert again.calls == 1 and b == a, "a new store on the same folder reads the floor back (1 probe call)"
@@ -78,10 +78,25 @@ def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
 
     edited = Counting(lambda rgb: corners(rgb)[::2])  # same name, other output: measured again
     c = measure_floor(scene, edited, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
-    assert edited.calls == 4 and c.key != a.key
+    assert edited.calls == 6 and c.key != a.key
     other_size = measure_floor(scene, corners, repeatability(px=2), size=RenderSize.parse(80),
                                store=FloorStore(tmp_path), name="corners")
     assert other_size.key not in (a.key, c.key) and other_size.size == "80"
+
+
+def test_the_nearest_photo_brought_to_each_pose_says_what_the_capture_itself_gives():
+    # The plane's photos are sharp and its poses differ by a sideways step (parallel optical axes): a photo
+    # brought to the neighbouring pose keeps almost every corner, whatever the field's blur does to the render.
+    sharp, soft = (measure_floor(BlurredPlane(blur=b, width=160, height=120), corners, repeatability(px=2))
+                   for b in (0.0, 2.5))
+    for floor in (sharp, soft):
+        assert len(floor.nearby) == 2 and all(s.valid for s in floor.nearby), floor.nearby
+        assert floor.nearby_degrees == 0.0 and floor.nearby_distance > 0, "the neighbour is not the view itself"
+        assert floor.nearby_value < 0.15, f"a sharp photo moved by a sideways step lost {floor.nearby_value}"
+    assert soft.value > 0.9 and sharp.value == 0.0, (soft.value, sharp.value)
+    assert "; the nearest other photo brought to each pose (0.0° and 0.1 reference lengths away): 0.105" in (
+        soft.describe()), soft.describe()
+    assert FieldFloor.from_dict(soft.to_dict()) == soft
 
 
 def test_floor_round_trips_through_json():

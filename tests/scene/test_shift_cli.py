@@ -35,7 +35,7 @@ def test_info_shift_prints_psnr_and_each_detectors_shift(tiny_scene_file, capsys
     assert math.isfinite(shift["psnr"]) and 0 < shift["ssim"] <= 1
     assert set(shift["nearby"]) == {"orb", "sift", "akaze"}, shift["nearby"]
     assert all(v is None or 0 <= v <= 1 for v in shift["nearby"].values()), shift["nearby"]
-    assert shift["nearby_gap"]["degrees"] > 0 and shift["nearby_gap"]["reference lengths"] > 0
+    assert shift["nearby_degrees"] > 0, "the nearest other photo is the view itself"
 
 
 def test_info_shift_without_photos_says_why(tiny_capture, tiny_fit, tmp_path, capsys, monkeypatch):
@@ -120,10 +120,16 @@ def test_optical_flow_alignment_undoes_a_shift(fidelity_benchmark):
 
 
 def test_the_shift_table_names_its_yardstick_and_says_when_it_has_none():
+    from pytest_n2r.relation.floor import FieldFloor, ShiftSample
     from pytest_n2r.study.fidelity import FidelityReport
 
-    exact = FidelityReport("wall", "480", "exact", "", (), {}, {"orb": 0.5, "sift": math.nan, "akaze": 0.7},
-                           {"degrees": 3.0, "reference lengths": 0.1}).format().splitlines()
+    def floor(detector: str, score: float) -> FieldFloor:
+        sample = ShiftSample("v", score, 1 - score, math.isfinite(score), "" if math.isfinite(score) else "none")
+        return FieldFloor("wall", detector, "repeatability", "480", "exact", (sample,), nearby=(sample,),
+                          nearby_degrees=3.0)
+
+    floors = {(d, "repeatability"): floor(d, s) for d, s in (("orb", 0.5), ("sift", math.nan), ("akaze", 0.7))}
+    exact = FidelityReport("wall", "480", "exact", "", (), floors).format().splitlines()
     assert exact[2].split()[-2:] == ["nearest", "view"], exact
     assert exact[3].split()[-1] == "0.500" and exact[4].split()[-1] == "undefined", exact
     assert exact[6].startswith("  nearest view: the nearest other fitted view's exact render (median 3.0° away)")

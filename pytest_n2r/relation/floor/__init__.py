@@ -13,7 +13,10 @@ source and follow-up. The reference image is, in this order:
 An exact scene has no field, so no floor; a fitted scene without photos or exact twin has no reference.
 Both are reported as unavailable with the reason, never as a floor of 0.
 
-The floor is the mean deviation over the held-out views whose metric is defined. A relation whose ``eps``
+The floor is the mean deviation over the held-out views whose metric is defined. Beside it, the same SUT and
+metric between each reference image and the capture's nearest other fitted view's reference image brought to the
+pose through the field's depth (:mod:`.nearby`): what an image taken nearby gives, so a floor is read against what
+the capture itself allows (a photo scene's floor near it is the photos', not the field's). A relation whose ``eps``
 is below it asks the SUT to agree with itself across two renders more closely than it agrees between the
 photo and the render of one pose: it then tests the scene field, not the SUT.
 
@@ -29,7 +32,7 @@ from __future__ import annotations
 
 from .annotate import annotate_relation, annotation_lines
 from .exact import EXACT_REPLAY_EXAMPLES, ExactComparison, compare_exact
-from .measure import FLOOR_VERSION, FieldFloor, FloorStore, measure_floor, sut_name
+from .measure import FLOOR_VERSION, FieldFloor, FloorStore, json_number, measure_floor, sut_name
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
 __all__ = [
@@ -42,6 +45,7 @@ __all__ = [
     "compare_exact",
     "exact_twin",
     "floor_views",
+    "json_number",
     "measure_floor",
     "reference_image",
     "reference_kind",

@@ -1,7 +1,8 @@
 """The field floor of one SUT and metric on one scene at one render size: the mean deviation, over the
 held-out views whose metric is defined, between the SUT's output on each view's reference image and on the
-field's render at the same pose (:func:`measure_floor`), kept in memory and on disk by a :class:`FloorStore`.
-See :mod:`pytest_n2r.relation.floor` for what it means.
+field's render at the same pose (:func:`measure_floor`), beside the same measured on the capture's nearest other
+photo brought to each pose (:mod:`~pytest_n2r.relation.floor.nearby`: what an image taken nearby gives), kept in
+memory and on disk by a :class:`FloorStore`. See :mod:`pytest_n2r.relation.floor` for what it means.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import json
 import math
 import os
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from itertools import chain
 from pathlib import Path
 from typing import Any
@@ -24,14 +25,16 @@ from ...geometry import Camera
 from ...metrics.base import Metric
 from ...render.size import RenderSize
 from ...render.view import RenderedView
-from ...scene.base import Scene, SceneView, normalize_outputs
+from ...scene.base import Scene, SceneView
 from ...scene.render_cache import RenderCache
+from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
 __all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_floor", "sut_name"]
 
-#: Bumped when the measurement changes, so cached floors of an older measurement are not reused.
-FLOOR_VERSION = 1
+#: Bumped when the measurement changes, so cached floors of an older measurement are not reused
+#: (2: the nearest other photo's samples beside the render's).
+FLOOR_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -40,7 +43,11 @@ class FieldFloor:
 
     ``reference`` is ``"photo"``, ``"exact"`` or ``"none"`` (then ``reason`` says why there is no floor);
     ``samples`` holds one :class:`ShiftSample` per held-out view. :attr:`value` is the mean deviation of
-    the defined samples (NaN when none is defined)."""
+    the defined samples (NaN when none is defined). ``nearby`` holds, per held-out view, the same SUT and metric
+    between the reference image and the nearest other fitted view's reference image brought to the pose
+    (how far those views were: ``nearby_degrees``, the median angle between optical axes, and
+    ``nearby_distance``, the median distance between centres in reference lengths); empty when the scene has no
+    other fitted view with a reference image. :attr:`nearby_value` is their mean deviation."""
 
     scene: str
     sut: str
@@ -50,10 +57,19 @@ class FieldFloor:
     samples: tuple[ShiftSample, ...] = ()
     reason: str = ""
     key: str = ""
+    nearby: tuple[ShiftSample, ...] = ()
+    nearby_degrees: float = math.nan
+    nearby_distance: float = math.nan
 
     @property
     def deviations(self) -> list[float]:
         return [s.deviation for s in self.samples if s.valid]
+
+    @property
+    def nearby_value(self) -> float:
+        """The mean deviation of the defined :attr:`nearby` samples (NaN when none is defined)."""
+        defined = [s.deviation for s in self.nearby if s.valid]
+        return float(np.mean(defined)) if defined else math.nan
 
     @property
     def n(self) -> int:
@@ -94,9 +110,13 @@ class FieldFloor:
             return f"field floor n/a: {self.why_unavailable}"
         against = "photo" if self.reference == "photo" else "exact render"
         undefined = len(self.samples) - self.n
+        nearby = (f"; the nearest other {'photo' if self.reference == 'photo' else 'view'} brought to each pose "
+                  f"({self.nearby_degrees:.1f}° and {self.nearby_distance:.2g} reference lengths away): "
+                  f"{self.nearby_value:.3g}"
+                  if math.isfinite(self.nearby_value) else "")
         text = (f"field floor {self.value:.3g} ({against} vs field render at the same pose, mean of "
                 f"{self.n} held-out view{'s' if self.n != 1 else ''}, max {self.max:.3g}"
-                + (f", {undefined} undefined" if undefined else "") + ")")
+                + (f", {undefined} undefined" if undefined else "") + nearby + ")")
         if eps is not None and self.above(eps):
             text += (f"; WARNING: eps {eps:g} is below the field floor: this relation tests the scene field, "
                      "not the SUT")
@@ -105,17 +125,23 @@ class FieldFloor:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN as ``None``), with the summary values for readers of reports."""
         d = asdict(self)
-        d["samples"] = [{**s, "score": json_number(s["score"]), "deviation": json_number(s["deviation"])}
-                        for s in d["samples"]]
-        d.update(value=json_number(self.value), max=json_number(self.max), n=self.n)
+        for name in ("samples", "nearby"):
+            d[name] = [{**s, "score": json_number(s["score"]), "deviation": json_number(s["deviation"])}
+                       for s in d[name]]
+        d.update(value=json_number(self.value), max=json_number(self.max), n=self.n,
+                 nearby_value=json_number(self.nearby_value), nearby_degrees=json_number(self.nearby_degrees),
+                 nearby_distance=json_number(self.nearby_distance))
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> FieldFloor:
-        samples = tuple(ShiftSample(s["view"], _num(s["score"]), _num(s["deviation"]), bool(s["valid"]),
-                                    s.get("reason", "")) for s in d.get("samples", ()))
-        return cls(d["scene"], d["sut"], d["metric"], d["size"], d["reference"], samples, d.get("reason", ""),
-                   d.get("key", ""))
+        def samples(name: str) -> tuple[ShiftSample, ...]:
+            return tuple(ShiftSample(s["view"], _num(s["score"]), _num(s["deviation"]), bool(s["valid"]),
+                                     s.get("reason", "")) for s in d.get(name, ()))
+
+        return cls(d["scene"], d["sut"], d["metric"], d["size"], d["reference"], samples("samples"),
+                   d.get("reason", ""), d.get("key", ""), samples("nearby"), _num(d.get("nearby_degrees")),
+                   _num(d.get("nearby_distance")))
 
 
 def json_number(x: float) -> float | None:
@@ -190,13 +216,13 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         return FieldFloor(scene.name, name, repr(metric), size_text, kind, reason=reason)
     views = floor_views(scene, max_views)
     render_cache = cache if cache is not None else RenderCache(None)
-    outputs = normalize_outputs(("rgb", *(getattr(metric, "needs", ()) or ())))
 
     def camera_of(view: SceneView) -> Camera:
         return view.camera if size is None else size.apply(view.camera)
 
     def render(s: Scene, c2w: np.ndarray, camera: Camera) -> RenderedView:
-        return render_cache.render(s, c2w, camera, outputs if s is scene else ("rgb",))
+        # depth and opacity too: the nearest other photo is brought to the pose through them
+        return render_cache.render(s, c2w, camera, ("rgb", "depth", "opacity") if s is scene else ("rgb",))
 
     references = (reference_image(scene, v, camera_of(v), kind, render) for v in views)
     first = next(references)
@@ -209,14 +235,20 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
     if store is not None and (known := store.get(key)) is not None:
         return known
-    samples = []
+    samples, nearby, gaps = [], [], []
     for view, image in zip(views, chain([first], references)):
         rendered = render(scene, view.c2w, camera_of(view))
-        real = RenderedView(rendered.camera, rendered.c2w, rgb=image, depth=rendered.depth,
-                            opacity=rendered.opacity)
+        real = replace(rendered, rgb=image)
         out_real = first_output if image is first else sut(image)
         samples.append(shift_sample(metric, out_real, sut(rendered.rgb), real, rendered, view.name))
-    floor = FieldFloor(scene.name, name, repr(metric), size_text, kind, tuple(samples), key=key)
+        near = nearby_image(scene, view, rendered, size, kind, render)
+        if near is not None:
+            nearby.append(shift_sample(metric, out_real, sut(near.image), real, replace(rendered, rgb=near.image),
+                                       view.name))
+            gaps.append((near.degrees, near.distance))
+    degrees, distance = np.median(gaps, axis=0) if gaps else (math.nan, math.nan)
+    floor = FieldFloor(scene.name, name, repr(metric), size_text, kind, tuple(samples), key=key,
+                       nearby=tuple(nearby), nearby_degrees=float(degrees), nearby_distance=float(distance))
     if store is not None:
         store.put(floor)
     return floor

@@ -1,5 +1,6 @@
 """The capture's nearest other photo brought to a view's pose: what a real image taken nearby gives a detector,
-the yardstick a render's reality-to-field shift is read against (``n2r info --shift``, ``benchmarks/fidelity.py``).
+the yardstick a field floor is read against (:class:`~pytest_n2r.relation.floor.FieldFloor`'s ``nearby``, printed
+beside each relation's floor and by ``n2r info --shift``).
 
 Convention
 ----------
@@ -19,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geometry import Camera, pixel_grid
-from ..metrics.correspondence import DepthMapping
-from ..relation.floor import reference_image
-from ..render.size import RenderSize
-from ..render.view import RenderedView
-from ..scene.base import Scene, SceneView
+from ...geometry import Camera, pixel_grid
+from ...metrics.correspondence import DepthMapping
+from ...render.size import RenderSize
+from ...render.view import RenderedView
+from ...scene.base import Scene, SceneView
+from .reference import reference_image
 
 __all__ = ["NearbyImage", "nearest_fitted_view", "brought_to_view", "nearby_image"]
 
@@ -79,13 +80,10 @@ def brought_to_view(view: RenderedView, image: np.ndarray, image_view: RenderedV
 
 @dataclass(frozen=True, eq=False)
 class NearbyImage:
-    """A view's reference image, its render, and the nearest other fitted view's reference image brought to its
-    pose (:func:`nearby_image`): ``rendered`` (RGB, depth, opacity), ``reference`` and ``image`` (H×W×3 uint8
-    RGB), the ``other`` view, how far it is (``degrees`` between optical axes, ``distance`` in reference lengths)
-    and the ``share`` of pixels that took its colour."""
+    """The nearest other fitted view's reference image brought to a view's pose (:func:`nearby_image`):
+    ``image`` (H×W×3 uint8 RGB, the view's size), the ``other`` view, how far it is (``degrees`` between optical
+    axes, ``distance`` in reference lengths) and the ``share`` of pixels that took its colour."""
 
-    rendered: RenderedView
-    reference: np.ndarray
     image: np.ndarray
     other: SceneView
     degrees: float
@@ -93,20 +91,19 @@ class NearbyImage:
     share: float
 
 
-def nearby_image(scene: Scene, view: SceneView, size: RenderSize | None, kind: str,
-                 render: Callable[[Scene, np.ndarray, Camera], RenderedView]) -> NearbyImage:
+def nearby_image(scene: Scene, view: SceneView, rendered: RenderedView, size: RenderSize | None, kind: str,
+                 render: Callable[[Scene, np.ndarray, Camera], RenderedView]) -> NearbyImage | None:
     """The nearest other fitted view's reference image (a stored photo for ``kind="photo"``, the exact render for
-    ``"exact"``) brought to ``view``'s pose at ``size`` (``None``: each view's camera), beside ``view``'s reference
-    and render; ``render(scene, c2w, camera)`` renders RGB, depth and opacity (a render cache's, say). A
-    ``ValueError`` when the scene has no other fitted view with a reference image."""
-    def sized(camera: Camera) -> Camera:
-        return camera if size is None else size.apply(camera)
-
+    ``"exact"``) brought to ``view``'s pose, whose render at ``size`` (``None``: each view's camera) is
+    ``rendered`` (RGB, depth and opacity); ``render(scene, c2w, camera)`` renders the other view the same way (a
+    render cache's, say). ``None`` when the scene has no other fitted view with a reference image."""
     usable = (lambda v: v.image is not None) if kind == "photo" else (lambda v: True)
-    other, degrees, distance = nearest_fitted_view(scene, view.c2w, usable)
-    camera, other_camera = sized(view.camera), sized(other.camera)
-    rendered = render(scene, view.c2w, camera)
-    image, share = brought_to_view(rendered, np.asarray(reference_image(scene, other, other_camera, kind, render)),
-                                   render(scene, other.c2w, other_camera))
-    return NearbyImage(rendered, np.asarray(reference_image(scene, view, camera, kind, render)), image, other,
-                       degrees, distance, share)
+    try:
+        other, degrees, distance = nearest_fitted_view(scene, view.c2w, usable)
+    except ValueError:
+        return None
+    camera = other.camera if size is None else size.apply(other.camera)
+    image, share = brought_to_view(rendered, np.asarray(reference_image(scene, other, camera, kind, render)),
+                                   render(scene, other.c2w, camera))
+    image.setflags(write=False)  # a SUT gets it as it gets a photo or a cached render: it may not draw on it
+    return NearbyImage(image, other, degrees, distance, share)

@@ -1,5 +1,5 @@
-"""The nearest other photo brought to a view's pose (pytest_n2r.study.nearby): it lands where the two depths say,
-keeps the render where the other view does not see the point, and is never the view itself."""
+"""The nearest other photo brought to a view's pose (pytest_n2r.relation.floor.nearby): it lands where the two
+depths say, keeps the render where the other view does not see the point, and is never the view itself."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from pytest_n2r.geometry import Camera
+from pytest_n2r.relation.floor.nearby import brought_to_view, nearest_fitted_view
 from pytest_n2r.render.view import RenderedView
-from pytest_n2r.study.nearby import brought_to_view, nearest_fitted_view
 
 CAMERA = Camera(64, 48, fx=50.0, fy=50.0, cx=31.5, cy=23.5)
 RENDER = np.full((48, 64, 3), 7, dtype=np.uint8)
