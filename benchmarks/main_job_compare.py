@@ -29,7 +29,9 @@ from pathlib import Path
 
 from splat_compare import export
 
-_SPLIT = re.compile(r"render (?P<render>[\d.]+) s / SUT (?P<sut>[\d.]+) s / metric (?P<metric>[\d.]+) s")
+#: The session's split in the plugin's time line (each verdict line has its own relation's split, not this one).
+_SPLIT = re.compile(r"relations [\d.]+ s = render (?P<render>[\d.]+) s / SUT (?P<sut>[\d.]+) s / metric "
+                    r"(?P<metric>[\d.]+) s / validity (?P<validity>[\d.]+) s / field floors (?P<floors>[\d.]+) s")
 _VERDICT = re.compile(r"^(PASSED|FAILED|SKIPPED|ERROR) ")
 
 
@@ -102,20 +104,21 @@ def main(argv: list[str] | None = None) -> int:
     base_verdicts = runs[0]["cold"][0]["verdicts"]
     print(f"main job, cold once then {args.warm} warm runs each, taking turns; bytecode "
           f"{'not written' if args.no_bytecode else 'kept'}; pytest args {' '.join(pytest_args) or '(none)'}\n")
-    print("| revision | cold wall s | warm wall s | warm median s | ratio to base | warm SUT s (median) | "
-          "warm metric s (median) | verdicts as the base's | pytest's last line (cold) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| revision | cold wall s | cold field floors s | warm wall s | warm median s | ratio to base | "
+          "warm SUT s (median) | warm metric s (median) | verdicts as the base's | pytest's last line (cold) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     base_median = statistics.median(r["wall"] for r in runs[0]["warm"])
     for (name, _), revision, measured in zip(trees, args.revisions, runs, strict=True):
         warm = [r["wall"] for r in measured["warm"]]
         median = statistics.median(warm)
 
-        def split(key: str, measured: dict = measured) -> str:
-            values = [r["split"][key] for r in measured["warm"] if key in r["split"]]
+        def split(key: str, measured: dict = measured, kind: str = "warm") -> str:
+            values = [r["split"][key] for r in measured[kind] if key in r["split"]]
             return f"{statistics.median(values):.2f}" if values else "—"
 
         same = all(r["verdicts"] == base_verdicts for r in measured["cold"] + measured["warm"])
-        print(f"| {revision} ({name}) | {measured['cold'][0]['wall']:.2f} | {' / '.join(f'{w:.2f}' for w in warm)} | "
+        print(f"| {revision} ({name}) | {measured['cold'][0]['wall']:.2f} | {split('floors', kind='cold')} | "
+              f"{' / '.join(f'{w:.2f}' for w in warm)} | "
               f"{median:.2f} | {median / base_median:.2f} | {split('sut')} | {split('metric')} | "
               f"{'yes' if same else 'NO'} ({len(base_verdicts)} lines) | {measured['cold'][0]['last']} |")
     return 0

@@ -73,3 +73,17 @@ def test_cheap_benchmarks_run_on_tiny_inputs(script: str):
 def test_every_smoke_run_names_an_existing_script():
     missing = sorted(set(SMOKE) - {s.name for s in SCRIPTS})
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"
+
+
+def test_main_job_compare_reads_the_sessions_split_not_a_relations(monkeypatch):
+    monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("_main_job_compare", ROOT / "benchmarks" / "main_job_compare.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    relation = "PASSED t.py::x: 10 examples; time render 7.47 s / SUT 0.12 s / metric 0.14 s of 9.57 s"
+    session = ("time 33.9 s since pytest loaded pytest-n2r: start-up and collection 2.1 s; fixtures 1.1 s; relations "
+               "30.7 s = render 22.27 s / SUT 0.25 s / metric 0.32 s / validity 0.30 s / field floors 6.70 s / "
+               "search and other 0.83 s; other tests 0.0 s")
+    assert module._SPLIT.search(relation) is None, "a relation's own split was taken for the session's"
+    assert module._SPLIT.search(session).groupdict() == {"render": "22.27", "sut": "0.25", "metric": "0.32",
+                                                         "validity": "0.30", "floors": "6.70"}
