@@ -135,5 +135,5 @@ def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: i
         sut = resolve_sut(name, None)
         for key, metric in sut.metrics().items():
             floors[name, key] = measure_floor(scene, sut.fn, metric, size=render_size, cache=cache, store=store,
-                                              name=name, max_views=max_views)
+                                              name=name, max_views=max_views, nearby=True)
     return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors)

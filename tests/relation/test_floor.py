@@ -114,6 +114,10 @@ def test_a_fitted_demo_scene_is_measured_against_its_exact_twin():
     assert floor.reference == "exact" and len(floor.samples) == len([v for v in scene.views
                                                                       if v.split == "heldout"])
     assert floor.available and 0.0 <= floor.value <= 1.0, floor
+    assert floor.nearby == (), "on a fitted demo scene the exact replay says what the field does; no yardstick"
+    with_nearby = measure_floor(scene, orb, repeatability(px=2), size=RenderSize.parse(160), nearby=True)
+    assert len(with_nearby.nearby) == len(floor.samples) and with_nearby.value == floor.value
+    assert "the nearest other view brought to each pose (" in with_nearby.describe(), with_nearby.describe()
 
 
 def test_study_measures_a_fitted_demo_scene_against_its_exact_twin():

@@ -25,7 +25,7 @@ from ...geometry import Camera
 from ...metrics.base import Metric
 from ...render.size import RenderSize
 from ...render.view import RenderedView
-from ...scene.base import Scene, SceneView
+from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.render_cache import RenderCache
 from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
@@ -200,29 +200,35 @@ def _digest_output(output: Any) -> str:
 def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, *,
                   size: RenderSize | None = None, cache: RenderCache | None = None,
                   store: FloorStore | None = None, name: str | None = None,
-                  max_views: int | None = 12) -> FieldFloor:
+                  max_views: int | None = 12, nearby: bool | None = None) -> FieldFloor:
     """The field floor of ``sut`` (an H×W×3 uint8 RGB image → its output) under ``metric`` on ``scene``,
-    rendered at ``size`` (``None``: each view's camera) on at most ``max_views`` held-out views.
+    rendered at ``size`` (``None``: each view's camera) on at most ``max_views`` held-out views; with ``nearby``
+    the same on the nearest other photo brought to each pose beside it (``None``: where the reference is a
+    photo; on a fitted demo scene the relation's replay on exact renders says more, and costs no extra render).
 
     Renders go through ``cache`` (default: none); ``store`` keeps measured floors keyed by the scene's
     content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and a digest of its output
     on the first reference image, so an edited SUT whose output changes there is measured again), the
-    metric's ``repr``, the size, the views and :data:`FLOOR_VERSION`.
+    metric's ``repr``, the size, the views, whether ``nearby`` and :data:`FLOOR_VERSION`.
     """
     name = name or sut_name(sut)
     size_text = "view size" if size is None else str(size)
     kind, reason = reference_kind(scene)
     if kind == "none":
         return FieldFloor(scene.name, name, repr(metric), size_text, kind, reason=reason)
+    nearby = kind == "photo" if nearby is None else bool(nearby)
     views = floor_views(scene, max_views)
     render_cache = cache if cache is not None else RenderCache(None)
 
     def camera_of(view: SceneView) -> Camera:
         return view.camera if size is None else size.apply(view.camera)
 
+    needs = ("depth", "opacity") if nearby else (getattr(metric, "needs", ()) or ())
+    outputs = normalize_outputs(("rgb", *needs))
+
     def render(s: Scene, c2w: np.ndarray, camera: Camera) -> RenderedView:
-        # depth and opacity too: the nearest other photo is brought to the pose through them
-        return render_cache.render(s, c2w, camera, ("rgb", "depth", "opacity") if s is scene else ("rgb",))
+        # with nearby, depth and opacity too: the nearest other photo is brought to the pose through them
+        return render_cache.render(s, c2w, camera, outputs if s is scene else ("rgb",))
 
     references = (reference_image(scene, v, camera_of(v), kind, render) for v in views)
     first = next(references)
@@ -231,24 +237,24 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "scene": scene.content_hash,
             "twin": twin.content_hash if twin is not None else None, "sut": name,
             "probe": _digest_output(first_output), "metric": repr(metric), "size": size_text,
-            "views": [v.name for v in views], "reference": kind}
+            "views": [v.name for v in views], "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
     if store is not None and (known := store.get(key)) is not None:
         return known
-    samples, nearby, gaps = [], [], []
+    samples, nearby_samples, gaps = [], [], []
     for view, image in zip(views, chain([first], references)):
         rendered = render(scene, view.c2w, camera_of(view))
-        real = replace(rendered, rgb=image)
+        real = RenderedView(rendered.camera, rendered.c2w, rgb=image, depth=rendered.depth, opacity=rendered.opacity)
         out_real = first_output if image is first else sut(image)
         samples.append(shift_sample(metric, out_real, sut(rendered.rgb), real, rendered, view.name))
-        near = nearby_image(scene, view, rendered, size, kind, render)
+        near = nearby_image(scene, view, rendered, size, kind, render) if nearby else None
         if near is not None:
-            nearby.append(shift_sample(metric, out_real, sut(near.image), real, replace(rendered, rgb=near.image),
-                                       view.name))
+            nearby_samples.append(shift_sample(metric, out_real, sut(near.image), real,
+                                               replace(rendered, rgb=near.image), view.name))
             gaps.append((near.degrees, near.distance))
     degrees, distance = np.median(gaps, axis=0) if gaps else (math.nan, math.nan)
     floor = FieldFloor(scene.name, name, repr(metric), size_text, kind, tuple(samples), key=key,
-                       nearby=tuple(nearby), nearby_degrees=float(degrees), nearby_distance=float(distance))
+                       nearby=tuple(nearby_samples), nearby_degrees=float(degrees), nearby_distance=float(distance))
     if store is not None:
         store.put(floor)
     return floor
