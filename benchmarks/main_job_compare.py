@@ -73,8 +73,7 @@ def run_once(folder: Path, env: dict[str, str], pytest_args: list[str]) -> dict:
     if result.returncode not in (0, 1) or not lines:
         raise SystemExit(f"the main job in {folder.name[:10]} ended with {result.returncode}:\n"
                          f"{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
-    # the session's summary line ("time ... relations ... = render ...") comes after every relation's own split
-    split = next((m.groupdict() for m in map(_SPLIT.search, reversed(lines)) if m), {})
+    split = next((m.groupdict() for m in map(_SPLIT.search, lines) if m), {})
     verdicts = sorted(line.split("; time ")[0] for line in lines if _VERDICT.match(line))  # times vary
     return {"wall": wall, "split": {k: float(v) for k, v in split.items()}, "last": lines[-1].strip("= "),
             "verdicts": verdicts}
