@@ -13,8 +13,10 @@ Convention
   arithmetic and is bumped when it changes.
 - The key names the metric's class, its ``repr`` (which rebuilds its constructor call: every parameter), its
   ``result_version``, the package's and numpy's versions, both render keys (scene content, renderer, camera,
-  exact pose) and a digest of each SUT output. An output the digest cannot name exactly (anything but numbers,
-  strings, numeric arrays and lists, tuples and string-keyed dicts of them) is not kept.
+  exact pose) and a digest of each SUT output; the render cache folds a digest of the package's source into every
+  decision's key (:func:`~pytest_n2r.scene.render_cache.source_digest`), so an edited checkout computes again.
+  An output the digest cannot name exactly (anything but numbers, strings, numeric arrays and lists, tuples and
+  string-keyed dicts of them) is not kept.
 - A result is kept when every detail is a plain ``bool``, ``int``, ``float``, ``str`` or ``None``, which JSON
   gives back as the same value and type (floats to the bit, NaN included).
 """

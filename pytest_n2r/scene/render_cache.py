@@ -4,7 +4,10 @@ A render is identified by everything that determines its pixels: the scene's con
 render settings), its renderer's version, the pose (exact float64 bytes), the camera and the package version.
 Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs renders
 only the missing ones. Beside the renders the disk store keeps *decisions*: small JSON objects that a check
-computed from renders alone (a follow-up's validity verdict), under a key that names those renders. Files are
+computed from renders alone (a follow-up's validity verdict, a keypoint metric's result), under a key that names
+those renders, folded with a digest of the package's source, so a checkout whose code was edited (its version
+unchanged) decides again rather than reading what the old code decided; renders, which the renderer's version names
+and which cost far more, are not. Files are
 written under a temporary name and renamed into place, so concurrent pytest-xdist workers sharing one directory
 never see a torn file: at worst two workers render the same view and the second rename wins with identical bytes
 (rendering is deterministic).
@@ -12,6 +15,7 @@ never see a torn file: at worst two workers render the same view and the second 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -36,7 +40,8 @@ from .base import Scene, normalize_outputs
 from .first_render import first_render
 from .keep_threads import threads_kept
 
-__all__ = ["RenderCache", "CacheStats", "render_key", "parse_size", "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
+__all__ = ["RenderCache", "CacheStats", "render_key", "source_digest", "parse_size", "DEFAULT_DISK_BYTES",
+           "DEFAULT_MEMORY_BYTES"]
 
 DEFAULT_MEMORY_BYTES = 512 * 2**20
 #: Check the disk size cap after this many bytes were written (a directory scan is not free).
@@ -63,6 +68,18 @@ def parse_size(text: str | int, name: str = "size") -> int:
 
 
 DEFAULT_DISK_BYTES = parse_size(defaults.CACHE_SIZE)
+
+
+@functools.cache
+def source_digest() -> str:
+    """Hex SHA-256 of every module of the installed package (paths and bytes), read once a process (~10 ms): it
+    names the code that made a decision, so an edit to a check or a metric in a checkout is decided again."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        h.update(f"{path.relative_to(root).as_posix()}\0".encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
 
 
 def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
@@ -242,6 +259,7 @@ class RenderCache:
 
     def _decision_path(self, key: str) -> Path:
         assert self.directory is not None
+        key = hashlib.sha256(f"{source_digest()}/{key}".encode()).hexdigest()
         return self.directory / _DECISIONS / key[:2] / f"{key}.json"
 
     def _disk_get(self, key: str, name: str) -> np.ndarray | None:

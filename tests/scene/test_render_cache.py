@@ -184,13 +184,26 @@ def test_a_decision_is_kept_on_disk_beside_the_renders(tmp_path):
     RenderCache(None).put_decision(key, {"valid": True})  # a memory-only cache keeps none
     RenderCache(tmp_path).put_decision(key, {"valid": False, "reason": "empty view"})
     assert RenderCache(tmp_path).decision(key) == {"valid": False, "reason": "empty view"}
-    path = tmp_path / "decisions" / "ab" / f"{key}.json"
+    path = RenderCache(tmp_path)._decision_path(key)
+    assert path.is_file() and path.parent.parent == tmp_path / "decisions"
     path.write_text('{"valid": tr')  # torn: decided again, and the file goes
     assert RenderCache(tmp_path).decision(key) is None and not path.exists()
     cache = RenderCache(tmp_path)
     cache.put_decision(key, {"valid": True})
     cache.clear()
     assert cache.decision(key) is None and not (tmp_path / "decisions").exists()
+
+
+def test_a_decision_made_by_other_code_is_not_read(tmp_path, monkeypatch):
+    from pytest_n2r.scene import render_cache
+
+    key = "cd" + "0" * 62
+    RenderCache(tmp_path).put_decision(key, {"valid": True})
+    assert len(render_cache.source_digest()) == 64 and render_cache.source_digest() == render_cache.source_digest()
+    monkeypatch.setattr(render_cache, "source_digest", lambda: "an edited checkout")
+    assert RenderCache(tmp_path).decision(key) is None, "a decision of the old code was read by the edited one"
+    RenderCache(tmp_path).put_decision(key, {"valid": False})
+    assert RenderCache(tmp_path).decision(key) == {"valid": False}
 
 
 def test_trimming_evicts_the_decisions_older_than_the_renders_it_evicts(tmp_path):
@@ -204,7 +217,7 @@ def test_trimming_evicts_the_decisions_older_than_the_renders_it_evicts(tmp_path
         cache.render(scene, _pose(scene, yaw), camera, "rgb")
     cache.put_decision(new, {"valid": True})
     renders = sorted((tmp_path / "renders").glob("*/*.npy"))
-    for age, path in enumerate([tmp_path / "decisions" / "aa" / f"{old}.json", *renders]):
+    for age, path in enumerate([cache._decision_path(old), *renders]):
         os.utime(path, (1000.0 + age, 1000.0 + age))  # the old decision, then the renders, oldest first
     cache.disk_bytes = 2 * one
     assert cache.trim() > 0
