@@ -10,6 +10,7 @@ from pathlib import Path
 import numba.core.boxing  # noqa: F401  (see below)
 import pytest
 from hypothesis import settings
+from numba.core.registry import cpu_target
 
 pytest_plugins = ["pytester"]
 
@@ -17,7 +18,11 @@ pytest_plugins = ["pytester"]
 # compile happens inside an in-process pytester run (a plugin test rendering a demo scene), pytester's module
 # snapshot drops the module afterwards, and the next compile imports it again: numba's global registry then
 # raises "duplicate registration for <class 'numba.core.types.scalars.Boolean'>" (seen in a -n 2 run whose
-# workers got the tests in another order). Imported here, before any inner run, it stays.
+# workers got the tests in another order). Imported here, before any inner run, it stays. The same holds for the
+# implementations numba's CPU target imports on its first compile or cache load (numba.np.polynomial's among
+# them: "duplicate registration for <class 'numba.core.types.npytypes.PolynomialType'>", seen on 3 December when
+# a demo scene's kernels were first loaded from numba's cache inside an inner run): loaded here (~0.6 s a process).
+cpu_target.target_context.refresh()
 
 # Our own property tests: "dev" draws new examples on every run (how most of our edge cases were found);
 # "ci" draws the same examples on every run, so a red CI run is a change in the code, never the luck of a
