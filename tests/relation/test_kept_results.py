@@ -42,26 +42,26 @@ def _counting(monkeypatch) -> list[int]:
     return computed
 
 
-def test_a_second_session_takes_the_keypoint_metrics_results_from_the_render_cache(tmp_path, monkeypatch):
-    scene = PlaneScene()
-    relation = Relation.build(repeatability(px=2), 0.9, transforms(yaw=3, x=0.05), examples=12)
-    computed = _counting(monkeypatch)
+def _second_session_computes_nothing(scene, relation, tmp_path, computed: list) -> None:
+    """Check ``relation`` in two sessions sharing one render cache: the second computes no keypoint metric and
+    gives the first one's records."""
     first = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
     assert computed and first.valid_examples, "the test needs evaluated examples"
     computed.clear()
     again = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
     assert computed == [] and _records(again) == _records(first)
+
+
+def test_a_second_session_takes_the_keypoint_metrics_results_from_the_render_cache(tmp_path, monkeypatch):
+    relation = Relation.build(repeatability(px=2), 0.9, transforms(yaw=3, x=0.05), examples=12)
+    _second_session_computes_nothing(PlaneScene(), relation, tmp_path, _counting(monkeypatch))
 
 
 def test_a_mutations_results_are_kept_under_its_source_render_and_its_pixels(tmp_path, monkeypatch):
     scene = PlaneScene()
     relation = Relation.build(repeatability(px=2), 0.9, brightness(max_levels=40), examples=10)
     computed = _counting(monkeypatch)
-    first = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
-    assert computed and first.valid_examples, "the test needs evaluated examples"
-    computed.clear()
-    again = check_relation(scene, corners, relation, settings=SETTINGS, cache=RenderCache(tmp_path))
-    assert computed == [] and _records(again) == _records(first)
+    _second_session_computes_nothing(scene, relation, tmp_path, computed)
     other = Relation.build(repeatability(px=2), 0.9, noise_patch(max_size=0.3, min_size=0.1), examples=5)
     check_relation(scene, corners, other, settings=SETTINGS, cache=RenderCache(tmp_path))
     assert computed, "other pixels: computed"
