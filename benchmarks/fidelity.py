@@ -19,7 +19,7 @@ placement and colour, not fine texture) and after the best per-channel gain and 
 held-out views and on as many fitted (training) views spread over the capture (the gap between the two is
 what the fit does not carry to new poses).
 ``--neighbours`` scores, beside the render, the nearest other fitted photo brought to each pose through the
-field's depth (:mod:`pytest_n2r.study.nearby`), and the same aligned onto the reference by optical flow
+field's depth (:mod:`pytest_n2r.relation.floor.nearby`), and the same aligned onto the reference by optical flow
 (:func:`aligned_onto`): what a real image
 taken nearby scores against the reference, the yardstick the targets are read against; on the held-out views
 and on as many fitted views.
@@ -174,7 +174,7 @@ def aligned_onto(reference: np.ndarray, image: np.ndarray) -> np.ndarray:
                      borderMode=cv2.BORDER_REPLICATE)
 
 
-#: ``--neighbours``: the images scored against each view's reference (see :mod:`pytest_n2r.study.nearby`).
+#: ``--neighbours``: the images scored against each view's reference (see :mod:`pytest_n2r.relation.floor.nearby`).
 NEIGHBOUR_ROWS = ("the field's render", "the nearest other photo, brought to the pose by the field's depth",
                   "the same, aligned onto the reference by optical flow")
 #: ``--neighbours``: the fitted views are also grouped by how far (degrees between optical axes) their nearest

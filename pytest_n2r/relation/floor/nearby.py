@@ -51,11 +51,11 @@ def nearest_fitted_view(scene: Scene, c2w: np.ndarray,
         degrees = float(np.degrees(np.arccos(np.clip(other[:3, 2] @ c2w[:3, 2], -1.0, 1.0))))
         return degrees, float(np.linalg.norm(other[:3, 3] - c2w[:3, 3])) / float(scene.reference_length)
 
-    candidates = [v for v in scene.views if v.split == "train" and usable(v) and not np.array_equal(v.c2w, c2w)]
+    candidates = [(v, *gap(v)) for v in scene.views
+                  if v.split == "train" and usable(v) and not np.array_equal(v.c2w, c2w)]
     if not candidates:
         raise ValueError(f"scene {getattr(scene, 'name', '?')!r} has no other fitted view to bring to this pose")
-    nearest = min(candidates, key=lambda v: np.radians(gap(v)[0]) + gap(v)[1])
-    return (nearest, *gap(nearest))
+    return min(candidates, key=lambda found: np.radians(found[1]) + found[2])
 
 
 def brought_to_view(view: RenderedView, image: np.ndarray, image_view: RenderedView) -> tuple[np.ndarray, float]:
