@@ -99,6 +99,20 @@ def test_the_nearest_photo_brought_to_each_pose_says_what_the_capture_itself_giv
     assert FieldFloor.from_dict(soft.to_dict()) == soft
 
 
+def test_the_floors_of_several_suts_bring_each_view_once(monkeypatch):
+    from pytest_n2r.relation.floor import nearby
+
+    calls = []
+    original = nearby.brought_to_view
+    monkeypatch.setattr(nearby, "brought_to_view", lambda *a: calls.append(1) or original(*a))
+    monkeypatch.setattr(nearby, "_BROUGHT", type(nearby._BROUGHT)())
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    first = measure_floor(scene, corners, repeatability(px=2))
+    second = measure_floor(scene, lambda rgb: corners(rgb)[::2], repeatability(px=3))
+    assert len(calls) == 2, f"2 held-out views brought {len(calls)} times for two floors"
+    assert len(first.nearby) == len(second.nearby) == 2
+
+
 def test_floor_round_trips_through_json():
     floor = measure_floor(BlurredPlane(blur=1.5, width=160, height=120), corners, repeatability(px=2))
     back = FieldFloor.from_dict(floor.to_dict())
