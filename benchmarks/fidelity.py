@@ -182,9 +182,10 @@ NEIGHBOUR_ROWS = ("the field's render", "the nearest other photo, brought to the
 NEIGHBOUR_ANGLE_BINS = ((0.0, 2.0), (2.0, 4.0), (4.0, 180.0))
 
 
-def _neighbour_record(scene, view, render_size: RenderSize, kind: str) -> dict:
+def _neighbour_record(scene, view, render_size: RenderSize, kind: str) -> dict | None:
     """One view's :func:`neighbours` measurements: the nearest other photo's angle, distance and share of pixels
-    brought, and PSNR and each detector's repeatability of each of :data:`NEIGHBOUR_ROWS`."""
+    brought, and PSNR and each detector's repeatability of each of :data:`NEIGHBOUR_ROWS`; ``None`` when the
+    scene has no other fitted view with a reference image."""
     def render(s, c2w: np.ndarray, camera) -> RenderedView:
         return s.render(c2w, camera, OUTPUTS if s is scene else ("rgb",))
 
@@ -192,6 +193,8 @@ def _neighbour_record(scene, view, render_size: RenderSize, kind: str) -> dict:
     rendered = render(scene, view.c2w, camera)
     reference = np.asarray(reference_image(scene, view, camera, kind, render))
     near = nearby_image(scene, view, rendered, render_size, kind, render)
+    if near is None:
+        return None
     real = replace(rendered, rgb=reference)
     outputs = {d: resolve_sut(d, None).fn(reference) for d in DETECTORS}
     scores = {}
@@ -215,8 +218,8 @@ def neighbours(scene, size: str, max_views: int | None) -> dict[str, dict]:
     fitted = [v for v in scene.views if v.split == "train"]
     spread = fitted if max_views is None or len(fitted) <= max_views else [
         fitted[i] for i in np.linspace(0, len(fitted) - 1, max_views).round().astype(int)]
-    held = [_neighbour_record(scene, v, render_size, kind) for v in floor_views(scene, max_views)]
-    fits = [_neighbour_record(scene, v, render_size, kind) for v in spread]
+    held = [r for v in floor_views(scene, max_views) if (r := _neighbour_record(scene, v, render_size, kind))]
+    fits = [r for v in spread if (r := _neighbour_record(scene, v, render_size, kind))]
     groups = {"held out": held, "fitted": fits}
     for low, high in NEIGHBOUR_ANGLE_BINS:
         groups[f"fitted, nearest {low:g}–{high:g}°" if high < 180 else f"fitted, nearest over {low:g}°"] = [
