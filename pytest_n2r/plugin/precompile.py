@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from ..scene.first_render import claim_kind, renderer_kind
+from ..scene.first_render import claim_kind, collector_paused, renderer_kind
 from .scenes import SceneSpec
 from .session import N2RSession
 
@@ -143,7 +143,9 @@ def run_job(job: dict[str, Any]) -> list[str]:
         _restart_log(job["cache_dir"])
         print(f"helper {os.getpid()} started at {time.strftime('%Y-%m-%d %H:%M:%S')}", flush=True)
         for name, kind, source in job.get("apart", ()):
-            if session.load(SceneSpec(name, kind, source)).compile_apart():
+            with collector_paused():
+                compiled = session.load(SceneSpec(name, kind, source)).compile_apart()
+            if compiled:
                 done.append(f"apart:{name}")
                 print(f"{name}: compiled apart from its kernels", flush=True)
         seen = {job["skip"]}
@@ -153,7 +155,7 @@ def run_job(job: dict[str, Any]) -> list[str]:
             if scene_kind in seen:
                 continue
             seen.add(scene_kind)
-            with claim_kind(job["cache_dir"], scene_kind, wait=False) as mine:
+            with claim_kind(job["cache_dir"], scene_kind, wait=False) as mine, collector_paused():
                 if not mine:  # a session process is compiling it now
                     print(f"{scene_kind}: another process holds it", flush=True)
                     continue

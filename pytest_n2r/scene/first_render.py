@@ -17,6 +17,7 @@ Convention
 
 from __future__ import annotations
 
+import gc
 import os
 import re
 import time
@@ -31,7 +32,7 @@ except ImportError:  # pragma: no cover - Windows: no lock, each process compile
 
 from .base import Scene
 
-__all__ = ["WAIT_S", "claim_kind", "first_render", "renderer_kind"]
+__all__ = ["WAIT_S", "claim_kind", "collector_paused", "first_render", "renderer_kind"]
 
 #: The longest a process waits for another's first render of a kind (s) before rendering without the lock.
 WAIT_S = 600.0
@@ -102,13 +103,29 @@ def _acquire(fd: int, wait_s: float) -> bool:
 
 
 @contextmanager
+def collector_paused() -> Iterator[None]:
+    """Python's cyclic garbage collector off for the block, back on after it (if it was on before): numba's compile
+    of a renderer's kernels makes millions of objects that live until it ends, and the collector walked them all
+    again in each of its full collections (docs/performance.md). The compile's garbage is collected once, after."""
+    if not gc.isenabled():
+        yield
+        return
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
+
+
+@contextmanager
 def first_render(directory: str | os.PathLike | None, scene: Scene) -> Iterator[None]:
     """Run a render of ``scene``: the first of its kind in this process under the kind's lock (see the module
-    docstring), later ones as they are. The kind counts as rendered once the block ends without an error."""
+    docstring) with the collector paused (:func:`collector_paused`: it compiles the kind's kernels or loads them),
+    later ones as they are. The kind counts as rendered once the block ends without an error."""
     kind = renderer_kind(scene)
     if kind in _RENDERED:
         yield
         return
-    with claim_kind(directory, kind):
+    with claim_kind(directory, kind), collector_paused():
         yield
     _RENDERED.add(kind)

@@ -66,6 +66,28 @@ def test_the_first_render_waits_for_another_holder_and_later_ones_do_not(tmp_pat
     assert waited < 0.3, f"a later render of {kind} waited {waited:.2f} s for the lock it no longer needs"
 
 
+def test_the_first_render_of_a_kind_runs_with_the_collector_off_and_turns_it_back_on(tmp_path):
+    import gc
+
+    scene = PlaneScene(width=16, height=12)
+    seen = []
+    for _ in range(2):
+        with fr.first_render(tmp_path, scene):
+            seen.append(gc.isenabled())
+    assert seen == [False, True], f"collector on during the first and a later render: {seen}"
+    assert gc.isenabled(), "the first render left the collector off"
+    gc.disable()
+    try:
+        with pytest.raises(RuntimeError), fr.collector_paused():
+            raise RuntimeError("compile failed")
+        assert not gc.isenabled(), "collector_paused turned on a collector that was off before it"
+    finally:
+        gc.enable()
+    with pytest.raises(RuntimeError), fr.collector_paused():
+        raise RuntimeError("compile failed")
+    assert gc.isenabled(), "a failed block left the collector off"
+
+
 def test_a_failed_first_render_is_not_counted(tmp_path):
     scene = PlaneScene(width=16, height=12)
     with pytest.raises(RuntimeError), fr.first_render(tmp_path, scene):
