@@ -1,14 +1,16 @@
 """What the exact demo renderer's first render compiles, and what each compilation costs (CPU seconds).
 
 Run: ``python benchmarks/kernel_compile.py`` (``--scene wall|object``, default wall; ``--masks-only``: compile the
-scene's blend masks alone, :meth:`~pytest_n2r.scene.base.Scene.compile_apart`, seconds long; ``--rounds R``,
-default 1). Each round runs in a child process with an empty numba cache (its own temporary folder) and one numba
-thread, renders one 32-pixel view of the scene (the kernels do not depend on the size) and reports, from numba's
-``numba:compile`` events, every function compiled with its CPU time inclusive and exclusive of the functions it
-compiled in turn; for the ray caster's kernel the CPU time of numba's compiler passes (``pipeline_times``:
-inlining, type inference, lowering...) and of LLVM (the ``llvm_lock`` timer). A last child renders again with the
-cache the first left: what a second process pays. Compilation runs on one thread: the child's CPU time is its
-duration on an idle core, whatever the machine's load.
+scene's blend masks alone, :meth:`~pytest_n2r.scene.base.Scene.compile_apart`, seconds long; ``--rounds R``, default
+1; ``--collector on|frozen|off``, default on: Python's cyclic garbage collector during the render as in a plain
+process, on with the heap frozen after the imports as in a test session, or off as a session's first render of a kind
+runs since 3 December). Each round runs in a child process with an empty numba cache (its own temporary folder) and
+one numba thread, renders one 32-pixel view of the scene (the kernels do not depend on the size) and reports, from
+numba's ``numba:compile`` events, every function compiled with its CPU time inclusive and exclusive of the functions
+it compiled in turn, and the collector's CPU time; for the ray caster's kernel the CPU time of numba's compiler passes
+(``pipeline_times``: inlining, type inference, lowering...) and of LLVM (the ``llvm_lock`` timer). A last child
+renders again with the cache the first left: what a second process pays. Compilation runs on one thread: the child's
+CPU time is its duration on an idle core, whatever the machine's load.
 """
 
 from __future__ import annotations
@@ -26,9 +28,19 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Run in a child process: argv = scene name, "masks" or "render". Prints one JSON object.
 CHILD = r"""
-import json, sys, time
+import gc, json, sys, time
 from collections import defaultdict
 from numba.core import event
+
+collector = {"s": 0.0, "full": 0, "started": 0.0}
+
+
+def timed(phase, info):
+    if phase == "start":
+        collector["started"] = time.process_time()
+    else:
+        collector["s"] += time.process_time() - collector["started"]
+        collector["full"] += info["generation"] == 2
 
 stack, inclusive, exclusive, count = [], defaultdict(float), defaultdict(float), defaultdict(int)
 
@@ -52,6 +64,12 @@ from pytest_n2r.demo import ground_truth, raycast
 
 scene = ground_truth(sys.argv[1])
 view = scene.views[0]
+if sys.argv[3] == "frozen":
+    gc.collect()
+    gc.freeze()
+elif sys.argv[3] == "off":
+    gc.disable()
+gc.callbacks.append(timed)
 start = time.process_time()
 if sys.argv[2] == "masks":
     scene.compile_apart()
@@ -59,6 +77,8 @@ else:
     camera = view.camera.scaled(32 / max(view.camera.width, view.camera.height))
     scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
 total = time.process_time() - start
+gc.enable()
+gc.callbacks.remove(timed)
 passes, llvm = {}, None
 for compiled in raycast._render_kernel.overloads.values():
     if compiled.metadata is None:  # loaded from numba's cache: nothing was compiled
@@ -68,15 +88,15 @@ for compiled in raycast._render_kernel.overloads.values():
         for name, t in pipeline.items():
             passes[name.split("_", 1)[1]] = t.init + t.run + t.finalize
 print(json.dumps({"total": total, "inclusive": inclusive, "exclusive": exclusive, "count": count, "passes": passes,
-                  "llvm": llvm}))
+                  "llvm": llvm, "collector": collector["s"], "full": collector["full"]}))
 """
 
 
-def run_child(scene: str, what: str, cache: Path) -> dict:
+def run_child(scene: str, what: str, cache: Path, collector: str = "on") -> dict:
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1",
                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
-    done = subprocess.run([sys.executable, "-c", CHILD, scene, what], env=env, capture_output=True, text=True,
-                          check=False)
+    done = subprocess.run([sys.executable, "-c", CHILD, scene, what, collector], env=env, capture_output=True,
+                          text=True, check=False)
     if done.returncode != 0:
         raise SystemExit(f"the child failed:\n{done.stderr}")
     return json.loads(done.stdout.splitlines()[-1])
@@ -87,17 +107,20 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scene", default="wall", choices=["wall", "object"])
     parser.add_argument("--masks-only", action="store_true", help="compile the scene's blend masks alone")
     parser.add_argument("--rounds", type=int, default=1)
+    parser.add_argument("--collector", default="on", choices=["on", "frozen", "off"],
+                        help="the cyclic garbage collector during the render: on, on with the heap frozen, off")
     args = parser.parse_args(argv)
     what = "masks" if args.masks_only else "render"
     with tempfile.TemporaryDirectory(prefix="n2r-kernel-compile-") as tmp:
-        runs = [run_child(args.scene, what, Path(tmp) / f"numba-{r}") for r in range(args.rounds)]
-        again = run_child(args.scene, what, Path(tmp) / f"numba-{args.rounds - 1}")
+        runs = [run_child(args.scene, what, Path(tmp) / f"numba-{r}", args.collector) for r in range(args.rounds)]
+        again = run_child(args.scene, what, Path(tmp) / f"numba-{args.rounds - 1}", args.collector)
     median = statistics.median
     print(f"demo:{args.scene}, {'blend masks alone' if args.masks_only else 'first render (32 px)'}, empty numba "
-          f"cache, one thread, {args.rounds} round(s), medians; load average at the end "
+          f"cache, one thread, collector {args.collector}, {args.rounds} round(s), medians; load average at the end "
           f"{os.getloadavg()[0]:.1f}\n")
-    print(f"CPU seconds: {median(r['total'] for r in runs):.2f} with an empty cache, {again['total']:.2f} with the "
-          "cache the first process left\n")
+    print(f"CPU seconds: {median(r['total'] for r in runs):.2f} with an empty cache (in the collector "
+          f"{median(r['collector'] for r in runs):.2f}, {median(r['full'] for r in runs)} full collections), "
+          f"{again['total']:.2f} with the cache the first process left\n")
     print("| function compiled | times | CPU s, inclusive | CPU s, exclusive |")
     print("|---|---|---|---|")
     names = sorted(runs[0]["exclusive"], key=lambda n: -runs[0]["exclusive"][n])
