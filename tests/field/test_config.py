@@ -7,7 +7,7 @@ import json
 import pytest
 
 from pytest_n2r.errors import InvalidArgument
-from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.field.config import LATER_SETTINGS, FieldConfig
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -55,3 +55,12 @@ def test_stages_follow_the_fractions():
     config = FieldConfig(resolutions=(16, 24, 40), stage_fractions=(0.2, 0.6))
     stages = [config.stage(p) for p in (0.0, 0.19, 0.2, 0.59, 0.6, 0.99)]
     assert stages == [0, 0, 1, 1, 2, 2], f"stage() at 0, .19, .2, .59, .6, .99 gave {stages}"
+
+
+def test_settings_added_later_are_stored_only_where_they_differ_from_their_defaults():
+    stored = FieldConfig().to_dict()
+    assert not set(LATER_SETTINGS) & set(stored), f"{sorted(set(LATER_SETTINGS) & set(stored))} stored at defaults"
+    changed = FieldConfig(max_pixels_per_voxel=0.0, detail_grid_max=512)
+    assert changed.to_dict()["max_pixels_per_voxel"] == 0.0 and changed.to_dict()["detail_grid_max"] == 512
+    assert FieldConfig.from_dict(changed.to_dict()) == changed
+    assert FieldConfig.from_dict(stored) == FieldConfig()
