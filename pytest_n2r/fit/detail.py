@@ -1,5 +1,6 @@
 """How much detail a capture can give a field: the training views' pixel footprint on the scene, the grid
-size whose voxel matches it, and the finest grid a machine's memory holds.
+size whose voxel matches it, the finer grid a fit adds where its ladder is too coarse for the photos, and the
+finest grid a machine's memory holds.
 
 A field cannot show detail finer than its voxel, and a photo shows none finer than its pixel's footprint on
 the surface. Where the cameras look closely, the voxel should approach that footprint; a coarser grid blurs
@@ -23,15 +24,23 @@ import numpy as np
 
 from ..data.capture import Capture
 from ..errors import InvalidArgument
+from ..field.config import FieldConfig
 from ..field.space import SceneSpace
 from ..geometry import inside_image, project
 
-__all__ = ["CaptureDetail", "capture_detail", "fit_memory_bytes", "memory_resolution"]
+__all__ = ["DEFAULT_LADDER", "DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "CaptureDetail", "capture_detail",
+           "detailed_config", "fit_memory_bytes", "memory_resolution"]
 
 #: Fewest sparse points a view must see for its footprint to count.
 MIN_POINTS = 10
 #: Percentile of the views' footprints that stands for "where the cameras look closely".
 CLOSE_PERCENTILE = 10.0
+#: Fraction of the run at which :func:`detailed_config`'s finer grid takes over (the last 30 %, as measured).
+DETAIL_STAGE_AT = 0.7
+#: The finer grid's size is a multiple of this.
+DETAIL_GRID_MULTIPLE = 64
+#: The ladder (``resolutions``, ``stage_fractions``) that :func:`detailed_config` extends: the default one.
+DEFAULT_LADDER = (FieldConfig().resolutions, FieldConfig().stage_fractions)
 
 
 @dataclass(frozen=True)
@@ -47,7 +56,12 @@ class CaptureDetail:
 
     def matching_resolution(self) -> int:
         """Vertices per axis of the grid whose voxel equals the close footprint."""
-        return int(math.ceil(2.0 * self.space.half_size / self.close)) + 1
+        return self.resolution_for(1.0)
+
+    def resolution_for(self, pixels_per_voxel: float) -> int:
+        """Vertices per axis of the coarsest grid whose voxel spans at most ``pixels_per_voxel`` close-footprint
+        pixels."""
+        return int(math.ceil(2.0 * self.space.half_size / (self.close * pixels_per_voxel))) + 1
 
     def pixels_per_voxel(self, resolution: int) -> float:
         """How many close-footprint pixels one voxel of a ``resolution``³ grid spans (1: it matches; more:
@@ -78,6 +92,29 @@ def capture_detail(capture: Capture, space: SceneSpace, views: Sequence | None =
         return None
     return CaptureDetail(float(np.percentile(footprints, CLOSE_PERCENTILE)), float(np.median(footprints)),
                          len(footprints), space)
+
+
+def detailed_config(config: FieldConfig, detail: CaptureDetail | None) -> FieldConfig:
+    """``config`` with one finer grid, trained from :data:`DETAIL_STAGE_AT` of the run, where its ladder is the
+    default one and a voxel of the default's finest grid spans more than ``config.max_pixels_per_voxel``
+    close-footprint pixels (see :class:`~pytest_n2r.field.config.FieldConfig`); ``config`` itself otherwise: a
+    ladder given is trained as given, 0 turns this off, and nothing is added where nothing could be measured
+    (``detail`` ``None``).
+
+    The finer grid is the coarsest with at most ``max_pixels_per_voxel`` pixels a voxel, rounded up to a
+    multiple of :data:`DETAIL_GRID_MULTIPLE`, at most ``detail_grid_max``.
+    """
+    if (config.resolutions, config.stage_fractions) != DEFAULT_LADDER:
+        return config
+    finest, limit = config.resolutions[-1], config.max_pixels_per_voxel
+    if detail is None or limit <= 0 or detail.pixels_per_voxel(finest) <= limit:
+        return config
+    wanted = DETAIL_GRID_MULTIPLE * math.ceil(detail.resolution_for(limit) / DETAIL_GRID_MULTIPLE)
+    finer = min(wanted, config.detail_grid_max)
+    if finer <= finest:
+        return config
+    return config.replace(resolutions=(*config.resolutions, finer),
+                          stage_fractions=(*config.stage_fractions, DETAIL_STAGE_AT))
 
 
 def fit_memory_bytes(resolution: int, *, occupied: float = 0.1, width: int = 13) -> int:

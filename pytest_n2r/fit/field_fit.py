@@ -33,14 +33,14 @@ from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from ..render.field_render import FieldRenderer, RenderSettings
 from .appearance import Appearance
-from .detail import capture_detail
+from .detail import capture_detail, detailed_config
 from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient
 from .prune import pruned_occupancy, pruned_occupancy_dense
 from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
-__all__ = ["fit", "FitResult", "evaluate_views", "FIT_RENDER"]
+__all__ = ["fit", "fit_space", "FitResult", "evaluate_views", "FIT_RENDER"]
 
 #: Render settings used for held-out evaluation during and after a fit.
 FIT_RENDER = RenderSettings()
@@ -100,6 +100,13 @@ class _Rays:
         self.n = self.o.shape[0]
 
 
+def fit_space(capture: Capture, config: FieldConfig) -> SceneSpace:
+    """The space a field of ``capture`` is fitted in: its unit cube holds the capture's bounds and every
+    camera, its shell is ``config.shell`` thick."""
+    centers = np.stack([v.c2w[:3, 3] for v in capture.views])
+    return SceneSpace.around(capture.bounds, centers, shell=config.shell)
+
+
 class _Trainer:
     def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False):
         train = [v for v in capture.train_views if v.image is not None]
@@ -108,8 +115,7 @@ class _Trainer:
         self.config, self.device = config, device
         #: Compiled (numba) kernels on the CPU; the torch path on CUDA (tests also run it on the CPU).
         self.compiled = device.type == "cpu"
-        centers = np.stack([v.c2w[:3, 3] for v in capture.views])
-        self.space = SceneSpace.around(capture.bounds, centers, shell=config.shell)
+        self.space = fit_space(capture, config)
         self.rays = _Rays(train, self.space, device)
         self.appearance = Appearance([v.name for v in train], device) if appearance else None
         self.generator = torch.Generator().manual_seed(config.seed)
@@ -270,7 +276,9 @@ def fit(
 ) -> FitResult:
     """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
     ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
-    ``max_steps`` alone is reproducible bit for bit on the same machine and thread count).
+    ``max_steps`` alone is reproducible bit for bit on the same machine and thread count). Where the capture
+    shows finer detail than ``config``'s finest grid holds, the fit trains one finer grid at the end of the
+    run (:func:`~pytest_n2r.fit.detail.detailed_config`); the result's ``config`` is the one it used.
 
     ``progress`` receives ``{step, stage, resolution, loss, psnr, elapsed_s, eta_s, occupied}`` about once a
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
@@ -289,6 +297,8 @@ def fit(
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
+    detail = capture_detail(capture, fit_space(capture, config))
+    given, config = config, detailed_config(config, detail)
     trainer = _Trainer(capture, config, dev, appearance=appearance)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
@@ -339,7 +349,6 @@ def fit(
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
     final = trainer.field.quantized()
-    detail = capture_detail(capture, trainer.space)
     e0 = time.perf_counter()
     rows = evaluate_views(final, heldout)
     eval_s += time.perf_counter() - e0
@@ -354,7 +363,8 @@ def fit(
         "final_loss": round(loss, 6),
         "step_ms": trainer.phases.report(),
         "field": final.describe(),
-        "detail": None if detail is None else detail.describe(final.resolution),
+        "detail": None if detail is None else {**detail.describe(final.resolution),
+                                                "grid_added": config.resolutions[-1] if config is not given else None},
         "heldout": rows,
         **_means(rows),
         "history": history,

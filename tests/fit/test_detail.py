@@ -4,11 +4,22 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from pytest_n2r.data.capture import Capture, CapturedView
 from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.fit.detail import capture_detail, fit_memory_bytes, memory_resolution
+from pytest_n2r.fit.detail import (
+    DETAIL_GRID_MULTIPLE,
+    DETAIL_STAGE_AT,
+    CaptureDetail,
+    capture_detail,
+    detailed_config,
+    fit_memory_bytes,
+    memory_resolution,
+)
 from pytest_n2r.geometry import Camera
 
 CAMERA = Camera(200, 100, 100.0, 100.0, 99.5, 49.5)
@@ -77,7 +88,7 @@ def test_a_fit_reports_how_many_training_pixels_its_finest_voxel_spans(short_fit
 
     detail = short_fit.report["detail"]
     expected = capture_detail(capture48, short_fit.field.space)
-    assert detail == expected.describe(short_fit.field.resolution)
+    assert detail == {**expected.describe(short_fit.field.resolution), "grid_added": None}
     assert expected.matching_resolution() > short_fit.field.resolution
     assert detail["pixels_per_voxel"] == pytest.approx(expected.pixels_per_voxel(short_fit.field.resolution), abs=0.01)
     path = save_scene(tmp_path / "s.n2r", short_fit.field, short_fit.config, capture48, short_fit.report,
@@ -85,3 +96,79 @@ def test_a_fit_reports_how_many_training_pixels_its_finest_voxel_spans(short_fit
     text = format_info(read_scene_file(path, images=False))
     assert (f"a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras look closest "
             f"(a {detail['matching_resolution']}³ grid would match the photos)") in text, text
+
+
+# -- the finer grid a fit adds where its ladder is too coarse for the photos ------------------------------------
+
+
+def _detail_at(pixels_per_voxel: float, resolution: int = 224) -> CaptureDetail:
+    """A capture whose close footprint makes a voxel of ``resolution``³ span ``pixels_per_voxel`` pixels."""
+    space = SceneSpace((0.0, 0.0, 0.0), 1.0)
+    close = space.voxel_size(resolution) / pixels_per_voxel
+    return CaptureDetail(close, close, 10, space)
+
+
+def test_a_ladder_fine_enough_for_the_photos_or_given_is_kept_as_it_is():
+    config = FieldConfig()
+    assert detailed_config(config, _detail_at(5.1)) is config  # the fox's 10-minute fit
+    assert detailed_config(config, None) is config  # nothing measured: nothing to follow
+    assert detailed_config(config.replace(max_pixels_per_voxel=0.0), _detail_at(20.0)).resolutions == (48, 96, 224)
+    given_ladder = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,))
+    assert detailed_config(given_ladder, _detail_at(20.0, 24)) is given_ladder
+
+
+def test_the_default_ladder_gets_one_finer_grid_for_the_last_part_of_the_run_where_the_photos_are_finer():
+    detailed = detailed_config(FieldConfig(), _detail_at(9.0))  # the wall's phone capture at 480×270
+    assert detailed.resolutions == (48, 96, 224, 384), detailed.resolutions
+    assert detailed.stage_fractions == (0.1, 0.35, DETAIL_STAGE_AT), detailed.stage_fractions
+    # the grid is the coarsest multiple of 64 that meets the limit: 6.5 pixels need 243 vertices, so 256
+    assert detailed_config(FieldConfig(), _detail_at(6.5)).resolutions[-1] == 256
+
+
+@given(pixels=st.floats(0.5, 60.0), limit=st.floats(1.0, 12.0), cap=st.integers(8, 1024))
+def test_a_finer_grid_is_added_exactly_where_the_limit_is_missed_and_meets_it_unless_capped(pixels, limit, cap):
+    config = FieldConfig(max_pixels_per_voxel=limit, detail_grid_max=cap)
+    detail = _detail_at(pixels)
+    detailed = detailed_config(config, detail)
+    if detail.pixels_per_voxel(224) <= limit or cap <= 224:
+        assert detailed is config, f"{detailed.resolutions} for {pixels:.2f} pixels a voxel (limit {limit:.2f})"
+        return
+    *kept, added = detailed.resolutions
+    assert tuple(kept) == config.resolutions and detailed.stage_fractions == (0.1, 0.35, DETAIL_STAGE_AT)
+    assert 224 < added <= cap, f"{added}³ for a cap of {cap}"
+    if added < cap:  # not capped: the coarsest multiple of 64 that meets the limit
+        assert added % DETAIL_GRID_MULTIPLE == 0, added
+        assert detail.pixels_per_voxel(added) <= limit, f"{added}³ spans {detail.pixels_per_voxel(added):.2f}"
+        coarser = added - DETAIL_GRID_MULTIPLE
+        assert coarser <= 224 or detail.pixels_per_voxel(coarser) > limit, f"{coarser}³ would have met it"
+
+
+def test_a_fit_trains_the_added_grid_and_its_scene_file_says_so(capture48, tmp_path, monkeypatch):
+    from pytest_n2r.cli.info import format_info
+    from pytest_n2r.fit import detail as detail_module
+    from pytest_n2r.fit import fit
+    from pytest_n2r.scene.file import read_scene_file, save_scene
+
+    from .conftest import SHORT_CONFIG
+
+    # the default ladder's grids take minutes to fit; the short one stands in for it (a voxel of 24³ spans 4.6 of
+    # this 48×27 capture's pixels, so a limit of 3 asks for 36 vertices: 64, capped at 32)
+    monkeypatch.setattr(detail_module, "DEFAULT_LADDER", (SHORT_CONFIG.resolutions, SHORT_CONFIG.stage_fractions))
+    config = SHORT_CONFIG.replace(max_pixels_per_voxel=3.0, detail_grid_max=32)
+    result = fit(capture48, config, max_steps=20, device="cpu")
+    assert result.config.resolutions == (16, 24, 32), result.config.resolutions
+    assert result.config.stage_fractions == (0.5, DETAIL_STAGE_AT)
+    assert result.field.resolution == 32 and "32" in result.report["step_ms"], result.report["step_ms"].keys()
+    assert result.report["detail"]["grid_added"] == 32
+    assert result.report["detail"]["pixels_per_voxel"] == pytest.approx(4.6 * 23 / 31, abs=0.05)
+    path = save_scene(tmp_path / "s.n2r", result.field, result.config, capture48, result.report, images=False)
+    scene = read_scene_file(path, images=False)
+    assert scene.config.resolutions == (16, 24, 32)
+    assert "32³ added for the end of the fit: the default grids were coarser than the photos" in format_info(scene)
+
+
+def test_the_detail_settings_are_checked():
+    with pytest.raises(InvalidArgument, match=r"detail_grid_max=2000: expected a grid size in 8\.\.1024"):
+        FieldConfig(detail_grid_max=2000)
+    with pytest.raises(InvalidArgument, match=r"max_pixels_per_voxel=-1\.0: expected a finite number >= 0"):
+        FieldConfig(max_pixels_per_voxel=-1.0)
