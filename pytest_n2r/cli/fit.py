@@ -63,15 +63,17 @@ def parse_config_override(text: str) -> tuple[str, object]:
 def build_config(overrides: list[tuple[str, object]]) -> FieldConfig:
     """The default :class:`~pytest_n2r.field.config.FieldConfig` with ``overrides`` applied (a scalar for a
     tuple setting becomes a one-element tuple); unknown keys and bad values raise naming them."""
+    from dataclasses import asdict
+
     from ..errors import InvalidArgument
     from ..field.config import FieldConfig
 
-    base = FieldConfig().to_dict()
+    base = asdict(FieldConfig())  # every setting (the stored form leaves some out at their defaults)
     changes = {}
     for key, value in overrides:
         if key not in base:
             raise InvalidArgument(f"--config {key}=...: unknown setting {key!r}; known: {sorted(base)}")
-        changes[key] = (value,) if isinstance(base[key], list) and not isinstance(value, (tuple, list)) else value
+        changes[key] = (value,) if isinstance(base[key], tuple) and not isinstance(value, (tuple, list)) else value
     try:
         return FieldConfig.from_dict({**base, **changes})
     except InvalidArgument as exc:

@@ -222,3 +222,13 @@ def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tm
     err = capsys.readouterr().err
     assert f"-o {tmp_path}: is a folder; expected the path of a .n2r scene file" in err, err
     assert "ingested" not in err, "the capture was ingested before the output was checked"
+
+
+def test_every_setting_can_be_given_including_those_stored_only_when_changed():
+    from pytest_n2r.cli.fit import build_config
+    from pytest_n2r.field.config import LATER_SETTINGS, FieldConfig
+
+    config = build_config([("max_pixels_per_voxel", 0.0), ("detail_grid_max", 512)])
+    assert (config.max_pixels_per_voxel, config.detail_grid_max) == (0.0, 512), config
+    for name in LATER_SETTINGS:  # their defaults are accepted too (an override that changes nothing)
+        assert build_config([(name, getattr(FieldConfig(), name))]) == FieldConfig(), name
