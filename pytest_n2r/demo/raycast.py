@@ -39,10 +39,8 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import platform
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,6 +52,7 @@ from numba.core.errors import NumbaExperimentalFeatureWarning
 from numba.extending import intrinsic
 
 from ..errors import InvalidArgument
+from ..render.threads import render_pool
 from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, albedo_row
 from .borrow import borrowed as _borrowed
 from .mask_kernel import compile_mask, no_mask
@@ -173,7 +172,8 @@ class CompiledScene:
             if threads <= 1:
                 _render_kernel(0, 1, *scratch[0], *args)
             else:  # every thread-th band per thread: bands of sky and of wall interleave (the kernel drops the GIL)
-                list(_pool().map(lambda first: _render_kernel(first, threads, *scratch[first], *args), range(threads)))
+                list(render_pool().map(lambda first: _render_kernel(first, threads, *scratch[first], *args),
+                                       range(threads)))
         out = {}
         if want_rgb:
             out["rgb"] = rgb
@@ -182,18 +182,6 @@ class CompiledScene:
         if want_opacity:
             out["opacity"] = opacity
         return out
-
-
-_POOL: tuple[int, ThreadPoolExecutor] | None = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    """The render threads (as many as numba may use; a render uses ``numba.get_num_threads()`` of them),
-    one pool per process: a forked child gets its own (the parent's threads do not exist in it)."""
-    global _POOL
-    if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-raycast"))
-    return _POOL[1]
 
 
 # -- building the tables -------------------------------------------------------------------------------------

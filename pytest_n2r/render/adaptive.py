@@ -27,7 +27,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+
+from .threads import run_parts
 
 __all__ = ["sample_adaptively", "grid_axis"]
 
@@ -61,13 +63,15 @@ def _agree(i00, i01, i10, i11, rgb, depth, opacity, tolerance, depth_tolerance):
     return max(v00, v01, v10, v11) - min(v00, v01, v10, v11) <= depth_tolerance * min(v00, v01, v10, v11)
 
 
-@njit(cache=True, parallel=True)
-def _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split):
-    """For each active cell: ``split`` it where its corners disagree, else interpolate its untraced pixels.
+@njit(cache=True, nogil=True)
+def _judge_cells(first, last, ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split):
+    """For each active cell of the rows of cells ``first <= a < last``: ``split`` it where its corners disagree,
+    else interpolate its untraced pixels.
 
-    Rows of cells in parallel: a cell reads only its traced corners, and a pixel on the edge two agreeing cells
-    share gets the same value from both (its weights on the far corners are exactly 0)."""
-    for a in prange(ys.shape[0] - 1):
+    Rows of cells in parallel (:func:`~.threads.run_parts`): a cell reads only its traced corners, and
+    a pixel on the edge two agreeing cells share gets the same value from both (its weights on the far corners are
+    exactly 0)."""
+    for a in range(first, last):
         y0, y1 = ys[a], ys[a + 1]
         for b in range(xs.shape[0] - 1):
             split[a, b] = False
@@ -133,19 +137,20 @@ def _grid_to_trace(ys, xs, split, stride, traced):
     return want
 
 
-@njit(cache=True, parallel=True)
-def _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance, inside):
-    """The mask of the leaves to trace in the split cells of the last split (``ys, xs`` the grid of spacing 2: cells
-    of 2×2 pixels, or 2×1 at the image's last row or column, corners traced): those on the cells' edges
-    (``inside`` False: the pixels between two corners), or those inside them (the cells' centres).
+@njit(cache=True, nogil=True)
+def _leaves_to_trace(first, last, ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance,
+                     inside, want):
+    """Set ``want`` (``(H·W,)`` bool, all False before) on the image rows ``first <= y < last`` at the leaves to trace
+    in the split cells of the last split (``ys, xs`` the grid of spacing 2: cells of 2×2 pixels, or 2×1 at the
+    image's last row or column, corners traced): those on the cells' edges (``inside`` False: the pixels between
+    two corners), or those inside them (the cells' centres).
 
     A leaf whose two pixels across its cell on its row, or else on its column, are traced and agree is
     interpolated half way between them instead. Each leaf is judged once, as every split cell it belongs to would
     judge it, and reads only pixels of the round before: rows in parallel, the same result."""
     height, width = ys[-1] + 1, xs[-1] + 1
     rows, cols = split.shape
-    want = np.zeros(height * width, dtype=np.bool_)
-    for y in prange(height):
+    for y in range(first, last):
         row = y * width
         if y % 2 == 0 or y == height - 1:  # a grid row: the pixels between two corners on it, in split cells
             if inside:
@@ -167,7 +172,6 @@ def _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, dept
                 i = row + x + 1
                 _judge_leaf(i, i - 1, i + 1, i - width, i + width, traced, rgb, depth, opacity, tolerance,
                             depth_tolerance, want)
-    return want
 
 
 @njit(cache=True, inline="always")
@@ -210,13 +214,19 @@ def sample_adaptively(trace: Tracer, height: int, width: int, stride: int, toler
     active = np.ones((ys.size - 1, xs.size - 1), dtype=np.bool_)
     while stride > 1 and active.size:
         split = np.empty_like(active)
-        _judge_cells(ys, xs, active, width, rgb, depth, opacity, traced, tolerance, depth_tolerance, split)
+        run_parts(_judge_cells, ys.size - 1, ys, xs, active, width, rgb, depth, opacity, traced, tolerance,
+                  depth_tolerance, split)
         if not split.any():
             break
         finer = stride // 2
         for inside in (False, True) if finer == 1 else (False,):  # leaves inside a cell: after those on its edges
-            trace_into(_grid_to_trace(ys, xs, split, finer, traced) if finer > 1 else
-                       _leaves_to_trace(ys, xs, split, traced, rgb, depth, opacity, tolerance, depth_tolerance, inside))
+            if finer > 1:
+                want = _grid_to_trace(ys, xs, split, finer, traced)
+            else:
+                want = np.zeros(n, dtype=np.bool_)
+                run_parts(_leaves_to_trace, height, ys, xs, split, traced, rgb, depth, opacity, tolerance,
+                          depth_tolerance, inside, want)
+            trace_into(want)
         fine_ys, fine_xs = grid_axis(height, finer), grid_axis(width, finer)
         active = split[(fine_ys[:-1] // stride)[:, None], (fine_xs[:-1] // stride)[None, :]]
         ys, xs, stride = fine_ys, fine_xs, finer

@@ -1,4 +1,5 @@
-"""The fused forward renderer of a scene field, compiled for the CPU (numba): one thread per ray.
+"""The fused forward renderer of a scene field, compiled for the CPU (numba): each ray on its own, ranges of rays
+on the render threads (:mod:`pytest_n2r.render.threads`).
 
 It samples the lattice of :mod:`pytest_n2r.field.lattice` with the field's compiled sampling maths
 (:mod:`pytest_n2r.field.kernels`, inlined), skips boxes of empty 8³-cell blocks in one jump and empty cells
@@ -30,7 +31,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..field.kernels import (
     BLOCK,
@@ -47,12 +48,12 @@ from .cell_bits import cell_occupied
 __all__ = ["render_rays", "bake_logits", "pixel_rays"]
 
 
-@njit(cache=True, parallel=True)
-def render_rays(o, d, density, values, logits, rows, bits, reach, res, shell, step, shell_samples, far,
+@njit(cache=True, nogil=True)
+def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, res, shell, step, shell_samples, far,
                 density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, slot, rgb,
                 depth, opacity):
-    """Volume-render every ray ``r`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and ``opacity[slot[r]]``
-    (float32; ``slot`` int64, say the flat pixel index of each ray).
+    """Volume-render the rays ``first <= r < last`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and
+    ``opacity[slot[r]]`` (float32; ``slot`` int64, say the flat pixel index of each ray).
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
     (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a
@@ -79,7 +80,7 @@ def render_rays(o, d, density, values, logits, rows, bits, reach, res, shell, st
     rr = res * res
     half = 1.0 + shell
     scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
-    for r in prange(o.shape[0]):
+    for r in range(first, last):
         ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
@@ -217,15 +218,15 @@ def _alpha(x, sigma_step):
     return sample_alpha(x, sigma_step)
 
 
-@njit(cache=True, parallel=True)
-def bake_logits(values, vertex, res, shell, origin, sh_degree, out):
-    """Colour logits ``out (n_rows, 3)`` of every stored vertex seen from ``origin`` (the camera centre,
-    normalized space): its SH colour for the direction from ``origin`` to the vertex (to a vertex at the shell's
-    outer face, which stands for infinity, the direction of its contracted position). ``vertex`` is each row's
-    flat vertex index ``(i·R + j)·R + k``."""
+@njit(cache=True, nogil=True)
+def bake_logits(first, last, values, vertex, res, shell, origin, sh_degree, out):
+    """Colour logits ``out[first:last]`` (of ``out (n_rows, 3)``) of those stored vertices seen from ``origin`` (the
+    camera centre, normalized space): each one's SH colour for the direction from ``origin`` to the vertex (to a
+    vertex at the shell's outer face, which stands for infinity, the direction of its contracted position).
+    ``vertex`` is each row's flat vertex index ``(i·R + j)·R + k``."""
     half = 1.0 + shell
     cell = 2.0 * half / (res - 1)
-    for r in prange(values.shape[0]):
+    for r in range(first, last):
         lr, lg, lb = SH_C0 * values[r, 1], SH_C0 * values[r, 2], SH_C0 * values[r, 3]
         if sh_degree == 1:
             f = vertex[r]
@@ -245,14 +246,15 @@ def bake_logits(values, vertex, res, shell, origin, sh_degree, out):
         out[r, 0], out[r, 1], out[r, 2] = lr, lg, lb
 
 
-@njit(cache=True, parallel=True)
-def pixel_rays(index, width, fx, fy, cx, cy, c2w, center, radius, o, d):
-    """The normalized rays ``o, d (N, 3)`` (float32) through the centres of the pixels with flat indices ``index``
-    (``y·width + x``) of a pinhole camera at ``c2w``: :func:`pytest_n2r.geometry.camera_rays` (camera-frame
-    z-component 1, so ``t`` is z-depth) then :meth:`pytest_n2r.field.space.SceneSpace.normalize_rays` (minus
-    ``center``, over ``radius``), in float64 before the one rounding to float32, without their arrays."""
+@njit(cache=True, nogil=True)
+def pixel_rays(first, last, index, width, fx, fy, cx, cy, c2w, center, radius, o, d):
+    """The normalized rays ``o[first:last], d[first:last]`` (of ``(N, 3)``, float32) through the centres of the
+    pixels with flat indices ``index[first:last]`` (``y·width + x``) of a pinhole camera at ``c2w``:
+    :func:`pytest_n2r.geometry.camera_rays` (camera-frame z-component 1, so ``t`` is z-depth) then
+    :meth:`pytest_n2r.field.space.SceneSpace.normalize_rays` (minus ``center``, over ``radius``), in float64
+    before the one rounding to float32, without their arrays."""
     ox, oy, oz = (c2w[0, 3] - center[0]) / radius, (c2w[1, 3] - center[1]) / radius, (c2w[2, 3] - center[2]) / radius
-    for r in prange(index.shape[0]):
+    for r in range(first, last):
         x = (index[r] % width - cx) / fx
         y = (index[r] // width - cy) / fy
         o[r, 0], o[r, 1], o[r, 2] = ox, oy, oz

@@ -32,6 +32,7 @@ from .block_reach import block_reach
 from .cell_bits import cell_bits
 from .field_kernels import bake_logits, pixel_rays, render_rays
 from .ray_order import tiled_pixels
+from .threads import run_parts
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -257,9 +258,9 @@ class FieldRenderer:
         space = self.field.space
         o = np.empty((index.size, 3), dtype=np.float32)
         d = np.empty((index.size, 3), dtype=np.float32)
-        pixel_rays(np.ascontiguousarray(index, dtype=np.int64), camera.width, float(camera.fx), float(camera.fy),
-                   float(camera.cx), float(camera.cy), c2w, np.asarray(space.center, dtype=np.float64),
-                   float(space.radius), o, d)
+        run_parts(pixel_rays, index.size, np.ascontiguousarray(index, dtype=np.int64), camera.width,
+                  float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy), c2w,
+                  np.asarray(space.center, dtype=np.float64), float(space.radius), o, d)
         return o, d
 
     def _bake_logits(self, c2w: np.ndarray) -> np.ndarray:
@@ -270,8 +271,8 @@ class FieldRenderer:
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
         logits = np.empty((self._values.shape[0], 3), dtype=np.float32)
-        bake_logits(self._values, self._vertex, self.grid.resolution, self.grid.shell, origin, self.field.sh_degree,
-                    logits)
+        run_parts(bake_logits, self._values.shape[0], self._values, self._vertex, self.grid.resolution,
+                  self.grid.shell, origin, self.field.sh_degree, logits)
         return logits
 
     def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, index: np.ndarray,
@@ -279,10 +280,10 @@ class FieldRenderer:
         """Render rays ``o, d`` into the pixels ``index`` of the flat images ``rgb``, ``depth`` and ``opacity``."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
-            render_rays(o, d, self._density, self._values, logits, self._rows, self._bits, self._reach, g.resolution,
-                        g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
-                        f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth,
-                        index, rgb, depth, opacity)
+            run_parts(render_rays, o.shape[0], o, d, self._density, self._values, logits, self._rows, self._bits,
+                      self._reach, g.resolution, g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
+                      f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth,
+                      index, rgb, depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

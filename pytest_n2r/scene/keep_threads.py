@@ -1,6 +1,6 @@
 """A render must not change the SUT's thread count.
 
-numba's OpenMP threading layer (the scene field's and the splats' parallel kernels) sets the OpenMP thread
+numba's OpenMP threading layer (the splat renderer's parallel kernels, or a user scene's) sets the OpenMP thread
 count of the calling thread each time it runs a kernel, and torch (built with OpenMP, as the CPU wheels are)
 reads the same setting. A classifier that set ``torch.set_num_threads(1)`` for speed and reproducibility then
 ran, after the first render of a fitted scene, with every core: measured on the example project under load

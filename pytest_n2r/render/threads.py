@@ -1,0 +1,72 @@
+"""The render threads: a compiled kernel that releases the GIL, run over parts of its work on several threads.
+
+numba's parallel loops (``parallel=True``, ``prange``) compile slowly: the scene field's marcher took 11.6 CPU s to
+compile as a parallel loop and 3.3 s as a plain one (docs/performance.md, "The field renderer's kernels without
+numba's parallel loops"), and a fresh checkout pays that on its first fitted render. So the field renderer's
+kernels are plain ``nogil`` loops over a range of their work (``first``, ``last``), and :func:`run_parts` runs the
+parts on this module's thread pool; the exact demo renderer runs its bands of rows on the same pool
+(:func:`render_pool`). The training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel loops:
+run this way, a training step took 1.3x as long (the same page).
+
+Convention
+----------
+- A kernel's work items (rays, rows) are independent: each writes only its own outputs. The result depends
+  neither on the thread count nor on which thread runs which part.
+- A render uses ``numba.get_num_threads()`` threads (``NUMBA_NUM_THREADS``, or ``numba.set_num_threads``), as
+  numba's parallel loops would.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor, wait
+from typing import Any
+
+import numba
+
+__all__ = ["render_pool", "run_parts"]
+
+_POOL: tuple[int, ThreadPoolExecutor] | None = None
+
+
+def render_pool() -> ThreadPoolExecutor:
+    """The process's render threads (``numba.config.NUMBA_NUM_THREADS`` of them, which covers any thread count numba
+    may be set to); a forked child gets its own (the parent's threads do not exist in it)."""
+    global _POOL
+    if _POOL is None or _POOL[0] != os.getpid():
+        _POOL = (os.getpid(), ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-render"))
+    return _POOL[1]
+
+
+def run_parts(kernel: Callable[..., Any], n: int, *args: Any) -> None:
+    """``kernel(first, last, *args)`` over ``numba.get_num_threads()`` contiguous parts ``[first, last)`` that
+    cover ``range(n)``, one a thread (the first on the calling thread), as numba's parallel loops split their
+    work; ``kernel`` must release the GIL (``nogil=True``) to run beside the others. Contiguous, not dealt out in
+    smaller pieces: on the fox field, rays dealt to the threads in chunks cost 7 % more work in all (each core's
+    cache then holds the cells of the whole image instead of half of them; docs/performance.md, "The cells'
+    occupancy as bits").
+
+    >>> from numba import njit
+    >>> import numpy as np
+    >>> @njit(nogil=True)
+    ... def square(first, last, x, out):
+    ...     for i in range(first, last):
+    ...         out[i] = x[i] * x[i]
+    >>> x, out = np.arange(10.0), np.empty(10)
+    >>> run_parts(square, 10, x, out)
+    >>> out.tolist() == (x * x).tolist()
+    True
+    """
+    threads = max(1, min(numba.get_num_threads(), n))
+    if threads == 1:
+        kernel(0, n, *args)
+        return
+    bounds = [n * i // threads for i in range(threads + 1)]
+    others = [render_pool().submit(kernel, bounds[part], bounds[part + 1], *args) for part in range(1, threads)]
+    try:
+        kernel(bounds[0], bounds[1], *args)  # the first part on the calling thread, which would wait otherwise
+    finally:
+        wait(others)  # no part still writing to the outputs once this returns, even after an error
+    for part in others:
+        part.result()

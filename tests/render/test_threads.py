@@ -1,0 +1,83 @@
+"""The render threads (render/threads.py): a kernel's parts cover its work exactly once, on the thread count numba
+is set to, and a part's error reaches the caller."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numba
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numba import njit
+
+from pytest_n2r.render.threads import render_pool, run_parts
+
+
+@njit(nogil=True)
+def _count(first, last, hits):
+    for i in range(first, last):
+        hits[i] += 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.integers(0, 5000), count=st.integers(1, 8))
+def test_the_parts_cover_the_work_exactly_once(n, count):
+    before = numba.get_num_threads()
+    numba.set_num_threads(min(count, numba.config.NUMBA_NUM_THREADS))
+    try:
+        hits = np.zeros(n, dtype=np.int64)
+        run_parts(_count, n, hits)
+    finally:
+        numba.set_num_threads(before)
+    assert (hits == 1).all(), f"n={n}, {count} threads: items run {np.bincount(hits).tolist()} times (0, 1, 2...)"
+
+
+def test_a_render_uses_the_thread_count_numba_is_set_to():
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    seen: list[str] = []
+    lock = threading.Lock()
+
+    def record(first: int, last: int) -> None:
+        with lock:
+            seen.append(threading.current_thread().name)
+
+    before = numba.get_num_threads()
+    caller = threading.current_thread().name
+    try:
+        numba.set_num_threads(1)
+        run_parts(record, 1000)
+        assert seen == [caller], f"one thread set: the parts ran on {seen}"
+        seen.clear()
+        numba.set_num_threads(2)
+        run_parts(record, 1000)
+        assert sorted(seen) == [caller, seen[1]] and seen[1].startswith("n2r-render"), (
+            f"two threads set: the parts ran on {seen}, expected the caller and one render thread")
+    finally:
+        numba.set_num_threads(before)
+
+
+@pytest.mark.parametrize("failing", [0, 1])
+def test_an_error_in_a_part_reaches_the_caller_after_every_part_ended(failing):
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    ended: list[int] = []
+
+    def part(first: int, last: int) -> None:
+        if first == 50 * failing:
+            raise ValueError(f"part [{first}, {last}) failed")
+        time.sleep(0.05)
+        ended.append(first)
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(2)
+        with pytest.raises(ValueError, match=rf"part \[{50 * failing}, {50 * failing + 50}\) failed"):
+            run_parts(part, 100)
+    finally:
+        numba.set_num_threads(before)
+    assert ended == [50 * (1 - failing)], f"the other part had not ended when the error was raised: {ended}"
+    assert render_pool() is render_pool(), "the pool is made once per process"
