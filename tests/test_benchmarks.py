@@ -71,6 +71,23 @@ def test_cheap_benchmarks_run_on_tiny_inputs(script: str):
     assert expected in result.stdout, f"{script} printed no {expected!r}:\n{result.stdout}"
 
 
+def test_kernel_compile_reports_the_field_renderers_kernels():
+    """The fitted twins' renderer compiles (docs/performance.md: its kernels' compile time is measured with this)."""
+    args = ["--scene", "object-field", "--size", "16", "--collector", "off"]
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "kernel_compile.py"), *args], cwd=ROOT,
+                            env=_environment(), capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 0, f"kernel_compile.py {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}"
+    assert "| render_rays | 1 |" in result.stdout, f"no compile of the field's kernel reported:\n{result.stdout}"
+
+
+def test_kernel_compile_reports_the_training_kernels():
+    args = ["--scene", "object", "--fit", "--collector", "off"]
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "kernel_compile.py"), *args], cwd=ROOT,
+                            env=_environment(), capture_output=True, text=True, timeout=600, check=False)
+    assert result.returncode == 0, f"kernel_compile.py {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}"
+    assert "| _composite_backward | 1 |" in result.stdout, f"no training kernel reported:\n{result.stdout}"
+
+
 def test_every_smoke_run_names_an_existing_script():
     missing = sorted(set(SMOKE) - {s.name for s in SCRIPTS})
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"
