@@ -3,7 +3,8 @@
 Run: ``python benchmarks/kernel_compile.py`` (``--scene wall|object``, default wall, the exact ray caster, or
 ``wall-field|object-field``, a fitted twin: the scene field's renderer; ``--size PX``, the render's longer side,
 default 32: the field's adaptive sampling compiles only from 480 px; ``--fit``: instead of a render, the fit
-tests' 80-step fit of the exact scene's 48×27 capture, which runs every training kernel and the field's renderer;
+tests' short fit (``tests/fit/conftest.py``) of the exact scene's 48×27 capture, which runs every training kernel
+and the field's renderer;
 ``--masks-only``: compile the exact scene's blend masks alone, :meth:`~pytest_n2r.scene.base.Scene.compile_apart`,
 seconds long; ``--rounds R``, default 1; ``--collector on|frozen|off``, default on: Python's cyclic garbage collector
 during the render as in a plain process, on with the heap frozen after the imports as in a test session, or off as a
@@ -69,8 +70,8 @@ scene = load_demo(sys.argv[1], device="cpu")
 view = scene.views[0]
 if sys.argv[2] == "fit":  # its capture is rendered by the exact scene: compiled here, before the count starts
     from pytest_n2r.demo.rendered_capture import capture_scene
-    from pytest_n2r.field.config import FieldConfig
     from pytest_n2r.fit import fit
+    from tests.fit.conftest import SHORT_CONFIG, SHORT_STEPS
 
     capture = capture_scene(scene, size=(48, 27))
     for table in (inclusive, exclusive, count):
@@ -85,8 +86,7 @@ start = time.process_time()
 if sys.argv[2] == "masks":
     scene.compile_apart()
 elif sys.argv[2] == "fit":  # the fit tests' short fit (tests/fit/conftest.py): every training kernel runs
-    fit(capture, FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_rays=256, prune_every=20,
-                             alpha_init=0.01), max_steps=80, device="cpu")
+    fit(capture, SHORT_CONFIG, max_steps=SHORT_STEPS, device="cpu")
 else:
     camera = view.camera.scaled(int(sys.argv[4]) / max(view.camera.width, view.camera.height))
     scene.render(view.c2w, camera, ("rgb", "depth", "opacity"))
@@ -124,7 +124,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="longer side of the render (pixels); the field's adaptive sampling compiles from 480")
     parser.add_argument("--masks-only", action="store_true", help="compile the scene's blend masks alone")
     parser.add_argument("--fit", action="store_true",
-                        help="instead of a render, an 80-step fit of the scene's 48x27 capture (the training kernels)")
+                        help="instead of a render, the fit tests' short fit of the scene's 48x27 capture (the training "
+                             "kernels)")
     parser.add_argument("--rounds", type=int, default=1)
     parser.add_argument("--collector", default="on", choices=["on", "frozen", "off"],
                         help="the cyclic garbage collector during the render: on, on with the heap frozen, off")
@@ -139,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
                 for r in range(args.rounds)]
         again = run_child(args.scene, what, Path(tmp) / f"numba-{args.rounds - 1}", args.collector, args.size)
     median = statistics.median
-    done = {"masks": "blend masks alone", "fit": "an 80-step fit of its 48x27 capture",
+    done = {"masks": "blend masks alone", "fit": "the fit tests' short fit of its 48x27 capture",
             "render": f"first render ({args.size} px)"}[what]
     print(f"demo:{args.scene}, {done}, empty numba cache, one thread, collector {args.collector}, {args.rounds} "
           f"round(s), medians; load average at the end {os.getloadavg()[0]:.1f}\n")
