@@ -59,8 +59,9 @@ LINE_BUDGET = 400
 #: growing unnoticed; a module that shrinks under the budget must leave this table.
 OVER_BUDGET: dict[str, tuple[int, str]] = {
     "pytest_n2r/demo/raycast.py": (
-        900, ("the compiled ray caster of the exact demo scenes: the scene compiler and the numba kernel with its "
-              "inlined helpers, still being tuned (issue 16); to be split into the compile step and the kernel")),
+        650, ("the compiled ray caster of the exact demo scenes: the scene compiler, the surfaces and the numba "
+              "kernel with its inlined helpers (the row cast is row_cast.py), still being tuned (issue 16); to be "
+              "split into the compile step and the kernel")),
 }
 
 

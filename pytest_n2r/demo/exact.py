@@ -142,9 +142,13 @@ class GroundTruthScene(Scene):
         return self._compiled
 
     def compile_apart(self) -> bool:
-        """The scene's blend masks (:attr:`~.raycast.CompiledScene.masks`), which a first render compiles after
-        the ray caster's kernel (or loads, when this ran meanwhile in another process)."""
-        return bool(self.compiled.masks and self.compiled.mask_functions)
+        """The ray caster's row cast (:func:`~.row_cast.cast_row_kernel`) and the scene's blend masks
+        (:attr:`~.raycast.CompiledScene.masks`), which a first render compiles after the kernel (or loads, when
+        this ran meanwhile in another process)."""
+        from .row_cast import cast_row_kernel
+
+        cast_row_kernel()
+        return bool(self.compiled.masks)  # a cached property, compiled on first use; never empty
 
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         return self.compiled.render(c2w, camera.fx, camera.fy, camera.cx, camera.cy, camera.height, camera.width,

@@ -13,6 +13,8 @@ Convention
 - A compiled mask has the signature :data:`MASK_SIGNATURE`: ``(a, b, out, count)`` writes
   ``mask(a[i], b[i])`` to ``out[i]`` for ``i < count`` (float64, unclipped).
 - Helpers the mask calls keep their own globals: a ``np.sin`` inside one is the library's (still correct).
+- A mask kept on disk compiles under the lock of its kernel piece, named as its files
+  (:func:`~pytest_n2r.scene.first_render.claim_piece`).
 - Compiled masks are kept per function for the process, and in numba's on-disk cache under a name made from
   :func:`mask_fingerprint`: the mask's code and that of every function it calls (through its globals,
   :mod:`.trig`'s included), each with the bytes of its source file, and the simple values (numbers, strings)
@@ -27,6 +29,7 @@ import hashlib
 import math
 import types
 from collections.abc import Callable
+from contextlib import nullcontext
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -36,6 +39,7 @@ from numba import njit
 from numba.core.errors import NumbaError
 
 from ..errors import InvalidArgument
+from ..scene.first_render import claim_piece
 from . import trig
 
 __all__ = ["MASK_SIGNATURE", "compile_mask", "mask_fingerprint", "no_mask"]
@@ -160,7 +164,9 @@ def compile_mask(fn: Callable) -> Any:
         # dispatcher, whose pickled form differs in every process, into numba's key)
         batch = types.FunctionType(_batch.__code__, {**globals(), "point": point}, "batch")
         batch.__qualname__ = f"mask_{fingerprint or 'uncached'}"
-        batch = njit(MASK_SIGNATURE, nogil=True, error_model="numpy", cache=fingerprint is not None)(batch)
+        # a kernel piece: a process that finds another compiling it waits and loads it from numba's cache
+        with claim_piece(batch.__qualname__) if fingerprint is not None else nullcontext():
+            batch = njit(MASK_SIGNATURE, nogil=True, error_model="numpy", cache=fingerprint is not None)(batch)
     except NumbaError as exc:
         raise InvalidArgument(
             f"Blend mask {name!r} cannot be compiled ({type(exc).__name__}); a mask must be a plain function "

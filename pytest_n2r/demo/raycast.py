@@ -26,6 +26,11 @@ What makes it fast (measured in ``docs/performance.md``):
 Threads take every n-th band of :data:`BAND` image rows, and each pixel depends only on its own band: results
 do not depend on the thread count.
 
+A fresh checkout compiles the ray caster in two halves that two processes can compile at once: the kernel (with
+a row's albedo and shading) and a row's cast (:mod:`.row_cast`, a kernel piece under its own lock), which the
+kernel calls through a function pointer. The kernel is compiled against a placeholder of the row cast's type, so
+its compile needs nothing of the row cast's (``docs/performance.md``).
+
 Convention
 ----------
 - Rays, hits and surface coordinates as in :mod:`.primitives`; colours as in :mod:`.exact` (the mean of
@@ -39,17 +44,14 @@ from __future__ import annotations
 
 import functools
 import math
-import platform
 import warnings
 from dataclasses import dataclass
 from typing import Any
 
 import numba
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
+from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
-from numba.extending import intrinsic
 
 from ..errors import InvalidArgument
 from ..render.threads import render_pool
@@ -58,25 +60,12 @@ from .borrow import borrowed as _borrowed
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
-from .relief_kernel import (
-    HIT_ROWS,
-    LANES,
-    MODEL_ROWS,
-    RELIEF_COLUMNS,
-    SLOT,
-    STATE_ROWS,
-    SUM_ROWS,
-    relief_at,
-    relief_hits,
-)
-from .relief_rows import RELIEF_ROWS, relief_row
+from .relief_kernel import LANES, RELIEF_COLUMNS, STATE_ROWS, SUM_ROWS, relief_at
+from .relief_rows import RELIEF_ROWS
+from .row_cast import BOX, CYLINDER, DISC, RELIEF, cast_rays, cast_row_kernel, no_cast_row
 from .textures import Texture
 
 __all__ = ["CompiledScene", "compile_scene"]
-
-# primitive kinds
-_DISC, _BOX, _CYLINDER, _RELIEF = 0, 1, 2, 3
-
 
 @dataclass(frozen=True, eq=False)
 class CompiledScene:
@@ -120,7 +109,7 @@ class CompiledScene:
         t = np.empty(len(o))
         which = np.empty(len(o), dtype=np.int64)
         everywhere = np.tile(np.array([-math.inf, math.inf, -math.inf, math.inf]), (len(self.cull_boxes), 1))
-        _cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, np.empty(LANES), everywhere,
+        cast_rays(o, d, self.groups, self.group_box, self.kinds, self.prims, self.waves, np.empty(LANES), everywhere,
                    t, which)
         return t, which
 
@@ -134,12 +123,14 @@ class CompiledScene:
         meanwhile (:mod:`pytest_n2r.plugin.precompile`, through numba's cache), and loads them afterwards."""
         view = (c2w, fx, fy, cx, cy)
         if "masks" not in self.__dict__:
-            self._render_with(view, 0, 0, supersample, far, outputs, (no_mask,) * max(len(self.mask_functions), 1))
-        return self._render_with(view, height, width, supersample, far, outputs, self.masks)
+            self._render_with(view, 0, 0, supersample, far, outputs, (no_mask,) * max(len(self.mask_functions), 1),
+                              no_cast_row())
+        return self._render_with(view, height, width, supersample, far, outputs, self.masks, cast_row_kernel())
 
     def _render_with(self, view: tuple, height: int, width: int, supersample: int, far: float,
-                     outputs: tuple[str, ...], masks: tuple) -> dict[str, np.ndarray]:
-        """:meth:`render` with the compiled ``masks``; ``view`` is ``(c2w, fx, fy, cx, cy)``."""
+                     outputs: tuple[str, ...], masks: tuple, cast_row: Any) -> dict[str, np.ndarray]:
+        """:meth:`render` with the compiled ``masks`` and row cast ``cast_row``; ``view`` is ``(c2w, fx, fy, cx,
+        cy)``."""
         c2w, fx, fy, cx, cy = view
         want_rgb, want_depth, want_opacity = ("rgb" in outputs), ("depth" in outputs), ("opacity" in outputs)
         rgb = np.empty((height, width, 3) if want_rgb else (0, 0, 3), dtype=np.uint8)
@@ -150,12 +141,12 @@ class CompiledScene:
         rects = screen_rects(self.cull_boxes, c2w, fx, fy, cx, cy)
         args = (c2w, camera, int(supersample), rects, self.groups,
                 self.group_box, self.kinds, self.prims, self.waves, self.prim_mat, self.node_kind, self.node_par,
-                self.node_child, self.rings, masks, self.tex_meta, self.texels, self.shading,
+                self.node_child, self.rings, masks, (cast_row,), self.tex_meta, self.texels, self.shading,
                 self.background, rgb, depth, opacity)
         threads = max(1, min(numba.get_num_threads(), -(-height // BAND)))
         rays = (int(supersample) + 1, int(supersample) * width)  # one pixel row's rays (see _render_kernel)
         samples = int(supersample) ** 2 * width  # one pixel row's supersampling rays (see _shading_inputs)
-        reliefs = max(1, int(np.sum(self.kinds == _RELIEF)))
+        reliefs = max(1, int(np.sum(self.kinds == RELIEF)))
         scratch = [(np.empty((5, *rays)), np.empty((2, *rays), dtype=np.int64), np.empty((11, samples)),
                     np.empty((2, samples), dtype=np.int64), np.empty(LANES), np.empty((4, rays[1])),
                     np.empty((STATE_ROWS, rays[1])), np.empty((SUM_ROWS, rays[1])), np.empty((SUM_ROWS, rays[1])),
@@ -350,21 +341,21 @@ def _primitive_row(prim: Primitive, b: _Builder, waves: list) -> tuple[int, list
     par = [0.0] * 16
     if isinstance(prim, Disc):
         par[:4] = [prim.height, prim.radius, *prim.centre]
-        return _DISC, par, [b.material(prim.material)] * 6
+        return DISC, par, [b.material(prim.material)] * 6
     if isinstance(prim, Box):
         par[:6] = [*prim.lo, *prim.hi]
         faces = [b.material(prim._material(name)) for name in ("-x", "-y", "-z", "+x", "+y", "+z")]
-        return _BOX, par, faces
+        return BOX, par, faces
     if isinstance(prim, Cylinder):
         par[:6] = [*prim.centre, "xyz".index(prim.axis), prim.radius, prim.half_length]
-        return _CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
+        return CYLINDER, par, [b.material(prim.side), b.material(prim.cap)] + [0] * 4
     if isinstance(prim, ReliefWall):
         par[:RELIEF_COLUMNS] = [prim.y0, *prim.extent, prim.depth, prim.slope_bound, len(waves), len(prim._w),
                                 prim.newton, prim.steps, prim.bisections, _curvature_bound(prim), b.reliefs,
                                 _third_bound(prim)]
         b.reliefs += 1
         waves.extend(prim._w.astype(np.float32).tolist())
-        return _RELIEF, par, [b.material(prim.material)] * 6
+        return RELIEF, par, [b.material(prim.material)] * 6
     raise InvalidArgument(f"primitive {type(prim).__name__} has no compiled form; expected one of Disc, Box, "
                           "Cylinder, ReliefWall")
 
@@ -403,237 +394,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
     )
 
 
-# -- geometry ------------------------------------------------------------------------------------------------
-
-
-def barrier_constraint(machine: str) -> str | None:
-    """The inline-asm constraint that keeps a float64 in place in a vector register on ``machine`` (as
-    ``platform.machine()`` names it): ``"=x,0"`` on x86-64; ``None`` elsewhere, where :func:`_opaque` is the
-    plain value (the same images; LLVM may then hoist the divisions again). Other architectures spell the
-    register class differently, and an unknown letter would fail the kernel's compile.
-
-    >>> barrier_constraint("x86_64"), barrier_constraint("AMD64"), barrier_constraint("arm64")
-    ('=x,0', '=x,0', None)
-    """
-    return "=x,0" if machine.lower() in ("x86_64", "amd64") else None
-
-
-@intrinsic
-def _opaque(typingctx, x):
-    """``x`` itself, through an empty asm statement that LLVM may not move: a division of it stays in the branch that
-    needs it. (LLVM hoists a division out of a loop when its inputs are invariant, even out of a branch: the
-    three of ``1 / d`` went to every ray, a tenth of an object frame, though only rays that meet a box use them.)
-    Only where :func:`barrier_constraint` knows the machine."""
-    def codegen(context, builder, signature, args):
-        constraint = barrier_constraint(platform.machine())
-        if constraint is None:
-            return args[0]
-        double = ir.DoubleType()
-        barrier = ir.InlineAsm(ir.FunctionType(double, [double]), "", constraint, side_effect=True)
-        return builder.call(barrier, args)
-
-    return types.float64(types.float64), codegen
-
-
-@njit(cache=True, error_model="numpy")
-def _slab(ox, oy, oz, ix, iy, iz, lo0, lo1, lo2, hi0, hi1, hi2):
-    """Entry and exit ``t`` of a ray (inverse direction ``1 / d``) through a box, NaN-safe like ``np.fmin`` /
-    ``np.fmax``."""
-    t_near, t_far = -math.inf, math.inf
-    for o, inv, lo, hi in ((ox, ix, lo0, hi0), (oy, iy, lo1, hi1), (oz, iz, lo2, hi2)):
-        t0, t1 = (lo - o) * inv, (hi - o) * inv
-        lo_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else min(t0, t1))
-        hi_t = t1 if math.isnan(t0) else (t0 if math.isnan(t1) else max(t0, t1))
-        if not math.isnan(lo_t):
-            t_near = max(t_near, lo_t)
-        if not math.isnan(hi_t):
-            t_far = min(t_far, hi_t)
-    return t_near, t_far
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz):
-    """First hit of a capped :class:`Cylinder`, ``inf`` on a miss."""
-    qx, qy, qz = ox - prims[row, 0], oy - prims[row, 1], oz - prims[row, 2]
-    k = int(prims[row, 3])
-    if k == 0:  # (i, j, k) = the two cross axes and the axis, without indexing a tuple at run time
-        qi, qj, qk, di, dj, dk = qy, qz, qx, dy, dz, dx
-    elif k == 1:
-        qi, qj, qk, di, dj, dk = qx, qz, qy, dx, dz, dy
-    else:
-        qi, qj, qk, di, dj, dk = qx, qy, qz, dx, dy, dz
-    radius, half = prims[row, 4], prims[row, 5]
-    A = di * di + dj * dj
-    B = 2 * (qi * di + qj * dj)
-    C = qi * qi + qj * qj - radius ** 2
-    disc = B * B - 4 * A * C
-    best = math.inf
-    if disc >= 0:
-        root = math.sqrt(disc)
-        for t in ((-B - root) / (2 * A), (-B + root) / (2 * A)):
-            along = qk + t * dk
-            if t > T_MIN and abs(along) <= half and t < best:
-                best = t
-    for sign in (-1.0, 1.0):
-        t = (sign * half - qk) / dk
-        pi, pj = qi + t * di, qj + t * dj
-        if t > T_MIN and pi * pi + pj * pj <= radius ** 2 and t < best:
-            best = t
-    return best
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _hit(kind, prims, row, reliefs, j, ox, oy, oz, dx, dy, dz, ix, iy, iz):
-    """``t`` of the first hit of one primitive (``inf`` on a miss), and a relief's gradient there: a relief's hits
-    are found beforehand for a whole batch of rays (``reliefs[slot, 0:4, j]``, :func:`.relief_kernel.relief_hits`)."""
-    if kind == _RELIEF:
-        slot = int(prims[row, SLOT])
-        return reliefs[slot, 0, j], reliefs[slot, 1, j], reliefs[slot, 2, j], reliefs[slot, 3, j] != 0.0
-    if kind == _DISC:
-        t = _disc_hit(prims, row, ox, oy, oz, dx, dy, dz)
-    elif kind == _BOX:
-        t = _box_hit(prims, row, ox, oy, oz, ix, iy, iz)
-    else:
-        t = _cylinder_hit(prims, row, ox, oy, oz, dx, dy, dz)
-    return t, 0.0, 0.0, False
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _disc_hit(prims, row, ox, oy, oz, dx, dy, dz):
-    """First hit of a :class:`Disc`, ``inf`` on a miss."""
-    t = (prims[row, 0] - oz) / dz
-    qx, qy = ox + t * dx - prims[row, 2], oy + t * dy - prims[row, 3]
-    return t if t > T_MIN and qx ** 2 + qy ** 2 <= prims[row, 1] ** 2 else math.inf
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _box_hit(prims, row, ox, oy, oz, ix, iy, iz):
-    """First hit of a box ``lo, hi`` (``prims[row, 0:6]``) by a ray of inverse direction ``1 / d``, ``inf`` on a
-    miss; from inside, the exit face."""
-    t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, prims[row, 0], prims[row, 1], prims[row, 2], prims[row, 3],
-                          prims[row, 4], prims[row, 5])
-    if t_near <= t_far and t_far > T_MIN:
-        return t_near if t_near > T_MIN else t_far
-    return math.inf
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _hits_along(kind, table, row, ox, oy, oz, dxs, dys, dzs, out):
-    """``t`` of the first hit of one disc, box or cylinder (``kind``, its parameters ``table[row]``; a group's box
-    is a box) along rays ``o + t d`` (``d`` = ``dxs[j], dys[j], dzs[j]``) into ``out[j]``, ``inf`` on a miss. Compiled
-    apart and called with each row as its own array, so that LLVM vectorizes the loops (see :func:`_nearest_hits`)."""
-    if kind == _DISC:
-        for j in range(out.shape[0]):
-            out[j] = _disc_hit(table, row, ox, oy, oz, dxs[j], dys[j], dzs[j])
-    elif kind == _BOX:
-        for j in range(out.shape[0]):
-            out[j] = _box_hit(table, row, ox, oy, oz, 1.0 / dxs[j], 1.0 / dys[j], 1.0 / dzs[j])
-    else:
-        for j in range(out.shape[0]):
-            out[j] = _cylinder_hit(table, row, ox, oy, oz, dxs[j], dys[j], dzs[j])
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _nearest_hits(groups, group_box, kinds, prims, reliefs, rects, us, v, ox, oy, oz, ds, count, row, ts, ks, gxs,
-                  gzs, haves, spare):
-    """:func:`_cast` for rays ``j < count`` of a row at once (pixel columns ``us[j]``, increasing in ``j``, and
-    row ``v``; directions ``ds[0:3, j]``) into ``ts, ks, gxs, gzs, haves[row, j]``: the same tests in the same order
-    with the same arithmetic, but one group's box and one primitive at a time over the rays under its screen
-    rectangle (a span of ``j``), each a loop LLVM vectorizes (:func:`_hits_along`, into ``spare[0]``; the group's
-    box into ``spare[1]``)."""
-    for j in range(count):
-        ts[row, j], ks[row, j], gxs[row, j], gzs[row, j], haves[row, j] = math.inf, 0, 0.0, 0.0, 0
-    columns = us[:count]
-    n_groups = groups.shape[0]
-    for g in range(n_groups):
-        if v < rects[g, 2] or v > rects[g, 3]:
-            continue
-        g0, g1 = np.searchsorted(columns, rects[g, 0], "left"), np.searchsorted(columns, rects[g, 1], "right")
-        if g1 <= g0:
-            continue
-        if groups[g, 2]:  # rays that miss the group's box skip its primitives (_BOX as a run-time value: numba
-            # would compile _hits_along once more for a literal kind)
-            _hits_along(groups[g, 2] * _BOX, group_box, g, ox, oy, oz, ds[0, g0:g1], ds[1, g0:g1], ds[2, g0:g1],
-                        spare[1, g0:g1])
-        else:
-            spare[1, g0:g1] = 0.0
-        for k in range(groups[g, 0], groups[g, 1]):
-            r = n_groups + k
-            if v < rects[r, 2] or v > rects[r, 3]:
-                continue
-            j0 = max(g0, np.searchsorted(columns, rects[r, 0], "left"))
-            j1 = min(g1, np.searchsorted(columns, rects[r, 1], "right"))
-            if j1 <= j0:
-                continue
-            relief = kinds[k] == _RELIEF
-            hits = reliefs[int(prims[k, SLOT])] if relief else reliefs[0]
-            if not relief:
-                _hits_along(kinds[k], prims, k, ox, oy, oz, ds[0, j0:j1], ds[1, j0:j1], ds[2, j0:j1],
-                            spare[0, j0:j1])
-            for j in range(j0, j1):
-                t = hits[0, j] if relief else spare[0, j]
-                if math.isfinite(spare[1, j]) and t < ts[row, j]:
-                    ts[row, j], ks[row, j] = t, k
-                    gxs[row, j], gzs[row, j], haves[row, j] = ((hits[1, j], hits[2, j], hits[3, j] != 0.0) if relief
-                                                               else (0.0, 0.0, False))
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _cast(groups, group_box, kinds, prims, reliefs, j, rects, u, v, ox, oy, oz, dx, dy, dz):
-    """Nearest hit ``(t, primitive, dh/dx, dh/dz, have)`` of ray ``j`` of a batch over all groups (``t = inf`` and
-    primitive 0 on a miss; a relief's hit and gradient from ``reliefs``, see :func:`_hit`). ``u, v``: the ray's
-    pixel coordinates; groups and primitives whose screen rectangle (``rects``, :func:`screen_rects`) does not hold
-    them are skipped."""
-    best, which, best_gx, best_gz, best_have = math.inf, 0, 0.0, 0.0, False
-    ix = iy = iz = math.nan
-    inverse = False  # 1 / d only for rays that meet a box (see _opaque)
-    n_groups = groups.shape[0]
-    for g in range(n_groups):
-        if u < rects[g, 0] or u > rects[g, 1] or v < rects[g, 2] or v > rects[g, 3]:
-            continue
-        if groups[g, 2] and not inverse:
-            ix, iy, iz, inverse = 1.0 / _opaque(dx), 1.0 / _opaque(dy), 1.0 / _opaque(dz), True
-        if groups[g, 2]:
-            t_near, t_far = _slab(ox, oy, oz, ix, iy, iz, group_box[g, 0], group_box[g, 1], group_box[g, 2],
-                                  group_box[g, 3], group_box[g, 4], group_box[g, 5])
-            if not (t_near <= t_far and t_far > T_MIN):
-                continue
-        for k in range(groups[g, 0], groups[g, 1]):
-            r = n_groups + k
-            if u < rects[r, 0] or u > rects[r, 1] or v < rects[r, 2] or v > rects[r, 3]:
-                continue
-            if kinds[k] == _BOX and not inverse:
-                ix, iy, iz, inverse = 1.0 / _opaque(dx), 1.0 / _opaque(dy), 1.0 / _opaque(dz), True
-            t, gx, gz, have = _hit(kinds[k], prims, k, reliefs, j, ox, oy, oz, dx, dy, dz, ix, iy, iz)
-            if t < best:
-                best, which, best_gx, best_gz, best_have = t, k, gx, gz, have
-    return best, which, best_gx, best_gz, best_have
-
-
-@njit(cache=True, error_model="numpy")
-def _cast_rays(o, d, groups, group_box, kinds, prims, waves, lanes, rects, t_out, which_out):
-    """:meth:`CompiledScene.cast`: one ray at a time (each its own origin), serial (used for small batches)."""
-    ds, no_guess, pixel = np.empty((3, 1)), np.full(1, math.nan), np.zeros(1)
-    state, sums, spare = np.empty((STATE_ROWS, 1)), np.empty((SUM_ROWS, 1)), np.empty((SUM_ROWS, 1))
-    reliefs, model = np.empty((_relief_count(kinds), HIT_ROWS, 1)), np.empty((MODEL_ROWS, 1))
-    everywhere = rects[0]
-    for r in range(o.shape[0]):
-        ds[0, 0], ds[1, 0], ds[2, 0] = d[r, 0], d[r, 1], d[r, 2]
-        for k in range(kinds.shape[0]):
-            if kinds[k] == _RELIEF:
-                relief_hits(prims, k, waves, lanes, o[r, 0], o[r, 1], o[r, 2], ds, no_guess, 1, pixel, 0.0,
-                            everywhere, state, sums, spare, reliefs[int(prims[k, SLOT])], model, False)
-        t_out[r], which_out[r], _, _, _ = _cast(groups, group_box, kinds, prims, reliefs, 0, rects, 0.0, 0.0,
-                                                o[r, 0], o[r, 1], o[r, 2], d[r, 0], d[r, 1], d[r, 2])
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _relief_count(kinds):
-    """How many reliefs a scene has (at least 1: the size of the kernels' relief buffers)."""
-    count = 0
-    for k in range(kinds.shape[0]):
-        count += kinds[k] == _RELIEF
-    return max(count, 1)
+# -- surfaces ------------------------------------------------------------------------------------------------
 
 
 @njit(cache=True, error_model="numpy")
@@ -655,9 +416,9 @@ def _cylinder_surface(prims, row, qx, qy, qz):
 def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
     """Unit outward normal, surface coordinates ``(a, b)`` and face slot of a hit point (see
     :meth:`Primitive.surface`); a relief uses the gradient ``gx, gz`` its hit gave when it ``have`` one."""
-    if kind == _DISC:
+    if kind == DISC:
         return 0.0, 0.0, 1.0, x, y, 0
-    if kind == _BOX:
+    if kind == BOX:
         best, face = abs(x - prims[row, 0]), 0
         for f, dist in ((1, abs(y - prims[row, 1])), (2, abs(z - prims[row, 2])), (3, abs(x - prims[row, 3])),
                         (4, abs(y - prims[row, 4])), (5, abs(z - prims[row, 5]))):
@@ -670,7 +431,7 @@ def _surface(kind, prims, row, waves, lanes, x, y, z, gx, gz, have):
         if axis == 0:  # right = (-n_y, n_x, 0) seen from outside
             return sign, 0.0, 0.0, y * sign, -z, face
         return 0.0, sign, 0.0, -x * sign, -z, face
-    if kind == _CYLINDER:
+    if kind == CYLINDER:
         return _cylinder_surface(prims, row, x - prims[row, 0], y - prims[row, 1], z - prims[row, 2])
     if not have:
         _, gx, gz = relief_at(waves, lanes, int(prims[row, 7]), int(prims[row, 8]), prims[row, 5], x, z)
@@ -758,49 +519,18 @@ def _light_and_footprint(rotation, yc, scale, light, xcs, ts, nxs, nys, nzs, foo
         lights[j] = ambient + (1.0 - ambient) * min(max(nx * lx + ny * ly + nz * lz, 0.0), 1.0)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _cast_row(row, n, v, rows, c2w, camera, uss, xcs, rects, groups, group_box, kinds, prims, waves,
-              lanes, rays, state, sums, spare, reliefs, ts, ks, gxs, gzs, haves):
-    """Cast row ``row`` of a pixel row's rays (``row < n``: a sub-row of sub-pixel rays at image row ``v``;
-    ``row == n``: the pixel centres) into ``ts, ks, gxs, gzs, haves[row]``: their directions, each relief's hits
-    for all of them at once (:func:`.relief_rows.relief_row`: a centre's after the ``rows`` rows of centres above
-    in this band, a sub-row's after its pixel row's centres), then each ray's nearest hit. Compiled apart from
-    the kernel and called once per row of rays (the kernel's compile grows with each helper inlined into it); its
-    helpers receive views of its arrays without reference counts, as the kernel's (:func:`_borrowed`)."""
-    fy, cy = camera[1], camera[3]
-    ox, oy, oz = c2w[0, 3], c2w[1, 3], c2w[2, 3]
-    rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
-    prims, waves, lanes, reliefs = _borrowed(prims), _borrowed(waves), _borrowed(lanes), _borrowed(reliefs)
-    uss, xcs, rays, ts, ks = _borrowed(uss), _borrowed(xcs), _borrowed(rays), _borrowed(ts), _borrowed(ks)
-    gxs, gzs, haves = _borrowed(gxs), _borrowed(gzs), _borrowed(haves)
-    centre = row == n
-    table = n if centre else 0
-    count = ts.shape[1] // n if centre else ts.shape[1]
-    ds, guesses = rays[0:3], rays[3]
-    yc = (v - cy) / fy
-    for j in range(count):
-        xc = xcs[table, j]
-        ds[0, j] = xc * c2w[0, 0] + yc * c2w[0, 1] + c2w[0, 2]
-        ds[1, j] = xc * c2w[1, 0] + yc * c2w[1, 1] + c2w[1, 2]
-        ds[2, j] = xc * c2w[2, 0] + yc * c2w[2, 1] + c2w[2, 2]
-    for k in range(kinds.shape[0]):
-        if kinds[k] == _RELIEF:
-            relief_row(k, prims, waves, lanes, ox, oy, oz, ds, guesses, count, uss[table], v,
-                       rects[groups.shape[0] + k], state, sums, spare, reliefs[int(prims[k, SLOT])], n, rows, centre)
-    _nearest_hits(groups, group_box, kinds, prims, reliefs, rects, uss[table], v, ox, oy, oz, ds, count, row, ts, ks,
-                  gxs, gzs, haves, spare)
-
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, rays, state, sums, spare, reliefs,
                    colours, taps, weights, mix, requests, request_slots, lods, queue, buckets, direct, sizes, c2w,
                    camera, n, rects, groups, group_box, kinds, prims, waves, prim_mat, node_kind, node_par, node_child,
-                   rings, masks, tex_meta, texels, shading, background, rgb, depth, opacity):
+                   rings, masks, cast_row, tex_meta, texels, shading, background, rgb, depth, opacity):
     """Bands ``first, first + step, ...`` of :data:`BAND` image rows. Per pixel row: the rays through the pixel
     centres are cast first (the depth rays), then the ``n`` sub-rows of supersampling rays, then each pixel is
     shaded. Each row of rays is cast as a batch: a relief's hits first, for all the row's rays at once (a
     centre's root searched from the roots of the rows above, a sub-ray's from its pixel centre's hit, see
-    :mod:`.relief_rows`), then the nearest hit of each ray."""
+    :mod:`.relief_rows`), then the nearest hit of each ray, by ``cast_row[0]``
+    (:func:`.row_cast.cast_row_kernel`, or its placeholder while the kernel compiles)."""
     fx, cx, far = camera[0], camera[2], camera[4]
     rects, groups, group_box, kinds = _borrowed(rects), _borrowed(groups), _borrowed(group_box), _borrowed(kinds)
     prims, waves, prim_mat, node_kind = _borrowed(prims), _borrowed(waves), _borrowed(prim_mat), _borrowed(node_kind)
@@ -812,7 +542,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     want_hits = want_colour or opacity.shape[0] > 0
     relief = False
     for k in range(kinds.shape[0]):
-        relief = relief or kinds[k] == _RELIEF
+        relief = relief or kinds[k] == RELIEF
     inv_count = np.float32(n * n)
     sub = n * width
     # the rays of one pixel row, n rows of sub-pixel offsets then the pixel centres: t, dh/dx, dh/dz of a relief
@@ -833,7 +563,7 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
     shade, shade_int = _borrowed(shade), _borrowed(shade_int)
     slight, nodes = shade[3], shade_int[0]
     lanes = _borrowed(lanes)
-    # one row of rays (see _cast_row): directions and the guesses of a relief's roots; a relief search's state;
+    # one row of rays (see .row_cast): directions and the guesses of a relief's roots; a relief search's state;
     # per relief its hits, the roots of the rows above and the models at the centres' hits (see .relief_rows)
     rays, state, sums, spare, reliefs = (_borrowed(rays), _borrowed(state), _borrowed(sums), _borrowed(spare),
                                          _borrowed(reliefs))
@@ -848,9 +578,9 @@ def _render_kernel(first, step, scratch, scratch_int, shade, shade_int, lanes, r
             for order in range(0 if depth.shape[0] > 0 or (want_hits and relief) else 1, n + 1 if want_hits else 1):
                 row = n if order == 0 else order - 1
                 centre = row == n
-                _cast_row(row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), above, c2w, camera, uss, xcs,
-                          rects, groups, group_box, kinds, prims, waves, lanes, rays, state, sums, spare, reliefs, ts,
-                          ks, gxs, gzs, haves)
+                cast_row[0](row, n, float(v) if centre else v + ((row + 0.5) / n - 0.5), above, c2w, camera, uss,
+                            xcs, rects, groups, group_box, kinds, prims, waves, lanes, rays, state, sums, spare,
+                            reliefs, ts, ks, gxs, gzs, haves)
             if depth.shape[0] > 0:
                 for u in range(width):
                     depth[v, u] = np.float32(ts[n, u] if math.isfinite(ts[n, u]) else far)

@@ -51,7 +51,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def _build_session(config: pytest.Config) -> Any:
     """Parse and check every option (a bad value is a usage error naming the option)."""
     from ..relation import RunSettings
-    from .precompile import start_for_session
+    from .precompile import compile_apart_meanwhile, start_for_session
     from .session import N2RSession
 
     values = read_options(config)
@@ -62,6 +62,7 @@ def _build_session(config: pytest.Config) -> Any:
                          cache_bytes=values["cache_size"])
     if values["precompile"]:
         session.on_first_render = functools.partial(start_for_session, session)
+        session.while_waiting = functools.partial(compile_apart_meanwhile, session)
     return session
 
 

@@ -9,8 +9,9 @@ runs no user code) and renders a tiny view of one scene of each renderer kind th
 itself, under the kind's lock (:mod:`pytest_n2r.scene.first_render`): numba writes the kernels to
 its cache, and the session, reaching that kind later, waits for the helper if it is still compiling and
 then loads them. Before that it compiles what the scenes of the session's first family compile apart from
-their kernels (:meth:`~pytest_n2r.scene.base.Scene.compile_apart`: the exact demo scenes' blend masks, which
-the session's first render loads after compiling the ray caster), for the families in :data:`APART_FAMILIES`.
+their kernels (:meth:`~pytest_n2r.scene.base.Scene.compile_apart`: the exact demo scenes' row cast, about half
+of the ray caster's compile, and their blend masks, which the session's first render waits for or loads after
+compiling the rest of the ray caster), for the families in :data:`APART_FAMILIES`.
 
 Only the kernels cross from the helper to the session (through numba's on-disk cache); the helper's renders
 are thrown away. One helper runs per render cache directory at a time (pytest-xdist workers share one); a
@@ -29,12 +30,12 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from ..scene.first_render import claim_kind, collector_paused, renderer_kind
+from ..scene.first_render import claim_kind, collector_paused, kernel_locks, renderer_kind
 from .scenes import SceneSpec
 from .session import N2RSession
 
-__all__ = ["APART_FAMILIES", "HELPER_KIND", "apart_specs", "family", "helper_specs", "start_helper",
-           "start_for_session", "run_job"]
+__all__ = ["APART_FAMILIES", "HELPER_KIND", "apart_specs", "compile_apart_meanwhile", "family", "helper_specs",
+           "start_helper", "start_for_session", "run_job"]
 
 #: The lock a running helper holds for its whole life (one helper per render cache directory).
 HELPER_KIND = "precompile-helper"
@@ -131,12 +132,22 @@ def start_for_session(session: N2RSession, scene: Any) -> None:
                                       session.render_scale, apart)
 
 
+def compile_apart_meanwhile(session: N2RSession, scene: Any) -> None:
+    """While ``session``'s first render of ``scene`` waits for another process compiling its kernels (an xdist
+    worker, or the helper): compile what the planned scenes of :data:`APART_FAMILIES` compile apart, which the
+    process that compiles their kernels would otherwise compile after them (the session's ``while_waiting``, set
+    by the plugin). A piece another process is compiling is waited for and loaded."""
+    for spec in session.planned:
+        if family(spec) in APART_FAMILIES:
+            session.load(spec).compile_apart()
+
+
 def run_job(job: dict[str, Any]) -> list[str]:
     """The helper's work: returns the scenes whose parts it compiled apart (``apart:NAME``) and the renderer
     kinds it compiled (or loaded from numba's cache)."""
     session = N2RSession(device=job["device"], render_scale=job["render_scale"])
     done: list[str] = []
-    with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held:
+    with claim_kind(job["cache_dir"], HELPER_KIND, wait=False) as held, kernel_locks(job["cache_dir"]):
         if not held:
             print(f"helper {os.getpid()}: another helper is compiling for this cache directory", flush=True)
             return done

@@ -42,6 +42,9 @@ class N2RSession:
     planned: list[SceneSpec] = field(default_factory=list)
     #: Called with the scene before the render cache's first render (the plugin starts the kernel helper).
     on_first_render: Callable[[Scene], None] | None = field(default=None, repr=False)
+    #: Called with the scene while its first render waits for another process compiling its kernels (the plugin
+    #: compiles kernel pieces meanwhile).
+    while_waiting: Callable[[Scene], None] | None = field(default=None, repr=False)
     #: The kernel helper process, once started; :meth:`close` ends it.
     helper: subprocess.Popen | None = field(default=None, repr=False)
     _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
@@ -53,6 +56,7 @@ class N2RSession:
         if self._cache is None:
             self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes)
             self._cache.on_first_render = self.on_first_render
+            self._cache.while_waiting = self.while_waiting
         return self._cache
 
     def spec_of(self, scene: Scene) -> SceneSpec | None:

@@ -11,6 +11,8 @@ Convention
 ----------
 - A *renderer kind* is the scene's class and its ``renderer_version`` (:func:`renderer_kind`): scenes of one
   kind run the same compiled kernels.
+- A *kernel piece* is a kernel a renderer compiles apart from the rest of its kind's, under its own lock
+  (:func:`claim_piece`), so that two processes can compile one kind's kernels at once.
 - The lock only orders work; the result never depends on it. Without a lock directory, without ``fcntl``
   (Windows), or after :data:`WAIT_S` seconds of waiting, the render goes ahead unlocked.
 """
@@ -21,8 +23,9 @@ import gc
 import os
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
 
 try:
@@ -32,7 +35,7 @@ except ImportError:  # pragma: no cover - Windows: no lock, each process compile
 
 from .base import Scene
 
-__all__ = ["WAIT_S", "claim_kind", "collector_paused", "first_render", "renderer_kind"]
+__all__ = ["WAIT_S", "claim_kind", "claim_piece", "collector_paused", "first_render", "kernel_locks", "renderer_kind"]
 
 #: The longest a process waits for another's first render of a kind (s) before rendering without the lock.
 WAIT_S = 600.0
@@ -41,6 +44,8 @@ _SUBDIR = "kernel-locks"
 
 #: Renderer kinds this process has rendered (its kernels compiled or loaded: later renders need no lock).
 _RENDERED: set[str] = set()
+#: The lock directory of the first render or helper job in progress (:func:`kernel_locks`), for its pieces.
+_DIRECTORY: ContextVar[str | os.PathLike | None] = ContextVar("n2r_kernel_lock_directory", default=None)
 
 
 def renderer_kind(scene: Scene) -> str:
@@ -64,11 +69,13 @@ def _lock_path(directory: Path, kind: str) -> Path:
 
 
 @contextmanager
-def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True) -> Iterator[bool]:
+def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True,
+               meanwhile: Callable[[], object] | None = None) -> Iterator[bool]:
     """Hold the lock file of ``kind`` under ``directory`` for the block; yields whether it is held.
 
     ``wait=False`` gives up at once when another process holds it (yields ``False``); ``wait=True`` waits up
-    to :data:`WAIT_S` seconds, then runs the block without it. ``directory=None`` or no ``fcntl``: no lock."""
+    to :data:`WAIT_S` seconds, then runs the block without it, calling ``meanwhile`` once first when the lock
+    is taken (other work, such as compiling kernel pieces). ``directory=None`` or no ``fcntl``: no lock."""
     if directory is None or fcntl is None:
         yield False
         return
@@ -80,7 +87,7 @@ def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True
         yield False
         return
     try:
-        held = _acquire(fd, WAIT_S if wait else 0.0)
+        held = _acquire(fd, WAIT_S if wait else 0.0, meanwhile)
         try:
             yield held
         finally:
@@ -90,7 +97,7 @@ def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True
         os.close(fd)
 
 
-def _acquire(fd: int, wait_s: float) -> bool:
+def _acquire(fd: int, wait_s: float, meanwhile: Callable[[], object] | None = None) -> bool:
     deadline = time.monotonic() + wait_s
     while True:
         try:
@@ -99,7 +106,32 @@ def _acquire(fd: int, wait_s: float) -> bool:
         except BlockingIOError:
             if time.monotonic() >= deadline:
                 return False
-            time.sleep(_POLL_S)
+            if meanwhile is not None:
+                meanwhile()
+                meanwhile = None
+            else:
+                time.sleep(_POLL_S)
+
+
+@contextmanager
+def kernel_locks(directory: str | os.PathLike | None) -> Iterator[None]:
+    """Kernel pieces compiled in the block (:func:`claim_piece`) take their locks under ``directory``."""
+    token = _DIRECTORY.set(directory)
+    try:
+        yield
+    finally:
+        _DIRECTORY.reset(token)
+
+
+@contextmanager
+def claim_piece(name: str) -> Iterator[bool]:
+    """Hold the lock of kernel piece ``name`` for the block (waiting as :func:`claim_kind` does); yields whether
+    it is held. A *piece* is a kernel a renderer compiles apart from its others, so that the kernel helper can
+    compile it while the session compiles the rest (:meth:`~.base.Scene.compile_apart`): a process that finds it
+    held waits for the other's compile, then loads it from numba's cache. No lock outside :func:`kernel_locks`
+    (or :func:`first_render`, which sets it)."""
+    with claim_kind(_DIRECTORY.get(), f"piece-{name}") as held:
+        yield held
 
 
 @contextmanager
@@ -118,14 +150,16 @@ def collector_paused() -> Iterator[None]:
 
 
 @contextmanager
-def first_render(directory: str | os.PathLike | None, scene: Scene) -> Iterator[None]:
+def first_render(directory: str | os.PathLike | None, scene: Scene,
+                 meanwhile: Callable[[], object] | None = None) -> Iterator[None]:
     """Run a render of ``scene``: the first of its kind in this process under the kind's lock (see the module
-    docstring) with the collector paused (:func:`collector_paused`: it compiles the kind's kernels or loads them),
-    later ones as they are. The kind counts as rendered once the block ends without an error."""
+    docstring; ``meanwhile`` is called once if it must wait for it) with the collector paused
+    (:func:`collector_paused`: it compiles the kind's kernels or loads them), later ones as they are. The kind
+    counts as rendered once the block ends without an error."""
     kind = renderer_kind(scene)
     if kind in _RENDERED:
         yield
         return
-    with claim_kind(directory, kind), collector_paused():
+    with kernel_locks(directory), collector_paused(), claim_kind(directory, kind, meanwhile=meanwhile):
         yield
     _RENDERED.add(kind)

@@ -150,6 +150,9 @@ class RenderCache:
         self._written_since_trim = 0
         #: Called with the scene just before this cache's first render (a session starts its kernel helper).
         self.on_first_render: Callable[[Scene], None] | None = None
+        #: Called with the scene when its first render waits for another process compiling its kind's kernels
+        #: (:func:`~.first_render.first_render`): the plugin compiles kernel pieces meanwhile.
+        self.while_waiting: Callable[[Scene], None] | None = None
 
     def __repr__(self) -> str:
         where = str(self.directory) if self.directory else "memory only"
@@ -187,7 +190,8 @@ class RenderCache:
                 self.on_first_render(scene)
             self.stats.renders += 1
             # threads_kept: the SUT runs next, with the thread count it chose
-            with first_render(self.directory, scene), threads_kept():
+            meanwhile = None if self.while_waiting is None else functools.partial(self.while_waiting, scene)
+            with first_render(self.directory, scene, meanwhile), threads_kept():
                 view = scene.render(c2w, camera, missing)
             for name in missing:
                 value = getattr(view, name)

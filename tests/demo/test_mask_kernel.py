@@ -1,5 +1,6 @@
 """Compiled blend masks in numba's on-disk cache: a second process loads them, a changed mask is compiled again
-under another name, and a first render compiles them after the kernel (another process may have meanwhile)."""
+under another name, and a first render compiles them and the ray caster's row cast after the kernel (another
+process may have meanwhile: the row cast waits for it)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import json
 import os
 import subprocess
 import sys
+import threading
+import time
 import types
 from pathlib import Path
 
@@ -92,31 +95,68 @@ def test_masks_without_a_stable_name_compile_in_every_process_and_still_work():
         np.testing.assert_allclose(out, fn(a, b), rtol=0, atol=1e-15, err_msg=f"{fn.__name__} compiled wrong")
 
 
-def test_a_first_render_runs_the_kernel_before_it_compiles_the_masks(monkeypatch):
-    """So that another process can compile the masks meanwhile (the kernel helper: compile_apart)."""
-    from pytest_n2r.demo import raycast
+def test_a_first_render_runs_the_kernel_before_it_compiles_the_masks_and_the_row_cast(monkeypatch):
+    """So that another process can compile them meanwhile (the kernel helper: compile_apart)."""
+    from pytest_n2r.demo import raycast, row_cast
     from pytest_n2r.demo.scenes import wall_scene
 
     events: list[str] = []
-    kernel, compile_one = raycast._render_kernel, raycast.compile_mask
-    masks_at = list(inspect.signature(kernel.py_func).parameters).index("masks")
+    kernel, compile_one, cast_row = raycast._render_kernel, raycast.compile_mask, row_cast.cast_row_kernel
+    parameters = list(inspect.signature(kernel.py_func).parameters)
+    masks_at, cast_at = parameters.index("masks"), parameters.index("cast_row")
 
     def kernel_call(*args):
-        events.append("kernel, placeholder masks" if args[masks_at][0] is raycast.no_mask else "kernel")
+        placeholders = args[masks_at][0] is raycast.no_mask, args[cast_at][0] is row_cast.no_cast_row()
+        events.append({(True, True): "kernel, placeholders", (False, False): "kernel"}[placeholders])
         return kernel(*args)
 
     def mask_call(fn):
         events.append(f"mask {fn.__name__}")
         return compile_one(fn)
 
+    def cast_row_call():
+        events.append("row cast")
+        return cast_row()
+
     monkeypatch.setattr(raycast, "_render_kernel", kernel_call)
     monkeypatch.setattr(raycast, "compile_mask", mask_call)
+    monkeypatch.setattr(raycast, "cast_row_kernel", cast_row_call)
+    monkeypatch.setattr(row_cast, "cast_row_kernel", cast_row_call)
     monkeypatch.setattr(raycast.numba, "get_num_threads", lambda: 1)
     scene = wall_scene()
     view = scene.views[0]
     first = scene.render(view.c2w, view.camera.resized(16, 9), ("rgb",))
     scene.render(view.c2w, view.camera.resized(16, 9), ("rgb",))
-    assert events == ["kernel, placeholder masks", "mask _growth_mask", "kernel", "kernel"], events
+    expected = ["kernel, placeholders", "mask _growth_mask", "row cast", "kernel", "row cast", "kernel"]
+    assert events == expected, events
     again = wall_scene()
-    assert again.compile_apart() and events[-1] == "mask _growth_mask", "compile_apart did not compile the mask"
+    assert again.compile_apart(), "compile_apart said the scene has nothing to compile apart"
+    assert events[-2:] == ["row cast", "mask _growth_mask"], f"compile_apart did not compile both: {events}"
     np.testing.assert_array_equal(again.render(view.c2w, view.camera.resized(16, 9), ("rgb",)).rgb, first.rgb)
+
+
+def test_the_row_cast_waits_for_another_process_compiling_it(tmp_path):
+    """A first render that reaches the row cast while the kernel helper compiles it waits for its lock."""
+    from pytest_n2r.demo import row_cast
+    from pytest_n2r.scene import first_render as fr
+
+    row_cast.cast_row_kernel.cache_clear()  # this process's compiled copy: the next call takes the lock again
+    ready, release = threading.Event(), threading.Event()
+
+    def hold():
+        with fr.claim_kind(tmp_path, f"piece-{row_cast.CAST_ROW_PIECE}", wait=False) as held:
+            assert held
+            ready.set()
+            release.wait(5)
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    ready.wait()
+    threading.Timer(0.5, release.set).start()
+    start = time.perf_counter()
+    with fr.kernel_locks(tmp_path):
+        compiled = row_cast.cast_row_kernel()
+    waited = time.perf_counter() - start
+    holder.join()
+    assert waited >= 0.4, f"the row cast went ahead after {waited:.2f} s while another process held its lock"
+    assert compiled.signatures, "the row cast was not compiled or loaded"

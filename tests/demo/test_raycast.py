@@ -221,13 +221,13 @@ def test_the_division_barrier_is_inline_asm_only_where_its_constraint_is_known(m
     value, or the exact renderer would not compile there at all."""
     from numba import njit
 
-    from pytest_n2r.demo import raycast
+    from pytest_n2r.demo import row_cast
 
-    monkeypatch.setattr(raycast.platform, "machine", lambda: machine)
+    monkeypatch.setattr(row_cast.platform, "machine", lambda: machine)
 
     @njit
     def halve(x):
-        return raycast._opaque(x) / 2.0
+        return row_cast._opaque(x) / 2.0
 
     assert halve(3.0) == 1.5
     ir = halve.inspect_llvm(halve.signatures[0])

@@ -5,7 +5,16 @@ from __future__ import annotations
 
 import pytest
 
-from pytest_n2r.plugin.precompile import HELPER_KIND, LOG_NAME, apart_specs, family, helper_specs, open_log, run_job
+from pytest_n2r.plugin.precompile import (
+    HELPER_KIND,
+    LOG_NAME,
+    apart_specs,
+    compile_apart_meanwhile,
+    family,
+    helper_specs,
+    open_log,
+    run_job,
+)
 from pytest_n2r.plugin.scenes import SceneSpec
 
 WALL, OBJECT = SceneSpec("wall", "demo", "demo:wall"), SceneSpec("object", "demo", "demo:object")
@@ -47,6 +56,19 @@ def test_precompile_no_leaves_the_session_without_a_helper(pytester, value, star
     session = _build_session(pytester.parseconfig("--n2r-precompile", value))
     assert (session.on_first_render is not None) == starts, \
         f"--n2r-precompile {value}: the session {'would not' if starts else 'would'} start the kernel helper"
+    assert (session.while_waiting is not None) == starts, \
+        f"--n2r-precompile {value}: the session {'would not' if starts else 'would'} compile pieces while it waits"
+
+
+def test_a_waiting_first_render_compiles_apart_the_planned_scenes_of_the_apart_families(monkeypatch):
+    from pytest_n2r.demo.exact import GroundTruthScene
+    from pytest_n2r.plugin.session import N2RSession
+
+    compiled: list[str] = []
+    monkeypatch.setattr(GroundTruthScene, "compile_apart", lambda self: compiled.append(self.name) or True)
+    session = N2RSession(planned=[WALL_FIELD, WALL, OBJECT_FIELD, OBJECT])
+    compile_apart_meanwhile(session, session.load(WALL_FIELD))
+    assert compiled == ["wall", "object"], f"compiled apart {compiled}, not the exact demo scenes in order"
 
 
 def _job(cache_dir) -> dict:

@@ -100,11 +100,14 @@ def test_the_render_cache_renders_the_first_of_a_kind_under_its_lock(tmp_path, m
     cache = RenderCache(tmp_path)
     seen = []
     cache.on_first_render = seen.append
+    waited = []
+    cache.while_waiting = waited.append
     claims = []
     claim = fr.claim_kind
 
-    def spy(directory, kind, wait=True):
+    def spy(directory, kind, wait=True, meanwhile=None):
         claims.append((str(directory), kind))
+        meanwhile()  # as if another process held the lock
         return claim(directory, kind, wait)
 
     monkeypatch.setattr(fr, "claim_kind", spy)
@@ -115,6 +118,7 @@ def test_the_render_cache_renders_the_first_of_a_kind_under_its_lock(tmp_path, m
         cache.render(scene, c2w, view.camera, ("rgb", "depth"))
     assert claims == [(str(tmp_path), fr.renderer_kind(scene))], "exactly the first render takes the lock"
     assert seen == [scene], "on_first_render is called once, with the scene, before the cache's first render"
+    assert waited == [scene], "the first render's wait for its lock does not call while_waiting with the scene"
     assert (tmp_path / "kernel-locks").is_dir()
     np.testing.assert_array_equal(cache.render(scene, view.c2w, view.camera).rgb,
                                   scene.render(view.c2w, view.camera).rgb)
@@ -164,3 +168,44 @@ def test_a_session_starts_the_helper_on_its_first_render(tmp_path, tiny_scene_fi
     assert session.helper is helper, "the helper starts once per session"
     session.close()
     assert session.helper is None
+
+
+def test_a_piece_is_locked_under_the_directory_of_its_kernel_locks_and_nowhere_else(tmp_path):
+    with fr.claim_piece("p") as outside:
+        assert outside is False, "a piece claimed outside kernel_locks took a lock"
+    with fr.kernel_locks(tmp_path), fr.claim_piece("p") as held:
+        assert held, "a piece inside kernel_locks was not locked"
+        with fr.claim_kind(tmp_path, "piece-p", wait=False) as other:
+            assert other is False, "another process could claim a piece that is held"
+    with fr.claim_kind(tmp_path, "piece-p", wait=False) as again:
+        assert again, "the piece's lock must be free once its block ended"
+
+
+def test_the_first_render_locks_its_pieces_under_its_directory(tmp_path):
+    scene = PlaneScene(width=16, height=12)
+    with fr.first_render(tmp_path, scene), fr.claim_piece("p") as held:
+        assert held and (tmp_path / "kernel-locks" / "piece-p.lock").exists(), "the piece was not locked there"
+
+
+def test_a_first_render_that_must_wait_works_meanwhile_once_and_one_that_need_not_does_not(tmp_path):
+    scene = PlaneScene(width=16, height=12)
+    kind = fr.renderer_kind(scene)
+    calls: list[object] = []
+    with fr.first_render(tmp_path, scene, meanwhile=lambda: calls.append(fr._DIRECTORY.get())):
+        pass
+    assert calls == [], "a first render that found the lock free worked meanwhile"
+    fr._RENDERED.clear()
+    ready = threading.Event()
+
+    def hold():
+        with fr.claim_kind(tmp_path, kind, wait=False):
+            ready.set()
+            time.sleep(0.5)
+
+    holder = threading.Thread(target=hold)
+    holder.start()
+    ready.wait()
+    with fr.first_render(tmp_path, scene, meanwhile=lambda: calls.append(fr._DIRECTORY.get())):
+        pass
+    holder.join()
+    assert calls == [tmp_path], f"meanwhile ran {len(calls)} times, or without the pieces' lock directory: {calls}"
