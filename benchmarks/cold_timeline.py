@@ -74,9 +74,9 @@ def pytest_configure(config):
 
     acquire = first_render._acquire
 
-    def timed(fd, wait_s):
+    def timed(fd, wait_s, *meanwhile):  # any revision's signature (a meanwhile callback since 3 December)
         start = time.time()
-        held = acquire(fd, wait_s)
+        held = acquire(fd, wait_s, *meanwhile)
         emit("waited", s=time.time() - start)
         return held
 
