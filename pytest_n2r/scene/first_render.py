@@ -74,8 +74,9 @@ def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True
     """Hold the lock file of ``kind`` under ``directory`` for the block; yields whether it is held.
 
     ``wait=False`` gives up at once when another process holds it (yields ``False``); ``wait=True`` waits up
-    to :data:`WAIT_S` seconds, then runs the block without it, calling ``meanwhile`` once first when the lock
-    is taken (other work, such as compiling kernel pieces). ``directory=None`` or no ``fcntl``: no lock."""
+    to :data:`WAIT_S` seconds, then runs the block without it; if it finds the lock held, it first calls
+    ``meanwhile`` once (other work, such as compiling kernel pieces, which never waits for a kind's lock).
+    ``directory=None`` or no ``fcntl``: no lock."""
     if directory is None or fcntl is None:
         yield False
         return
