@@ -265,7 +265,8 @@ OPTIONS: tuple[Option, ...] = (
            "(default: {default})", default="auto", parse=_derandomize),
     Option("--n2r-precompile", "n2r_precompile", "yes|no",
            "on the first render, compile the kernels of the other renderers the tests use in a helper process, "
-           "on an idle core (default: {default})", default="yes", parse=_yes_no),
+           "on an idle core, and kernel pieces while a first render waits for another process's kernels "
+           "(default: {default})", default="yes", parse=_yes_no),
     Option("--n2r-cache-clear", None, None, "empty the render cache before the run", action="store_true"),
     Option("--n2r-save-baseline", None, "PATH",
            "write every relation's drawn examples (all a replay needs, and their deviations) to PATH",
