@@ -274,9 +274,9 @@ def _relief_count(kinds):
 # -- a row of rays, the kernel piece -------------------------------------------------------------------------
 
 
-#: The signature of :func:`_cast_row`, which the kernel calls through a function pointer (as
-#: :data:`CAST_ROW_SIGNATURE`-typed first-class functions): the kernel and the row's cast compile apart, each
-#: without the other, so that two processes can compile them at once (:func:`cast_row_kernel`).
+#: The signature of :func:`_cast_row`: the kernel calls it through a function pointer of this type, so that the
+#: two compile apart and two processes can compile them at once (:func:`cast_row_kernel`). It must name the types
+#: the kernel passes exactly (numba refuses the kernel's compile otherwise: "mismatch of argument types").
 CAST_ROW_SIGNATURE = (
     "void(int64, int64, float64, int64, float64[:, ::1], float64[::1], float64[:, ::1], float64[:, ::1], "
     "float64[:, ::1], int64[:, ::1], float64[:, ::1], int64[::1], float64[:, ::1], float32[:, ::1], float64[::1], "
