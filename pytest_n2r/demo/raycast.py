@@ -118,9 +118,10 @@ class CompiledScene:
         """The ``outputs`` (``rgb``, ``depth``, ``opacity``) of the pinhole view at pose ``c2w`` (see
         :mod:`.exact` for their definitions).
 
-        The first render compiles (or loads) the kernel before the blend masks, on an empty image with
-        placeholder masks of the same type: a process compiling the kernel leaves the masks to another process
-        meanwhile (:mod:`pytest_n2r.plugin.precompile`, through numba's cache), and loads them afterwards."""
+        The first render compiles (or loads) the kernel before the blend masks and the row cast, on an empty
+        image with placeholders of the same types: a process compiling the kernel leaves those pieces to another
+        process meanwhile (:mod:`pytest_n2r.plugin.precompile`, through numba's cache), and then loads them or
+        waits for them (:func:`~pytest_n2r.scene.first_render.claim_piece`)."""
         view = (c2w, fx, fy, cx, cy)
         if "masks" not in self.__dict__:
             self._render_with(view, 0, 0, supersample, far, outputs, (no_mask,) * max(len(self.mask_functions), 1),
