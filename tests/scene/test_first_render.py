@@ -36,8 +36,9 @@ def test_no_directory_means_no_lock():
         assert held is False
 
 
-def _wait_while_held(directory, scene, kind, seconds) -> float:
-    """Seconds ``first_render`` of ``scene`` waited while another thread held ``kind``'s lock for ``seconds``."""
+def _wait_while_held(directory, scene, kind, seconds, meanwhile=None) -> float:
+    """Seconds ``first_render`` of ``scene`` (with ``meanwhile``) waited while another thread held ``kind``'s lock
+    for ``seconds``."""
     ready = threading.Event()
 
     def hold():
@@ -50,7 +51,7 @@ def _wait_while_held(directory, scene, kind, seconds) -> float:
     holder.start()
     ready.wait()
     start = time.perf_counter()
-    with fr.first_render(directory, scene):
+    with fr.first_render(directory, scene, meanwhile):
         waited = time.perf_counter() - start
     holder.join()
     return waited
@@ -195,17 +196,5 @@ def test_a_first_render_that_must_wait_works_meanwhile_once_and_one_that_need_no
         pass
     assert calls == [], "a first render that found the lock free worked meanwhile"
     fr._RENDERED.clear()
-    ready = threading.Event()
-
-    def hold():
-        with fr.claim_kind(tmp_path, kind, wait=False):
-            ready.set()
-            time.sleep(0.5)
-
-    holder = threading.Thread(target=hold)
-    holder.start()
-    ready.wait()
-    with fr.first_render(tmp_path, scene, meanwhile=lambda: calls.append(fr._DIRECTORY.get())):
-        pass
-    holder.join()
+    _wait_while_held(tmp_path, scene, kind, 0.5, meanwhile=lambda: calls.append(fr._DIRECTORY.get()))
     assert calls == [tmp_path], f"meanwhile ran {len(calls)} times, or without the pieces' lock directory: {calls}"
