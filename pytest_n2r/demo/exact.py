@@ -32,6 +32,7 @@ import numpy as np
 
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView
+from .portable_math import norm3
 from .primitives import T_MIN, Group, Primitive, slab_hits
 
 if TYPE_CHECKING:  # the ray caster (numba and its kernels) is imported by the first render, not with the scene: a
@@ -106,7 +107,7 @@ class GroundTruthScene(Scene):
         self.primitives = tuple(flat)
         self.views = tuple(views)
         light = np.asarray(light, dtype=np.float64)
-        self.light = light / np.linalg.norm(light)
+        self.light = light / norm3(light)  # the same bits on every machine: the content hash covers them
         self.ambient = float(ambient)
         self.background = np.asarray(background, dtype=np.float32)
         self.far = float(far)

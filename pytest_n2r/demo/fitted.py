@@ -17,7 +17,8 @@ Reproducibility
     number of steps and the CPU thread count; the fit runs on the CPU. The report stored in the file holds no
     timings, so two builds on the same machine and library versions give byte-identical files
     (``n2r demo build``; tested). Another CPU or library version may round differently: the bytes can
-    differ, the recipe digest and the fit's quality do not.
+    differ, the recipe digest (the scene's poses are the same bits everywhere: :mod:`.portable_math`) and
+    the fit's quality do not.
 """
 
 from __future__ import annotations

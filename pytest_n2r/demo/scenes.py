@@ -24,6 +24,7 @@ from ..geometry import Camera
 from ..scene.base import SceneView
 from .exact import GroundTruthScene
 from .materials import Blend, Flat, Poster, Radial, Textured
+from .portable_math import cos, norm3, sin, tan
 from .primitives import Box, Cylinder, Disc, Group, ReliefWall
 from .textures import Texture
 
@@ -34,7 +35,7 @@ N_VIEWS = 48
 
 def default_camera(width: int = 480, height: int = 270, hfov_deg: float = 60.0) -> Camera:
     """A pinhole camera with square pixels, principal point at the image centre (OpenCV pixels)."""
-    f = 0.5 * width / math.tan(math.radians(hfov_deg) / 2)
+    f = 0.5 * width / tan(math.radians(hfov_deg) / 2)
     return Camera(width, height, f, f, (width - 1) / 2, (height - 1) / 2)
 
 
@@ -43,12 +44,13 @@ Z_UP = np.array([0.0, 0.0, 1.0])
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = Z_UP) -> np.ndarray:
-    """Camera-to-world pose (OpenCV axes) at ``eye`` looking at ``target``, image 'up' towards world ``up``."""
+    """Camera-to-world pose (OpenCV axes) at ``eye`` looking at ``target``, image 'up' towards world ``up``;
+    the same bits on every machine (:mod:`.portable_math`)."""
     eye, target = np.asarray(eye, float), np.asarray(target, float)
     z = target - eye
-    z /= np.linalg.norm(z)
+    z /= norm3(z)
     x = np.cross(z, up)
-    x /= np.linalg.norm(x)
+    x /= norm3(x)
     y = np.cross(z, x)
     c2w = np.eye(4)
     c2w[:3, 0], c2w[:3, 1], c2w[:3, 2], c2w[:3, 3] = x, y, z, eye
@@ -103,8 +105,8 @@ def wall_scene() -> GroundTruthScene:
             s = k / (per_row - 1)
             x = -3.0 + 6.0 * (s if row == 0 else 1 - s)
             i = row * per_row + k
-            eye = np.array([x, -2.2 + 0.15 * math.sin(0.9 * i), z + 0.08 * math.sin(1.7 * i)])
-            target = np.array([x + 0.35 * math.sin(0.6 * i + 0.4), 0.0, z - pitch_drop])
+            eye = np.array([x, -2.2 + 0.15 * sin(0.9 * i), z + 0.08 * sin(1.7 * i)])
+            target = np.array([x + 0.35 * sin(0.6 * i + 0.4), 0.0, z - pitch_drop])
             poses.append(look_at(eye, target))
     # Held out: views 4, 12, ..., each with captured views on both sides. A row's end (views 0 and 24) sees
     # a stretch of wall that no other view sees, where a field can only guess, whatever its quality.
@@ -172,9 +174,9 @@ def object_scene() -> GroundTruthScene:
     poses = []
     for i in range(N_VIEWS):
         angle = 2 * math.pi * i / N_VIEWS + 0.1
-        radius = 7.5 + 0.3 * math.sin(3.1 * i)
-        eye = np.array([radius * math.cos(angle), radius * math.sin(angle), 3.2 + 0.15 * math.sin(1.3 * i)])
-        target = np.array([0.2 * math.sin(0.7 * i), 0.2 * math.cos(0.9 * i), 1.0])
+        radius = 7.5 + 0.3 * sin(3.1 * i)
+        eye = np.array([radius * cos(angle), radius * sin(angle), 3.2 + 0.15 * sin(1.3 * i)])
+        target = np.array([0.2 * sin(0.7 * i), 0.2 * cos(0.9 * i), 1.0])
         poses.append(look_at(eye, target))
     return GroundTruthScene(
         "object",
