@@ -1,6 +1,6 @@
 """The splat scenes shipped in tests/splats/data, built from the exact demo scenes: ``python -m
 tests.splats.make_data`` rewrites them (deterministically; a test checks that the shipped files are what this
-builds: the cameras byte for byte, the Gaussians to 1e-5).
+builds: the cameras' text, their numbers to 1e-13, the Gaussians to 1e-5).
 
 - ``object-sh0``: the object scene, 4000 Gaussians, SH degree 0, in the 3DGS output layout
   (``point_cloud/iteration_7000/point_cloud.ply`` and ``cameras.json``);
