@@ -19,7 +19,7 @@ Convention
 ----------
 - :func:`sin`, :func:`cos`, :func:`tan`: the float64 nearest to the function's true value at the float64
   argument (ties to even), for ``|x| <= 1e6`` radians; glibc's ``math.sin``/``cos``/``tan`` give the same
-  on every demo argument (``tests/demo/test_portable_math.py``).
+  on every demo argument (glibc 2.36: ``tests/demo/test_portable_math.py`` builds the scenes with both).
 - :func:`fma`: ``a * b + c`` rounded once.
 - :func:`norm3`: ``sqrt(fma(v2, v2, fma(v1, v1, v0 * v0)))``, the BLAS kernel's order and roundings that the
   shipped twins were fitted with; not the correctly rounded length, which differs from it in the last bit

@@ -2,6 +2,7 @@
 
 import math
 import os
+import platform
 import subprocess
 import sys
 from fractions import Fraction
@@ -79,3 +80,16 @@ def test_the_demo_scenes_are_the_same_bits_whatever_blas_kernel_numpy_runs():
         run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
         hashes[kernel] = run.stdout.split()
     assert hashes["Prescott"] == hashes["Haswell"], f"the demo scenes' content hashes follow the BLAS kernel: {hashes}"
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="the claim is about glibc's libm")
+@pytest.mark.parametrize("name", ["wall", "object"])
+def test_glibc_gives_the_scenes_the_same_poses(name, monkeypatch):
+    """portable_math's claim that glibc's sin, cos and tan are correctly rounded on every demo argument: the
+    scenes built with them are the same bits (so the change to portable_math moved no pose on glibc)."""
+    from pytest_n2r.demo import scenes
+
+    portable = scenes.build_scene(name).content_hash
+    for fn in ("sin", "cos", "tan"):
+        monkeypatch.setattr(scenes, fn, getattr(math, fn))
+    assert scenes.build_scene(name).content_hash == portable, f"{name}: glibc's trigonometry moved a pose"
