@@ -10,10 +10,9 @@ not the same everywhere:
   products, and 13 of the demo poses' 192 normalizations differ in their last bit (12 of the 96 poses with them).
   ``OPENBLAS_CORETYPE=Prescott`` shows such a difference on any x86 machine.
 - The C library's ``sin``, ``cos`` and ``tan`` are correctly rounded by glibc on every demo argument, but no C
-  standard promises it, and other libraries round differently.
+  standard promises it, and other libraries may round differently.
 
-So the scenes' poses and light use these functions instead, each evaluated exactly (in integers)
-and rounded once.
+So the scenes' poses and light use these functions instead, each evaluated exactly (in integers) and rounded once.
 
 Convention
 ----------
