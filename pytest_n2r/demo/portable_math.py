@@ -13,6 +13,7 @@ not the same everywhere:
   standard promises it, and other libraries may round differently.
 
 So the scenes' poses and light use these functions instead, each evaluated exactly (in integers) and rounded once.
+(:mod:`.trig` is the other sine here: compiled, within 2 units in the last place, for the renderer's inner loops.)
 
 Convention
 ----------
@@ -94,20 +95,20 @@ def _check(x: float, name: str) -> None:
         raise InvalidArgument(f"{name}(x={x!r}): expected a finite number of radians with |x| <= {MAX_ARGUMENT:g}")
 
 
-def _evaluate(x: float, name: str, pick: int) -> float:
-    """``sin`` (``pick`` 0), ``cos`` (1) or ``tan`` (2) of ``x``, correctly rounded. An integer divided by an
-    integer is correctly rounded in Python, and rounding is monotonic: when both ends of the interval that holds
-    the true value round to the same float, that float is the true value's."""
+def _evaluate(x: float, name: str) -> float:
+    """``name`` (``"sin"``, ``"cos"`` or ``"tan"``) of ``x``, correctly rounded. An integer divided by an integer
+    is correctly rounded in Python, and rounding is monotonic: when both ends of the interval that holds the true
+    value round to the same float, that float is the true value's."""
     _check(x, name)
     x = float(x)
-    if x == 0 and pick != 1:
+    if x == 0 and name != "cos":
         return x  # sin and tan of ±0 are ±0; the fixed point would keep no sign
     bits = _BITS
     while True:  # more rounds only where the value lies close to a rounding boundary or to 0
         s, c = _sin_cos_fixed(x, bits)
         e = _ERROR_UNITS
-        if pick < 2:
-            v, one = (s, c)[pick], 1 << bits
+        if name != "tan":
+            v, one = (s if name == "sin" else c), 1 << bits
             lo, hi = (v - e) / one, (v + e) / one
         elif abs(c) > e:
             corners = [(s + ds) / (c + dc) for ds in (-e, e) for dc in (-e, e)]
@@ -121,17 +122,17 @@ def _evaluate(x: float, name: str, pick: int) -> float:
 
 def sin(x: float) -> float:
     """The sine of ``x`` radians, correctly rounded (module *Convention*)."""
-    return _evaluate(x, "sin", 0)
+    return _evaluate(x, "sin")
 
 
 def cos(x: float) -> float:
     """The cosine of ``x`` radians, correctly rounded (module *Convention*)."""
-    return _evaluate(x, "cos", 1)
+    return _evaluate(x, "cos")
 
 
 def tan(x: float) -> float:
     """The tangent of ``x`` radians, correctly rounded (module *Convention*)."""
-    return _evaluate(x, "tan", 2)
+    return _evaluate(x, "tan")
 
 
 def fma(a: float, b: float, c: float) -> float:
