@@ -37,7 +37,6 @@ from ..field.kernels import (
     BLOCK,
     SH_C0,
     SH_C1,
-    block_exit,
     cell_of,
     grid_coords_xyz,
     lattice_setup,
@@ -75,7 +74,10 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
     ray would land on the same step (the first one in an occupied block), so the samples taken are the same as
     one block at a time. That holds while each sample is one step; once the tail has doubled a ray's samples, a
     jump lands on a step but the sample is taken at the middle of the next ones, so a longer jump would move the
-    samples after it (on the fox, 19 of 388 800 RGB values), and the ray jumps one block at a time.
+    samples after it (on the fox, 19 of 388 800 RGB values), and the ray jumps one block at a time. The exit is
+    found in the samples' own coordinates, the lattice index ``m`` of ``g0 + m·step`` (vertex units), from the
+    step's inverse along each axis (once a ray: no division a jump), less 1e-9 of a step, so rounding can land a
+    jump one step early (a sample in the empty box, checked again), never past a sample outside it.
     """
     rr = res * res
     half = 1.0 + shell
@@ -103,6 +105,8 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
         # a lattice step in vertex units from the unit direction: not from dt·d, whose rounding depends on d's
         # length, and moves a sample that lies on a cell face to the other cell at another scene scale
         gdx, gdy, gdz = dx / dn * (step * scale), dy / dn * (step * scale), dz / dn * (step * scale)
+        # lattice steps a vertex unit along each axis: a jump's exit found by multiplying, not dividing
+        igx, igy, igz = _inverse(gdx, dx), _inverse(gdy, dy), _inverse(gdz, dz)
         while k < total and trans > t_stop:
             # this sample stands for lattice steps k..k+n-1 (never across the end of the cube or the lattice),
             # taken at their middle
@@ -121,10 +125,8 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
                 # an empty block: jump to where the ray leaves the box of empty blocks around it (one sample a
                 # step: see the docstring), or this block alone
                 e = np.int64(block_reach) if stride == 1 else 0
-                t_exit = block_exit(ox, oy, oz, dx, dy, dz, bi + (e if dx > 0.0 else -e), bj + (e if dy > 0.0 else -e),
-                                    bk + (e if dz > 0.0 else -e), shell, res)
-                k_next = max(k + 1, int(math.ceil((t_exit - t0) / dt - 0.5)))
-                k = min(k_next, n_inner)
+                m_exit = min(_exit_steps(bi, e, gx0, igx), _exit_steps(bj, e, gy0, igy), _exit_steps(bk, e, gz0, igz))
+                k = min(max(k + 1, int(math.ceil(m_exit - 0.5 - 1e-9 * (1.0 + m_exit)))), n_inner)
                 continue
             k += n
             if not cell_occupied(bits, bi, bj, bk, ci, cj, ck):
@@ -185,6 +187,25 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
         opacity[i] = 1.0 - trans
         if want_depth:
             depth[i] = zd / wsum if trans < 1.0 else ts + far / dn
+
+
+@njit(cache=True, inline="always")
+def _inverse(g_step, d):
+    """Lattice steps a vertex unit along one axis (``1 / g_step``, signed), or 0 where the ray's direction ``d``
+    has no component along it (``|d| <= 1e-12``, as :func:`~pytest_n2r.field.kernels.block_exit`)."""
+    return 1.0 / g_step if abs(d) > 1e-12 else 0.0
+
+
+@njit(cache=True, inline="always")
+def _exit_steps(b, e, g0, inverse):
+    """Lattice index ``m`` (a sample at ``g0 + m·step``) where the ray leaves, along one axis, the box of blocks
+    ``b - e .. b + e`` (vertex coordinates ``BLOCK·(b - e)`` to ``BLOCK·(b + e + 1)``); infinity along an axis it
+    does not move along (``inverse`` 0)."""
+    if inverse > 0.0:
+        return ((b + e + 1) * BLOCK - g0) * inverse
+    if inverse < 0.0:
+        return ((b - e) * BLOCK - g0) * inverse
+    return math.inf
 
 
 @njit(cache=True, inline="always")
