@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from pytest_n2r.render.block_reach import block_reach
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 
-from ..field.fields import CAMERA, POSES, camera_for, named_pose, random_field
+from ..field.fields import CAMERA, POSES, camera_for, named_pose, pose, random_field
+from .strategies import cameras, poses
 
 
 def brute_reach(blocks: np.ndarray) -> np.ndarray:
@@ -69,3 +70,38 @@ def test_jumps_through_boxes_of_empty_blocks_change_no_bit(sh_degree, tail):
             differing = int(np.sum(a[output] != b[output]))
             assert differing == 0, (f"pose {name}, {output}: {differing} of {a[output].size} values differ between "
                                     "jumps through boxes of empty blocks and jumps block by block")
+
+
+BLOB = blob_field(1)
+
+
+def no_jumps(renderer: FieldRenderer) -> FieldRenderer:
+    """``renderer`` stepping through every lattice step of an empty block (every block marked occupied in its
+    reach: the ray checks each empty cell's bit and takes nothing there)."""
+    renderer._reach = np.full_like(renderer._reach, -1)
+    return renderer
+
+
+def assert_no_sample_lost(c2w: np.ndarray, camera, what: str) -> None:
+    """Jumps through empty blocks give every output to the bit as stepping through them (one sample a step, so
+    without the tail: with it a jump moves the doubled samples after it, the module docstring of the kernel)."""
+    settings_ = RenderSettings(tail=(), adaptive=0.0)
+    a = FieldRenderer(BLOB, settings_).render(c2w, camera, ("rgb", "depth", "opacity"))
+    b = no_jumps(FieldRenderer(BLOB, settings_)).render(c2w, camera, ("rgb", "depth", "opacity"))
+    for output in a:
+        differing = int(np.sum(a[output] != b[output]))
+        assert differing == 0, (f"{what}, {output}: {differing} of {a[output].size} values differ between jumping "
+                                "through empty blocks and stepping through them: a jump skipped a sample")
+
+
+@pytest.mark.parametrize("eye", [(2.0, 0.0, 0.0), (0.0, -2.0, 0.0), (0.0, 0.0, 2.5), (0.31, 0.0, 0.0)])
+def test_jumps_along_an_axis_skip_no_sample(eye):
+    """Rays along a grid axis (the other two direction components 0 at the centre pixel, tiny around it), from
+    outside the cube and from inside it."""
+    assert_no_sample_lost(pose(eye, (0.0, 0.0, 0.0)), CAMERA.resized(33, 33), f"eye {eye} towards the centre")
+
+
+@settings(max_examples=40, deadline=None)
+@given(eye_target=poses(max_distance=30.0), camera=cameras(max_side=12))
+def test_jumps_skip_no_sample_from_any_pose(eye_target, camera):
+    assert_no_sample_lost(pose(*eye_target), camera, f"eye {eye_target[0]} towards {eye_target[1]}, {camera}")
