@@ -1,9 +1,10 @@
 """Fitting speed and quality on the fox capture: held-out PSNR / SSIM after 1, 3, 6 and 10 minutes.
 
-Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 2532] [--out /tmp/fox.n2r] [--config key=value ...]``.
-``--steps N`` fits N steps instead of a time budget: the same fit on a loaded machine as on an idle one (2 532
-steps are what the default recipe reaches in 10 minutes on an idle 2-core machine: docs/performance.md), with
-the CPU seconds it took printed beside.
+Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--out /tmp/fox.n2r] [--config key=value ...]``.
+``--steps N`` fits N steps instead of a time budget: the same fit on a loaded machine as on an idle one (the
+default recipe reached 6 051-6 582 steps in 10 minutes on the idle AVX-512 2-core host of 2 December; the AVX2
+host of 3 December takes 12 min 52 s for 6 500: docs/performance.md), with the CPU seconds it took printed
+beside.
 Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. Evaluation
 time is not counted as training time. The fitted scene is written to ``--out`` so that
 ``benchmarks/render_speed.py`` can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only

@@ -11,7 +11,7 @@ the batch), ``march`` (occupied samples), ``corners`` (sample positions, corner 
 rows), ``forward`` (interpolate, shade, composite, loss), ``backward``, ``update`` (priors and Adam on the
 touched rows), ``prune`` (occupancy refresh, every ``prune_every`` steps, averaged over all steps) and
 ``refine`` (moving to the next grid). Wall-clock milliseconds: run under ``flock /tmp/n2r-cpu.lock`` and
-compare runs made side by side. Results: docs/performance.md ("Fitting").
+compare runs made side by side. Results: docs/performance.md ("Fitting the fox capture").
 """
 
 from __future__ import annotations

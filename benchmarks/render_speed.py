@@ -48,11 +48,12 @@ EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
-#: The defaults before RENDER_VERSION 4, and before RENDER_VERSION 5.
+#: Today's defaults without RENDER_VERSION 4's changes (colour baked per frame, min_weight) and 5's (the tail);
+#: the adaptive sampler's last split (6 and 7) stays, so PREVIOUS is not the whole RENDER_VERSION 3 renderer.
 PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0, tail=())
 VERSION_4 = DEFAULT.replace(tail=())
-#: The changes of RENDER_VERSION 4 and 5, each on top of the one before (docs/performance.md, "Rendering").
-CHANGES = (("previous defaults (RENDER_VERSION 3)", PREVIOUS),
+#: The changes of RENDER_VERSION 4 and 5, each on top of the one before (docs/performance-log.md, "Rendering").
+CHANGES = (("defaults less RENDER_VERSION 4 and 5", PREVIOUS),
            ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex")),
            ("+ min_weight=1e-2 (RENDER_VERSION 4)", VERSION_4),
            ("+ tail=(0.3, 0.1) (the defaults, RENDER_VERSION 5)", DEFAULT),

@@ -2,7 +2,7 @@
 
 numba counts references to an array each time a helper it inlines receives one (an atomic increment and decrement
 per call, per array): in the ray caster's per-ray loops that was about half of a render's time
-(``docs/performance.md``). A kernel passes views of its own arguments to its helpers instead, which are alive for
+(``docs/performance-log.md``). A kernel passes views of its own arguments to its helpers instead, which are alive for
 the whole call.
 """
 

@@ -6,7 +6,7 @@ arrays in the reference renderer). Compiled as it is, each ``np.sin`` in it is a
 every point a call through a function pointer. :func:`compile_mask` compiles a copy whose ``np.sin`` /
 ``np.cos`` / ``math.sin`` / ``math.cos`` are :mod:`.trig`'s inlined polynomials (within about one unit in the
 last place of NumPy's), inlined into a loop over arrays: measured 13× faster per point on the wall's growth
-mask (``docs/performance.md``).
+mask (``docs/performance-log.md``).
 
 Convention
 ----------

@@ -7,7 +7,7 @@ kernel then follows the vectorized definitions of :mod:`.primitives`, :mod:`.mat
 bilinear lookup of OpenCV's ``remap`` with its 1/32-texel steps), so its images match theirs to within
 rounding (tested against them, ``tests/demo/test_raycast.py``).
 
-What makes it fast (measured in ``docs/performance.md``):
+What makes it fast (measured in ``docs/performance-log.md``):
 
 - Each row of rays (the pixel centres, then each sub-row of sub-pixel rays) is cast as a batch: first a
   relief's hits for all its rays at once, Newton's method in lockstep with the waves evaluated four rays to a
@@ -29,7 +29,7 @@ do not depend on the thread count.
 A fresh checkout compiles the ray caster in two halves that two processes can compile at once: the kernel (with
 a row's albedo and shading) and a row's cast (:mod:`.row_cast`, a kernel piece under its own lock), which the
 kernel calls through a function pointer. The kernel is compiled against a placeholder of the row cast's type, so
-its compile needs nothing of the row cast's (``docs/performance.md``).
+its compile needs nothing of the row cast's (``docs/performance-log.md``).
 
 Convention
 ----------

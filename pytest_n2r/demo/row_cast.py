@@ -6,7 +6,7 @@ The row cast is a *kernel piece* (:func:`~pytest_n2r.scene.first_render.claim_pi
 kernel (:mod:`.raycast`), which calls it through a function pointer of one type (:data:`CAST_ROW_SIGNATURE`) and
 compiles against a placeholder of that type (:func:`no_cast_row`). The two are about half of the ray caster's
 compile each, and two processes can compile them at once (the kernel helper, or a process waiting for another's
-kernels: ``docs/performance.md``).
+kernels: ``docs/performance-log.md``).
 
 Convention
 ----------
@@ -324,7 +324,7 @@ CAST_ROW_PIECE = "demo-cast-row"
 def cast_row_kernel() -> Any:
     """:func:`_cast_row` compiled for :data:`CAST_ROW_SIGNATURE` (or loaded from numba's cache), once a process,
     under its piece's lock: the kernel helper compiles it while the session compiles the kernel (about half of
-    the ray caster's compile each, ``docs/performance.md``), and the session then waits for it and loads it."""
+    the ray caster's compile each, ``docs/performance-log.md``), and the session then waits for it and loads it."""
     with claim_piece(CAST_ROW_PIECE):
         return njit(CAST_ROW_SIGNATURE, cache=True, nogil=True, error_model="numpy")(_cast_row)
 

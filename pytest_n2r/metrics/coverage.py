@@ -33,7 +33,7 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     and merged into disjoint intervals, whose two ends mark a one-byte difference array that one pass sums:
     ``N * (2 radius + 1)`` runs sorted, and no array of the image's size wider than a byte (a warm main job
     paints about 400 masks at 320x180, and freeing and faulting in 8-byte difference arrays cost more than
-    the arithmetic: 0.66-0.68 -> 0.39-0.41 ms a mask, docs/performance.md).
+    the arithmetic: 0.66-0.68 -> 0.39-0.41 ms a mask, docs/performance-log.md).
     """
     radius = check_positive("radius", radius) + DISC_SLACK
     h, w = camera.height, camera.width

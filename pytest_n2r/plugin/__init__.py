@@ -96,8 +96,9 @@ def _pause_collector(config: pytest.Config) -> None:
     """Turn the cyclic garbage collector off until the end of the first test's setup, where
     :func:`pytest_runtest_setup` collects once, freezes the heap and turns it back on. The start-up (the engine's
     imports, the test modules', a network's in its fixture) allocates millions of objects that live for the session
-    and few cycles, and the collector walked them all in each of its full collections: five in a warm main job,
-    0.27 s of CPU (docs/performance.md). Not in a pytest-xdist controller (it runs no test), nor when the collector
+    and few cycles, and the collector walked them all in each of its full collections: in a warm main job 12 of
+    them took 0.55-0.70 s of CPU, with the collector off during the start-up 5 took 0.37-0.45 s
+    (docs/performance-log.md, 2 December). Not in a pytest-xdist controller (it runs no test), nor when the collector
     was off already; :func:`pytest_unconfigure` turns it back on in a session that ran no test."""
     if gc.isenabled() and (hasattr(config, "workerinput") or getattr(config.option, "dist", "no") == "no"):
         gc.disable()
@@ -214,7 +215,7 @@ def pytest_runtest_setup(item: pytest.Item) -> Any:
     out of the cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads once and keeps
     (imports, scenes, networks, compiled kernels) is then no longer walked by every full collection. Measured
     on the main job: the collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many
-    collections), 0.9 → 0.6 s of a warm one (docs/performance.md). The collection first, and once a scene
+    collections), 0.9 → 0.6 s of a warm one (docs/performance-log.md). The collection first, and once a scene
     rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
     never be freed. After the session's first setup too, when the start-up ran with the collector off
     (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next allocation

@@ -1,8 +1,9 @@
 """Compile the kernels of a session's other renderers in a helper process while the session renders.
 
 In a fresh checkout (numba's cache empty) each renderer compiles its kernels on its first render: on the
-example project 15 s for the demo ray caster, then 12 s for the scene field's marcher when the first fitted
-twin is rendered, one after the other, while the session's other core is mostly idle. When a session
+example project about 18 CPU s for the demo ray caster, then 7 for the scene field's renderer when the first
+fitted twin is rendered (docs/performance-log.md, 3 December), one after the other, while the session's other
+core is mostly idle. When a session
 renders for the first time it starts this helper (:func:`start_helper`), which loads the session's scenes in
 the order the tests use them (built-in demo scenes and scene files; never a ``module:function`` scene: it
 runs no user code) and renders a tiny view of one scene of each renderer kind the session is not rendering

@@ -19,7 +19,7 @@ as a full render traces it, so every traced pixel holds the full render's value 
 depends only on the traced values (not on the thread count or on the order of the work): deterministic.
 A feature narrower than the spacing of the coarsest grid that lies between its traced pixels can be missed,
 and at the last split a feature of one pixel between two agreeing pixels; the stride is therefore chosen by
-image size (docs/performance.md measures the error).
+image size (docs/performance-log.md measures the error).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 The compiled renderer skips an empty block in one jump, to where the ray leaves it. Around the fox most blocks
 are empty (93 % of the 224³ field's), and a ray crossed about 25 of them one jump at a time, each jump a few
-divisions (docs/performance.md, "Rendering"). With the reach of a block the ray jumps to where it leaves the
+divisions (docs/performance-log.md, "Rendering"). With the reach of a block the ray jumps to where it leaves the
 whole box of empty blocks around it instead.
 
 Convention: ``reach[bi, bj, bk]`` (int16, block indices as :func:`pytest_n2r.field.kernels.block_occupancy`'s

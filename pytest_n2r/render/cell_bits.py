@@ -4,7 +4,7 @@ The renderer looks up the cell of every sample it does not jump over (on the 224
 ~16 occupied ones a ray). As a byte a cell in the grid's own order, a step of one cell along the first axis is
 ``R²`` bytes away (a new cache line at every cell a ray enters), and the grid (11 MB at 224³, 56 MB at the
 demo twins' 384³) does not stay in cache: on ``demo:object`` that one load was the kernel's hottest
-instruction (a profile with ``perf``, docs/performance.md, "Rendering"). Block by block, the cells a ray
+instruction (a profile with ``perf``, docs/performance-log.md, "Rendering"). Block by block, the cells a ray
 crosses in an occupied block share one 64-byte line, and the whole grid is an eighth of the bytes.
 
 Convention: ``bits[bi, bj, bk, li]`` (int64, block indices as :func:`pytest_n2r.field.kernels.block_occupancy`'s

@@ -6,7 +6,7 @@ It samples the lattice of :mod:`pytest_n2r.field.lattice` with the field's compi
 one by one, and stops a ray once its transmittance falls below ``t_stop`` (early ray termination). Each ray
 is independent, so results do not depend on the thread count.
 
-Colour is the costly part of a sample (docs/performance.md, "Rendering"), and two settings make it cheaper:
+Colour is the costly part of a sample (docs/performance-log.md, "Rendering"), and two settings make it cheaper:
 
 - **colour logits baked per frame** (:func:`bake_logits`): every stored vertex's colour logits for the direction
   from the camera to that vertex, so a sample interpolates 3 values instead of ``3·n_sh`` SH coefficients. A
@@ -18,7 +18,7 @@ Colour is the costly part of a sample (docs/performance.md, "Rendering"), and tw
   middle of the steps it stands for, its opacity over their length; never across the cube's face or the
   lattice's end). What lies behind a transmittance ``T`` adds at most
   ``T`` to a channel in either render, so the two differ by at most the transmittance at the first threshold
-  crossed; measured, far less (docs/performance.md, "Rendering").
+  crossed; measured, far less (docs/performance-log.md, "Rendering").
 - **colour only where it carries weight** (``min_weight``): a sample whose compositing weight, plus the weight
   carried from the samples before it, stays below ``min_weight`` is not coloured; its weight is carried to the
   next coloured sample (at the ray's end: the last colour, else the background). Every carried sample weighs less

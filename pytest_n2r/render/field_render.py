@@ -42,7 +42,7 @@ COLOUR_DIRECTIONS = ("vertex", "ray")
 #: Part of every fitted scene's content hash: bump it whenever the output for the same field and settings
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
 RENDER_VERSION = 7  # 4: colour logits baked per frame, min_weight; 5: coarser tail; 6: adaptive sampling interpolates
-#  the last split's edge pixels between agreeing ends; 7: and its centres (docs/performance.md, "Rendering")
+#  the last split's edge pixels between agreeing ends; 7: and its centres (docs/performance-log.md, "Rendering")
 
 
 @dataclass(frozen=True)
@@ -50,31 +50,32 @@ class RenderSettings:
     """The render knobs (see docs/performance.md for what each costs and buys).
 
     - ``step_ratio``: sample spacing along a ray, in voxels of the field's grid (default: the training
-      spacing; 1.0 measured on fox 1.8× faster for 0.22 dB less PSNR against the real photos);
+      spacing; 1.0 measured on fox 1.4× faster for 0.28 dB less PSNR against the real photos, before adaptive
+      sampling: docs/performance-log.md, "Run time against error");
     - ``shell_samples``: samples in the contracted outer shell (``None``: one per ``step_ratio`` voxels);
     - ``far``: how far beyond the unit cube rays go, in normalized units (the contracted shell reaches
       ``1 + shell·(1 - 1/(1+far))`` of the way to infinity);
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
-      transmittance left shows the background, as at the far end (0.03 measured on fox 1.3× faster than
+      transmittance left shows the background, as at the far end (0.03 measured on fox 1.2× faster than
       1e-3 for 0.03 dB less PSNR against the real photos);
     - ``tail``: transmittances (decreasing, in (0, 1)) below which a ray's samples get coarser: at each one
       crossed the ray takes every second lattice sample of the rest, each with the opacity of the length it
       stands for (compiled backend). A render moves by at most the transmittance at the first one crossed
       (what lies behind it adds at most that much); measured on the fox and the demo twins, far less
-      (docs/performance.md, "Rendering"); ``()`` takes every lattice sample;
+      (docs/performance-log.md, "Rendering"); ``()`` takes every lattice sample;
     - ``min_alpha``: cells whose densest corner gives less opacity per sample than this are skipped (1e-2
       was 1.1× faster on the fox for 0.001 dB, but it depends on the grid: a smooth field upsampled 16 → 31
       lost 18 dB to its thin cells, tests/field/test_grid.py, so the default stays 1e-4);
     - ``scale``: render at this fraction of the camera's width and height, then resize to the camera
       (bilinear; depth takes the nearest rendered pixel, so it never invents a depth between a surface and
-      what is behind it). A fitted field has no more detail than its grid: on the fox, 0.5 renders 3.6×
-      faster for 0.26 dB less PSNR against the real photos (docs/performance.md);
+      what is behind it). A fitted field has no more detail than its grid: on the fox, 0.5 rendered 4.0×
+      faster for 0.26 dB less PSNR against the real photos, before adaptive sampling (docs/performance-log.md);
     - ``adaptive``: adaptive pixel sampling (:mod:`pytest_n2r.render.adaptive`): trace a coarse grid of
       pixels and interpolate each grid cell whose corners agree within this (colour and opacity in [0, 1];
       z-depth within ``adaptive_depth`` relatively), tracing the pixels of every other cell; 0 traces every
       pixel. The default 0.04 traced 45 % / 26 % / 13 % of the fox's pixels at 480×270 / 960×540 / 1080p
       and stayed within 0.08 dB of tracing every pixel against the photos and the demo twins' exact scenes
-      (docs/performance.md);
+      (docs/performance-log.md);
     - ``adaptive_stride``: the spacing of the coarsest grid in pixels (a power of two), ``None``: by image
       size, the largest power of two not above ``min(width, height) / 135`` (2 at 480×270, 8 at 1920×1080);
     - ``colour_direction`` (compiled backend): ``"vertex"`` bakes every vertex's colour for the direction from
@@ -84,7 +85,7 @@ class RenderSettings:
     - ``min_weight`` (compiled backend): a sample is coloured only once its compositing weight, plus the weight
       carried from samples not coloured before it, reaches this; the carried weight takes the next colour, so
       each channel is off by at most the summed weight of the ray's samples lighter than this (0: colour every
-      sample). The default 1e-2 skips about half of the fox's samples' colours (docs/performance.md);
+      sample). The default 1e-2 skips about half of the fox's samples' colours (docs/performance-log.md);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).

@@ -4,7 +4,8 @@ Rays of neighbouring pixels cross the same cells of a field, and a thread that t
 finds those cells' values in its cache. Row by row, the next ray in the same cells is a whole image row later
 (hundreds of rays, their cells evicted meanwhile); tile by tile (``TILE``² pixels, tiles row by row, pixels row
 by row inside a tile) it is at most ``TILE`` rays later. On the fox field at 480×270 (one thread, every pixel)
-the same rays took 1.2–1.6× less CPU time in 16×16 tiles than in rows (docs/performance.md, "Rendering").
+the same rays took 1.00–1.10× less CPU time in 16×16 tiles than in rows on a quiet host, 1.2–1.6× under other
+jobs' load, which evicts the cells from the cache (docs/performance-log.md, "Rendering").
 Each ray's result does not depend on the order, so images are the same to the bit.
 
 The pixels to trace come as a mask over the image, and are read off it tile by tile in one pass (no sort).

@@ -47,8 +47,8 @@ class SplatSettings:
     - ``background``: RGB in [0, 1] shown through the transmittance left (``None``: the scene's own);
     - ``tile``: tile side in pixels (work organisation only: the output does not depend on it). 64 by
       default: a Gaussian then falls into fewer tiles, so binning and the per-(tile, Gaussian) work shrink
-      (1 thread, 300 000 Gaussians at 480×270: binning 13 → 4 ms, a frame about 20 % less CPU than with 16;
-      docs/performance.md), and 40 tiles at 480×270 still share out evenly over a few threads;
+      (1 thread, 300 000 Gaussians at 480×270: binning 13 → 4 ms, a frame 15-24 % less CPU than with 16;
+      docs/performance-log.md), and 40 tiles at 480×270 still share out evenly over a few threads;
     - ``max_pairs``: (tile, Gaussian) pairs composited per run (bounds memory: each tile's copy of its
       Gaussians' records takes 104 B a pair; the output does not depend on it).
     """

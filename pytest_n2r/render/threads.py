@@ -1,7 +1,7 @@
 """The render threads: a compiled kernel that releases the GIL, run over parts of its work on several threads.
 
 numba's parallel loops (``parallel=True``, ``prange``) compile slowly: the scene field's marcher took 11.6 CPU s to
-compile as a parallel loop and 3.3 s as a plain one (docs/performance.md, "The field renderer's kernels without
+compile as a parallel loop and 3.3 s as a plain one (docs/performance-log.md, "The field renderer's kernels without
 numba's parallel loops"), and a fresh checkout pays that on its first fitted render. So the field renderer's
 kernels are plain ``nogil`` loops over a range of their work (``first``, ``last``), and :func:`run_parts` runs the
 parts on this module's thread pool; the exact demo renderer runs its bands of rows on the same pool
@@ -44,7 +44,7 @@ def run_parts(kernel: Callable[..., Any], n: int, *args: Any) -> None:
     cover ``range(n)``, one a thread (the first on the calling thread), as numba's parallel loops split their
     work; ``kernel`` must release the GIL (``nogil=True``) to run beside the others. Contiguous, not dealt out in
     smaller pieces: on the fox field, rays dealt to the threads in chunks cost 7 % more work in all (each core's
-    cache then holds the cells of the whole image instead of half of them; docs/performance.md, "The cells'
+    cache then holds the cells of the whole image instead of half of them; docs/performance-log.md, "The cells'
     occupancy as bits").
 
     >>> from numba import njit

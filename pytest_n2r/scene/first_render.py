@@ -139,7 +139,7 @@ def claim_piece(name: str) -> Iterator[bool]:
 def collector_paused() -> Iterator[None]:
     """Python's cyclic garbage collector off for the block, back on after it (if it was on before): numba's compile
     of a renderer's kernels makes millions of objects that live until it ends, and the collector walked them all
-    again in each of its full collections (docs/performance.md). The compile's garbage is collected once, after."""
+    again in each of its full collections (docs/performance-log.md). The compile's garbage is collected once, after."""
     if not gc.isenabled():
         yield
         return

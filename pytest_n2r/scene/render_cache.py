@@ -98,7 +98,7 @@ def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
 
 
 #: The header ``np.save`` writes for the little-endian C-order arrays of renders (version 1.0), read without
-#: ``np.load``'s general parser of headers: a warm main job reads about 2 000 entries (docs/performance.md).
+#: ``np.load``'s general parser of headers: a warm main job reads about 2 000 entries (docs/performance-log.md).
 _NPY_HEADER = re.compile(rb"\{'descr': '(<f4|<f8|\|u1|\|b1)', 'fortran_order': False, "
                          rb"'shape': \((\d+(?:, \d+)*),?\), \} *\n")
 

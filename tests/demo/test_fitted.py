@@ -135,7 +135,7 @@ def test_the_fitted_object_scene_is_close_to_the_exact_one():
 
     Rendered with the settings its report was measured with (RENDER_VERSION 3: every sample coloured from its
     ray's direction, every lattice sample taken); the defaults since RENDER_VERSION 4 score this view 0.011 dB
-    lower (``min_weight``, measured; within issue 16's 0.1 dB, docs/performance.md) and would test the renderer,
+    lower (``min_weight``, measured; within issue 16's 0.1 dB, docs/performance-log.md) and would test the renderer,
     not the file."""
     from pytest_n2r.demo import ground_truth
     from pytest_n2r.metrics.image_quality import psnr

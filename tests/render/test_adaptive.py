@@ -137,7 +137,7 @@ def test_adaptive_renders_keep_every_traced_pixel_of_the_full_render(backend):
     # Bounds measured on this field (seeds 2-5, strides 2 and 4): an interpolated pixel at most 12-16 levels from
     # the full render and the image 48.4-50.0 dB from it (seed 2: 12 levels, 50.0 dB), since the last split
     # interpolates a pixel between two agreeing traced pixels of its row or column (before: 2-13 levels, 56-71 dB);
-    # the fox lost 0.02 dB to that against its photos (docs/performance.md, "Rendering"). A pixel off by more than
+    # the fox lost 0.02 dB to that against its photos (docs/performance-log.md, "Rendering"). A pixel off by more than
     # twice the tolerance, or an image below 46 dB, is a fault.
     error = out["rgb"].astype(float) - full["rgb"]
     diff, db = np.abs(error).max(), 10 * np.log10(255.0**2 / np.mean(error**2))

@@ -58,7 +58,7 @@ def test_baked_colours_of_a_degree_0_field_are_exact_and_degree_1_moves_them(pos
     """A degree-0 colour has no direction. A degree-1 colour moves by the angle a cell subtends: on this 16³
     field of unit-normal SH coefficients, seen from inside, cells subtend up to tens of degrees and the
     renders differ by up to 9 (inside) and 8 (in the shell) levels, measured; the test allows 16. A fitted
-    field at 160³ seen from its capture poses differs far less (fox: 65.8 dB, docs/performance.md)."""
+    field at 160³ seen from its capture poses differs far less (fox: 65.8 dB, docs/performance-log.md)."""
     c2w = named_pose(pose_name)
     flat = random_field(resolution=16, sh_degree=0, seed=6)
     exact = FieldRenderer(flat, EXACT).render(c2w, CAMERA, ("rgb",))["rgb"].astype(np.int16)

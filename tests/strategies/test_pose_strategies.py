@@ -125,7 +125,7 @@ def test_draws_spread_over_the_whole_bound():
 
 
 def test_the_grid_draws_what_hypothesis_integers_draw():
-    """The grid draws from ``st.integers`` built once and unwrapped (cheaper per draw, docs/performance.md):
+    """The grid draws from ``st.integers`` built once and unwrapped (cheaper per draw, docs/performance-log.md):
     the same values as ``st.integers`` itself, seed for seed, so the drawn examples stay the same."""
     from pytest_n2r.strategies.grid import _integers
 
