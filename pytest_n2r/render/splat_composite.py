@@ -3,10 +3,10 @@
 
 :func:`composite_tiles` (parallel over tiles, the busiest first): front-to-back alpha compositing with early
 termination, a Gaussian at a time over blocks of :data:`LANES` pixels, branch-free inside a block so that
-LLVM compiles a block to SIMD instructions (one AVX-512 vector of float64 per quantity, the exponential's
-table read by one gather); each pixel's arithmetic is the same as one pixel at a time, so are its bits. Each
-pixel's state (transmittance, colour, depth) carries over between runs, so compositing a long list in
-several runs gives the same bits as in one. :func:`finish` turns the pixel state into the outputs.
+LLVM compiles a block to SIMD instructions (a block's 4 float64 per quantity: one AVX2 vector); each pixel's
+arithmetic is the same as one pixel at a time, so are its bits. Each pixel's state (transmittance, colour,
+depth) carries over between runs, so compositing a long list in several runs gives the same bits as in one.
+:func:`finish` turns the pixel state into the outputs.
 """
 
 from __future__ import annotations
@@ -22,9 +22,11 @@ __all__ = ["BATCH", "COLS", "LANES", "ROWS", "composite_tiles", "exp_of_power", 
 BATCH = 32
 #: A block: ``COLS`` pixels of ``ROWS`` tile rows, composited together. A tile holds its pixel state in blocks,
 #: transmittance, R, G, B and depth each ``LANES`` values in a row (lane ``(y % ROWS) · COLS + x % COLS``).
-#: Two rows of 4 (rather than one of 8): a Gaussian's rectangle in a tile, about 5 × 4 pixels at 480×270,
-#: covers 15 % fewer blocks, and a Gaussian's loop runs over half as many block rows.
-COLS = 4
+#: Two rows of 2: a block's 4 float64 fill one AVX2 vector, and a Gaussian's rectangle in a tile, about 5 × 4
+#: pixels at 480×270, leaves fewer of a block's lanes idle than with the 4 × 2 blocks (one AVX-512 vector) that
+#: came before. On an AVX2 CPU a frame took 0.72 of their CPU; on the AVX-512 CPU they were chosen on, blocks of
+#: 4 lanes had measured the same as 4 × 2 (docs/performance-log.md, "Splat scenes").
+COLS = 2
 ROWS = 2
 LANES = COLS * ROWS
 _T, _AR, _AG, _AB, _AD = range(5)
@@ -33,6 +35,7 @@ _FIELDS = 5
 _EXP_STEPS = 64
 _POWER_MIN_EXP = 6.0
 _EXP_TABLE = np.exp(-np.arange(int(_POWER_MIN_EXP * _EXP_STEPS) + 1) / _EXP_STEPS)
+_INDEX_MAX = float(_EXP_TABLE.shape[0] - 1)
 
 
 @njit(inline="always")
@@ -43,7 +46,9 @@ def exp_of_power(power):
     below ``1e-16``). Inlined and free of calls, so the compositing loop keeps its values in registers (libm's
     ``exp`` is a call that spills them)."""
     x = -power * _EXP_STEPS
-    j = min(max(int(x + 0.5), 0), _EXP_TABLE.shape[0] - 1)  # a rounding's tiny positive power: j = 0
+    # the index clamped as a float and converted to int32: AVX2 converts a vector of float64 to int32, not int64
+    # (the same index as int(x + 0.5) clamped to the table; a rounding's tiny positive power: j = 0)
+    j = np.int32(min(max(x, 0.0), _INDEX_MAX) + 0.5)
     r = (j - x) * (1.0 / _EXP_STEPS)
     return _EXP_TABLE[j] * (1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0))))))
 
