@@ -6,7 +6,7 @@ For each capture, :func:`pytest_n2r.fit.detail.capture_detail` in the space a fi
 training views' pixel footprint (z-depth / fx at the median depth of the sparse points each sees) where
 the cameras look closely (10th percentile) and at the median view, the finest grid's voxel in those pixels,
 and the grid that would match them. No fit: seconds. The fox (``../shared/scenes/fox``, 1/4 resolution,
-as benchmarks/field_fit.py fits it) is skipped when absent. Results: docs/scene-field.md.
+as benchmarks/field_fit.py fits it) is skipped when absent. Results: docs/scene-field-log.md.
 """
 
 from __future__ import annotations

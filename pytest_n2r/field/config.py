@@ -40,7 +40,7 @@ class FieldConfig:
         last 30 % gained 0.7 dB and SIFT's repeatability against the photos 0.32 → 0.56 at equal training
         time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability
         but cost 0.28 dB held out (0.26 dB at twice the time); the fox (5.1 pixels a voxel) keeps 224³
-        (docs/scene-field.md, "A grid that follows the capture's detail").
+        (docs/scene-field-log.md, "A grid that follows the capture's detail").
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0 or 1.
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
