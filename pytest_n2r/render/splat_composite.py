@@ -1,9 +1,9 @@
 """Compiled CPU compositing (numba) of the splat rasterizer, its last stage (the others:
 :mod:`pytest_n2r.render.splat_kernels`).
 
-:func:`composite_tiles` (parallel over tiles, the busiest first): front-to-back alpha compositing with early
-termination, a Gaussian at a time over blocks of :data:`LANES` pixels, branch-free inside a block so that
-LLVM compiles a block to SIMD instructions (a block's 4 float64 per quantity: one AVX2 vector); each pixel's
+:func:`composite_tiles` (tiles dealt over the render threads, the busiest first): front-to-back alpha compositing
+with early termination, a Gaussian at a time over blocks of :data:`LANES` pixels, branch-free inside a block so
+that LLVM compiles a block to SIMD instructions (a block's 4 float64 per quantity: one AVX2 vector); each pixel's
 arithmetic is the same as one pixel at a time, so are its bits. Each pixel's state (transmittance, colour,
 depth) carries over between runs, so compositing a long list in several runs gives the same bits as in one.
 :func:`finish` turns the pixel state into the outputs.
@@ -53,9 +53,9 @@ def exp_of_power(power):
     return _EXP_TABLE[j] * (1.0 + r * (1.0 + r * (0.5 + r * (1.0 / 6.0 + r * (1.0 / 24.0 + r * (1.0 / 120.0))))))
 
 
-@njit(cache=True, parallel=True, fastmath={"contract"})
-def composite_tiles(tile_start, pair_records, pair_rects, width, tile, tiles_x, tile_order, t_stop, live, trans,
-                    acc_rgb, acc_depth, final, background, rgb_out, depth_out, opacity_out):
+@njit(cache=True, nogil=True, fastmath={"contract"})
+def composite_tiles(part, parts, tile_start, pair_records, pair_rects, width, tile, tiles_x, tile_order, t_stop, live,
+                    trans, acc_rgb, acc_depth, final, background, rgb_out, depth_out, opacity_out):
     """Composite each tile's Gaussians (rows ``tile_start[t]`` to ``tile_start[t + 1]`` of ``pair_records`` and
     ``pair_rects``, depth-ordered) front to back into the pixel state (``trans``: transmittance, negated once
     the pixel is done; ``acc_rgb`` / ``acc_depth``: weighted sums), updating ``live`` (pixels of the tile not
@@ -74,13 +74,16 @@ def composite_tiles(tile_start, pair_records, pair_rects, width, tile, tiles_x, 
     multiply-adds).
 
     With ``final`` (the last run), each tile's pixels are then finished into the outputs (:func:`finish`) in
-    the same parallel region: one region fewer per frame. Tiles are taken in ``tile_order`` (every tile
-    once; the busiest first, so that no thread is left with a long tile at the end).
+    the same call: one pass fewer per frame. This call composites the tiles ``tile_order[part::parts]``
+    (:func:`~pytest_n2r.render.threads.run_dealt` runs the ``parts`` on the render threads; ``tile_order`` lists
+    every tile once, the busiest first, so that dealt in turn they share out evenly). A plain ``nogil`` loop on
+    the render threads rather than numba's parallel loop: with the same tiles in the same order, compositing took
+    0.77-0.83 of the parallel loop's time on two threads (docs/performance-log.md, "Splat scenes").
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
     blocks_x = (tile + COLS - 1) // COLS
-    for i in prange(n_tiles):
+    for i in range(part, n_tiles, parts):
         t = tile_order[i]
         s, e = tile_start[t], tile_start[t + 1]
         tx0 = (t % tiles_x) * tile

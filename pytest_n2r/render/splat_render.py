@@ -27,6 +27,7 @@ from ..geometry import Camera, invert_pose
 from ..splats.gaussians import Gaussians
 from . import splat_composite as c
 from . import splat_kernels as k
+from .threads import run_dealt
 
 __all__ = ["SPLAT_RENDER_VERSION", "SplatRenderer", "SplatSettings"]
 
@@ -162,10 +163,10 @@ class SplatRenderer:
             tile_order = np.argsort(-np.diff(tile_start), kind="stable")
             clock.lap("bin")
             finished = stop == len(order)
-            with parallel_chunksize(1):  # tiles differ in work: hand them out one at a time
-                c.composite_tiles(tile_start, pair_records, pair_rects, w, s.tile, tiles_x, tile_order,
-                                  s.t_stop, live, trans, acc_rgb, acc_depth, finished, background, out_rgb,
-                                  out_depth, out_opacity)
+            # tiles differ in work: dealt over the render threads in that order, so that they share out evenly
+            run_dealt(c.composite_tiles, len(tile_order), tile_start, pair_records, pair_rects, w, s.tile, tiles_x,
+                      tile_order, s.t_stop, live, trans, acc_rgb, acc_depth, finished, background, out_rgb, out_depth,
+                      out_opacity)
             clock.lap("composite")
             start = stop
         if not finished:  # nothing drawn, or every pixel done before the last run

@@ -5,8 +5,9 @@ compile as a parallel loop and 3.3 s as a plain one (docs/performance-log.md, "T
 numba's parallel loops"), and a fresh checkout pays that on its first fitted render. So the field renderer's
 kernels are plain ``nogil`` loops over a range of their work (``first``, ``last``), and :func:`run_parts` runs the
 parts on this module's thread pool; the exact demo renderer runs its bands of rows on the same pool
-(:func:`render_pool`). The training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel loops:
-run this way, a training step took 1.3x as long (the same page).
+(:func:`render_pool`), and the splat renderer composites its tiles dealt over it (:func:`run_dealt`). The
+training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel loops: run this way, a training step
+took 1.3x as long (the same page).
 
 Convention
 ----------
@@ -25,7 +26,7 @@ from typing import Any
 
 import numba
 
-__all__ = ["render_pool", "run_parts"]
+__all__ = ["run_dealt", "render_pool", "run_parts"]
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
@@ -58,14 +59,45 @@ def run_parts(kernel: Callable[..., Any], n: int, *args: Any) -> None:
     >>> out.tolist() == (x * x).tolist()
     True
     """
-    threads = max(1, min(numba.get_num_threads(), n))
-    if threads == 1:
-        kernel(0, n, *args)
-        return
+    threads = _thread_count(n)
     bounds = [n * i // threads for i in range(threads + 1)]
-    others = [render_pool().submit(kernel, bounds[part], bounds[part + 1], *args) for part in range(1, threads)]
+    _run(kernel, [(bounds[part], bounds[part + 1]) for part in range(threads)], args)
+
+
+def run_dealt(kernel: Callable[..., Any], n: int, *args: Any) -> None:
+    """``kernel(part, parts, *args)`` on ``parts = numba.get_num_threads()`` threads (at most ``n``), part ``p``
+    taking the items ``p, p + parts, p + 2·parts, ...`` of ``range(n)``: dealt like cards, so that work listed
+    busiest first shares out evenly (the splat renderer's tiles, whose work differs tenfold).
+
+    >>> from numba import njit
+    >>> import numpy as np
+    >>> @njit(nogil=True)
+    ... def mark(part, parts, owner):
+    ...     for i in range(part, owner.size, parts):
+    ...         owner[i] = part
+    >>> owner = np.full(7, -1)
+    >>> run_dealt(mark, 7, owner)
+    >>> sorted(set(owner.tolist())) == list(range(min(numba.get_num_threads(), 7)))
+    True
+    """
+    parts = _thread_count(n)
+    _run(kernel, [(part, parts) for part in range(parts)], args)
+
+
+def _thread_count(n: int) -> int:
+    """The threads a kernel over ``n`` items runs on: numba's thread count, at most ``n``, at least 1."""
+    return max(1, min(numba.get_num_threads(), n))
+
+
+def _run(kernel: Callable[..., Any], heads: list[tuple[int, int]], args: tuple[Any, ...]) -> None:
+    """``kernel(*head, *args)`` for each head, the first on the calling thread and the others on the render
+    threads; returns once every call has ended, raising the first error among them."""
+    if len(heads) == 1:
+        kernel(*heads[0], *args)
+        return
+    others = [render_pool().submit(kernel, *head, *args) for head in heads[1:]]
     try:
-        kernel(bounds[0], bounds[1], *args)  # the first part on the calling thread, which would wait otherwise
+        kernel(*heads[0], *args)  # the first part on the calling thread, which would wait otherwise
     finally:
         wait(others)  # no part still writing to the outputs once this returns, even after an error
     for part in others:

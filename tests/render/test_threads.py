@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numba import njit
 
-from pytest_n2r.render.threads import render_pool, run_parts
+from pytest_n2r.render.threads import render_pool, run_dealt, run_parts
 
 
 @njit(nogil=True)
@@ -22,17 +22,50 @@ def _count(first, last, hits):
         hits[i] += 1
 
 
+@njit(nogil=True)
+def _count_dealt(part, parts, hits):
+    for i in range(part, hits.size, parts):
+        hits[i] += 1
+
+
 @settings(max_examples=60, deadline=None)
-@given(n=st.integers(0, 5000), count=st.integers(1, 8))
-def test_the_parts_cover_the_work_exactly_once(n, count):
+@given(n=st.integers(0, 5000), count=st.integers(1, 8), dealt=st.booleans())
+def test_the_parts_cover_the_work_exactly_once(n, count, dealt):
     before = numba.get_num_threads()
     numba.set_num_threads(min(count, numba.config.NUMBA_NUM_THREADS))
     try:
         hits = np.zeros(n, dtype=np.int64)
-        run_parts(_count, n, hits)
+        if dealt:
+            run_dealt(_count_dealt, n, hits)
+        else:
+            run_parts(_count, n, hits)
     finally:
         numba.set_num_threads(before)
-    assert (hits == 1).all(), f"n={n}, {count} threads: items run {np.bincount(hits).tolist()} times (0, 1, 2...)"
+    runner = "run_dealt" if dealt else "run_parts"
+    assert (hits == 1).all(), (
+        f"{runner}, n={n}, {count} threads: items run {np.bincount(hits).tolist()} times (0, 1, 2...)")
+
+
+def test_dealt_parts_take_every_parts_th_item_on_the_set_thread_count():
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has a single thread here")
+    heads: list[tuple[int, int]] = []
+    lock = threading.Lock()
+
+    def record(part: int, parts: int) -> None:
+        with lock:
+            heads.append((part, parts))
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(2)
+        run_dealt(record, 5)
+        assert sorted(heads) == [(0, 2), (1, 2)], f"two threads, 5 items: parts {heads}, expected (0, 2), (1, 2)"
+        heads.clear()
+        run_dealt(record, 1)
+        assert heads == [(0, 1)], f"two threads, one item: parts {heads}, expected the one part (0, 1)"
+    finally:
+        numba.set_num_threads(before)
 
 
 def test_a_render_uses_the_thread_count_numba_is_set_to():
