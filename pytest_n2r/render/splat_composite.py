@@ -24,8 +24,8 @@ BATCH = 32
 #: transmittance, R, G, B and depth each ``LANES`` values in a row (lane ``(y % ROWS) · COLS + x % COLS``).
 #: Two rows of 2: a block's 4 float64 fill one AVX2 vector, and a Gaussian's rectangle in a tile, about 5 × 4
 #: pixels at 480×270, leaves fewer of a block's lanes idle than with the 4 × 2 blocks (one AVX-512 vector) that
-#: came before. On an AVX2 CPU a frame took 0.72 of their CPU; on the AVX-512 CPU they were chosen on, blocks of
-#: 4 lanes had measured the same as 4 × 2 (docs/performance-log.md, "Splat scenes").
+#: came before. On an AVX2 CPU a frame took 0.72-0.85 of their CPU; on the AVX-512 CPU they were chosen on, blocks
+#: of 4 lanes had measured the same as 4 × 2 (docs/performance-log.md, "Splat scenes").
 COLS = 2
 ROWS = 2
 LANES = COLS * ROWS

@@ -26,7 +26,7 @@ from typing import Any
 
 import numba
 
-__all__ = ["run_dealt", "render_pool", "run_parts"]
+__all__ = ["render_pool", "run_dealt", "run_parts"]
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
@@ -67,7 +67,8 @@ def run_parts(kernel: Callable[..., Any], n: int, *args: Any) -> None:
 def run_dealt(kernel: Callable[..., Any], n: int, *args: Any) -> None:
     """``kernel(part, parts, *args)`` on ``parts = numba.get_num_threads()`` threads (at most ``n``), part ``p``
     taking the items ``p, p + parts, p + 2·parts, ...`` of ``range(n)``: dealt like cards, so that work listed
-    busiest first shares out evenly (the splat renderer's tiles, whose work differs tenfold).
+    busiest first shares out evenly (the splat renderer's tiles: at 480×270 the busiest of 40 holds 8-11 % of a
+    frame's (tile, Gaussian) pairs, four times the mean).
 
     >>> from numba import njit
     >>> import numpy as np
