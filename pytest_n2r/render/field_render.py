@@ -32,7 +32,7 @@ from .block_reach import block_reach
 from .cell_bits import cell_bits
 from .field_kernels import bake_logits, pixel_rays, render_rays
 from .ray_order import tiled_pixels
-from .threads import run_parts
+from .threads import run_balanced, run_parts
 
 __all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
 
@@ -281,10 +281,10 @@ class FieldRenderer:
         """Render rays ``o, d`` into the pixels ``index`` of the flat images ``rgb``, ``depth`` and ``opacity``."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
-            run_parts(render_rays, o.shape[0], o, d, self._density, self._values, logits, self._rows, self._bits,
-                      self._reach, g.resolution, g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio,
-                      f.sh_degree, s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth,
-                      index, rgb, depth, opacity)
+            run_balanced(render_rays, o.shape[0], o, d, self._density, self._values, logits, self._rows,
+                         self._bits, self._reach, g.resolution, g.shell, g.step, g.shell_samples, g.far,
+                         f.density_shift, g.step_ratio, f.sh_degree, s.t_stop, self._tail, s.min_weight,
+                         np.asarray(self.background), want_depth, index, rgb, depth, opacity)
             return
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)

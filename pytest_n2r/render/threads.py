@@ -4,8 +4,9 @@ numba's parallel loops (``parallel=True``, ``prange``) compile slowly: the scene
 compile as a parallel loop and 3.3 s as a plain one (docs/performance-log.md, "The field renderer's kernels without
 numba's parallel loops"), and a fresh checkout pays that on its first fitted render. So the field renderer's
 kernels are plain ``nogil`` loops over a range of their work (``first``, ``last``), and :func:`run_parts` runs the
-parts on this module's thread pool; the exact demo renderer runs its bands of rows on the same pool
-(:func:`render_pool`), and the splat renderer composites its tiles dealt over it (:func:`run_dealt`). The
+parts on this module's thread pool (:func:`run_balanced` where the work's cost is uneven: the rays); the exact demo
+renderer runs its bands of rows on the same pool (:func:`render_pool`), and the splat renderer composites its tiles
+dealt over it (:func:`run_dealt`). The
 training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel loops: run this way, a training step
 took 1.3x as long (the same page).
 
@@ -20,13 +21,14 @@ Convention
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 from typing import Any
 
 import numba
 
-__all__ = ["render_pool", "run_dealt", "run_parts"]
+__all__ = ["render_pool", "run_balanced", "run_dealt", "run_parts"]
 
 _POOL: tuple[int, ThreadPoolExecutor] | None = None
 
@@ -64,6 +66,64 @@ def run_parts(kernel: Callable[..., Any], n: int, *args: Any) -> None:
     _run(kernel, [(bounds[part], bounds[part + 1]) for part in range(threads)], args)
 
 
+def run_balanced(kernel: Callable[..., Any], n: int, *args: Any, smallest: int = 256) -> None:
+    """``kernel(first, last, *args)`` over ranges that cover ``range(n)``, on ``numba.get_num_threads()`` threads
+    whose shares follow the work's cost: each thread starts on its own contiguous part, as :func:`run_parts`
+    splits them, and runs it from its front a quarter of what is left at a time; a thread whose part is done
+    takes, from the back of the part with the most left, a quarter of that. A range is at least ``smallest``
+    items (the last of a part may be shorter). So each thread's items stay next to each other (a thread taking
+    from its neighbour's back continues where its own part began), and the threads end within about one
+    ``smallest`` range of each other. For the rays of a fitted field, whose cost differs across the image: with
+    contiguous halves one thread waited 20 % of a frame of the demo object's twin for the other
+    (docs/performance-log.md, "Rendering").
+
+    >>> from numba import njit
+    >>> import numpy as np
+    >>> @njit(nogil=True)
+    ... def square(first, last, x, out):
+    ...     for i in range(first, last):
+    ...         out[i] = x[i] * x[i]
+    >>> x, out = np.arange(1000.0), np.empty(1000)
+    >>> run_balanced(square, 1000, x, out, smallest=16)
+    >>> out.tolist() == (x * x).tolist()
+    True
+    """
+    if smallest < 1:
+        raise ValueError(f"smallest={smallest}: expected a range of at least 1 item")
+    threads = _thread_count(n)
+    bounds = [n * i // threads for i in range(threads + 1)]
+    left = [[bounds[part], bounds[part + 1]] for part in range(threads)]  # what is left of each part: [front, back)
+    lock = threading.Lock()
+    failed = False
+
+    def take(part: int) -> tuple[int, int] | None:
+        with lock:
+            if failed:
+                return None
+            own = left[part]
+            if own[0] < own[1]:
+                first = own[0]
+                own[0] = min(own[1], first + max(smallest, (own[1] - first) // 4))
+                return first, own[0]
+            other = max(left, key=lambda span: span[1] - span[0])
+            if other[0] >= other[1]:
+                return None
+            last = other[1]
+            other[1] = max(other[0], last - max(smallest, (last - other[0]) // 4))
+            return other[1], last
+
+    def work(part: int) -> None:
+        nonlocal failed
+        try:
+            while (span := take(part)) is not None:
+                kernel(*span, *args)
+        except BaseException:
+            failed = True  # the other threads take nothing more
+            raise
+
+    _run(work, [(part,) for part in range(threads)], ())
+
+
 def run_dealt(kernel: Callable[..., Any], n: int, *args: Any) -> None:
     """``kernel(part, parts, *args)`` on ``parts = numba.get_num_threads()`` threads (at most ``n``), part ``p``
     taking the items ``p, p + parts, p + 2·parts, ...`` of ``range(n)``: dealt like cards, so that work listed
@@ -90,7 +150,7 @@ def _thread_count(n: int) -> int:
     return max(1, min(numba.get_num_threads(), n))
 
 
-def _run(kernel: Callable[..., Any], heads: list[tuple[int, int]], args: tuple[Any, ...]) -> None:
+def _run(kernel: Callable[..., Any], heads: list[tuple[int, ...]], args: tuple[Any, ...]) -> None:
     """``kernel(*head, *args)`` for each head, the first on the calling thread and the others on the render
     threads; returns once every call has ended, raising the first error among them."""
     if len(heads) == 1:
