@@ -91,6 +91,9 @@ def run_balanced(kernel: Callable[..., Any], n: int, *args: Any, smallest: int =
     if smallest < 1:
         raise ValueError(f"smallest={smallest}: expected a range of at least 1 item")
     threads = _thread_count(n)
+    if threads == 1:
+        kernel(0, n, *args)
+        return
     bounds = [n * i // threads for i in range(threads + 1)]
     left = [[bounds[part], bounds[part + 1]] for part in range(threads)]  # what is left of each part: [front, back)
     lock = threading.Lock()
