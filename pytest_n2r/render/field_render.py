@@ -29,7 +29,7 @@ from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .block_reach import block_reach
-from .cell_bits import cell_bits
+from .cell_bits import kept_cells
 from .field_kernels import bake_logits, pixel_rays, render_rays
 from .ray_order import tiled_pixels
 from .threads import run_balanced, run_parts
@@ -179,12 +179,18 @@ class FieldRenderer:
         self.settings = settings or RenderSettings()
         s = self.settings
         self.backend = s.backend_on(field.device)
-        occupancy = field.occupancy
-        with torch.no_grad():  # also checks that the field stores every corner of its occupied cells (the kernel
-            alpha = field.occupied_cell_alpha(s.step_ratio)  # reads them without a check)
-        if s.min_alpha > 0:
-            occupancy = occupancy.clone()
-            occupancy[field.occupancy] = alpha >= s.min_alpha  # a mask takes its cells in nonzero() order
+        # the cells sampled; both also check that the field stores every corner of its occupied cells (the
+        # compiled kernel reads them without a check)
+        if self.backend == "compiled":  # in one compiled pass, with their bits (the same cells: tested)
+            cells, self._bits = kept_cells(field, s.step_ratio, s.min_alpha)
+            occupancy = torch.from_numpy(cells.view(np.bool_))
+        else:
+            occupancy = field.occupancy
+            with torch.no_grad():
+                alpha = field.occupied_cell_alpha(s.step_ratio)
+            if s.min_alpha > 0:
+                occupancy = occupancy.clone()
+                occupancy[field.occupancy] = alpha >= s.min_alpha  # a mask takes its cells in nonzero() order
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background_of(field)
@@ -194,9 +200,7 @@ class FieldRenderer:
             self._values = np.ascontiguousarray(field.values.detach().cpu().numpy())
             self._density = np.ascontiguousarray(self._values[:, 0])
             self._rows = field.kernel_rows()
-            cells, blocks = self.grid.numpy()
-            self._reach = block_reach(blocks)
-            self._bits = cell_bits(cells)
+            self._reach = block_reach((self._bits != 0).any(axis=-1).astype(np.uint8))  # blocks with a cell sampled
             self._vertex = None
             if s.colour_direction == "vertex":
                 self._vertex = np.arange(self._values.shape[0], dtype=np.int64)  # each row's flat vertex index

@@ -1,16 +1,19 @@
-"""The cells' occupancy bits, block by block (pytest_n2r/render/cell_bits.py), against the grid they pack; the
-renderer's check of the corners its kernel reads unchecked."""
+"""The cells' occupancy bits, block by block (pytest_n2r/render/cell_bits.py), against the grid they pack; the cells
+a render samples, found in one compiled pass, against the field's own selection; the renderer's check of the corners
+its kernel reads unchecked."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.demo import load_demo
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.kernels import BLOCK
-from pytest_n2r.render.cell_bits import cell_bits, cell_occupied
+from pytest_n2r.render.cell_bits import cell_bits, cell_occupied, kept_cells
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 
 from ..field.fields import random_field
@@ -31,6 +34,53 @@ def test_every_cell_reads_back_as_the_grid_has_it(side, occupied, seed):
                              f"{bool(read[tuple(wrong[0])])} instead of {bool(cells[tuple(wrong[0])])}")
     assert sum((int(w) & (2 ** 64 - 1)).bit_count() for w in bits.ravel()) == int(cells.sum()), \
         "the padding beyond the grid has occupied bits"
+
+
+def selected_cells(field, step_ratio: float, min_alpha: float) -> np.ndarray:
+    """The cells a render samples as the torch backend selects them: occupied, and (``min_alpha > 0``) with the
+    opacity of the densest corner at least ``min_alpha``."""
+    occupancy = field.occupancy.clone()
+    if min_alpha > 0:
+        with torch.no_grad():
+            occupancy[field.occupancy] = field.occupied_cell_alpha(step_ratio) >= min_alpha
+    return occupancy.numpy()
+
+
+def assert_same_cells(field, step_ratio: float, min_alpha: float, what: str) -> None:
+    cells, bits = kept_cells(field, step_ratio, min_alpha)
+    expected = selected_cells(field, step_ratio, min_alpha)
+    wrong = np.argwhere(cells.astype(bool) != expected)
+    assert wrong.size == 0, (f"{what}, step_ratio={step_ratio}, min_alpha={min_alpha}: {len(wrong)} of "
+                             f"{expected.sum()} selected cells differ, e.g. {wrong[0].tolist()} kept="
+                             f"{bool(cells[tuple(wrong[0])])}, expected {bool(expected[tuple(wrong[0])])}")
+    assert np.array_equal(bits, cell_bits(expected.astype(np.uint8))), f"{what}: the bits do not pack those cells"
+
+
+@settings(max_examples=40, deadline=None)
+@given(resolution=st.integers(4, 20), occupied=st.floats(0.0, 1.0), seed=st.integers(0, 2 ** 16),
+       sparse=st.booleans(), step_ratio=st.sampled_from([0.25, 0.5, 1.0]),
+       min_alpha=st.sampled_from([0.0, 1e-4, 1e-2, 0.3]), density_scale=st.floats(0.5, 8.0))
+def test_kept_cells_are_the_cells_the_field_selects(resolution, occupied, seed, sparse, step_ratio, min_alpha,
+                                                    density_scale):
+    field = random_field(resolution=resolution, occupied=occupied, seed=seed, density_scale=density_scale)
+    field = field.compact() if sparse else field
+    assert_same_cells(field, step_ratio, min_alpha, f"{'sparse' if sparse else 'dense'} {resolution}³ field")
+
+
+@pytest.mark.parametrize("min_alpha", [0.0, 1e-4])
+def test_a_cell_with_a_nan_corner_is_kept_only_without_a_threshold(min_alpha):
+    """As the torch selection: the densest corner of a cell with a NaN is NaN, whose opacity is below any
+    threshold."""
+    field = random_field(resolution=10, occupied=1.0, seed=5)
+    field.values[0, 0] = float("nan")  # vertex (0, 0, 0): a corner of cell (0, 0, 0) alone
+    cells, _ = kept_cells(field, 0.5, min_alpha)
+    assert bool(cells[0, 0, 0]) == (min_alpha == 0), f"min_alpha={min_alpha}: cell (0, 0, 0) kept={cells[0, 0, 0]}"
+    assert_same_cells(field, 0.5, min_alpha, "a field with a NaN corner")
+
+
+def test_kept_cells_are_the_cells_the_field_selects_on_a_shipped_twin():
+    """The demo wall's fitted twin (384³, a real fit's densities), at the default settings."""
+    assert_same_cells(load_demo("wall-field", device="cpu").field, 0.5, 1e-4, "the wall's fitted twin")
 
 
 @pytest.mark.parametrize("min_alpha", [0.0, 1e-4])
