@@ -202,6 +202,7 @@ class FieldRenderer:
             self._rows = field.kernel_rows()
             self._reach = block_reach((self._bits != 0).any(axis=-1).astype(np.uint8))  # blocks with a cell sampled
             self._vertex = None
+            self._fixed_logits: np.ndarray | None = None
             if s.colour_direction == "vertex":
                 self._vertex = np.arange(self._values.shape[0], dtype=np.int64)  # each row's flat vertex index
                 if self._rows.shape[0]:
@@ -270,14 +271,19 @@ class FieldRenderer:
 
     def _bake_logits(self, c2w: np.ndarray) -> np.ndarray:
         """The compiled kernel's per-frame colour logits for a camera at ``c2w`` (``(n_rows, 3)`` float32), or an
-        empty array: colour from each ray's direction."""
+        empty array: colour from each ray's direction. A field without view-dependent colour (SH degree 0) has
+        the same logits from every camera: baked on the first frame, kept for the others."""
         if self.backend != "compiled" or self._vertex is None:
             return np.zeros((0, 3), dtype=np.float32)
+        if self.field.sh_degree == 0 and self._fixed_logits is not None:
+            return self._fixed_logits
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
         logits = np.empty((self._values.shape[0], 3), dtype=np.float32)
         run_parts(bake_logits, self._values.shape[0], self._values, self._vertex, self.grid.resolution,
                   self.grid.shell, origin, self.field.sh_degree, logits)
+        if self.field.sh_degree == 0:
+            self._fixed_logits = logits  # the kernel only reads it (a read-only array would compile it anew)
         return logits
 
     def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, index: np.ndarray,

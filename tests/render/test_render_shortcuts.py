@@ -1,5 +1,5 @@
-"""The compiled renderer's shortcuts: colour logits baked per frame at the vertices, and colour only where a
-sample carries weight (each within its stated bound)."""
+"""The compiled renderer's shortcuts: colour logits baked per frame at the vertices (kept across frames where
+they do not depend on the camera), and colour only where a sample carries weight (each within its stated bound)."""
 
 from __future__ import annotations
 
@@ -70,6 +70,24 @@ def test_baked_colours_of_a_degree_0_field_are_exact_and_degree_1_moves_them(pos
     diff = np.abs(baked - exact)
     assert 1 < diff.max() <= 16, (f"pose {pose_name!r}: baked colours of a degree-1 field differ by up to "
                                   f"{diff.max()} levels from exact ones; expected a visible change of at most 16")
+
+
+@pytest.mark.parametrize("sh_degree", [0, 1])
+def test_a_renderer_kept_across_frames_renders_what_a_fresh_one_does(sh_degree):
+    """A degree-0 field's logits are baked on the first frame and kept (they do not depend on the camera); a
+    degree-1 field's are baked for each frame. Either way frame after frame from one renderer matches, to the bit,
+    a fresh renderer for each pose."""
+    field = random_field(resolution=16, sh_degree=sh_degree, seed=8)
+    settings = RenderSettings(backend="compiled")
+    kept = FieldRenderer(field, settings)
+    for name in ("outside", "inside", "in_shell"):
+        c2w = named_pose(name)
+        again = kept.render(c2w, CAMERA, ("rgb", "depth", "opacity"))
+        fresh = FieldRenderer(field, settings).render(c2w, CAMERA, ("rgb", "depth", "opacity"))
+        differ = [k for k in fresh if not np.array_equal(again[k], fresh[k])]
+        assert not differ, f"SH degree {sh_degree}, pose {name!r}: {differ} differ from a fresh renderer's"
+    assert (kept._fixed_logits is not None) == (sh_degree == 0), (
+        f"SH degree {sh_degree}: logits kept across frames: {kept._fixed_logits is not None}")
 
 
 @pytest.mark.parametrize("tail", [(0.3,), (0.3, 0.1), (0.5, 0.2, 0.05)])
