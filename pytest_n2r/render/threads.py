@@ -6,9 +6,8 @@ numba's parallel loops"), and a fresh checkout pays that on its first fitted ren
 kernels are plain ``nogil`` loops over a range of their work (``first``, ``last``), and :func:`run_parts` runs the
 parts on this module's thread pool (:func:`run_balanced` where the work's cost is uneven: the rays); the exact demo
 renderer runs its bands of rows on the same pool (:func:`render_pool`), and the splat renderer composites its tiles
-dealt over it (:func:`run_dealt`). The
-training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel loops: run this way, a training step
-took 1.3x as long (the same page).
+dealt over it (:func:`run_dealt`). The training kernels (:mod:`pytest_n2r.fit.train_kernels`) keep numba's parallel
+loops: run this way, a training step took 1.3x as long (the same page).
 
 Convention
 ----------
