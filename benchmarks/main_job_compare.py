@@ -9,8 +9,11 @@ project copied to ``ex`` there, and run as a user runs it: ``python -m pytest ex
 the export's root with the export first on ``PYTHONPATH``, its own empty render cache (``N2R_CACHE_DIR``), numba
 cache (``NUMBA_CACHE_DIR``) and bytecode prefix (``PYTHONPYCACHEPREFIX``: the cold run compiles every module it
 imports, torch's included, into it, so a cold run here is longer than a user's first run). A warm run is the same
-command again with those caches filled. Wall times are the child process's, start to exit; the split is the
-plugin's summary line (render / SUT / metric). The verdict lines (``-rA``'s PASSED / FAILED / SKIPPED) of every run
+command again with those caches filled. Wall times are the child process's, start to exit; CPU seconds are the
+user and system time of the whole process tree the run waited for (pytest, its kernel helper, xdist's workers:
+``getrusage(RUSAGE_CHILDREN)`` around the run), which a cold run that keeps both cores busy is bound by, and which
+does not count the time a shared host runs other machines' work; the split is the plugin's summary line (render /
+SUT / metric). The verdict lines (``-rA``'s PASSED / FAILED / SKIPPED) of every run
 are compared with the base's cold run: a speed change must not change a verdict.
 """
 
@@ -19,6 +22,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import resource
 import shutil
 import statistics
 import subprocess
@@ -65,17 +69,20 @@ def check_export_imported(folder: Path, env: dict[str, str]) -> None:
 
 def run_once(folder: Path, env: dict[str, str], pytest_args: list[str]) -> dict:
     """One run of the main job in ``folder``: wall seconds, the plugin's split, pytest's last line, the verdicts."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     result = subprocess.run([sys.executable, "-m", "pytest", "ex", "-p", "no:cacheprovider", "-q", "-rA",
                              *pytest_args], cwd=folder, env=env, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     lines = result.stdout.splitlines()
     if result.returncode not in (0, 1) or not lines:
         raise SystemExit(f"the main job in {folder.name[:10]} ended with {result.returncode}:\n"
                          f"{result.stdout[-3000:]}\n{result.stderr[-3000:]}")
     split = next((m.groupdict() for m in map(_SPLIT.search, lines) if m), {})
     verdicts = sorted(line.split("; time ")[0] for line in lines if _VERDICT.match(line))  # times vary
-    return {"wall": wall, "split": {k: float(v) for k, v in split.items()}, "last": lines[-1].strip("= "),
+    return {"wall": wall, "cpu": cpu, "split": {k: float(v) for k, v in split.items()}, "last": lines[-1].strip("= "),
             "verdicts": verdicts}
 
 
@@ -103,9 +110,10 @@ def main(argv: list[str] | None = None) -> int:
     base_verdicts = runs[0]["cold"][0]["verdicts"]
     print(f"main job, cold once then {args.warm} warm runs each, taking turns; bytecode "
           f"{'not written' if args.no_bytecode else 'kept'}; pytest args {' '.join(pytest_args) or '(none)'}\n")
-    print("| revision | cold wall s | cold field floors s | warm wall s | warm median s | ratio to base | "
-          "warm SUT s (median) | warm metric s (median) | verdicts as the base's | pytest's last line (cold) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| revision | cold wall s | cold CPU s | cold field floors s | warm wall s | warm median s | ratio to base | "
+          "warm CPU s (median) | warm SUT s (median) | warm metric s (median) | verdicts as the base's | "
+          "pytest's last line (cold) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     base_median = statistics.median(r["wall"] for r in runs[0]["warm"])
     for (name, _), revision, measured in zip(trees, args.revisions, runs, strict=True):
         warm = [r["wall"] for r in measured["warm"]]
@@ -116,9 +124,10 @@ def main(argv: list[str] | None = None) -> int:
             return f"{statistics.median(values):.2f}" if values else "—"
 
         same = all(r["verdicts"] == base_verdicts for r in measured["cold"] + measured["warm"])
-        print(f"| {revision} ({name}) | {measured['cold'][0]['wall']:.2f} | {split('floors', kind='cold')} | "
-              f"{' / '.join(f'{w:.2f}' for w in warm)} | "
-              f"{median:.2f} | {median / base_median:.2f} | {split('sut')} | {split('metric')} | "
+        warm_cpu = statistics.median(r["cpu"] for r in measured["warm"])
+        print(f"| {revision} ({name}) | {measured['cold'][0]['wall']:.2f} | {measured['cold'][0]['cpu']:.1f} | "
+              f"{split('floors', kind='cold')} | {' / '.join(f'{w:.2f}' for w in warm)} | "
+              f"{median:.2f} | {median / base_median:.2f} | {warm_cpu:.1f} | {split('sut')} | {split('metric')} | "
               f"{'yes' if same else 'NO'} ({len(base_verdicts)} lines) | {measured['cold'][0]['last']} |")
     return 0
 
