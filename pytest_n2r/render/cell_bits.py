@@ -13,8 +13,8 @@ where that cell is occupied. Cells beyond the grid (the last block's padding) ar
 
 The cells a render samples are the field's occupied cells whose densest corner is not too thin
 (``RenderSettings.min_alpha``): :func:`kept_cells` finds them and packs their bits in one compiled pass over the
-grid (:meth:`~pytest_n2r.field.grid.SceneField.occupied_cell_alpha` and :func:`cell_bits` on the demo twins' 384³
-grids took 1.2 s of a renderer's 1.4 s set-up; docs/performance-log.md, "Rendering").
+grid (:meth:`~pytest_n2r.field.grid.SceneField.occupied_cell_alpha` and a packing of a dense copy of the grid took
+1.2 s of a renderer's 1.4 s set-up on the demo twins' 384³ grids; docs/performance-log.md, "Rendering").
 
 numba's cache checks a kernel's own file only (numba/numba#1833): after editing :func:`cell_occupied`, delete the
 ``__pycache__`` folder of ``pytest_n2r/render``, whose cached renderer inlines it.
@@ -33,31 +33,13 @@ from ..field.grid import SceneField, opacity
 from ..field.kernels import BLOCK
 from .threads import run_parts
 
-__all__ = ["cell_bits", "cell_occupied", "kept_cells"]
-
-
-def cell_bits(cells: np.ndarray) -> np.ndarray:
-    """The occupancy bits of ``cells`` (``(C, C, C)``, nonzero where a cell is occupied), block by block.
-
-    >>> cells = np.zeros((10, 10, 10), dtype=np.uint8)
-    >>> cells[9, 2, 3] = 1  # block (1, 0, 0), li 1, bit 8·2 + 3
-    >>> bits = cell_bits(cells)
-    >>> bits.shape, int(bits[1, 0, 0, 1]) == 1 << 19, int(np.count_nonzero(bits))
-    ((2, 2, 2, 8), True, 1)
-    """
-    side = cells.shape[0]
-    nb = (side + BLOCK - 1) // BLOCK
-    padded = np.zeros((nb * BLOCK,) * 3, dtype=bool)
-    padded[:side, :side, :side] = cells != 0
-    by_block = padded.reshape(nb, BLOCK, nb, BLOCK, nb, BLOCK).transpose(0, 2, 4, 1, 3, 5)
-    packed = np.packbits(by_block.reshape(nb, nb, nb, BLOCK, BLOCK * BLOCK), axis=-1, bitorder="little")
-    return np.ascontiguousarray(packed).view("<i8").reshape(nb, nb, nb, BLOCK).astype(np.int64, copy=False)
+__all__ = ["cell_occupied", "kept_cells"]
 
 
 @njit(cache=True, inline="always")
 def cell_occupied(bits, bi, bj, bk, ci, cj, ck):
     """Whether cell ``(ci, cj, ck)`` (of block ``(bi, bj, bk)``, its indices over ``BLOCK``) is occupied (``bits``
-    from :func:`cell_bits`; indices >= 0)."""
+    from :func:`kept_cells`; indices >= 0)."""
     m = BLOCK - 1  # unsigned indices: no wraparound code (pytest_n2r.render.field_kernels._row)
     word = bits[np.uint64(bi), np.uint64(bj), np.uint64(bk), np.uint64(ci & m)]
     return (word >> ((cj & m) * BLOCK + (ck & m))) & 1 != 0
@@ -65,7 +47,7 @@ def cell_occupied(bits, bi, bj, bk, ci, cj, ck):
 
 def kept_cells(field: SceneField, step_ratio: float, min_alpha: float) -> tuple[np.ndarray, np.ndarray]:
     """``(cells, bits)``: the cells a render of ``field`` samples, as a ``(C, C, C)`` uint8 grid (1: sampled) and
-    as :func:`cell_bits` packs them. Those are the occupied cells whose densest corner gives at least
+    as bits (the module's *Convention*). Those are the occupied cells whose densest corner gives at least
     ``min_alpha`` opacity over one sample of ``step_ratio`` voxels (every occupied cell for ``min_alpha=0``;
     a cell with a NaN corner only then), the cells ``field.occupied_cell_alpha(step_ratio) >= min_alpha`` selects.
     Each stored vertex's opacity is computed once (the same torch expression), and a cell takes that of its

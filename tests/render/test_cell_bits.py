@@ -1,6 +1,6 @@
-"""The cells' occupancy bits, block by block (pytest_n2r/render/cell_bits.py), against the grid they pack; the cells
-a render samples, found in one compiled pass, against the field's own selection; the renderer's check of the corners
-its kernel reads unchecked."""
+"""The cells a render samples (pytest_n2r/render/cell_bits.py), found in one compiled pass, against the field's own
+selection; their bits, block by block, read back as the renderer reads them; the renderer's check of the corners its
+kernel reads unchecked."""
 
 from __future__ import annotations
 
@@ -13,27 +13,40 @@ from hypothesis import strategies as st
 from pytest_n2r.demo import load_demo
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.kernels import BLOCK
-from pytest_n2r.render.cell_bits import cell_bits, cell_occupied, kept_cells
+from pytest_n2r.render.cell_bits import cell_occupied, kept_cells
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
 
 from ..field.fields import random_field
 
 
+def unpacked(bits: np.ndarray, side: int) -> np.ndarray:
+    """The ``(side,) * 3`` bool grid ``bits`` holds (the module's *Convention*: ``bits[bi, bj, bk, li]``, bit
+    ``8·lj + lk``), and whether its padding beyond ``side`` holds no bit."""
+    nb = bits.shape[0]
+    assert bits.shape == (nb, nb, nb, BLOCK) and bits.dtype == np.int64 and nb == -(-side // BLOCK), (
+        f"bits of a {side}³ grid: shape {bits.shape} {bits.dtype}, expected ({-(-side // BLOCK)},) * 3 + ({BLOCK},) "
+        "int64")
+    flat = np.unpackbits(bits.astype("<i8").view(np.uint8), bitorder="little").reshape((nb,) * 3 + (BLOCK,) * 3)
+    grid = flat.transpose(0, 3, 1, 4, 2, 5).reshape((nb * BLOCK,) * 3).astype(bool)
+    assert int(grid.sum()) == int(grid[:side, :side, :side].sum()), "the padding beyond the grid has occupied bits"
+    return grid[:side, :side, :side]
+
+
 @settings(max_examples=40, deadline=None)
-@given(side=st.integers(1, 20), occupied=st.floats(0.0, 1.0), seed=st.integers(0, 2 ** 16))
+@given(side=st.integers(3, 20), occupied=st.floats(0.0, 1.0), seed=st.integers(0, 2 ** 16))
 def test_every_cell_reads_back_as_the_grid_has_it(side, occupied, seed):
-    cells = (np.random.default_rng(seed).random((side,) * 3) < occupied).astype(np.uint8)
-    bits = cell_bits(cells)
-    blocks = -(-side // BLOCK)
-    assert bits.shape == (blocks, blocks, blocks, BLOCK) and bits.dtype == np.int64, \
-        f"bits of a {side}³ grid: shape {bits.shape} {bits.dtype}, expected ({blocks},) * 3 + ({BLOCK},) int64"
+    """Without a threshold every occupied cell is sampled; the renderer's reader (``cell_occupied``) finds each
+    cell's bit where the layout puts it."""
+    field = random_field(resolution=side + 1, occupied=occupied, seed=seed)
+    cells, bits = kept_cells(field, 0.5, 0.0)
+    grid = field.occupancy.numpy()
+    assert np.array_equal(cells.astype(bool), grid), "min_alpha=0: the cells sampled are not the occupied ones"
     read = np.array([[[cell_occupied(bits, i // BLOCK, j // BLOCK, k // BLOCK, i, j, k) for k in range(side)]
                       for j in range(side)] for i in range(side)])
-    wrong = np.argwhere(read != cells.astype(bool))
-    assert wrong.size == 0, (f"{len(wrong)} of {cells.size} cells read back wrong, e.g. cell {wrong[0].tolist()}: "
-                             f"{bool(read[tuple(wrong[0])])} instead of {bool(cells[tuple(wrong[0])])}")
-    assert sum((int(w) & (2 ** 64 - 1)).bit_count() for w in bits.ravel()) == int(cells.sum()), \
-        "the padding beyond the grid has occupied bits"
+    wrong = np.argwhere(read != grid)
+    assert wrong.size == 0, (f"{len(wrong)} of {grid.size} cells read back wrong, e.g. cell {wrong[0].tolist()}: "
+                             f"{bool(read[tuple(wrong[0])])} instead of {bool(grid[tuple(wrong[0])])}")
+    assert np.array_equal(unpacked(bits, side), grid), "the bits are not laid out as the module's Convention says"
 
 
 def selected_cells(field, step_ratio: float, min_alpha: float) -> np.ndarray:
@@ -53,7 +66,7 @@ def assert_same_cells(field, step_ratio: float, min_alpha: float, what: str) -> 
     assert wrong.size == 0, (f"{what}, step_ratio={step_ratio}, min_alpha={min_alpha}: {len(wrong)} of "
                              f"{expected.sum()} selected cells differ, e.g. {wrong[0].tolist()} kept="
                              f"{bool(cells[tuple(wrong[0])])}, expected {bool(expected[tuple(wrong[0])])}")
-    assert np.array_equal(bits, cell_bits(expected.astype(np.uint8))), f"{what}: the bits do not pack those cells"
+    assert np.array_equal(unpacked(bits, expected.shape[0]), expected), f"{what}: the bits do not hold those cells"
 
 
 @settings(max_examples=40, deadline=None)
