@@ -275,7 +275,7 @@ class FieldRenderer:
         the same logits from every camera: baked on the first frame, kept for the others."""
         if self.backend != "compiled" or self._vertex is None:
             return np.zeros((0, 3), dtype=np.float32)
-        if self.field.sh_degree == 0 and self._fixed_logits is not None:
+        if self._fixed_logits is not None:  # set for a degree-0 field only, below
             return self._fixed_logits
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
