@@ -68,7 +68,8 @@ def check_export_imported(folder: Path, env: dict[str, str]) -> None:
 
 
 def run_once(folder: Path, env: dict[str, str], pytest_args: list[str]) -> dict:
-    """One run of the main job in ``folder``: wall seconds, the plugin's split, pytest's last line, the verdicts."""
+    """One run of the main job in ``folder``: wall seconds, CPU seconds of its process tree, the plugin's split,
+    pytest's last line, the verdicts."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     result = subprocess.run([sys.executable, "-m", "pytest", "ex", "-p", "no:cacheprovider", "-q", "-rA",
