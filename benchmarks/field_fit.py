@@ -1,11 +1,14 @@
 """Fitting speed and quality on the fox capture: held-out PSNR / SSIM after 1, 3, 6 and 10 minutes.
 
-Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--out /tmp/fox.n2r] [--config key=value ...]``.
+Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--out /tmp/fox.n2r] [--config key=value ...]
+[--sfm]``.
 ``--steps N`` fits N steps instead of a time budget: the same fit on a loaded machine as on an idle one (the
 default recipe reached 6 051-6 582 steps in 10 minutes on the idle AVX-512 2-core host of 2 December; the AVX2
 host of 3 December takes 12 min 52 s for 6 500: docs/performance.md), with the CPU seconds it took printed
 beside.
-Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. Evaluation
+Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. The poses are
+the ones the fox was published with (its ``transforms.json``), or with ``--sfm`` those our structure from motion
+finds from the photos alone, as ``n2r fit photos/`` fits a user's capture (the same photos held out). Evaluation
 time is not counted as training time. The fitted scene is written to ``--out`` so that
 ``benchmarks/render_speed.py`` can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only
 data, never copied into this repository). Results: docs/performance.md.
@@ -36,6 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=None, help="fit this many steps instead of --budget")
     parser.add_argument("--out", default="/tmp/n2r-bench-fox.n2r", help="where to write the fitted scene")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="FieldConfig overrides")
+    parser.add_argument("--sfm", action="store_true",
+                        help="poses from our structure from motion on the photos, not the published transforms.json")
     args = parser.parse_args(argv)
     if not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
@@ -46,9 +51,10 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
         t0 = time.perf_counter()
-        capture = ingest(FOX, downscale=0.25)
+        capture = ingest(FOX.parent / "images" if args.sfm else FOX, downscale=0.25)
     height, width = capture.views[0].image.shape[:2]
-    print(f"ingest: {time.perf_counter() - t0:.1f} s, {len(capture.train_views)} train / "
+    print(f"ingest ({'structure from motion' if args.sfm else 'transforms.json'}): {time.perf_counter() - t0:.1f} s, "
+          f"{len(capture.train_views)} train / "
           f"{len(capture.heldout_views)} held-out views of {width}×{height}")
     marks = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget] if args.steps is None else []
     c0 = time.process_time()

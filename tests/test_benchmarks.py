@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +38,8 @@ SMOKE = {
     "render_fingerprint.py": (["--twins", "--steps", "4"], "| short-fit/file |"),
     "fit_profile.py": (["--capture", "wall", "--steps", "30", "--threads", "1", "--config", "resolutions=16,24",
                         "stage_fractions=0.5", "batch_rays=256"], "| 1 | all | 30 |"),
+    # structure from motion at 160 px registers a few photos, or none (a row saying so): either way a table row
+    "capture_poses.py": (["sfm", "--scenes", "wall", "--size", "160"], "| wall | 160 |"),
     "fit_budget.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--base", "default", "--variant", "tiny",
                        "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256"], "| wall | tiny | 10 |"),
 }
@@ -93,11 +96,16 @@ def test_every_smoke_run_names_an_existing_script():
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"
 
 
-def test_main_job_compare_reads_the_sessions_split_not_a_relations(monkeypatch):
+def _benchmark_module(monkeypatch, name: str):
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location("_main_job_compare", ROOT / "benchmarks" / "main_job_compare.py")
+    spec = importlib.util.spec_from_file_location(f"_{name}", ROOT / "benchmarks" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
+    return module
+
+
+def test_main_job_compare_reads_the_sessions_split_not_a_relations(monkeypatch):
+    module = _benchmark_module(monkeypatch, "main_job_compare")
     relation = "PASSED t.py::x: 10 examples; time render 7.47 s / SUT 0.12 s / metric 0.14 s of 9.57 s"
     session = ("time 33.9 s since pytest loaded pytest-n2r: start-up and collection 2.1 s; fixtures 1.1 s; relations "
                "30.7 s = render 22.27 s / SUT 0.25 s / metric 0.32 s / validity 0.30 s / field floors 6.70 s / "
@@ -105,3 +113,36 @@ def test_main_job_compare_reads_the_sessions_split_not_a_relations(monkeypatch):
     assert module._SPLIT.search(relation) is None, "a relation's own split was taken for the session's"
     assert module._SPLIT.search(session).groupdict() == {"render": "22.27", "sut": "0.25", "metric": "0.32",
                                                          "validity": "0.30", "floors": "6.70"}
+
+
+def test_capture_poses_scores_a_reconstruction_up_to_a_similarity_and_sets_turned_photos_apart(monkeypatch):
+    from scipy.spatial.transform import Rotation
+
+    module = _benchmark_module(monkeypatch, "capture_poses")
+    rng = np.random.default_rng(0)
+    truth = {}
+    for k in range(12):
+        c2w = np.eye(4)
+        c2w[:3, :3] = Rotation.from_rotvec(rng.normal(0, 0.3, 3)).as_matrix()
+        c2w[:3, 3] = [k * 0.5, rng.normal(0, 0.2), rng.normal(0, 0.2)]
+        truth[f"p{k:02d}"] = c2w
+    world = np.eye(4)  # a similarity of the world: what structure from motion is free to choose
+    world[:3, :3] = Rotation.from_rotvec([0.4, -1.1, 2.0]).as_matrix() * 3.0
+    world[:3, 3] = [1.0, -2.0, 0.5]
+    estimated = {}
+    for name, c2w in truth.items():
+        est = world @ c2w
+        est[:3, :3] /= 3.0
+        estimated[name] = est
+    right = module.score_poses(estimated, truth)
+    assert right["consistent"] == 12 and right["others_rotation_deg"] is None, f"a right reconstruction: {right}"
+    assert right["rotation_deg"][1] < 1e-5 and right["centre_pct"][1] < 1e-5, f"a right reconstruction: {right}"
+    flip = Rotation.from_rotvec([0.0, 0.0, np.pi]).as_matrix()
+    for name in ("p08", "p09", "p10", "p11"):  # turned half a turn about the world's z, centres moved
+        estimated[name] = estimated[name].copy()
+        estimated[name][:3, :3] = flip @ estimated[name][:3, :3]
+        estimated[name][:3, 3] += [0.0, 5.0, 0.0]
+    wrong = module.score_poses(estimated, truth)
+    assert wrong["consistent"] == 8, f"four photos turned by 180° counted as consistent: {wrong}"
+    assert wrong["rotation_deg"][1] < 1e-5 and wrong["centre_pct"][1] < 1e-5, f"the right eight scored: {wrong}"
+    assert abs(wrong["others_rotation_deg"] - 180.0) < 1e-5, f"four photos turned by 180° scored: {wrong}"
