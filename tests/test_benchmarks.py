@@ -91,7 +91,6 @@ def test_kernel_compile_reports_the_training_kernels():
     assert "| _composite_backward | 1 |" in result.stdout, f"no training kernel reported:\n{result.stdout}"
 
 
-
 def test_capture_poses_perturb_fits_a_capture_with_a_turned_pose():
     """The other mode of capture_poses.py (SMOKE runs its structure from motion): a 5-step fit at 96 px."""
     args = ["perturb", "--size", "96", "--steps", "5", "--degrees", "10"]
@@ -99,6 +98,7 @@ def test_capture_poses_perturb_fits_a_capture_with_a_turned_pose():
                             env=_environment(), capture_output=True, text=True, timeout=300, check=False)
     assert result.returncode == 0, f"capture_poses.py {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}"
     assert "| 10° |" in result.stdout, f"no turned photo reported:\n{result.stdout}"
+
 
 def test_every_smoke_run_names_an_existing_script():
     missing = sorted(set(SMOKE) - {s.name for s in SCRIPTS})
