@@ -31,11 +31,12 @@ from pathlib import Path
 import numpy as np
 
 from pytest_n2r.data import ingest
+from pytest_n2r.data.atomic import atomic_write_text
 from pytest_n2r.data.compare import compare_poses
 from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.data.sfm import MATCHERS, run_sfm
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
-from pytest_n2r.errors import IngestError
+from pytest_n2r.errors import IngestError, InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.field_fit import evaluate_views
@@ -135,6 +136,46 @@ def _pair(values: list[float] | None) -> str:
     return "—" if values is None else f"{values[0]:.2f} / {values[1]:.2f}"
 
 
+def run(args: argparse.Namespace) -> list[dict]:
+    """Run the chosen mode and print its table; the rows."""
+    with tempfile.TemporaryDirectory(prefix="n2r-capture-poses-") as tmp:
+        if args.mode == "perturb":
+            row = perturb_rows(args.scene, args.size, args.steps, args.degrees, Path(tmp) / "capture")
+            print_perturb(row)
+            return [row]
+        rows = [sfm_row(name, size, args.matcher, Path(tmp) / f"{name}-{size}")
+                for name in args.scenes for size in args.size]
+    print(f"structure from motion on phone-style demo captures (no poses given), matcher {args.matcher}; "
+          f"consistent: world rotation within {CONSISTENT_DEG:g}° of the consensus\n")
+    print("| scene | px | registered | models | consistent | their rotation error, median / max ° "
+          "| their centre error, median / max % of the camera spread | the others' rotation error, median ° "
+          "| focal error, max % | s |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        if "error" in r:
+            print(f"| {r['scene']} | {r['size']} | 0 of {r['photos']} |" + " — |" * 6 + f" {r['seconds']} |"
+                  f"\n\n{r['scene']}: {r['error']}\n")
+            continue
+        print(f"| {r['scene']} | {r['size']} | {r['registered']} of {r['photos']} | {r['models']} | "
+              f"{r['consistent']} | {_pair(r['rotation_deg'])} | {_pair(r['centre_pct'])} | "
+              + ("—" if r["others_rotation_deg"] is None else f"{r['others_rotation_deg']:.1f}")
+              + f" | {r['focal_error_pct']:.1f} | {r['seconds']} |")
+    return rows
+
+
+def print_perturb(r: dict) -> None:
+    print(f"{r['scene']} phone capture at {r['size']} px, {r['steps']} steps ({r['fit_s']} s): PSNR dB of "
+          "the field's render at each photo's given pose against the photo\n")
+    print("| photo | pose turned by | PSNR dB |")
+    print("|---|---|---|")
+    for photo, t in r["turned"].items():
+        print(f"| {photo} | {t['degrees']:g}° | {t['psnr']:.2f} |")
+    print(f"| the other {r['others']['n']} fitted photos | 0° | median {r['others']['median']:.2f}, "
+          f"lowest {r['others']['lowest']:.2f} |")
+    if r["heldout"] is not None:
+        print(f"| held-out photos (never fitted) | 0° | {r['heldout'][0]:.2f} to {r['heldout'][1]:.2f} |")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     modes = parser.add_subparsers(dest="mode", required=True)
@@ -150,40 +191,12 @@ def main(argv: list[str] | None = None) -> int:
     for sub in (sfm, turn):
         sub.add_argument("--json", type=Path, help="also write the results here")
     args = parser.parse_args(argv)
-    with tempfile.TemporaryDirectory(prefix="n2r-capture-poses-") as tmp:
-        if args.mode == "sfm":
-            rows = [sfm_row(name, size, args.matcher, Path(tmp) / f"{name}-{size}")
-                    for name in args.scenes for size in args.size]
-            print(f"structure from motion on phone-style demo captures (no poses given), matcher {args.matcher}; "
-                  f"consistent: world rotation within {CONSISTENT_DEG:g}° of the consensus\n")
-            print("| scene | px | registered | models | consistent | their rotation error, median / max ° "
-                  "| their centre error, median / max % of the camera spread | the others' rotation error, median ° "
-                  "| focal error, max % | s |")
-            print("|---|---|---|---|---|---|---|---|---|---|")
-            for r in rows:
-                if "error" in r:
-                    print(f"| {r['scene']} | {r['size']} | 0 of {r['photos']} |" + " — |" * 6 + f" {r['seconds']} |"
-                          f"\n\n{r['scene']}: {r['error']}\n")
-                    continue
-                print(f"| {r['scene']} | {r['size']} | {r['registered']} of {r['photos']} | {r['models']} | "
-                      f"{r['consistent']} | {_pair(r['rotation_deg'])} | {_pair(r['centre_pct'])} | "
-                      + ("—" if r["others_rotation_deg"] is None else f"{r['others_rotation_deg']:.1f}")
-                      + f" | {r['focal_error_pct']:.1f} | {r['seconds']} |")
-        else:
-            rows = [perturb_rows(args.scene, args.size, args.steps, args.degrees, Path(tmp) / "capture")]
-            r = rows[0]
-            print(f"{r['scene']} phone capture at {r['size']} px, {r['steps']} steps ({r['fit_s']} s): PSNR dB of "
-                  "the field's render at each photo's given pose against the photo\n")
-            print("| photo | pose turned by | PSNR dB |")
-            print("|---|---|---|")
-            for photo, t in r["turned"].items():
-                print(f"| {photo} | {t['degrees']:g}° | {t['psnr']:.2f} |")
-            print(f"| the other {r['others']['n']} fitted photos | 0° | median {r['others']['median']:.2f}, "
-                  f"lowest {r['others']['lowest']:.2f} |")
-            if r["heldout"] is not None:
-                print(f"| held-out photos (never fitted) | 0° | {r['heldout'][0]:.2f} to {r['heldout'][1]:.2f} |")
+    try:
+        rows = run(args)
+    except InvalidArgument as error:  # a size or step count the library refuses: say which, without a traceback
+        parser.error(str(error))
     if args.json is not None:
-        args.json.write_text(json.dumps(rows, indent=1))
+        atomic_write_text(args.json, json.dumps(rows, indent=1))
     return 0
 
 
