@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from phone_capture import CONFIG  # the phone benchmark's config, so its fits are comparable
 
 from pytest_n2r.data import ingest
 from pytest_n2r.data.atomic import atomic_write_text
@@ -37,7 +38,6 @@ from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.data.sfm import MATCHERS, run_sfm
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.errors import IngestError, InvalidArgument
-from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.field_fit import evaluate_views
 from pytest_n2r.geometry import Camera, rotation_angle_deg
@@ -46,9 +46,6 @@ from pytest_n2r.geometry import Camera, rotation_angle_deg
 CONSISTENT_DEG = 5.0
 #: A placeholder camera for the pose sets compared (the comparison reads poses only).
 CAMERA = Camera(2, 2, 1.0, 1.0, 0.5, 0.5)
-#: The phone benchmark's config (benchmarks/phone_capture.py), so its fits are comparable.
-CONFIG = FieldConfig(resolutions=(32, 96, 160), stage_fractions=(0.15, 0.4), sh_degree=0, batch_rays=4096,
-                     lr_density=0.2, lr_color=0.1, tv=1e-4, seed=0)
 
 
 def _mean_rotation(rotations: list[np.ndarray]) -> np.ndarray:
