@@ -43,46 +43,49 @@ def tv_gradient(field: SceneField, flat_of_row: torch.Tensor, unique: torch.Tens
 
 
 @njit(cache=True, inline="always")
-def _pull(values, row_map, row, neighbour, columns, scale, grad, n):
-    """Add ``scale[f] · (values[row, f] − values[neighbour's row, f])`` to ``grad[n, f]`` for each of
-    ``columns`` when the neighbour vertex is stored."""
+def _pull(values, row_map, row, neighbour, lo, hi, scale, grad, n):
+    """Add ``scale[f] · (values[row, f] − values[neighbour's row, f])`` to ``grad[n, f]`` for columns ``lo``
+    to ``hi`` when the neighbour vertex is stored."""
     other = vertex_row(row_map, neighbour)
     if other >= 0:
-        for c in range(columns.shape[0]):
-            f = columns[c]
+        for f in range(lo, hi):
             grad[n, f] += scale[f] * (values[row, f] - values[other, f])
 
 
 @njit(cache=True, parallel=True)
-def _add_tv(values, unique, flat_of_row, row_map, res, columns, scale, grad):
+def _add_tv(values, unique, flat_of_row, row_map, res, lo, hi, scale, grad):
     rr = res * res
     for n in prange(unique.shape[0]):
         row = unique[n]
         flat = flat_of_row[row]
         i, j, k = flat // rr, (flat // res) % res, flat % res
         if i > 0:
-            _pull(values, row_map, row, flat - rr, columns, scale, grad, n)
+            _pull(values, row_map, row, flat - rr, lo, hi, scale, grad, n)
         if i < res - 1:
-            _pull(values, row_map, row, flat + rr, columns, scale, grad, n)
+            _pull(values, row_map, row, flat + rr, lo, hi, scale, grad, n)
         if j > 0:
-            _pull(values, row_map, row, flat - res, columns, scale, grad, n)
+            _pull(values, row_map, row, flat - res, lo, hi, scale, grad, n)
         if j < res - 1:
-            _pull(values, row_map, row, flat + res, columns, scale, grad, n)
+            _pull(values, row_map, row, flat + res, lo, hi, scale, grad, n)
         if k > 0:
-            _pull(values, row_map, row, flat - 1, columns, scale, grad, n)
+            _pull(values, row_map, row, flat - 1, lo, hi, scale, grad, n)
         if k < res - 1:
-            _pull(values, row_map, row, flat + 1, columns, scale, grad, n)
+            _pull(values, row_map, row, flat + 1, lo, hi, scale, grad, n)
 
 
 def add_tv_gradient(values: torch.Tensor, unique: torch.Tensor, flat_of_row: torch.Tensor, row_map: np.ndarray,
                     resolution: int, weights: torch.Tensor, grad: torch.Tensor) -> None:
     """``grad += weights · tv_gradient(...)`` in one compiled pass (CPU tensors; ``grad`` float32
     contiguous ``(len(unique), F)``, changed in place). ``row_map`` is the field's
-    :meth:`~pytest_n2r.field.grid.SceneField.kernel_rows`; columns whose weight is 0 are skipped."""
+    :meth:`~pytest_n2r.field.grid.SceneField.kernel_rows`; the columns before the first and after the last
+    nonzero weight are skipped (a zero weight between them adds zero).
+
+    The kernel loops over a range of columns, not a list of them: the loop vectorizes (late in a fox fit
+    17 → 7.5 ms a step, the same bits)."""
     weights = weights.detach().cpu().double().numpy()
-    columns = np.flatnonzero(weights != 0.0).astype(np.int64)
+    columns = np.flatnonzero(weights != 0.0)
     if not len(columns) or not unique.numel():
         return
     scale = (weights * (2.0 / unique.numel())).astype(np.float32)
-    _add_tv(values.detach().numpy(), unique.numpy(), flat_of_row.numpy(), row_map, resolution, columns, scale,
-            grad.numpy())
+    _add_tv(values.detach().numpy(), unique.numpy(), flat_of_row.numpy(), row_map, resolution, int(columns[0]),
+            int(columns[-1]) + 1, scale, grad.numpy())

@@ -126,22 +126,25 @@ def _interp_forward(sub, inverse, weights, out):
 
 @njit(cache=True, parallel=True)
 def _interp_backward(grad_out, inverse, weights, bounds, grad_sub):
-    # Each thread owns the columns bounds[g]..bounds[g + 1] and walks the samples in order, adding into its
-    # part of each corner's row: no two threads write the same element, every element gets its additions in
-    # sample and corner order whatever the thread count, and each corner's columns are written side by side.
+    # Each thread owns the rows bounds[g]..bounds[g + 1] and walks the samples in order, adding into the
+    # corners it owns: no two threads write the same row (nor, but at the bounds, the same cache line), and
+    # every element gets its additions in sample and corner order whatever the thread count. (Owning columns
+    # instead had both threads writing every row's cache lines: 3x slower on the fox, slower than one thread.)
     for g in prange(bounds.shape[0] - 1):
         lo, hi = bounds[g], bounds[g + 1]
         for i in range(inverse.shape[0]):
             for c in range(8):
-                row, w = inverse[i, c], weights[i, c]
-                for f in range(lo, hi):
-                    grad_sub[row, f] += w * grad_out[i, f]
+                row = inverse[i, c]
+                if lo <= row < hi:
+                    w = weights[i, c]
+                    for f in range(grad_out.shape[1]):
+                        grad_sub[row, f] += w * grad_out[i, f]
 
 
-def _column_bounds(columns: int) -> np.ndarray:
-    """Split ``columns`` into one contiguous group per thread (at most one group per column)."""
-    groups = max(1, min(numba.get_num_threads(), columns))
-    return np.linspace(0, columns, groups + 1).round().astype(np.int64)
+def _row_bounds(rows: int) -> np.ndarray:
+    """Split ``rows`` into one contiguous range per thread (at most one range per row)."""
+    groups = max(1, min(numba.get_num_threads(), rows))
+    return np.linspace(0, rows, groups + 1).round().astype(np.int64)
 
 
 class Interpolate(torch.autograd.Function):
@@ -160,7 +163,7 @@ class Interpolate(torch.autograd.Function):
         inverse, weights = ctx.saved_tensors
         grad_sub = torch.zeros(ctx.n_rows, grad_out.shape[1], dtype=grad_out.dtype)
         _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(),
-                         _column_bounds(grad_out.shape[1]), grad_sub.numpy())
+                         _row_bounds(ctx.n_rows), grad_sub.numpy())
         return grad_sub, None, None
 
 

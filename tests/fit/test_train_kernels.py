@@ -17,6 +17,7 @@ from pytest_n2r.fit.train_kernels import (
     Composite,
     Interpolate,
     RowIndex,
+    _interp_backward,
     adam_rows,
     lattice_positions,
     sample_corners,
@@ -154,6 +155,24 @@ def test_interpolate_forward_and_gradient_equal_autograd(n_samples):
     torch.testing.assert_close(out, out_ref, rtol=0, atol=TOL, msg=lambda m: f"Interpolate forward: {m}")
     torch.testing.assert_close(grad, sub.grad, rtol=0, atol=TOL, msg=lambda m: f"Interpolate gradient: {m}")
 
+
+
+@pytest.mark.parametrize("groups", [2, 3, 8])
+def test_interpolate_gradient_is_the_same_bits_however_its_rows_are_shared_out(groups):
+    # the backward pass gives each thread a range of rows; every element must still get its additions in
+    # sample and corner order, so a fit is the same on any thread count
+    rng = np.random.default_rng(groups)
+    rows = rng.integers(0, 300, size=(2000, 8))
+    unique, inverse = RowIndex(300).unique(rows)
+    grad_out = rng.normal(size=(2000, 13)).astype(np.float32)
+    weights = rng.random((2000, 8)).astype(np.float32)
+    one = np.zeros((len(unique), 13), dtype=np.float32)
+    _interp_backward(grad_out, inverse, weights, np.array([0, len(unique)]), one)
+    shared = np.zeros_like(one)
+    _interp_backward(grad_out, inverse, weights, np.linspace(0, len(unique), groups + 1).round().astype(np.int64),
+                     shared)
+    differ = np.flatnonzero((one != shared).any(axis=1))
+    assert not len(differ), f"rows {differ[:10].tolist()} differ when {groups} ranges share the rows out"
 
 def test_sample_corners_are_the_reference_trilinear_corners():
     rng = np.random.default_rng(0)
