@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 import torch
 
@@ -60,12 +61,11 @@ def march_compiled(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Packed occupied samples of CPU float32 rays ``o, d (N, 3)`` (normalized space)."""
     cells, blocks = grid.numpy()
-    o_np, d_np = o.numpy(), d.numpy()
-    args = (cells, blocks, grid.resolution, grid.shell, grid.step, grid.shell_samples, grid.far)
-    counts = torch.from_numpy(kernels.march_count(o_np, d_np, *args))
-    ray_idx, offsets = _packed(counts)
-    t = np.empty(int(offsets[-1]), dtype=np.float32)
-    kernels.march_fill(o_np, d_np, *args, offsets.numpy(), t)
+    groups = max(1, min(numba.get_num_threads(), o.shape[0]))
+    bounds = np.linspace(0, o.shape[0], groups + 1).round().astype(np.int64)
+    counts, t = kernels.march_packed(o.numpy(), d.numpy(), cells, blocks, grid.resolution, grid.shell, grid.step,
+                                     grid.shell_samples, grid.far, bounds)
+    ray_idx, offsets = _packed(torch.from_numpy(counts))
     return ray_idx, torch.from_numpy(t), offsets
 
 

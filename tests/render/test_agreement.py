@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
-from pytest_n2r.field.kernels import BLOCK
+from pytest_n2r.field.kernels import BLOCK, march_packed
 from pytest_n2r.field.march import MarchGrid, march_compiled, march_dense
 from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
@@ -141,6 +141,22 @@ def test_block_skipping_drops_no_occupied_sample_on_random_rays(occupied):
     n = assert_same_samples(o, d, grid, f"4000 random rays, {occupied:.1%} of cells occupied")
     assert n > 0, "no ray took a sample: the comparison tested nothing"
 
+
+
+@pytest.mark.parametrize("groups", [1, 3, 4000])
+def test_the_march_packs_the_same_samples_however_its_rays_are_shared_out(groups):
+    # each thread marches its range of rays into its own part of a scratch buffer; the joined result must
+    # not depend on how many parts there were
+    field = random_field(resolution=41, occupied=0.05, seed=2)
+    grid = MarchGrid(field.occupancy, field.space.shell, 0.5, 4, 20.0)
+    cells, blocks = grid.numpy()
+    o, d = (x.numpy() for x in random_rays(4000, seed=groups))
+    args = (o, d, cells, blocks, grid.resolution, grid.shell, grid.step, grid.shell_samples, grid.far)
+    counts_1, t_1 = march_packed(*args, np.array([0, 4000]))
+    counts, t = march_packed(*args, np.linspace(0, 4000, groups + 1).round().astype(np.int64))
+    assert t_1.size > 0, "no ray took a sample: the comparison tested nothing"
+    np.testing.assert_array_equal(counts, counts_1, err_msg=f"sample counts change when {groups} parts march")
+    np.testing.assert_array_equal(t, t_1, err_msg=f"packed t change when {groups} parts march")
 
 def test_a_single_occupied_cell_is_found_behind_empty_blocks():
     """Rays through the middle of one occupied cell far from others must sample it, from every side."""
