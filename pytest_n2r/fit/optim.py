@@ -23,6 +23,11 @@ class RowAdam:
         self.t = 0
 
     @torch.no_grad()
+    def keep(self, rows: torch.Tensor, values: torch.Tensor) -> None:
+        """Go on with ``values``, the rows ``rows`` of the old ones (in that order): their moments come along."""
+        self.values, self.m, self.v = values, self.m[rows].contiguous(), self.v[rows].contiguous()
+
+    @torch.no_grad()
     def step(self, rows: torch.Tensor, grad: torch.Tensor, lr_scale: float = 1.0) -> None:
         """Apply the gradient ``grad`` ``(len(rows), columns)`` of the unique ``rows``."""
         b1, b2 = self.betas
