@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 __all__ = [
     "BLOCK", "SH_C0", "SH_C1", "block_occupancy", "lattice_setup", "contract_xyz", "grid_coords_xyz", "cell_of",
-    "block_exit", "march_packed", "sample_alpha", "vertex_row",
+    "block_exit", "march_packed", "sample_alpha", "thread_ranges", "vertex_row",
 ]
 
 #: Side of an empty-space-skipping block, in cells.
@@ -39,6 +40,13 @@ def block_occupancy(occupancy: np.ndarray) -> np.ndarray:
     padded = np.zeros((nb * BLOCK,) * 3, dtype=bool)
     padded[:n, :n, :n] = occupancy.astype(bool)
     return padded.reshape(nb, BLOCK, nb, BLOCK, nb, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
+
+
+def thread_ranges(n: int) -> np.ndarray:
+    """Bounds ``(groups + 1,)`` int64 splitting ``n`` items into one contiguous range per numba thread (at most
+    one range per item, at least one range): thread ``g`` takes ``bounds[g]:bounds[g + 1]``."""
+    groups = max(1, min(numba.get_num_threads(), n))
+    return np.linspace(0, n, groups + 1).round().astype(np.int64)
 
 
 @njit(cache=True, inline="always")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import torch
 
@@ -61,10 +60,8 @@ def march_compiled(
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Packed occupied samples of CPU float32 rays ``o, d (N, 3)`` (normalized space)."""
     cells, blocks = grid.numpy()
-    groups = max(1, min(numba.get_num_threads(), o.shape[0]))
-    bounds = np.linspace(0, o.shape[0], groups + 1).round().astype(np.int64)
     counts, t = kernels.march_packed(o.numpy(), d.numpy(), cells, blocks, grid.resolution, grid.shell, grid.step,
-                                     grid.shell_samples, grid.far, bounds)
+                                     grid.shell_samples, grid.far, kernels.thread_ranges(o.shape[0]))
     ray_idx, offsets = _packed(torch.from_numpy(counts))
     return ray_idx, torch.from_numpy(t), offsets
 

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import torch
 from numba import njit, prange
 
-from ..field.kernels import cell_of, grid_coords_xyz, vertex_row
+from ..field.kernels import cell_of, grid_coords_xyz, thread_ranges, vertex_row
 from ..field.lattice import lattice_counts
 
 __all__ = ["sample_corners", "lattice_positions", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
@@ -141,12 +140,6 @@ def _interp_backward(grad_out, inverse, weights, bounds, grad_sub):
                         grad_sub[row, f] += w * grad_out[i, f]
 
 
-def _row_bounds(rows: int) -> np.ndarray:
-    """Split ``rows`` into one contiguous range per thread (at most one range per row)."""
-    groups = max(1, min(numba.get_num_threads(), rows))
-    return np.linspace(0, rows, groups + 1).round().astype(np.int64)
-
-
 class Interpolate(torch.autograd.Function):
     """``out[i] = Σ_c weights[i, c] · sub[inverse[i, c]]`` with a compiled forward and backward (CPU)."""
 
@@ -163,7 +156,7 @@ class Interpolate(torch.autograd.Function):
         inverse, weights = ctx.saved_tensors
         grad_sub = torch.zeros(ctx.n_rows, grad_out.shape[1], dtype=grad_out.dtype)
         _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(),
-                         _row_bounds(ctx.n_rows), grad_sub.numpy())
+                         thread_ranges(ctx.n_rows), grad_sub.numpy())
         return grad_sub, None, None
 
 
