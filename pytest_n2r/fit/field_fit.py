@@ -152,7 +152,8 @@ class _Trainer:
             self.flat_of_row[rows[stored].to(torch.int64)] = stored
 
     def _compact(self) -> None:
-        """Keep only the rows of vertices an occupied cell uses, with their Adam moments."""
+        """Keep only the rows of vertices an occupied cell uses, with their Adam moments (a grid upsampled from
+        the last stores every vertex of its dilated occupancy: a sixth stay in use on the fox's 224³ grid)."""
         old = self.field
         self.field = old.compact()
         self._index_rows()
@@ -264,11 +265,8 @@ class _Trainer:
             return
         self.field.occupancy = occupancy
         if self.compact_pending:
-            # A grid starts with every vertex of its dilated (upsampled) occupancy; the first prune leaves a
-            # sixth of them in use on the fox's 224³ grid. The rest held values frozen since the upsampling
-            # that the TV prior still pulled towards and the prune still read: without them the fox's
-            # validation views score 25.85 against 25.33 dB after 2 000 steps, the demo captures' the same
-            # (docs/performance-log.md, "The training step ...").
+            # the unused rows' stale values pulled on the TV prior and the prune: the fox's validation views
+            # score 25.85 against 25.33 dB without them (docs/performance-log.md, "The training step")
             self.compact_pending = False
             self._compact()
         self._rebuild_grid()
