@@ -36,7 +36,7 @@ from .appearance import Appearance
 from .detail import capture_detail, detailed_config
 from .optim import RowAdam
 from .phases import StepPhases
-from .prior import add_tv_gradient, tv_gradient
+from .prior import add_tv_gradient, tv_gradient, tv_neighbours
 from .prune import pruned_occupancy, pruned_occupancy_dense
 from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
 
@@ -150,6 +150,8 @@ class _Trainer:
         if rows is not None:
             stored = torch.nonzero(rows >= 0).reshape(-1)
             self.flat_of_row[rows[stored].to(torch.int64)] = stored
+        #: Each row's stored grid neighbours, for the compiled prior (see ``tv_neighbours``).
+        self.tv_rows = tv_neighbours(self.flat_of_row, self.row_map, self.field.resolution) if self.compiled else None
 
     def _compact(self) -> None:
         """Keep only the rows of vertices an occupied cell uses, with their Adam moments (a grid upsampled from
@@ -195,8 +197,7 @@ class _Trainer:
             s = lattice_positions(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
             rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
                                                   self.space.shell, f.resolution, self.row_map)
-            unique, inverse = self.row_index.unique(rows)
-            unique, inverse, weights = (torch.from_numpy(a) for a in (unique, inverse, weights))
+            unique, inverse, weights = (torch.from_numpy(a) for a in (*self.row_index.unique(rows), weights))
             sub = f.values[unique].requires_grad_(True)
             clock.lap("corners")
             v = Interpolate.apply(sub, inverse, weights)
@@ -236,8 +237,7 @@ class _Trainer:
             grad = sub.grad
             if c.tv > 0 or c.tv_density > 0:
                 if self.compiled:
-                    add_tv_gradient(f.values, unique, self.flat_of_row, self.row_map, f.resolution,
-                                    self.tv_weights, grad)
+                    add_tv_gradient(f.values, unique, self.tv_rows, self.tv_weights, grad)
                 else:
                     grad += self.tv_weights * tv_gradient(f, self.flat_of_row, unique)
             if not torch.isfinite(grad.sum()):

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.fit.prior import add_tv_gradient, tv_gradient
+from pytest_n2r.fit.prior import add_tv_gradient, tv_gradient, tv_neighbours
 
 
 def _field(resolution: int, stored: float, seed: int) -> tuple[SceneField, torch.Tensor]:
@@ -43,7 +43,8 @@ def test_the_compiled_tv_gradient_adds_the_torch_one(resolution, stored, seed, t
     start = torch.randn(unique.numel(), 13, generator=generator)
     expected = start + weights * tv_gradient(field, flat_of_row, unique)
     got = start.clone()
-    add_tv_gradient(field.values, unique, flat_of_row, field.kernel_rows(), field.resolution, weights, got)
+    neighbours = tv_neighbours(flat_of_row, field.kernel_rows(), field.resolution)
+    add_tv_gradient(field.values, unique, neighbours, weights, got)
     torch.testing.assert_close(got, expected, rtol=1e-5, atol=1e-6,
                                msg=lambda m: f"compiled TV gradient != torch's ({resolution}³, {stored:.0%} "
                                              f"stored, tv={tv}, tv_density={tv_density}): {m}")
@@ -62,8 +63,33 @@ def test_the_compiled_tv_gradient_pulls_towards_stored_neighbours_only():
     sparse = SceneField(field.space, values, field.occupancy, 0.0, 1, rows=rows)
     grad = torch.zeros(1, 13)
     weights = torch.tensor([0.5] + [0.0] * 12)
-    add_tv_gradient(sparse.values, torch.tensor([0]), torch.tensor([corner, right]), sparse.kernel_rows(), 4,
-                    weights, grad)
+    neighbours = tv_neighbours(torch.tensor([corner, right]), sparse.kernel_rows(), 4)
+    assert neighbours.tolist() == [[-1, -1, -1, -1, -1, 1], [-1, -1, -1, -1, 0, -1]], \
+        f"expected (0, 0, 0) and (0, 0, 1) each other's only neighbours along z, got {neighbours.tolist()}"
+    add_tv_gradient(sparse.values, torch.tensor([0]), neighbours, weights, grad)
     expected = torch.zeros(1, 13)
     expected[0, 0] = 0.5 * 2.0 * (3.0 - 1.0)
     assert torch.equal(grad, expected), f"expected only the density pulled by 2.0, got {grad.tolist()}"
+
+
+@settings(max_examples=30, deadline=None)
+@given(resolution=st.integers(4, 9), stored=st.sampled_from([1.0, 0.6, 0.2]), seed=st.integers(0, 2**16))
+def test_the_neighbour_table_holds_each_rows_stored_neighbours_along_each_axis(resolution, stored, seed):
+    """Each row's entry ``2·axis + (0 for −, 1 for +)`` is the row of the vertex one step along that axis, or
+    -1 where that vertex is outside the grid or not stored, checked vertex by vertex in Python."""
+    field, flat_of_row = _field(resolution, stored, seed)
+    table = tv_neighbours(flat_of_row, field.kernel_rows(), resolution)
+    assert table.shape == (field.values.shape[0], 6) and table.dtype == np.int32, \
+        f"expected an int32 ({field.values.shape[0]}, 6) table, got {table.dtype} {table.shape}"
+    row_of = {int(flat): row for row, flat in enumerate(flat_of_row.tolist())}
+    for row, flat in enumerate(flat_of_row.tolist()):
+        ijk = (flat // resolution ** 2, flat // resolution % resolution, flat % resolution)
+        for axis in range(3):
+            for side, sign in enumerate((-1, 1)):
+                moved = list(ijk)
+                moved[axis] += sign
+                inside = 0 <= moved[axis] < resolution
+                expected = row_of.get((moved[0] * resolution + moved[1]) * resolution + moved[2], -1) if inside else -1
+                got = table[row, 2 * axis + side]
+                assert got == expected, \
+                    f"row {row} (vertex {ijk}): neighbour along axis {axis}, sign {sign}, is {got}; expected {expected}"
