@@ -121,14 +121,15 @@ def fit_memory_bytes(resolution: int, *, occupied: float = 0.1, width: int = 13)
     """An upper estimate of the bytes a fit holds on its finest grid of ``resolution``³: the row map (int32
     per vertex), the occupancy (a byte per cell) and the training visibility (float32 per cell), plus the
     stored vertices of ``occupied`` of the cells (about 1.2 vertices per occupied cell at the fractions fits
-    reach) with ``width`` float32 values each, Adam's two moments and their row index (8 bytes)."""
+    reach) with ``width`` float32 values each, Adam's two moments, their row index (8 bytes) and their six
+    neighbours for the prior (int32 each, :func:`~pytest_n2r.fit.prior.tv_neighbours`)."""
     if not 0.0 < occupied <= 1.0:
         raise InvalidArgument(f"occupied={occupied!r}: expected a fraction of the cells in (0, 1]")
     if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 2:
         raise InvalidArgument(f"resolution={resolution!r}: expected vertices per axis >= 2")
     vertices, cells = resolution ** 3, (resolution - 1) ** 3
     stored = min(vertices, 1.2 * occupied * cells)
-    return int(4 * vertices + 5 * cells + stored * (3 * 4 * width + 8))
+    return int(4 * vertices + 5 * cells + stored * (3 * 4 * width + 8 + 6 * 4))
 
 
 def memory_resolution(memory_bytes: float, *, occupied: float = 0.1, width: int = 13, multiple: int = 16) -> int:
@@ -136,7 +137,7 @@ def memory_resolution(memory_bytes: float, *, occupied: float = 0.1, width: int 
     by :func:`fit_memory_bytes`.
 
     >>> memory_resolution(24 * 2**30)
-    960
+    928
     """
     if not (math.isfinite(memory_bytes) and memory_bytes > 0):
         raise InvalidArgument(f"memory_bytes={memory_bytes!r}: expected a number of bytes > 0")
