@@ -32,6 +32,10 @@ def test_a_grids_first_prune_keeps_only_the_rows_its_occupied_cells_use(capture4
     for name, old, new in (("m", moments[0], trainer.adam.m), ("v", moments[1], trainer.adam.v)):
         assert torch.equal(new[new_rows], old[old_rows]), f"Adam's {name} did not come along with its rows"
     assert trainer.adam.values is after.values, "Adam updates another tensor than the field's values"
+    if compiled:  # the prior's neighbour table indexes rows: a stale one would read past the compacted values
+        table, n_values = trainer.tv_rows, after.values.shape[0]
+        assert table.shape[0] == n_values and int(table.max()) < n_values, \
+            f"the prior's neighbour table has {table.shape[0]} rows up to row {table.max()} for {n_values} values"
 
     loss, _ = trainer.step(1.0)
     assert torch.isfinite(torch.tensor(loss)), f"a step after compaction gives the loss {loss}"
