@@ -44,7 +44,7 @@ from ..field.kernels import (
 )
 from .cell_bits import cell_occupied
 
-__all__ = ["render_rays", "bake_logits", "pixel_rays"]
+__all__ = ["render_rays", "bake_logits", "pixel_rays", "vertex_positions"]
 
 
 @njit(cache=True, nogil=True)
@@ -240,24 +240,38 @@ def _alpha(x, sigma_step):
 
 
 @njit(cache=True, nogil=True)
-def bake_logits(first, last, values, vertex, res, shell, origin, sh_degree, out):
-    """Colour logits ``out[first:last]`` (of ``out (n_rows, 3)``) of those stored vertices seen from ``origin`` (the
-    camera centre, normalized space): each one's SH colour for the direction from ``origin`` to the vertex (to a
-    vertex at the shell's outer face, which stands for infinity, the direction of its contracted position).
-    ``vertex`` is each row's flat vertex index ``(i·R + j)·R + k``."""
+def vertex_positions(first, last, vertex, res, shell, position, outer):
+    """Where :func:`bake_logits` takes the direction to each of the stored vertices ``first <= r < last`` from:
+    ``position[r]`` (of ``(n_rows, 3)`` float64, normalized space) is the vertex's uncontracted position, or, for a
+    vertex on the shell's outer face (``outer[r]`` set), which stands for infinity, its contracted position, a
+    direction. ``vertex`` is each row's flat vertex index ``(i·R + j)·R + k``. Once a renderer: a frame's bake
+    then reads these instead of dividing each row's index into its three (docs/performance-log.md, "Rendering")."""
     half = 1.0 + shell
     cell = 2.0 * half / (res - 1)
     for r in range(first, last):
+        f = vertex[r]
+        qx, qy, qz = f // (res * res) * cell - half, (f // res) % res * cell - half, f % res * cell - half
+        m = max(abs(qx), abs(qy), abs(qz))
+        outer[r] = m >= half - 1e-9
+        if outer[r]:
+            position[r, 0], position[r, 1], position[r, 2] = qx, qy, qz
+        else:  # uncontract (pytest_n2r.field.space): ‖q‖∞ = 1 + shell·(1 - 1/‖p‖∞)
+            s = 1.0 if m <= 1.0 else 1.0 / ((1.0 - (m - 1.0) / shell) * m)
+            position[r, 0], position[r, 1], position[r, 2] = qx * s, qy * s, qz * s
+
+
+@njit(cache=True, nogil=True)
+def bake_logits(first, last, values, position, outer, origin, sh_degree, out):
+    """Colour logits ``out[first:last]`` (of ``out (n_rows, 3)``) of those stored vertices seen from ``origin`` (the
+    camera centre, normalized space): each one's SH colour for the direction from ``origin`` to the vertex, from
+    :func:`vertex_positions`' ``position`` and ``outer`` (to a vertex on the shell's outer face, the direction of
+    its contracted position). A degree-0 field's logits take no direction (``position`` and ``outer`` unread)."""
+    for r in range(first, last):
         lr, lg, lb = SH_C0 * values[r, 1], SH_C0 * values[r, 2], SH_C0 * values[r, 3]
         if sh_degree == 1:
-            f = vertex[r]
-            qx, qy, qz = f // (res * res) * cell - half, (f // res) % res * cell - half, f % res * cell - half
-            m = max(abs(qx), abs(qy), abs(qz))
-            if m >= half - 1e-9:
-                ux, uy, uz = qx, qy, qz
-            else:  # uncontract (pytest_n2r.field.space): ‖q‖∞ = 1 + shell·(1 - 1/‖p‖∞)
-                s = 1.0 if m <= 1.0 else 1.0 / ((1.0 - (m - 1.0) / shell) * m)
-                ux, uy, uz = qx * s - origin[0], qy * s - origin[1], qz * s - origin[2]
+            ux, uy, uz = position[r, 0], position[r, 1], position[r, 2]
+            if not outer[r]:
+                ux, uy, uz = ux - origin[0], uy - origin[1], uz - origin[2]
             n = math.sqrt(ux * ux + uy * uy + uz * uz)
             if n > 0.0:  # a vertex at the camera centre keeps its direction-free colour
                 b1, b2, b3 = -SH_C1 * uy / n, SH_C1 * uz / n, -SH_C1 * ux / n

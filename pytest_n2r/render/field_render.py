@@ -30,7 +30,7 @@ from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .block_reach import block_reach
 from .cell_bits import kept_cells
-from .field_kernels import bake_logits, pixel_rays, render_rays
+from .field_kernels import bake_logits, pixel_rays, render_rays, vertex_positions
 from .ray_order import tiled_pixels
 from .threads import run_balanced, run_parts
 
@@ -201,13 +201,19 @@ class FieldRenderer:
             self._density = np.ascontiguousarray(self._values[:, 0])
             self._rows = field.kernel_rows()
             self._reach = block_reach((self._bits != 0).any(axis=-1).astype(np.uint8))  # blocks with a cell sampled
-            self._vertex = None
             self._fixed_logits: np.ndarray | None = None
-            if s.colour_direction == "vertex":
-                self._vertex = np.arange(self._values.shape[0], dtype=np.int64)  # each row's flat vertex index
+            # where each vertex's colour direction is taken from when a frame bakes its logits: a degree-0 field's
+            # colour takes none (its logits are baked once)
+            n_rows = self._values.shape[0] if field.sh_degree > 0 and s.colour_direction == "vertex" else 0
+            self._position = np.empty((n_rows, 3), dtype=np.float64)
+            self._outer = np.empty(n_rows, dtype=np.bool_)
+            if n_rows:
+                vertex = np.arange(n_rows, dtype=np.int64)  # each row's flat vertex index
                 if self._rows.shape[0]:
                     stored = np.flatnonzero(self._rows >= 0)
-                    self._vertex[self._rows[stored]] = stored
+                    vertex[self._rows[stored]] = stored
+                run_parts(vertex_positions, n_rows, vertex, self.grid.resolution, self.grid.shell, self._position,
+                          self._outer)
 
     def render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         """``outputs`` (from ``rgb``, ``depth``, ``opacity``) of ``camera`` at ``c2w`` (OpenCV axes, scene units):
@@ -273,15 +279,15 @@ class FieldRenderer:
         """The compiled kernel's per-frame colour logits for a camera at ``c2w`` (``(n_rows, 3)`` float32), or an
         empty array: colour from each ray's direction. A field without view-dependent colour (SH degree 0) has
         the same logits from every camera: baked on the first frame, kept for the others."""
-        if self.backend != "compiled" or self._vertex is None:
+        if self.backend != "compiled" or self.settings.colour_direction != "vertex":
             return np.zeros((0, 3), dtype=np.float32)
         if self._fixed_logits is not None:  # set for a degree-0 field only, below
             return self._fixed_logits
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
         logits = np.empty((self._values.shape[0], 3), dtype=np.float32)
-        run_parts(bake_logits, self._values.shape[0], self._values, self._vertex, self.grid.resolution,
-                  self.grid.shell, origin, self.field.sh_degree, logits)
+        run_parts(bake_logits, self._values.shape[0], self._values, self._position, self._outer, origin,
+                  self.field.sh_degree, logits)
         if self.field.sh_degree == 0:
             self._fixed_logits = logits  # the kernel only reads it (a read-only array would compile it anew)
         return logits

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from pytest_n2r.field.grid import SceneField
+from pytest_n2r.field.lattice import contract
 from pytest_n2r.field.march import march_dense
 from pytest_n2r.geometry import Camera
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
@@ -70,6 +71,30 @@ def test_baked_colours_of_a_degree_0_field_are_exact_and_degree_1_moves_them(pos
     diff = np.abs(baked - exact)
     assert 1 < diff.max() <= 16, (f"pose {pose_name!r}: baked colours of a degree-1 field differ by up to "
                                   f"{diff.max()} levels from exact ones; expected a visible change of at most 16")
+
+
+@pytest.mark.parametrize("sparse", [False, True])
+def test_a_frame_bakes_each_vertex_from_its_uncontracted_position(sparse):
+    """``vertex_positions``: contracting the position a vertex's colour direction is taken from gives the vertex's
+    own lattice position back, and exactly the vertices on the shell's outer face (which stand for infinity) are
+    flagged, their position that face point (a direction, not a place)."""
+    field = random_field(resolution=12, sh_degree=1, occupied=0.3, seed=5)
+    field = field.compact() if sparse else field
+    renderer = FieldRenderer(field, RenderSettings(backend="compiled"))
+    res, shell = renderer.grid.resolution, renderer.grid.shell
+    rows = field.kernel_rows()
+    vertex = np.flatnonzero(rows >= 0) if rows.shape[0] else np.arange(res ** 3)
+    row = rows[vertex] if rows.shape[0] else vertex
+    assert (rows.shape[0] > 0) == sparse and row.size == renderer._position.shape[0], "not the field asked for"
+    half = 1.0 + shell
+    lattice = np.stack(np.unravel_index(vertex, (res,) * 3), axis=1) * (2.0 * half / (res - 1)) - half
+    position, outer = renderer._position[row], renderer._outer[row]
+    on_face = np.abs(lattice).max(axis=1) >= half - 1e-9
+    assert np.array_equal(outer, on_face), f"{int((outer != on_face).sum())} vertices flagged wrongly as at infinity"
+    back = contract(torch.from_numpy(position[~outer]), shell).numpy()
+    np.testing.assert_allclose(back, lattice[~outer], rtol=0, atol=1e-12,
+                               err_msg="a vertex's position does not contract to its lattice position")
+    np.testing.assert_array_equal(position[outer], lattice[outer], err_msg="an outer vertex's direction moved")
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1])
