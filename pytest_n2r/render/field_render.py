@@ -57,7 +57,9 @@ class RenderSettings:
       ``1 + shell·(1 - 1/(1+far))`` of the way to infinity);
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
       transmittance left shows the background, as at the far end (0.03 measured on fox 1.2× faster than
-      1e-3 for 0.03 dB less PSNR against the real photos);
+      1e-3 for 0.03 dB less PSNR against the real photos; 0.04 with ``min_weight=2e-2``, the defaults since 4
+      December, 1.10–1.13× faster than 0.03 with 1e-2 for 0.011 dB less against the fox's held-out photos and
+      0.013 / 0.028 dB less against the demo twins' exact scenes: docs/performance-log.md, "Rendering");
     - ``tail``: transmittances (decreasing, in (0, 1)) below which a ray's samples get coarser: at each one
       crossed the ray takes every second lattice sample of the rest, each with the opacity of the length it
       stands for (compiled backend). A render moves by at most the transmittance at the first one crossed
@@ -85,7 +87,8 @@ class RenderSettings:
     - ``min_weight`` (compiled backend): a sample is coloured only once its compositing weight, plus the weight
       carried from samples not coloured before it, reaches this; the carried weight takes the next colour, so
       each channel is off by at most the summed weight of the ray's samples lighter than this (0: colour every
-      sample). The default 1e-2 skips about half of the fox's samples' colours (docs/performance-log.md);
+      sample). 1e-2 skipped about half of the fox's samples' colours; 2e-2 (the default) was 1.03–1.08× faster
+      again for 0.001–0.009 dB on the fox and the demo twins (docs/performance-log.md);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
@@ -94,7 +97,7 @@ class RenderSettings:
     step_ratio: float = 0.5
     shell_samples: int | None = None
     far: float = 100.0
-    t_stop: float = 3e-2
+    t_stop: float = 4e-2
     tail: tuple[float, ...] = (0.3, 0.1)
     min_alpha: float = 1e-4
     scale: float = 1.0
@@ -102,7 +105,7 @@ class RenderSettings:
     adaptive_depth: float = 0.1
     adaptive_stride: int | None = None
     colour_direction: str = "vertex"
-    min_weight: float = 1e-2
+    min_weight: float = 2e-2
     chunk_rays: int = 1 << 16
     background: tuple[float, float, float] | None = None
     backend: str = "auto"
