@@ -32,6 +32,8 @@ SMOKE = {
     "field_compare.py": (["demo:object", "HEAD", "--smoke"], "| HEAD ("),
     "mutations.py": (["--images", "8"], "LUT brightness is"),
     "render_speed.py": (["demo:object", "--smoke"], "| 96×54 | adaptive=0 |"),
+    "render_settings.py": (["demo:object", "default", "t_stop=0.05 min_weight=0.03", "--smoke"],
+                           "| t_stop=0.05 min_weight=0.03 |"),
     "splat_speed.py": (["--smoke"], "| 64×36 |"),
     "splat_compare.py": (["HEAD", "--smoke"], "| 64x36 | HEAD"),
     "splat_from_field.py": (["--smoke"], "| splats from the field |"),
