@@ -58,8 +58,9 @@ class RenderSettings:
     - ``t_stop``: early ray termination once transmittance is below this (compiled backend); the
       transmittance left shows the background, as at the far end (0.03 measured on fox 1.2× faster than
       1e-3 for 0.03 dB less PSNR against the real photos; 0.04 with ``min_weight=2e-2``, the defaults since 4
-      December, 1.10–1.13× faster than 0.03 with 1e-2 for 0.011 dB less against the fox's held-out photos and
-      0.013 / 0.028 dB less against the demo twins' exact scenes: docs/performance-log.md, "Rendering");
+      December, took 1.086× less CPU than 0.03 with 1e-2 on the fox for 0.011 dB less against its held-out photos,
+      1.04–1.19× on the demo twins for 0.009–0.028 dB against their exact scenes; keep it at or below ``adaptive``,
+      or terminated rays' opacities split the sampler's cells: docs/performance-log.md, "Rendering");
     - ``tail``: transmittances (decreasing, in (0, 1)) below which a ray's samples get coarser: at each one
       crossed the ray takes every second lattice sample of the rest, each with the opacity of the length it
       stands for (compiled backend). A render moves by at most the transmittance at the first one crossed
@@ -87,8 +88,8 @@ class RenderSettings:
     - ``min_weight`` (compiled backend): a sample is coloured only once its compositing weight, plus the weight
       carried from samples not coloured before it, reaches this; the carried weight takes the next colour, so
       each channel is off by at most the summed weight of the ray's samples lighter than this (0: colour every
-      sample). 1e-2 skipped about half of the fox's samples' colours; 2e-2 (the default) was 1.03–1.08× faster
-      again for 0.001–0.009 dB on the fox and the demo twins (docs/performance-log.md);
+      sample). 1e-2 skipped about half of the fox's samples' colours; 2e-2 (the default) was 1.02–1.10× faster
+      again for 0.001–0.008 dB on the fox and the demo twins (docs/performance-log.md);
     - ``chunk_rays``: rays per batch (bounds memory at any image size);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
