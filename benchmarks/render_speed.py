@@ -12,7 +12,9 @@ and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prin
    shared machine) and the share of pixels traced, for the defaults, the defaults with every pixel traced
    (``adaptive=0``: the renderer before adaptive sampling, the same kernel), and the two fastest settings the
    sweep prices (half the size upsampled, ``scale=0.5``; and that with twice the sample spacing), and the
-   previous defaults (RENDER_VERSION 4: ``tail=()``);
+   defaults before 4 December (``t_stop=0.03``, ``min_weight=1e-2``). The defaults' row adds the frames/s over all
+   the held-out views (their count over the sum of each one's best time): how fast the views render, where the
+   other columns time the first one;
 2. ``changes``: each change to the compiled renderer side by side with the one before, on ONE thread
    (``numba.set_num_threads(1)``: two threads give little more on a 2-core VM, so this is the ratio to read):
    CPU milliseconds a frame and PSNR against the truth (mean over the views) at each size;
@@ -48,15 +50,19 @@ EVERY_PIXEL = DEFAULT.replace(adaptive=0.0)
 BEST = RenderSettings(step_ratio=0.25, t_stop=0.0, min_alpha=0.0, adaptive=0.0)
 #: The speed tricks that trade the most time for the least error (the sweep below prices them).
 FAST = (DEFAULT.replace(scale=0.5), DEFAULT.replace(scale=0.5, step_ratio=1.0))
-#: Today's defaults without RENDER_VERSION 4's changes (colour baked per frame, min_weight) and 5's (the tail);
-#: the adaptive sampler's last split (6 and 7) stays, so PREVIOUS is not the whole RENDER_VERSION 3 renderer.
-PREVIOUS = DEFAULT.replace(colour_direction="ray", min_weight=0.0, tail=())
-VERSION_4 = DEFAULT.replace(tail=())
-#: The changes of RENDER_VERSION 4 and 5, each on top of the one before (docs/performance-log.md, "Rendering").
+#: The defaults before 4 December's (``t_stop=0.03``, ``min_weight=1e-2``), the base of the changes below.
+BEFORE_DEC4 = DEFAULT.replace(t_stop=0.03, min_weight=1e-2)
+#: Those defaults without RENDER_VERSION 4's changes (colour baked per frame, min_weight) and 5's (the tail); the
+#: adaptive sampler's last split (6 and 7) stays, so PREVIOUS is not the whole RENDER_VERSION 3 renderer.
+PREVIOUS = BEFORE_DEC4.replace(colour_direction="ray", min_weight=0.0, tail=())
+VERSION_4 = BEFORE_DEC4.replace(tail=())
+#: The changes of RENDER_VERSION 4 and 5 and of 4 December's defaults, each on top of the one before
+#: (docs/performance-log.md, "Rendering").
 CHANGES = (("defaults less RENDER_VERSION 4 and 5", PREVIOUS),
            ("+ colour_direction='vertex'", PREVIOUS.replace(colour_direction="vertex")),
            ("+ min_weight=1e-2 (RENDER_VERSION 4)", VERSION_4),
-           ("+ tail=(0.3, 0.1) (the defaults, RENDER_VERSION 5)", DEFAULT),
+           ("+ tail=(0.3, 0.1) (RENDER_VERSION 5)", BEFORE_DEC4),
+           ("+ t_stop=0.04, min_weight=2e-2 (the defaults, 4 December)", DEFAULT),
            ("+ tail=(0.5, 0.1) (not adopted)", DEFAULT.replace(tail=(0.5, 0.1))))
 TABLES = ("speed", "changes", "psnr", "sweep")
 
@@ -143,7 +149,7 @@ def main(argv: list[str]) -> int:
         return 1
     print(f"scene {args.scene}: field {scene.field.resolution}³, fit PSNR {scene.report.get('psnr')} dB, "
           f"{args.threads} threads\n")
-    variants = {"default": scene, "previous defaults": scene.with_settings(VERSION_4),
+    variants = {"default": scene, "defaults before 4 December": scene.with_settings(BEFORE_DEC4),
                 "adaptive=0": scene.with_settings(EVERY_PIXEL),
                 "scale=0.5": scene.with_settings(FAST[0]), "scale=0.5, step_ratio=1": scene.with_settings(FAST[1])}
     if "speed" in tables:
@@ -158,8 +164,10 @@ def main(argv: list[str]) -> int:
 
 
 def speed_table(variants, views, sizes, repeats: int) -> None:
-    """Table 1: frames/s and CPU ms of the defaults and the fast settings at each size."""
-    print(f"| size | settings | s / frame | frames/s | CPU ms / frame | pixels traced |\n|{' --- |' * 6}")
+    """Table 1: frames/s and CPU ms of the defaults and the fast settings at each size (the first held-out view),
+    and the defaults' frames/s over every held-out view."""
+    print(f"| size | settings | s / frame | frames/s | CPU ms / frame | pixels traced | frames/s over the {len(views)} "
+          f"held-out views |\n|{' --- |' * 7}")
     for w, h in sizes:
         camera = sized(views[0].camera, w * h)
         for label, variant in variants.items():
@@ -167,7 +175,13 @@ def speed_table(variants, views, sizes, repeats: int) -> None:
             s = best_seconds(render, repeats)
             ms = cpu_ms(render, repeats)
             traced = variant._renderer.last_traced / (camera.width * camera.height)
-            print(f"| {camera.width}×{camera.height} | {label} | {s:.3f} | {1 / s:.2f} | {ms:.0f} | {traced:.0%} |")
+            over = "—"
+            if label == "default":
+                seconds = [best_seconds(functools.partial(variant.render, v.c2w, camera, ("rgb",)), repeats)
+                           for v in views]
+                over = f"{len(seconds) / sum(seconds):.2f}"
+            print(f"| {camera.width}×{camera.height} | {label} | {s:.3f} | {1 / s:.2f} | {ms:.0f} | {traced:.0%} | "
+                  f"{over} |")
 
 
 
