@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from render_speed import BEST, cpu_ms, load, sized
 
+from pytest_n2r.errors import N2RError
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import RenderSettings
 
@@ -69,7 +70,12 @@ def main(argv: list[str]) -> int:
     rounds, n_views = (1, 2) if args.smoke else (args.rounds, 8)
     numba.set_num_threads(1)
     torch.set_num_threads(1)
-    scene, views, truth = load(args.scene, n_views)
+    try:
+        scene, views, truth = load(args.scene, n_views)
+    except N2RError as exc:  # a missing or unreadable scene file, an unknown demo scene
+        parser.error(str(exc))
+    if not views:
+        parser.error(f"{args.scene}: no held-out view with a photo or an exact twin to compare against")
     train = [v for v in scene.views if v.split == "train"]
     train = train[::max(1, len(train) // (2 if args.smoke else args.train_views))][:args.train_views]
     camera = sized(views[0].camera, width * height)
