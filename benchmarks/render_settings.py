@@ -41,12 +41,12 @@ def variant(text: str) -> RenderSettings:
     for pair in text.split():
         key, sep, value = pair.partition("=")
         try:
-            changes[key] = ast.literal_eval(value) if sep else None
+            if not sep:
+                raise ValueError(pair)
+            changes[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
-            sep = ""
-        if not sep:
             raise ValueError(f"variant {text!r}: {pair!r} is not KEY=VALUE with VALUE a Python literal (0.03, "
-                             "(0.3,0.1) without spaces, 'ray')")
+                             "(0.3,0.1) without spaces, 'ray')") from None
     try:
         return RenderSettings(**changes)
     except TypeError as exc:
@@ -97,14 +97,15 @@ def main(argv: list[str]) -> int:
     print(f"{args.scene} at {camera.width}×{camera.height}, one thread, {rounds} rounds; {len(views)} held-out views "
           f"(timed, reported), {len(train)} training poses (to choose by)\n\n| variant | CPU ms a frame | speed-up | "
           "pixels traced | PSNR → best, training poses | PSNR → truth, held out | difference |\n|" + " --- |" * 7)
-    base_ms, base_db = None, None
+    base_ms = base_db = None  # the first variant's
     for text, variant_scene in scenes.items():
         m = statistics.median(ms[text])
         at_train = [psnr(r, variant_scene.render(v.c2w, camera, ("rgb",)).rgb) for r, v in zip(reference, train)]
         to_best = f"{np.mean(at_train):.2f} dB" if at_train else "no training poses"
         to_truth = float(np.mean([psnr(p, variant_scene.render(v.c2w, camera, ("rgb",)).rgb)
                                   for p, v in zip(photos, views)]))
-        base_ms, base_db = (m, to_truth) if base_ms is None else (base_ms, base_db)
+        if base_ms is None:
+            base_ms, base_db = m, to_truth
         print(f"| {text} | {m:.1f} | {base_ms / m:.3f}× | {traced[text]:.1%} | {to_best} | {to_truth:.3f} dB | "
               f"{to_truth - base_db:+.3f} dB |")
     return 0
