@@ -137,6 +137,15 @@ class SceneField:
         field does not store the vertex)."""
         return flat if self.rows is None else self.rows[flat].to(torch.int64)
 
+    def row_vertices(self) -> torch.Tensor:
+        """The flat vertex index ``(i·R + j)·R + k`` of each row of ``values`` (int64, on the field's device): the
+        inverse of :meth:`vertex_rows`."""
+        flat = torch.arange(self.values.shape[0], device=self.device)
+        if self.rows is not None:
+            stored = torch.nonzero(self.rows >= 0).reshape(-1)
+            flat[self.rows[stored].to(torch.int64)] = stored
+        return flat
+
     def kernel_rows(self) -> np.ndarray:
         """The row map as the compiled kernels take it: int32 ``R³``, empty for a dense field."""
         if self.rows is None:

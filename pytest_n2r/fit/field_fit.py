@@ -142,14 +142,10 @@ class _Trainer:
 
     def _index_rows(self) -> None:
         self.row_index = RowIndex(self.field.values.shape[0]) if self.compiled else None
-        rows = self.field.rows
         #: The field's vertex → row map for the compiled kernels (empty: a dense field).
         self.row_map = self.field.kernel_rows()
         #: The flat vertex index of each row.
-        self.flat_of_row = torch.arange(self.field.values.shape[0], device=self.device)
-        if rows is not None:
-            stored = torch.nonzero(rows >= 0).reshape(-1)
-            self.flat_of_row[rows[stored].to(torch.int64)] = stored
+        self.flat_of_row = self.field.row_vertices()
         #: Each row's stored grid neighbours, for the compiled prior (see ``tv_neighbours``).
         self.tv_rows = tv_neighbours(self.flat_of_row, self.row_map, self.field.resolution) if self.compiled else None
 

@@ -212,10 +212,7 @@ class FieldRenderer:
             self._position = np.empty((n_rows, 3), dtype=np.float64)
             self._outer = np.empty(n_rows, dtype=np.bool_)
             if n_rows:
-                vertex = np.arange(n_rows, dtype=np.int64)  # each row's flat vertex index
-                if self._rows.shape[0]:
-                    stored = np.flatnonzero(self._rows >= 0)
-                    vertex[self._rows[stored]] = stored
+                vertex = field.row_vertices().numpy()
                 run_parts(vertex_positions, n_rows, vertex, self.grid.resolution, self.grid.shell, self._position,
                           self._outer)
 

@@ -101,6 +101,20 @@ def test_used_vertices_are_exactly_the_corners_of_occupied_cells(cells, fraction
         f"{expected.tolist()}")
 
 
+@pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
+def test_row_vertices_inverts_vertex_rows(sparse):
+    field = random_field(resolution=10, sh_degree=0, occupied=0.3, seed=4)
+    if sparse:
+        field = SceneField.from_tensors(field.metadata(), field.tensors())
+    flat = field.row_vertices()
+    assert flat.shape == (field.values.shape[0],) and flat.dtype == torch.int64, (
+        f"row_vertices() is {tuple(flat.shape)} {flat.dtype}; expected ({field.values.shape[0]},) int64")
+    rows = field.vertex_rows(flat)
+    assert torch.equal(rows, torch.arange(field.values.shape[0])), (
+        f"vertex_rows(row_vertices()) is not each row itself: first mismatch at row "
+        f"{int((rows != torch.arange(rows.numel())).nonzero()[0])}")
+
+
 @pytest.mark.parametrize("sh_degree", [0, 1])
 def test_tensors_round_trip_to_the_quantized_field(sh_degree):
     field = random_field(resolution=12, sh_degree=sh_degree, occupied=0.3, seed=9)
