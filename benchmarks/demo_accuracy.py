@@ -1,6 +1,7 @@
 """Accuracy of the fitted demo scenes: the field's render against the exact ground truth at the same pose.
 
-Run: ``python benchmarks/demo_accuracy.py [--scenes wall object] [--draws 2] [--seed 0] [--json out.json]``.
+Run: ``python benchmarks/demo_accuracy.py [--scenes wall object] [--draws 2] [--seed 0] [--fields DIR]
+[--json out.json]``.
 
 For each fitted demo scene (``demo:<name>-field``) and its exact scene (``demo:<name>``), at the capture size
 of the fitted scene:
@@ -16,7 +17,9 @@ saw), the median relative error of the field's z-depth where the true ray hits a
 repeatability of ORB (500 points, 2 px, mutual nearest neighbours) between the points found
 on the true image and on the field's image, mapped with the **exact** depth: 1 means the field's error
 changes no keypoint, ``1 - repeatability`` is the share of an ORB "inconsistency" the field itself causes.
-Results: docs/demo-scenes.md.
+``--fields DIR`` scores the files ``DIR/<name>.n2r`` (say, a recipe's variant built by ``n2r demo build -o DIR``)
+instead of the fitted scenes the package loads. Choose a variant by the transformed poses of another ``--seed``
+than the one reported, never by the held-out poses. Results: docs/demo-scenes.md.
 """
 
 from __future__ import annotations
@@ -61,9 +64,19 @@ def compare(exact, field, c2w: np.ndarray, camera) -> dict:
             "repeatability": rep.score if rep.valid else float("nan")}
 
 
-def measure(name: str, draws: int, seed: int) -> dict[str, list[dict]]:
-    """Rows of :func:`compare` for the held-out poses and each τ family, by family."""
-    exact, field = ground_truth(name), fitted_scene(name, device="cpu")
+def load_field(name: str, folder: str | None):
+    """The fitted scene of ``name``: the package's, or the file ``folder/<name>.n2r``."""
+    if folder is None:
+        return fitted_scene(name, device="cpu")
+    from pytest_n2r.scene import load_scene
+
+    return load_scene(f"{folder}/{name}.n2r", device="cpu")
+
+
+def measure(name: str, field, draws: int, seed: int) -> dict[str, list[dict]]:
+    """Rows of :func:`compare` of ``field`` (the fitted ``name``) for the held-out poses and each τ family, by
+    family."""
+    exact = ground_truth(name)
     rng = np.random.default_rng(seed)
     heldout = [v for v in field.views if v.split == "heldout"]
     rows: dict[str, list[dict]] = {"held out": []}
@@ -94,15 +107,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--scenes", nargs="*", default=list(demo_scene_names()), help="exact scene names")
     parser.add_argument("--draws", type=int, default=2, help="transforms per held-out pose and τ family")
     parser.add_argument("--seed", type=int, default=0, help="seed of the transform draws")
+    parser.add_argument("--fields", default=None, metavar="DIR", help="score DIR/<name>.n2r, not the package's")
     parser.add_argument("--json", default=None, metavar="PATH", help="also write every row as JSON")
     args = parser.parse_args(argv)
     torch.set_num_threads(2)
     everything = {}
     for name in args.scenes:
         t0 = time.perf_counter()
-        rows = measure(name, args.draws, args.seed)
+        field = load_field(name, args.fields)
+        rows = measure(name, field, args.draws, args.seed)
         everything[name] = rows
-        field = fitted_scene(name, device="cpu")
         cam = field.views[0].camera
         print(f"\n{name}-field vs {name} (exact), {cam.width}x{cam.height}, fit report held-out PSNR "
               f"{field.report['psnr']:.2f} dB ({time.perf_counter() - t0:.0f} s)")
