@@ -35,6 +35,7 @@ import numpy as np
 import torch
 
 from pytest_n2r.demo import demo_scene_names, fitted_scene, ground_truth
+from pytest_n2r.errors import N2RError
 from pytest_n2r.geometry import Transform
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.image_quality import psnr, ssim
@@ -114,7 +115,10 @@ def main(argv: list[str] | None = None) -> int:
     everything = {}
     for name in args.scenes:
         t0 = time.perf_counter()
-        field = load_field(name, args.fields)
+        try:
+            field = load_field(name, args.fields)
+        except N2RError as exc:  # an unknown demo scene, a missing or unreadable file in --fields
+            parser.error(str(exc))
         rows = measure(name, field, args.draws, args.seed)
         everything[name] = rows
         cam = field.views[0].camera

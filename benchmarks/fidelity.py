@@ -44,6 +44,7 @@ import numpy as np
 import torch
 from _scoring import defined_mean, format_repeatabilities
 
+from pytest_n2r.errors import N2RError
 from pytest_n2r.metrics.image_quality import psnr, ssim
 from pytest_n2r.relation.floor.nearby import nearby_image
 from pytest_n2r.relation.floor.reference import floor_views, reference_image, reference_kind, shift_sample
@@ -517,7 +518,10 @@ def main(argv: list[str] | None = None) -> int:
     print("|" + "---|" * (header.count("|") - 1))
     for spec in args.scenes:
         t0 = time.perf_counter()
-        scene = load(spec)
+        try:
+            scene = load(spec)
+        except N2RError as exc:  # a missing or unreadable scene file, an unknown demo scene
+            parser.error(str(exc))
         report = measure_fidelity(scene, size=args.size, max_views=args.views)
         seconds = time.perf_counter() - t0
         reports.append(report)

@@ -104,6 +104,20 @@ def test_capture_poses_perturb_fits_a_capture_with_a_turned_pose():
     assert "| 10° |" in result.stdout, f"no turned photo reported:\n{result.stdout}"
 
 
+@pytest.mark.parametrize("script, args", [
+    ("fidelity.py", ["MISSING/fox.n2r"]),
+    ("demo_accuracy.py", ["--scenes", "wall", "--fields", "MISSING"]),
+    ("render_settings.py", ["MISSING/fox.n2r", "default"]),
+], ids=["fidelity", "demo_accuracy", "render_settings"])
+def test_a_missing_scene_file_is_a_usage_error_naming_it(script: str, args: list[str], tmp_path: Path):
+    args = [a.replace("MISSING", str(tmp_path / "missing")) for a in args]
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *args], cwd=ROOT,
+                            env=_environment(), capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 2 and "Traceback" not in result.stderr, (
+        f"{script} {' '.join(args)}: exit {result.returncode}, expected a usage error (2):\n{result.stderr}")
+    assert str(tmp_path / "missing") in result.stderr, f"{script} did not name the missing file:\n{result.stderr}"
+
+
 def test_every_smoke_run_names_an_existing_script():
     missing = sorted(set(SMOKE) - {s.name for s in SCRIPTS})
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"
