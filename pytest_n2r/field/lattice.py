@@ -37,7 +37,8 @@ def ray_box(o: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tenso
     return t_in, t_out
 
 
-def lattice_counts(o: torch.Tensor, d: torch.Tensor, step: float, shell_samples: int, far: float):
+def lattice_counts(o: torch.Tensor, d: torch.Tensor, step: float, shell_samples: int,
+                   far: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per ray: ``(t0, dt, n_inner, ts, du)`` — the inner lattice start, spacing and size, and the shell
     lattice's start ``ts`` and spacing ``du`` in ``1/t``."""
     dn = d.norm(dim=-1)

@@ -165,7 +165,8 @@ class _Trainer:
     def _rebuild_grid(self) -> None:
         self.grid = MarchGrid(self.field.occupancy, self.space.shell, self.config.step_ratio, None, FIT_RENDER.far)
 
-    def march(self, o: torch.Tensor, d: torch.Tensor):
+    def march(self, o: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The batch's occupied samples, packed: ``(ray_idx, t, offsets)`` (:mod:`pytest_n2r.field.march`)."""
         if self.compiled:
             return march_compiled(o, d, self.grid)
         return march_dense(o, d, self.grid)

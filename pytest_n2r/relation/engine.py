@@ -101,7 +101,7 @@ class Engine:
 
     # -- pieces -----------------------------------------------------------------------------------------
 
-    def camera_for(self, view: SceneView):
+    def camera_for(self, view: SceneView) -> Camera:
         return view.camera if self.size is None else self.size.apply(view.camera)
 
     def render(self, c2w: np.ndarray, camera: Any, view: SceneView, outputs: tuple[str, ...],
