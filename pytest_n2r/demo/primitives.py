@@ -26,6 +26,10 @@ T_MIN = 1e-6
 _AXES = {"x": 0, "y": 1, "z": 2}
 _UP = np.array([0.0, 0.0, 1.0])
 
+#: What :meth:`Primitive.surface` returns: normals ``(N, 3)``, surface coordinates ``a`` and ``b`` ``(N,)``, and
+#: ``(indices, material)`` groups.
+Surface = tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]
+
 
 class Primitive(ABC):
     """A surface with an exact ray intersection."""
@@ -35,7 +39,7 @@ class Primitive(ABC):
         """Ray parameter ``t`` ``(N,)`` of the first hit of rays ``o + t d`` (each ``(N, 3)``), ``inf`` on a miss."""
 
     @abstractmethod
-    def surface(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]:
+    def surface(self, p: np.ndarray) -> Surface:
         """For hit points ``p (N, 3)``: normals ``(N, 3)``, ``a``, ``b`` and ``(indices, material)`` groups."""
 
     @abstractmethod
@@ -88,7 +92,7 @@ class Disc(Primitive):
         r2 = (p[:, 0] - self.centre[0]) ** 2 + (p[:, 1] - self.centre[1]) ** 2
         return np.where((t > T_MIN) & (r2 <= self.radius**2), t, np.inf)
 
-    def surface(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]:
+    def surface(self, p: np.ndarray) -> Surface:
         n = np.broadcast_to(_UP, p.shape)
         return n, p[:, 0], p[:, 1], [(np.arange(len(p)), self.material)]
 
@@ -116,7 +120,7 @@ class Box(Primitive):
     def _material(self, face: str) -> Material:
         return self.materials[face] if face in self.materials else self.materials["*"]
 
-    def surface(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]:
+    def surface(self, p: np.ndarray) -> Surface:
         lo, hi = np.asarray(self.lo), np.asarray(self.hi)
         dist = np.concatenate([np.abs(p - lo), np.abs(p - hi)], axis=1)  # -x -y -z +x +y +z
         face = np.argmin(dist, axis=1)
@@ -183,7 +187,7 @@ class Cylinder(Primitive):
                 best = np.where(ok & (t < best), t, best)
         return best
 
-    def surface(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]:
+    def surface(self, p: np.ndarray) -> Surface:
         k = _AXES[self.axis]
         i, j = [m for m in range(3) if m != k]
         q = p - np.asarray(self.centre)
@@ -337,7 +341,7 @@ class ReliefWall(Primitive):
             a, b = np.where(inside, a, m), np.where(inside, m, b)
         return np.where(found, 0.5 * (a + b), np.inf)
 
-    def surface(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[tuple[np.ndarray, Material]]]:
+    def surface(self, p: np.ndarray) -> Surface:
         _, gx, gz = self.height_and_gradient(p[:, 0], p[:, 2])
         n = np.stack([-gx, -np.ones(len(p)), -gz], axis=1)  # outward: towards -y
         n /= np.linalg.norm(n, axis=1, keepdims=True)
