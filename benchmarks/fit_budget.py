@@ -5,7 +5,8 @@ Run: ``python benchmarks/fit_budget.py [--scenes wall object] [--size 160] [--st
 [--ladder default=48,96,160@0.1,0.35 --ladder planned=48,96,160,256@0.025,0.0875,0.25] [--fox 10m] [--json out.json]``,
 or, to compare other settings of the fit at the same steps, ``--base default --variant base
 --variant tv tv=1e-4 --variant half-rays batch_rays=2048 steps=4000`` (each variant: a name, then
-``FieldConfig`` settings as ``n2r fit --config`` takes them; ``steps=N`` overrides ``--steps`` for it).
+``FieldConfig`` settings as ``n2r fit --config`` takes them; ``steps=N`` overrides ``--steps`` for it;
+``appearance=True`` fits a colour gain per photo, as ``n2r fit --appearance`` does).
 
 Each demo scene is photographed like a phone does (:func:`pytest_n2r.demo.phone_capture.write_phone_capture`:
 mixed orientation, exposure and white balance, blur, JPEG), read with its poses, and fitted once per
@@ -74,17 +75,22 @@ def parse_ladder(text: str) -> tuple[str, tuple[int, ...], tuple[float, ...]]:
     return name, resolutions, stage
 
 
-def parse_variant(words: list[str]) -> tuple[str, dict, int | None]:
-    """``[name, key=value, ...]`` of ``--variant`` → (name, FieldConfig changes, steps or None)."""
+def parse_variant(words: list[str]) -> tuple[str, dict, dict]:
+    """``[name, key=value, ...]`` of ``--variant`` → (name, FieldConfig changes, options of the fit: ``max_steps``
+    from ``steps=N``, ``appearance`` from ``appearance=True``)."""
     if not words or "=" in words[0]:
         raise argparse.ArgumentTypeError(f"--variant {' '.join(words)}: expected a name, then key=value settings")
-    changes, steps = {}, None
+    changes, options = {}, {}
     for word in words[1:]:
         key, value = parse_config_override(word)
         if key == "steps":
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise argparse.ArgumentTypeError(f"--variant {words[0]}: steps={value!r}: expected an integer >= 1")
-            steps = value
+            options["max_steps"] = value
+        elif key == "appearance":
+            if not isinstance(value, bool):
+                raise argparse.ArgumentTypeError(f"--variant {words[0]}: appearance={value!r}: expected True or False")
+            options["appearance"] = value
         else:
             default = getattr(FieldConfig(), key, None)
             changes[key] = (value,) if isinstance(default, tuple) and not isinstance(value, tuple) else value
@@ -92,7 +98,7 @@ def parse_variant(words: list[str]) -> tuple[str, dict, int | None]:
         CONFIG.replace(**changes)
     except (TypeError, ValueError) as exc:
         raise argparse.ArgumentTypeError(f"--variant {words[0]}: {exc}") from None
-    return words[0], changes, steps
+    return words[0], changes, options
 
 
 def split_validation(capture: Capture, every: int = 8, first: int = 4) -> tuple[Capture, list, list]:
@@ -135,9 +141,11 @@ def _progress(info: dict) -> None:
         print(f"  step {info['step']}, {info['resolution']}³, {info['elapsed_s']:.0f} s", file=sys.stderr, flush=True)
 
 
-def run_fit(capture: Capture, config: FieldConfig, **limits) -> tuple[object, dict]:
+def run_fit(capture: Capture, config: FieldConfig, **options) -> tuple[object, dict]:
+    """Fit ``capture`` on the CPU with ``options`` (:func:`pytest_n2r.fit.fit`'s ``max_steps`` or
+    ``time_budget_s``, ``appearance``): the field and the fit's steps, wall and CPU seconds and detail."""
     t0, c0 = time.perf_counter(), time.process_time()
-    result = fit(capture, config, device="cpu", progress=_progress, **limits)
+    result = fit(capture, config, device="cpu", progress=_progress, **options)
     info = {"steps": result.report["steps"], "fit_s": round(time.perf_counter() - t0, 1),
             "cpu_s": round(time.process_time() - c0, 1),
             "pixels_per_voxel": round(pixels_per_voxel(capture, config.resolutions[-1]), 2)}
@@ -172,12 +180,12 @@ def main(argv: list[str] | None = None) -> int:
             variants = [parse_variant(words) for words in args.variant]
         except argparse.ArgumentTypeError as exc:
             parser.error(str(exc))
-        timed = [name for name, _, own_steps in variants if own_steps and args.time]
+        timed = [name for name, _, options in variants if "max_steps" in options and args.time]
         if timed:
             parser.error(f"--variant {timed[0]}: steps=N with --time (the demo scenes' fits stop at the time; "
                          "leave steps out, or use --steps)")
     else:
-        variants = [(name, {"resolutions": res, "stage_fractions": stage}, None)
+        variants = [(name, {"resolutions": res, "stage_fractions": stage}, {})
                     for name, res, stage in (args.ladder or [parse_ladder(text) for text in LADDERS])]
     torch.set_num_threads(2)
     rows = []
@@ -202,9 +210,9 @@ def main(argv: list[str] | None = None) -> int:
             write_phone_capture(name, tmp, PhoneSettings(size=args.size))
             capture, validation, heldout = split_validation(ingest(tmp))
         for steps in [None] if args.time else args.steps:
-            for variant, changes, own_steps in variants:
-                limits = {"time_budget_s": args.time} if args.time else {"max_steps": own_steps or steps}
-                field, info = run_fit(capture, base.replace(**changes), **limits)
+            for variant, changes, options in variants:
+                limits = {"time_budget_s": args.time} if args.time else {"max_steps": steps}
+                field, info = run_fit(capture, base.replace(**changes), **{**limits, **options})
                 report({"scene": name, "ladder": variant, **info,
                         "validation": score_exact(scene, field, poses(validation)),
                         "heldout": score_exact(scene, field, poses(heldout))})
@@ -217,11 +225,11 @@ def main(argv: list[str] | None = None) -> int:
                 capture, validation, _ = split_validation(ingest(FOX, downscale=0.25))
             keep = Path(args.fox_dir or tempfile.mkdtemp(prefix="n2r-budget-fox-"))
             keep.mkdir(parents=True, exist_ok=True)
-            for variant, changes, own_steps in variants:
+            for variant, changes, options in variants:
                 config = FieldConfig().replace(**changes)
-                limits = ({"max_steps": own_steps or args.fox_steps} if args.fox_steps is not None
+                limits = ({"max_steps": options.get("max_steps", args.fox_steps)} if args.fox_steps is not None
                           else {"time_budget_s": args.fox})
-                field, info = run_fit(capture, config, **limits)
+                field, info = run_fit(capture, config, **limits, appearance=options.get("appearance", False))
                 report({"scene": "fox", "ladder": variant, **info,
                         "validation": score_fox(field, config, capture, validation, keep / f"{variant}.n2r"),
                         "heldout": None})

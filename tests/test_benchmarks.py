@@ -44,8 +44,10 @@ SMOKE = {
                         "stage_fractions=0.5", "batch_rays=256"], "| 1 | all | 30 |"),
     # structure from motion at 160 px registers a few photos, or none (a row saying so): either way a table row
     "capture_poses.py": (["sfm", "--scenes", "wall", "--size", "160"], "| wall | 160 |"),
+    # a variant fitted with the per-photo appearance correction: the fit option a variant passes through
     "fit_budget.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--base", "default", "--variant", "tiny",
-                       "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256"], "| wall | tiny | 10 |"),
+                       "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256", "appearance=True"],
+                      "| wall | tiny | 10 |"),
 }
 
 
