@@ -38,7 +38,7 @@ from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
 from .prune import pruned_occupancy, pruned_occupancy_dense
-from .train_kernels import Composite, Interpolate, RowIndex, lattice_positions, sample_corners, scatter_max
+from .train_kernels import Composite, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "fit_space", "FitResult", "evaluate_views", "FIT_RENDER"]
 
@@ -197,10 +197,9 @@ class _Trainer:
             unique, inverse, weights = (torch.from_numpy(a) for a in (*self.row_index.unique(rows), weights))
             sub = f.values[unique].requires_grad_(True)
             clock.lap("corners")
-            v = Interpolate.apply(sub, inverse, weights)
             rgb, alpha_sum, dist, sample_weight = Composite.apply(
-                v, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift, c.step_ratio, ALPHA_MAX,
-                background)
+                sub, inverse, weights, ray_idx, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift,
+                c.step_ratio, ALPHA_MAX, background)
             scatter_max(cells, sample_weight.numpy(), self.cell_weight.numpy())
         else:
             s = lattice_position(o, d, t, ray_idx, g.step, g.shell_samples, g.far)

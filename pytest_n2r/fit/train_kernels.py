@@ -1,5 +1,5 @@
-"""Compiled CPU kernels of a training step (numba): sample corners, unique rows, trilinear gather with its
-gradient, and the row-sparse Adam update.
+"""Compiled CPU kernels of a training step (numba): sample corners, unique rows, the samples interpolated, shaded
+and composited with their gradient, and the row-sparse Adam update.
 
 They replace the torch ops that dominate a CPU step (``torch.unique``, the serial scatter in the backward of
 an index, Adam over fancy-indexed rows) and agree with them (tests check against torch autograd).
@@ -16,7 +16,7 @@ from numba import njit, prange
 from ..field.kernels import cell_of, grid_coords_xyz, thread_ranges, vertex_row
 from ..field.lattice import lattice_counts
 
-__all__ = ["sample_corners", "lattice_positions", "scatter_max", "RowIndex", "Interpolate", "Composite", "adam_rows"]
+__all__ = ["sample_corners", "lattice_positions", "scatter_max", "RowIndex", "Composite", "adam_rows"]
 
 
 @njit(cache=True, parallel=True)
@@ -114,53 +114,6 @@ class RowIndex:
 
 
 @njit(cache=True, parallel=True)
-def _interp_forward(sub, inverse, weights, out):
-    for i in prange(inverse.shape[0]):
-        for f in range(sub.shape[1]):
-            acc = 0.0
-            for c in range(8):
-                acc += weights[i, c] * sub[inverse[i, c], f]
-            out[i, f] = acc
-
-
-@njit(cache=True, parallel=True)
-def _interp_backward(grad_out, inverse, weights, bounds, grad_sub):
-    # Each thread owns the rows bounds[g]..bounds[g + 1] and walks the samples in order, adding into the
-    # corners it owns: no two threads write the same row (nor, but at the bounds, the same cache line), and
-    # every element gets its additions in sample and corner order whatever the thread count. (Owning columns
-    # instead had both threads writing every row's cache lines: 3x slower on the fox, slower than one thread.)
-    for g in prange(bounds.shape[0] - 1):
-        lo, hi = bounds[g], bounds[g + 1]
-        for i in range(inverse.shape[0]):
-            for c in range(8):
-                row = inverse[i, c]
-                if lo <= row < hi:
-                    w = weights[i, c]
-                    for f in range(grad_out.shape[1]):
-                        grad_sub[row, f] += w * grad_out[i, f]
-
-
-class Interpolate(torch.autograd.Function):
-    """``out[i] = Σ_c weights[i, c] · sub[inverse[i, c]]`` with a compiled forward and backward (CPU)."""
-
-    @staticmethod
-    def forward(ctx, sub: torch.Tensor, inverse: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
-        out = torch.empty(inverse.shape[0], sub.shape[1], dtype=sub.dtype)
-        _interp_forward(sub.detach().numpy(), inverse.numpy(), weights.numpy(), out.numpy())
-        ctx.save_for_backward(inverse, weights)
-        ctx.n_rows = sub.shape[0]
-        return out
-
-    @staticmethod
-    def backward(ctx, grad_out: torch.Tensor):
-        inverse, weights = ctx.saved_tensors
-        grad_sub = torch.zeros(ctx.n_rows, grad_out.shape[1], dtype=grad_out.dtype)
-        _interp_backward(grad_out.contiguous().numpy(), inverse.numpy(), weights.numpy(),
-                         thread_ranges(ctx.n_rows), grad_sub.numpy())
-        return grad_sub, None, None
-
-
-@njit(cache=True, parallel=True)
 def adam_rows(values, m, v, rows, grad, lrs, b1, b2, eps, bias1, bias2):
     """Adam on ``values[rows]`` in place (``bias1``/``bias2``: the bias corrections ``1 - β^t``)."""
     for i in prange(rows.shape[0]):
@@ -175,27 +128,41 @@ def adam_rows(values, m, v, rows, grad, lrs, b1, b2, eps, bias1, bias2):
 
 
 @njit(cache=True, inline="always")
-def _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col):
-    """Sample ``i``'s opacity (capped at ``alpha_max``) and its derivative by the raw density; its colour
-    goes to ``col``."""
-    x = v[i, 0] + density_shift
+def _corner_values(sub, inverse, weights, basis, i, r, out):
+    """Sample ``i`` (on ray ``r``) from its 8 corners: ``out[i, 0]`` its raw density, ``out[i, 1 + ch]`` its
+    colour logits along the ray's SH ``basis`` (float64 sums over the corners' float32 values)."""
+    n_sh = basis.shape[1]
+    x = lr = lg = lb = 0.0
+    for c in range(8):
+        row = inverse[i, c]
+        w = np.float64(weights[i, c])
+        x += w * sub[row, 0]
+        for l in range(n_sh):
+            wb = w * basis[r, l]
+            lr += wb * sub[row, 1 + l * 3]
+            lg += wb * sub[row, 2 + l * 3]
+            lb += wb * sub[row, 3 + l * 3]
+    out[i, 0], out[i, 1], out[i, 2], out[i, 3] = x, lr, lg, lb
+
+
+@njit(cache=True, inline="always")
+def _sample(raw, i, density_shift, step_ratio, alpha_max, col):
+    """Sample ``i``'s opacity (capped at ``alpha_max``) and its derivative by the raw density, from its raw values
+    (:func:`_corner_values`); its colour goes to ``col``."""
+    x = raw[i, 0] + density_shift
     sigma = x if x > 20.0 else math.log1p(math.exp(x))
     alpha = 1.0 - math.exp(-sigma * step_ratio)
     d_alpha = step_ratio * (1.0 - alpha) / (1.0 + math.exp(-x))
     if alpha > alpha_max:
         alpha, d_alpha = alpha_max, 0.0
     for ch in range(3):
-        acc = 0.0
-        for l in range(n_sh):
-            acc += basis[r, l] * v[i, 1 + l * 3 + ch]
-        col[ch] = 1.0 / (1.0 + math.exp(-acc))
+        col[ch] = 1.0 / (1.0 + math.exp(-raw[i, 1 + ch]))
     return alpha, d_alpha
 
 
 @njit(cache=True, parallel=True)
-def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, background, rgb,
-                       alpha_sum, dist, weight):
-    n_sh = basis.shape[1]
+def _composite_forward(sub, inverse, weights, basis, offsets, s, delta, density_shift, step_ratio, alpha_max,
+                       background, rgb, alpha_sum, dist, weight, raw):
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
         trans = 1.0
@@ -203,7 +170,8 @@ def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, a
         a_sum = 0.0
         w_before = s_before = pairs = squares = 0.0  # running sums of weights and of weight · position
         for i in range(offsets[r], offsets[r + 1]):
-            alpha, _ = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
+            _corner_values(sub, inverse, weights, basis, i, r, raw)
+            alpha, _ = _sample(raw, i, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
             weight[i] = w
             for ch in range(3):
@@ -221,9 +189,8 @@ def _composite_forward(v, basis, offsets, s, delta, density_shift, step_ratio, a
 
 
 @njit(cache=True, parallel=True)
-def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, rgb, weight,
-                        grad_rgb, grad_alpha, grad_dist, grad_weight, grad_v):
-    n_sh = basis.shape[1]
+def _composite_backward(raw, offsets, s, delta, density_shift, step_ratio, alpha_max, rgb, weight,
+                        grad_rgb, grad_alpha, grad_dist, grad_weight, grad_raw):
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
         first, last = offsets[r], offsets[r + 1]
@@ -250,7 +217,7 @@ def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, 
         h_prefix = 0.0
         g = grad_rgb[r]
         for i in range(first, last):
-            alpha, d_raw = _sample(v, i, basis, r, n_sh, density_shift, step_ratio, alpha_max, col)
+            alpha, d_raw = _sample(raw, i, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
             d_alpha = grad_alpha[r]
             if gd != 0.0:  # ∂w_i/∂alpha_k: T_k for i = k, -w_i / (1 - alpha_k) for i > k
@@ -260,53 +227,86 @@ def _composite_backward(v, basis, offsets, s, delta, density_shift, step_ratio, 
                 prefix[ch] += w * col[ch]
                 suffix = rgb[r, ch] - prefix[ch]          # what is behind this sample, background included
                 d_alpha += g[ch] * (trans * col[ch] - suffix / (1.0 - alpha))
-                d_logit = g[ch] * w * col[ch] * (1.0 - col[ch])
-                for l in range(n_sh):
-                    grad_v[i, 1 + l * 3 + ch] = d_logit * basis[r, l]
-            grad_v[i, 0] = d_alpha * d_raw
+                grad_raw[i, 1 + ch] = g[ch] * w * col[ch] * (1.0 - col[ch])
+            grad_raw[i, 0] = d_alpha * d_raw
             trans *= 1.0 - alpha
 
 
-class Composite(torch.autograd.Function):
-    """Shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
+@njit(cache=True, parallel=True)
+def _corner_backward(grad_raw, inverse, weights, basis, ray_idx, bounds, grad_sub):
+    # Each thread owns the rows bounds[g]..bounds[g + 1] and walks the samples in order, adding into the
+    # corners it owns: no two threads write the same row (nor, but at the bounds, the same cache line), and
+    # every element gets its additions in sample and corner order whatever the thread count. (Owning columns
+    # instead had both threads writing every row's cache lines: 3x slower on the fox, slower than one thread.)
+    n_sh = basis.shape[1]
+    for g in prange(bounds.shape[0] - 1):
+        lo, hi = bounds[g], bounds[g + 1]
+        for i in range(inverse.shape[0]):
+            r = ray_idx[i]
+            for c in range(8):
+                row = inverse[i, c]
+                if lo <= row < hi:
+                    w = np.float64(weights[i, c])
+                    grad_sub[row, 0] += w * grad_raw[i, 0]
+                    for l in range(n_sh):
+                        wb = w * basis[r, l]
+                        grad_sub[row, 1 + l * 3] += wb * grad_raw[i, 1]
+                        grad_sub[row, 2 + l * 3] += wb * grad_raw[i, 2]
+                        grad_sub[row, 3 + l * 3] += wb * grad_raw[i, 3]
 
-    Inputs: interpolated values ``v (N, F)``, the SH basis of each ray's direction ``(B, n_sh)``, ``offsets
-    (B+1)``, each sample's position ``s (N,)`` along its ray and the length ``delta`` a sample stands for
-    (both in contracted units), and ``background`` ``(3,)`` or one colour per ray ``(B, 3)``.
+
+class Composite(torch.autograd.Function):
+    """Interpolate, shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
+
+    Inputs: the step's rows of the field ``sub (U, F)``, each sample's 8 corners as indices into them
+    ``inverse (N, 8)`` with their trilinear ``weights (N, 8)``, each sample's ray ``ray_idx (N,)``, the SH basis
+    of each ray's direction ``(B, n_sh)``, ``offsets (B+1)``, each sample's position ``s (N,)`` along its ray
+    and the length ``delta`` a sample stands for (both in contracted units), and ``background`` ``(3,)`` or
+    one colour per ray ``(B, 3)``.
     Outputs: ``rgb (B, 3)`` over the background, the per-ray sum of sample opacities ``(B,)``, the per-ray
     distortion ``(B,)`` and, not differentiable, each sample's compositing weight ``(N,)`` (float32; the
-    backward pass reuses them in float64).
-    Same formulas as :func:`pytest_n2r.field.query.shade`, :func:`~pytest_n2r.field.query.composite` and
-    :func:`~pytest_n2r.field.query.distortion`.
+    backward pass reuses them in float64). The gradient is ``sub``'s alone.
+
+    Same formulas as :func:`pytest_n2r.field.query.interpolate`, :func:`~pytest_n2r.field.query.shade`,
+    :func:`~pytest_n2r.field.query.composite` and :func:`~pytest_n2r.field.query.distortion`, in float64
+    inside. A sample's values are never stored whole: each sample keeps its raw density and three colour
+    logits (``4`` numbers, not ``1 + 3·n_sh``), and the backward pass spreads their gradients over the corners'
+    SH coefficients directly (docs/performance-log.md, "The interpolation fused into the composite").
     """
 
     @staticmethod
-    def forward(ctx, v, basis, offsets, s, delta, density_shift, step_ratio, alpha_max, background):
+    def forward(ctx, sub, inverse, weights, ray_idx, basis, offsets, s, delta, density_shift, step_ratio,
+                alpha_max, background):
         n = offsets.shape[0] - 1
         rgb = torch.empty(n, 3, dtype=torch.float64)
         alpha_sum = torch.empty(n, dtype=torch.float64)
         dist = torch.empty(n, dtype=torch.float64)
-        weight = torch.empty(v.shape[0], dtype=torch.float64)
+        weight = torch.empty(inverse.shape[0], dtype=torch.float64)
+        raw = torch.empty(inverse.shape[0], 4, dtype=torch.float64)
         s = s.double().contiguous()
-        _composite_forward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(), delta,
-                           density_shift, step_ratio, alpha_max,
+        basis = basis.double().contiguous()
+        _composite_forward(sub.detach().numpy(), inverse.numpy(), weights.numpy(), basis.numpy(), offsets.numpy(),
+                           s.numpy(), delta, density_shift, step_ratio, alpha_max,
                            background.double().expand(n, 3).contiguous().numpy(), rgb.numpy(), alpha_sum.numpy(),
-                           dist.numpy(), weight.numpy())
-        ctx.save_for_backward(v, basis, offsets, s, rgb, weight)
+                           dist.numpy(), weight.numpy(), raw.numpy())
+        ctx.save_for_backward(inverse, weights, ray_idx, basis, offsets, s, rgb, weight, raw)
         ctx.params = (delta, density_shift, step_ratio, alpha_max)
+        ctx.sub_shape, ctx.sub_dtype = sub.shape, sub.dtype
         sample_weight = weight.float()
         ctx.mark_non_differentiable(sample_weight)
-        return rgb.to(v.dtype), alpha_sum.to(v.dtype), dist.to(v.dtype), sample_weight
+        return rgb.to(sub.dtype), alpha_sum.to(sub.dtype), dist.to(sub.dtype), sample_weight
 
     @staticmethod
     def backward(ctx, grad_rgb, grad_alpha_sum, grad_dist, _grad_weight):
-        v, basis, offsets, s, rgb, weight = ctx.saved_tensors
+        inverse, weights, ray_idx, basis, offsets, s, rgb, weight, raw = ctx.saved_tensors
         n = rgb.shape[0]
         grads = [g.double().contiguous() if g is not None else torch.zeros(shape, dtype=torch.float64)
                  for g, shape in ((grad_rgb, (n, 3)), (grad_alpha_sum, (n,)), (grad_dist, (n,)))]
-        grad_v = torch.empty(v.shape, dtype=torch.float64)
-        grad_weight = np.empty(v.shape[0])  # scratch: ∂dist/∂weight per sample
-        _composite_backward(v.detach().double().numpy(), basis.double().numpy(), offsets.numpy(), s.numpy(),
-                            *ctx.params, rgb.numpy(), weight.numpy(), *(g.numpy() for g in grads), grad_weight,
-                            grad_v.numpy())
-        return grad_v.to(v.dtype), None, None, None, None, None, None, None, None
+        grad_raw = np.empty((inverse.shape[0], 4))
+        grad_weight = np.empty(inverse.shape[0])  # scratch: ∂dist/∂weight per sample
+        _composite_backward(raw.numpy(), offsets.numpy(), s.numpy(), *ctx.params, rgb.numpy(), weight.numpy(),
+                            *(g.numpy() for g in grads), grad_weight, grad_raw)
+        grad_sub = torch.zeros(ctx.sub_shape, dtype=ctx.sub_dtype)
+        _corner_backward(grad_raw, inverse.numpy(), weights.numpy(), basis.numpy(), ray_idx.numpy(),
+                         thread_ranges(ctx.sub_shape[0]), grad_sub.numpy())
+        return grad_sub, *(None,) * 11

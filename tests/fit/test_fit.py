@@ -64,12 +64,12 @@ def test_a_nan_in_a_step_raises_fit_error_naming_the_step(capture48, monkeypatch
     real_apply = fit_module.Composite.apply
     calls = []
 
-    def poisoned(v, *args):
+    def poisoned(sub, *args):
         calls.append(None)
         if len(calls) == 4:  # the fourth step (step index 3)
-            v = v.clone()
-            v[0, 0] = float("nan")
-        return real_apply(v, *args)
+            sub = sub.clone()
+            sub[0, 0] = float("nan")
+        return real_apply(sub, *args)
 
     monkeypatch.setattr(fit_module.Composite, "apply", poisoned)
     with pytest.raises(FitError, match=r"diverged at step 3\b") as info:
@@ -91,15 +91,15 @@ class _NaNGradient(torch.autograd.Function):
 
 
 def test_non_finite_gradients_raise_fit_error_naming_the_step(capture48, monkeypatch):
-    real_apply = fit_module.Interpolate.apply
+    real_apply = fit_module.Composite.apply
     calls = []
 
     def poisoned(*args):
         calls.append(None)
-        out = real_apply(*args)
-        return _NaNGradient.apply(out) if len(calls) == 3 else out
+        rgb, *rest = real_apply(*args)
+        return (_NaNGradient.apply(rgb) if len(calls) == 3 else rgb), *rest
 
-    monkeypatch.setattr(fit_module.Interpolate, "apply", poisoned)
+    monkeypatch.setattr(fit_module.Composite, "apply", poisoned)
     with pytest.raises(FitError, match=r"diverged at step 2: non-finite gradients"):
         fit(capture48, SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=()), max_steps=10, device="cpu")
     assert len(calls) == 3, f"the fit went on for {len(calls) - 3} steps after the NaN gradient"

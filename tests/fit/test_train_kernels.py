@@ -15,9 +15,8 @@ from pytest_n2r.field.query import ALPHA_MAX, composite, distortion, interpolate
 from pytest_n2r.fit.optim import RowAdam
 from pytest_n2r.fit.train_kernels import (
     Composite,
-    Interpolate,
     RowIndex,
-    _interp_backward,
+    _corner_backward,
     adam_rows,
     lattice_positions,
     sample_corners,
@@ -35,32 +34,38 @@ def packed(counts: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.repeat_interleave(torch.arange(len(counts)), counts_t), offsets
 
 
-def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None
-            ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Random interpolated values ``v (N, F)`` (float64, requiring grad), unit ray directions' SH basis
+def samples(counts: list[int], sh_degree: int, seed: int, capped: int | None = None, n_rows: int = 40
+            ) -> tuple[torch.Tensor, ...]:
+    """A step's random field rows ``sub (U, F)`` (float64, requiring grad), each sample's 8 corners ``inverse
+    (N, 8)`` into them and trilinear ``weights (N, 8)`` (summing to 1), unit ray directions' SH basis
     ``(B, n_sh)``, ``ray_idx``, ``offsets`` and increasing sample positions ``s (N,)`` along each ray (gaps
     of at least ``DELTA``, as on the lattice); sample ``capped`` gets a density whose opacity is capped."""
     g = torch.Generator().manual_seed(seed)
     ray_idx, offsets = packed(counts)
-    n_sh = (sh_degree + 1) ** 2
-    v = torch.randn(int(offsets[-1]), 1 + 3 * n_sh, generator=g, dtype=torch.float64) * 2.0
-    if capped is not None:
-        v[capped, 0] = 60.0  # softplus → 58: alpha = 1 - e⁻²⁹, above ALPHA_MAX
+    n, n_sh = int(offsets[-1]), (sh_degree + 1) ** 2
+    sub = torch.randn(n_rows, 1 + 3 * n_sh, generator=g, dtype=torch.float64) * 2.0
+    inverse = torch.randint(0, n_rows - 1, (n, 8), generator=g)
+    weights = torch.rand(n, 8, generator=g, dtype=torch.float64)
+    weights /= weights.sum(dim=1, keepdim=True)
+    if capped is not None:  # its corners all the last row, whose density is high: softplus → 58, alpha = 1 - e⁻²⁹
+        inverse[capped] = n_rows - 1
+        sub[n_rows - 1, 0] = 60.0
     dirs = torch.randn(len(counts), 3, generator=g, dtype=torch.float64)
     basis = sh_basis(dirs / dirs.norm(dim=-1, keepdim=True), sh_degree)
-    gaps = DELTA * (1.0 + 3.0 * torch.rand(int(offsets[-1]), generator=g, dtype=torch.float64))
+    gaps = DELTA * (1.0 + 3.0 * torch.rand(n, generator=g, dtype=torch.float64))
     s = torch.cat([torch.cumsum(gaps[a:b], 0) for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())])
-    return v.requires_grad_(True), basis, ray_idx, offsets, s
+    return sub.requires_grad_(True), inverse, weights, basis, ray_idx, offsets, s
 
 
-def reference(v: torch.Tensor, basis: torch.Tensor, ray_idx: torch.Tensor, offsets: torch.Tensor, s: torch.Tensor,
-              background: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """rgb, the sum of capped opacities, the distortion and per-sample weights by ``query.shade``,
-    ``query.composite`` and ``query.distortion``."""
-    alpha, rgb = shade(v, basis[ray_idx], SHIFT, STEP_RATIO)
+def reference(sub: torch.Tensor, inverse: torch.Tensor, weights: torch.Tensor, basis: torch.Tensor,
+              ray_idx: torch.Tensor, offsets: torch.Tensor, s: torch.Tensor, background: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """rgb, the sum of capped opacities, the distortion and per-sample weights by ``query.interpolate``,
+    ``query.shade``, ``query.composite`` and ``query.distortion``."""
+    alpha, rgb = shade(interpolate(sub, inverse, weights), basis[ray_idx], SHIFT, STEP_RATIO)
     n_rays = len(offsets) - 1
     out = composite(alpha, rgb, torch.zeros_like(alpha), ray_idx, offsets, n_rays, background)
-    alpha_sum = torch.zeros(n_rays, dtype=v.dtype).index_add(0, ray_idx, alpha.clamp(max=ALPHA_MAX))
+    alpha_sum = torch.zeros(n_rays, dtype=sub.dtype).index_add(0, ray_idx, alpha.clamp(max=ALPHA_MAX))
     dist = distortion(out["weights"], s, ray_idx, offsets, n_rays, DELTA)
     return out["rgb"], alpha_sum, dist, out["weights"]
 
@@ -79,7 +84,8 @@ CAPPED = {"capped_sample": 5, "one_sample_each": 2, "long_ray": 150}
 @pytest.mark.parametrize("sh_degree", [0, 1])
 @pytest.mark.parametrize("case", list(CASES))
 def test_composite_forward_and_gradient_equal_autograd_through_the_reference(case, sh_degree, per_ray_background):
-    v, basis, ray_idx, offsets, s = samples(CASES[case], sh_degree, seed=len(case), capped=CAPPED.get(case))
+    sub, inverse, weights, basis, ray_idx, offsets, s = samples(CASES[case], sh_degree, seed=len(case),
+                                                                capped=CAPPED.get(case))
     g = torch.Generator().manual_seed(1)
     if per_ray_background:  # training composites each ray over its own random colour
         background = torch.rand(len(offsets) - 1, 3, generator=g, dtype=torch.float64)
@@ -90,28 +96,30 @@ def test_composite_forward_and_gradient_equal_autograd_through_the_reference(cas
     d_dist = torch.randn(len(offsets) - 1, generator=g, dtype=torch.float64)
 
     def value_and_grad(fn):
-        v.grad = None
-        rgb, alpha_sum, dist, weights = fn()
+        sub.grad = None
+        rgb, alpha_sum, dist, sample_weights = fn()
         ((rgb * d_rgb).sum() + (alpha_sum * d_alpha).sum() + (dist * d_dist).sum()).backward()
-        return rgb.detach(), alpha_sum.detach(), dist.detach(), weights.detach(), v.grad
+        return rgb.detach(), alpha_sum.detach(), dist.detach(), sample_weights.detach(), sub.grad
 
-    rgb, alpha_sum, dist, weights, grad = value_and_grad(
-        lambda: Composite.apply(v, basis, offsets, s, DELTA, SHIFT, STEP_RATIO, ALPHA_MAX, background))
+    rgb, alpha_sum, dist, sample_weights, grad = value_and_grad(
+        lambda: Composite.apply(sub, inverse, weights, ray_idx, basis, offsets, s, DELTA, SHIFT, STEP_RATIO,
+                                ALPHA_MAX, background))
     rgb_ref, alpha_sum_ref, dist_ref, weights_ref, grad_ref = value_and_grad(
-        lambda: reference(v, basis, ray_idx, offsets, s, background))
+        lambda: reference(sub, inverse, weights, basis, ray_idx, offsets, s, background))
 
     what = f"case {case!r} (samples per ray {CASES[case]}), sh_degree={sh_degree}, background {tuple(background.shape)}"
     torch.testing.assert_close(rgb, rgb_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite rgb: {m}")
     torch.testing.assert_close(alpha_sum, alpha_sum_ref, rtol=0, atol=TOL,
                                msg=lambda m: f"{what}: Composite opacity sum: {m}")
     torch.testing.assert_close(dist, dist_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite distortion: {m}")
-    torch.testing.assert_close(weights.double(), weights_ref, rtol=1e-6, atol=1e-7,
+    torch.testing.assert_close(sample_weights.double(), weights_ref, rtol=1e-6, atol=1e-7,
                                msg=lambda m: f"{what}: Composite sample weights (float32): {m}")
     torch.testing.assert_close(grad, grad_ref, rtol=0, atol=TOL, msg=lambda m: f"{what}: Composite gradient: {m}")
-    if case in CAPPED:
-        i = CAPPED[case]
-        assert grad[i, 0] == 0.0, f"{what}: the capped sample's density has gradient {float(grad[i, 0])}; expected 0"
-        assert grad[i, 1:].abs().max() > 0, f"{what}: the capped sample's colour got no gradient"
+    if case in CAPPED:  # the capped sample alone uses the last row
+        last = sub.shape[0] - 1
+        assert grad[last, 0] == 0.0, (
+            f"{what}: the capped sample's density has gradient {float(grad[last, 0])}; expected 0")
+        assert grad[last, 1:].abs().max() > 0, f"{what}: the capped sample's colour got no gradient"
     if case == "all_empty":
         torch.testing.assert_close(rgb, background.expand(len(offsets) - 1, 3), rtol=0, atol=0,
                                    msg=lambda m: f"{what}: empty rays must show the background: {m}")
@@ -120,13 +128,14 @@ def test_composite_forward_and_gradient_equal_autograd_through_the_reference(cas
 def test_composite_gradient_in_float32_tracks_float64():
     """Training runs in float32: the kernel computes in float64 inside, so the float32 gradient is the
     float64 one rounded."""
-    v, basis, _, offsets, s = samples([5, 2, 9], 1, seed=3)
+    sub, inverse, weights, basis, ray_idx, offsets, s = samples([5, 2, 9], 1, seed=3)
     background = torch.zeros(3, dtype=torch.float64)
     grads = []
     for dtype in (torch.float64, torch.float32):
-        x = v.detach().to(dtype).requires_grad_(True)
-        rgb, alpha_sum, dist, _ = Composite.apply(x, basis.to(dtype), offsets, s.to(dtype), DELTA, SHIFT,
-                                                  STEP_RATIO, ALPHA_MAX, background.to(dtype))
+        x = sub.detach().to(dtype).requires_grad_(True)
+        rgb, alpha_sum, dist, _ = Composite.apply(x, inverse, weights.to(dtype), ray_idx, basis.to(dtype), offsets,
+                                                  s.to(dtype), DELTA, SHIFT, STEP_RATIO, ALPHA_MAX,
+                                                  background.to(dtype))
         assert rgb.dtype == dtype, f"Composite returned {rgb.dtype} rgb for {dtype} values"
         (rgb.sum() + alpha_sum.sum() + dist.sum()).backward()
         grads.append(x.grad.double())
@@ -135,44 +144,35 @@ def test_composite_gradient_in_float32_tracks_float64():
 
 
 @pytest.mark.parametrize("n_samples", [0, 1, 257])
-def test_interpolate_forward_and_gradient_equal_autograd(n_samples):
+def test_row_index_gives_each_distinct_row_once_ascending(n_samples):
     g = torch.Generator().manual_seed(n_samples)
     rows = torch.randint(0, 40, (n_samples, 8), generator=g).numpy()
     unique, inverse = RowIndex(40).unique(rows)
     assert len(set(unique.tolist())) == len(unique), f"RowIndex.unique returned repeated rows {unique.tolist()}"
     assert np.all(np.diff(unique) > 0), f"RowIndex.unique rows are not ascending: {unique.tolist()}"
     np.testing.assert_array_equal(unique[inverse], rows, err_msg="RowIndex.unique: unique[inverse] is not rows")
-    sub = torch.randn(len(unique), 7, generator=g, dtype=torch.float64, requires_grad=True)
-    weights = torch.rand(n_samples, 8, generator=g, dtype=torch.float64)
-    inverse_t = torch.from_numpy(inverse)
-    d_out = torch.randn(n_samples, 7, generator=g, dtype=torch.float64)
-
-    out = Interpolate.apply(sub, inverse_t, weights)
-    (out * d_out).sum().backward()
-    grad, sub.grad = sub.grad.clone(), None
-    out_ref = interpolate(sub, inverse_t, weights)
-    (out_ref * d_out).sum().backward()
-    torch.testing.assert_close(out, out_ref, rtol=0, atol=TOL, msg=lambda m: f"Interpolate forward: {m}")
-    torch.testing.assert_close(grad, sub.grad, rtol=0, atol=TOL, msg=lambda m: f"Interpolate gradient: {m}")
-
+    assert sorted(unique.tolist()) == sorted(set(rows.ravel().tolist())), "RowIndex.unique lost or invented rows"
 
 
 @pytest.mark.parametrize("groups", [2, 3, 8])
-def test_interpolate_gradient_is_the_same_bits_however_its_rows_are_shared_out(groups):
+def test_corner_gradient_is_the_same_bits_however_its_rows_are_shared_out(groups):
     # the backward pass gives each thread a range of rows; every element must still get its additions in
     # sample and corner order, so a fit is the same on any thread count
     rng = np.random.default_rng(groups)
     rows = rng.integers(0, 300, size=(2000, 8))
     unique, inverse = RowIndex(300).unique(rows)
-    grad_out = rng.normal(size=(2000, 13)).astype(np.float32)
+    grad_raw = rng.normal(size=(2000, 4))
     weights = rng.random((2000, 8)).astype(np.float32)
+    ray_idx = np.repeat(np.arange(200), 10)
+    basis = rng.normal(size=(200, 4))
     one = np.zeros((len(unique), 13), dtype=np.float32)
-    _interp_backward(grad_out, inverse, weights, np.array([0, len(unique)]), one)
+    _corner_backward(grad_raw, inverse, weights, basis, ray_idx, np.array([0, len(unique)]), one)
     shared = np.zeros_like(one)
-    _interp_backward(grad_out, inverse, weights, np.linspace(0, len(unique), groups + 1).round().astype(np.int64),
-                     shared)
+    _corner_backward(grad_raw, inverse, weights, basis, ray_idx,
+                     np.linspace(0, len(unique), groups + 1).round().astype(np.int64), shared)
     differ = np.flatnonzero((one != shared).any(axis=1))
     assert not len(differ), f"rows {differ[:10].tolist()} differ when {groups} ranges share the rows out"
+
 
 def test_sample_corners_are_the_reference_trilinear_corners():
     rng = np.random.default_rng(0)
