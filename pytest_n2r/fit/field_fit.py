@@ -198,7 +198,7 @@ class _Trainer:
             sub = f.values[unique].requires_grad_(True)
             clock.lap("corners")
             rgb, alpha_sum, dist, sample_weight = Composite.apply(
-                sub, inverse, weights, ray_idx, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift,
+                sub, inverse, weights, sh_basis(unit, f.sh_degree), offsets, s, g.step, f.density_shift,
                 c.step_ratio, ALPHA_MAX, background)
             scatter_max(cells, sample_weight.numpy(), self.cell_weight.numpy())
         else:

@@ -233,7 +233,7 @@ def _composite_backward(raw, offsets, s, delta, density_shift, step_ratio, alpha
 
 
 @njit(cache=True, parallel=True)
-def _corner_backward(grad_raw, inverse, weights, basis, ray_idx, bounds, grad_sub):
+def _corner_backward(grad_raw, inverse, weights, basis, offsets, bounds, grad_sub):
     # Each thread owns the rows bounds[g]..bounds[g + 1] and walks the samples in order, adding into the
     # corners it owns: no two threads write the same row (nor, but at the bounds, the same cache line), and
     # every element gets its additions in sample and corner order whatever the thread count. (Owning columns
@@ -241,28 +241,34 @@ def _corner_backward(grad_raw, inverse, weights, basis, ray_idx, bounds, grad_su
     n_sh = basis.shape[1]
     for g in prange(bounds.shape[0] - 1):
         lo, hi = bounds[g], bounds[g + 1]
-        for i in range(inverse.shape[0]):
-            r = ray_idx[i]
-            for c in range(8):
-                row = inverse[i, c]
-                if lo <= row < hi:
-                    w = np.float64(weights[i, c])
-                    grad_sub[row, 0] += w * grad_raw[i, 0]
-                    for l in range(n_sh):
-                        wb = w * basis[r, l]
-                        grad_sub[row, 1 + l * 3] += wb * grad_raw[i, 1]
-                        grad_sub[row, 2 + l * 3] += wb * grad_raw[i, 2]
-                        grad_sub[row, 3 + l * 3] += wb * grad_raw[i, 3]
+        for r in range(offsets.shape[0] - 1):
+            for i in range(offsets[r], offsets[r + 1]):
+                _scatter_sample(grad_raw, inverse, weights, basis, i, r, n_sh, lo, hi, grad_sub)
+
+
+@njit(cache=True, inline="always")
+def _scatter_sample(grad_raw, inverse, weights, basis, i, r, n_sh, lo, hi, grad_sub):
+    """Add sample ``i``'s (on ray ``r``) raw-value gradients into those of its corners' rows in ``lo..hi``."""
+    for c in range(8):
+        row = inverse[i, c]
+        if lo <= row < hi:
+            w = np.float64(weights[i, c])
+            grad_sub[row, 0] += w * grad_raw[i, 0]
+            for l in range(n_sh):
+                wb = w * basis[r, l]
+                grad_sub[row, 1 + l * 3] += wb * grad_raw[i, 1]
+                grad_sub[row, 2 + l * 3] += wb * grad_raw[i, 2]
+                grad_sub[row, 3 + l * 3] += wb * grad_raw[i, 3]
 
 
 class Composite(torch.autograd.Function):
     """Interpolate, shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
 
     Inputs: the step's rows of the field ``sub (U, F)``, each sample's 8 corners as indices into them
-    ``inverse (N, 8)`` with their trilinear ``weights (N, 8)``, each sample's ray ``ray_idx (N,)``, the SH basis
-    of each ray's direction ``(B, n_sh)``, ``offsets (B+1)``, each sample's position ``s (N,)`` along its ray
-    and the length ``delta`` a sample stands for (both in contracted units), and ``background`` ``(3,)`` or
-    one colour per ray ``(B, 3)``.
+    ``inverse (N, 8)`` with their trilinear ``weights (N, 8)``, the SH basis of each ray's direction
+    ``(B, n_sh)``, ``offsets (B+1)`` (ray ``r``'s samples are ``offsets[r]`` to ``offsets[r + 1]``, the ``N``
+    samples all told), each sample's position ``s (N,)`` along its ray and the length ``delta`` a sample
+    stands for (both in contracted units), and ``background`` ``(3,)`` or one colour per ray ``(B, 3)``.
     Outputs: ``rgb (B, 3)`` over the background, the per-ray sum of sample opacities ``(B,)``, the per-ray
     distortion ``(B,)`` and, not differentiable, each sample's compositing weight ``(N,)`` (float32; the
     backward pass reuses them in float64). The gradient is ``sub``'s alone.
@@ -275,8 +281,8 @@ class Composite(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, sub, inverse, weights, ray_idx, basis, offsets, s, delta, density_shift, step_ratio,
-                alpha_max, background):
+    def forward(ctx, sub, inverse, weights, basis, offsets, s, delta, density_shift, step_ratio, alpha_max,
+                background):
         n = offsets.shape[0] - 1
         rgb = torch.empty(n, 3, dtype=torch.float64)
         alpha_sum = torch.empty(n, dtype=torch.float64)
@@ -289,7 +295,7 @@ class Composite(torch.autograd.Function):
                            s.numpy(), delta, density_shift, step_ratio, alpha_max,
                            background.double().expand(n, 3).contiguous().numpy(), rgb.numpy(), alpha_sum.numpy(),
                            dist.numpy(), weight.numpy(), raw.numpy())
-        ctx.save_for_backward(inverse, weights, ray_idx, basis, offsets, s, rgb, weight, raw)
+        ctx.save_for_backward(inverse, weights, basis, offsets, s, rgb, weight, raw)
         ctx.params = (delta, density_shift, step_ratio, alpha_max)
         ctx.sub_shape, ctx.sub_dtype = sub.shape, sub.dtype
         sample_weight = weight.float()
@@ -298,7 +304,7 @@ class Composite(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, grad_rgb, grad_alpha_sum, grad_dist, _grad_weight):
-        inverse, weights, ray_idx, basis, offsets, s, rgb, weight, raw = ctx.saved_tensors
+        inverse, weights, basis, offsets, s, rgb, weight, raw = ctx.saved_tensors
         n = rgb.shape[0]
         grads = [g.double().contiguous() if g is not None else torch.zeros(shape, dtype=torch.float64)
                  for g, shape in ((grad_rgb, (n, 3)), (grad_alpha_sum, (n,)), (grad_dist, (n,)))]
@@ -307,6 +313,6 @@ class Composite(torch.autograd.Function):
         _composite_backward(raw.numpy(), offsets.numpy(), s.numpy(), *ctx.params, rgb.numpy(), weight.numpy(),
                             *(g.numpy() for g in grads), grad_weight, grad_raw)
         grad_sub = torch.zeros(ctx.sub_shape, dtype=ctx.sub_dtype)
-        _corner_backward(grad_raw, inverse.numpy(), weights.numpy(), basis.numpy(), ray_idx.numpy(),
+        _corner_backward(grad_raw, inverse.numpy(), weights.numpy(), basis.numpy(), offsets.numpy(),
                          thread_ranges(ctx.sub_shape[0]), grad_sub.numpy())
-        return grad_sub, *(None,) * 11
+        return grad_sub, *(None,) * 10
