@@ -7,7 +7,10 @@ from dataclasses import asdict, dataclass, fields, replace
 
 from ..errors import InvalidArgument
 
-__all__ = ["LATER_SETTINGS", "FieldConfig"]
+__all__ = ["LATER_SETTINGS", "SH_DEGREES", "FieldConfig"]
+
+#: The spherical-harmonics degrees a field's colour can have (:func:`pytest_n2r.field.grid.n_sh_coefficients`).
+SH_DEGREES = (0, 1, 2)
 
 
 def _is_number(value: object, kind: type) -> bool:
@@ -41,7 +44,7 @@ class FieldConfig:
         time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability
         but cost 0.28 dB held out (0.26 dB at twice the time); the fox (5.1 pixels a voxel) keeps 224³
         (docs/scene-field-log.md, "A grid that follows the capture's detail").
-        ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0 or 1.
+        ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2.
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
     Optimizer (Adam on the rows a step touches)
@@ -126,8 +129,8 @@ class FieldConfig:
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected an integer >= 1")
         if not isinstance(self.random_background, bool):
             raise InvalidArgument(f"FieldConfig.random_background={self.random_background!r}: expected True or False")
-        if self.sh_degree not in (0, 1):
-            raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0 or 1")
+        if self.sh_degree not in SH_DEGREES:
+            raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0, 1 or 2")
 
     def _check_types(self) -> None:
         """Every setting has its declared kind (a string, None or a bool where a number belongs is named)."""

@@ -5,7 +5,7 @@ Values live on grid vertices (trilinear interpolation between them):
 - column 0: raw density; the density is ``σ = softplus(raw + density_shift)`` per voxel (a sample spanning
   ``step_ratio`` voxels has opacity ``1 - exp(-σ·step_ratio)``), so it is rescaled when the grid is refined;
 - columns 1…: colour as real spherical harmonics of degree ``sh_degree`` (0: view-independent, 1: four
-  coefficients per channel), stored ``[l·3 + channel]``; the colour is ``sigmoid(Σ_l Y_l(dir)·k_l)``.
+  coefficients per channel, 2: nine), stored ``[l·3 + channel]``; the colour is ``sigmoid(Σ_l Y_l(dir)·k_l)``.
 
 An occupancy grid over the ``(resolution - 1)³`` cells marks where the field has something; rays take
 samples only in occupied cells, so only the vertices of occupied cells are ever read.
@@ -29,6 +29,7 @@ import torch.nn.functional as F
 
 from .._validation import as_unit_rgb
 from ..errors import InvalidArgument, SceneFileError
+from .config import SH_DEGREES
 from .query import trilinear
 from .space import SceneSpace
 
@@ -42,9 +43,13 @@ FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
 
 
 def n_sh_coefficients(sh_degree: int) -> int:
-    """Spherical-harmonics coefficients per colour channel of ``sh_degree`` (0 or 1)."""
-    if sh_degree not in (0, 1):
-        raise InvalidArgument(f"sh_degree={sh_degree!r}: expected 0 (view-independent colour) or 1")
+    """Spherical-harmonics coefficients per colour channel of ``sh_degree`` (0, 1 or 2).
+
+    >>> [n_sh_coefficients(d) for d in SH_DEGREES]
+    [1, 4, 9]
+    """
+    if sh_degree not in SH_DEGREES or isinstance(sh_degree, bool):
+        raise InvalidArgument(f"sh_degree={sh_degree!r}: expected 0 (view-independent colour), 1 or 2")
     return (sh_degree + 1) ** 2
 
 

@@ -22,15 +22,17 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = [
-    "BLOCK", "SH_C0", "SH_C1", "block_occupancy", "lattice_setup", "contract_xyz", "grid_coords_xyz", "cell_of",
-    "block_exit", "march_packed", "sample_alpha", "thread_ranges", "vertex_row",
+    "BLOCK", "SH_C0", "SH_C1", "SH_C2", "sh_terms", "block_occupancy", "lattice_setup", "contract_xyz",
+    "grid_coords_xyz", "cell_of", "block_exit", "march_packed", "sample_alpha", "thread_ranges", "vertex_row",
 ]
 
 #: Side of an empty-space-skipping block, in cells.
 BLOCK = 8
-#: Real spherical-harmonics constants of degree 0 and 1.
+#: Real spherical-harmonics constants of degree 0, 1 and 2 (the signs of the 3DGS reference code:
+#: :mod:`pytest_n2r.splats.sh` evaluates the same basis for splats).
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
+SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 
 
 def block_occupancy(occupancy: np.ndarray) -> np.ndarray:
@@ -47,6 +49,18 @@ def thread_ranges(n: int) -> np.ndarray:
     one range per item, at least one range): thread ``g`` takes ``bounds[g]:bounds[g + 1]``."""
     groups = max(1, min(numba.get_num_threads(), n))
     return np.linspace(0, n, groups + 1).round().astype(np.int64)
+
+
+@njit(cache=True, inline="always")
+def sh_terms(x, y, z):
+    """The SH basis after the constant ``SH_C0`` at the unit direction ``(x, y, z)`` (world axes): degree 1's
+    three values, then degree 2's five (coefficient ``l`` of a field's colour is basis value ``l - 1`` here).
+
+    >>> [round(b, 6) for b in sh_terms(0.0, 0.0, 1.0)]
+    [-0.0, 0.488603, -0.0, 0.0, -0.0, 0.630783, -0.0, 0.0]
+    """
+    return (-SH_C1 * y, SH_C1 * z, -SH_C1 * x, SH_C2[0] * x * y, SH_C2[1] * y * z,
+            SH_C2[2] * (2.0 * z * z - x * x - y * y), SH_C2[3] * x * z, SH_C2[4] * (x * x - y * y))
 
 
 @njit(cache=True, inline="always")

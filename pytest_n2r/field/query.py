@@ -9,7 +9,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-from .kernels import SH_C0, SH_C1
+from .kernels import SH_C0, SH_C1, SH_C2
 
 __all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "distortion", "ALPHA_MAX"]
 
@@ -42,7 +42,11 @@ def sh_basis(directions: torch.Tensor, sh_degree: int) -> torch.Tensor:
     if sh_degree == 0:
         return c0
     x, y, z = directions.unbind(-1)
-    return torch.cat([c0, torch.stack([-SH_C1 * y, SH_C1 * z, -SH_C1 * x], dim=-1)], dim=-1)
+    terms = [-SH_C1 * y, SH_C1 * z, -SH_C1 * x]
+    if sh_degree == 2:
+        terms += [SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2.0 * z * z - x * x - y * y), SH_C2[3] * x * z,
+                  SH_C2[4] * (x * x - y * y)]
+    return torch.cat([c0, torch.stack(terms, dim=-1)], dim=-1)
 
 
 def interpolate(values: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:

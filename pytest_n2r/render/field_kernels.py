@@ -11,8 +11,9 @@ Colour is the costly part of a sample (docs/performance-log.md, "Rendering"), an
 - **colour logits baked per frame** (:func:`bake_logits`): every stored vertex's colour logits for the direction
   from the camera to that vertex, so a sample interpolates 3 values instead of ``3·n_sh`` SH coefficients. A
   sample then sees its corners' colours from the directions of the corners, not of its ray: they differ by at
-  most the angle a cell subtends from the camera (the logit error is at most ``SH_C1·θ·‖c₁‖``, ``c₁`` a
-  corner's degree-1 coefficients); a degree-0 field's colours do not depend on direction and stay exact.
+  most the angle θ a cell subtends from the camera (the logit error is at most ``θ·(SH_C1·‖c₁‖ + SH_C2[0]·‖c₂‖)``,
+  ``c₁``, ``c₂`` a corner's degree-1 and degree-2 coefficients: the fastest each degree's basis turns with the
+  direction); a degree-0 field's colours do not depend on direction and stay exact.
 - **coarser samples behind the surface** (``tail``): each time the ray's transmittance falls below the next of
   the ``tail`` thresholds, the ray's samples stand for twice as many lattice steps as before (one sample at the
   middle of the steps it stands for, its opacity over their length; never across the cube's face or the
@@ -36,11 +37,11 @@ from numba import njit
 from ..field.kernels import (
     BLOCK,
     SH_C0,
-    SH_C1,
     cell_of,
     grid_coords_xyz,
     lattice_setup,
     sample_alpha,
+    sh_terms,
 )
 from .cell_bits import cell_occupied
 
@@ -87,8 +88,7 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        # degree-1 basis for this ray's direction (degree 0 is the constant SH_C0)
-        b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
+        basis = sh_terms(dx / dn, dy / dn, dz / dn)  # this ray's SH basis after the constant SH_C0
         baked = logits.shape[0] > 0
         carried = 0.0  # weight of the samples not coloured yet
         last_r, last_g, last_b = background[0], background[1], background[2]
@@ -167,10 +167,10 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
                 lr = SH_C0 * _at(values, 1, vs, ws)
                 lg = SH_C0 * _at(values, 2, vs, ws)
                 lb = SH_C0 * _at(values, 3, vs, ws)
-                if sh_degree == 1:
-                    lr += b1 * _at(values, 4, vs, ws) + b2 * _at(values, 7, vs, ws) + b3 * _at(values, 10, vs, ws)
-                    lg += b1 * _at(values, 5, vs, ws) + b2 * _at(values, 8, vs, ws) + b3 * _at(values, 11, vs, ws)
-                    lb += b1 * _at(values, 6, vs, ws) + b2 * _at(values, 9, vs, ws) + b3 * _at(values, 12, vs, ws)
+                for l in range((sh_degree + 1) * (sh_degree + 1) - 1):
+                    lr += basis[l] * _at(values, 4 + 3 * l, vs, ws)
+                    lg += basis[l] * _at(values, 5 + 3 * l, vs, ws)
+                    lb += basis[l] * _at(values, 6 + 3 * l, vs, ws)
             last_r = 1.0 / (1.0 + math.exp(-lr))
             last_g = 1.0 / (1.0 + math.exp(-lg))
             last_b = 1.0 / (1.0 + math.exp(-lb))
@@ -268,16 +268,17 @@ def bake_logits(first, last, values, position, outer, origin, sh_degree, out):
     its contracted position). A degree-0 field's logits take no direction (``position`` and ``outer`` unread)."""
     for r in range(first, last):
         lr, lg, lb = SH_C0 * values[r, 1], SH_C0 * values[r, 2], SH_C0 * values[r, 3]
-        if sh_degree == 1:
+        if sh_degree > 0:
             ux, uy, uz = position[r, 0], position[r, 1], position[r, 2]
             if not outer[r]:
                 ux, uy, uz = ux - origin[0], uy - origin[1], uz - origin[2]
             n = math.sqrt(ux * ux + uy * uy + uz * uz)
             if n > 0.0:  # a vertex at the camera centre keeps its direction-free colour
-                b1, b2, b3 = -SH_C1 * uy / n, SH_C1 * uz / n, -SH_C1 * ux / n
-                lr += b1 * values[r, 4] + b2 * values[r, 7] + b3 * values[r, 10]
-                lg += b1 * values[r, 5] + b2 * values[r, 8] + b3 * values[r, 11]
-                lb += b1 * values[r, 6] + b2 * values[r, 9] + b3 * values[r, 12]
+                basis = sh_terms(ux / n, uy / n, uz / n)
+                for l in range((sh_degree + 1) * (sh_degree + 1) - 1):
+                    lr += basis[l] * values[r, 4 + 3 * l]
+                    lg += basis[l] * values[r, 5 + 3 * l]
+                    lb += basis[l] * values[r, 6 + 3 * l]
         out[r, 0], out[r, 1], out[r, 2] = lr, lg, lb
 
 

@@ -82,9 +82,9 @@ class RenderSettings:
     - ``adaptive_stride``: the spacing of the coarsest grid in pixels (a power of two), ``None``: by image
       size, the largest power of two not above ``min(width, height) / 135`` (2 at 480×270, 8 at 1920×1080);
     - ``colour_direction`` (compiled backend): ``"vertex"`` bakes every vertex's colour for the direction from
-      the camera to it once a frame, so a sample interpolates 3 colour logits instead of 12 SH coefficients;
-      ``"ray"`` takes each sample's ray direction (exact, as the torch reference). The two differ by the angle
-      a cell subtends from the camera: on the fox 65.8 dB apart, 0.000 dB against the photos;
+      the camera to it once a frame, so a sample interpolates 3 colour logits instead of 12 SH coefficients (27
+      at degree 2); ``"ray"`` takes each sample's ray direction (exact, as the torch reference). The two differ
+      by the angle a cell subtends from the camera: on the fox 65.8 dB apart, 0.000 dB against the photos;
     - ``min_weight`` (compiled backend): a sample is coloured only once its compositing weight, plus the weight
       carried from samples not coloured before it, reaches this; the carried weight takes the next colour, so
       each channel is off by at most the summed weight of the ray's samples lighter than this (0: colour every

@@ -8,6 +8,7 @@ import zipfile
 import zlib
 
 from ..errors import SceneFileError
+from ..field.config import SH_DEGREES
 from ..field.grid import SceneField, n_sh_coefficients
 from . import schema
 from .archive import StoredMember
@@ -27,8 +28,8 @@ def field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
     if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.resolution={res!r}; expected an integer in "
                              "4..2048 (grid vertices per axis)")
-    if sh_degree not in (0, 1) or isinstance(sh_degree, bool):
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0 or 1")
+    if sh_degree not in SH_DEGREES or isinstance(sh_degree, bool):
+        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0, 1 or 2")
     width = 1 + 3 * n_sh_coefficients(sh_degree)
     where = f"{source}: {schema.FIELD_FILE}"
     try:

@@ -31,7 +31,7 @@ from pytest_n2r.field.config import LATER_SETTINGS, FieldConfig
     ({"batch_rays": 0}, r"FieldConfig\.batch_rays=0: expected an integer >= 1"),
     ({"prune_every": 2.5}, r"FieldConfig\.prune_every=2\.5"),
     ({"prune_after": 0}, r"FieldConfig\.prune_after=0: expected an integer >= 1"),
-    ({"sh_degree": 2}, r"FieldConfig\.sh_degree=2: expected 0 or 1"),
+    ({"sh_degree": 3}, r"FieldConfig\.sh_degree=3: expected 0, 1 or 2"),
 ])
 def test_bad_values_are_refused_naming_the_setting(changes, message):
     with pytest.raises(InvalidArgument, match=message):

@@ -115,7 +115,7 @@ def test_row_vertices_inverts_vertex_rows(sparse):
         f"{int((rows != torch.arange(rows.numel())).nonzero()[0])}")
 
 
-@pytest.mark.parametrize("sh_degree", [0, 1])
+@pytest.mark.parametrize("sh_degree", [0, 1, 2])
 def test_tensors_round_trip_to_the_quantized_field(sh_degree):
     field = random_field(resolution=12, sh_degree=sh_degree, occupied=0.3, seed=9)
     quantized = field.quantized()
@@ -209,7 +209,7 @@ def _broken(change: str) -> tuple[dict, dict]:
     ("nan", r"tensor 'vertex_values' holds NaN or Inf"),
     ("index outside", r"tensor 'vertex_index' points outside the 8³ grid"),
     ("index not the used vertices", r"'vertex_index' does not list exactly the vertices of occupied cells"),
-    ("sh_degree", r"sh_degree=3: expected 0 \(view-independent colour\) or 1"),
+    ("sh_degree", r"sh_degree=3: expected 0 \(view-independent colour\), 1 or 2"),
     ("metadata", r"field metadata is incomplete or invalid \('density_shift'\)"),
     ("background", r"field background \[0.5, 2.0, 0.5\] is not three values in \[0, 1\]"),
     ("no background", r"field metadata is incomplete or invalid \('background'\)"),
@@ -231,5 +231,5 @@ def test_inconsistent_field_arrays_are_named(rows, width, occupancy, message):
     with pytest.raises(InvalidArgument, match=r"rows is torch.int64 \(64,\); expected int32 \(64,\)"):
         SceneField(SPACE, torch.zeros(10, 4), torch.ones((3, 3, 3), dtype=torch.bool), 0.0, 0,
                    rows=torch.zeros(64, dtype=torch.int64))
-    with pytest.raises(InvalidArgument, match=r"sh_degree=2: expected 0"):
-        n_sh_coefficients(2)
+    with pytest.raises(InvalidArgument, match=r"sh_degree=3: expected 0"):
+        n_sh_coefficients(3)

@@ -81,7 +81,7 @@ CAPPED = {"capped_sample": 5, "one_sample_each": 2, "long_ray": 150}
 
 
 @pytest.mark.parametrize("per_ray_background", [False, True], ids=["one_background", "background_per_ray"])
-@pytest.mark.parametrize("sh_degree", [0, 1])
+@pytest.mark.parametrize("sh_degree", [0, 1, 2])
 @pytest.mark.parametrize("case", list(CASES))
 def test_composite_forward_and_gradient_equal_autograd_through_the_reference(case, sh_degree, per_ray_background):
     sub, inverse, weights, basis, ray_idx, offsets, s = samples(CASES[case], sh_degree, seed=len(case),

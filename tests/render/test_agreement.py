@@ -23,7 +23,8 @@ from .strategies import cameras, poses
 
 OUTPUTS = ("rgb", "depth", "opacity")
 #: One random field per SH degree for the Hypothesis test (built once).
-FIELDS = {0: random_field(sh_degree=0, occupied=0.2, seed=3), 1: random_field(sh_degree=1)}
+FIELDS = {0: random_field(sh_degree=0, occupied=0.2, seed=3), 1: random_field(sh_degree=1),
+          2: random_field(sh_degree=2, seed=5)}
 EXACT = RenderSettings(t_stop=0.0, tail=(), min_alpha=0.0, colour_direction="ray", min_weight=0.0)
 
 
@@ -53,7 +54,7 @@ def assert_same_render(compiled: dict, reference: dict, what: str, rtol: float =
 RTOL = {name: 1e-4 for name in POSES} | {"far_away": 3e-3}
 
 
-@pytest.mark.parametrize("sh_degree", [0, 1])
+@pytest.mark.parametrize("sh_degree", [0, 1, 2])
 @pytest.mark.parametrize("pose_name", list(POSES))
 def test_compiled_renderer_matches_the_torch_reference(pose_name, sh_degree):
     field = random_field(sh_degree=sh_degree, seed=sh_degree)
@@ -75,7 +76,7 @@ def test_the_compiled_renderer_skips_empty_blocks_without_losing_samples(pose_na
 
 
 @settings(max_examples=30, deadline=None)
-@given(eye_target=poses(max_distance=30.0), camera=cameras(max_side=8), sh_degree=st.sampled_from([0, 1]))
+@given(eye_target=poses(max_distance=30.0), camera=cameras(max_side=8), sh_degree=st.sampled_from([0, 1, 2]))
 def test_the_backends_agree_from_any_pose_within_30_radii(eye_target, camera, sh_degree):
     field = FIELDS[sh_degree]
     compiled, reference = render_both(field, pose(*eye_target), camera)

@@ -392,7 +392,7 @@ SCENE_FILE_CASES = [
      r"normalization\.center=\[1e\+300, 0, 0\]; expected three numbers within 10000 reference lengths"),
     ("grid resolution 5000", {"edit": _set("field.resolution", 5000)},
      r"field\.resolution=5000; expected an integer in 4\.\.2048"),
-    ("SH degree 3", {"edit": _set("field.sh_degree", 3)}, r"field\.sh_degree=3; expected 0 or 1"),
+    ("SH degree 3", {"edit": _set("field.sh_degree", 3)}, r"field\.sh_degree=3; expected 0, 1 or 2"),
     ("a config with seed 'x'", {"edit": _set("config.seed", "x")},
      r"'config' is not a valid FieldConfig \(FieldConfig\.seed='x'"),
     ("scene.json nested 100 000 deep", {"replace": {SCENE_JSON: b"[" * 100_000 + b"]" * 100_000}},

@@ -13,9 +13,12 @@ from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.grid import SceneField
+from pytest_n2r.field.query import sh_basis
 from pytest_n2r.field.space import SceneSpace
 from pytest_n2r.scene.splat_from_field import field_to_gaussians, uncontract
 from pytest_n2r.splats.sh import view_colours
+
+from ..render.splat_reference import sh_basis as splat_sh_basis
 
 SPACE = SceneSpace((1.0, -2.0, 0.5), 3.0, shell=0.25)
 RES = 6  # 5³ cells of 2.5 / 5 = 0.5 normalized units; cell i spans [-1.25 + 0.5 i, -0.75 + 0.5 i]
@@ -29,7 +32,7 @@ def one_cell_field(cell: tuple[int, int, int], raw_density: float, coeff: np.nda
     occupancy[cell] = True
     row = np.concatenate([[raw_density], np.asarray(coeff, dtype=np.float64).reshape(-1)])  # [l·3 + channel]
     values = torch.tensor(np.tile(row, (RES ** 3, 1)), dtype=torch.float32)
-    return SceneField(SPACE, values, occupancy, shift, sh_degree=0 if len(coeff) == 1 else 1)
+    return SceneField(SPACE, values, occupancy, shift, sh_degree={1: 0, 4: 1, 9: 2}[len(coeff)])
 
 
 @settings(max_examples=50, deadline=None)
@@ -59,18 +62,31 @@ def test_a_cell_inside_the_cube_becomes_a_round_gaussian_of_its_density_and_colo
     np.testing.assert_allclose(colour, 1 / (1 + np.exp(-0.28209479177387814 * coeff[0])), rtol=1e-6)
 
 
-def test_degree_one_colour_is_the_fields_to_first_order():
+@pytest.mark.parametrize("degree", [0, 1, 2])
+def test_the_fields_sh_basis_is_the_splats(degree):
+    """A field and a splat scene evaluate one basis (the 3DGS reference code's constants and signs), so a field's
+    coefficients carry over to splats unchanged but for the colour's sigmoid."""
+    d = np.random.default_rng(degree).normal(size=(50, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    field_basis = sh_basis(torch.from_numpy(d), degree).numpy()
+    np.testing.assert_allclose(field_basis, splat_sh_basis(d, degree), rtol=0, atol=1e-15,
+                               err_msg=f"the field's SH basis of degree {degree} is not the splats'")
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_view_dependent_colour_is_the_fields_to_first_order(degree):
     """The field's colour is sigmoid(Σ Y_l k_l); the splat's is linear in the same basis: they agree at every
-    direction to the square of the degree-1 terms."""
-    coeff = np.array([[0.5, -1.0, 0.2], [0.02, -0.03, 0.01], [0.01, 0.02, -0.02], [-0.03, 0.01, 0.02]])
+    direction to the square of the view-dependent terms."""
+    coeff = np.array([[0.5, -1.0, 0.2], [0.02, -0.03, 0.01], [0.01, 0.02, -0.02], [-0.03, 0.01, 0.02],
+                      [0.01, -0.02, 0.03], [-0.02, 0.01, 0.01], [0.03, 0.02, -0.01], [0.01, 0.01, 0.02],
+                      [-0.01, 0.03, -0.02]])[:(degree + 1) ** 2]
     g = field_to_gaussians(one_cell_field((2, 2, 2), 3.0, coeff))
     d = np.random.default_rng(0).normal(size=(20, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    c0, c1 = 0.28209479177387814, 0.4886025119029199
-    basis = np.stack([np.full(20, c0), -c1 * d[:, 1], c1 * d[:, 2], -c1 * d[:, 0]], axis=1)
-    field_colour = 1 / (1 + np.exp(-(basis @ coeff)))
+    field_colour = 1 / (1 + np.exp(-(splat_sh_basis(d, degree) @ coeff)))
     splat_colour = view_colours(np.repeat(g.sh.astype(np.float64), 20, axis=0), d)
-    assert np.abs(splat_colour - field_colour).max() < 2e-3, "degree-1 colour is not the first-order expansion"
+    assert np.abs(splat_colour - field_colour).max() < 2e-3, (
+        f"degree-{degree} colour is not the first-order expansion: off by {np.abs(splat_colour - field_colour).max()}")
 
 
 def test_a_cell_in_the_shell_is_stretched_to_its_world_extent():
