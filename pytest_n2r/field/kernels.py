@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit, prange
 
 __all__ = [
-    "BLOCK", "SH_C0", "SH_C1", "SH_C2", "sh_terms", "block_occupancy", "lattice_setup", "contract_xyz",
+    "BLOCK", "SH_C0", "SH_C1", "SH_C2", "sh2_terms", "block_occupancy", "lattice_setup", "contract_xyz",
     "grid_coords_xyz", "cell_of", "block_exit", "march_packed", "sample_alpha", "thread_ranges", "vertex_row",
 ]
 
@@ -52,15 +52,15 @@ def thread_ranges(n: int) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def sh_terms(x, y, z):
-    """The SH basis after the constant ``SH_C0`` at the unit direction ``(x, y, z)`` (world axes): degree 1's
-    three values, then degree 2's five (coefficient ``l`` of a field's colour is basis value ``l - 1`` here).
+def sh2_terms(x, y, z):
+    """The five degree-2 SH basis values at the unit direction ``(x, y, z)`` (world axes): a field's colour
+    coefficients 4 to 8 (degree 0's is ``SH_C0``, degree 1's ``SH_C1·(-y, z, -x)``).
 
-    >>> [round(b, 6) for b in sh_terms(0.0, 0.0, 1.0)]
-    [-0.0, 0.488603, -0.0, 0.0, -0.0, 0.630783, -0.0, 0.0]
+    >>> [round(b, 6) for b in sh2_terms(0.0, 0.0, 1.0)]
+    [0.0, -0.0, 0.630783, -0.0, 0.0]
     """
-    return (-SH_C1 * y, SH_C1 * z, -SH_C1 * x, SH_C2[0] * x * y, SH_C2[1] * y * z,
-            SH_C2[2] * (2.0 * z * z - x * x - y * y), SH_C2[3] * x * z, SH_C2[4] * (x * x - y * y))
+    return (SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2.0 * z * z - x * x - y * y), SH_C2[3] * x * z,
+            SH_C2[4] * (x * x - y * y))
 
 
 @njit(cache=True, inline="always")

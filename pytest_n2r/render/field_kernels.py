@@ -37,11 +37,12 @@ from numba import njit
 from ..field.kernels import (
     BLOCK,
     SH_C0,
+    SH_C1,
     cell_of,
     grid_coords_xyz,
     lattice_setup,
     sample_alpha,
-    sh_terms,
+    sh2_terms,
 )
 from .cell_bits import cell_occupied
 
@@ -88,7 +89,9 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
         dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        basis = sh_terms(dx / dn, dy / dn, dz / dn)  # this ray's SH basis after the constant SH_C0
+        # degree-1 and degree-2 basis for this ray's direction (degree 0 is the constant SH_C0)
+        b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
+        q4, q5, q6, q7, q8 = sh2_terms(dx / dn, dy / dn, dz / dn)
         baked = logits.shape[0] > 0
         carried = 0.0  # weight of the samples not coloured yet
         last_r, last_g, last_b = background[0], background[1], background[2]
@@ -167,10 +170,17 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
                 lr = SH_C0 * _at(values, 1, vs, ws)
                 lg = SH_C0 * _at(values, 2, vs, ws)
                 lb = SH_C0 * _at(values, 3, vs, ws)
-                for l in range((sh_degree + 1) * (sh_degree + 1) - 1):
-                    lr += basis[l] * _at(values, 4 + 3 * l, vs, ws)
-                    lg += basis[l] * _at(values, 5 + 3 * l, vs, ws)
-                    lb += basis[l] * _at(values, 6 + 3 * l, vs, ws)
+                if sh_degree >= 1:
+                    lr += b1 * _at(values, 4, vs, ws) + b2 * _at(values, 7, vs, ws) + b3 * _at(values, 10, vs, ws)
+                    lg += b1 * _at(values, 5, vs, ws) + b2 * _at(values, 8, vs, ws) + b3 * _at(values, 11, vs, ws)
+                    lb += b1 * _at(values, 6, vs, ws) + b2 * _at(values, 9, vs, ws) + b3 * _at(values, 12, vs, ws)
+                if sh_degree == 2:
+                    lr += (q4 * _at(values, 13, vs, ws) + q5 * _at(values, 16, vs, ws) + q6 * _at(values, 19, vs, ws)
+                           + q7 * _at(values, 22, vs, ws) + q8 * _at(values, 25, vs, ws))
+                    lg += (q4 * _at(values, 14, vs, ws) + q5 * _at(values, 17, vs, ws) + q6 * _at(values, 20, vs, ws)
+                           + q7 * _at(values, 23, vs, ws) + q8 * _at(values, 26, vs, ws))
+                    lb += (q4 * _at(values, 15, vs, ws) + q5 * _at(values, 18, vs, ws) + q6 * _at(values, 21, vs, ws)
+                           + q7 * _at(values, 24, vs, ws) + q8 * _at(values, 27, vs, ws))
             last_r = 1.0 / (1.0 + math.exp(-lr))
             last_g = 1.0 / (1.0 + math.exp(-lg))
             last_b = 1.0 / (1.0 + math.exp(-lb))
@@ -274,11 +284,18 @@ def bake_logits(first, last, values, position, outer, origin, sh_degree, out):
                 ux, uy, uz = ux - origin[0], uy - origin[1], uz - origin[2]
             n = math.sqrt(ux * ux + uy * uy + uz * uz)
             if n > 0.0:  # a vertex at the camera centre keeps its direction-free colour
-                basis = sh_terms(ux / n, uy / n, uz / n)
-                for l in range((sh_degree + 1) * (sh_degree + 1) - 1):
-                    lr += basis[l] * values[r, 4 + 3 * l]
-                    lg += basis[l] * values[r, 5 + 3 * l]
-                    lb += basis[l] * values[r, 6 + 3 * l]
+                b1, b2, b3 = -SH_C1 * uy / n, SH_C1 * uz / n, -SH_C1 * ux / n
+                lr += b1 * values[r, 4] + b2 * values[r, 7] + b3 * values[r, 10]
+                lg += b1 * values[r, 5] + b2 * values[r, 8] + b3 * values[r, 11]
+                lb += b1 * values[r, 6] + b2 * values[r, 9] + b3 * values[r, 12]
+                if sh_degree == 2:
+                    q4, q5, q6, q7, q8 = sh2_terms(ux / n, uy / n, uz / n)
+                    lr += (q4 * values[r, 13] + q5 * values[r, 16] + q6 * values[r, 19] + q7 * values[r, 22]
+                           + q8 * values[r, 25])
+                    lg += (q4 * values[r, 14] + q5 * values[r, 17] + q6 * values[r, 20] + q7 * values[r, 23]
+                           + q8 * values[r, 26])
+                    lb += (q4 * values[r, 15] + q5 * values[r, 18] + q6 * values[r, 21] + q7 * values[r, 24]
+                           + q8 * values[r, 27])
         out[r, 0], out[r, 1], out[r, 2] = lr, lg, lb
 
 

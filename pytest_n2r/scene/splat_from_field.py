@@ -9,8 +9,8 @@ Each occupied cell of the field's grid (:class:`~pytest_n2r.field.grid.SceneFiel
   stretched along the axes to match: the contraction's shear is not kept); no rotation;
 - **opacity**: ``1 - exp(-σ · path)``, the opacity of ``path`` voxels of the cell's density ``σ`` (per
   voxel; the density at the centre, from the mean of the 8 corners' raw values);
-- **colour**: the field's colour ``sigmoid(Σ Y_l k_l)`` at the centre, as splat SH of the same degree (0 or
-  1, the same real SH basis): the DC term gives ``sigmoid(C0 k_0)`` exactly, the degree-1 terms are the
+- **colour**: the field's colour ``sigmoid(Σ Y_l k_l)`` at the centre, as splat SH of the same degree (0, 1
+  or 2, the same real SH basis): the DC term gives ``sigmoid(C0 k_0)`` exactly, the view-dependent terms are the
   sigmoid's first-order expansion around it.
 
 It is a conversion, not a fit: a field renders smooth trilinear densities along rays, the splats render

@@ -44,14 +44,16 @@ def test_colouring_only_weighty_samples_stays_within_the_light_samples_weight(po
     assert error.max() >= 1 and bound.max() > 0.01, "no pixel changed: the bound was not put to the test"
 
 
-def test_baked_vertex_colours_match_ray_colours_where_a_cell_subtends_no_angle():
+@pytest.mark.parametrize("sh_degree", [1, 2])
+def test_baked_vertex_colours_match_ray_colours_where_a_cell_subtends_no_angle(sh_degree):
     """From a thousand radii away (telephoto) the direction to a vertex is the ray's: within one level."""
-    field = random_field(resolution=16, sh_degree=1, seed=2)
+    field = random_field(resolution=16, sh_degree=sh_degree, seed=2)
     c2w, camera = named_pose("far_away"), camera_for("far_away")
     exact = FieldRenderer(field, EXACT).render(c2w, camera, ("rgb",))["rgb"].astype(np.int16)
     baked = FieldRenderer(field, EXACT.replace(colour_direction="vertex")).render(c2w, camera, ("rgb",))["rgb"]
     diff = np.abs(baked.astype(np.int16) - exact)
-    assert diff.max() <= 1, f"baked colours differ by up to {diff.max()} levels from a thousand radii away"
+    assert diff.max() <= 1, (f"sh_degree={sh_degree}: baked colours differ by up to {diff.max()} levels from a "
+                             "thousand radii away")
 
 
 @pytest.mark.parametrize("pose_name", ["inside", "in_shell"])
@@ -97,10 +99,10 @@ def test_a_frame_bakes_each_vertex_from_its_uncontracted_position(sparse):
     np.testing.assert_array_equal(position[outer], lattice[outer], err_msg="an outer vertex's direction moved")
 
 
-@pytest.mark.parametrize("sh_degree", [0, 1])
+@pytest.mark.parametrize("sh_degree", [0, 1, 2])
 def test_a_renderer_kept_across_frames_renders_what_a_fresh_one_does(sh_degree):
     """A degree-0 field's logits are baked on the first frame and kept (they do not depend on the camera); a
-    degree-1 field's are baked for each frame. Either way frame after frame from one renderer matches, to the bit,
+    view-dependent field's are baked for each frame. Either way frame after frame from one renderer matches, to the bit,
     a fresh renderer for each pose."""
     field = random_field(resolution=16, sh_degree=sh_degree, seed=8)
     settings = RenderSettings(backend="compiled")

@@ -24,11 +24,11 @@ TINY_CONFIG = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,), batch_ra
 TINY_STEPS = 30
 
 
-def random_field(resolution: int = 12, seed: int = 0) -> SceneField:
+def random_field(resolution: int = 12, seed: int = 0, sh_degree: int = 1) -> SceneField:
     """A field with random densities and colours whose occupancy leaves out about a third of the cells."""
     generator = torch.Generator().manual_seed(seed)
     space = SceneSpace(center=(0.1, -0.2, 0.3), radius=2.5, shell=0.25)
-    field = SceneField.empty(space, resolution, sh_degree=1, alpha=0.05, step_ratio=0.5)
+    field = SceneField.empty(space, resolution, sh_degree=sh_degree, alpha=0.05, step_ratio=0.5)
     field.values.copy_(torch.randn(field.values.shape, generator=generator))
     field.occupancy &= torch.rand(field.occupancy.shape, generator=generator) > 0.3
     return field

@@ -33,6 +33,26 @@ def test_load_scene_gives_the_views_photos_scale_and_report(scene_path):
     assert all(v.image is None for v in load_scene(scene_path, device="cpu", images=False).views)
 
 
+@pytest.mark.parametrize("sh_degree", [0, 2])
+def test_a_scene_file_keeps_the_fields_sh_degree(tmp_path, sh_degree):
+    """Every degree a field can have goes through a scene file: read back, the field has that degree, its colour
+    columns, and renders as the field before saving does once its values are rounded to the file's float16."""
+    from pytest_n2r.field.config import FieldConfig
+
+    field = random_field(sh_degree=sh_degree, seed=4)
+    path = save_scene(tmp_path / "degree.n2r", field, FieldConfig(sh_degree=sh_degree), tiny_views(), {},
+                      reference_length=3.0)
+    loaded = load_scene(path, device="cpu").field
+    assert loaded.sh_degree == sh_degree and loaded.values.shape[1] == 1 + 3 * (sh_degree + 1) ** 2, (
+        f"sh_degree={sh_degree}: read back as degree {loaded.sh_degree} with {loaded.values.shape[1]} columns")
+    view = tiny_views()[1]
+    want = FieldRenderer(loaded, RenderSettings()).render(view.c2w, view.camera, ("rgb",))["rgb"]
+    field.values.copy_(field.values.half().float())
+    got = FieldRenderer(field, RenderSettings()).render(view.c2w, view.camera, ("rgb",))["rgb"]
+    diff = np.abs(got.astype(int) - want).max()
+    assert diff <= 1, f"sh_degree={sh_degree}: the scene read back renders up to {diff} levels off the field saved"
+
+
 def test_the_top_level_names_are_the_scene_package_ones():
     assert (pytest_n2r.load_scene, pytest_n2r.save_scene, pytest_n2r.FieldScene) == (load_scene, save_scene, FieldScene)
 
