@@ -13,7 +13,8 @@ Colour is the costly part of a sample (docs/performance-log.md, "Rendering"), an
   sample then sees its corners' colours from the directions of the corners, not of its ray: they differ by at
   most the angle θ a cell subtends from the camera (the logit error is at most ``θ·(SH_C1·‖c₁‖ + SH_C2[0]·‖c₂‖)``,
   ``c₁``, ``c₂`` a corner's degree-1 and degree-2 coefficients: the fastest each degree's basis turns with the
-  direction); a degree-0 field's colours do not depend on direction and stay exact.
+  direction; the contracted shell's outermost cells reach infinity, so from a camera outside the scene they
+  subtend large angles); a degree-0 field's colours do not depend on direction and stay exact.
 - **coarser samples behind the surface** (``tail``): each time the ray's transmittance falls below the next of
   the ``tail`` thresholds, the ray's samples stand for twice as many lattice steps as before (one sample at the
   middle of the steps it stands for, its opacity over their length; never across the cube's face or the

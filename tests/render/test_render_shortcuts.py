@@ -44,16 +44,23 @@ def test_colouring_only_weighty_samples_stays_within_the_light_samples_weight(po
     assert error.max() >= 1 and bound.max() > 0.01, "no pixel changed: the bound was not put to the test"
 
 
+@pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("sh_degree", [1, 2])
-def test_baked_vertex_colours_match_ray_colours_where_a_cell_subtends_no_angle(sh_degree):
-    """From a thousand radii away (telephoto) the direction to a vertex is the ray's: within one level."""
-    field = random_field(resolution=16, sh_degree=sh_degree, seed=2)
+def test_baked_vertex_colours_match_ray_colours_where_a_cell_subtends_no_angle(sh_degree, seed):
+    """From a thousand radii away (telephoto) the direction to a vertex is the ray's: within one level. Not in
+    the contracted shell's outermost layer of cells, which reaches infinity and so subtends large angles from
+    any camera outside the scene (its vertices take their direction from the scene's centre): with it, degree-1
+    fields of seeds 0 and 5 differed by 28 and 48 levels (measured), so this field leaves it empty."""
+    field = random_field(resolution=16, sh_degree=sh_degree, seed=seed)
+    outermost = torch.zeros_like(field.occupancy)
+    outermost[[0, -1]] = outermost[:, [0, -1]] = outermost[:, :, [0, -1]] = True
+    field.occupancy &= ~outermost
     c2w, camera = named_pose("far_away"), camera_for("far_away")
     exact = FieldRenderer(field, EXACT).render(c2w, camera, ("rgb",))["rgb"].astype(np.int16)
     baked = FieldRenderer(field, EXACT.replace(colour_direction="vertex")).render(c2w, camera, ("rgb",))["rgb"]
     diff = np.abs(baked.astype(np.int16) - exact)
-    assert diff.max() <= 1, (f"sh_degree={sh_degree}: baked colours differ by up to {diff.max()} levels from a "
-                             "thousand radii away")
+    assert diff.max() <= 1, (f"sh_degree={sh_degree}, seed {seed}: baked colours differ by up to {diff.max()} "
+                             "levels from a thousand radii away")
 
 
 @pytest.mark.parametrize("pose_name", ["inside", "in_shell"])
