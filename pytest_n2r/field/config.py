@@ -44,7 +44,9 @@ class FieldConfig:
         time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability
         but cost 0.28 dB held out (0.26 dB at twice the time); the fox (5.1 pixels a voxel) keeps 224³
         (docs/scene-field-log.md, "A grid that follows the capture's detail").
-        ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2.
+        ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
+        colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes
+        1.85× as long and at 10 minutes it ties (docs/scene-field-log.md, "Spherical harmonics of degree 2").
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
     Optimizer (Adam on the rows a step touches)
