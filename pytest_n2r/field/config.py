@@ -46,7 +46,8 @@ class FieldConfig:
         (docs/scene-field-log.md, "A grid that follows the capture's detail").
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
         colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes
-        1.85× as long and at 10 minutes it ties (docs/scene-field-log.md, "Spherical harmonics of degree 2").
+        1.85× as long, at 10 minutes it ties, and its field renders 1.3–1.5× slower (docs/scene-field-log.md,
+        "Spherical harmonics of degree 2").
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
     Optimizer (Adam on the rows a step touches)
