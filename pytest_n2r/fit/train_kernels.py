@@ -128,21 +128,22 @@ def adam_rows(values, m, v, rows, grad, lrs, b1, b2, eps, bias1, bias2):
 
 
 @njit(cache=True, inline="always")
-def _corner_values(sub, inverse, weights, basis, i, r, out):
-    """Sample ``i`` (on ray ``r``) from its 8 corners: ``out[i, 0]`` its raw density, ``out[i, 1 + ch]`` its
-    colour logits along the ray's SH ``basis`` (float64 sums over the corners' float32 values)."""
-    n_sh = basis.shape[1]
-    x = lr = lg = lb = 0.0
+def _corner_values(sub, inverse, weights, basis, i, r, v, out):
+    """Sample ``i`` (on ray ``r``) from its 8 corners: its values interpolated into the scratch row ``v`` (float64
+    sums over the corners' float32 values), then ``out[i, 0]`` its raw density and ``out[i, 1 + ch]`` its colour
+    logits along the ray's SH ``basis``."""
+    v[:] = 0.0
     for c in range(8):
         row = inverse[i, c]
         w = np.float64(weights[i, c])
-        x += w * sub[row, 0]
-        for l in range(n_sh):
-            wb = w * basis[r, l]
-            lr += wb * sub[row, 1 + l * 3]
-            lg += wb * sub[row, 2 + l * 3]
-            lb += wb * sub[row, 3 + l * 3]
-    out[i, 0], out[i, 1], out[i, 2], out[i, 3] = x, lr, lg, lb
+        for f in range(v.shape[0]):
+            v[f] += w * sub[row, f]
+    lr = lg = lb = 0.0
+    for l in range(basis.shape[1]):
+        lr += basis[r, l] * v[1 + l * 3]
+        lg += basis[r, l] * v[2 + l * 3]
+        lb += basis[r, l] * v[3 + l * 3]
+    out[i, 0], out[i, 1], out[i, 2], out[i, 3] = v[0], lr, lg, lb
 
 
 @njit(cache=True, inline="always")
@@ -165,12 +166,13 @@ def _composite_forward(sub, inverse, weights, basis, offsets, s, delta, density_
                        background, rgb, alpha_sum, dist, weight, raw):
     for r in prange(offsets.shape[0] - 1):
         col = np.empty(3)
+        v = np.empty(sub.shape[1])
         trans = 1.0
         acc = np.zeros(3)
         a_sum = 0.0
         w_before = s_before = pairs = squares = 0.0  # running sums of weights and of weight · position
         for i in range(offsets[r], offsets[r + 1]):
-            _corner_values(sub, inverse, weights, basis, i, r, raw)
+            _corner_values(sub, inverse, weights, basis, i, r, v, raw)
             alpha, _ = _sample(raw, i, density_shift, step_ratio, alpha_max, col)
             w = trans * alpha
             weight[i] = w
