@@ -94,7 +94,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--downscale", type=float, default=4.0, metavar="F",
                    help="divide the image width and height by F before fitting (default: 4)")
     p.add_argument("--time-budget", type=parse_duration, default=None, metavar="DURATION",
-                   help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given)")
+                   help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given); from 20m on, "
+                        "the colour takes SH degree 2 unless --config sh_degree is given")
     p.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
@@ -150,6 +151,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .. import fit as fitting
     from ..data import ingest
+    from ..fit.budget import LONG_BUDGET_S, budget_config
     from ..scene.file import read_scene_file, save_scene
     from ._output import SCENE, check_output
     from .info import format_info
@@ -159,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
     time_budget = args.time_budget
     if time_budget is None and args.max_steps is None:
         time_budget = 600.0
-    config = build_config(args.config)
+    given = build_config(args.config)
+    config = budget_config(given, time_budget, fixed={key for key, _ in args.config})
     output = check_output(args.output, SCENE, inputs=[Path(args.source)], force=args.force)
     start = time.perf_counter()
     with warnings.catch_warnings():
@@ -171,6 +174,10 @@ def run(args: argparse.Namespace) -> int:
     lines = [(f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
               f"held out, {shown} ({ingest_s:.1f} s)"),
              *format_skipped(capture.skipped)]
+    if config.sh_degree != given.sh_degree:
+        lines.append(f"colour      SH degree {config.sh_degree}: it fits better than {given.sh_degree} from a "
+                     f"{LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
+                     f"--config sh_degree={given.sh_degree} keeps {given.sh_degree}")
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
     last: dict = {}

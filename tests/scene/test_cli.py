@@ -217,6 +217,34 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     assert "unknown setting 'warp'" in capsys.readouterr().err and not out.exists()
 
 
+@pytest.mark.parametrize(("flags", "degree"), [
+    (["--time-budget", "20m"], 2),
+    (["--time-budget", "1h"], 2),
+    (["--time-budget", "20m", "--config", "sh_degree=1"], 1),
+    (["--time-budget", "19m"], 1),
+    (["--max-steps", "100000"], 1),
+])
+def test_a_long_budget_fits_degree_2_colour_unless_the_degree_is_given(exported, tmp_path, monkeypatch, capsys,
+                                                                       flags, degree):
+    from pytest_n2r import fit as fitting
+
+    chosen = []
+
+    def fit(capture, config, **kwargs):  # what the fit was asked for; then stop before any training
+        chosen.append(config)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fitting, "fit", fit)
+    assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu",
+                 *flags]) == 130
+    err = capsys.readouterr().err
+    assert [c.sh_degree for c in chosen] == [degree], f"{flags}: fitted SH degree {chosen[0].sh_degree}"
+    said = "colour      SH degree 2: it fits better than 1 from a 20-minute budget on" in err
+    assert said == (degree == 2), f"{flags}: the choice of degree was {'' if said else 'not '}printed:\n{err}"
+    if degree == 2:
+        assert "--config sh_degree=1 keeps 1" in err
+
+
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
     assert main(["fit", str(exported), "-o", str(tmp_path), "--max-steps", "1"]) == 2
     err = capsys.readouterr().err
