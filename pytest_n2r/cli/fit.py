@@ -95,7 +95,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="divide the image width and height by F before fitting (default: 4)")
     p.add_argument("--time-budget", type=parse_duration, default=None, metavar="DURATION",
                    help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given); from 20m on, "
-                        "the colour takes SH degree 2 unless --config sh_degree is given")
+                        "without --max-steps, the colour takes SH degree 2 unless --config sh_degree is given")
     p.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     if time_budget is None and args.max_steps is None:
         time_budget = 600.0
     given = build_config(args.config)
-    config = budget_config(given, time_budget, fixed={key for key, _ in args.config})
+    config = budget_config(given, time_budget, max_steps=args.max_steps, fixed={key for key, _ in args.config})
     output = check_output(args.output, SCENE, inputs=[Path(args.source)], force=args.force)
     start = time.perf_counter()
     with warnings.catch_warnings():

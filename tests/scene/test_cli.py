@@ -220,9 +220,11 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
 @pytest.mark.parametrize(("flags", "degree"), [
     (["--time-budget", "20m"], 2),
     (["--time-budget", "1h"], 2),
+    (["--time-budget", "20m", "--config", "seed=1"], 2),
     (["--time-budget", "20m", "--config", "sh_degree=1"], 1),
     (["--time-budget", "19m"], 1),
     (["--max-steps", "100000"], 1),
+    (["--max-steps", "100000", "--time-budget", "1h"], 1),
 ])
 def test_a_long_budget_fits_degree_2_colour_unless_the_degree_is_given(exported, tmp_path, monkeypatch, capsys,
                                                                        flags, degree):
@@ -238,7 +240,7 @@ def test_a_long_budget_fits_degree_2_colour_unless_the_degree_is_given(exported,
     assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu",
                  *flags]) == 130
     err = capsys.readouterr().err
-    assert [c.sh_degree for c in chosen] == [degree], f"{flags}: fitted SH degree {chosen[0].sh_degree}"
+    assert [c.sh_degree for c in chosen] == [degree], f"{flags}: the fits asked for were {chosen}"
     said = "colour      SH degree 2: it fits better than 1 from a 20-minute budget on" in err
     assert said == (degree == 2), f"{flags}: the choice of degree was {'' if said else 'not '}printed:\n{err}"
     if degree == 2:
