@@ -1,7 +1,7 @@
 """Fitting speed and quality on the fox capture: held-out PSNR / SSIM after 1, 3, 6 and 10 minutes.
 
-Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--out /tmp/fox.n2r] [--config key=value ...]
-[--sfm]``.
+Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--eval-at 10m,20m] [--out /tmp/fox.n2r]
+[--config key=value ...] [--sfm]``.
 ``--steps N`` fits N steps instead of a time budget: the same fit on a loaded machine as on an idle one (the
 default recipe reached 6 051-6 582 steps in 10 minutes on the idle AVX-512 2-core host of 2 December; the AVX2
 host of 3 December takes 12 min 52 s for 6 500: docs/performance.md), with the CPU seconds it took printed
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration
+from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration, parse_durations
 from pytest_n2r.data import ingest
 from pytest_n2r.fit import fit
 from pytest_n2r.scene import save_scene
@@ -37,6 +37,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--budget", default="10m", help="training time (e.g. 90s, 10m)")
     parser.add_argument("--steps", type=int, default=None, help="fit this many steps instead of --budget")
+    parser.add_argument("--eval-at", type=parse_durations, default=None, metavar="DURATIONS",
+                        help="training times at which the held-out views are scored, within the budget "
+                             "(default 1m,3m,6m,10m)")
     parser.add_argument("--out", default="/tmp/n2r-bench-fox.n2r", help="where to write the fitted scene")
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="FieldConfig overrides")
     parser.add_argument("--sfm", action="store_true",
@@ -56,7 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"ingest ({'structure from motion' if args.sfm else 'transforms.json'}): {time.perf_counter() - t0:.1f} s, "
           f"{len(capture.train_views)} train / "
           f"{len(capture.heldout_views)} held-out views of {width}×{height}")
-    marks = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget] if args.steps is None else []
+    wanted = (60.0, 180.0, 360.0, 600.0) if args.eval_at is None else args.eval_at
+    marks = [m for m in wanted if m < budget] if args.steps is None else []
     c0 = time.process_time()
     if args.steps is None:
         result = fit(capture, config, time_budget_s=budget, eval_at_s=marks)
