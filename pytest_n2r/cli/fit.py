@@ -178,6 +178,11 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"colour      SH degree {config.sh_degree}: it fits better than {given.sh_degree} from a "
                      f"{LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
                      f"--config sh_degree={given.sh_degree} keeps {given.sh_degree}")
+    if config.resolutions != given.resolutions:
+        kept = ",".join(map(str, given.resolutions))
+        lines.append(f"grid        {' → '.join(f'{r}³' for r in config.resolutions)}: a finer last grid fits better "
+                     f"from a {LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
+                     f"--config resolutions={kept} keeps {given.resolutions[-1]}³")
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
     last: dict = {}

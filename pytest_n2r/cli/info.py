@@ -110,7 +110,7 @@ def format_info(scene: SceneFile) -> str:
         lines.append(f"  detail    a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras "
                      f"look closest (a {detail['matching_resolution']}³ grid would match the photos)")
         if detail.get("grid_added"):
-            lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the default grids were "
+            lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
                          "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
     state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
     where = f" on {report['device']}" if "device" in report else ""

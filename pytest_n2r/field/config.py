@@ -47,8 +47,8 @@ class FieldConfig:
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
         colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes
         1.85× as long, at 10 minutes it ties, at 20 it wins, and its field renders 1.3–1.5× slower
-        (docs/scene-field-log.md, "Spherical harmonics of degree 2", "A longer fit"); ``n2r fit`` takes it from
-        a 20-minute budget (:mod:`pytest_n2r.fit.budget`).
+        (docs/scene-field-log.md, "Spherical harmonics of degree 2", "A longer fit"); ``n2r fit`` takes it, and a
+        last grid of 256³, from a 20-minute budget (:mod:`pytest_n2r.fit.budget`).
     Sampling
         ``step_ratio``: sample spacing in voxels. ``batch_rays``: rays per step.
     Optimizer (Adam on the rows a step touches)

@@ -1,4 +1,4 @@
-"""What a time budget chooses for a fit: the colour's spherical-harmonics degree.
+"""What a time budget chooses for a fit: the colour's spherical-harmonics degree and the grid ladder.
 
 A field's colour depends on the viewing direction through spherical harmonics (``FieldConfig.sh_degree``).
 Degree 2 fitted the fox better per step (1.1–1.3 dB at 1 000–1 500 steps), but its step costs 1.85× a degree-1
@@ -8,12 +8,19 @@ minutes, the 160 px wall phone capture's 6) degree 1 gained nothing while degree
 fox; the wall's smaller capture won already at 6. The rule does not look at the capture's size or the device;
 its evidence is from a 2-core CPU (docs/scene-field-log.md, "A longer fit").
 
+The same budget trains a last grid of 256³ instead of 224³ (:data:`LONG_BUDGET_RESOLUTIONS`). With degree 2,
+at the same budgets, it fitted the validation views of both scenes better than 224³ (the fox +0.13 dB, the
+wall's capture +0.22 dB side by side) and then the fox's held-out views (29.03 against 28.86 dB, every detector
+higher), while an hour of degree 2 on 224³ scored no better held out than 20 minutes, nor on its fitted views:
+more steps on that grid bought nothing (docs/scene-field-log.md, "An hour on the fox"). A capture finer than the
+256³ voxel still gets its finer grid for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`).
+
 Convention
 ----------
 Budgets are seconds of training (a fit's ``time_budget_s``), not counting ingestion or evaluation. Only a fit
 whose length is a time budget alone is changed: one given ``max_steps`` (with or without a budget) keeps its
-config, since its caller chose a length in steps, where degree 2 is a different trade (better per step, dearer
-per second).
+config, since its caller chose a length in steps, where degree 2 and a finer grid are a different trade (better
+per step, dearer per second). A setting its caller gave is kept, and so is one that is not the default.
 """
 
 from __future__ import annotations
@@ -24,35 +31,46 @@ from collections.abc import Collection
 from ..errors import InvalidArgument
 from ..field.config import FieldConfig
 
-__all__ = ["LONG_BUDGET_S", "LONG_BUDGET_SH_DEGREE", "budget_config"]
+__all__ = ["LONG_BUDGET_RESOLUTIONS", "LONG_BUDGET_S", "LONG_BUDGET_SH_DEGREE", "budget_config"]
 
 #: Training seconds from which a fit takes :data:`LONG_BUDGET_SH_DEGREE`: 20 minutes.
 LONG_BUDGET_S = 1200.0
 #: The spherical-harmonics degree of a long fit.
 LONG_BUDGET_SH_DEGREE = 2
+#: The grid ladder of a long fit (vertices per axis), switched at the default ``stage_fractions``.
+LONG_BUDGET_RESOLUTIONS = (48, 96, 256)
 
 
 def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps: int | None = None,
                   fixed: Collection[str] = ()) -> FieldConfig:
-    """``config`` with the spherical-harmonics degree a training budget of ``time_budget_s`` seconds chooses:
-    :data:`LONG_BUDGET_SH_DEGREE` from :data:`LONG_BUDGET_S` on, where no ``max_steps`` is given, ``config``
-    has the default degree and ``"sh_degree"`` is not among ``fixed`` (the settings its caller gave); ``config``
-    itself otherwise.
+    """``config`` with what a training budget of ``time_budget_s`` seconds chooses: from :data:`LONG_BUDGET_S`
+    on, where no ``max_steps`` is given, the spherical-harmonics degree :data:`LONG_BUDGET_SH_DEGREE` and the
+    grids :data:`LONG_BUDGET_RESOLUTIONS`, each where ``config`` has the default and its caller did not give
+    it (``fixed``: the names of the settings given; ``resolutions`` or ``stage_fractions`` fixes the ladder);
+    ``config`` itself otherwise.
 
-    >>> budget_config(FieldConfig(), 1800.0).sh_degree
-    2
-    >>> budget_config(FieldConfig(), 600.0).sh_degree, budget_config(FieldConfig(), None).sh_degree
-    (1, 1)
-    >>> budget_config(FieldConfig(), 1800.0, max_steps=5000).sh_degree
-    1
-    >>> budget_config(FieldConfig(), 1800.0, fixed={"sh_degree"}).sh_degree
-    1
-    >>> budget_config(FieldConfig(sh_degree=0), 1800.0).sh_degree
-    0
+    >>> long = budget_config(FieldConfig(), 1800.0)
+    >>> long.sh_degree, long.resolutions
+    (2, (48, 96, 256))
+    >>> budget_config(FieldConfig(), 600.0) == budget_config(FieldConfig(), None) == FieldConfig()
+    True
+    >>> budget_config(FieldConfig(), 1800.0, max_steps=5000) == FieldConfig()
+    True
+    >>> given = budget_config(FieldConfig(), 1800.0, fixed={"sh_degree"})
+    >>> given.sh_degree, given.resolutions
+    (1, (48, 96, 256))
+    >>> chosen = FieldConfig(sh_degree=0, resolutions=(32, 64), stage_fractions=(0.5,))
+    >>> budget_config(chosen, 1800.0) == chosen
+    True
     """
     if time_budget_s is not None and not (math.isfinite(time_budget_s) and time_budget_s > 0):
         raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected a finite number of seconds > 0, or None")
-    if (time_budget_s is None or time_budget_s < LONG_BUDGET_S or max_steps is not None or "sh_degree" in fixed
-            or config.sh_degree != FieldConfig().sh_degree):
+    if time_budget_s is None or time_budget_s < LONG_BUDGET_S or max_steps is not None:
         return config
-    return config.replace(sh_degree=LONG_BUDGET_SH_DEGREE)
+    default = FieldConfig()
+    if "sh_degree" not in fixed and config.sh_degree == default.sh_degree:
+        config = config.replace(sh_degree=LONG_BUDGET_SH_DEGREE)
+    ladder = (config.resolutions, config.stage_fractions)
+    if not {"resolutions", "stage_fractions"} & set(fixed) and ladder == (default.resolutions, default.stage_fractions):
+        config = config.replace(resolutions=LONG_BUDGET_RESOLUTIONS)
+    return config

@@ -27,9 +27,10 @@ from ..errors import InvalidArgument
 from ..field.config import FieldConfig
 from ..field.space import SceneSpace
 from ..geometry import inside_image, project
+from .budget import LONG_BUDGET_RESOLUTIONS
 
-__all__ = ["DEFAULT_LADDER", "DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "CaptureDetail", "capture_detail",
-           "detailed_config", "fit_memory_bytes", "memory_resolution"]
+__all__ = ["DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "CaptureDetail", "capture_detail",
+           "LIBRARY_LADDERS", "detailed_config", "fit_memory_bytes", "memory_resolution"]
 
 #: Fewest sparse points a view must see for its footprint to count.
 MIN_POINTS = 10
@@ -39,8 +40,10 @@ CLOSE_PERCENTILE = 10.0
 DETAIL_STAGE_AT = 0.7
 #: The finer grid's size is a multiple of this.
 DETAIL_GRID_MULTIPLE = 64
-#: The ladder (``resolutions``, ``stage_fractions``) that :func:`detailed_config` extends: the default one.
-DEFAULT_LADDER = (FieldConfig().resolutions, FieldConfig().stage_fractions)
+#: The ladders (``resolutions``, ``stage_fractions``) that :func:`detailed_config` extends: the library's own,
+#: the default one and a long time budget's (:mod:`pytest_n2r.fit.budget`).
+LIBRARY_LADDERS = ((FieldConfig().resolutions, FieldConfig().stage_fractions),
+                   (LONG_BUDGET_RESOLUTIONS, FieldConfig().stage_fractions))
 
 
 @dataclass(frozen=True)
@@ -95,8 +98,8 @@ def capture_detail(capture: Capture, space: SceneSpace, views: Sequence | None =
 
 
 def detailed_config(config: FieldConfig, detail: CaptureDetail | None) -> FieldConfig:
-    """``config`` with one finer grid, trained from :data:`DETAIL_STAGE_AT` of the run, where its ladder is the
-    default one and a voxel of the default's finest grid spans more than ``config.max_pixels_per_voxel``
+    """``config`` with one finer grid, trained from :data:`DETAIL_STAGE_AT` of the run, where its ladder is one
+    of :data:`LIBRARY_LADDERS` and a voxel of that ladder's finest grid spans more than ``config.max_pixels_per_voxel``
     close-footprint pixels (see :class:`~pytest_n2r.field.config.FieldConfig`); ``config`` itself otherwise: a
     ladder given is trained as given, 0 turns this off, and nothing is added where nothing could be measured
     (``detail`` ``None``).
@@ -104,7 +107,7 @@ def detailed_config(config: FieldConfig, detail: CaptureDetail | None) -> FieldC
     The finer grid is the coarsest with at most ``max_pixels_per_voxel`` pixels a voxel, rounded up to a
     multiple of :data:`DETAIL_GRID_MULTIPLE`, at most ``detail_grid_max``.
     """
-    if (config.resolutions, config.stage_fractions) != DEFAULT_LADDER:
+    if (config.resolutions, config.stage_fractions) not in LIBRARY_LADDERS:
         return config
     finest, limit = config.resolutions[-1], config.max_pixels_per_voxel
     if detail is None or limit <= 0 or detail.pixels_per_voxel(finest) <= limit:

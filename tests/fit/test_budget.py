@@ -10,36 +10,55 @@ from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import SH_DEGREES, FieldConfig
-from pytest_n2r.fit.budget import LONG_BUDGET_S, LONG_BUDGET_SH_DEGREE, budget_config
+from pytest_n2r.fit.budget import LONG_BUDGET_RESOLUTIONS, LONG_BUDGET_S, LONG_BUDGET_SH_DEGREE, budget_config
+
+DEFAULT = FieldConfig()
+LONG = (LONG_BUDGET_SH_DEGREE, LONG_BUDGET_RESOLUTIONS)
+SHORT = (DEFAULT.sh_degree, DEFAULT.resolutions)
 
 
-@pytest.mark.parametrize(("budget", "kwargs", "degree"), [
-    (1200.0, {}, 2),
-    (3600.0, {"fixed": {"resolutions", "seed"}}, 2),  # other settings given: the degree is still the budget's
-    (1199.0, {}, 1),
-    (None, {}, 1),
-    (3600.0, {"fixed": {"sh_degree"}}, 1),
-    (3600.0, {"max_steps": 20_000}, 1),
+@pytest.mark.parametrize(("budget", "kwargs", "chosen"), [
+    (1200.0, {}, LONG),
+    (3600.0, {"fixed": {"seed", "tv"}}, LONG),  # other settings given: the budget still chooses these two
+    (3600.0, {"fixed": {"resolutions"}}, (LONG_BUDGET_SH_DEGREE, DEFAULT.resolutions)),
+    (3600.0, {"fixed": {"stage_fractions"}}, (LONG_BUDGET_SH_DEGREE, DEFAULT.resolutions)),
+    (3600.0, {"fixed": {"sh_degree"}}, (DEFAULT.sh_degree, LONG_BUDGET_RESOLUTIONS)),
+    (3600.0, {"fixed": {"sh_degree", "resolutions"}}, SHORT),
+    (1199.0, {}, SHORT),
+    (None, {}, SHORT),
+    (3600.0, {"max_steps": 20_000}, SHORT),
 ])
-def test_the_default_degree_follows_a_long_time_budget(budget, kwargs, degree):
-    chosen = budget_config(FieldConfig(), budget, **kwargs).sh_degree
-    assert chosen == degree, f"budget {budget} s with {kwargs}: SH degree {chosen}, expected {degree}"
+def test_the_default_degree_and_grids_follow_a_long_time_budget(budget, kwargs, chosen):
+    config = budget_config(DEFAULT, budget, **kwargs)
+    got = (config.sh_degree, config.resolutions)
+    assert got == chosen, f"budget {budget} s with {kwargs}: SH degree and grids {got}, expected {chosen}"
+    assert config.stage_fractions == DEFAULT.stage_fractions, config.stage_fractions
 
 
 @given(budget=st.one_of(st.none(), st.floats(min_value=1e-3, max_value=1e6)), degree=st.sampled_from(SH_DEGREES),
-       fixed=st.sampled_from([(), ("sh_degree",), ("resolutions",)]),
+       ladder=st.sampled_from([DEFAULT.resolutions, (48, 96, 192), (32, 64, 128, 320)]),
+       fixed=st.sets(st.sampled_from(["sh_degree", "resolutions", "stage_fractions", "tv"])),
        max_steps=st.one_of(st.none(), st.integers(1, 10**6)))
-def test_only_the_default_degree_changes_and_nothing_else(budget, degree, fixed, max_steps):
-    config = FieldConfig(sh_degree=degree)
+def test_only_default_settings_not_given_change_and_nothing_else(budget, degree, ladder, fixed, max_steps):
+    fractions = DEFAULT.stage_fractions if len(ladder) == 3 else (0.1, 0.3, 0.6)
+    config = FieldConfig(sh_degree=degree, resolutions=ladder, stage_fractions=fractions)
     chosen = budget_config(config, budget, max_steps=max_steps, fixed=fixed)
-    if degree != FieldConfig().sh_degree or "sh_degree" in fixed or max_steps is not None:
-        assert chosen == config, f"a degree {degree} config, fixed {fixed}, max_steps {max_steps} was changed"
-    assert chosen.replace(sh_degree=degree) == config, "a setting other than the SH degree changed"
+    short = budget is None or budget < LONG_BUDGET_S or max_steps is not None
+    if short or degree != DEFAULT.sh_degree or "sh_degree" in fixed:
+        assert chosen.sh_degree == degree, f"a degree {degree} config, fixed {fixed}, budget {budget} was changed"
+    else:
+        assert chosen.sh_degree == LONG_BUDGET_SH_DEGREE, f"budget {budget} s, fixed {fixed}: degree {degree} kept"
+    if short or ladder != DEFAULT.resolutions or {"resolutions", "stage_fractions"} & fixed:
+        assert chosen.resolutions == ladder, f"grids {ladder}, fixed {fixed}, budget {budget} became {chosen}"
+    else:
+        assert chosen.resolutions == LONG_BUDGET_RESOLUTIONS, f"budget {budget} s, fixed {fixed}: grids {ladder} kept"
+    assert chosen.replace(sh_degree=degree, resolutions=ladder) == config, "a setting not the budget's changed"
 
 
 def test_the_threshold_is_inclusive():
-    assert budget_config(FieldConfig(), LONG_BUDGET_S).sh_degree == LONG_BUDGET_SH_DEGREE
-    assert budget_config(FieldConfig(), math.nextafter(LONG_BUDGET_S, 0.0)).sh_degree == FieldConfig().sh_degree
+    assert budget_config(DEFAULT, LONG_BUDGET_S) == DEFAULT.replace(sh_degree=LONG_BUDGET_SH_DEGREE,
+                                                                    resolutions=LONG_BUDGET_RESOLUTIONS)
+    assert budget_config(DEFAULT, math.nextafter(LONG_BUDGET_S, 0.0)) == DEFAULT
 
 
 @pytest.mark.parametrize("budget", [0.0, -5.0, math.nan, math.inf])

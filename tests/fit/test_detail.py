@@ -11,6 +11,7 @@ from pytest_n2r.data.capture import Capture, CapturedView
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit.budget import LONG_BUDGET_S, budget_config
 from pytest_n2r.fit.detail import (
     DETAIL_GRID_MULTIPLE,
     DETAIL_STAGE_AT,
@@ -125,6 +126,15 @@ def test_the_default_ladder_gets_one_finer_grid_for_the_last_part_of_the_run_whe
     assert detailed_config(FieldConfig(), _detail_at(6.5)).resolutions[-1] == 256
 
 
+def test_a_long_budgets_ladder_gets_the_finer_grid_too_where_its_256_grid_is_coarser_than_the_photos():
+    long = budget_config(FieldConfig(), LONG_BUDGET_S)
+    assert long.resolutions[-1] == 256, long.resolutions
+    detailed = detailed_config(long, _detail_at(9.0))  # the wall's phone capture: 7.9 pixels a voxel at 256³
+    assert detailed.resolutions == (48, 96, 256, 384), detailed.resolutions
+    assert detailed.stage_fractions == (0.1, 0.35, DETAIL_STAGE_AT), detailed.stage_fractions
+    assert detailed_config(long, _detail_at(6.5)) is long, "256³ meets 6 pixels a voxel where 224³ spans 6.5"
+
+
 @given(pixels=st.floats(0.5, 60.0), limit=st.floats(1.0, 12.0), cap=st.integers(8, 1024))
 def test_a_finer_grid_is_added_exactly_where_the_limit_is_missed_and_meets_it_unless_capped(pixels, limit, cap):
     config = FieldConfig(max_pixels_per_voxel=limit, detail_grid_max=cap)
@@ -153,7 +163,7 @@ def test_a_fit_trains_the_added_grid_and_its_scene_file_says_so(capture48, tmp_p
 
     # the default ladder's grids take minutes to fit; the short one stands in for it (a voxel of 24³ spans 4.6 of
     # this 48×27 capture's pixels, so a limit of 3 asks for 36 vertices: 64, capped at 32)
-    monkeypatch.setattr(detail_module, "DEFAULT_LADDER", (SHORT_CONFIG.resolutions, SHORT_CONFIG.stage_fractions))
+    monkeypatch.setattr(detail_module, "LIBRARY_LADDERS", ((SHORT_CONFIG.resolutions, SHORT_CONFIG.stage_fractions),))
     config = SHORT_CONFIG.replace(max_pixels_per_voxel=3.0, detail_grid_max=32)
     result = fit(capture48, config, max_steps=20, device="cpu")
     assert result.config.resolutions == (16, 24, 32), result.config.resolutions
@@ -164,7 +174,7 @@ def test_a_fit_trains_the_added_grid_and_its_scene_file_says_so(capture48, tmp_p
     path = save_scene(tmp_path / "s.n2r", result.field, result.config, capture48, result.report, images=False)
     scene = read_scene_file(path, images=False)
     assert scene.config.resolutions == (16, 24, 32)
-    assert "32³ added for the end of the fit: the default grids were coarser than the photos" in format_info(scene)
+    assert "32³ added for the end of the fit: the ladder's grids were coarser than the photos" in format_info(scene)
 
 
 def test_the_detail_settings_are_checked():

@@ -217,17 +217,18 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     assert "unknown setting 'warp'" in capsys.readouterr().err and not out.exists()
 
 
-@pytest.mark.parametrize(("flags", "degree"), [
-    (["--time-budget", "20m"], 2),
-    (["--time-budget", "1h"], 2),
-    (["--time-budget", "20m", "--config", "seed=1"], 2),
-    (["--time-budget", "20m", "--config", "sh_degree=1"], 1),
-    (["--time-budget", "19m"], 1),
-    (["--max-steps", "100000"], 1),
-    (["--max-steps", "100000", "--time-budget", "1h"], 1),
+@pytest.mark.parametrize(("flags", "degree", "finest"), [
+    (["--time-budget", "20m"], 2, 256),
+    (["--time-budget", "1h"], 2, 256),
+    (["--time-budget", "20m", "--config", "seed=1"], 2, 256),
+    (["--time-budget", "20m", "--config", "sh_degree=1"], 1, 256),
+    (["--time-budget", "20m", "--config", "resolutions=48,96,224"], 2, 224),
+    (["--time-budget", "19m"], 1, 224),
+    (["--max-steps", "100000"], 1, 224),
+    (["--max-steps", "100000", "--time-budget", "1h"], 1, 224),
 ])
-def test_a_long_budget_fits_degree_2_colour_unless_the_degree_is_given(exported, tmp_path, monkeypatch, capsys,
-                                                                       flags, degree):
+def test_a_long_budget_fits_degree_2_colour_and_a_256_grid_unless_they_are_given(exported, tmp_path, monkeypatch,
+                                                                                capsys, flags, degree, finest):
     from pytest_n2r import fit as fitting
 
     chosen = []
@@ -240,11 +241,16 @@ def test_a_long_budget_fits_degree_2_colour_unless_the_degree_is_given(exported,
     assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu",
                  *flags]) == 130
     err = capsys.readouterr().err
-    assert [c.sh_degree for c in chosen] == [degree], f"{flags}: the fits asked for were {chosen}"
+    asked = [(c.sh_degree, c.resolutions[-1]) for c in chosen]
+    assert asked == [(degree, finest)], f"{flags}: the fits asked for were {chosen}"
     said = "colour      SH degree 2: it fits better than 1 from a 20-minute budget on" in err
     assert said == (degree == 2), f"{flags}: the choice of degree was {'' if said else 'not '}printed:\n{err}"
     if degree == 2:
         assert "--config sh_degree=1 keeps 1" in err
+    said = "grid        48³ → 96³ → 256³: a finer last grid fits better from a 20-minute budget on" in err
+    assert said == (finest == 256), f"{flags}: the choice of grids was {'' if said else 'not '}printed:\n{err}"
+    if finest == 256:
+        assert "--config resolutions=48,96,224 keeps 224³" in err
 
 
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
