@@ -45,11 +45,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sfm", action="store_true",
                         help="poses from our structure from motion on the photos, not the published transforms.json")
     args = parser.parse_args(argv)
+    budget = parse_duration(args.budget)
+    if args.eval_at is not None and args.steps is not None:
+        parser.error("--eval-at: scores at training times within --budget; a fit of --steps takes none")
+    if args.eval_at is not None and args.eval_at[-1] >= budget:
+        parser.error(f"--eval-at {args.eval_at[-1]:g} s: expected training times below --budget {budget:g} s "
+                     "(the end of the fit is always scored)")
+    config = build_config([parse_config_override(text) for text in args.config])
     if not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         return 0
-    budget = parse_duration(args.budget)
-    config = build_config([parse_config_override(text) for text in args.config])
     torch.set_num_threads(2)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the fox transforms.json lists frames whose photos are absent
@@ -59,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"ingest ({'structure from motion' if args.sfm else 'transforms.json'}): {time.perf_counter() - t0:.1f} s, "
           f"{len(capture.train_views)} train / "
           f"{len(capture.heldout_views)} held-out views of {width}×{height}")
-    wanted = (60.0, 180.0, 360.0, 600.0) if args.eval_at is None else args.eval_at
-    marks = [m for m in wanted if m < budget] if args.steps is None else []
+    defaults = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget] if args.steps is None else []
+    marks = defaults if args.eval_at is None else list(args.eval_at)
     c0 = time.process_time()
     if args.steps is None:
         result = fit(capture, config, time_budget_s=budget, eval_at_s=marks)

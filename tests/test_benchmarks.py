@@ -120,6 +120,18 @@ def test_a_missing_scene_file_is_a_usage_error_naming_it(script: str, args: list
     assert str(tmp_path / "missing") in result.stderr, f"{script} did not name the missing file:\n{result.stderr}"
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--steps", "5", "--eval-at", "1m"], "--eval-at: scores at training times within --budget"),
+    (["--budget", "10m", "--eval-at", "5m,10m"], "--eval-at 600 s: expected training times below --budget 600 s"),
+], ids=["with-steps", "past-the-budget"])
+def test_field_fit_refuses_scoring_times_it_would_not_reach(monkeypatch, capsys, args: list[str], message: str):
+    module = _benchmark_module(monkeypatch, "field_fit")
+    with pytest.raises(SystemExit) as exit_info:
+        module.main(args)
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and message in err, f"field_fit.py {' '.join(args)}: exit {exit_info.value}: {err}"
+
+
 def test_every_smoke_run_names_an_existing_script():
     missing = sorted(set(SMOKE) - {s.name for s in SCRIPTS})
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"

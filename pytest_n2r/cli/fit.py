@@ -95,7 +95,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="divide the image width and height by F before fitting (default: 4)")
     p.add_argument("--time-budget", type=parse_duration, default=None, metavar="DURATION",
                    help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given); from 20m on, "
-                        "without --max-steps, the colour takes SH degree 2 unless --config sh_degree is given")
+                        "without --max-steps, the colour takes SH degree 2 (unless --config sh_degree is given) "
+                        "and the grids end on 256³ (unless --config resolutions or stage_fractions is given)")
     p.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
@@ -181,8 +182,8 @@ def run(args: argparse.Namespace) -> int:
     if config.resolutions != given.resolutions:
         kept = ",".join(map(str, given.resolutions))
         lines.append(f"grid        {' → '.join(f'{r}³' for r in config.resolutions)}: a finer last grid fits better "
-                     f"from a {LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
-                     f"--config resolutions={kept} keeps {given.resolutions[-1]}³")
+                     f"from a {LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md; photos finer than "
+                     f"its voxel add one more for the end); --config resolutions={kept} keeps the default grids")
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
     last: dict = {}

@@ -35,10 +35,11 @@ class FieldConfig:
         each of ``stage_fractions`` of the run (fractions of the time budget or of ``max_steps``). A last
         grid of 224³ won against 192³ (which had won against 160³) at equal training time on both scenes
         the priors were chosen on, once the learning rates were doubled.
-        ``max_pixels_per_voxel``: with the default ``resolutions``, where a voxel of 224³ would span more
-        training pixels than this where the cameras look closest (:mod:`pytest_n2r.fit.detail`), the fit trains
-        one finer grid for the last 30 % of the run, sized for this many pixels a voxel (rounded up to a
-        multiple of 64, at most ``detail_grid_max``); 0 turns it off, and a ladder given is trained as given.
+        ``max_pixels_per_voxel``: with the library's ladders (the default, or a long budget's ending on 256³),
+        where a voxel of their last grid would span more training pixels than this where the cameras look
+        closest (:mod:`pytest_n2r.fit.detail`), the fit trains one finer grid for the last 30 % of the run,
+        sized for this many pixels a voxel (rounded up to a multiple of 64, at most ``detail_grid_max``); 0 turns
+        it off, and any other ladder is trained as given.
         On a phone-style capture of the wall (480×270 photos, 9 pixels a voxel at 224³) a 384³ grid for the
         last 30 % gained 0.7 dB and SIFT's repeatability against the photos 0.32 → 0.56 at equal training
         time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability

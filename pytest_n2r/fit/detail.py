@@ -29,8 +29,8 @@ from ..field.space import SceneSpace
 from ..geometry import inside_image, project
 from .budget import LONG_BUDGET_RESOLUTIONS
 
-__all__ = ["DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "CaptureDetail", "capture_detail",
-           "LIBRARY_LADDERS", "detailed_config", "fit_memory_bytes", "memory_resolution"]
+__all__ = ["DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "LIBRARY_LADDERS", "CaptureDetail", "capture_detail",
+           "detailed_config", "fit_memory_bytes", "memory_resolution"]
 
 #: Fewest sparse points a view must see for its footprint to count.
 MIN_POINTS = 10
@@ -100,8 +100,8 @@ def capture_detail(capture: Capture, space: SceneSpace, views: Sequence | None =
 def detailed_config(config: FieldConfig, detail: CaptureDetail | None) -> FieldConfig:
     """``config`` with one finer grid, trained from :data:`DETAIL_STAGE_AT` of the run, where its ladder is one
     of :data:`LIBRARY_LADDERS` and a voxel of that ladder's finest grid spans more than ``config.max_pixels_per_voxel``
-    close-footprint pixels (see :class:`~pytest_n2r.field.config.FieldConfig`); ``config`` itself otherwise: a
-    ladder given is trained as given, 0 turns this off, and nothing is added where nothing could be measured
+    close-footprint pixels (see :class:`~pytest_n2r.field.config.FieldConfig`); ``config`` itself otherwise: any
+    other ladder is trained as given, 0 turns this off, and nothing is added where nothing could be measured
     (``detail`` ``None``).
 
     The finer grid is the coarsest with at most ``max_pixels_per_voxel`` pixels a voxel, rounded up to a

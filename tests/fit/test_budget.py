@@ -36,11 +36,12 @@ def test_the_default_degree_and_grids_follow_a_long_time_budget(budget, kwargs, 
 
 
 @given(budget=st.one_of(st.none(), st.floats(min_value=1e-3, max_value=1e6)), degree=st.sampled_from(SH_DEGREES),
-       ladder=st.sampled_from([DEFAULT.resolutions, (48, 96, 192), (32, 64, 128, 320)]),
+       ladder=st.sampled_from([(DEFAULT.resolutions, DEFAULT.stage_fractions), (DEFAULT.resolutions, (0.2, 0.5)),
+                               ((48, 96, 192), DEFAULT.stage_fractions), ((32, 64, 128, 320), (0.1, 0.3, 0.6))]),
        fixed=st.sets(st.sampled_from(["sh_degree", "resolutions", "stage_fractions", "tv"])),
        max_steps=st.one_of(st.none(), st.integers(1, 10**6)))
 def test_only_default_settings_not_given_change_and_nothing_else(budget, degree, ladder, fixed, max_steps):
-    fractions = DEFAULT.stage_fractions if len(ladder) == 3 else (0.1, 0.3, 0.6)
+    (ladder, fractions), default_ladder = ladder, (DEFAULT.resolutions, DEFAULT.stage_fractions)
     config = FieldConfig(sh_degree=degree, resolutions=ladder, stage_fractions=fractions)
     chosen = budget_config(config, budget, max_steps=max_steps, fixed=fixed)
     short = budget is None or budget < LONG_BUDGET_S or max_steps is not None
@@ -48,8 +49,8 @@ def test_only_default_settings_not_given_change_and_nothing_else(budget, degree,
         assert chosen.sh_degree == degree, f"a degree {degree} config, fixed {fixed}, budget {budget} was changed"
     else:
         assert chosen.sh_degree == LONG_BUDGET_SH_DEGREE, f"budget {budget} s, fixed {fixed}: degree {degree} kept"
-    if short or ladder != DEFAULT.resolutions or {"resolutions", "stage_fractions"} & fixed:
-        assert chosen.resolutions == ladder, f"grids {ladder}, fixed {fixed}, budget {budget} became {chosen}"
+    if short or (ladder, fractions) != default_ladder or {"resolutions", "stage_fractions"} & fixed:
+        assert chosen.resolutions == ladder, f"grids {ladder} at {fractions}, fixed {fixed}, budget {budget}: {chosen}"
     else:
         assert chosen.resolutions == LONG_BUDGET_RESOLUTIONS, f"budget {budget} s, fixed {fixed}: grids {ladder} kept"
     assert chosen.replace(sh_degree=degree, resolutions=ladder) == config, "a setting not the budget's changed"

@@ -223,6 +223,7 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     (["--time-budget", "20m", "--config", "seed=1"], 2, 256),
     (["--time-budget", "20m", "--config", "sh_degree=1"], 1, 256),
     (["--time-budget", "20m", "--config", "resolutions=48,96,224"], 2, 224),
+    (["--time-budget", "20m", "--config", "stage_fractions=0.1,0.35"], 2, 224),
     (["--time-budget", "19m"], 1, 224),
     (["--max-steps", "100000"], 1, 224),
     (["--max-steps", "100000", "--time-budget", "1h"], 1, 224),
@@ -250,7 +251,7 @@ def test_a_long_budget_fits_degree_2_colour_and_a_256_grid_unless_they_are_given
     said = "grid        48³ → 96³ → 256³: a finer last grid fits better from a 20-minute budget on" in err
     assert said == (finest == 256), f"{flags}: the choice of grids was {'' if said else 'not '}printed:\n{err}"
     if finest == 256:
-        assert "--config resolutions=48,96,224 keeps 224³" in err
+        assert "--config resolutions=48,96,224 keeps the default grids" in err, f"{flags}: no way back said:\n{err}"
 
 
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
