@@ -11,10 +11,10 @@ its evidence is from a 2-core CPU (docs/scene-field-log.md, "A longer fit").
 The same budget trains a last grid of 256³ instead of 224³ (:data:`LONG_BUDGET_RESOLUTIONS`). With degree 2,
 at the same budgets, it fitted the validation views of both scenes better than 224³ (the fox +0.13 dB, the
 wall's capture +0.22 dB side by side, +0.06 against an earlier run that took more steps) and then the fox's
-held-out views (29.03 against 28.86 dB, every detector
-higher), while an hour of degree 2 on 224³ scored no better held out than 20 minutes, nor on its fitted views:
-more steps on that grid bought nothing (docs/scene-field-log.md, "An hour on the fox"). A capture finer than the
-256³ voxel still gets its finer grid for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`).
+held-out views (29.03 against 28.86 dB, every detector higher), while an hour of degree 2 on 224³ scored no
+better held out than 20 minutes, nor on its fitted views: more steps on that grid bought nothing
+(docs/scene-field-log.md, "An hour on the fox"). A capture finer than the 256³ voxel still gets its finer grid
+for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`).
 
 Convention
 ----------
