@@ -96,7 +96,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--time-budget", type=parse_duration, default=None, metavar="DURATION",
                    help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given); from 20m on, "
                         "without --max-steps, the colour takes SH degree 2 (unless --config sh_degree is given) "
-                        "and the grids end on 256³ (unless --config resolutions or stage_fractions is given)")
+                        "and the grids end on 256³ (unless --config resolutions or stage_fractions is given); "
+                        "from 40m on, a finer grid is added for the end where the last one's voxel spans more than "
+                        "3.5 of the photos' pixels, not 6 (unless --config max_pixels_per_voxel is given)")
     p.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")
@@ -152,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .. import fit as fitting
     from ..data import ingest
-    from ..fit.budget import LONG_BUDGET_S, budget_config
+    from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..scene.file import read_scene_file, save_scene
     from ._output import SCENE, check_output
     from .info import format_info
@@ -184,6 +186,12 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"grid        {' → '.join(f'{r}³' for r in config.resolutions)}: a finer last grid fits better "
                      f"from a {LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md; photos finer than "
                      f"its voxel add one more for the end); --config resolutions={kept} keeps the default grids")
+    if config.max_pixels_per_voxel != given.max_pixels_per_voxel:
+        was = f"{given.max_pixels_per_voxel:g}"
+        lines.append(f"detail      a finer grid for the last 30 % where a voxel spans more than "
+                     f"{config.max_pixels_per_voxel:g} of the photos' pixels, not {was}: it fits better from a "
+                     f"{FINE_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
+                     f"--config max_pixels_per_voxel={was} keeps {was}")
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
     last: dict = {}

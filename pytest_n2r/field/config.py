@@ -44,7 +44,8 @@ class FieldConfig:
         last 30 % gained 0.7 dB and SIFT's repeatability against the photos 0.32 → 0.56 at equal training
         time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability
         but cost 0.28 dB held out (0.26 dB at twice the time); the fox (5.1 pixels a voxel) keeps 224³
-        (docs/scene-field-log.md, "A grid that follows the capture's detail").
+        (docs/scene-field-log.md, "A grid that follows the capture's detail"). ``n2r fit`` with a budget of 40
+        minutes or more sets 3.5 (:mod:`pytest_n2r.fit.budget`).
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
         colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes
         1.85× as long, at 10 minutes it ties, at 20 it wins, and its field renders 1.3–1.5× slower

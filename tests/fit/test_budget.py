@@ -10,7 +10,14 @@ from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import SH_DEGREES, FieldConfig
-from pytest_n2r.fit.budget import LONG_BUDGET_RESOLUTIONS, LONG_BUDGET_S, LONG_BUDGET_SH_DEGREE, budget_config
+from pytest_n2r.fit.budget import (
+    FINE_BUDGET_PIXELS_PER_VOXEL,
+    FINE_BUDGET_S,
+    LONG_BUDGET_RESOLUTIONS,
+    LONG_BUDGET_S,
+    LONG_BUDGET_SH_DEGREE,
+    budget_config,
+)
 
 DEFAULT = FieldConfig()
 LONG = (LONG_BUDGET_SH_DEGREE, LONG_BUDGET_RESOLUTIONS)
@@ -38,13 +45,18 @@ def test_the_default_degree_and_grids_follow_a_long_time_budget(budget, kwargs, 
 @given(budget=st.one_of(st.none(), st.floats(min_value=1e-3, max_value=1e6)), degree=st.sampled_from(SH_DEGREES),
        ladder=st.sampled_from([(DEFAULT.resolutions, DEFAULT.stage_fractions), (DEFAULT.resolutions, (0.2, 0.5)),
                                ((48, 96, 192), DEFAULT.stage_fractions), ((32, 64, 128, 320), (0.1, 0.3, 0.6))]),
-       fixed=st.sets(st.sampled_from(["sh_degree", "resolutions", "stage_fractions", "tv"])),
+       pixels=st.sampled_from([DEFAULT.max_pixels_per_voxel, 0.0, 2.0]),
+       fixed=st.sets(st.sampled_from(["sh_degree", "resolutions", "stage_fractions", "max_pixels_per_voxel", "tv"])),
        max_steps=st.one_of(st.none(), st.integers(1, 10**6)))
-def test_only_default_settings_not_given_change_and_nothing_else(budget, degree, ladder, fixed, max_steps):
+def test_only_default_settings_not_given_change_and_nothing_else(budget, degree, ladder, pixels, fixed, max_steps):
     (ladder, fractions), default_ladder = ladder, (DEFAULT.resolutions, DEFAULT.stage_fractions)
-    config = FieldConfig(sh_degree=degree, resolutions=ladder, stage_fractions=fractions)
+    config = FieldConfig(sh_degree=degree, resolutions=ladder, stage_fractions=fractions, max_pixels_per_voxel=pixels)
     chosen = budget_config(config, budget, max_steps=max_steps, fixed=fixed)
     short = budget is None or budget < LONG_BUDGET_S or max_steps is not None
+    if short or budget < FINE_BUDGET_S or pixels != DEFAULT.max_pixels_per_voxel or "max_pixels_per_voxel" in fixed:
+        assert chosen.max_pixels_per_voxel == pixels, f"{pixels} px a voxel, fixed {fixed}, budget {budget}: changed"
+    else:
+        assert chosen.max_pixels_per_voxel == FINE_BUDGET_PIXELS_PER_VOXEL, f"budget {budget} s, fixed {fixed}: kept"
     if short or degree != DEFAULT.sh_degree or "sh_degree" in fixed:
         assert chosen.sh_degree == degree, f"a degree {degree} config, fixed {fixed}, budget {budget} was changed"
     else:
@@ -53,13 +65,16 @@ def test_only_default_settings_not_given_change_and_nothing_else(budget, degree,
         assert chosen.resolutions == ladder, f"grids {ladder} at {fractions}, fixed {fixed}, budget {budget}: {chosen}"
     else:
         assert chosen.resolutions == LONG_BUDGET_RESOLUTIONS, f"budget {budget} s, fixed {fixed}: grids {ladder} kept"
-    assert chosen.replace(sh_degree=degree, resolutions=ladder) == config, "a setting not the budget's changed"
+    unchosen = chosen.replace(sh_degree=degree, resolutions=ladder, max_pixels_per_voxel=pixels)
+    assert unchosen == config, "a setting not the budget's changed"
 
 
-def test_the_threshold_is_inclusive():
-    assert budget_config(DEFAULT, LONG_BUDGET_S) == DEFAULT.replace(sh_degree=LONG_BUDGET_SH_DEGREE,
-                                                                    resolutions=LONG_BUDGET_RESOLUTIONS)
+def test_the_thresholds_are_inclusive():
+    long = DEFAULT.replace(sh_degree=LONG_BUDGET_SH_DEGREE, resolutions=LONG_BUDGET_RESOLUTIONS)
+    assert budget_config(DEFAULT, LONG_BUDGET_S) == long
     assert budget_config(DEFAULT, math.nextafter(LONG_BUDGET_S, 0.0)) == DEFAULT
+    assert budget_config(DEFAULT, FINE_BUDGET_S) == long.replace(max_pixels_per_voxel=FINE_BUDGET_PIXELS_PER_VOXEL)
+    assert budget_config(DEFAULT, math.nextafter(FINE_BUDGET_S, 0.0)) == long
 
 
 @pytest.mark.parametrize("budget", [0.0, -5.0, math.nan, math.inf])

@@ -217,19 +217,23 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     assert "unknown setting 'warp'" in capsys.readouterr().err and not out.exists()
 
 
-@pytest.mark.parametrize(("flags", "degree", "finest"), [
-    (["--time-budget", "20m"], 2, 256),
-    (["--time-budget", "1h"], 2, 256),
-    (["--time-budget", "20m", "--config", "seed=1"], 2, 256),
-    (["--time-budget", "20m", "--config", "sh_degree=1"], 1, 256),
-    (["--time-budget", "20m", "--config", "resolutions=48,96,224"], 2, 224),
-    (["--time-budget", "20m", "--config", "stage_fractions=0.1,0.35"], 2, 224),
-    (["--time-budget", "19m"], 1, 224),
-    (["--max-steps", "100000"], 1, 224),
-    (["--max-steps", "100000", "--time-budget", "1h"], 1, 224),
+@pytest.mark.parametrize(("flags", "degree", "finest", "pixels"), [
+    (["--time-budget", "20m"], 2, 256, 6.0),
+    (["--time-budget", "39m"], 2, 256, 6.0),
+    (["--time-budget", "40m"], 2, 256, 3.5),
+    (["--time-budget", "1h"], 2, 256, 3.5),
+    (["--time-budget", "1h", "--config", "max_pixels_per_voxel=6"], 2, 256, 6.0),
+    (["--time-budget", "1h", "--config", "max_pixels_per_voxel=0"], 2, 256, 0.0),
+    (["--time-budget", "20m", "--config", "seed=1"], 2, 256, 6.0),
+    (["--time-budget", "20m", "--config", "sh_degree=1"], 1, 256, 6.0),
+    (["--time-budget", "20m", "--config", "resolutions=48,96,224"], 2, 224, 6.0),
+    (["--time-budget", "20m", "--config", "stage_fractions=0.1,0.35"], 2, 224, 6.0),
+    (["--time-budget", "19m"], 1, 224, 6.0),
+    (["--max-steps", "100000"], 1, 224, 6.0),
+    (["--max-steps", "100000", "--time-budget", "1h"], 1, 224, 6.0),
 ])
-def test_a_long_budget_fits_degree_2_colour_and_a_256_grid_unless_they_are_given(exported, tmp_path, monkeypatch,
-                                                                                capsys, flags, degree, finest):
+def test_a_long_budget_fits_degree_2_colour_and_finer_grids_unless_they_are_given(exported, tmp_path, monkeypatch,
+                                                                                capsys, flags, degree, finest, pixels):
     from pytest_n2r import fit as fitting
 
     chosen = []
@@ -242,8 +246,8 @@ def test_a_long_budget_fits_degree_2_colour_and_a_256_grid_unless_they_are_given
     assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu",
                  *flags]) == 130
     err = capsys.readouterr().err
-    asked = [(c.sh_degree, c.resolutions[-1]) for c in chosen]
-    assert asked == [(degree, finest)], f"{flags}: the fits asked for were {chosen}"
+    asked = [(c.sh_degree, c.resolutions[-1], c.max_pixels_per_voxel) for c in chosen]
+    assert asked == [(degree, finest, pixels)], f"{flags}: the fits asked for were {chosen}"
     said = "colour      SH degree 2: it fits better than 1 from a 20-minute budget on" in err
     assert said == (degree == 2), f"{flags}: the choice of degree was {'' if said else 'not '}printed:\n{err}"
     if degree == 2:
@@ -252,6 +256,11 @@ def test_a_long_budget_fits_degree_2_colour_and_a_256_grid_unless_they_are_given
     assert said == (finest == 256), f"{flags}: the choice of grids was {'' if said else 'not '}printed:\n{err}"
     if finest == 256:
         assert "--config resolutions=48,96,224 keeps the default grids" in err, f"{flags}: no way back said:\n{err}"
+    said = ("detail      a finer grid for the last 30 % where a voxel spans more than 3.5 of the photos' pixels, "
+            "not 6: it fits better from a 40-minute budget on") in err
+    assert said == (pixels == 3.5), f"{flags}: the detail grid's sizing was {'' if said else 'not '}printed:\n{err}"
+    if pixels == 3.5:
+        assert "--config max_pixels_per_voxel=6 keeps 6" in err, f"{flags}: no way back said:\n{err}"
 
 
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
