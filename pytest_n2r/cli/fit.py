@@ -156,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
     from ..data import ingest
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..scene.file import read_scene_file, save_scene
+    from ._interrupt import interrupted
     from ._output import SCENE, check_output
     from .info import format_info
     from .poses import format_skipped
@@ -210,12 +211,11 @@ def run(args: argparse.Namespace) -> int:
                              device=args.device, progress=progress, checkpoint=checkpoint,
                              checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
                              appearance=args.appearance)
-    except KeyboardInterrupt:
+    except BaseException as exc:
         progress.close()
-        print(f"n2r fit: interrupted; {_kept(output, last)}", file=sys.stderr)
-        return 130
-    except BaseException:
-        progress.close()
+        if interrupted(exc):  # Ctrl-C, also when a compiled kernel wrapped it in a SystemError
+            print(f"n2r fit: interrupted; {_kept(output, last)}", file=sys.stderr)
+            return 130
         print(f"n2r fit: the fit failed; {_kept(output, last)}", file=sys.stderr)
         raise
     progress.close()

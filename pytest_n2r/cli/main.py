@@ -15,6 +15,7 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import N2RError
+from ._interrupt import interrupted
 
 #: Subcommand modules, in the order ``n2r --help`` lists them.
 COMMANDS: tuple[str, ...] = ("poses", "fit", "import", "render", "info", "demo", "study")
@@ -44,7 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except N2RError as exc:
         print(f"n2r {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as exc:  # a SystemError: Ctrl-C inside a compiled kernel's call back
+        if not interrupted(exc):
+            raise
         print(f"n2r {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # `n2r info ... | head`: the reader left; say nothing more

@@ -143,8 +143,16 @@ def run_fit(exported: Path, out: Path, every: str) -> int:
                  "cpu", "--checkpoint-every", every, *TINY_FLAGS])
 
 
-def test_ctrl_c_keeps_the_last_checkpoint_loadable(exported, tmp_path, monkeypatch, capsys):
-    written = interrupting_fit(monkeypatch, KeyboardInterrupt(), after_checkpoints=1)
+def kernel_wrapped_interrupt() -> SystemError:
+    """Ctrl-C as numba reports it when the signal lands in a compiled kernel's call back into Python."""
+    error = SystemError("CPUDispatcher(<function march_packed>) returned a result with an exception set")
+    error.__cause__ = KeyboardInterrupt()
+    return error
+
+
+@pytest.mark.parametrize("interrupt", [KeyboardInterrupt, kernel_wrapped_interrupt], ids=["plain", "in-a-kernel"])
+def test_ctrl_c_keeps_the_last_checkpoint_loadable(exported, tmp_path, monkeypatch, capsys, interrupt):
+    written = interrupting_fit(monkeypatch, interrupt(), after_checkpoints=1)
     out = tmp_path / "object.n2r"
     assert run_fit(exported, out, "0.2") == 130
     err = capsys.readouterr().err
@@ -175,6 +183,22 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_pa
     assert f"no checkpoint was written yet, so {out} was not touched" in err
     assert out.read_bytes() == before
     assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
+
+
+@pytest.mark.parametrize(("error", "code"), [(kernel_wrapped_interrupt, 130), (SystemError, None)])
+def test_any_command_reads_a_kernel_wrapped_ctrl_c_as_an_interrupt_and_nothing_else(monkeypatch, capsys, error, code):
+    from pytest_n2r.cli import info
+
+    def run(args):
+        raise error()
+
+    monkeypatch.setattr(info, "run", run)
+    if code is None:
+        with pytest.raises(SystemError):
+            main(["info", "any.n2r"])
+        return
+    assert main(["info", "any.n2r"]) == code
+    assert capsys.readouterr().err == "n2r info: interrupted\n"
 
 
 def test_a_crash_keeps_the_last_checkpoint_and_exits_with_the_error(exported, tmp_path, monkeypatch, capsys):
