@@ -155,6 +155,7 @@ def run(args: argparse.Namespace) -> int:
     from .. import fit as fitting
     from ..data import ingest
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
+    from ..fit.detail import DETAIL_STAGE_AT
     from ..scene.file import read_scene_file, save_scene
     from ._interrupt import interrupted
     from ._output import SCENE, check_output
@@ -188,8 +189,8 @@ def run(args: argparse.Namespace) -> int:
                      f"from a {LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md; photos finer than "
                      f"its voxel add one more for the end); --config resolutions={kept} keeps the default grids")
     if config.max_pixels_per_voxel != given.max_pixels_per_voxel:
-        was = f"{given.max_pixels_per_voxel:g}"
-        lines.append(f"detail      a finer grid for the last 30 % where a voxel spans more than "
+        was, end = f"{given.max_pixels_per_voxel:g}", round(100 * (1 - DETAIL_STAGE_AT))
+        lines.append(f"detail      a finer grid for the last {end} % where a voxel spans more than "
                      f"{config.max_pixels_per_voxel:g} of the photos' pixels, not {was}: it fits better from a "
                      f"{FINE_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
                      f"--config max_pixels_per_voxel={was} keeps {was}")
