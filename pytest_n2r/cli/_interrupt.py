@@ -1,15 +1,24 @@
-"""Ctrl-C as the ``n2r`` commands see it: a :class:`KeyboardInterrupt`, or one that compiled code wrapped.
+"""Ctrl-C as the ``n2r`` commands see it: a :class:`KeyboardInterrupt`, one that compiled code wrapped, or
+a press a long loop reads when it is ready.
 
 Python raises :class:`KeyboardInterrupt` in whatever Python code runs when the signal arrives. When that is a
 callback from a numba-compiled kernel (numba calls back into Python to rebuild some constants), the kernel
 reports the failed callback as a :class:`SystemError` whose cause is the interrupt; a command that only
 caught :class:`KeyboardInterrupt` printed that as a crash, with numba's traceback. :func:`interrupted`
-looks through an exception's causes for the interrupt.
+looks through an exception's causes for the interrupt. Once (5 December, a fit under load) a first Ctrl-C
+was not seen at all, the fit going on for minutes: an exception raised in such a callback can be dropped.
+:func:`first_ctrl_c_deferred` raises nothing on the first press, so nothing can drop it: it is remembered
+until the loop asks.
 """
 
 from __future__ import annotations
 
-__all__ = ["interrupted"]
+import contextlib
+import signal
+import threading
+from collections.abc import Callable, Iterator
+
+__all__ = ["interrupted", "first_ctrl_c_deferred"]
 
 
 def interrupted(exc: BaseException) -> bool:
@@ -36,3 +45,35 @@ def interrupted(exc: BaseException) -> bool:
         seen.add(id(current))
         current = current.__cause__ or current.__context__
     return False
+
+
+@contextlib.contextmanager
+def first_ctrl_c_deferred() -> Iterator[Callable[[], bool]]:
+    """Within the block the first Ctrl-C (SIGINT) raises nothing and is only remembered: the callable yielded
+    says whether it came, for a loop to ask between steps. Each later press raises :class:`KeyboardInterrupt`
+    as usual (to quit at once). The previous handler is restored on leaving. Python handles signals in its
+    main thread only; elsewhere nothing is installed and the callable stays false.
+
+    >>> import os
+    >>> with first_ctrl_c_deferred() as pressed:
+    ...     before = pressed()
+    ...     os.kill(os.getpid(), signal.SIGINT)
+    ...     after = pressed()
+    >>> before, after
+    (False, True)
+    """
+    pressed = threading.Event()
+    if threading.current_thread() is not threading.main_thread():
+        yield pressed.is_set
+        return
+
+    def handle(signum: int, frame: object) -> None:
+        if pressed.is_set():
+            raise KeyboardInterrupt
+        pressed.set()
+
+    previous = signal.signal(signal.SIGINT, handle)
+    try:
+        yield pressed.is_set
+    finally:
+        signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)

@@ -157,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..fit.detail import DETAIL_STAGE_AT
     from ..scene.file import read_scene_file, save_scene
-    from ._interrupt import interrupted
+    from ._interrupt import first_ctrl_c_deferred, interrupted
     from ._output import SCENE, check_output
     from .info import format_info
     from .poses import format_skipped
@@ -208,10 +208,24 @@ def run(args: argparse.Namespace) -> int:
 
     progress = _Progress(args.max_steps, time_budget)
     try:
-        result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
-                             device=args.device, progress=progress, checkpoint=checkpoint,
-                             checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
-                             appearance=args.appearance)
+        with first_ctrl_c_deferred() as pressed:
+
+            def stop() -> bool:
+                """The first Ctrl-C, read after a step: before the first checkpoint it abandons the fit (the
+                output untouched); after it, the fit ends there and the field trained so far is saved."""
+                if not pressed():
+                    return False
+                if not last:
+                    raise KeyboardInterrupt
+                progress.close()
+                print("n2r fit: Ctrl-C: stopping here, then evaluating and saving the field trained so far "
+                      "(Ctrl-C again to quit at once and keep the last checkpoint)", file=sys.stderr)
+                return True
+
+            result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
+                                 device=args.device, progress=progress, checkpoint=checkpoint,
+                                 checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
+                                 appearance=args.appearance, stop=stop)
     except BaseException as exc:
         progress.close()
         if interrupted(exc):  # Ctrl-C, also when a compiled kernel wrapped it in a SystemError
@@ -222,6 +236,10 @@ def run(args: argparse.Namespace) -> int:
     progress.close()
     save(result, {**result.report, "complete": True})
     print(format_info(read_scene_file(output, images=False)))
+    if result.report["stopped"]:
+        print(f"n2r fit: interrupted; the field at step {result.report['steps']} "
+              f"({result.report['train_seconds']:.0f} s of training) is saved in {output}", file=sys.stderr)
+        return 130
     return 0
 
 

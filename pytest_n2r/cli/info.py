@@ -112,7 +112,8 @@ def format_info(scene: SceneFile) -> str:
         if detail.get("grid_added"):
             lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
                          "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
-    state = "complete" if report.get("complete", True) else "checkpoint (the fit did not finish)"
+    state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
+             else "stopped before the end of its budget (Ctrl-C)" if report.get("stopped") else "complete")
     where = f" on {report['device']}" if "device" in report else ""
     threads = f" ({report['threads']} threads)" if "threads" in report else ""
     # a fitted demo scene stores no timings (its file is rebuilt byte for byte)
@@ -127,7 +128,7 @@ def format_info(scene: SceneFile) -> str:
         width = max(len(r["view"]) for r in rows)
         lines.append(f"  {'view':<{width}}  PSNR dB    SSIM")
         lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
-    elif state == "complete":
+    elif report.get("complete", True):
         lines.append("held out    no held-out view with a photo (nothing to score)")
     gains = report.get("appearance")
     if gains:

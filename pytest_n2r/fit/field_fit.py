@@ -287,6 +287,7 @@ def fit(
     checkpoint_every_s: float = 60.0,
     eval_at_s: Sequence[float] = (),
     appearance: bool = False,
+    stop: Callable[[], bool] | None = None,
 ) -> FitResult:
     """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
     ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
@@ -302,6 +303,9 @@ def fit(
     ``appearance`` fits a colour gain per training photo and channel alongside the field, for captures whose
     exposure and white balance vary (a phone's automatic exposure); the field keeps their average and renders
     no gain at any pose. ``report["appearance"]`` holds the fitted gains by photo.
+
+    ``stop`` is asked after every step whether to end the fit there (say the user pressed Ctrl-C); the field
+    is then pruned and evaluated as at the end of the budget, and ``report["stopped"]`` is true.
     """
     config = config or FieldConfig()
     if time_budget_s is None and max_steps is None:
@@ -321,6 +325,7 @@ def fit(
     start = time.perf_counter()
     last_report = last_checkpoint = 0.0
     loss = batch_psnr = float("nan")
+    stopped = False
 
     def progress_fraction() -> float:
         if max_steps is not None:
@@ -360,6 +365,9 @@ def fit(
         if checkpoint is not None and now - last_checkpoint >= checkpoint_every_s:
             last_checkpoint = now
             checkpoint(snapshot())
+        if stop is not None and stop():
+            stopped = True
+            break
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
     final = trainer.field.quantized()
@@ -374,6 +382,7 @@ def fit(
         "threads": torch.get_num_threads(),
         "time_budget_s": time_budget_s,
         "max_steps": max_steps,
+        "stopped": stopped,
         "final_loss": round(loss, 6),
         "step_ms": trainer.phases.report(),
         "field": final.describe(),

@@ -6,7 +6,9 @@ import argparse
 import contextlib
 import io
 import json
+import os
 import shutil
+import signal
 import zipfile
 from pathlib import Path
 
@@ -183,6 +185,76 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_pa
     assert f"no checkpoint was written yet, so {out} was not touched" in err
     assert out.read_bytes() == before
     assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
+
+
+def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> list[int]:
+    """Make ``fit`` send this process ``presses`` real SIGINTs from its progress callback, once, after
+    ``after_checkpoints`` checkpoints were written; returns the steps of the checkpoints written."""
+    from pytest_n2r import fit as fitting
+
+    real_fit = fitting.fit
+    written: list[int] = []
+
+    def fit(*args, progress, checkpoint, **kwargs):
+        sent = []
+
+        def save(result):
+            checkpoint(result)
+            written.append(result.report["steps"])
+
+        def report(info):
+            progress(info)
+            if len(written) >= after_checkpoints and not sent:
+                sent.append(info["step"])
+                for _ in range(presses):
+                    os.kill(os.getpid(), signal.SIGINT)
+
+        return real_fit(*args, progress=report, checkpoint=save, **kwargs)
+
+    monkeypatch.setattr(fitting, "fit", fit)
+    return written
+
+
+def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exported, tmp_path, monkeypatch, capsys):
+    written = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "0.2") == 130
+    err = capsys.readouterr().err
+    assert "Ctrl-C: stopping here, then evaluating and saving" in err, err
+    report = load_scene(out, device="cpu").report
+    assert report["stopped"] is True and report["complete"] is True, \
+        f"expected a finished file of a stopped fit: stopped={report['stopped']}, complete={report['complete']}"
+    assert report["steps"] >= written[-1] and report["steps"] < 100000, report["steps"]
+    assert report["psnr"] is not None, "the stopped field was not evaluated on the held-out views"
+    assert f"interrupted; the field at step {report['steps']} (" in err and str(out) in err, err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
+    assert main(["info", str(out)]) == 0
+    assert "fit         stopped before the end of its budget (Ctrl-C)" in capsys.readouterr().out
+
+
+def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported, tmp_path, monkeypatch, capsys):
+    written = pressing_ctrl_c(monkeypatch, presses=2, after_checkpoints=1)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "0.2") == 130
+    err = capsys.readouterr().err
+    assert f"interrupted; the last checkpoint (step {written[-1]}," in err, err
+    report = load_scene(out, device="cpu").report
+    assert report["complete"] is False and report["steps"] == written[-1], \
+        f"expected the last checkpoint (step {written[-1]}), found complete={report['complete']} at {report['steps']}"
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
+
+
+def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(exported, tmp_path, monkeypatch,
+                                                                              capsys):
+    pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=0)
+    out = tmp_path / "object.n2r"
+    with zipfile.ZipFile(out, "w") as previous:  # what `n2r fit` may replace: a scene file (a zip with scene.json)
+        previous.writestr("scene.json", "the previous scene")
+    before = out.read_bytes()
+    assert run_fit(exported, out, "100000") == 130
+    assert f"no checkpoint was written yet, so {out} was not touched" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
 @pytest.mark.parametrize(("error", "code"), [(kernel_wrapped_interrupt, 130), (SystemError, None)])
