@@ -67,7 +67,7 @@ def first_ctrl_c_deferred() -> Iterator[Callable[[], bool]]:
         yield pressed.is_set
         return
 
-    def handle(signum: int, frame: object) -> None:
+    def handle(_signum: int, _frame: object) -> None:
         if pressed.is_set():
             raise KeyboardInterrupt
         pressed.set()

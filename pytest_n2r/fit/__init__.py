@@ -4,6 +4,7 @@ It sits above :mod:`pytest_n2r.field` (the representation and its sampling maths
 :mod:`pytest_n2r.render` (held-out evaluation renders); neither imports it.
 """
 
-from .field_fit import FIT_RENDER, FitResult, evaluate_views, fit
+from .evaluate import FIT_RENDER, evaluate_views
+from .field_fit import FitResult, fit
 
 __all__ = ["FIT_RENDER", "FitResult", "evaluate_views", "fit"]

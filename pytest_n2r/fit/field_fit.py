@@ -31,20 +31,16 @@ from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
 from ..geometry import camera_rays
-from ..render.field_render import FieldRenderer, RenderSettings
 from .appearance import Appearance
 from .detail import capture_detail, detailed_config
+from .evaluate import FIT_RENDER, evaluate_views, mean_scores
 from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
 from .prune import pruned_occupancy, pruned_occupancy_dense
 from .train_kernels import Composite, RowIndex, lattice_positions, sample_corners, scatter_max
 
-__all__ = ["fit", "fit_space", "FitResult", "evaluate_views", "FIT_RENDER"]
-
-#: Render settings used for held-out evaluation during and after a fit.
-FIT_RENDER = RenderSettings()
-
+__all__ = ["fit", "fit_space", "FitResult"]
 
 @dataclass
 class FitResult:
@@ -53,23 +49,6 @@ class FitResult:
     field: SceneField
     config: FieldConfig
     report: dict = dataclass_field(default_factory=dict)
-
-
-def evaluate_views(
-    field: SceneField, views: Sequence[CapturedView], settings: RenderSettings = FIT_RENDER
-) -> list[dict]:
-    """PSNR (dB) and SSIM of the field's render against each view's real image."""
-    from ..metrics.image_quality import psnr, ssim
-
-    renderer = FieldRenderer(field, settings)
-    rows = []
-    for view in views:
-        if view.image is None:
-            continue
-        rgb = renderer.render(view.c2w, view.camera, ("rgb",))["rgb"]
-        rows.append({"view": view.name, "psnr": round(psnr(view.image, rgb), 3),
-                     "ssim": round(ssim(view.image, rgb), 4)})
-    return rows
 
 
 def _versions() -> dict:
@@ -353,7 +332,7 @@ def fit(
             e0 = time.perf_counter()
             rows = evaluate_views(trainer.field, heldout)
             history.append({"seconds": round(pending_evals.pop(0), 3), "train_seconds": round(train_s, 2),
-                            "step": trainer.steps, **_means(rows)})
+                            "step": trainer.steps, **mean_scores(rows)})
             eval_s += time.perf_counter() - e0
         now = time.perf_counter() - start
         if progress is not None and now - last_report >= 1.0:
@@ -389,7 +368,7 @@ def fit(
         "detail": None if detail is None else {**detail.describe(final.resolution),
                                                 "grid_added": config.resolutions[-1] if config is not given else None},
         "heldout": rows,
-        **_means(rows),
+        **mean_scores(rows),
         "history": history,
         "versions": _versions(),
     }
@@ -397,9 +376,3 @@ def fit(
         report["appearance"] = trainer.appearance.report()
     return FitResult(final, config, report)
 
-
-def _means(rows: list[dict]) -> dict:
-    if not rows:
-        return {"psnr": None, "ssim": None}
-    return {"psnr": round(float(np.mean([r["psnr"] for r in rows])), 3),
-            "ssim": round(float(np.mean([r["ssim"] for r in rows])), 4)}
