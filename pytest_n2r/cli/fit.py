@@ -87,7 +87,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "a scene field within the time budget, and write the scene file: field, cameras, poses, "
                     "split, optional JPEG copies of the photos and the fit report (held-out PSNR/SSIM per "
                     "view, time, device, versions), which is also printed. A checkpoint is written to the "
-                    "output about every minute, so Ctrl-C or a crash leaves the last good scene.",
+                    "output about every minute, so a crash leaves the last good scene; Ctrl-C ends the fit "
+                    "after its step and saves the field trained so far (a second Ctrl-C quits at once, "
+                    "keeping the last checkpoint).",
     )
     p.add_argument("source", metavar="SOURCE", help="transforms.json, COLMAP model folder, images folder or video")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
