@@ -42,6 +42,7 @@ from .train_kernels import Composite, RowIndex, lattice_positions, sample_corner
 
 __all__ = ["fit", "fit_space", "FitResult"]
 
+
 @dataclass
 class FitResult:
     """A fitted field, the config it was fitted with, and the fit report (plain JSON-ready values)."""

@@ -257,6 +257,24 @@ def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(e
     assert [p.name for p in tmp_path.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
+def test_off_the_main_thread_ctrl_c_is_left_to_python():
+    """Python runs signal handlers in its main thread only: elsewhere nothing is installed (and nothing fails)."""
+    import threading
+
+    from pytest_n2r.cli._interrupt import first_ctrl_c_deferred
+
+    seen = []
+
+    def body():
+        with first_ctrl_c_deferred() as pressed:
+            seen.append((pressed(), signal.getsignal(signal.SIGINT)))
+
+    worker = threading.Thread(target=body)
+    worker.start()
+    worker.join()
+    assert seen == [(False, signal.default_int_handler)], f"off the main thread: {seen}"
+
+
 @pytest.mark.parametrize(("error", "code"), [(kernel_wrapped_interrupt, 130), (SystemError, None)])
 def test_any_command_reads_a_kernel_wrapped_ctrl_c_as_an_interrupt_and_nothing_else(monkeypatch, capsys, error, code):
     from pytest_n2r.cli import info
