@@ -52,18 +52,21 @@ def first_ctrl_c_deferred() -> Iterator[Callable[[], bool]]:
     """Within the block the first Ctrl-C (SIGINT) raises nothing and is only remembered: the callable yielded
     says whether it came, for a loop to ask between steps. Each later press raises :class:`KeyboardInterrupt`
     as usual (to quit at once). The previous handler is restored on leaving. Python handles signals in its
-    main thread only; elsewhere nothing is installed and the callable stays false.
+    main thread only, and a process started with Ctrl-C ignored (``nohup``, a background job of a script)
+    keeps ignoring it: in both cases nothing is installed and the callable stays false.
 
     >>> import os
+    >>> previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as in an interactive shell
     >>> with first_ctrl_c_deferred() as pressed:
     ...     before = pressed()
     ...     os.kill(os.getpid(), signal.SIGINT)
     ...     after = pressed()
-    >>> before, after
-    (False, True)
+    >>> before, after, signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    (False, True, True)
+    >>> _ = signal.signal(signal.SIGINT, previous)
     """
     pressed = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         yield pressed.is_set
         return
 

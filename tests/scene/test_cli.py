@@ -187,6 +187,15 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_pa
     assert [p.name for p in out.parent.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
+@pytest.fixture
+def interactive_ctrl_c():
+    """Ctrl-C handled as in an interactive shell (Python's default handler) for the test, and what it was
+    before restored after it: a background job, as CI may run the suite, starts with Ctrl-C ignored."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> list[int]:
     """Make ``fit`` send this process ``presses`` real SIGINTs from its progress callback, once, after
     ``after_checkpoints`` checkpoints were written; returns the steps of the checkpoints written."""
@@ -215,6 +224,7 @@ def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> list[i
     return written
 
 
+@pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exported, tmp_path, monkeypatch, capsys):
     written = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
     out = tmp_path / "object.n2r"
@@ -232,6 +242,7 @@ def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exporte
     assert "fit         stopped before the end of its budget (Ctrl-C)" in capsys.readouterr().out
 
 
+@pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported, tmp_path, monkeypatch, capsys):
     written = pressing_ctrl_c(monkeypatch, presses=2, after_checkpoints=1)
     out = tmp_path / "object.n2r"
@@ -244,8 +255,8 @@ def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
 
 
-def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(exported, tmp_path, monkeypatch,
-                                                                              capsys):
+@pytest.mark.usefixtures("interactive_ctrl_c")
+def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(exported, tmp_path, monkeypatch, capsys):
     pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=0)
     out = tmp_path / "object.n2r"
     with zipfile.ZipFile(out, "w") as previous:  # what `n2r fit` may replace: a scene file (a zip with scene.json)
@@ -257,6 +268,7 @@ def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(e
     assert [p.name for p in tmp_path.iterdir()] == ["object.n2r"], "temporary files were left behind"
 
 
+@pytest.mark.usefixtures("interactive_ctrl_c")
 def test_off_the_main_thread_ctrl_c_is_left_to_python():
     """Python runs signal handlers in its main thread only: elsewhere nothing is installed (and nothing fails)."""
     import threading
@@ -273,6 +285,21 @@ def test_off_the_main_thread_ctrl_c_is_left_to_python():
     worker.start()
     worker.join()
     assert seen == [(False, signal.default_int_handler)], f"off the main thread: {seen}"
+
+
+def test_a_process_started_with_ctrl_c_ignored_keeps_ignoring_it():
+    """``nohup n2r fit …`` or a script's background job: Ctrl-C was ignored when the process started."""
+    from pytest_n2r.cli._interrupt import first_ctrl_c_deferred
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with first_ctrl_c_deferred() as pressed:
+            during = signal.getsignal(signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            seen = pressed()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert (during, seen) == (signal.SIG_IGN, False), f"handler {during}, pressed {seen}: expected it left ignored"
 
 
 @pytest.mark.parametrize(("error", "code"), [(kernel_wrapped_interrupt, 130), (SystemError, None)])
