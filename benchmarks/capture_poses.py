@@ -38,8 +38,7 @@ from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.data.sfm import MATCHERS, run_sfm
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.errors import IngestError, InvalidArgument
-from pytest_n2r.fit import fit
-from pytest_n2r.fit.field_fit import evaluate_views
+from pytest_n2r.fit import evaluate_views, fit
 from pytest_n2r.geometry import Camera, rotation_angle_deg
 
 #: A photo whose world rotation lies within this many degrees of the consensus is consistent with it.

@@ -65,18 +65,24 @@ def first_ctrl_c_deferred() -> Iterator[Callable[[], bool]]:
     (False, True, True)
     >>> _ = signal.signal(signal.SIGINT, previous)
     """
-    pressed = threading.Event()
+    presses = 0  # a plain count: the handler runs in the main thread, between Python instructions
+
+    def pressed() -> bool:
+        return presses > 0
+
     if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
-        yield pressed.is_set
+        yield pressed
         return
 
     def handle(_signum: int, _frame: object) -> None:
-        if pressed.is_set():
+        nonlocal presses
+        presses += 1
+        if presses > 1:
             raise KeyboardInterrupt
-        pressed.set()
 
-    previous = signal.signal(signal.SIGINT, handle)
+    previous = signal.getsignal(signal.SIGINT)
     try:
-        yield pressed.is_set
+        signal.signal(signal.SIGINT, handle)
+        yield pressed
     finally:
         signal.signal(signal.SIGINT, previous if previous is not None else signal.SIG_DFL)

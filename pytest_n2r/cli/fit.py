@@ -1,7 +1,8 @@
 """``n2r fit SOURCE -o scene.n2r``: ingest a capture, fit a scene field, write the scene file and its report.
 
-Checkpoints are written (atomically) to the output path while fitting, so Ctrl-C or a crash leaves the last
-good scene there; the final file replaces them when the fit ends.
+Checkpoints are written (atomically) to the output path while fitting, so a crash leaves the last good scene
+there; the first Ctrl-C ends the fit after its step and saves the field trained so far (before the first
+checkpoint, nothing); the final file replaces them when the fit ends.
 """
 
 from __future__ import annotations
@@ -88,8 +89,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "split, optional JPEG copies of the photos and the fit report (held-out PSNR/SSIM per "
                     "view, time, device, versions), which is also printed. A checkpoint is written to the "
                     "output about every minute, so a crash leaves the last good scene; Ctrl-C ends the fit "
-                    "after its step and saves the field trained so far (a second Ctrl-C quits at once, "
-                    "keeping the last checkpoint).",
+                    "after its step and saves the field trained so far (before the first checkpoint it "
+                    "writes nothing; a second Ctrl-C quits at once, keeping the last checkpoint), exit "
+                    "status 130.",
     )
     p.add_argument("source", metavar="SOURCE", help="transforms.json, COLMAP model folder, images folder or video")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
@@ -210,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
 
     progress = _Progress(args.max_steps, time_budget)
     try:
-        with first_ctrl_c_deferred() as pressed:
+        with first_ctrl_c_deferred() as pressed:  # the first press is read here, the second raises at once
 
             def stop() -> bool:
                 """The first Ctrl-C, read after a step: before the first checkpoint it abandons the fit (the
@@ -221,13 +223,17 @@ def run(args: argparse.Namespace) -> int:
                     raise KeyboardInterrupt
                 progress.close()
                 print("n2r fit: Ctrl-C: stopping here, then evaluating and saving the field trained so far "
-                      "(Ctrl-C again to quit at once and keep the last checkpoint)", file=sys.stderr)
+                      f"(Ctrl-C again to quit at once, keeping the checkpoint of step {last['steps']})",
+                      file=sys.stderr)
                 return True
 
             result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
                                  device=args.device, progress=progress, checkpoint=checkpoint,
                                  checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
                                  appearance=args.appearance, stop=stop)
+            progress.close()
+            save(result, {**result.report, "complete": True})
+            late = pressed() and not result.report["stopped"]  # pressed after the last step: the field is complete
     except BaseException as exc:
         progress.close()
         if interrupted(exc):  # Ctrl-C, also when a compiled kernel wrapped it in a SystemError
@@ -235,12 +241,14 @@ def run(args: argparse.Namespace) -> int:
             return 130
         print(f"n2r fit: the fit failed; {_kept(output, last)}", file=sys.stderr)
         raise
-    progress.close()
-    save(result, {**result.report, "complete": True})
     print(format_info(read_scene_file(output, images=False)))
     if result.report["stopped"]:
         print(f"n2r fit: interrupted; the field at step {result.report['steps']} "
               f"({result.report['train_seconds']:.0f} s of training) is saved in {output}", file=sys.stderr)
+        return 130
+    if late:
+        print(f"n2r fit: interrupted after training had ended; the complete field is saved in {output}",
+              file=sys.stderr)
         return 130
     return 0
 

@@ -113,7 +113,7 @@ def format_info(scene: SceneFile) -> str:
             lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
                          "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
     state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
-             else "stopped before the end of its budget (Ctrl-C)" if report.get("stopped") else "complete")
+             else "stopped before the end of its budget" if report.get("stopped") else "complete")
     where = f" on {report['device']}" if "device" in report else ""
     threads = f" ({report['threads']} threads)" if "threads" in report else ""
     # a fitted demo scene stores no timings (its file is rebuilt byte for byte)

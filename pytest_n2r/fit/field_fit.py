@@ -285,7 +285,8 @@ def fit(
     no gain at any pose. ``report["appearance"]`` holds the fitted gains by photo.
 
     ``stop`` is asked after every step whether to end the fit there (say the user pressed Ctrl-C); the field
-    is then pruned and evaluated as at the end of the budget, and ``report["stopped"]`` is true.
+    is then pruned and evaluated as at the end of the budget, and ``report["stopped"]`` is true unless that
+    step had reached the budget anyway.
     """
     config = config or FieldConfig()
     if time_budget_s is None and max_steps is None:
@@ -346,7 +347,7 @@ def fit(
             last_checkpoint = now
             checkpoint(snapshot())
         if stop is not None and stop():
-            stopped = True
+            stopped = progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s)
             break
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
@@ -376,4 +377,3 @@ def fit(
     if trainer.appearance is not None:
         report["appearance"] = trainer.appearance.report()
     return FitResult(final, config, report)
-

@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import signal
+import sys
 import zipfile
 from pathlib import Path
 
@@ -140,8 +141,8 @@ def interrupting_fit(monkeypatch, error: BaseException, after_checkpoints: int) 
     return written
 
 
-def run_fit(exported: Path, out: Path, every: str) -> int:
-    return main(["fit", str(exported), "-o", str(out), "--downscale", "1", "--max-steps", "100000", "--device",
+def run_fit(exported: Path, out: Path, every: str, steps: str = "100000") -> int:
+    return main(["fit", str(exported), "-o", str(out), "--downscale", "1", "--max-steps", steps, "--device",
                  "cpu", "--checkpoint-every", every, *TINY_FLAGS])
 
 
@@ -191,63 +192,83 @@ def test_ctrl_c_before_the_first_checkpoint_leaves_the_old_file(exported, tmp_pa
 def interactive_ctrl_c():
     """Ctrl-C handled as in an interactive shell (Python's default handler) for the test, and what it was
     before restored after it: a background job, as CI may run the suite, starts with Ctrl-C ignored."""
+    if sys.platform == "win32":
+        pytest.skip("os.kill(pid, SIGINT) ends the process on Windows")
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, previous)
 
 
-def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> list[int]:
-    """Make ``fit`` send this process ``presses`` real SIGINTs from its progress callback, once, after
-    ``after_checkpoints`` checkpoints were written; returns the steps of the checkpoints written."""
+def press_ctrl_c(times: int = 1, seen: dict | None = None) -> bool:
+    """Send this process ``times`` real SIGINTs; whether the first one returned without raising (also set as
+    ``seen["deferred"]`` before the next press, which may raise)."""
+    os.kill(os.getpid(), signal.SIGINT)
+    if seen is not None:  # reached only when the first press raised nothing
+        seen["deferred"] = True
+    for _ in range(times - 1):
+        os.kill(os.getpid(), signal.SIGINT)
+    return True
+
+
+def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> dict:
+    """Make ``fit`` press Ctrl-C ``presses`` times from its progress callback, once, after ``after_checkpoints``
+    checkpoints were written. Returns what happened, filled in as the fit runs: ``written`` (the steps of the
+    checkpoints), ``at`` (the step of the presses) and ``deferred`` (the first press raised nothing)."""
     from pytest_n2r import fit as fitting
 
     real_fit = fitting.fit
-    written: list[int] = []
+    seen: dict = {"written": [], "at": None, "deferred": False}
 
     def fit(*args, progress, checkpoint, **kwargs):
-        sent = []
-
         def save(result):
             checkpoint(result)
-            written.append(result.report["steps"])
+            seen["written"].append(result.report["steps"])
 
         def report(info):
             progress(info)
-            if len(written) >= after_checkpoints and not sent:
-                sent.append(info["step"])
-                for _ in range(presses):
-                    os.kill(os.getpid(), signal.SIGINT)
+            if len(seen["written"]) >= after_checkpoints and seen["at"] is None:
+                seen["at"] = info["step"]
+                press_ctrl_c(presses, seen)
 
         return real_fit(*args, progress=report, checkpoint=save, **kwargs)
 
     monkeypatch.setattr(fitting, "fit", fit)
-    return written
+    return seen
+
+
+#: Steps that a fit of the tiny export cannot finish before a press (a stop that is not read fails the test
+#: instead of fitting on).
+PRESSED_STEPS = "3000"
 
 
 @pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exported, tmp_path, monkeypatch, capsys):
-    written = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
+    seen = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
     out = tmp_path / "object.n2r"
-    assert run_fit(exported, out, "0.2") == 130
+    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
     err = capsys.readouterr().err
-    assert "Ctrl-C: stopping here, then evaluating and saving" in err, err
+    assert seen["deferred"], "the first Ctrl-C raised at once instead of being read between steps"
+    assert f"Ctrl-C: stopping here, then evaluating and saving the field trained so far (Ctrl-C again to quit " \
+           f"at once, keeping the checkpoint of step {seen['written'][-1]})" in err, err
     report = load_scene(out, device="cpu").report
     assert report["stopped"] is True and report["complete"] is True, \
         f"expected a finished file of a stopped fit: stopped={report['stopped']}, complete={report['complete']}"
-    assert report["steps"] >= written[-1] and report["steps"] < 100000, report["steps"]
+    assert report["steps"] == seen["at"], f"pressed at step {seen['at']}, stopped at {report['steps']}"
     assert report["psnr"] is not None, "the stopped field was not evaluated on the held-out views"
     assert f"interrupted; the field at step {report['steps']} (" in err and str(out) in err, err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
     assert main(["info", str(out)]) == 0
-    assert "fit         stopped before the end of its budget (Ctrl-C)" in capsys.readouterr().out
+    assert "fit         stopped before the end of its budget: " in capsys.readouterr().out
 
 
 @pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported, tmp_path, monkeypatch, capsys):
-    written = pressing_ctrl_c(monkeypatch, presses=2, after_checkpoints=1)
+    seen = pressing_ctrl_c(monkeypatch, presses=2, after_checkpoints=1)
     out = tmp_path / "object.n2r"
-    assert run_fit(exported, out, "0.2") == 130
+    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
     err = capsys.readouterr().err
+    assert seen["deferred"], "the first Ctrl-C raised at once: the second press was never needed"
+    written = seen["written"]
     assert f"interrupted; the last checkpoint (step {written[-1]}," in err, err
     report = load_scene(out, device="cpu").report
     assert report["complete"] is False and report["steps"] == written[-1], \
@@ -256,13 +277,57 @@ def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported
 
 
 @pytest.mark.usefixtures("interactive_ctrl_c")
+def test_a_second_ctrl_c_while_the_stopped_field_is_evaluated_keeps_the_checkpoint(exported, tmp_path, monkeypatch,
+                                                                                   capsys):
+    from pytest_n2r.fit import field_fit
+
+    seen = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
+    real_evaluate = field_fit.evaluate_views
+
+    def evaluate(*args, **kwargs):
+        if seen["at"] is not None:  # the final evaluation of the stopped fit
+            press_ctrl_c()
+        return real_evaluate(*args, **kwargs)
+
+    monkeypatch.setattr(field_fit, "evaluate_views", evaluate)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
+    assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in capsys.readouterr().err
+    report = load_scene(out, device="cpu").report
+    assert (report["complete"], report["steps"]) == (False, seen["written"][-1]), report
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
+
+
+@pytest.mark.usefixtures("interactive_ctrl_c")
+def test_a_ctrl_c_after_the_last_step_keeps_the_complete_field(exported, tmp_path, monkeypatch, capsys):
+    from pytest_n2r.scene import file as scene_file
+
+    real_save = scene_file.save_scene
+    pressed = []
+
+    def save(path, field, config, capture, report, **kwargs):
+        if report["complete"] and not pressed:  # the final save of a fit that reached its steps
+            pressed.append(press_ctrl_c())
+        return real_save(path, field, config, capture, report, **kwargs)
+
+    monkeypatch.setattr(scene_file, "save_scene", save)
+    out = tmp_path / "object.n2r"
+    assert run_fit(exported, out, "100000", steps="40") == 130
+    assert pressed == [True], "the press during the final save was raised, not read"
+    assert f"interrupted after training had ended; the complete field is saved in {out}" in capsys.readouterr().err
+    report = load_scene(out, device="cpu").report
+    assert (report["complete"], report["stopped"], report["steps"]) == (True, False, 40), report
+
+
+@pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_real_ctrl_c_before_the_first_checkpoint_leaves_the_output_untouched(exported, tmp_path, monkeypatch, capsys):
-    pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=0)
+    seen = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=0)
     out = tmp_path / "object.n2r"
     with zipfile.ZipFile(out, "w") as previous:  # what `n2r fit` may replace: a scene file (a zip with scene.json)
         previous.writestr("scene.json", "the previous scene")
     before = out.read_bytes()
-    assert run_fit(exported, out, "100000") == 130
+    assert run_fit(exported, out, "100000", steps=PRESSED_STEPS) == 130
+    assert seen["deferred"], "the first Ctrl-C raised at once instead of being read between steps"
     assert f"no checkpoint was written yet, so {out} was not touched" in capsys.readouterr().err
     assert out.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["object.n2r"], "temporary files were left behind"
