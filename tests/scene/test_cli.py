@@ -241,13 +241,19 @@ def pressing_ctrl_c(monkeypatch, presses: int, after_checkpoints: int) -> dict:
 PRESSED_STEPS = "3000"
 
 
+def fit_pressed(exported: Path, out: Path, seen: dict, capsys) -> str:
+    """Run the fit that :func:`pressing_ctrl_c` presses Ctrl-C in, checkpointing every 0.2 s; checks that it
+    exited 130 and that the first press was read between steps, and returns what it printed to stderr."""
+    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
+    assert seen["deferred"], "the first Ctrl-C raised at once instead of being read between steps"
+    return capsys.readouterr().err
+
+
 @pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exported, tmp_path, monkeypatch, capsys):
     seen = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
     out = tmp_path / "object.n2r"
-    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
-    err = capsys.readouterr().err
-    assert seen["deferred"], "the first Ctrl-C raised at once instead of being read between steps"
+    err = fit_pressed(exported, out, seen, capsys)
     assert f"Ctrl-C: stopping here, then evaluating and saving the field trained so far (Ctrl-C again to quit " \
            f"at once, keeping the checkpoint of step {seen['written'][-1]})" in err, err
     report = load_scene(out, device="cpu").report
@@ -265,9 +271,7 @@ def test_a_real_ctrl_c_after_a_checkpoint_saves_the_field_trained_so_far(exporte
 def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported, tmp_path, monkeypatch, capsys):
     seen = pressing_ctrl_c(monkeypatch, presses=2, after_checkpoints=1)
     out = tmp_path / "object.n2r"
-    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
-    err = capsys.readouterr().err
-    assert seen["deferred"], "the first Ctrl-C raised at once: the second press was never needed"
+    err = fit_pressed(exported, out, seen, capsys)
     written = seen["written"]
     assert f"interrupted; the last checkpoint (step {written[-1]}," in err, err
     report = load_scene(out, device="cpu").report
@@ -291,8 +295,7 @@ def test_a_second_ctrl_c_while_the_stopped_field_is_evaluated_keeps_the_checkpoi
 
     monkeypatch.setattr(field_fit, "evaluate_views", evaluate)
     out = tmp_path / "object.n2r"
-    assert run_fit(exported, out, "0.2", steps=PRESSED_STEPS) == 130
-    assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in capsys.readouterr().err
+    assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in fit_pressed(exported, out, seen, capsys)
     report = load_scene(out, device="cpu").report
     assert (report["complete"], report["steps"]) == (False, seen["written"][-1]), report
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
