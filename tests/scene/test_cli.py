@@ -295,7 +295,8 @@ def test_a_second_ctrl_c_while_the_stopped_field_is_evaluated_keeps_the_checkpoi
 
     monkeypatch.setattr(field_fit, "evaluate_views", evaluate)
     out = tmp_path / "object.n2r"
-    assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in fit_pressed(exported, out, seen, capsys)
+    err = fit_pressed(exported, out, seen, capsys)
+    assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in err, err
     report = load_scene(out, device="cpu").report
     assert (report["complete"], report["steps"]) == (False, seen["written"][-1]), report
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler, "the Ctrl-C handler was not restored"
