@@ -313,11 +313,14 @@ def fit(
             return trainer.steps / max_steps
         return train_s / time_budget_s
 
+    def budget_left() -> bool:
+        return progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s)
+
     def snapshot() -> FitResult:
         return FitResult(trainer.field.quantized(), config,
                          {"steps": trainer.steps, "train_seconds": round(train_s, 2)})
 
-    while progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s):
+    while budget_left():
         t0 = time.perf_counter()
         frac = progress_fraction()
         if config.stage(frac) > trainer.stage:
@@ -347,7 +350,7 @@ def fit(
             last_checkpoint = now
             checkpoint(snapshot())
         if stop is not None and stop():
-            stopped = progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s)
+            stopped = budget_left()
             break
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
