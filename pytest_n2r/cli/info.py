@@ -112,6 +112,11 @@ def format_info(scene: SceneFile) -> str:
         if detail.get("grid_added"):
             lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
                          "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
+    for limit in report.get("grid_limits") or []:
+        from ..fit.memory import GridChoice
+
+        choice = GridChoice(limit["wanted"], limit["trained"], limit["needed_bytes"], limit["free_bytes"])
+        lines.append(f"  memory    at step {limit['step']}, {choice.message()}")
     state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
              else "stopped before the end of its budget" if report.get("stopped") else "complete")
     where = f" on {report['device']}" if "device" in report else ""

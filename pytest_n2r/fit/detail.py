@@ -1,6 +1,6 @@
 """How much detail a capture can give a field: the training views' pixel footprint on the scene, the grid
-size whose voxel matches it, the finer grid a fit adds where its ladder is too coarse for the photos, and the
-finest grid a machine's memory holds.
+size whose voxel matches it, and the finer grid a fit adds where its ladder is too coarse for the photos (what a
+machine's memory holds: :mod:`.memory`).
 
 A field cannot show detail finer than its voxel, and a photo shows none finer than its pixel's footprint on
 the surface. Where the cameras look closely, the voxel should approach that footprint; a coarser grid blurs
@@ -23,14 +23,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.capture import Capture
-from ..errors import InvalidArgument
 from ..field.config import FieldConfig
 from ..field.space import SceneSpace
 from ..geometry import inside_image, project
 from .budget import LONG_BUDGET_RESOLUTIONS
 
 __all__ = ["DETAIL_GRID_MULTIPLE", "DETAIL_STAGE_AT", "LIBRARY_LADDERS", "CaptureDetail", "capture_detail",
-           "detailed_config", "fit_memory_bytes", "memory_resolution"]
+           "detailed_config"]
 
 #: Fewest sparse points a view must see for its footprint to count.
 MIN_POINTS = 10
@@ -118,36 +117,3 @@ def detailed_config(config: FieldConfig, detail: CaptureDetail | None) -> FieldC
         return config
     return config.replace(resolutions=(*config.resolutions, finer),
                           stage_fractions=(*config.stage_fractions, DETAIL_STAGE_AT))
-
-
-def fit_memory_bytes(resolution: int, *, occupied: float = 0.1, width: int = 13) -> int:
-    """An upper estimate of the bytes a fit holds on its finest grid of ``resolution``³: the row map (int32
-    per vertex), the occupancy (a byte per cell) and the training visibility (float32 per cell), plus the
-    stored vertices of ``occupied`` of the cells (about 1.2 vertices per occupied cell at the fractions fits
-    reach) with ``width`` float32 values each, Adam's two moments, their row index (8 bytes) and their six
-    neighbours for the prior (int32 each, :func:`~pytest_n2r.fit.prior.tv_neighbours`)."""
-    if not 0.0 < occupied <= 1.0:
-        raise InvalidArgument(f"occupied={occupied!r}: expected a fraction of the cells in (0, 1]")
-    if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 2:
-        raise InvalidArgument(f"resolution={resolution!r}: expected vertices per axis >= 2")
-    vertices, cells = resolution ** 3, (resolution - 1) ** 3
-    stored = min(vertices, 1.2 * occupied * cells)
-    return int(4 * vertices + 5 * cells + stored * (3 * 4 * width + 8 + 6 * 4))
-
-
-def memory_resolution(memory_bytes: float, *, occupied: float = 0.1, width: int = 13, multiple: int = 16) -> int:
-    """The largest grid size (a multiple of ``multiple``, at most 1024) whose fit fits in ``memory_bytes``
-    by :func:`fit_memory_bytes`.
-
-    >>> memory_resolution(24 * 2**30)
-    928
-    """
-    if not (math.isfinite(memory_bytes) and memory_bytes > 0):
-        raise InvalidArgument(f"memory_bytes={memory_bytes!r}: expected a number of bytes > 0")
-    best = 0
-    for r in range(multiple, 1024 + 1, multiple):
-        if fit_memory_bytes(r, occupied=occupied, width=width) <= memory_bytes:
-            best = r
-    if best == 0:
-        raise InvalidArgument(f"memory_bytes={memory_bytes!r}: not even a {multiple}³ grid fits")
-    return best

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import platform
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
@@ -34,6 +35,7 @@ from ..geometry import camera_rays
 from .appearance import Appearance
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, mean_scores
+from .memory import GridChoice, GridMemoryLimit, choose_grid, free_bytes
 from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
@@ -248,11 +250,19 @@ class _Trainer:
         self._rebuild_grid()
 
     @torch.no_grad()
-    def refine(self) -> None:
-        """Move to the next grid resolution."""
-        self.stage += 1
-        self.field = self.field.upsampled(self.config.resolutions[self.stage])
-        self._reset_optimizer()
+    def refine(self) -> GridChoice:
+        """Move to the next grid of the ladder, or to the finest coarser one the free memory holds, or stay
+        where none does (:func:`~pytest_n2r.fit.memory.choose_grid`); ``config`` then names the grids trained."""
+        stage = self.stage + 1
+        choice = choose_grid(self.field, self.config.resolutions[stage], free_bytes(self.device))
+        if choice.limited:
+            self.config = choice.applied_to(self.config, stage)
+            warnings.warn(f"fit: at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=3)
+        if choice.resolution > self.field.resolution:
+            self.stage = stage
+            self.field = self.field.upsampled(choice.resolution)
+            self._reset_optimizer()
+        return choice
 
 
 def fit(
@@ -273,7 +283,9 @@ def fit(
     ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
     ``max_steps`` alone is reproducible bit for bit on the same machine and thread count). Where the capture
     shows finer detail than ``config``'s finest grid holds, the fit trains one finer grid at the end of the
-    run (:func:`~pytest_n2r.fit.detail.detailed_config`); the result's ``config`` is the one it used.
+    run (:func:`~pytest_n2r.fit.detail.detailed_config`). A grid that would not fit in the memory free is
+    replaced by the finest that does (:func:`~pytest_n2r.fit.memory.choose_grid`), with a warning and a row of
+    ``report["grid_limits"]``; the result's ``config`` names the grids trained.
 
     ``progress`` receives ``{step, stage, resolution, loss, psnr, elapsed_s, eta_s, occupied}`` about once a
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
@@ -298,6 +310,7 @@ def fit(
     dev = resolve_device(device)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
+    added = config is not given
     trainer = _Trainer(capture, config, dev, appearance=appearance)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
@@ -307,6 +320,7 @@ def fit(
     last_report = last_checkpoint = 0.0
     loss = batch_psnr = float("nan")
     stopped = False
+    limits: list[dict] = []
 
     def progress_fraction() -> float:
         if max_steps is not None:
@@ -325,8 +339,11 @@ def fit(
         frac = progress_fraction()
         if config.stage(frac) > trainer.stage:
             trainer.phases.start(config.resolutions[trainer.stage + 1])
-            trainer.refine()
+            choice = trainer.refine()
             trainer.phases.lap("refine")
+            if choice.limited:
+                config = trainer.config
+                limits.append({"step": trainer.steps, **choice.describe()})
         loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
         if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
             trainer.phases.start(trainer.field.resolution)
@@ -371,7 +388,8 @@ def fit(
         "step_ms": trainer.phases.report(),
         "field": final.describe(),
         "detail": None if detail is None else {**detail.describe(final.resolution),
-                                                "grid_added": config.resolutions[-1] if config is not given else None},
+                                                "grid_added": final.resolution if added else None},
+        "grid_limits": limits,
         "heldout": rows,
         **mean_scores(rows),
         "history": history,

@@ -1,4 +1,4 @@
-"""How much detail a capture gives a field: pixel footprints, the matching grid, the memory ceiling."""
+"""How much detail a capture gives a field: pixel footprints, the matching grid, the finer grid added."""
 
 from __future__ import annotations
 
@@ -18,8 +18,6 @@ from pytest_n2r.fit.detail import (
     CaptureDetail,
     capture_detail,
     detailed_config,
-    fit_memory_bytes,
-    memory_resolution,
 )
 from pytest_n2r.geometry import Camera
 
@@ -61,26 +59,6 @@ def test_views_that_see_too_few_points_do_not_count_and_none_means_nothing_to_me
     assert capture_detail(_capture([1.0], points=np.zeros((0, 3))), space) is None
     few = _capture([1.0], points=np.zeros((5, 3)))
     assert capture_detail(few, space) is None
-
-
-def test_the_memory_ceiling_grows_with_memory_and_the_estimate_with_the_grid():
-    sizes = [memory_resolution(gib * 2**30) for gib in (1, 4, 24)]
-    assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
-    for r in sizes:
-        assert fit_memory_bytes(r) <= max(gib * 2**30 for gib in (1, 4, 24))
-    assert fit_memory_bytes(385) > fit_memory_bytes(384)
-    assert fit_memory_bytes(384, occupied=0.2) > fit_memory_bytes(384, occupied=0.1)
-
-
-@pytest.mark.parametrize("call, message", [
-    (lambda: memory_resolution(0), "memory_bytes=0"),
-    (lambda: memory_resolution(1000), "not even a 16³ grid"),
-    (lambda: fit_memory_bytes(1), "resolution=1"),
-    (lambda: fit_memory_bytes(64, occupied=0.0), "occupied=0.0"),
-])
-def test_bad_arguments_are_named(call, message):
-    with pytest.raises(InvalidArgument, match=message):
-        call()
 
 
 def test_a_fit_reports_how_many_training_pixels_its_finest_voxel_spans(short_fit, capture48, tmp_path):

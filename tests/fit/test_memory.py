@@ -1,0 +1,191 @@
+"""What a fit holds in memory: the stage estimate, the free memory, and the grid a fit moves to when the
+wanted one would not fit (the fox's 30-step fit that moved an unpruned field to 384³ and was killed at 24 GB)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.field.grid import SceneField
+from pytest_n2r.field.space import SceneSpace
+from pytest_n2r.fit import memory
+from pytest_n2r.fit.memory import (
+    HEADROOM,
+    GridChoice,
+    GridMemoryLimit,
+    choose_grid,
+    fit_memory_bytes,
+    free_bytes,
+    memory_resolution,
+    stage_bytes,
+)
+
+from .conftest import SHORT_CONFIG
+
+
+def _field(resolution: int, occupied: np.ndarray | None = None, width_degree: int = 1, seed: int = 0) -> SceneField:
+    """A sparse field of ``resolution``³ with random values on the vertices of ``occupied`` cells (all: None)."""
+    field = SceneField.empty(SceneSpace((0.0, 0.0, 0.0), 1.0), resolution, width_degree, 0.01, 0.5, "cpu")
+    if occupied is not None:
+        field.occupancy = torch.as_tensor(occupied, dtype=torch.bool)
+    field = field.compact()
+    field.values = torch.randn(field.values.shape, generator=torch.Generator().manual_seed(seed))
+    return field
+
+
+def test_the_memory_ceiling_grows_with_memory_and_the_estimate_with_the_grid():
+    sizes = [memory_resolution(gib * 2**30) for gib in (1, 4, 24)]
+    assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
+    for r in sizes:
+        assert fit_memory_bytes(r) <= max(gib * 2**30 for gib in (1, 4, 24))
+    assert fit_memory_bytes(385) > fit_memory_bytes(384)
+    assert fit_memory_bytes(384, occupied=0.2) > fit_memory_bytes(384, occupied=0.1)
+    assert stage_bytes(384, 10**6, width=28) > stage_bytes(384, 10**6, width=13) > stage_bytes(384, 10**5)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: memory_resolution(0), "memory_bytes=0"),
+    (lambda: memory_resolution(1000), "not even a 16³ grid"),
+    (lambda: fit_memory_bytes(1), "resolution=1"),
+    (lambda: fit_memory_bytes(64, occupied=0.0), "occupied=0.0"),
+    (lambda: stage_bytes(64, -1), r"stored=-1: expected a vertex count in 0\.\.262144"),
+    (lambda: stage_bytes(True, 0), "resolution=True"),
+    (lambda: choose_grid(_field(16), 16, None), "wanted=16: expected a grid finer than the field's 16³"),
+    (lambda: _field(8).upsampled(12, chunk=0), "chunk=0: expected a number of vertices >= 1"),
+])
+def test_bad_arguments_are_named(call, message):
+    with pytest.raises(InvalidArgument, match=message):
+        call()
+
+
+@settings(max_examples=25, deadline=None)
+@given(resolution=st.integers(4, 10), finer=st.integers(11, 24), chunk=st.integers(1, 300),
+       seed=st.integers(0, 2**16), degree=st.sampled_from([0, 1, 2]))
+def test_upsampling_a_chunk_at_a_time_gives_the_same_field_to_the_bit(resolution, finer, chunk, seed, degree):
+    rng = np.random.default_rng(seed)
+    field = _field(resolution, rng.random((resolution - 1,) * 3) < 0.3, degree, seed)
+    whole = field.upsampled(finer, chunk=10**9)
+    parts = field.upsampled(finer, chunk=chunk)
+    assert torch.equal(whole.occupancy, parts.occupancy) and torch.equal(whole.rows, parts.rows)
+    assert torch.equal(whole.values, parts.values), f"values differ when upsampled {chunk} vertices at a time"
+    stored = int((whole.rows >= 0).sum())
+    assert stored == int(memory.used_vertex_mask(field.upsampled_occupancy(finer)).sum()), \
+        "the vertex count choose_grid sizes a grid by is not what upsampling stores"
+
+
+def test_the_wanted_grid_where_it_fits_or_where_the_free_memory_is_unknown():
+    field = _field(16)
+    assert choose_grid(field, 48, None) == GridChoice(48, 48, stage_bytes(48, 48**3), None)
+    plenty = 10 * stage_bytes(48, 48**3)
+    choice = choose_grid(field, 48, plenty)
+    assert choice.resolution == 48 and not choice.limited and choice.free == plenty
+
+
+def test_a_grid_that_does_not_fit_gives_way_to_the_finest_that_does():
+    field = _field(16)  # every cell occupied: upsampling stores every vertex of the finer grid
+    free = int(stage_bytes(40, 40**3) / HEADROOM) + 1  # room for 40³, not for 41³ and above
+    choice = choose_grid(field, 64, free)
+    assert choice.limited and choice.resolution == 32, f"expected 32³ (16's multiple below 40), got {choice}"
+    assert choice.needed == stage_bytes(64, 64**3) > HEADROOM * free
+    assert "a 64³ grid would need" in choice.message() and "trained 32³ instead" in choice.message()
+    stays = choose_grid(field, 64, stage_bytes(20, 20**3))
+    assert stays.resolution == 16 and stays.limited, "nothing finer fits, so the field keeps its grid"
+
+
+def test_a_sparse_field_is_sized_by_the_vertices_it_will_store_not_by_the_cube():
+    occupied = np.zeros((15,) * 3, dtype=bool)
+    occupied[7, 7, 7] = True
+    sparse = _field(16, occupied)
+    free = int(stage_bytes(64, 5000) / HEADROOM) + 1
+    assert choose_grid(sparse, 64, free).resolution == 64, "one occupied cell fits where a full grid would not"
+    assert choose_grid(_field(16), 64, free).resolution < 64
+
+
+def test_the_chosen_grid_replaces_or_drops_its_stage_in_the_config():
+    config = FieldConfig(resolutions=(48, 96, 256, 384), stage_fractions=(0.1, 0.35, 0.7))
+    reduced = GridChoice(384, 320, 1, 1).applied_to(config, 3)
+    assert reduced.resolutions == (48, 96, 256, 320) and reduced.stage_fractions == config.stage_fractions
+    dropped = GridChoice(384, 256, 1, 1).applied_to(config, 3)
+    assert dropped.resolutions == (48, 96, 256) and dropped.stage_fractions == (0.1, 0.35)
+    middle = GridChoice(256, 96, 1, 1).applied_to(config, 2)
+    assert middle.resolutions == (48, 96, 384) and middle.stage_fractions == (0.1, 0.7)
+
+
+def test_a_fit_short_of_memory_trains_a_coarser_grid_and_says_so(capture48, monkeypatch, tmp_path):
+    from pytest_n2r.cli.info import format_info
+    from pytest_n2r.fit import fit
+    from pytest_n2r.scene.file import read_scene_file, save_scene
+
+    # room for a 32³ stage storing every vertex at SH degree 1, not for 64³ storing what the pruned field needs
+    free = int(stage_bytes(32, 32**3) / HEADROOM) + 1
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: free)
+    with pytest.warns(GridMemoryLimit, match=r"at step 40, a 64³ grid would need .* instead") as caught:
+        result = fit(capture48, SHORT_CONFIG.replace(resolutions=(16, 64)), max_steps=80, device="cpu")
+    (limit,) = result.report["grid_limits"]
+    trained = limit["trained"]
+    assert limit["step"] == 40 and limit["wanted"] == 64 and 16 < trained < 64 and trained % 16 == 0, limit
+    assert f"trained {trained}³ instead" in str(caught[0].message)
+    assert result.field.resolution == trained and result.config.resolutions == (16, trained)
+    assert np.isfinite(result.report["psnr"]), "the coarser field was not evaluated"
+    path = save_scene(tmp_path / "limited.n2r", result.field, result.config, capture48, result.report, images=False)
+    assert "  memory    at step 40, a 64³ grid would need" in format_info(read_scene_file(path, images=False))
+
+
+def test_a_fit_with_no_memory_for_any_finer_grid_stays_on_its_own(capture48, monkeypatch):
+    from pytest_n2r.fit import fit
+
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: 1)
+    with pytest.warns(GridMemoryLimit, match="trained 16³ instead"):
+        result = fit(capture48, SHORT_CONFIG, max_steps=60, device="cpu")
+    assert result.field.resolution == 16 and result.config.resolutions == (16,)
+    assert result.config.stage_fractions == ()
+
+
+def test_a_fit_with_memory_enough_reports_no_limit(short_fit):
+    assert short_fit.report["grid_limits"] == []
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GridMemoryLimit)
+        assert choose_grid(_field(16), 24, free_bytes(torch.device("cpu"))).resolution == 24
+
+
+def _cgroup_tree(tmp_path: Path, lines: str, files: dict[str, str]) -> None:
+    (tmp_path / "proc").mkdir()
+    (tmp_path / "proc" / "cgroup").write_text(lines)
+    for name, text in files.items():
+        path = tmp_path / "sys" / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+
+
+@pytest.mark.parametrize("lines, files, expected", [
+    # cgroup v2: a container limited to 8 GiB using 5 GiB, 1 GiB of it reclaimable file cache
+    ("0::/docker/abc\n", {"docker/abc/memory.max": str(8 << 30), "docker/abc/memory.current": str(5 << 30),
+                          "docker/abc/memory.stat": f"anon 1\ninactive_file {1 << 30}\n", "memory.max": "max\n",
+                          "memory.current": "123\n"}, 4 << 30),
+    # cgroup v1: the parent's limit is the tighter one
+    ("4:memory:/a/b\n3:cpu:/\n", {"memory/a/b/memory.limit_in_bytes": str(16 << 30),
+                                   "memory/a/b/memory.usage_in_bytes": str(2 << 30),
+                                   "memory/a/memory.limit_in_bytes": str(6 << 30),
+                                   "memory/a/memory.usage_in_bytes": str(3 << 30)}, 3 << 30),
+    ("0::/\n", {"memory.max": "max\n", "memory.current": "5\n"}, None),  # no limit
+])
+def test_a_containers_memory_limit_is_read_from_its_cgroup(tmp_path, monkeypatch, lines, files, expected):
+    _cgroup_tree(tmp_path, lines, files)
+    monkeypatch.setattr(memory, "_PROC_CGROUP", tmp_path / "proc" / "cgroup")
+    monkeypatch.setattr(memory, "_CGROUP_ROOT", tmp_path / "sys")
+    assert memory._cgroup_free() == expected
+
+
+def test_the_free_memory_of_this_machine_is_known_and_positive():
+    free = free_bytes(torch.device("cpu"))
+    if free is None:
+        pytest.skip("this system reports no free memory (no /proc/meminfo, no cgroup)")
+    assert 0 < free < 2**50, f"free memory {free} bytes is not plausible"
