@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import math
 import re
 import sys
 import time
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -147,6 +149,24 @@ class _Progress:
     def close(self) -> None:
         self.bar.close()
 
+    @contextlib.contextmanager
+    def showing_memory_limits(self) -> Iterator[None]:
+        """Print a fit's :class:`~pytest_n2r.fit.memory.GridMemoryLimit` warnings as a line above the bar, not
+        as a warning with a source line through it (other warnings are shown as before)."""
+        from ..fit.memory import GridMemoryLimit
+
+        with warnings.catch_warnings():
+            shown = warnings.showwarning
+
+            def show(message: Warning | str, category: type[Warning], *where: object, **kw: object) -> None:
+                if issubclass(category, GridMemoryLimit):
+                    self.bar.write(f"n2r fit: memory: {message}", file=sys.stderr)
+                else:
+                    shown(message, category, *where, **kw)
+
+            warnings.showwarning = show
+            yield
+
 
 def _clock(seconds: float) -> str:
     seconds = int(round(seconds))
@@ -227,10 +247,11 @@ def run(args: argparse.Namespace) -> int:
                       file=sys.stderr)
                 return True
 
-            result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
-                                 device=args.device, progress=progress, checkpoint=checkpoint,
-                                 checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
-                                 appearance=args.appearance, stop=stop)
+            with progress.showing_memory_limits():
+                result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
+                                     device=args.device, progress=progress, checkpoint=checkpoint,
+                                     checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
+                                     appearance=args.appearance, stop=stop)
             progress.close()
             save(result, {**result.report, "complete": True})
             late = pressed() and not result.report["stopped"]  # pressed after the last step: the field is complete

@@ -257,7 +257,7 @@ class _Trainer:
         choice = choose_grid(self.field, self.config.resolutions[stage], free_bytes(self.device))
         if choice.limited:
             self.config = choice.applied_to(self.config, stage)
-            warnings.warn(f"fit: at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=3)
+            warnings.warn(f"at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=3)
         if choice.resolution > self.field.resolution:
             self.stage = stage
             self.field = self.field.upsampled(choice.resolution)

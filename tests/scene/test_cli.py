@@ -473,6 +473,19 @@ def test_a_long_budget_fits_degree_2_colour_and_finer_grids_unless_they_are_give
         assert "--config max_pixels_per_voxel=6 keeps 6" in err, f"{flags}: no way back said:\n{err}"
 
 
+def test_a_fit_short_of_memory_says_so_above_the_bar_and_in_the_report(exported, tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: 1)  # no room for any finer grid
+    path = tmp_path / "small.n2r"
+    assert main(["fit", str(exported), "-o", str(path), "--downscale", "1", "--max-steps", "30", "--device", "cpu",
+                 *TINY_FLAGS]) == 0
+    out, err = capsys.readouterr()
+    assert "n2r fit: memory: at step 15, a 24³ grid would need" in err and "trained 16³ instead" in err, err
+    assert "GridMemoryLimit" not in err, f"the warning was shown with its source line:\n{err}"
+    assert "  memory    at step 15, a 24³ grid would need" in out, out
+    scene = read_scene_file(path, images=False)
+    assert scene.config.resolutions == (16,) and scene.report["grid_limits"][0]["trained"] == 16
+
+
 def test_an_output_that_cannot_be_written_is_refused_before_fitting(exported, tmp_path, capsys):
     assert main(["fit", str(exported), "-o", str(tmp_path), "--max-steps", "1"]) == 2
     err = capsys.readouterr().err
