@@ -183,7 +183,10 @@ def _cgroup_free() -> int | None:
         return None
     free = []
     for line in lines:
-        _, controllers, path = line.split(":", 2)
+        parts = line.split(":", 2)
+        if len(parts) != 3:
+            continue
+        _, controllers, path = parts
         if controllers == "":
             base, limit_file, usage_file, cache_key = _CGROUP_ROOT, "memory.max", "memory.current", "inactive_file"
         elif "memory" in controllers.split(","):

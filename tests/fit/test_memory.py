@@ -176,6 +176,7 @@ def _cgroup_tree(tmp_path: Path, lines: str, files: dict[str, str]) -> None:
                                    "memory/a/memory.limit_in_bytes": str(6 << 30),
                                    "memory/a/memory.usage_in_bytes": str(3 << 30)}, 3 << 30),
     ("0::/\n", {"memory.max": "max\n", "memory.current": "5\n"}, None),  # no limit
+    ("garbage\n\n0::/\n", {"memory.max": "100\n", "memory.current": "40\n"}, 60),  # lines not of the form skipped
 ])
 def test_a_containers_memory_limit_is_read_from_its_cgroup(tmp_path, monkeypatch, lines, files, expected):
     _cgroup_tree(tmp_path, lines, files)
