@@ -87,6 +87,8 @@ def info_dict(scene: SceneFile) -> dict:
 
 def format_info(scene: SceneFile) -> str:
     """The plain-text summary ``n2r info`` (and ``n2r fit`` at the end) prints."""
+    from ..fit.memory import GridChoice
+
     info = info_dict(scene)
     report, field = info["report"], info["field"]
     lines = [
@@ -113,8 +115,6 @@ def format_info(scene: SceneFile) -> str:
             lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
                          "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
     for limit in report.get("grid_limits") or []:
-        from ..fit.memory import GridChoice
-
         choice = GridChoice(limit["wanted"], limit["trained"], limit["needed_bytes"], limit["free_bytes"])
         lines.append(f"  memory    at step {limit['step']}, {choice.message()}")
     state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)

@@ -33,17 +33,18 @@ from .config import SH_DEGREES
 from .query import trilinear
 from .space import SceneSpace
 
-__all__ = ["SceneField", "n_sh_coefficients", "opacity", "used_vertex_index", "used_vertex_mask", "vertex_ijk",
-           "FIELD_TENSORS", "UPSAMPLE_CHUNK"]
+__all__ = ["SceneField", "dilated", "n_sh_coefficients", "opacity", "used_vertex_index", "used_vertex_mask",
+           "vertex_ijk", "FIELD_TENSORS", "UPSAMPLE_CHUNK"]
 
 #: The largest |density_shift| a scene file may hold: a fit's shift is -14.5..69 for alpha_init 1e-6..0.999
 #: over steps of 0.1..2 voxels (-8.5 by default); beyond ±100, every sample is empty or opaque alike.
 _MAX_DENSITY_SHIFT = 100.0
 #: Names of the tensors a scene file stores for the field.
 FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
-#: Vertices :meth:`SceneField.upsampled` resamples at a time: their gathered corners take 2²⁴ values (64 MB
-#: at 4 values a vertex, 470 MB at SH degree 2's 28), where all at once a dense 384³ grid's took 51 GB.
-UPSAMPLE_CHUNK = 1 << 19
+#: Vertices :meth:`SceneField.upsampled` resamples (and :meth:`SceneField.quantized` rounds) at a time: the
+#: 8 corners gathered for each take 2²⁰ values (16 MB at 4 values a vertex, 117 MB at SH degree 2's 28), where
+#: all at once a dense 384³ grid's took 51 GB.
+UPSAMPLE_CHUNK = 1 << 17
 
 
 def n_sh_coefficients(sh_degree: int) -> int:
@@ -193,10 +194,16 @@ class SceneField:
         return opacity(corner_max, self.density_shift, step_ratio)
 
     def upsampled_occupancy(self, resolution: int) -> torch.Tensor:
-        """``(resolution - 1)³`` bool: the occupancy :meth:`upsampled` carries to a grid of ``resolution``
-        (nearest cell, then one cell of dilation)."""
-        occ = F.interpolate(self.occupancy[None, None].float(), size=(resolution - 1,) * 3, mode="nearest")
-        return F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
+        """``(resolution - 1)³`` bool: the occupancy :meth:`upsampled` carries to a grid of ``resolution``: each
+        cell takes its nearest coarse cell's (``F.interpolate``'s ``"nearest"``: coarse index ``⌊i·n/m⌋`` in
+        float32), then one cell of dilation; in bools, 3 bytes a fine cell at the peak."""
+        n, m = self.resolution - 1, resolution - 1
+        nearest = (torch.arange(m, dtype=torch.float32, device=self.device) * torch.tensor(n / m, dtype=torch.float32)
+                   ).floor().long().clamp(max=n - 1)
+        occ = self.occupancy.bool()
+        for axis in range(3):
+            occ = occ.index_select(axis, nearest)
+        return dilated(occ)
 
     def upsampled(self, resolution: int, chunk: int = UPSAMPLE_CHUNK) -> SceneField:
         """The same field on a finer grid, sparse: occupancy carried over with one cell of dilation, values
@@ -212,8 +219,8 @@ class SceneField:
             ijk = vertex_ijk(flat[start:start + chunk], resolution).to(self.values.dtype)
             corners, weights = trilinear(ijk * ((self.resolution - 1) / (resolution - 1)), self.resolution)
             corner_rows = self.vertex_rows(corners)
-            gathered = torch.where((corner_rows >= 0)[..., None], self.values[corner_rows.clamp(min=0)], 0.0)
-            values[start:start + chunk] = torch.einsum("nk,nkf->nf", weights, gathered)
+            weights[corner_rows < 0] = 0.0  # a vertex the coarse field does not store counts as zeros
+            values[start:start + chunk] = torch.einsum("nk,nkf->nf", weights, self.values[corner_rows.clamp(min=0)])
         ratio = (resolution - 1) / (self.resolution - 1)
         sigma = F.softplus(values[:, 0] + self.density_shift) / ratio
         values[:, 0] = inverse_softplus(sigma) - self.density_shift
@@ -234,9 +241,12 @@ class SceneField:
                        occupancy=self.occupancy.clone(), rows=_row_map(flat, self.resolution))
 
     def quantized(self) -> SceneField:
-        """The field as a scene file stores it: sparse, its values rounded to float16."""
+        """The field as a scene file stores it: sparse, its values rounded to float16 (in place, a chunk at a
+        time: a fit takes this copy every checkpoint while it holds its own)."""
         field = self.compact()
-        field.values = field.values.half().float()
+        for start in range(0, field.values.shape[0], UPSAMPLE_CHUNK):
+            part = field.values[start:start + UPSAMPLE_CHUNK]
+            part.copy_(part.half())
         return field
 
     # -- serialization (the scene file module wraps these in a zip) -----------------------------------------
@@ -335,6 +345,25 @@ def used_vertex_index(occupancy: torch.Tensor) -> torch.Tensor:
     vertex is used when one of its up to 8 cells is occupied; 11× faster than sorting the corners on a 384³
     grid: 0.28 against 3.1 s, so loading a fitted scene no longer waits on it)."""
     return used_vertex_mask(occupancy).reshape(-1).nonzero().reshape(-1)
+
+
+def dilated(cells: torch.Tensor) -> torch.Tensor:
+    """The bool ``cells`` and every cell within one cell of them (26-neighbourhood, not past the borders): the
+    3×3×3 box as three passes of 3 cells, one along each axis.
+
+    >>> cells = torch.zeros(5, 5, 5, dtype=torch.bool)
+    >>> cells[0, 2, 4] = True
+    >>> int(dilated(cells).sum())  # 2 × 3 × 2 cells: the box clipped at two borders
+    12
+    """
+    out = cells.bool()
+    for axis in range(3):
+        n = out.shape[axis]
+        grown = out.clone()
+        grown.narrow(axis, 1, n - 1).logical_or_(out.narrow(axis, 0, n - 1))
+        grown.narrow(axis, 0, n - 1).logical_or_(out.narrow(axis, 1, n - 1))
+        out = grown
+    return out
 
 
 def used_vertex_mask(occupancy: torch.Tensor) -> torch.Tensor:

@@ -35,7 +35,8 @@ from ..geometry import camera_rays
 from .appearance import Appearance
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, mean_scores
-from .memory import GridChoice, GridMemoryLimit, choose_grid, free_bytes
+from .free_memory import free_bytes
+from .memory import GridMemoryLimit, choose_grid
 from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
@@ -106,6 +107,7 @@ class _Trainer:
         self.field = SceneField.empty(self.space, config.resolutions[0], config.sh_degree, config.alpha_init,
                                       config.step_ratio, device, background)
         self.stage = 0
+        self.limits: list[dict] = []  # a report row for each grid memory kept the fit from (see refine)
         self.steps = 0
         self.phases = StepPhases()
         self._reset_optimizer()
@@ -134,10 +136,10 @@ class _Trainer:
     def _compact(self) -> None:
         """Keep only the rows of vertices an occupied cell uses, with their Adam moments (a grid upsampled from
         the last stores every vertex of its dilated occupancy: a sixth stay in use on the fox's 224³ grid)."""
-        old = self.field
-        self.field = old.compact()
+        old, self.field = self.field, self.field.compact()
         self._index_rows()
-        self.adam.keep(old.vertex_rows(self.flat_of_row), self.field.values)
+        rows, old = old.vertex_rows(self.flat_of_row), None  # the old values go before the moments are gathered
+        self.adam.keep(rows, self.field.values)
 
     def _reset_visibility(self) -> None:
         #: The largest compositing weight of any training sample in each cell since the last prune (-1: no
@@ -250,19 +252,20 @@ class _Trainer:
         self._rebuild_grid()
 
     @torch.no_grad()
-    def refine(self) -> GridChoice:
-        """Move to the next grid of the ladder, or to the finest coarser one the free memory holds, or stay
-        where none does (:func:`~pytest_n2r.fit.memory.choose_grid`); ``config`` then names the grids trained."""
+    def refine(self) -> None:
+        """Move to the next grid, or to the finest coarser one the free memory holds, or stay (then pruned as the
+        last) where none does (:func:`~pytest_n2r.fit.memory.choose_grid`); ``config`` names the grids trained."""
         stage = self.stage + 1
         choice = choose_grid(self.field, self.config.resolutions[stage], free_bytes(self.device))
+        self.phases.start(choice.resolution)
         if choice.limited:
             self.config = choice.applied_to(self.config, stage)
+            self.limits.append({"step": self.steps, **choice.describe()})
             warnings.warn(f"at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=3)
-        if choice.resolution > self.field.resolution:
+        if not choice.limited or choice.resolution > self.field.resolution:
             self.stage = stage
             self.field = self.field.upsampled(choice.resolution)
             self._reset_optimizer()
-        return choice
 
 
 def fit(
@@ -310,7 +313,6 @@ def fit(
     dev = resolve_device(device)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
-    added = config is not given
     trainer = _Trainer(capture, config, dev, appearance=appearance)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
@@ -320,7 +322,6 @@ def fit(
     last_report = last_checkpoint = 0.0
     loss = batch_psnr = float("nan")
     stopped = False
-    limits: list[dict] = []
 
     def progress_fraction() -> float:
         if max_steps is not None:
@@ -331,19 +332,16 @@ def fit(
         return progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s)
 
     def snapshot() -> FitResult:
-        return FitResult(trainer.field.quantized(), config,
-                         {"steps": trainer.steps, "train_seconds": round(train_s, 2)})
+        return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2),
+                                                              "grid_limits": list(trainer.limits)})
 
     while budget_left():
         t0 = time.perf_counter()
         frac = progress_fraction()
         if config.stage(frac) > trainer.stage:
-            trainer.phases.start(config.resolutions[trainer.stage + 1])
-            choice = trainer.refine()
+            trainer.refine()
             trainer.phases.lap("refine")
-            if choice.limited:
-                config = trainer.config
-                limits.append({"step": trainer.steps, **choice.describe()})
+            config = trainer.config
         loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
         if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
             trainer.phases.start(trainer.field.resolution)
@@ -371,6 +369,7 @@ def fit(
             break
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
+    trainer.adam = None  # its moments (two floats a value) are not needed from here on
     final = trainer.field.quantized()
     e0 = time.perf_counter()
     rows = evaluate_views(final, heldout)
@@ -388,8 +387,9 @@ def fit(
         "step_ms": trainer.phases.report(),
         "field": final.describe(),
         "detail": None if detail is None else {**detail.describe(final.resolution),
-                                                "grid_added": final.resolution if added else None},
-        "grid_limits": limits,
+                                                "grid_added": final.resolution if final.resolution
+                                                > given.resolutions[-1] else None},
+        "grid_limits": trainer.limits,
         "heldout": rows,
         **mean_scores(rows),
         "history": history,

@@ -24,8 +24,11 @@ class RowAdam:
 
     @torch.no_grad()
     def keep(self, rows: torch.Tensor, values: torch.Tensor) -> None:
-        """Go on with ``values``, the rows ``rows`` of the old ones (in that order): their moments come along."""
-        self.values, self.m, self.v = values, self.m[rows].contiguous(), self.v[rows].contiguous()
+        """Go on with ``values``, the rows ``rows`` of the old ones (in that order): their moments come along,
+        one at a time (each old tensor is let go before the next new one is made)."""
+        self.values = values
+        self.m = self.m[rows].contiguous()
+        self.v = self.v[rows].contiguous()
 
     @torch.no_grad()
     def step(self, rows: torch.Tensor, grad: torch.Tensor, lr_scale: float = 1.0) -> None:

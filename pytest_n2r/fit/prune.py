@@ -21,10 +21,9 @@ import math
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from numba import njit
 
-from ..field.grid import SceneField, opacity
+from ..field.grid import SceneField, dilated, opacity
 from ..field.kernels import vertex_row
 
 __all__ = ["pruned_occupancy", "pruned_occupancy_dense"]
@@ -38,22 +37,12 @@ def pruned_occupancy_dense(field: SceneField, cell_weight: torch.Tensor, thresho
     keep = field.cell_alpha(step_ratio) >= threshold
     seen = cell_weight.reshape(keep.shape)
     keep &= (seen < 0) | (seen >= prune_weight)
-    keep = F.max_pool3d(keep[None, None].float(), kernel_size=3, stride=1, padding=1)[0, 0] > 0
-    return field.occupancy & keep
+    return field.occupancy & dilated(keep)
 
 
 def _dilated(mask: np.ndarray) -> np.ndarray:
-    """The cells of ``mask`` (uint8 ``n³``) and every cell within one cell of them (26-neighbourhood): the 3×3×3
-    box as three passes of 3 cells, one along each axis."""
-    out = mask
-    for axis in range(3):
-        grown = out.copy()
-        lo, hi = [slice(None)] * 3, [slice(None)] * 3
-        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        grown[tuple(hi)] |= out[tuple(lo)]
-        grown[tuple(lo)] |= out[tuple(hi)]
-        out = grown
-    return out
+    """:func:`~pytest_n2r.field.grid.dilated` of a uint8 or bool ``n³`` mask, as a bool array."""
+    return dilated(torch.from_numpy(mask.view(np.bool_))).numpy()
 
 
 @njit(cache=True)
@@ -87,4 +76,4 @@ def pruned_occupancy(field: SceneField, occ: np.ndarray, row_map: np.ndarray, ce
     kept = np.zeros(occ.size, dtype=np.uint8)
     kept[cells[keep.numpy()]] = 1
     # a cell stays occupied when a kept cell lies within one cell of it: the dilation is symmetric
-    return torch.from_numpy((occ & _dilated(kept.reshape(occ.shape))).view(np.bool_))
+    return torch.from_numpy(occ.view(np.bool_) & _dilated(kept.reshape(occ.shape)))

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument, SceneFileError
-from pytest_n2r.field.grid import SceneField, _cell_corners, n_sh_coefficients, used_vertex_index
+from pytest_n2r.field.grid import SceneField, _cell_corners, n_sh_coefficients, used_vertex_index, used_vertex_mask
 from pytest_n2r.geometry import Camera
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings
@@ -158,6 +158,38 @@ def test_a_sparse_field_renders_exactly_like_the_dense_one(backend, pose_name):
                       ("dense occupied_cell_alpha", dense.occupied_cell_alpha(0.5)),
                       ("sparse occupied_cell_alpha", sparse.occupied_cell_alpha(0.5))):
         assert torch.equal(got, expected), f"{name} differs from the dense cell_alpha of the occupied cells"
+
+
+@settings(max_examples=40, deadline=None)
+@given(coarse=st.integers(4, 14), finer=st.integers(0, 40), fraction=st.sampled_from([0.0, 0.03, 0.3, 1.0]),
+       seed=st.integers(0, 2**16))
+def test_the_upsampled_occupancy_is_the_nearest_cell_dilated_as_torch_defines_them(coarse, finer, fraction, seed):
+    """In bools, index by index: the same cells as ``F.interpolate(nearest)`` then a 3³ ``max_pool3d``, which
+    took 17 bytes a fine cell (1 GB at 384³) to size a grid that might not fit."""
+    field = random_field(resolution=coarse, occupied=fraction, seed=seed)
+    fine = coarse + finer
+    occ = F.interpolate(field.occupancy[None, None].float(), size=(fine - 1,) * 3, mode="nearest")
+    expected = F.max_pool3d(occ, kernel_size=3, stride=1, padding=1)[0, 0] > 0
+    got = field.upsampled_occupancy(fine)
+    assert torch.equal(got, expected), f"{coarse}³ → {fine}³: {int((got != expected).sum())} cells differ"
+
+
+@settings(max_examples=25, deadline=None)
+@given(resolution=st.integers(4, 10), finer=st.integers(11, 24), chunk=st.integers(1, 300),
+       seed=st.integers(0, 2**16), sh_degree=st.sampled_from([0, 1, 2]))
+def test_upsampling_a_chunk_at_a_time_gives_the_same_field_to_the_bit(resolution, finer, chunk, seed, sh_degree):
+    field = random_field(resolution=resolution, sh_degree=sh_degree, occupied=0.3, seed=seed).compact()
+    whole = field.upsampled(finer, chunk=10**9)
+    parts = field.upsampled(finer, chunk=chunk)
+    assert torch.equal(whole.occupancy, parts.occupancy) and torch.equal(whole.rows, parts.rows)
+    assert torch.equal(whole.values, parts.values), f"values differ when upsampled {chunk} vertices at a time"
+    assert torch.equal(whole.rows >= 0, used_vertex_mask(field.upsampled_occupancy(finer)).reshape(-1)), \
+        "the vertices counted to size a grid are not those upsampling stores"
+
+
+def test_a_bad_upsampling_chunk_is_named():
+    with pytest.raises(InvalidArgument, match="chunk=0: expected a number of vertices >= 1"):
+        random_field(resolution=8).upsampled(12, chunk=0)
 
 
 def test_upsampling_a_sparse_field_keeps_its_stored_values():

@@ -9,21 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.fit import memory
+from pytest_n2r.fit import free_memory
+from pytest_n2r.fit.free_memory import free_bytes
 from pytest_n2r.fit.memory import (
     HEADROOM,
     GridChoice,
     GridMemoryLimit,
     choose_grid,
     fit_memory_bytes,
-    free_bytes,
     memory_resolution,
     stage_bytes,
 )
@@ -58,27 +56,12 @@ def test_the_memory_ceiling_grows_with_memory_and_the_estimate_with_the_grid():
     (lambda: fit_memory_bytes(64, occupied=0.0), "occupied=0.0"),
     (lambda: stage_bytes(64, -1), r"stored=-1: expected a vertex count in 0\.\.262144"),
     (lambda: stage_bytes(True, 0), "resolution=True"),
-    (lambda: choose_grid(_field(16), 16, None), "wanted=16: expected a grid finer than the field's 16³"),
-    (lambda: _field(8).upsampled(12, chunk=0), "chunk=0: expected a number of vertices >= 1"),
+    (lambda: stage_bytes(64, 1, width=0), "width=0: expected float32 values a vertex >= 1"),
+    (lambda: choose_grid(_field(16), 12, None), "wanted=12: expected a grid no coarser than the field's 16³"),
 ])
 def test_bad_arguments_are_named(call, message):
     with pytest.raises(InvalidArgument, match=message):
         call()
-
-
-@settings(max_examples=25, deadline=None)
-@given(resolution=st.integers(4, 10), finer=st.integers(11, 24), chunk=st.integers(1, 300),
-       seed=st.integers(0, 2**16), degree=st.sampled_from([0, 1, 2]))
-def test_upsampling_a_chunk_at_a_time_gives_the_same_field_to_the_bit(resolution, finer, chunk, seed, degree):
-    rng = np.random.default_rng(seed)
-    field = _field(resolution, rng.random((resolution - 1,) * 3) < 0.3, degree, seed)
-    whole = field.upsampled(finer, chunk=10**9)
-    parts = field.upsampled(finer, chunk=chunk)
-    assert torch.equal(whole.occupancy, parts.occupancy) and torch.equal(whole.rows, parts.rows)
-    assert torch.equal(whole.values, parts.values), f"values differ when upsampled {chunk} vertices at a time"
-    stored = int((whole.rows >= 0).sum())
-    assert stored == int(memory.used_vertex_mask(field.upsampled_occupancy(finer)).sum()), \
-        "the vertex count choose_grid sizes a grid by is not what upsampling stores"
 
 
 def test_the_wanted_grid_where_it_fits_or_where_the_free_memory_is_unknown():
@@ -150,10 +133,59 @@ def test_a_fit_with_no_memory_for_any_finer_grid_stays_on_its_own(capture48, mon
 
 
 def test_a_fit_with_memory_enough_reports_no_limit(short_fit):
-    assert short_fit.report["grid_limits"] == []
+    assert short_fit.report["grid_limits"] == [] and short_fit.field.resolution == 24
+
+
+def test_a_middle_grid_that_does_not_fit_is_skipped_and_the_next_is_still_trained(capture48, monkeypatch):
+    from pytest_n2r.fit import fit
+
+    answers = iter([1, 10**12])  # no room at the move to 24³, plenty at the move to 32³
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: next(answers))
+    config = SHORT_CONFIG.replace(resolutions=(16, 24, 32), stage_fractions=(0.3, 0.6))
+    with pytest.warns(GridMemoryLimit, match="at step 24, a 24³ grid would need .*: trained 16³ instead"):
+        result = fit(capture48, config, max_steps=80, device="cpu")
+    assert result.config.resolutions == (16, 32) and result.config.stage_fractions == (0.6,)
+    assert result.field.resolution == 32, "the grid after the skipped one was not trained"
+    assert [(r["wanted"], r["trained"]) for r in result.report["grid_limits"]] == [(24, 16)]
+    assert set(result.report["step_ms"]) >= {"16", "32"} and "24" not in result.report["step_ms"], \
+        f"the step phases name a grid that was not trained: {sorted(result.report['step_ms'])}"
+
+
+def test_a_ladder_repeating_a_grid_size_still_fits(capture48):
+    from pytest_n2r.fit import fit
+
+    config = SHORT_CONFIG.replace(resolutions=(16, 16, 24), stage_fractions=(0.3, 0.6))
+    result = fit(capture48, config, max_steps=40, device="cpu")
+    assert result.field.resolution == 24 and result.report["grid_limits"] == []
+
+
+@pytest.mark.parametrize("room, added", [(10**12, 32), (None, None)], ids=["trained", "no room"])
+def test_the_report_names_an_added_grid_only_where_it_was_trained(capture48, monkeypatch, room, added):
+    from pytest_n2r.fit import fit
+
+    ladder = SHORT_CONFIG.replace(resolutions=(16, 24, 32), stage_fractions=(0.5, 0.7))  # as a detail grid adds
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.detailed_config", lambda config, detail: ladder)
+    answers = iter([10**12, room or 1])
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: next(answers))
+    checkpoints = []
     with warnings.catch_warnings():
-        warnings.simplefilter("error", GridMemoryLimit)
-        assert choose_grid(_field(16), 24, free_bytes(torch.device("cpu"))).resolution == 24
+        warnings.simplefilter("ignore", GridMemoryLimit)
+        result = fit(capture48, SHORT_CONFIG, max_steps=80, device="cpu", checkpoint=checkpoints.append,
+                     checkpoint_every_s=0.0)
+    assert result.report["detail"]["grid_added"] == added, result.report["detail"]
+    assert checkpoints[-1].report["grid_limits"] == result.report["grid_limits"], \
+        "a checkpoint after the limit does not carry it"
+    assert checkpoints[-1].config == result.config
+
+
+def test_the_free_memory_is_the_tighter_of_the_kernels_and_the_cgroups(monkeypatch):
+    monkeypatch.setattr(free_memory, "_meminfo_available", lambda: 8 << 30)
+    monkeypatch.setattr(free_memory, "_cgroup_free", lambda: 3 << 30)
+    assert free_bytes(torch.device("cpu")) == 3 << 30
+    monkeypatch.setattr(free_memory, "_cgroup_free", lambda: None)
+    assert free_bytes(torch.device("cpu")) == 8 << 30
+    monkeypatch.setattr(free_memory, "_meminfo_available", lambda: None)
+    assert free_bytes(torch.device("cpu")) is None
 
 
 def _cgroup_tree(tmp_path: Path, lines: str, files: dict[str, str]) -> None:
@@ -177,12 +209,13 @@ def _cgroup_tree(tmp_path: Path, lines: str, files: dict[str, str]) -> None:
                                    "memory/a/memory.usage_in_bytes": str(3 << 30)}, 3 << 30),
     ("0::/\n", {"memory.max": "max\n", "memory.current": "5\n"}, None),  # no limit
     ("garbage\n\n0::/\n", {"memory.max": "100\n", "memory.current": "40\n"}, 60),  # lines not of the form skipped
+    ("0::/not/mounted/here\n", {"memory.max": str(1 << 30), "memory.current": "0\n"}, 1 << 30),  # no such folder
 ])
 def test_a_containers_memory_limit_is_read_from_its_cgroup(tmp_path, monkeypatch, lines, files, expected):
     _cgroup_tree(tmp_path, lines, files)
-    monkeypatch.setattr(memory, "_PROC_CGROUP", tmp_path / "proc" / "cgroup")
-    monkeypatch.setattr(memory, "_CGROUP_ROOT", tmp_path / "sys")
-    assert memory._cgroup_free() == expected
+    monkeypatch.setattr(free_memory, "_PROC_CGROUP", tmp_path / "proc" / "cgroup")
+    monkeypatch.setattr(free_memory, "_CGROUP_ROOT", tmp_path / "sys")
+    assert free_memory._cgroup_free() == expected
 
 
 def test_the_free_memory_of_this_machine_is_known_and_positive():
