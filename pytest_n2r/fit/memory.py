@@ -53,7 +53,7 @@ def stage_bytes(resolution: int, stored: int, *, width: int = 13) -> int:
     the old ones live), each at most ``4·width + 40`` bytes a stored vertex and a row map.
 
     >>> round(stage_bytes(384, 384 ** 3, width=28) / 2**30, 1)  # every vertex of a 384³ grid at SH degree 2
-    28.9
+    28.6
     """
     if isinstance(resolution, bool) or not isinstance(resolution, int) or resolution < 2:
         raise InvalidArgument(f"resolution={resolution!r}: expected vertices per axis >= 2")
@@ -83,7 +83,7 @@ def memory_resolution(memory_bytes: float, *, occupied: float = 0.1, width: int 
     by :func:`fit_memory_bytes`.
 
     >>> memory_resolution(24 * 2**30)
-    928
+    800
     """
     if not (math.isfinite(memory_bytes) and memory_bytes > 0):
         raise InvalidArgument(f"memory_bytes={memory_bytes!r}: expected a number of bytes > 0")
