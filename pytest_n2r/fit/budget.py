@@ -27,7 +27,8 @@ the last 30 % of the fit runs on 384³. At 40 minutes on 256³ the fox's validat
 SIFT +0.022; the wall's 320 px phone capture at 12 minutes (5.15 pixels a voxel at 256³) 26.43 against 26.29 dB,
 SSIM +0.012. Held out, the fox scored 29.52 dB, ORB 0.561, SIFT 0.614, AKAZE 0.765 against the 20-minute
 recipe's 29.03 / 0.542 / 0.592 / 0.732. Such a field renders 1.4–1.7× slower than the 256³ one
-(docs/scene-field-log.md, "Forty minutes").
+(docs/scene-field-log.md, "Forty minutes"). An hour of the same recipe scored 29.33 dB, ORB 0.560, SIFT 0.611, AKAZE
+0.764 held out: nothing over forty minutes (docs/scene-field-log.md, "An hour with the forty-minute recipe").
 
 Convention
 ----------

@@ -261,9 +261,9 @@ class _Trainer:
         if choice.limited:
             self.config = choice.applied_to(self.config, stage)
             self.limits.append({"step": self.steps, **choice.describe()})
-            warnings.warn(f"at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=3)
+            warnings.warn(f"at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=4)  # fit's caller
         if not choice.limited or choice.resolution > self.field.resolution:
-            self.stage = stage
+            self.stage, self.adam = stage, None  # the old grid's moments go before the new grid is made
             self.field = self.field.upsampled(choice.resolution)
             self._reset_optimizer()
 
