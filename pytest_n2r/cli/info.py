@@ -87,8 +87,6 @@ def info_dict(scene: SceneFile) -> dict:
 
 def format_info(scene: SceneFile) -> str:
     """The plain-text summary ``n2r info`` (and ``n2r fit`` at the end) prints."""
-    from ..fit.memory import GridChoice
-
     info = info_dict(scene)
     report, field = info["report"], info["field"]
     lines = [
@@ -107,6 +105,22 @@ def format_info(scene: SceneFile) -> str:
     lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
                  f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
                  f"stored ({_size(field['tensor_bytes'])}; {_size(field['memory_bytes'])} in memory)")
+    try:
+        lines += _report_lines(report)
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a report edited by hand, or by another tool
+        from ..errors import SceneFileError
+
+        raise SceneFileError(f"{info['path']}: scene.json 'report' is not as n2r fit writes it ({type(exc).__name__}: "
+                             f"{exc}); n2r info --json prints it as stored") from None
+    return "\n".join(lines)
+
+
+def _report_lines(report: dict) -> list[str]:
+    """The fit report's lines of :func:`format_info` (a ``KeyError``, ``TypeError`` or ``ValueError`` where a value
+    is not as ``n2r fit`` writes it)."""
+    from ..fit.memory import GridChoice
+
+    lines = []
     detail = report.get("detail")
     if detail:
         lines.append(f"  detail    a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras "
@@ -147,7 +161,7 @@ def format_info(scene: SceneFile) -> str:
     versions = report.get("versions")
     if versions:
         lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
-    return "\n".join(lines)
+    return lines
 
 
 def _num(value: float | None, width: int, digits: int) -> str:

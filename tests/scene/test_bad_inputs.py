@@ -162,6 +162,10 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("info on an empty file", "info {empty_n2r}", r"empty\.n2r: not a zip archive, or truncated"),
     ("info --size abc", "info {scene} --shift --size abc", r"--size='abc' is not a render size"),
     ("info on a zip without scene.json", "info {plain_zip}", r"the archive has no 'scene\.json'"),
+    ("info on a report whose grid_limits rows lack their grids", "info {odd_limits}",
+     r"odd_limits\.n2r: scene\.json 'report' is not as n2r fit writes it \(KeyError: 'wanted'\); n2r info --json"),
+    ("info on a report whose detail holds text", "info {odd_detail}",
+     r"odd_detail\.n2r: scene\.json 'report' is not as n2r fit writes it \(ValueError: Unknown format code 'f'"),
     # -- n2r poses
     ("poses of a missing source", "poses {tmp}/nowhere", r"SOURCE .*nowhere: does not exist"),
     ("poses over the capture's transforms.json", "poses {capture} -o {capture}/transforms.json",
@@ -259,10 +263,14 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     (tmp / "empty.n2r").write_bytes(b"")
     with zipfile.ZipFile(tmp / "plain.n2r", "w") as archive:
         archive.writestr("readme.txt", "no scene here")
+    for name, report in (("odd_limits", {"grid_limits": [{"step": 21}]}),
+                         ("odd_detail", {"detail": {"pixels_per_voxel": "fine", "matching_resolution": 1}})):
+        save_scene(tmp / f"{name}.n2r", random_field(), FieldConfig(), tiny_views(), report, reference_length=3.0)
     return {"tmp": str(tmp), "scene": str(scene), "capture": str(capture), "notes_txt": str(tmp / "notes.txt"),
             "fake_n2r": str(tmp / "fake.n2r"), "fake_png": str(tmp / "fake.png"), "new_n2r": str(tmp / "new.n2r"),
             "new_png": str(tmp / "new.png"), "other_json": str(tmp / "other.json"),
-            "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r")}
+            "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r"),
+            "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r")}
 
 
 def _argv(template: str, workspace: dict[str, str]) -> list[str]:
