@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..data.capture import Capture, CapturedView
+from ..data.capture import Capture
 from ..errors import FitError, InvalidArgument
 from ..field.config import FieldConfig
 from ..field.device import resolve_device
@@ -31,7 +31,6 @@ from ..field.lattice import grid_coords, lattice_position
 from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
-from ..geometry import camera_rays
 from .appearance import Appearance
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, mean_scores
@@ -41,6 +40,7 @@ from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
 from .prune import pruned_occupancy, pruned_occupancy_dense
+from .rays import TrainingRays
 from .train_kernels import Composite, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "fit_space", "FitResult"]
@@ -64,25 +64,6 @@ def _versions() -> dict:
             "numpy": np.__version__, "python": platform.python_version()}
 
 
-class _Rays:
-    """Every training pixel as a normalized ray and its colour (float32, on the fitting device)."""
-
-    def __init__(self, views: Sequence[CapturedView], space: SceneSpace, device: torch.device):
-        origins, directions, colors, owners = [], [], [], []
-        for k, view in enumerate(views):
-            o, d = space.normalize_rays(*camera_rays(view.camera, view.c2w))
-            origins.append(o.reshape(-1, 3))
-            directions.append(d.reshape(-1, 3))
-            colors.append(view.image.reshape(-1, 3))
-            owners.append(np.full(len(colors[-1]), k, dtype=np.int64))
-        #: The index (into the training views) of the photo each ray comes from.
-        self.view = torch.from_numpy(np.concatenate(owners)).to(device)
-        self.o = torch.from_numpy(np.concatenate(origins)).to(device)
-        self.d = torch.from_numpy(np.concatenate(directions)).to(device)
-        self.rgb = torch.from_numpy(np.concatenate(colors)).to(device)
-        self.n = self.o.shape[0]
-
-
 def fit_space(capture: Capture, config: FieldConfig) -> SceneSpace:
     """The space a field of ``capture`` is fitted in: its unit cube holds the capture's bounds and every
     camera, its shell is ``config.shell`` thick."""
@@ -99,7 +80,7 @@ class _Trainer:
         #: Compiled (numba) kernels on the CPU; the torch path on CUDA (tests also run it on the CPU).
         self.compiled = device.type == "cpu"
         self.space = fit_space(capture, config)
-        self.rays = _Rays(train, self.space, device)
+        self.rays = TrainingRays(train, self.space, device)
         self.appearance = Appearance([v.name for v in train], device) if appearance else None
         self.generator = torch.Generator().manual_seed(config.seed)
         # the field renders over the mean of the backgrounds its training rays are composited over
@@ -162,7 +143,7 @@ class _Trainer:
         clock.start(f.resolution)
         clock.steps[f.resolution] += 1
         pick = torch.randint(self.rays.n, (c.batch_rays,), generator=self.generator).to(self.device)
-        o, d = self.rays.o[pick], self.rays.d[pick]
+        o, d = self.rays.o(pick), self.rays.d[pick]
         target = self.rays.rgb[pick].float() / 255.0
         if c.random_background:
             background = torch.rand(c.batch_rays, 3, generator=self.generator).to(self.device)
