@@ -25,7 +25,7 @@ from ..errors import InvalidArgument
 from ..field.config import FieldConfig
 from ..field.grid import SceneField, used_vertex_mask
 
-__all__ = ["GRID_STEP", "HEADROOM", "GridChoice", "GridMemoryLimit", "choose_grid", "fit_memory_bytes",
+__all__ = ["GRID_STEP", "HEADROOM", "GridChoice", "GridMemoryLimit", "byte_count", "choose_grid", "fit_memory_bytes",
            "memory_resolution", "stage_bytes"]
 
 #: The share of the free memory a new grid may take: the rest is for what :func:`stage_bytes` leaves out (the
@@ -34,6 +34,15 @@ __all__ = ["GRID_STEP", "HEADROOM", "GridChoice", "GridMemoryLimit", "choose_gri
 HEADROOM = 0.8
 #: A grid that does not fit is replaced by the finest multiple of this below it that does.
 GRID_STEP = 16
+
+
+def byte_count(n: float) -> str:
+    """``n`` bytes for a message, in GiB from 1 GiB, in MiB below.
+
+    >>> byte_count(30743256953), byte_count(100_000)
+    ('28.6 GiB', '0.1 MiB')
+    """
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.1f} MiB"
 
 
 class GridMemoryLimit(UserWarning):
@@ -124,10 +133,9 @@ class GridChoice:
 
     def message(self) -> str:
         """One line for the user: what was wanted, what it needed, what was free, what was trained instead."""
-        gib = 2 ** 30
-        free = "free memory unknown" if self.free is None else f"{self.free / gib:.1f} GiB free"
+        free = "free memory unknown" if self.free is None else f"{byte_count(self.free)} free"
         trained = f"trained {self.resolution}³ instead" if self.limited else f"trained {self.resolution}³"
-        return (f"a {self.wanted}³ grid would need {self.needed / gib:.1f} GiB, {free} (at most {HEADROOM:.0%} of it "
+        return (f"a {self.wanted}³ grid would need {byte_count(self.needed)}, {free} (at most {HEADROOM:.0%} of it "
                 f"is taken): {trained}")
 
     def describe(self) -> dict:

@@ -25,7 +25,7 @@ from ..errors import FitError
 from ..field.space import SceneSpace
 from ..geometry import camera_rays
 from .free_memory import free_bytes
-from .memory import HEADROOM
+from .memory import HEADROOM, byte_count
 
 __all__ = ["RAY_BYTES", "TrainingRays"]
 
@@ -51,7 +51,7 @@ class TrainingRays:
         if free is not None and needed > HEADROOM * free:
             smaller = math.ceil(10 * math.sqrt(needed / (HEADROOM * free))) / 10
             raise FitError(f"the {len(views)} training photos hold {sum(sizes):,} pixels: as training rays they need "
-                           f"{needed / 2**30:.1f} GiB, {free / 2**30:.1f} GiB free (at most {HEADROOM:.0%} of it is "
+                           f"{byte_count(needed)}, {byte_count(free)} free (at most {HEADROOM:.0%} of it is "
                            f"taken); fit them at least {smaller:g}× smaller along each side (n2r fit --downscale)")
         origins, directions, colors, owners = [], [], [], []
         for k, view in enumerate(views):

@@ -41,7 +41,7 @@ def test_a_capture_too_large_for_the_memory_free_is_refused_with_how_much_smalle
         TrainingRays(views, space, torch.device("cpu"), free)
     message = str(info.value)
     assert f"the {len(views)} training photos hold {pixels:,} pixels: as training rays they need" in message
-    assert "GiB free (at most 80% of it is taken); fit them at least" in message and "(n2r fit --downscale)" in message
+    assert "MiB free (at most 80% of it is taken); fit them at least" in message and "(n2r fit --downscale)" in message
     factor = float(message.split("at least ")[1].split("×")[0])
     largest = max(v.camera.width * v.camera.height for v in views)
     shrunk = (2 * RAY_BYTES * pixels + 72 * largest) / factor ** 2  # 72: a photo's float64 and float32 conversion
@@ -51,5 +51,5 @@ def test_a_capture_too_large_for_the_memory_free_is_refused_with_how_much_smalle
 
 def test_a_fit_on_too_little_memory_stops_before_any_step(capture48, monkeypatch):
     monkeypatch.setattr("pytest_n2r.fit.rays.free_bytes", lambda device: 1000)
-    with pytest.raises(FitError, match=r"as training rays they need .* GiB, 0\.0 GiB free"):
+    with pytest.raises(FitError, match=r"as training rays they need 2\.\d MiB, 0\.0 MiB free"):
         fit(capture48, SHORT_CONFIG, max_steps=10, device="cpu")
