@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -46,7 +48,14 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}, indent=2))
     else:
-        print(format_info(scene) + (f"\n{shift.format()}" if shift else ""))
+        try:
+            text = format_info(scene)
+        except ReportUnreadable as exc:  # a report edited by hand, or written by another tool
+            from ..errors import SceneFileError
+
+            raise SceneFileError(f"{args.scene}: scene.json {exc.args[0]} (not as n2r fit writes it); "
+                                 "n2r info --json prints it as stored") from exc
+        print(text + (f"\n{shift.format()}" if shift else ""))
     return 0
 
 
@@ -87,10 +96,12 @@ def info_dict(scene: SceneFile) -> dict:
 
 def format_info(scene: SceneFile) -> str:
     """The plain-text summary ``n2r info`` (and ``n2r fit`` at the end) prints."""
+    from ..fit.memory import byte_count
+
     info = info_dict(scene)
     report, field = info["report"], info["field"]
     lines = [
-        f"scene       {info['path']} ({_size(info['file_bytes'])}, format version {info['format_version']})",
+        f"scene       {info['path']} ({byte_count(info['file_bytes'])}, format version {info['format_version']})",
         (f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
          f"{info['photos_stored']} photos stored"),
     ]
@@ -104,71 +115,85 @@ def format_info(scene: SceneFile) -> str:
                  + (f"{mpu:.4g} m per scene unit" if mpu is not None else "metric scale unknown"))
     lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
                  f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
-                 f"stored ({_size(field['tensor_bytes'])}; {_size(field['memory_bytes'])} in memory)")
-    try:
-        lines += _report_lines(report)
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:  # a report edited by hand, or by another tool
-        from ..errors import SceneFileError
+                 f"stored ({byte_count(field['tensor_bytes'])}; {byte_count(field['memory_bytes'])} in memory)")
+    return "\n".join(lines + _report_lines(report))
 
-        raise SceneFileError(f"{info['path']}: scene.json 'report' is not as n2r fit writes it ({type(exc).__name__}: "
-                             f"{exc}); n2r info --json prints it as stored") from None
-    return "\n".join(lines)
+
+class ReportUnreadable(ValueError):
+    """A value of a scene file's ``report`` that :func:`format_info` cannot read: ``keys`` names the report's keys
+    being read (a report is free-form JSON that any tool may have written); ``n2r info`` turns it into a
+    :class:`~pytest_n2r.errors.SceneFileError` naming the file."""
+
+    def __init__(self, keys: str, cause: Exception):
+        super().__init__(f"report {keys}: {type(cause).__name__}: {cause}")
+        self.keys = keys
+
+
+@contextlib.contextmanager
+def _reading(keys: str) -> Iterator[None]:
+    try:
+        yield
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise ReportUnreadable(keys, exc) from exc
 
 
 def _report_lines(report: dict) -> list[str]:
-    """The fit report's lines of :func:`format_info` (a ``KeyError``, ``TypeError`` or ``ValueError`` where a value
-    is not as ``n2r fit`` writes it)."""
+    """The fit report's lines of :func:`format_info` (:class:`ReportUnreadable` where a value is not as ``n2r fit``
+    writes it)."""
     from ..fit.memory import GridChoice
 
     lines = []
-    detail = report.get("detail")
-    if detail:
-        lines.append(f"  detail    a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the cameras "
-                     f"look closest (a {detail['matching_resolution']}³ grid would match the photos)")
-        if detail.get("grid_added"):
-            lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids were "
-                         "coarser than the photos (FieldConfig.max_pixels_per_voxel)")
-    for limit in report.get("grid_limits") or []:
-        choice = GridChoice(limit["wanted"], limit["trained"], limit["needed_bytes"], limit["free_bytes"])
-        lines.append(f"  memory    at step {limit['step']}, {choice.message()}")
-    state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
-             else "stopped before the end of its budget" if report.get("stopped") else "complete")
-    where = f" on {report['device']}" if "device" in report else ""
-    threads = f" ({report['threads']} threads)" if "threads" in report else ""
-    # a fitted demo scene stores no timings (its file is rebuilt byte for byte)
-    seconds = report.get("train_seconds")
-    duration = f"{seconds:.1f} s of training" if seconds is not None else "training time not recorded"
-    lines.append(f"fit         {state}: {report.get('steps', '?')} steps, {duration}{where}{threads}")
-    if "source" in report:
-        lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
-    rows = report.get("heldout") or []
-    if report.get("psnr") is not None:
-        lines.append(f"held out    PSNR {report['psnr']:.2f} dB, SSIM {report['ssim']:.4f} (mean of {len(rows)} views)")
-        width = max(len(r["view"]) for r in rows)
-        lines.append(f"  {'view':<{width}}  PSNR dB    SSIM")
-        lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
-    elif report.get("complete", True):
-        lines.append("held out    no held-out view with a photo (nothing to score)")
-    gains = report.get("appearance")
-    if gains:
-        values = [g for rgb in gains.values() for g in rgb]
-        lines.append(f"appearance  a colour gain per training photo ({len(gains)} photos, {min(values):.3f} to "
-                     f"{max(values):.3f}); renders use none")
-    for entry in report.get("history") or []:
-        scores = (f"PSNR {entry['psnr']:.2f} dB, SSIM {entry['ssim']:.4f}" if entry.get("psnr") is not None
-                  else "no held-out view with a photo")
-        lines.append(f"  after {entry['seconds']:g} s of training (step {entry['step']}): {scores}")
-    versions = report.get("versions")
-    if versions:
-        lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
+    with _reading("'detail'"):
+        detail = report.get("detail")
+        if detail:
+            lines.append(f"  detail    a voxel spans {detail['pixels_per_voxel']:.1f} training pixels where the "
+                         f"cameras look closest (a {detail['matching_resolution']}³ grid would match the photos)")
+            if detail.get("grid_added"):
+                lines.append(f"            {detail['grid_added']}³ added for the end of the fit: the ladder's grids "
+                             "were coarser than the photos (FieldConfig.max_pixels_per_voxel)")
+    with _reading("'grid_limits'"):
+        for limit in report.get("grid_limits") or []:
+            choice = GridChoice(limit["wanted"], limit["trained"], limit["needed_bytes"], limit["free_bytes"])
+            lines.append(f"  memory    at step {limit['step']}, {choice.message()}")
+    with _reading("'complete', 'stopped', 'steps', 'train_seconds', 'device' or 'threads'"):
+        state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
+                 else "stopped before the end of its budget" if report.get("stopped") else "complete")
+        where = f" on {report['device']}" if "device" in report else ""
+        threads = f" ({report['threads']} threads)" if "threads" in report else ""
+        # a fitted demo scene stores no timings (its file is rebuilt byte for byte)
+        seconds = report.get("train_seconds")
+        duration = f"{seconds:.1f} s of training" if seconds is not None else "training time not recorded"
+        lines.append(f"fit         {state}: {report.get('steps', '?')} steps, {duration}{where}{threads}")
+    with _reading("'source' or 'downscale'"):
+        if "source" in report:
+            lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
+    with _reading("'heldout', 'psnr' or 'ssim'"):
+        rows = report.get("heldout") or []
+        if report.get("psnr") is not None:
+            lines.append(f"held out    PSNR {report['psnr']:.2f} dB, SSIM {report['ssim']:.4f} (mean of {len(rows)} "
+                         "views)")
+            width = max(len(r["view"]) for r in rows)
+            lines.append(f"  {'view':<{width}}  PSNR dB    SSIM")
+            lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
+        elif report.get("complete", True):
+            lines.append("held out    no held-out view with a photo (nothing to score)")
+    with _reading("'appearance'"):
+        gains = report.get("appearance")
+        if gains:
+            values = [g for rgb in gains.values() for g in rgb]
+            lines.append(f"appearance  a colour gain per training photo ({len(gains)} photos, {min(values):.3f} to "
+                         f"{max(values):.3f}); renders use none")
+    with _reading("'history'"):
+        for entry in report.get("history") or []:
+            scores = (f"PSNR {entry['psnr']:.2f} dB, SSIM {entry['ssim']:.4f}" if entry.get("psnr") is not None
+                      else "no held-out view with a photo")
+            lines.append(f"  after {entry['seconds']:g} s of training (step {entry['step']}): {scores}")
+    with _reading("'versions'"):
+        versions = report.get("versions")
+        if versions:
+            lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
     return lines
 
 
 def _num(value: float | None, width: int, digits: int) -> str:
     return f"{value:{width}.{digits}f}" if value is not None else f"{'inf':>{width}}"
-
-
-def _size(n: int) -> str:
-    if n < 1024:
-        return f"{n} bytes"
-    return f"{n / 1024:.1f} KiB" if n < 1024 ** 2 else f"{n / 1024 ** 2:.1f} MiB"

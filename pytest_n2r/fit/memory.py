@@ -37,12 +37,15 @@ GRID_STEP = 16
 
 
 def byte_count(n: float) -> str:
-    """``n`` bytes for a message, in GiB from 1 GiB, in MiB below.
+    """``n`` bytes for a message: in GiB from 1 GiB, MiB from 1 MiB, KiB from 1 KiB, bytes below.
 
-    >>> byte_count(30743256953), byte_count(100_000)
-    ('28.6 GiB', '0.1 MiB')
+    >>> byte_count(30743256953), byte_count(1552437657), byte_count(100_000), byte_count(512)
+    ('28.6 GiB', '1.4 GiB', '97.7 KiB', '512 bytes')
     """
-    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.1f} MiB"
+    for unit, size in (("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
+        if n >= size:
+            return f"{n / size:.1f} {unit}"
+    return f"{int(n)} bytes"
 
 
 class GridMemoryLimit(UserWarning):

@@ -163,9 +163,9 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("info --size abc", "info {scene} --shift --size abc", r"--size='abc' is not a render size"),
     ("info on a zip without scene.json", "info {plain_zip}", r"the archive has no 'scene\.json'"),
     ("info on a report whose grid_limits rows lack their grids", "info {odd_limits}",
-     r"odd_limits\.n2r: scene\.json 'report' is not as n2r fit writes it \(KeyError: 'wanted'\); n2r info --json"),
+     r"odd_limits\.n2r: scene\.json report 'grid_limits': KeyError: 'wanted' \(not as n2r fit writes it\); n2r info"),
     ("info on a report whose detail holds text", "info {odd_detail}",
-     r"odd_detail\.n2r: scene\.json 'report' is not as n2r fit writes it \(ValueError: Unknown format code 'f'"),
+     r"odd_detail\.n2r: scene\.json report 'detail': ValueError: Unknown format code 'f'"),
     # -- n2r poses
     ("poses of a missing source", "poses {tmp}/nowhere", r"SOURCE .*nowhere: does not exist"),
     ("poses over the capture's transforms.json", "poses {capture} -o {capture}/transforms.json",
