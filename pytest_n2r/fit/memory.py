@@ -159,8 +159,9 @@ def choose_grid(field: SceneField, wanted: int, free: int | None) -> GridChoice:
     room = None if free is None else HEADROOM * free
 
     def needed(resolution: int) -> int:
-        if room is not None and stage_bytes(resolution, resolution ** 3, width=width) <= room:
-            return stage_bytes(resolution, resolution ** 3, width=width)  # fits even with every vertex stored
+        everything = stage_bytes(resolution, resolution ** 3, width=width)
+        if room is None or everything <= room:
+            return everything  # unchecked, or fits even with every vertex stored: not worth counting them
         stored = int(used_vertex_mask(field.upsampled_occupancy(resolution)).sum())
         return stage_bytes(resolution, stored, width=width)
 
