@@ -265,11 +265,11 @@ def fit(
 ) -> FitResult:
     """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
     ``max_steps`` steps. The stage schedule follows whichever limit is given (steps when both: a fit with
-    ``max_steps`` alone is reproducible bit for bit on the same machine and thread count). Where the capture
-    shows finer detail than ``config``'s finest grid holds, the fit trains one finer grid at the end of the
-    run (:func:`~pytest_n2r.fit.detail.detailed_config`). A grid that would not fit in the memory free is
-    replaced by the finest that does (:func:`~pytest_n2r.fit.memory.choose_grid`), with a warning and a row of
-    ``report["grid_limits"]``; the result's ``config`` names the grids trained.
+    ``max_steps`` alone is reproducible bit for bit on the same machine and thread count, where memory limited no
+    grid). Where the capture shows finer detail than ``config``'s finest grid holds, the fit trains one finer grid
+    at the end of the run (:func:`~pytest_n2r.fit.detail.detailed_config`). A grid that would not fit in the
+    memory free is replaced by the finest that does (:func:`~pytest_n2r.fit.memory.choose_grid`), with a warning
+    and a row of ``report["grid_limits"]``; the result's ``config`` names the grids trained.
 
     ``progress`` receives ``{step, stage, resolution, loss, psnr, elapsed_s, eta_s, occupied}`` about once a
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
