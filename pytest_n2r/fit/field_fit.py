@@ -72,11 +72,15 @@ def fit_space(capture: Capture, config: FieldConfig) -> SceneSpace:
 
 
 class _Trainer:
-    def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False):
+    def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False,
+                 haze_from: int | None = None):
         train = [v for v in capture.train_views if v.image is not None]
         if not train:
             raise FitError(f"capture {capture.source!r} has no training view with an image; load it with images")
         self.config, self.device = config, device
+        #: The first stage whose prunes drop thin haze (``final_prune_alpha``): the ladder's last grid, or the
+        #: caller's last where a finer grid for the end was added (:func:`~pytest_n2r.fit.detail.detailed_config`).
+        self.haze_from = len(config.resolutions) - 1 if haze_from is None else haze_from
         #: Compiled (numba) kernels on the CPU; the torch path on CUDA (tests also run it on the CPU).
         self.compiled = device.type == "cpu"
         self.space = fit_space(capture, config)
@@ -215,7 +219,7 @@ class _Trainer:
         """Drop cells the field left empty, and cells that training rays reached but that never contributed
         (hidden behind surfaces or clear air): one cell of dilation keeps what is left free to grow."""
         c = self.config
-        threshold = c.final_prune_alpha if self.stage == len(c.resolutions) - 1 else c.prune_alpha
+        threshold = c.final_prune_alpha if self.stage >= self.haze_from else c.prune_alpha
         if self.compiled:
             occupancy = pruned_occupancy(self.field, self.grid.numpy()[0], self.row_map, self.cell_weight,
                                          threshold, c.prune_weight, c.step_ratio)
@@ -294,7 +298,7 @@ def fit(
     dev = resolve_device(device)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
-    trainer = _Trainer(capture, config, dev, appearance=appearance)
+    trainer = _Trainer(capture, config, dev, appearance=appearance, haze_from=len(given.resolutions) - 1)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
     pending_evals = sorted(float(s) for s in eval_at_s)
