@@ -67,8 +67,9 @@ class FieldConfig:
         opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
         that training rays sampled in that time without any sample reaching a compositing weight of
-        ``prune_weight`` (one cell of dilation keeps surfaces free to grow). On the finest grid the opacity
-        threshold is ``final_prune_alpha`` instead: thin haze in front of surfaces is dropped while the
+        ``prune_weight`` (one cell of dilation keeps surfaces free to grow). On the finest grid (and, where
+        a fit adds a finer grid for the end, on the grid before it) the opacity threshold is
+        ``final_prune_alpha`` instead: thin haze in front of surfaces is dropped while the
         fit can still adapt to its absence, so rays reach surfaces in fewer samples (faster steps and
         renders). Nothing is pruned before step ``prune_after``: the field needs that long to show where
         its surfaces are. ``tv`` and ``tv_density``: weights of a total-variation prior on the colour and on
