@@ -30,9 +30,10 @@ recipe's 29.03 / 0.542 / 0.592 / 0.732. Such a field renders 1.4–1.7× slower 
 (docs/scene-field-log.md, "Forty minutes"). An hour of the same recipe scored 29.33 dB, ORB 0.560, SIFT 0.611, AKAZE
 0.764 held out: nothing over forty minutes (docs/scene-field-log.md, "An hour with the forty-minute recipe").
 At 30 minutes the finer end won the fox's validation views by less than a seed's spread (28.63 against 28.48 dB),
-so the threshold stays at 40. Every figure with a finer end carries a handicap found then: the 256³ grid before it
-is not the last, keeps its thin haze and steps at a fifth of its speed (docs/scene-field-log.md, "A finer end at
-thirty minutes").
+so the threshold stays at 40. Every figure with a finer end above carries a handicap found then and since mended:
+the 256³ grid before it was not the last, kept its thin haze and stepped at a fifth of its speed; pruned as the last
+grid is, the finer end at 30 minutes scored 29.00 dB on the fox's validation views (docs/scene-field-log.md, "A
+finer end at thirty minutes").
 
 Convention
 ----------
