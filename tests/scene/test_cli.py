@@ -473,6 +473,28 @@ def test_a_long_budget_fits_degree_2_colour_and_finer_grids_unless_they_are_give
         assert "--config max_pixels_per_voxel=6 keeps 6" in err, f"{flags}: no way back said:\n{err}"
 
 
+def test_fit_help_states_the_budget_rules_the_fit_applies(capsys):
+    """``n2r fit --help`` writes the budgets out (the parser must not import torch to read them): this holds the
+    text to :mod:`pytest_n2r.fit.budget`'s constants, so moving a threshold cannot leave the help behind."""
+    from pytest_n2r.field.config import FieldConfig
+    from pytest_n2r.fit.budget import (
+        FINE_BUDGET_PIXELS_PER_VOXEL,
+        FINE_BUDGET_S,
+        LONG_BUDGET_RESOLUTIONS,
+        LONG_BUDGET_S,
+        LONG_BUDGET_SH_DEGREE,
+    )
+
+    with pytest.raises(SystemExit):
+        main(["fit", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for rule in (f"from {LONG_BUDGET_S / 60:g}m on", f"SH degree {LONG_BUDGET_SH_DEGREE}",
+                 f"end on {LONG_BUDGET_RESOLUTIONS[-1]}³", f"from {FINE_BUDGET_S / 60:g}m on",
+                 (f"more than {FINE_BUDGET_PIXELS_PER_VOXEL:g} of the photos' pixels, "
+                  f"not {FieldConfig().max_pixels_per_voxel:g}")):
+        assert rule in text, f"n2r fit --help does not say {rule!r}:\n{text}"
+
+
 def test_a_fit_short_of_memory_says_so_above_the_bar_and_in_the_report(exported, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr("pytest_n2r.fit.field_fit.free_bytes", lambda device: 1)  # no room for any finer grid
     path = tmp_path / "small.n2r"
