@@ -41,10 +41,10 @@ class FieldConfig:
         sized for this many pixels a voxel (rounded up to a multiple of 64, at most ``detail_grid_max``); 0 turns
         it off, and any other ladder is trained as given.
         On a phone-style capture of the wall (480×270 photos, 9 pixels a voxel at 224³) a 384³ grid for the
-        last 30 % gained 0.7 dB and SIFT's repeatability against the photos 0.32 → 0.56 at equal training
-        time; on the object's 960×540 capture (10.1 pixels a voxel) it raised all three detectors' repeatability
-        but cost 0.28 dB held out (0.26 dB at twice the time); the fox (5.1 pixels a voxel) keeps 224³
-        (docs/scene-field-log.md, "A grid that follows the capture's detail"). ``n2r fit`` with a budget of 40
+        last 30 % gained 0.9 dB and SIFT's repeatability against the photos 0.29 → 0.58 at equal training
+        time; on the object's 960×540 capture (10.1 pixels a voxel) 0.5 dB, and all three detectors'
+        repeatability; the fox (5.1 pixels a voxel) keeps 224³ (docs/scene-field-log.md, "A grid that follows
+        the capture's detail", "The 10-minute default on fine phone captures"). ``n2r fit`` with a budget of 40
         minutes or more sets 3.5 (:mod:`pytest_n2r.fit.budget`).
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
         colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes
