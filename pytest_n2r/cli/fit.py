@@ -103,7 +103,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="training time, e.g. 10m, 90s, 1h (default: 10m unless --max-steps is given); from 20m on, "
                         "without --max-steps, the colour takes SH degree 2 (unless --config sh_degree is given) "
                         "and the grids end on 256³ (unless --config resolutions or stage_fractions is given); "
-                        "from 40m on, a finer grid is added for the end where the last one's voxel spans more than "
+                        "from 30m on, a finer grid is added for the end where the last one's voxel spans more than "
                         "3.5 of the photos' pixels, not 6 (unless --config max_pixels_per_voxel is given)")
     p.add_argument("--max-steps", type=int, default=None, metavar="N",
                    help="stop after N steps (with no time budget, the fit is reproducible bit for bit)")

@@ -44,7 +44,7 @@ class FieldConfig:
         last 30 % gained 0.9 dB and SIFT's repeatability against the photos 0.29 → 0.58 at equal training
         time; on the object's 960×540 capture (10.1 pixels a voxel) 0.5 dB, and all three detectors'
         repeatability; the fox (5.1 pixels a voxel) keeps 224³ (docs/scene-field-log.md, "A grid that follows
-        the capture's detail", "The 10-minute default on fine phone captures"). ``n2r fit`` with a budget of 40
+        the capture's detail", "The 10-minute default on fine phone captures"). ``n2r fit`` with a budget of 30
         minutes or more sets 3.5 (:mod:`pytest_n2r.fit.budget`).
         ``shell``: thickness of the contracted outer shell (normalized units). ``sh_degree``: 0, 1 or 2 (the
         colour's spherical harmonics); degree 2 fits the fox 1.1–1.3 dB better at equal steps, but a step takes

@@ -429,8 +429,8 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
 
 @pytest.mark.parametrize(("flags", "degree", "finest", "pixels"), [
     (["--time-budget", "20m"], 2, 256, 6.0),
-    (["--time-budget", "39m"], 2, 256, 6.0),
-    (["--time-budget", "40m"], 2, 256, 3.5),
+    (["--time-budget", "29m"], 2, 256, 6.0),
+    (["--time-budget", "30m"], 2, 256, 3.5),
     (["--time-budget", "1h"], 2, 256, 3.5),
     (["--time-budget", "1h", "--config", "max_pixels_per_voxel=6"], 2, 256, 6.0),
     (["--time-budget", "1h", "--config", "max_pixels_per_voxel=0"], 2, 256, 0.0),
@@ -467,7 +467,7 @@ def test_a_long_budget_fits_degree_2_colour_and_finer_grids_unless_they_are_give
     if finest == 256:
         assert "--config resolutions=48,96,224 keeps the default grids" in err, f"{flags}: no way back said:\n{err}"
     said = ("detail      a finer grid for the last 30 % where a voxel spans more than 3.5 of the photos' pixels, "
-            "not 6: it fits better from a 40-minute budget on") in err
+            "not 6: it fits better from a 30-minute budget on") in err
     assert said == (pixels == 3.5), f"{flags}: the detail grid's sizing was {'' if said else 'not '}printed:\n{err}"
     if pixels == 3.5:
         assert "--config max_pixels_per_voxel=6 keeps 6" in err, f"{flags}: no way back said:\n{err}"
