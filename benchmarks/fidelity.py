@@ -242,16 +242,22 @@ def neighbours(scene, size: str, max_views: int | None) -> dict[str, dict]:
     return out
 
 
-def _found_again(a: np.ndarray, b: np.ndarray, px: float) -> tuple[float, float]:
-    """Points ``a`` and ``b`` of one pose (identity mapping): the share found again within ``px`` one to one
-    (mutual nearest neighbours over the smaller set, as the metric counts) and plainly (each point of ``a`` with a
-    point of ``b`` within ``px``)."""
+#: How :func:`_found_again` counts a point found again, in the order it returns them.
+FOUND_AGAIN = ("one to one", "mutual", "plain")
+
+
+def _found_again(a: np.ndarray, b: np.ndarray, px: float) -> tuple[float, float, float]:
+    """Points ``a`` and ``b`` of one pose (identity mapping): the share found again within ``px`` one to one (the
+    largest one-to-one matching over the smaller set, as the metric counts), as mutual nearest neighbours (what
+    the metric counted before its ``result_version`` 2) and plainly (each point of ``a`` with a point of ``b``
+    within ``px``)."""
     from scipy.spatial import cKDTree
 
-    from pytest_n2r.metrics._matching import mutual_nearest
+    from pytest_n2r.metrics._matching import maximum_matching, mutual_nearest
 
-    one_to_one = len(mutual_nearest(a, b, px)) / max(min(len(a), len(b)), 1)
-    return one_to_one, float(np.mean(cKDTree(b).query(a)[0] <= px)) if len(a) and len(b) else float("nan")
+    smaller = max(min(len(a), len(b)), 1)
+    plain = float(np.mean(cKDTree(b).query(a)[0] <= px)) if len(a) and len(b) else float("nan")
+    return len(maximum_matching(a, b, px)) / smaller, len(mutual_nearest(a, b, px)) / smaller, plain
 
 
 def _inner_points(detect, rgb: np.ndarray, shift: int = 0, border: int = 16) -> np.ndarray:
@@ -265,10 +271,10 @@ def _inner_points(detect, rgb: np.ndarray, shift: int = 0, border: int = 16) -> 
 def crowding(scene, size: str, max_views: int | None) -> dict[str, dict[str, float]]:
     """Per detector, on the held-out views: ``crowded``, the share of its points on the reference image that have
     another of its points within the repeatability metric's tolerance; and the share of points found again one to
-    one and plainly (:func:`_found_again`) in the reference moved by one whole pixel (nothing resampled) and in
-    the render. Where points crowd, one-to-one matching pairs a point that moved a little with a neighbour's
-    counterpart and counts both as lost. Points within 16 px of the border are left out. Empty without reference
-    images."""
+    one, as mutual nearest neighbours and plainly (:func:`_found_again`) in the reference moved by one whole pixel
+    (nothing resampled) and in the render. Where points crowd, mutual nearest neighbours pair a point that moved a
+    little with a neighbour's counterpart and count both as lost. Points within 16 px of the border are left out.
+    Empty without reference images."""
     from scipy.spatial import cKDTree
 
     kind, _ = reference_kind(scene)
@@ -295,7 +301,7 @@ def crowding(scene, size: str, max_views: int | None) -> dict[str, dict[str, flo
 
     return {d: {"crowded": mean(r["crowded"]),
                 **{f"{name} {how}": mean([x[k] for x in r[name]])
-                   for name in ("moved", "render") for k, how in enumerate(("one to one", "plain"))}}
+                   for name in ("moved", "render") for k, how in enumerate(FOUND_AGAIN)}}
             for d, r in rows.items()}
 
 
@@ -558,9 +564,9 @@ def main(argv: list[str] | None = None) -> int:
         print_ceiling(spec, table)
         if crowded.get(spec):
             print("\nthe reference's points with another point of the same detector within the metric's tolerance, "
-                  "and the share found again one to one (as the metric counts) and plainly (nearest within the "
-                  "tolerance), in the reference moved by 1 whole pixel and in the render (same pose, 16 px borders "
-                  "left out)\n")
+                  "and the share found again one to one (as the metric counts), as mutual nearest neighbours (as it "
+                  "counted before result_version 2) and plainly (nearest within the tolerance), in the reference "
+                  "moved by 1 whole pixel and in the render (same pose, 16 px borders left out)\n")
             columns = list(next(iter(crowded[spec].values())))
             print("| detector | " + " | ".join(columns) + " |")
             print("|---|" + "---|" * len(columns))

@@ -48,7 +48,7 @@ def resolve_metric(metric: Metric | str, **params: Any) -> Metric:
     """A metric object from a metric (returned as is) or a name from :data:`METRICS` plus parameters.
 
     >>> resolve_metric("repeatability", px=3)
-    repeatability(px=3.0, mapping='depth')
+    repeatability(px=3.0, matching='maximum', mapping='depth')
     """
     if isinstance(metric, Metric):
         if params:

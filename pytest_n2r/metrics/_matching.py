@@ -1,13 +1,15 @@
-"""Mutual nearest neighbours between two 2-D point sets within a distance (k-d tree, or chunked numpy)."""
+"""Matching two 2-D point sets within a distance: nearest neighbours, mutual nearest neighbours and the
+largest one-to-one matching (k-d tree, or binned numpy)."""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
-__all__ = ["mutual_nearest", "nearest_within"]
+__all__ = ["maximum_matching", "mutual_nearest", "nearest_within", "pairs_within"]
 
 
 @functools.cache
@@ -35,8 +37,25 @@ def nearest_within(queries: np.ndarray, points: np.ndarray, radius: float, *, us
 
 
 def _nearest_within_grid(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
-    """Numpy-only :func:`nearest_within`: bin ``points`` into square cells of side ``radius`` and look at
-    the 3x3 cells around each query, so the work grows with the number of close pairs, not ``N x M``."""
+    """Numpy-only :func:`nearest_within`: see :func:`_cell_pairs`."""
+    best = np.full(len(queries), -1, dtype=np.intp)
+    best_d2 = np.full(len(queries), np.inf)
+    for qi, pi, d2 in _cell_pairs(queries, points, radius):
+        # the nearest candidate per query in this cell: sort by (query, distance, index), keep firsts
+        o = np.lexsort((pi, d2, qi))
+        first = o[np.r_[True, qi[o][1:] != qi[o][:-1]]]
+        q_first, d_first, p_first = qi[first], d2[first], pi[first]
+        better = (d_first < best_d2[q_first]) | ((d_first == best_d2[q_first]) & (p_first < best[q_first]))
+        best[q_first[better]] = p_first[better]
+        best_d2[q_first[better]] = d_first[better]
+    return np.where(best_d2 <= radius * radius, best, -1)
+
+
+def _cell_pairs(queries: np.ndarray, points: np.ndarray,
+                radius: float) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``(query index, point index, squared distance)`` arrays of every pair whose point lies in one of the 3x3
+    square cells of side ``radius`` around the query's cell, one cell offset at a time: a superset of the pairs
+    within ``radius`` whose size grows with the number of close pairs, not ``N x M``."""
     origin = np.minimum(queries.min(axis=0), points.min(axis=0))
     cell = max(float(radius), 1e-12)
     pc = np.floor((points - origin) / cell).astype(np.int64)
@@ -45,8 +64,6 @@ def _nearest_within_grid(queries: np.ndarray, points: np.ndarray, radius: float)
     keys = (pc[:, 1] + 1) * width + (pc[:, 0] + 1)
     order = np.argsort(keys, kind="stable")
     sorted_keys = keys[order]
-    best = np.full(len(queries), -1, dtype=np.intp)
-    best_d2 = np.full(len(queries), np.inf)
     for dv in (-1, 0, 1):
         for du in (-1, 0, 1):
             k = (qc[:, 1] + 1 + dv) * width + (qc[:, 0] + 1 + du)
@@ -56,15 +73,89 @@ def _nearest_within_grid(queries: np.ndarray, points: np.ndarray, radius: float)
                 continue
             qi = np.repeat(np.arange(len(queries)), counts)
             pi = order[np.repeat(start - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())]
-            d2 = ((queries[qi] - points[pi]) ** 2).sum(axis=1)
-            # the nearest candidate per query in this cell: sort by (query, distance, index), keep firsts
-            o = np.lexsort((pi, d2, qi))
-            first = o[np.r_[True, qi[o][1:] != qi[o][:-1]]]
-            q_first, d_first, p_first = qi[first], d2[first], pi[first]
-            better = (d_first < best_d2[q_first]) | ((d_first == best_d2[q_first]) & (p_first < best[q_first]))
-            best[q_first[better]] = p_first[better]
-            best_d2[q_first[better]] = d_first[better]
-    return np.where(best_d2 <= radius * radius, best, -1)
+            yield qi, pi, ((queries[qi] - points[pi]) ** 2).sum(axis=1)
+
+
+def pairs_within(a: np.ndarray, b: np.ndarray, radius: float, *,
+                 use_scipy: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair ``(i, j)`` with ``a[i]`` and ``b[j]`` at most ``radius`` apart (Euclidean, inclusive), as the
+    index arrays ``i``, ``j`` and the distances, nearest first (ties by ``i``, then ``j``)."""
+    empty = np.zeros(0, dtype=np.intp)
+    if len(a) == 0 or len(b) == 0:
+        return empty, empty, np.zeros(0)
+    tree = _kd_tree() if use_scipy else None
+    if tree is not None:  # candidates a little past radius; the test below is the numpy path's, to the bit
+        found = tree(a).sparse_distance_matrix(tree(b), np.nextafter(radius, np.inf), output_type="ndarray")
+        i, j = found["i"].astype(np.intp), found["j"].astype(np.intp)
+        d2 = ((a[i] - b[j]) ** 2).sum(axis=1)
+    else:
+        cells = list(_cell_pairs(a, b, radius))
+        i, j, d2 = (np.concatenate([c[k] for c in cells]) for k in range(3)) if cells else (empty, empty, np.zeros(0))
+    near = d2 <= radius * radius
+    i, j, d = i[near], j[near], np.sqrt(d2[near])
+    order = np.lexsort((j, i, d))
+    return i[order], j[order], d[order]
+
+
+def maximum_matching(a: np.ndarray, b: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
+    """``(M, 2)`` index pairs ``(i, j)``, ``a[i]`` and ``b[j]`` at most ``radius`` apart, each point in at most
+    one pair, with as many pairs as that allows (a maximum bipartite matching).
+
+    The nearest pairs are taken first (every pair of mutual nearest neighbours among them); then each point of
+    ``a`` left over gets a partner where an augmenting path reassigns others within ``radius``: a point whose
+    neighbour took its counterpart pairs with the neighbour's instead, where mutual nearest neighbours would
+    leave both unmatched.
+
+    >>> a = np.array([[0.0, 0.0], [1.0, 0.0]])
+    >>> maximum_matching(a, a + [1.2, 0.0], 2.0).tolist()   # both moved 1.2 px: both found again
+    [[0, 0], [1, 1]]
+    >>> mutual_nearest(a, a + [1.2, 0.0], 2.0).tolist()     # a[1]'s counterpart is nearer a[0]'s
+    [[1, 0]]
+    """
+    i, j, _ = pairs_within(a, b, radius, use_scipy=use_scipy)
+    mate_a, mate_b = [-1] * len(a), [-1] * len(b)
+    for u, v in zip(i.tolist(), j.tolist(), strict=True):  # nearest first
+        if mate_a[u] < 0 and mate_b[v] < 0:
+            mate_a[u], mate_b[v] = v, u
+    by_a = np.lexsort((j, i))  # each point's candidates, still nearest first (a stable sort by i)
+    starts = np.searchsorted(i[by_a], np.arange(len(a) + 1))
+    neighbours = j[by_a].tolist()
+    adjacency = [neighbours[s:e] for s, e in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True)]
+    free = [u for u in range(len(a)) if mate_a[u] < 0 and adjacency[u]]
+    while free:  # Kuhn's augmenting paths, one visited set a pass, until a pass finds none
+        seen = [False] * len(b)
+        left = [u for u in free if not _augment(u, adjacency, mate_a, mate_b, seen)]
+        if len(left) == len(free):
+            break
+        free = left
+    pairs = [(u, v) for u, v in enumerate(mate_a) if v >= 0]
+    return np.array(pairs, dtype=np.intp).reshape(-1, 2)
+
+
+def _augment(root: int, adjacency: list[list[int]], mate_a: list[int], mate_b: list[int], seen: list[bool]) -> bool:
+    """Whether an alternating path from the free point ``root`` of ``a`` reaches a free point of ``b`` through
+    points not yet ``seen``; if so, the matching along it is flipped (one pair more). Iterative depth-first."""
+    stack = [(root, 0)]  # (point of a, index of the next candidate to try)
+    via: list[int] = []  # the point of b each stacked point of a (but the root) was reached through
+    while stack:
+        u, k = stack[-1]
+        if k == len(adjacency[u]):
+            stack.pop()
+            if via:
+                via.pop()
+            continue
+        stack[-1] = (u, k + 1)
+        v = adjacency[u][k]
+        if seen[v]:
+            continue
+        seen[v] = True
+        if mate_b[v] < 0:  # a free point of b: flip the path
+            for (w, _), x in zip(stack, [*via, v], strict=True):
+                mate_a[w], mate_b[x] = x, w
+            return True
+        via.append(v)
+        stack.append((mate_b[v], 0))
+    return False
 
 
 def mutual_nearest(a: np.ndarray, b: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:

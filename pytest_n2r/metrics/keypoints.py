@@ -37,7 +37,7 @@ from .._validation import check_positive, check_range
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 from ..render.view import RenderedView
-from ._matching import mutual_nearest
+from ._matching import maximum_matching, mutual_nearest
 from ._outputs import as_keypoints
 from .base import Metric, MetricResult
 from .correspondence import (
@@ -60,6 +60,7 @@ __all__ = [
 Mapping = Literal["depth", "homography"]
 _MAPPINGS = ("depth", "homography")
 _FORMS = ("schmid", "symmetric")
+_MATCHINGS = ("maximum", "mutual")
 #: Share of an image that one view's points may cover with discs of the metric's tolerance before the
 #: metric is undefined (chance matches). Measured on the demo scenes at 320×180 with discs of radius 8 px:
 #: shipped OpenCV detectors cover at most 0.67 (SIFT on the wall), ORB 0.35; a grid of points every 8 px
@@ -91,8 +92,8 @@ class KeypointCorrespondences:
     ``source`` ``(n_s, 2)`` and ``follow`` ``(n_f, 2)`` are the distinct keypoints (rounded to 1e-6 px) in
     their own images; ``source_in_follow`` ``(n_s, 2)`` are the source points mapped into the follow-up
     image (NaN where not visible in both views); ``source_visible`` / ``follow_visible`` say which points
-    count; ``matches`` ``(M, 2)`` holds index pairs ``(i, j)`` into ``source`` / ``follow`` of the mutual
-    nearest neighbours within the tolerance (empty for metrics that do not match points). With the depth
+    count; ``matches`` ``(M, 2)`` holds index pairs ``(i, j)`` into ``source`` / ``follow`` of the points
+    matched within the tolerance (empty for metrics that do not match points). With the depth
     mapping ``source`` is read-only: the metric keeps it for later pairs on the same (cached) source render.
     """
 
@@ -243,29 +244,40 @@ class Repeatability(_KeypointMetric):
     """Fraction of keypoints detected again at the same scene point (Schmid et al. 2000).
 
     With ``n1`` source points mapped into the follow-up image and ``n2`` follow-up points, all visible in
-    both views, ``m`` is the number of **mutual nearest neighbours** at most ``px`` pixels apart (each point
-    matched at most once). The score is ``m / min(n1, n2)`` (``form="schmid"``, default) or
-    ``2 m / (n1 + n2)`` (``form="symmetric"``). Range [0, 1], ideal 1, deviation ``1 - score``.
+    both views, ``m`` is the number of pairs at most ``px`` pixels apart, each point in at most one pair.
+    The score is ``m / min(n1, n2)`` (``form="schmid"``, default) or ``2 m / (n1 + n2)``
+    (``form="symmetric"``). Range [0, 1], ideal 1, deviation ``1 - score``.
+
+    ``matching="maximum"`` (default) counts the most such pairs one-to-one matching allows;
+    ``matching="mutual"`` only mutual nearest neighbours, what this metric counted before ``result_version``
+    2. Where a detector's points crowd (ORB finds one corner at several pyramid levels), mutual nearest
+    neighbours lose a point whose neighbour's counterpart lies nearer than its own, and its neighbour's
+    counterpart with it: on the fox, a photo moved by one whole pixel kept 0.61 of ORB's points that way
+    (docs/metrics.md, "Repeatability: which points pair").
     """
 
     name = "repeatability"
     ideal = 1.0
-    result_version = "1"
+    result_version = "2"
 
     def __init__(
         self, px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
-        plane: tuple[np.ndarray, float] | None = None, min_opacity: float = DEFAULT_MIN_OPACITY,
-        depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+        matching: Literal["maximum", "mutual"] = "maximum", plane: tuple[np.ndarray, float] | None = None,
+        min_opacity: float = DEFAULT_MIN_OPACITY, depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
     ) -> None:
         self.px = check_positive("px", px)
         if form not in _FORMS:
             raise InvalidArgument(f"form={form!r}; expected one of {_FORMS}")
+        if matching not in _MATCHINGS:
+            raise InvalidArgument(f"matching={matching!r}; expected one of {_MATCHINGS}")
         self.form = form
+        self.matching = matching
         self.tolerance = self.px
         super().__init__(mapping, plane, min_opacity, depth_tolerance)
 
     def _match(self, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return mutual_nearest(p, q, self.px)
+        match = maximum_matching if self.matching == "maximum" else mutual_nearest
+        return match(p, q, self.px)
 
     def _score(self, c: KeypointCorrespondences, camera: Camera, details: dict[str, Any]) -> MetricResult:
         m = len(c.matches)
@@ -274,8 +286,10 @@ class Repeatability(_KeypointMetric):
         return self.result(score, n_matched=m, **details)
 
     def __repr__(self) -> str:
+        # the matching is always named: a baseline saved when mutual nearest neighbours were all this metric
+        # counted names none, so comparing it with today's scores reads as a changed metric, not a change
         form = "" if self.form == "schmid" else f", form={self.form!r}"
-        return f"repeatability(px={self.px!r}{form}, {self._mapping_repr()})"
+        return f"repeatability(px={self.px!r}{form}, matching={self.matching!r}, {self._mapping_repr()})"
 
 
 def _may_cover(n_points: int, camera: Camera, radius: float) -> bool:
@@ -319,8 +333,8 @@ class InterestPointSpread(_KeypointMetric):
 
 def repeatability(
     px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
-    plane: tuple[np.ndarray, float] | None = None, min_opacity: float = DEFAULT_MIN_OPACITY,
-    depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
+    matching: Literal["maximum", "mutual"] = "maximum", plane: tuple[np.ndarray, float] | None = None,
+    min_opacity: float = DEFAULT_MIN_OPACITY, depth_tolerance: float = DEFAULT_DEPTH_TOLERANCE,
 ) -> Repeatability:
     """Keypoint repeatability with a tolerance of ``px`` pixels (follow-up image); see :class:`Repeatability`.
 
@@ -329,9 +343,9 @@ def repeatability(
     of the world plane ``plane = (n, d)`` (``n·X + d = 0``), or of a pure rotation when ``plane`` is None.
 
     >>> repeatability(px=2)
-    repeatability(px=2.0, mapping='depth')
+    repeatability(px=2.0, matching='maximum', mapping='depth')
     """
-    return Repeatability(px, mapping, form=form, plane=plane, min_opacity=min_opacity,
+    return Repeatability(px, mapping, form=form, matching=matching, plane=plane, min_opacity=min_opacity,
                          depth_tolerance=depth_tolerance)
 
 

@@ -113,6 +113,18 @@ def test_points_shifted_by_3px_fail_at_2px_and_pass_at_4px():
     assert result.score > 0.9, result  # only points pushed out of the source image are lost
 
 
+def test_crowded_points_moved_within_the_tolerance_are_all_found_again():
+    """A detector that reports each corner twice, 1 px apart (as ORB does at two pyramid levels), all its points
+    moved 1.2 px: every point's counterpart is within 2 px, so repeatability is 1; counting only mutual nearest
+    neighbours (what this metric did before result_version 2) loses one point of each crowded pair."""
+    view, same = pair(Transform())
+    p = np.vstack([grid_points(), grid_points() + [1.0, 0.0]])
+    q = p + [1.2, 0.0]
+    assert repeatability(px=2, mapping="homography")(p, q, view, same).score == 1.0
+    mutual = repeatability(px=2, mapping="homography", matching="mutual")(p, q, view, same)
+    assert mutual.score == 0.5, mutual
+
+
 def test_occluded_points_are_excluded():
     """A square occluder in front of the wall hides, in the follow-up view, wall points the source saw."""
     occluder = Plane((0.0, 0.0, 1.0), -2.0, centre=(0.35, 0.0, 2.0), half=0.25)
@@ -263,6 +275,10 @@ def test_bad_arguments_and_views():
         repeatability(px=-1)
     with pytest.raises(InvalidArgument, match="mapping='flow'; expected one of"):
         repeatability(mapping="flow")
+    with pytest.raises(InvalidArgument, match=r"matching='nearest'; expected one of \('maximum', 'mutual'\)"):
+        repeatability(matching="nearest")
+    assert repr(repeatability(matching="mutual", form="symmetric")) == (
+        "repeatability(px=2.0, form='symmetric', matching='mutual', mapping='depth')")
     with pytest.raises(InvalidArgument, match="plane=.* only used with mapping='homography'"):
         repeatability(plane=WALL_PLANE)
     with pytest.raises(InvalidType, match="needs the source RenderedView"):

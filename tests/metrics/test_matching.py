@@ -1,0 +1,74 @@
+"""The largest one-to-one matching of two point sets within a distance, against SciPy's Hopcroft-Karp."""
+
+from __future__ import annotations
+
+import hypothesis.strategies as st
+import numpy as np
+from hypothesis import given, settings
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import maximum_bipartite_matching
+
+from pytest_n2r.metrics._matching import maximum_matching, mutual_nearest, pairs_within
+
+
+def crowded(seed: int, n: int, spread: float) -> np.ndarray:
+    """``n`` points in a ``spread`` px square: at a radius of a few px, many have several candidates."""
+    return np.random.default_rng(seed).uniform(0.0, spread, size=(n, 2))
+
+
+def largest_matching_size(a: np.ndarray, b: np.ndarray, radius: float) -> int:
+    """The size of a maximum bipartite matching of the pairs within ``radius``, by SciPy (Hopcroft-Karp)."""
+    if len(a) == 0 or len(b) == 0:
+        return 0
+    d = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
+    graph = csr_matrix((d <= radius).astype(np.int8))
+    return int((maximum_bipartite_matching(graph, perm_type="column") >= 0).sum())
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**16), n_a=st.integers(0, 80), n_b=st.integers(0, 80), spread=st.floats(5, 40),
+       radius=st.floats(0.5, 4))
+def test_the_matching_is_one_to_one_within_the_radius_and_as_large_as_one_can_be(seed, n_a, n_b, spread, radius):
+    a, b = crowded(seed, n_a, spread), crowded(seed + 1, n_b, spread)
+    pairs = maximum_matching(a, b, radius)
+    i, j = pairs.T
+    assert len(set(i.tolist())) == len(i) and len(set(j.tolist())) == len(j), f"a point paired twice: {pairs}"
+    distances = np.hypot(*(a[i] - b[j]).T)
+    assert np.all(distances <= radius), f"pairs farther than {radius} px: {distances[distances > radius]}"
+    assert len(pairs) == largest_matching_size(a, b, radius), "not a maximum matching"
+    assert len(pairs) >= len(mutual_nearest(a, b, radius)), "fewer pairs than mutual nearest neighbours"
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**16), n_a=st.integers(0, 200), n_b=st.integers(0, 200), radius=st.floats(0.5, 10))
+def test_numpy_pairs_and_matching_equal_the_kdtree_ones(seed, n_a, n_b, radius):
+    a, b = crowded(seed, n_a, 60.0), crowded(seed + 1, n_b, 60.0)
+    for fast, slow in zip(pairs_within(a, b, radius), pairs_within(a, b, radius, use_scipy=False), strict=True):
+        np.testing.assert_array_equal(fast, slow)
+    np.testing.assert_array_equal(maximum_matching(a, b, radius), maximum_matching(a, b, radius, use_scipy=False))
+
+
+def test_pairs_are_listed_nearest_first_and_a_pair_exactly_at_the_radius_counts():
+    a = np.array([[0.0, 0.0], [10.0, 0.0]])
+    b = np.array([[2.0, 0.0], [10.5, 0.0], [0.0, 1.0], [0.0, 2.5]])
+    for use_scipy in (True, False):
+        i, j, d = pairs_within(a, b, 2.0, use_scipy=use_scipy)
+        assert (i.tolist(), j.tolist(), d.tolist()) == ([1, 0, 0], [1, 2, 0], [0.5, 1.0, 2.0]), use_scipy
+
+
+def test_a_crowded_set_moved_rigidly_is_matched_whole():
+    """Points 1 px apart, all moved 1.2 px: each one's own counterpart is within 2 px, but a neighbour's is
+    nearer, so mutual nearest neighbours keep one pair in two; the largest matching keeps every point."""
+    centres = np.array([[u, v] for u in np.arange(10.0, 60.0, 10.0) for v in (10.0, 20.0)])
+    a = np.vstack([centres, centres + [1.0, 0.0]])
+    b = a + [1.2, 0.0]
+    assert len(maximum_matching(a, b, 2.0)) == len(a)
+    assert len(mutual_nearest(a, b, 2.0)) == len(a) // 2
+    np.testing.assert_array_equal(maximum_matching(a, b, 2.0), np.column_stack([np.arange(len(a))] * 2))
+
+
+def test_nearest_pairs_are_kept_where_the_count_allows():
+    """Far-apart points are paired with their nearest counterpart, not another within the radius."""
+    a = np.array([[0.0, 0.0], [30.0, 0.0]])
+    b = np.array([[1.5, 0.0], [0.5, 0.0], [30.0, 1.9], [31.0, 0.0]])
+    assert maximum_matching(a, b, 2.0).tolist() == [[0, 1], [1, 3]]
