@@ -15,6 +15,21 @@ the loaded modules (the drawn examples changed; issue 15): on the new draws four
 rule, and their eps went up to keep it, not to hide a regression (that is the gate's job, test_gate.py):
 ORB repeatability τ4 worst 0.825 (object; eps 0.9 -> 0.95), τ6 worst 0.654 (object; 0.65 -> 0.75), ORB
 spread τ1 worst 0.415 (object; 0.45 -> 0.5), AKAZE τ4 worst 0.750 (object; 0.8 -> 0.85).
+
+Re-measured when repeatability began to count the largest one-to-one matching instead of mutual nearest
+neighbours only (pytest-n2r's ``result_version`` 2, docs/metrics.md "Repeatability: which points pair"). ORB
+finds one corner at several pyramid levels, and mutual nearest neighbours lost both points of such a pair when
+one moved a little: on the same examples (the baseline of main replayed with both matchings) the ORB
+relations' mean deviation fell by 0.12-0.22 (τ1 0.308 -> 0.149 object, 0.324 -> 0.151 wall; τ4 0.532 ->
+0.378, 0.501 -> 0.364), SIFT's and AKAZE's by at most 0.041. A relation's draws are keyed to its metric
+and eps, so the new metric, and each new eps, draws other examples: the ORB eps went to 0.45-0.9 by the rule on
+the first new draws, and those draws then broke τ2 and τ3 on the object (0.486, 0.542). So the ORB repeatability
+eps come from 140 draws per relation and scene: those two sets of 20 and 100 more (``-o n2r_examples=100``, eps
+0.99 so every draw is scored). Worst deviation (object / wall) and eps, the rule applied to the worst: τ1 0.420 /
+0.259 (0.6 -> 0.5), τ2 0.532 / 0.325 (0.65 stays), τ3 0.542 / 0.432 (0.75 -> 0.65), τ4 0.843 / 0.564 (0.95
+stays), τ5 0.396 / 0.288 (0.65 -> 0.5), τ6 0.495 / 0.305 (0.75 -> 0.6): the means fell by half, the object's
+worst draws under large motions much less. SIFT and AKAZE keep their eps (worst on the first new draws τ1 SIFT
+0.393 / 0.209, AKAZE 0.250 / 0.082; τ4 SIFT 0.537 / 0.275, AKAZE 0.714 / 0.333): the metric did not move them.
 """
 
 from __future__ import annotations
@@ -32,7 +47,7 @@ pytestmark = pytest.mark.detectors
 
 
 # -- ORB, the detector the robot runs (PERCEPTION_ORB selects a candidate configuration) ---------------------
-@metamorphic(REPEATABILITY, eps=0.6, transform="tau1")
+@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
 def test_orb_repeatability_tau1(n2r_scene, orb):
     return orb
 
@@ -42,7 +57,7 @@ def test_orb_repeatability_tau2(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.75, transform="tau3")
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau3")
 def test_orb_repeatability_tau3(n2r_scene, orb):
     return orb
 
@@ -52,12 +67,12 @@ def test_orb_repeatability_tau4(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.65, transform="tau5")
+@metamorphic(REPEATABILITY, eps=0.5, transform="tau5")
 def test_orb_repeatability_tau5(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.75, transform="tau6")
+@metamorphic(REPEATABILITY, eps=0.6, transform="tau6")
 def test_orb_repeatability_tau6(n2r_scene, orb):
     return orb
 

@@ -25,6 +25,17 @@ AKAZE 0.200 / 0.196, the floors ORB 0.437 / 0.495 and AKAZE 0.131 / 0.212 (0.438
 ORB on object-field is now 0.03–0.07 below its eps, not 0.08: eps stays, as no measurement says the relation, not
 the draws, moved (docs/performance-log.md, "Rendering").
 
+Since repeatability counts the largest one-to-one matching, not mutual nearest neighbours only (``result_version``
+2, as in test_detectors.py), the same examples replayed with both matchings: ORB's mean deviation 0.310 -> 0.122
+(wall-field) and 0.326 -> 0.157 (object-field), worst 0.451 -> 0.185 and 0.476 -> 0.273; AKAZE's 0.069 -> 0.028 and
+0.065 -> 0.056. The floors fell with them: ORB 0.160 / 0.304 (max 0.258 / 0.661), AKAZE 0.109 / 0.181 (wall-field /
+object-field): most of what looked like the fields' effect on ORB was the matching. On the new draws the worst
+deviations are ORB 0.171 / 0.302 and AKAZE 0.059 / 0.250; the field adds −0.011 / −0.023 (ORB) and −0.015 /
+−0.002 (AKAZE) to the mean deviation of the same poses on exact renders. ORB's eps is derived again as in
+test_detectors.py, from those 10 draws and 100 more (eps 0.99): worst 0.225 / 0.410, so 0.55 -> 0.5, above its
+floors. AKAZE's 0.3 stays (0.05 above object-field's new worst draw; the matching moved it by at most 0.041 on
+the same examples).
+
 Two renders of one field share most of its errors: on the same examples the field adds −0.01 to +0.045 to
 the mean deviation, though its floor (one render against the truth) is 0.13–0.47. Not asserted here,
 measured the same way: EfficientNet-Lite0's cosine similarity under τ1 on object-field (worst 0.345) has a
@@ -51,7 +62,7 @@ EXAMPLES = 10
 pytestmark = [pytest.mark.field, pytest.mark.detectors, pytest.mark.n2r_scene(*FITTED)]
 
 
-@metamorphic(REPEATABILITY, eps=0.55, transform="tau1", examples=EXAMPLES)
+@metamorphic(REPEATABILITY, eps=0.5, transform="tau1", examples=EXAMPLES)
 def test_orb_repeatability_tau1(n2r_scene, orb):
     return orb
 
