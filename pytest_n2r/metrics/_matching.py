@@ -117,7 +117,7 @@ def maximum_matching(a: np.ndarray, b: np.ndarray, radius: float, *, use_scipy: 
     for u, v in zip(i.tolist(), j.tolist(), strict=True):  # nearest first
         if mate_a[u] < 0 and mate_b[v] < 0:
             mate_a[u], mate_b[v] = v, u
-    by_a = np.lexsort((j, i))  # each point's candidates, still nearest first (a stable sort by i)
+    by_a = np.argsort(i, kind="stable")  # each point's candidates, still nearest first
     starts = np.searchsorted(i[by_a], np.arange(len(a) + 1))
     neighbours = j[by_a].tolist()
     adjacency = [neighbours[s:e] for s, e in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True)]
