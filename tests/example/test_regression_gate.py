@@ -14,6 +14,7 @@ import importlib
 import importlib.util
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from types import ModuleType
 
@@ -79,3 +80,16 @@ def test_the_gate_catches_a_realistic_regression(name, example_gate, request):
     report = "\n".join(tables)
     assert caught, f"{name} passed the gate:\n{report}"
     assert all(c.outcome in ("worse", "lost") for c in caught), f"{name}: a failure that is not a regression:\n{report}"
+
+
+def test_a_baseline_of_another_metric_reads_as_a_changed_metric(example_gate):
+    """A baseline recorded with a metric the suite no longer uses (repeatability before it named its matching)
+    fails the gate as ``changed-metric``, saying to save a new baseline, not as "nothing replayed"."""
+    from pytest_n2r.demo import load_demo
+
+    base = next(r for r in example_gate.baseline().values() if r.metric.startswith("repeatability("))
+    old = replace(base, metric="repeatability(px=3.0, mapping='depth')")
+    current = example_gate.replay(load_demo(base.scene), None, old, cache=None)
+    (comparison,) = example_gate.compare_paired({old.nodeid: old}, [current], margin=example_gate.MARGIN)
+    assert comparison.outcome == "changed-metric" and comparison.fails, comparison
+    assert "save a new baseline" in comparison.message, comparison.message
