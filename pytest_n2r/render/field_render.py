@@ -209,8 +209,10 @@ class FieldRenderer:
             # where each vertex's colour direction is taken from when a frame bakes its logits: a degree-0 field's
             # colour takes none (its logits are baked once)
             n_rows = self._values.shape[0] if field.sh_degree > 0 and s.colour_direction == "vertex" else 0
-            self._position = np.empty((n_rows, 3), dtype=np.float64)
+            self._position = np.empty((3, n_rows), dtype=np.float64)
             self._outer = np.empty(n_rows, dtype=np.bool_)
+            # the colour coefficients by column for a frame's bake (a degree-0 field's: transposed for its one bake)
+            self._colour = np.ascontiguousarray(self._values[:, 1:].T) if n_rows else None
             if n_rows:
                 vertex = field.row_vertices().numpy()
                 run_parts(vertex_positions, n_rows, vertex, self.grid.resolution, self.grid.shell, self._position,
@@ -286,8 +288,9 @@ class FieldRenderer:
             return self._fixed_logits
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
+        colour = self._colour if self._colour is not None else np.ascontiguousarray(self._values[:, 1:].T)
         logits = np.empty((self._values.shape[0], 3), dtype=np.float32)
-        run_parts(bake_logits, self._values.shape[0], self._values, self._position, self._outer, origin,
+        run_parts(bake_logits, self._values.shape[0], colour, self._position, self._outer, origin,
                   self.field.sh_degree, logits)
         if self.field.sh_degree == 0:
             self._fixed_logits = logits  # the kernel only reads it (a read-only array would compile it anew)

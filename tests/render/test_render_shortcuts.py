@@ -10,7 +10,9 @@ import torch
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.lattice import contract
 from pytest_n2r.field.march import march_dense
+from pytest_n2r.field.query import sh_basis
 from pytest_n2r.geometry import Camera
+from pytest_n2r.render.field_kernels import bake_logits
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
 
 from ..field.fields import CAMERA, SPACE, camera_for, named_pose, pose, random_field
@@ -94,16 +96,40 @@ def test_a_frame_bakes_each_vertex_from_its_uncontracted_position(sparse):
     rows = field.kernel_rows()
     vertex = np.flatnonzero(rows >= 0) if rows.shape[0] else np.arange(res ** 3)
     row = rows[vertex] if rows.shape[0] else vertex
-    assert (rows.shape[0] > 0) == sparse and row.size == renderer._position.shape[0], "not the field asked for"
+    assert (rows.shape[0] > 0) == sparse and row.size == renderer._position.shape[1], "not the field asked for"
     half = 1.0 + shell
     lattice = np.stack(np.unravel_index(vertex, (res,) * 3), axis=1) * (2.0 * half / (res - 1)) - half
-    position, outer = renderer._position[row], renderer._outer[row]
+    position, outer = renderer._position[:, row].T, renderer._outer[row]
     on_face = np.abs(lattice).max(axis=1) >= half - 1e-9
     assert np.array_equal(outer, on_face), f"{int((outer != on_face).sum())} vertices flagged wrongly as at infinity"
     back = contract(torch.from_numpy(position[~outer]), shell).numpy()
     np.testing.assert_allclose(back, lattice[~outer], rtol=0, atol=1e-12,
                                err_msg="a vertex's position does not contract to its lattice position")
     np.testing.assert_array_equal(position[outer], lattice[outer], err_msg="an outer vertex's direction moved")
+
+
+@pytest.mark.parametrize("sh_degree", [1, 2])
+def test_a_frames_bake_is_the_sh_colour_from_the_camera_to_each_vertex(sh_degree):
+    """``bake_logits`` (column by column, branch-free) gives each stored vertex the SH colour logits of the direction
+    from the camera to it (:func:`~pytest_n2r.field.query.sh_basis`, float64), and a vertex at the camera centre,
+    which has no direction, its direction-free colour."""
+    field = random_field(resolution=12, sh_degree=sh_degree, occupied=0.3, seed=6).compact()
+    renderer = FieldRenderer(field, RenderSettings(backend="compiled"))
+    position, outer = renderer._position, renderer._outer
+    inner = np.flatnonzero(~outer)
+    origin = position[:, inner[inner.size // 2]].copy()  # the camera stands on this vertex
+    logits = np.empty((outer.size, 3), dtype=np.float32)
+    bake_logits(0, outer.size, renderer._colour, position, outer, origin, sh_degree, logits)
+    direction = position.T - np.where(outer[:, None], 0.0, origin)
+    norm = np.linalg.norm(direction, axis=1, keepdims=True)
+    unit = torch.from_numpy(np.divide(direction, norm, out=np.zeros_like(direction), where=norm > 0))
+    basis = sh_basis(unit, sh_degree).numpy()
+    basis[norm[:, 0] == 0, 1:] = 0.0
+    values = field.values.detach().double().numpy()
+    expected = np.einsum("nl,nlc->nc", basis, values[:, 1:].reshape(values.shape[0], -1, 3))
+    assert (norm == 0).sum() == 1 and np.isfinite(logits).all(), "the vertex at the camera centre got no finite colour"
+    np.testing.assert_allclose(logits.astype(np.float64), expected, rtol=1e-5, atol=1e-5,
+                               err_msg="a baked logit is not the SH colour seen from the camera")
 
 
 @pytest.mark.parametrize("sh_degree", [0, 1, 2])
