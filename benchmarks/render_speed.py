@@ -23,7 +23,11 @@ and ``--smoke`` (one tiny size, one view, one timed render) change the run. Prin
 4. ``sweep``: at the first size, a sweep of the knobs of :class:`pytest_n2r.render.RenderSettings` — sample spacing,
    the opacity below which cells are skipped, early ray termination, adaptive sampling's tolerance and
    render resolution — with frames/s and the PSNR of each variant against the best-quality render (finest
-   spacing, no skipping, no termination, every pixel traced) and against the photos. The default is marked.
+   spacing, no skipping, no termination, every pixel traced) and against the photos. The default is marked;
+5. ``parts``: where a frame's wall time goes with the defaults, at each size on one thread and on ``--threads``:
+   the colour bake (:func:`pytest_n2r.render.field_kernels.bake_logits`), the ray kernel (every pass of the
+   adaptive sampler) and the rest (the sampler's judging, the rays, numpy and Python between the kernels); the
+   mean over the held-out views of each one's fastest of 3 frames.
 
 Results: docs/performance.md.
 """
@@ -64,7 +68,7 @@ CHANGES = (("defaults less RENDER_VERSION 4 and 5", PREVIOUS),
            ("+ tail=(0.3, 0.1) (RENDER_VERSION 5)", BEFORE_DEC4),
            ("+ t_stop=0.04, min_weight=2e-2 (the defaults, 4 December)", DEFAULT),
            ("+ tail=(0.5, 0.1) (not adopted)", DEFAULT.replace(tail=(0.5, 0.1))))
-TABLES = ("speed", "changes", "psnr", "sweep")
+TABLES = ("speed", "changes", "psnr", "sweep", "parts")
 
 
 def sized(camera, pixels: int):
@@ -160,6 +164,8 @@ def main(argv: list[str]) -> int:
         psnr_table(scene, variants, views, truth, sizes)
     if "sweep" in tables:
         sweep_table(scene, views, truth, sizes, repeats, args.smoke)
+    if "parts" in tables:
+        parts_table(scene, views, sizes, repeats)
     return 0
 
 
@@ -237,6 +243,52 @@ def sweep_table(scene, views, truth, sizes, repeats: int, smoke: bool) -> None:
         for min_weight in (0.0, 3e-2):
             row(f"min_weight={min_weight:g}", DEFAULT.replace(min_weight=min_weight))
         row("colour_direction='ray'", DEFAULT.replace(colour_direction="ray"))
+
+
+def parts_table(scene, views, sizes, repeats: int) -> None:
+    """Table 5: a frame's wall time at the defaults split into the colour bake, the ray kernel and the rest."""
+    renderer = scene._renderer  # built on first use
+    spent = {"bake": 0.0, "rays": 0.0}
+
+    def timed(name: str, method):
+        def run(*args):
+            t0 = time.perf_counter()
+            try:
+                return method(*args)
+            finally:
+                spent[name] += time.perf_counter() - t0
+        return run
+
+    # instance attributes shadow the renderer's methods for this table only (deleted below)
+    renderer._bake_logits = timed("bake", renderer._bake_logits)
+    renderer._render_rays = timed("rays", renderer._render_rays)
+    threads = numba.get_num_threads()
+    print(f"\nwhere a frame's wall time goes, defaults, mean over {len(views)} held-out views (each one's fastest of "
+          f"{repeats})\n| size | threads | ms a frame | colour bake | ray kernel | the rest |\n|{' --- |' * 6}")
+    try:
+        for n in sorted({1, threads}):
+            numba.set_num_threads(n)
+            for w, h in sizes:
+                rows = []
+                for view in views:
+                    camera = sized(view.camera, w * h)
+                    scene.render(view.c2w, camera, ("rgb",))  # warm
+                    best = None
+                    for _ in range(repeats):
+                        spent.update(bake=0.0, rays=0.0)
+                        t0 = time.perf_counter()
+                        scene.render(view.c2w, camera, ("rgb",))
+                        total = time.perf_counter() - t0
+                        if best is None or total < best[0]:
+                            best = (total, spent["bake"], spent["rays"])
+                    rows.append(best)
+                total, bake, rays = (float(np.mean(column)) * 1e3 for column in zip(*rows))
+                rest = total - bake - rays
+                print(f"| {camera.width}×{camera.height} | {n} | {total:.1f} | {bake:.1f} ({bake / total:.0%}) | "
+                      f"{rays:.1f} ({rays / total:.0%}) | {rest:.1f} ({rest / total:.0%}) |")
+    finally:
+        del renderer._bake_logits, renderer._render_rays
+        numba.set_num_threads(threads)
 
 
 if __name__ == "__main__":
