@@ -274,8 +274,8 @@ def vertex_positions(first, last, vertex, res, shell, position, outer):
 @njit(cache=True, nogil=True)
 def colour_columns(first, last, values, colour):
     """The SH colour coefficients of rows ``first <= r < last`` by column: ``colour[c, r] = values[r, 1 + c]``
-    (``colour`` ``(3·n_sh, n_rows)``, ``values`` ``(n_rows, 1 + 3·n_sh)``, float32), what :func:`bake_logits` reads;
-    once a renderer (3.3x less time than numpy's transposed copy on two threads)."""
+    (``colour`` ``(3·n_sh, n_rows)``, ``values`` ``(n_rows, 1 + 3·n_sh)``, of one dtype), what :func:`bake_logits`
+    reads; once a renderer (3.3x less time than numpy's transposed copy on two threads)."""
     for r in range(first, last):
         for c in range(colour.shape[0]):
             colour[c, r] = values[r, 1 + c]
@@ -287,7 +287,7 @@ def bake_logits(first, last, colour, position, outer, origin, sh_degree, out):
     camera centre, normalized space): each one's SH colour for the direction from ``origin`` to the vertex, from
     :func:`vertex_positions`' ``position`` and ``outer`` (to a vertex on the shell's outer face, the direction of
     its contracted position). ``colour`` is the field's SH colour coefficients by column, ``(3·n_sh, n_rows)``
-    float32 (a field's ``values[:, 1:]`` transposed). A degree-0 field's logits take no direction (``position`` and
+    (a field's ``values[:, 1:]`` transposed). A degree-0 field's logits take no direction (``position`` and
     ``outer`` unread).
 
     Column by column and without a branch, so the loop runs on vector registers: 2.1-2.3x less CPU than row by

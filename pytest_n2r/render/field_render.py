@@ -212,7 +212,7 @@ class FieldRenderer:
             self._position = np.empty((3, n_rows), dtype=np.float64)
             self._outer = np.empty(n_rows, dtype=np.bool_)
             # the colour coefficients by column for a frame's bake (a degree-0 field's: transposed for its one bake)
-            self._colour = np.empty((self._values.shape[1] - 1, n_rows), dtype=np.float32) if n_rows else None
+            self._colour = np.empty((self._values.shape[1] - 1, n_rows), dtype=self._values.dtype) if n_rows else None
             if n_rows:
                 run_parts(colour_columns, n_rows, self._values, self._colour)
                 vertex = field.row_vertices().numpy()
