@@ -211,10 +211,9 @@ class FieldRenderer:
             n_rows = self._values.shape[0] if field.sh_degree > 0 and s.colour_direction == "vertex" else 0
             self._position = np.empty((3, n_rows), dtype=np.float64)
             self._outer = np.empty(n_rows, dtype=np.bool_)
-            # the colour coefficients by column for a frame's bake (a degree-0 field's: transposed for its one bake)
-            self._colour = np.empty((self._values.shape[1] - 1, n_rows), dtype=self._values.dtype) if n_rows else None
+            # the colour coefficients by column for a frame's bake (a degree-0 field's: made for its one bake)
+            self._colour = self._colour_columns() if n_rows else None
             if n_rows:
-                run_parts(colour_columns, n_rows, self._values, self._colour)
                 vertex = field.row_vertices().numpy()
                 run_parts(vertex_positions, n_rows, vertex, self.grid.resolution, self.grid.shell, self._position,
                           self._outer)
@@ -289,13 +288,20 @@ class FieldRenderer:
             return self._fixed_logits
         space = self.field.space
         origin = (c2w[:3, 3] - np.asarray(space.center)) / space.radius
-        colour = self._colour if self._colour is not None else np.ascontiguousarray(self._values[:, 1:].T)
+        colour = self._colour if self._colour is not None else self._colour_columns()
         logits = np.empty((self._values.shape[0], 3), dtype=np.float32)
         run_parts(bake_logits, self._values.shape[0], colour, self._position, self._outer, origin,
                   self.field.sh_degree, logits)
         if self.field.sh_degree == 0:
             self._fixed_logits = logits  # the kernel only reads it (a read-only array would compile it anew)
         return logits
+
+    def _colour_columns(self) -> np.ndarray:
+        """The field's SH colour coefficients by column, ``(3·n_sh, n_rows)`` in the values' dtype, what a frame's
+        bake reads (:func:`~.field_kernels.colour_columns`)."""
+        colour = np.empty((self._values.shape[1] - 1, self._values.shape[0]), dtype=self._values.dtype)
+        run_parts(colour_columns, self._values.shape[0], self._values, colour)
+        return colour
 
     def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, index: np.ndarray,
                      rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
