@@ -21,7 +21,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-from .borrow import borrowed
+from ..render.borrow import borrowed
 
 __all__ = ["albedo_of", "albedo_row", "bilinear", "level_constants", "log2", "look_up", "taps_at", "FLAT", "TEXTURED",
            "POSTER", "BLEND", "RADIAL", "F0", "F1", "META_COLUMNS"]
@@ -305,7 +305,7 @@ def albedo_row(samples, nodes, shade, node_kind, node_par, node_child, rings, te
     (texel offsets and weights, :func:`_plan_bucket`: level ``lo``, then ``lo + 1`` where it exists, into the next
     columns of ``taps``), then all lookups read in one loop whose texel reads (cache misses on large textures)
     overlap. Compiled apart from the render kernel (its compile time); its
-    helpers receive views of its arrays without reference counts (:func:`.borrow.borrowed`)."""
+    helpers receive views of its arrays without reference counts (:func:`pytest_n2r.render.borrow.borrowed`)."""
     nodes, shade, node_kind, node_par, node_child = (borrowed(nodes), borrowed(shade), borrowed(node_kind),
                                                      borrowed(node_par), borrowed(node_child))
     rings, tex_meta, texels, colours, mix = (borrowed(rings), borrowed(tex_meta), borrowed(texels), borrowed(colours),

@@ -19,7 +19,7 @@ What makes it fast (measured in ``docs/performance-log.md``):
 - Each render projects the groups' and primitives' bounding boxes to pixel rectangles (:func:`screen_rects`):
   a ray tests only what may lie under its pixel.
 - The hot helpers are inlined and receive views of the kernel's arrays without reference counts
-  (:func:`.borrow.borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
+  (:func:`pytest_n2r.render.borrow.borrowed`); scalar helpers are left to LLVM to inline (quicker to compile).
 - No sine goes to the C library: a relief's waves and the blend masks (once per pixel row over all its
   sub-rays, :mod:`.mask_kernel`) take theirs from :mod:`.trig`'s inlined polynomials, in vectorized loops.
 
@@ -54,9 +54,9 @@ from numba import njit
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from ..errors import InvalidArgument
+from ..render.borrow import borrowed as _borrowed
 from ..render.threads import render_pool
 from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, albedo_row
-from .borrow import borrowed as _borrowed
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
 from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall

@@ -28,8 +28,8 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
+from ..render.borrow import borrowed as _borrowed
 from ..scene.first_render import claim_piece
-from .borrow import borrowed as _borrowed
 from .primitives import T_MIN
 from .relief_kernel import HIT_ROWS, MODEL_ROWS, SLOT, STATE_ROWS, SUM_ROWS, relief_hits
 from .relief_rows import relief_row
