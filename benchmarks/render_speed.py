@@ -261,7 +261,7 @@ def parts_table(scene, views, sizes, repeats: int) -> None:
 
     # instance attributes shadow the renderer's methods for this table only (deleted below)
     renderer._bake_logits = timed("bake", renderer._bake_logits)
-    renderer._render_rays = timed("rays", renderer._render_rays)
+    renderer._trace_pixels = timed("rays", renderer._trace_pixels)
     threads = numba.get_num_threads()
     print(f"\nwhere a frame's wall time goes, defaults, mean over {len(views)} held-out views (each one's fastest of "
           f"{repeats})\n| size | threads | ms a frame | colour bake | ray kernel | the rest |\n|{' --- |' * 6}")
@@ -287,7 +287,7 @@ def parts_table(scene, views, sizes, repeats: int) -> None:
                 print(f"| {camera.width}×{camera.height} | {n} | {total:.1f} | {bake:.1f} ({bake / total:.0%}) | "
                       f"{rays:.1f} ({rays / total:.0%}) | {rest:.1f} ({rest / total:.0%}) |")
     finally:
-        del renderer._bake_logits, renderer._render_rays
+        del renderer._bake_logits, renderer._trace_pixels
         numba.set_num_threads(threads)
 
 

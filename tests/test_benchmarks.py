@@ -89,7 +89,7 @@ def test_kernel_compile_reports_the_field_renderers_kernels():
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "kernel_compile.py"), *args], cwd=ROOT,
                             env=_environment(), capture_output=True, text=True, timeout=300, check=False)
     assert result.returncode == 0, f"kernel_compile.py {' '.join(args)} failed:\n{result.stdout}\n{result.stderr}"
-    assert "| render_rays | 1 |" in result.stdout, f"no compile of the field's kernel reported:\n{result.stdout}"
+    assert "| render_pixels | 1 |" in result.stdout, f"no compile of the field's kernel reported:\n{result.stdout}"
 
 
 def test_kernel_compile_reports_the_training_kernels():

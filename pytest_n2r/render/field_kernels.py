@@ -47,15 +47,19 @@ from ..field.kernels import (
 )
 from .cell_bits import cell_occupied
 
-__all__ = ["render_rays", "bake_logits", "colour_columns", "pixel_rays", "vertex_positions"]
+__all__ = ["render_pixels", "bake_logits", "colour_columns", "pixel_rays", "vertex_positions"]
 
 
 @njit(cache=True, nogil=True)
-def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, res, shell, step, shell_samples, far,
-                density_shift, sigma_step, sh_degree, t_stop, tail, min_weight, background, want_depth, slot, rgb,
-                depth, opacity):
-    """Volume-render the rays ``first <= r < last`` into ``rgb[slot[r]]`` (3 values), ``depth[slot[r]]`` and
-    ``opacity[slot[r]]`` (float32; ``slot`` int64, say the flat pixel index of each ray).
+def render_pixels(first, last, index, width, pinhole, c2w, origin, radius, density, values, logits, rows, bits, reach,
+                  res, shell, step, shell_samples, far, density_shift, sigma_step, sh_degree, t_stop, tail, min_weight,
+                  background, want_depth, rgb, depth, opacity):
+    """Volume-render the rays through the pixels ``index[first:last]`` (flat, ``y·width + x``) into ``rgb[p]`` (3
+    values), ``depth[p]`` and ``opacity[p]`` of each such pixel ``p`` (float32).
+
+    A pixel's ray is :func:`pixel_rays`' to the bit (made here, not stored): from ``origin`` (float32, the camera
+    centre in normalized space) along :func:`_pixel_direction` of ``pinhole`` (``fx, fy, cx, cy``), ``c2w`` and
+    the scene's ``radius``, rounded to float32 as :func:`pixel_rays` stores it.
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
     (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a
@@ -85,9 +89,11 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
     rr = res * res
     half = 1.0 + shell
     scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
+    ox, oy, oz = np.float64(origin[0]), np.float64(origin[1]), np.float64(origin[2])
     for r in range(first, last):
-        ox, oy, oz = np.float64(o[r, 0]), np.float64(o[r, 1]), np.float64(o[r, 2])
-        dx, dy, dz = np.float64(d[r, 0]), np.float64(d[r, 1]), np.float64(d[r, 2])
+        i = index[r]
+        dx, dy, dz = _pixel_direction(i, width, pinhole, c2w, radius)
+        dx, dy, dz = np.float64(np.float32(dx)), np.float64(np.float32(dy)), np.float64(np.float32(dz))
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
         # degree-1 and degree-2 basis for this ray's direction (degree 0 is the constant SH_C0)
@@ -191,7 +197,6 @@ def render_rays(first, last, o, d, density, values, logits, rows, bits, reach, r
         cr += carried * last_r
         cg += carried * last_g
         cb += carried * last_b
-        i = slot[r]
         rgb[i, 0] = cr + trans * background[0]
         rgb[i, 1] = cg + trans * background[1]
         rgb[i, 2] = cb + trans * background[2]
@@ -324,9 +329,18 @@ def pixel_rays(first, last, index, width, fx, fy, cx, cy, c2w, center, radius, o
     :meth:`pytest_n2r.field.space.SceneSpace.normalize_rays` (minus ``center``, over ``radius``), in float64
     before the one rounding to float32, without their arrays."""
     ox, oy, oz = (c2w[0, 3] - center[0]) / radius, (c2w[1, 3] - center[1]) / radius, (c2w[2, 3] - center[2]) / radius
+    pinhole = (fx, fy, cx, cy)
     for r in range(first, last):
-        x = (index[r] % width - cx) / fx
-        y = (index[r] // width - cy) / fy
         o[r, 0], o[r, 1], o[r, 2] = ox, oy, oz
-        for i in range(3):
-            d[r, i] = (x * c2w[i, 0] + y * c2w[i, 1] + c2w[i, 2]) / radius
+        d[r, 0], d[r, 1], d[r, 2] = _pixel_direction(index[r], width, pinhole, c2w, radius)
+
+
+@njit(cache=True, inline="always")
+def _pixel_direction(p, width, pinhole, c2w, radius):
+    """The normalized direction (float64, before :func:`pixel_rays` rounds it) of the ray through the centre of pixel
+    ``p`` (flat, ``y·width + x``) of a pinhole camera (``pinhole``: ``fx, fy, cx, cy``) at ``c2w``, the scene's
+    ``radius`` the unit: camera-frame z-component 1 (``t`` is z-depth), rotated to the world, over ``radius``."""
+    x = (p % width - pinhole[2]) / pinhole[0]
+    y = (p // width - pinhole[3]) / pinhole[1]
+    return ((x * c2w[0, 0] + y * c2w[0, 1] + c2w[0, 2]) / radius, (x * c2w[1, 0] + y * c2w[1, 1] + c2w[1, 2]) / radius,
+            (x * c2w[2, 0] + y * c2w[2, 1] + c2w[2, 2]) / radius)

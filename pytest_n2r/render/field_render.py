@@ -30,7 +30,7 @@ from ..geometry import Camera
 from .adaptive import sample_adaptively
 from .block_reach import block_reach
 from .cell_bits import kept_cells
-from .field_kernels import bake_logits, colour_columns, pixel_rays, render_rays, vertex_positions
+from .field_kernels import bake_logits, colour_columns, pixel_rays, render_pixels, vertex_positions
 from .ray_order import tiled_pixels
 from .threads import run_balanced, run_parts
 
@@ -240,9 +240,8 @@ class FieldRenderer:
         def trace(want: np.ndarray, rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
             index = tiled_pixels(want, w)  # traced tile by tile (render/ray_order.py)
             for start in range(0, index.size, self.settings.chunk_rays):
-                chunk = index[start:start + self.settings.chunk_rays]
-                o, d = self._pixel_rays(chunk, camera, c2w)
-                self._render_rays(o, d, logits, want_depth, chunk, rgb, depth, opacity)
+                self._trace_pixels(index[start:start + self.settings.chunk_rays], camera, c2w, logits, want_depth,
+                                   rgb, depth, opacity)
 
         if adaptive:
             rgb, depth, opacity, self.last_traced = sample_adaptively(
@@ -254,7 +253,9 @@ class FieldRenderer:
             self.last_traced = h * w
         out: dict[str, np.ndarray] = {}
         if "rgb" in outputs:
-            out["rgb"] = np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8).reshape(h, w, 3)
+            scaled = np.multiply(rgb, np.float32(255.0))  # rounded and clipped in place: one temporary, not three
+            np.clip(np.rint(scaled, out=scaled), 0, 255, out=scaled)
+            out["rgb"] = scaled.astype(np.uint8).reshape(h, w, 3)
         if "depth" in outputs:
             out["depth"] = depth.reshape(h, w)
         if "opacity" in outputs:
@@ -303,16 +304,23 @@ class FieldRenderer:
         run_parts(colour_columns, self._values.shape[0], self._values, colour)
         return colour
 
-    def _render_rays(self, o: np.ndarray, d: np.ndarray, logits: np.ndarray, want_depth: bool, index: np.ndarray,
-                     rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
-        """Render rays ``o, d`` into the pixels ``index`` of the flat images ``rgb``, ``depth`` and ``opacity``."""
+    def _trace_pixels(self, index: np.ndarray, camera: Camera, c2w: np.ndarray, logits: np.ndarray, want_depth: bool,
+                      rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
+        """Render the rays through the pixels ``index`` (flat) of ``camera`` at ``c2w`` into those pixels of the flat
+        images ``rgb``, ``depth`` and ``opacity``. The compiled kernel makes each pixel's ray itself, as
+        :meth:`_pixel_rays` would (one pass over the rays, no ray arrays)."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
-            run_balanced(render_rays, o.shape[0], o, d, self._density, self._values, logits, self._rows,
-                         self._bits, self._reach, g.resolution, g.shell, g.step, g.shell_samples, g.far,
-                         f.density_shift, g.step_ratio, f.sh_degree, s.t_stop, self._tail, s.min_weight,
-                         np.asarray(self.background), want_depth, index, rgb, depth, opacity)
+            space = f.space
+            origin = ((c2w[:3, 3] - np.asarray(space.center, dtype=np.float64)) / space.radius).astype(np.float32)
+            pinhole = np.array([camera.fx, camera.fy, camera.cx, camera.cy], dtype=np.float64)
+            run_balanced(render_pixels, index.size, index, camera.width, pinhole, c2w, origin, float(space.radius),
+                         self._density, self._values, logits, self._rows, self._bits, self._reach, g.resolution,
+                         g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree,
+                         s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth, rgb, depth,
+                         opacity)
             return
+        o, d = self._pixel_rays(index, camera, c2w)
         with torch.no_grad():
             ot = torch.from_numpy(o).to(f.device)
             dt = torch.from_numpy(d).to(f.device)
