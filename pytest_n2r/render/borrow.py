@@ -1,12 +1,12 @@
 """Views of arrays without reference counts, for compiled kernels (numba) whose helpers receive arrays.
 
-numba counts references to an array each time a helper it inlines receives one (an atomic increment and decrement
-per call, per array), and its pass that prunes the pairs misses many: in the demo ray caster's per-ray loops that was
-about half of a render's time, in the adaptive sampler's judging of leaves 80 % of it (``docs/performance-log.md``).
-A kernel passes views of its own arguments to its
-helpers instead, which are alive for the whole call. Used by the exact demo renderer and the adaptive sampler; the
-fitted field's ray kernel and the training kernels measured no faster with them (the pruning pass keeps their loops
-free of counts).
+numba counts references to an array each time a helper it inlines receives one, or a row of it is taken as a view
+(an atomic increment and decrement each), and its pass that prunes the pairs misses many: that was about half of a
+render's time in the demo ray caster's per-ray loops, 80 % of the adaptive sampler's judging of leaves, a tenth to a
+sixth of the splat compositor's CPU (``docs/performance-log.md``). A kernel passes views of its own arguments to its
+helpers instead, which are alive for the whole call. Used by the exact demo renderer, the adaptive sampler and the
+splat compositor; the fitted field's ray kernel and the training kernels measured no faster with them (the pruning
+pass keeps their loops free of counts).
 """
 
 from __future__ import annotations

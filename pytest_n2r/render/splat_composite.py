@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .borrow import borrowed
 from .splat_kernels import _B, _CA, _CB, _CC, _G, _O, _R, _R2, _U, _V, _Z, ALPHA_MAX, ALPHA_MIN
 
 __all__ = ["BATCH", "COLS", "LANES", "ROWS", "composite_tiles", "exp_of_power", "finish"]
@@ -82,6 +83,7 @@ def composite_tiles(part, parts, tile_start, pair_records, pair_rects, width, ti
     """
     n_tiles = live.shape[0]
     height = trans.shape[0] // width
+    pair_records, pair_rects = borrowed(pair_records), borrowed(pair_rects)  # rows taken per pair: render/borrow.py
     blocks_x = (tile + COLS - 1) // COLS
     for i in range(part, n_tiles, parts):
         t = tile_order[i]
@@ -94,7 +96,8 @@ def composite_tiles(part, parts, tile_start, pair_records, pair_rects, width, ti
             e = s
         block_rows = (ty1 - ty0 + ROWS - 1) // ROWS
         state = np.empty((block_rows * blocks_x, _FIELDS, LANES))
-        _load_tile(state, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x)
+        view = borrowed(state)  # for the helpers and the blocks: state itself is read to the tile's end, below
+        _load_tile(view, trans, acc_rgb, acc_depth, width, tx0, tx1, ty0, ty1, blocks_x)
         # per block row of the tile, the pixels lo <= x < hi hold every pixel not yet done
         lo = np.full(block_rows, tx0)
         hi = np.full(block_rows, tx1)
@@ -102,7 +105,7 @@ def composite_tiles(part, parts, tile_start, pair_records, pair_rects, width, ti
             if (k - s) % BATCH == 0:
                 rows_left = 0
                 for br in range(block_rows):
-                    _shrink_span(state, br, blocks_x, tx0, lo, hi)
+                    _shrink_span(view, br, blocks_x, tx0, lo, hi)
                     rows_left += lo[br] < hi[br]
                 if rows_left == 0:
                     break
@@ -118,7 +121,7 @@ def composite_tiles(part, parts, tile_start, pair_records, pair_rects, width, ti
                     continue
                 y0 = ty0 + br * ROWS
                 for bx in range((xa - tx0) // COLS, (xe - tx0 - 1) // COLS + 1):
-                    blk = state[br * blocks_x + bx]
+                    blk = view[br * blocks_x + bx]
                     x0 = tx0 + bx * COLS
                     for lane in range(LANES):
                         px = x0 + lane % COLS
