@@ -51,15 +51,15 @@ __all__ = ["render_pixels", "bake_logits", "colour_columns", "pixel_rays", "vert
 
 
 @njit(cache=True, nogil=True)
-def render_pixels(first, last, index, width, pinhole, c2w, origin, radius, density, values, logits, rows, bits, reach,
+def render_pixels(first, last, index, width, pinhole, c2w, center, radius, density, values, logits, rows, bits, reach,
                   res, shell, step, shell_samples, far, density_shift, sigma_step, sh_degree, t_stop, tail, min_weight,
                   background, want_depth, rgb, depth, opacity):
     """Volume-render the rays through the pixels ``index[first:last]`` (flat, ``y·width + x``) into ``rgb[p]`` (3
     values), ``depth[p]`` and ``opacity[p]`` of each such pixel ``p`` (float32).
 
-    A pixel's ray is :func:`pixel_rays`' to the bit (made here, not stored): from ``origin`` (float32, the camera
-    centre in normalized space) along :func:`_pixel_direction` of ``pinhole`` (``fx, fy, cx, cy``), ``c2w`` and
-    the scene's ``radius``, rounded to float32 as :func:`pixel_rays` stores it.
+    A pixel's ray is :func:`pixel_rays`' to the bit, made here instead of stored: the same arithmetic from the pinhole
+    camera (``pinhole``: ``fx, fy, cx, cy``) at ``c2w`` and the scene's ``center`` and ``radius``, rounded to
+    float32 as :func:`pixel_rays` stores it.
 
     ``values`` is ``(n_rows, 1 + 3·n_sh)`` float32: the raw density then the SH colour coefficients
     (``[l·3 + channel]``) of each stored vertex, ``rows`` the ``res³`` int32 map of a sparse field from a
@@ -89,11 +89,10 @@ def render_pixels(first, last, index, width, pinhole, c2w, origin, radius, densi
     rr = res * res
     half = 1.0 + shell
     scale = (res - 1) / (2.0 * half)  # normalized units → vertex coordinates (grid_coords_xyz)
-    ox, oy, oz = np.float64(origin[0]), np.float64(origin[1]), np.float64(origin[2])
+    ox, oy, oz = _rounded(_camera_origin(c2w, center, radius))
     for r in range(first, last):
         i = index[r]
-        dx, dy, dz = _pixel_direction(i, width, pinhole, c2w, radius)
-        dx, dy, dz = np.float64(np.float32(dx)), np.float64(np.float32(dy)), np.float64(np.float32(dz))
+        dx, dy, dz = _rounded(_pixel_direction(i, width, pinhole, c2w, radius))
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
         # degree-1 and degree-2 basis for this ray's direction (degree 0 is the constant SH_C0)
@@ -322,17 +321,24 @@ def bake_logits(first, last, colour, position, outer, origin, sh_degree, out):
 
 
 @njit(cache=True, nogil=True)
-def pixel_rays(first, last, index, width, fx, fy, cx, cy, c2w, center, radius, o, d):
+def pixel_rays(first, last, index, width, pinhole, c2w, center, radius, o, d):
     """The normalized rays ``o[first:last], d[first:last]`` (of ``(N, 3)``, float32) through the centres of the
-    pixels with flat indices ``index[first:last]`` (``y·width + x``) of a pinhole camera at ``c2w``:
+    pixels with flat indices ``index[first:last]`` (``y·width + x``) of a pinhole camera (``pinhole``: ``fx, fy,
+    cx, cy``) at ``c2w``:
     :func:`pytest_n2r.geometry.camera_rays` (camera-frame z-component 1, so ``t`` is z-depth) then
     :meth:`pytest_n2r.field.space.SceneSpace.normalize_rays` (minus ``center``, over ``radius``), in float64
     before the one rounding to float32, without their arrays."""
-    ox, oy, oz = (c2w[0, 3] - center[0]) / radius, (c2w[1, 3] - center[1]) / radius, (c2w[2, 3] - center[2]) / radius
-    pinhole = (fx, fy, cx, cy)
+    ox, oy, oz = _camera_origin(c2w, center, radius)
     for r in range(first, last):
         o[r, 0], o[r, 1], o[r, 2] = ox, oy, oz
         d[r, 0], d[r, 1], d[r, 2] = _pixel_direction(index[r], width, pinhole, c2w, radius)
+
+
+@njit(cache=True, inline="always")
+def _camera_origin(c2w, center, radius):
+    """The camera centre of ``c2w`` in normalized space (minus the scene's ``center``, over its ``radius``;
+    float64, before :func:`pixel_rays` rounds it)."""
+    return (c2w[0, 3] - center[0]) / radius, (c2w[1, 3] - center[1]) / radius, (c2w[2, 3] - center[2]) / radius
 
 
 @njit(cache=True, inline="always")
@@ -344,3 +350,9 @@ def _pixel_direction(p, width, pinhole, c2w, radius):
     y = (p // width - pinhole[3]) / pinhole[1]
     return ((x * c2w[0, 0] + y * c2w[0, 1] + c2w[0, 2]) / radius, (x * c2w[1, 0] + y * c2w[1, 1] + c2w[1, 2]) / radius,
             (x * c2w[2, 0] + y * c2w[2, 1] + c2w[2, 2]) / radius)
+
+
+@njit(cache=True, inline="always")
+def _rounded(v):
+    """A float64 triple rounded to float32 and back, as a ray :func:`pixel_rays` stores is read."""
+    return np.float64(np.float32(v[0])), np.float64(np.float32(v[1])), np.float64(np.float32(v[2]))

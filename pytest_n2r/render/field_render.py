@@ -271,13 +271,18 @@ class FieldRenderer:
     def _pixel_rays(self, index: np.ndarray, camera: Camera, c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normalized float32 rays ``(o, d)`` through the pixels with flat indices ``index`` (compiled; the
         same arithmetic as ``normalize_rays(*camera_rays(...))``, tests/render/test_settings.py)."""
-        space = self.field.space
         o = np.empty((index.size, 3), dtype=np.float32)
         d = np.empty((index.size, 3), dtype=np.float32)
         run_parts(pixel_rays, index.size, np.ascontiguousarray(index, dtype=np.int64), camera.width,
-                  float(camera.fx), float(camera.fy), float(camera.cx), float(camera.cy), c2w,
-                  np.asarray(space.center, dtype=np.float64), float(space.radius), o, d)
+                  *self._pinhole_rays(camera, c2w), o, d)
         return o, d
+
+    def _pinhole_rays(self, camera: Camera, c2w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """What the compiled kernels make a camera's rays from: ``(pinhole, c2w, center, radius)``, ``pinhole`` the
+        intrinsics ``fx, fy, cx, cy`` (pixels), ``center`` and ``radius`` the field's normalization (scene units)."""
+        space = self.field.space
+        return (np.array([camera.fx, camera.fy, camera.cx, camera.cy], dtype=np.float64), c2w,
+                np.asarray(space.center, dtype=np.float64), float(space.radius))
 
     def _bake_logits(self, c2w: np.ndarray) -> np.ndarray:
         """The compiled kernel's per-frame colour logits for a camera at ``c2w`` (``(n_rows, 3)`` float32), or an
@@ -311,10 +316,7 @@ class FieldRenderer:
         :meth:`_pixel_rays` would (one pass over the rays, no ray arrays)."""
         s, g, f = self.settings, self.grid, self.field
         if self.backend == "compiled":
-            space = f.space
-            origin = ((c2w[:3, 3] - np.asarray(space.center, dtype=np.float64)) / space.radius).astype(np.float32)
-            pinhole = np.array([camera.fx, camera.fy, camera.cx, camera.cy], dtype=np.float64)
-            run_balanced(render_pixels, index.size, index, camera.width, pinhole, c2w, origin, float(space.radius),
+            run_balanced(render_pixels, index.size, index, camera.width, *self._pinhole_rays(camera, c2w),
                          self._density, self._values, logits, self._rows, self._bits, self._reach, g.resolution,
                          g.shell, g.step, g.shell_samples, g.far, f.density_shift, g.step_ratio, f.sh_degree,
                          s.t_stop, self._tail, s.min_weight, np.asarray(self.background), want_depth, rgb, depth,
