@@ -52,7 +52,7 @@ def grid_axis(n: int, stride: int) -> np.ndarray:
 @njit(cache=True, inline="always")
 def _agree(i00, i01, i10, i11, rgb, depth, opacity, tolerance, depth_tolerance):
     """Whether pixels ``i00, i01, i10, i11`` agree: colour and opacity spread within ``tolerance``, z-depth within
-    ``depth_tolerance`` of the smallest (two pixels: pass each twice)."""
+    ``depth_tolerance`` of the smallest (a cell's four corners; two pixels: :func:`_agree_two`)."""
     for c in range(3):
         v00, v01, v10, v11 = rgb[i00, c], rgb[i01, c], rgb[i10, c], rgb[i11, c]
         if max(v00, v01, v10, v11) - min(v00, v01, v10, v11) > tolerance:
