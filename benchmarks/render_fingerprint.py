@@ -8,9 +8,11 @@ every item whose bytes changed (exit status 1 when any did):
 1. the shipped fitted demo twins (``--twins``, default ``wall object``): RGB, z-depth and opacity at four
    captured poses and two poses moved off the capture (rays that cross the contracted shell at grazing
    angles), with the compiled backend at the capture size and the torch backend at a quarter of it;
-2. a short fit of the demo ``object`` scene (``--steps`` steps at 48×27 through
-   :func:`pytest_n2r.demo.fitted.build_fitted`, which writes the same bytes for the same fit): the scene
-   file's bytes, and its renders in both backends.
+2. short fits of the demo ``object`` scene (``--steps`` steps at 48×27 through
+   :func:`pytest_n2r.demo.fitted.build_fitted`, which writes the same bytes for the same fit), one of SH degree 1
+   and one of degree 2: each scene file's bytes, and its renders in both backends and, compiled, with each sample's
+   colour from its ray's direction (``colour_direction="ray"``: the SH coefficients read in the kernel, the path
+   the twins, of degree 0, and the default baked colour do not take).
 
 Timings are not compared; the script takes about a minute on two CPU threads.
 """
@@ -62,15 +64,21 @@ def _poses(file: SceneFile) -> list[tuple[str, np.ndarray, Camera]]:
     return poses
 
 
-def _renders(label: str, path: Path) -> dict[str, str]:
+#: Each render's backend, its size as a fraction of the capture's, and where a sample's colour takes its direction.
+RENDERS = (("compiled", 1.0, "vertex"), ("torch", 0.25, "vertex"))
+RAY_COLOUR = (("compiled", 1.0, "ray"),)
+
+
+def _renders(label: str, path: Path, renders: tuple[tuple[str, float, str], ...] = RENDERS) -> dict[str, str]:
     file = read_scene_file(path, images=False)
     out = {}
-    for backend, scale in (("compiled", 1.0), ("torch", 0.25)):
-        renderer = FieldRenderer(file.field, RenderSettings(backend=backend))
+    for backend, scale, direction in renders:
+        renderer = FieldRenderer(file.field, RenderSettings(backend=backend, colour_direction=direction))
+        kind = backend if direction == "vertex" else f"{backend}-{direction}"
         for name, c2w, camera in _poses(file):
             small = camera.resized(max(8, round(camera.width * scale)), max(8, round(camera.height * scale)))
             images = renderer.render(c2w, small, OUTPUTS)
-            out[f"{label}/{backend}/{name}"] = _digest(*(images[k] for k in OUTPUTS))
+            out[f"{label}/{kind}/{name}"] = _digest(*(images[k] for k in OUTPUTS))
     return out
 
 
@@ -79,11 +87,13 @@ def fingerprints(twins: list[str], steps: int) -> dict[str, str]:
     result = {}
     for name in twins:
         result.update(_renders(f"twin:{name}", fitted_path(name, build=False)))
-    recipe = RECIPES["object"].replace(size=(48, 27), config=SHORT_CONFIG, max_steps=steps)
-    with tempfile.TemporaryDirectory() as tmp:
-        path, _ = build_fitted("object", Path(tmp) / "short.n2r", recipe=recipe)
-        result["short-fit/file"] = hashlib.sha256(path.read_bytes()).hexdigest()
-        result.update(_renders("short-fit", path))
+    for label, degree in (("short-fit", 1), ("short-fit-sh2", 2)):
+        config = SHORT_CONFIG.replace(sh_degree=degree)
+        recipe = RECIPES["object"].replace(size=(48, 27), config=config, max_steps=steps)
+        with tempfile.TemporaryDirectory() as tmp:
+            path, _ = build_fitted("object", Path(tmp) / "short.n2r", recipe=recipe)
+            result[f"{label}/file"] = hashlib.sha256(path.read_bytes()).hexdigest()
+            result.update(_renders(label, path, RENDERS + RAY_COLOUR))
     return result
 
 
