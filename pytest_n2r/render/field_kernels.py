@@ -95,9 +95,9 @@ def render_pixels(first, last, index, width, pinhole, c2w, center, radius, densi
         dx, dy, dz = _rounded(_pixel_direction(i, width, pinhole, c2w, radius))
         t0, dt, n_inner, ts, du = lattice_setup(ox, oy, oz, dx, dy, dz, step, shell_samples, far)
         dn = math.sqrt(dx * dx + dy * dy + dz * dz)
-        # degree-1 and degree-2 basis for this ray's direction (degree 0 is the constant SH_C0)
-        b1, b2, b3 = -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn
+        # the SH basis for this ray's direction, coefficient by coefficient (degree 0's is the constant SH_C0)
         q4, q5, q6, q7, q8 = sh2_terms(dx / dn, dy / dn, dz / dn)
+        basis = (SH_C0, -SH_C1 * dy / dn, SH_C1 * dz / dn, -SH_C1 * dx / dn, q4, q5, q6, q7, q8)
         baked = logits.shape[0] > 0
         carried = 0.0  # weight of the samples not coloured yet
         last_r, last_g, last_b = background[0], background[1], background[2]
@@ -172,21 +172,8 @@ def render_pixels(first, last, index, width, pinhole, c2w, center, radius, densi
             vs, ws = (v0, v1, v2, v3, v4, v5, v6, v7), (w0, w1, w2, w3, w4, w5, w6, w7)
             if baked:
                 lr, lg, lb = _at(logits, 0, vs, ws), _at(logits, 1, vs, ws), _at(logits, 2, vs, ws)
-            else:  # the SH colour: coefficient l·3 + channel is column 1 + l·3 + channel
-                lr = SH_C0 * _at(values, 1, vs, ws)
-                lg = SH_C0 * _at(values, 2, vs, ws)
-                lb = SH_C0 * _at(values, 3, vs, ws)
-                if sh_degree >= 1:
-                    lr += b1 * _at(values, 4, vs, ws) + b2 * _at(values, 7, vs, ws) + b3 * _at(values, 10, vs, ws)
-                    lg += b1 * _at(values, 5, vs, ws) + b2 * _at(values, 8, vs, ws) + b3 * _at(values, 11, vs, ws)
-                    lb += b1 * _at(values, 6, vs, ws) + b2 * _at(values, 9, vs, ws) + b3 * _at(values, 12, vs, ws)
-                if sh_degree == 2:
-                    lr += (q4 * _at(values, 13, vs, ws) + q5 * _at(values, 16, vs, ws) + q6 * _at(values, 19, vs, ws)
-                           + q7 * _at(values, 22, vs, ws) + q8 * _at(values, 25, vs, ws))
-                    lg += (q4 * _at(values, 14, vs, ws) + q5 * _at(values, 17, vs, ws) + q6 * _at(values, 20, vs, ws)
-                           + q7 * _at(values, 23, vs, ws) + q8 * _at(values, 26, vs, ws))
-                    lb += (q4 * _at(values, 15, vs, ws) + q5 * _at(values, 18, vs, ws) + q6 * _at(values, 21, vs, ws)
-                           + q7 * _at(values, 24, vs, ws) + q8 * _at(values, 27, vs, ws))
+            else:
+                lr, lg, lb = _sh_logits(values, sh_degree, basis, vs, ws)
             last_r = 1.0 / (1.0 + math.exp(-lr))
             last_g = 1.0 / (1.0 + math.exp(-lg))
             last_b = 1.0 / (1.0 + math.exp(-lb))
@@ -239,6 +226,24 @@ def _at(table, column, rows, weights):
             + weights[2] * table[rows[2], column] + weights[3] * table[rows[3], column]
             + weights[4] * table[rows[4], column] + weights[5] * table[rows[5], column]
             + weights[6] * table[rows[6], column] + weights[7] * table[rows[7], column])
+
+
+@njit(cache=True, inline="always")
+def _sh_logits(values, sh_degree, basis, rows, weights):
+    """A sample's colour logits from its corners' SH coefficients (coefficient ``l·3 + channel`` is column
+    ``1 + l·3 + channel`` of ``values``) and the ``basis`` of its ray's direction (9 values): each degree's terms
+    summed in order, then added to the logits degree by degree. A loop, so numba inlines the interpolation (``_at``)
+    three times, not 27: the kernel compiles in about 3 CPU s less (docs/performance.md, "The main job")."""
+    lr = lg = lb = 0.0
+    for degree in range(sh_degree + 1):
+        sr = sg = sb = 0.0
+        for c in range(degree * degree, (degree + 1) * (degree + 1)):
+            column = 1 + 3 * c
+            sr += basis[c] * _at(values, column, rows, weights)
+            sg += basis[c] * _at(values, column + 1, rows, weights)
+            sb += basis[c] * _at(values, column + 2, rows, weights)
+        lr, lg, lb = lr + sr, lg + sg, lb + sb
+    return lr, lg, lb
 
 
 @njit(cache=True, inline="always")
