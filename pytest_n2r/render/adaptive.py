@@ -167,26 +167,31 @@ def _leaves_to_trace(first, last, ys, xs, split, traced, rgb, depth, opacity, to
     traced, want = borrowed(traced), borrowed(want)
     for y in range(first, last):
         row = y * width
-        if y % 2 == 0 or y == height - 1:  # a grid row: the pixels between two corners on it, in split cells
-            if inside:
-                continue
-            g = y // 2 if y % 2 == 0 else rows  # its index in ys
-            for b in range(cols):
-                x = xs[b] + 1
-                if x < xs[b + 1] and ((g > 0 and split[g - 1, b]) or (g < rows and split[g, b])):
-                    _judge_leaf(row + x, row + x - 1, row + x + 1, -1, -1, traced, rgb, depth, opacity, tolerance,
-                                depth_tolerance, want)
+        on_grid = y % 2 == 0 or y == height - 1  # a row of corners: its leaves lie between two corners on it
+        if on_grid and inside:
             continue
-        a = y // 2  # the cell row whose middle this is: ys[a] = y - 1, ys[a + 1] = y + 1
+        g_row = y // 2 if y % 2 == 0 else rows  # a row of corners: its index in ys
+        a = y // 2  # a middle row: the cell row it crosses (ys[a] = y - 1, ys[a + 1] = y + 1)
         for g in range(cols + 1):
             x = xs[g]
-            if not inside and ((g > 0 and split[a, g - 1]) or (g < cols and split[a, g])):  # between two corners
-                _judge_leaf(row + x, -1, -1, row + x - width, row + x + width, traced, rgb, depth, opacity,
-                            tolerance, depth_tolerance, want)
-            if inside and g < cols and x + 1 < xs[g + 1] and split[a, g]:  # a cell's centre
+            # one call site for the three kinds of leaf: numba inlines _judge_leaf's code once (compile time)
+            if on_grid:  # the pixel after corner x, in split cells
+                if not (g < cols and x + 1 < xs[g + 1]
+                        and ((g_row > 0 and split[g_row - 1, g]) or (g_row < rows and split[g_row, g]))):
+                    continue
                 i = row + x + 1
-                _judge_leaf(i, i - 1, i + 1, i - width, i + width, traced, rgb, depth, opacity, tolerance,
-                            depth_tolerance, want)
+                left, right, up, down = i - 1, i + 1, -1, -1
+            elif inside:  # a cell's centre
+                if not (g < cols and x + 1 < xs[g + 1] and split[a, g]):
+                    continue
+                i = row + x + 1
+                left, right, up, down = i - 1, i + 1, i - width, i + width
+            else:  # the pixel between two corners on column x
+                if not ((g > 0 and split[a, g - 1]) or (g < cols and split[a, g])):
+                    continue
+                i = row + x
+                left, right, up, down = -1, -1, i - width, i + width
+            _judge_leaf(i, left, right, up, down, traced, rgb, depth, opacity, tolerance, depth_tolerance, want)
 
 
 @njit(cache=True, inline="always")
