@@ -155,7 +155,7 @@ def _report_lines(report: dict) -> list[str]:
         for limit in report.get("grid_limits") or []:
             choice = GridChoice(limit["wanted"], limit["trained"], limit["needed_bytes"], limit["free_bytes"])
             lines.append(f"  memory    at step {limit['step']}, {choice.message()}")
-    with _reading("'complete', 'stopped', 'steps', 'train_seconds', 'device' or 'threads'"):
+    with _reading("'complete', 'stopped', 'steps', 'train_seconds', 'compile_seconds', 'device' or 'threads'"):
         state = ("checkpoint (the fit did not finish)" if not report.get("complete", True)
                  else "stopped before the end of its budget" if report.get("stopped") else "complete")
         where = f" on {report['device']}" if "device" in report else ""
@@ -163,6 +163,8 @@ def _report_lines(report: dict) -> list[str]:
         # a fitted demo scene stores no timings (its file is rebuilt byte for byte)
         seconds = report.get("train_seconds")
         duration = f"{seconds:.1f} s of training" if seconds is not None else "training time not recorded"
+        compiling = report.get("compile_seconds") or 0.0  # a fresh installation's first fit compiles its kernels
+        duration += f" (and {compiling:.1f} s compiling its kernels)" if compiling >= 0.05 else ""
         lines.append(f"fit         {state}: {report.get('steps', '?')} steps, {duration}{where}{threads}")
     with _reading("'source' or 'downscale'"):
         if "source" in report:

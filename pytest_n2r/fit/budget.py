@@ -40,7 +40,8 @@ thirty minutes"). With the mend an hour scored 29.60 dB held out, still rising a
 
 Convention
 ----------
-Budgets are seconds of training (a fit's ``time_budget_s``), not counting ingestion or evaluation. Only a fit
+Budgets are seconds of training (a fit's ``time_budget_s``), not counting ingestion, evaluation or a fresh
+installation's compile of the training kernels (:mod:`.compile_clock`). Only a fit
 whose length is a time budget alone is changed: one given ``max_steps`` (with or without a budget) keeps its
 config, since its caller chose a length in steps, where degree 2 and a finer grid are a different trade (better
 per step, dearer per second). A setting its caller gave is kept, and so is one that is not the default.

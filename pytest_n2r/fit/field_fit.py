@@ -32,6 +32,7 @@ from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
 from .appearance import Appearance
+from .compile_clock import CompileClock
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, mean_scores
 from .free_memory import free_bytes
@@ -97,7 +98,9 @@ class _Trainer:
         self.stage = 0
         self.limits: list[dict] = []  # a report row for each grid memory kept the fit from (see refine)
         self.steps = 0
-        self.phases = StepPhases()
+        #: numba's compiles during the training steps (a fresh installation's first fit): not training time
+        self.compiles = CompileClock()
+        self.phases = StepPhases(self.compiles)
         self._reset_optimizer()
 
     def _reset_optimizer(self) -> None:
@@ -281,7 +284,8 @@ def fit(
     ``progress`` receives ``{step, stage, resolution, loss, psnr, elapsed_s, eta_s, occupied}`` about once a
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
     a scene file stores it); ``eval_at_s`` lists training times at which held-out PSNR/SSIM are recorded
-    in ``report["history"]`` (evaluation time is not counted as training time).
+    in ``report["history"]``. Neither evaluation nor compiling the training kernels (a fresh installation's first
+    fit, ``report["compile_seconds"]``) counts as training time.
 
     ``appearance`` fits a colour gain per training photo and channel alongside the field, for captures whose
     exposure and white balance vary (a phone's automatic exposure); the field keeps their average and renders
@@ -323,19 +327,21 @@ def fit(
         return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2),
                                                               "grid_limits": list(trainer.limits)})
 
+    compiles = trainer.compiles  # a fresh installation's kernel compiles: not training (compile_clock.py)
     while budget_left():
-        t0 = time.perf_counter()
+        t0, compiled_before = time.perf_counter(), compiles.seconds
         frac = progress_fraction()
-        if config.stage(frac) > trainer.stage:
-            trainer.refine()
-            trainer.phases.lap("refine")
-            config = trainer.config
-        loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
-        if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
-            trainer.phases.start(trainer.field.resolution)
-            trainer.prune()
-            trainer.phases.lap("prune")
-        train_s += time.perf_counter() - t0
+        with compiles.counting():
+            if config.stage(frac) > trainer.stage:
+                trainer.refine()
+                trainer.phases.lap("refine")
+                config = trainer.config
+            loss, batch_psnr = trainer.step(config.lr_final_ratio ** frac)
+            if trainer.steps >= config.prune_after and trainer.steps % config.prune_every == 0:
+                trainer.phases.start(trainer.field.resolution)
+                trainer.prune()
+                trainer.phases.lap("prune")
+        train_s += time.perf_counter() - t0 - (compiles.seconds - compiled_before)
         while pending_evals and train_s >= pending_evals[0]:
             e0 = time.perf_counter()
             rows = evaluate_views(trainer.field, heldout)
@@ -366,6 +372,7 @@ def fit(
         "steps": trainer.steps,
         "train_seconds": round(train_s, 2),
         "eval_seconds": round(eval_s, 2),
+        "compile_seconds": round(compiles.seconds, 2),
         "device": str(dev),
         "threads": torch.get_num_threads(),
         "time_budget_s": time_budget_s,
