@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     for row in [*report["history"], final]:
         print(f"{row['seconds'] / 60:>8.1f} m {row['step']:>6} {row['psnr']:>8.2f} {row['ssim']:>6.3f}")
     print(f"\nfield: {json.dumps(report['field'])}; {report['steps'] / report['train_seconds']:.2f} steps/s, "
-          f"{time.process_time() - c0:.0f} CPU s (training and evaluation)")
+          f"{time.process_time() - c0:.0f} CPU s (training and evaluation); "
+          f"{report['compile_seconds']:.1f} s compiling the training kernels (not training time)")
     print("held-out views:", ", ".join(f"{r['view']} {r['psnr']:.2f} dB" for r in report["heldout"]))
     save_scene(args.out, result.field, result.config, capture, report)
     print(f"wrote {args.out}")
