@@ -2,9 +2,10 @@
 
 A fresh installation compiles the training kernels during its first fit's first steps (14 s of a 2-minute fox fit
 on the project's 2-core host, docs/performance-log.md, "A fresh installation's kernel compiles kept out of the
-budget"); later fits load them from numba's on-disk cache in under a second. A time budget counts seconds of training, so what a budget buys should not depend on whether that
-cache was filled: the fit measures its compiles with a :class:`CompileClock`, takes them off its training time and
-reports them apart (``report["compile_seconds"]``).
+budget"); later fits load them from numba's on-disk cache in under a second. A time budget counts seconds of
+training, so what a budget buys should not depend on whether that cache was filled: the fit measures its compiles
+with a :class:`CompileClock`, takes them off its training time and reports them apart
+(``report["compile_seconds"]``).
 
 Convention
 ----------
