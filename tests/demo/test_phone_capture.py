@@ -111,12 +111,17 @@ def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
     monkeypatch.syspath_prepend(str(REPO_ROOT / "benchmarks"))  # as when run: its helpers sit beside it
     spec.loader.exec_module(module)
     out = tmp_path / "phone.json"
-    assert module.main(["--scenes", "wall", "--size", "96", "--steps", "10", "--resolutions", "16,24",
-                        "--json", str(out)]) == 0
+    assert module.main(["--scenes", "wall", "--size", "96", "--steps", "10", "--config", "resolutions=16,24",
+                        "stage_fractions=0.5", "batch_rays=256", "--json", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "| wall | corrected | held out (6) |" in printed
+    row = "| wall | corrected | 10 | "
+    for where in ("held out (6)", "moved (12)", "fitted (6)"):
+        assert any(line.startswith(row) and "| 16³→24³ | " in line and f"| {where} |" in line
+                   for line in printed.splitlines()), \
+            f"no row for the corrected fit's {where} poses after 10 steps on 16³→24³:\n{printed}"
     result = json.loads(out.read_text())["wall"]
     assert set(result) == {"plain", "corrected"} and len(result["corrected"]["gain_range"]) == 2
+    assert result["plain"]["steps"] == 10 and result["plain"]["grids"] == [16, 24], result["plain"]
     # at 96 px after 10 steps ORB finds nothing to compare on some views: counted apart, never scored
     for fit in result.values():
         for detector in ("orb", "sift", "akaze"):
