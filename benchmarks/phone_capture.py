@@ -36,6 +36,7 @@ from pytest_n2r.cli.fit import build_config, parse_config_override, parse_durati
 from pytest_n2r.data import ingest
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.budget import budget_config
@@ -87,8 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", default=None, metavar="PATH")
     args = parser.parse_args(argv)
     budget = 600.0 if args.budget is None and args.steps is None else args.budget
-    config = budget_config(build_config(args.config), budget, max_steps=args.steps,
-                           fixed={key for key, _ in args.config})
+    try:
+        config = budget_config(build_config(args.config), budget, max_steps=args.steps,
+                               fixed={key for key, _ in args.config})
+    except InvalidArgument as exc:
+        parser.error(str(exc))
     torch.set_num_threads(2)
     results = {}
     print("| scene | fit | steps | train s | grids | pixels/voxel | poses | PSNR dB (vs exact) | SSIM | "

@@ -100,16 +100,31 @@ def test_n2r_fit_appearance_fits_a_gain_per_photo_and_info_says_so(tmp_path, cap
     assert "appearance  a colour gain per training photo (6 photos," in capsys.readouterr().out
 
 
-@pytest.mark.filterwarnings("error::RuntimeWarning")  # it once averaged an empty selection ("Mean of empty slice")
-def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
+def _phone_benchmark(monkeypatch):
+    """``benchmarks/phone_capture.py`` loaded as a module, with its folder on the path as when it runs (its
+    helpers sit beside it)."""
     import importlib.util
 
     from ..conftest import REPO_ROOT
 
     spec = importlib.util.spec_from_file_location("phone_benchmark", REPO_ROOT / "benchmarks" / "phone_capture.py")
     module = importlib.util.module_from_spec(spec)
-    monkeypatch.syspath_prepend(str(REPO_ROOT / "benchmarks"))  # as when run: its helpers sit beside it
+    monkeypatch.syspath_prepend(str(REPO_ROOT / "benchmarks"))
     spec.loader.exec_module(module)
+    return module
+
+
+def test_the_phone_capture_benchmark_names_an_unknown_setting_as_a_usage_error(capsys, monkeypatch):
+    module = _phone_benchmark(monkeypatch)
+    with pytest.raises(SystemExit) as stopped:
+        module.main(["--steps", "2", "--config", "nosuch=1"])
+    assert stopped.value.code == 2, "an unknown --config setting should end as a usage error, before any capture"
+    assert "unknown setting 'nosuch'" in capsys.readouterr().err
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # it once averaged an empty selection ("Mean of empty slice")
+def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
+    module = _phone_benchmark(monkeypatch)
     out = tmp_path / "phone.json"
     assert module.main(["--scenes", "wall", "--size", "96", "--steps", "10", "--config", "resolutions=16,24",
                         "stage_fractions=0.5", "batch_rays=256", "--json", str(out)]) == 0
