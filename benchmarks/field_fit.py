@@ -24,8 +24,9 @@ import warnings
 from pathlib import Path
 
 import torch
+from _arguments import field_config
 
-from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration, parse_durations
+from pytest_n2r.cli.fit import parse_duration, parse_durations
 from pytest_n2r.data import ingest
 from pytest_n2r.fit import fit
 from pytest_n2r.scene import save_scene
@@ -51,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.eval_at is not None and args.eval_at[-1] >= budget:
         parser.error(f"--eval-at {args.eval_at[-1]:g} s: expected training times below --budget {budget:g} s "
                      "(the end of the fit is always scored)")
-    config = build_config([parse_config_override(text) for text in args.config])
+    config, _ = field_config(parser, args.config)
     if not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         return 0

@@ -25,6 +25,10 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from pytest_n2r.field.config import FieldConfig
 
 FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"
 PHASES = ("rays", "march", "corners", "forward", "backward", "update", "prune", "refine")
@@ -44,15 +48,13 @@ def load_capture(name: str, folder: str):
     return ingest(folder)
 
 
-def child(args: argparse.Namespace) -> int:
-    """One fit in this process; prints its report as one JSON line."""
+def child(args: argparse.Namespace, config: FieldConfig) -> int:
+    """One fit of ``config`` in this process; prints its report as one JSON line."""
     import torch
 
-    from pytest_n2r.cli.fit import build_config, parse_config_override
     from pytest_n2r.fit import fit
 
     torch.set_num_threads(args.child)
-    config = build_config([parse_config_override(text) for text in args.config])
     with tempfile.TemporaryDirectory(prefix="n2r-profile-") as tmp:
         capture = load_capture(args.capture, tmp)
         # compile (or load from numba's cache) every kernel first, so the first grid is not charged for it
@@ -78,8 +80,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.capture == "fox" and not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         return 0
+    from _arguments import field_config
+
+    config, _ = field_config(parser, args.config)  # a bad setting stops here, before any child starts
     if args.child is not None:
-        return child(args)
+        return child(args, config)
     runs = []
     for threads in args.threads:
         env = {**os.environ, "NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": str(threads)}

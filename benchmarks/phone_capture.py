@@ -30,13 +30,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from _arguments import field_config
 from _scoring import format_repeatabilities, score_exact
 
-from pytest_n2r.cli.fit import build_config, parse_config_override, parse_duration
+from pytest_n2r.cli.fit import parse_duration
 from pytest_n2r.data import ingest
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
-from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.budget import budget_config
@@ -83,16 +83,13 @@ def main(argv: list[str] | None = None) -> int:
     length.add_argument("--budget", type=parse_duration, default=None, metavar="DURATION",
                         help="training time of each fit, as n2r fit --time-budget (default 10m)")
     length.add_argument("--steps", type=int, default=None, help="fit this many steps instead of a time budget")
-    parser.add_argument("--config", nargs="*", type=parse_config_override, default=[], metavar="KEY=VALUE",
+    parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE",
                         help="FieldConfig settings, as n2r fit --config takes them")
     parser.add_argument("--json", default=None, metavar="PATH")
     args = parser.parse_args(argv)
     budget = 600.0 if args.budget is None and args.steps is None else args.budget
-    try:
-        config = budget_config(build_config(args.config), budget, max_steps=args.steps,
-                               fixed={key for key, _ in args.config})
-    except InvalidArgument as exc:
-        parser.error(str(exc))
+    given, keys = field_config(parser, args.config)
+    config = budget_config(given, budget, max_steps=args.steps, fixed=keys)
     torch.set_num_threads(2)
     results = {}
     print("| scene | fit | steps | train s | grids | pixels/voxel | poses | PSNR dB (vs exact) | SSIM | "

@@ -123,6 +123,19 @@ def test_a_missing_scene_file_is_a_usage_error_naming_it(script: str, args: list
     assert str(tmp_path / "missing") in result.stderr, f"{script} did not name the missing file:\n{result.stderr}"
 
 
+@pytest.mark.parametrize("script, args", [
+    ("field_fit.py", ["--steps", "1"]),
+    ("fit_profile.py", ["--capture", "wall", "--steps", "1"]),
+    ("phone_capture.py", ["--steps", "1"]),
+], ids=["field_fit", "fit_profile", "phone_capture"])
+def test_an_unknown_fit_setting_is_a_usage_error_naming_it(script: str, args: list[str]):
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / script), *args, "--config", "nosuch=1"],
+                            cwd=ROOT, env=_environment(), capture_output=True, text=True, timeout=300, check=False)
+    assert result.returncode == 2 and "Traceback" not in result.stderr, (
+        f"{script} --config nosuch=1: exit {result.returncode}, expected a usage error (2):\n{result.stderr}")
+    assert "unknown setting 'nosuch'" in result.stderr, f"{script} did not name the setting:\n{result.stderr}"
+
+
 @pytest.mark.parametrize("args, message", [
     (["--steps", "5", "--eval-at", "1m"], "--eval-at: scores at training times within --budget"),
     (["--budget", "10m", "--eval-at", "5m,10m"], "--eval-at 600 s: expected training times below --budget 600 s"),
