@@ -18,7 +18,9 @@ wall's capture +0.22 dB side by side, +0.06 against an earlier run that took mor
 held-out views (29.03 against 28.86 dB, every detector higher), while an hour of degree 2 on 224³ scored no
 better held out than 20 minutes, nor on its fitted views: more steps on that grid bought nothing
 (docs/scene-field-log.md, "An hour on the fox"). A capture finer than the 256³ voxel still gets its finer grid
-for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`).
+for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`). It starts on 32³, as the default
+ladder does: a 48³ start grows floaters of sky on captures that orbit their subject, with this ladder too (the
+object's phone capture in 3-minute fits: 18.41 against 25.77 dB held out; docs/scene-field-log.md, "A 32³ start").
 
 From 30 minutes (:data:`FINE_BUDGET_S`) that finer grid is sized for 3.5 of the photos' pixels a voxel where the
 cameras look closest, not 6 (:data:`FINE_BUDGET_PIXELS_PER_VOXEL`): on the fox, whose 256³ voxel spans 4.4 pixels,
@@ -63,7 +65,7 @@ LONG_BUDGET_S = 1200.0
 #: The spherical-harmonics degree of a long fit.
 LONG_BUDGET_SH_DEGREE = 2
 #: The grid ladder of a long fit (vertices per axis), switched at the default ``stage_fractions``.
-LONG_BUDGET_RESOLUTIONS = (48, 96, 256)
+LONG_BUDGET_RESOLUTIONS = (32, 96, 256)
 #: Training seconds from which a fit's finer grid for the end is sized for :data:`FINE_BUDGET_PIXELS_PER_VOXEL`:
 #: 30 minutes.
 FINE_BUDGET_S = 1800.0
@@ -83,7 +85,7 @@ def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps
 
     >>> long = budget_config(FieldConfig(), 1200.0)
     >>> long.sh_degree, long.resolutions, long.max_pixels_per_voxel
-    (2, (48, 96, 256), 6.0)
+    (2, (32, 96, 256), 6.0)
     >>> budget_config(FieldConfig(), 1800.0).max_pixels_per_voxel
     3.5
     >>> budget_config(FieldConfig(), 600.0) == budget_config(FieldConfig(), None) == FieldConfig()
@@ -92,7 +94,7 @@ def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps
     True
     >>> given = budget_config(FieldConfig(), 1200.0, fixed={"sh_degree"})
     >>> given.sh_degree, given.resolutions
-    (1, (48, 96, 256))
+    (1, (32, 96, 256))
     >>> chosen = FieldConfig(sh_degree=0, resolutions=(32, 64), stage_fractions=(0.5,))
     >>> budget_config(chosen, 1200.0) == chosen
     True

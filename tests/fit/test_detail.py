@@ -91,14 +91,14 @@ def test_a_ladder_fine_enough_for_the_photos_or_given_is_kept_as_it_is():
     config = FieldConfig()
     assert detailed_config(config, _detail_at(5.1)) is config  # the fox's 10-minute fit
     assert detailed_config(config, None) is config  # nothing measured: nothing to follow
-    assert detailed_config(config.replace(max_pixels_per_voxel=0.0), _detail_at(20.0)).resolutions == (48, 96, 224)
+    assert detailed_config(config.replace(max_pixels_per_voxel=0.0), _detail_at(20.0)).resolutions == (32, 96, 224)
     given_ladder = FieldConfig(resolutions=(16, 24), stage_fractions=(0.5,))
     assert detailed_config(given_ladder, _detail_at(20.0, 24)) is given_ladder
 
 
 def test_the_default_ladder_gets_one_finer_grid_for_the_last_part_of_the_run_where_the_photos_are_finer():
     detailed = detailed_config(FieldConfig(), _detail_at(9.0))  # the wall's phone capture at 480×270
-    assert detailed.resolutions == (48, 96, 224, 384), detailed.resolutions
+    assert detailed.resolutions == (32, 96, 224, 384), detailed.resolutions
     assert detailed.stage_fractions == (0.1, 0.35, DETAIL_STAGE_AT), detailed.stage_fractions
     # the grid is the coarsest multiple of 64 that meets the limit: 6.5 pixels need 243 vertices, so 256
     assert detailed_config(FieldConfig(), _detail_at(6.5)).resolutions[-1] == 256
@@ -108,7 +108,7 @@ def test_a_long_budgets_ladder_gets_the_finer_grid_too_where_its_256_grid_is_coa
     long = budget_config(FieldConfig(), LONG_BUDGET_S)
     assert long.resolutions[-1] == 256, long.resolutions
     detailed = detailed_config(long, _detail_at(9.0))  # the wall's phone capture: 7.9 pixels a voxel at 256³
-    assert detailed.resolutions == (48, 96, 256, 384), detailed.resolutions
+    assert detailed.resolutions == (32, 96, 256, 384), detailed.resolutions
     assert detailed.stage_fractions == (0.1, 0.35, DETAIL_STAGE_AT), detailed.stage_fractions
     assert detailed_config(long, _detail_at(6.5)) is long, "256³ meets 6 pixels a voxel where 224³ spans 6.5"
 

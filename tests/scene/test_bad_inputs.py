@@ -83,7 +83,7 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("--config resolutions=abc", "fit {capture} -o {new_n2r} --config resolutions=abc",
      r"--config 'resolutions=abc': 'abc' is not a number, True/False or a comma-separated list"),
     ("--config resolutions='abc'", "fit {capture} -o {new_n2r} --config \"resolutions='abc'\"",
-     r"--config: FieldConfig\.resolutions=\('abc',\): expected a list of integers \(default: 48,96,224\)"),
+     r"--config: FieldConfig\.resolutions=\('abc',\): expected a list of integers \(default: 32,96,224\)"),
     ("--config seed='x'", "fit {capture} -o {new_n2r} --config \"seed='x'\"",
      r"FieldConfig\.seed='x': expected an integer \(default: 0\)"),
     ("--config seed=1.5", "fit {capture} -o {new_n2r} --config seed=1.5",

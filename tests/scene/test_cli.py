@@ -436,7 +436,7 @@ def test_config_overrides_are_literals_and_bad_ones_are_named(exported, tmp_path
     (["--time-budget", "1h", "--config", "max_pixels_per_voxel=0"], 2, 256, 0.0),
     (["--time-budget", "20m", "--config", "seed=1"], 2, 256, 6.0),
     (["--time-budget", "20m", "--config", "sh_degree=1"], 1, 256, 6.0),
-    (["--time-budget", "20m", "--config", "resolutions=48,96,224"], 2, 224, 6.0),
+    (["--time-budget", "20m", "--config", "resolutions=32,96,224"], 2, 224, 6.0),
     (["--time-budget", "20m", "--config", "stage_fractions=0.1,0.35"], 2, 224, 6.0),
     (["--time-budget", "19m"], 1, 224, 6.0),
     (["--max-steps", "100000"], 1, 224, 6.0),
@@ -462,10 +462,10 @@ def test_a_long_budget_fits_degree_2_colour_and_finer_grids_unless_they_are_give
     assert said == (degree == 2), f"{flags}: the choice of degree was {'' if said else 'not '}printed:\n{err}"
     if degree == 2:
         assert "--config sh_degree=1 keeps 1" in err
-    said = "grid        48³ → 96³ → 256³: a finer last grid fits better from a 20-minute budget on" in err
+    said = "grid        32³ → 96³ → 256³: a finer last grid fits better from a 20-minute budget on" in err
     assert said == (finest == 256), f"{flags}: the choice of grids was {'' if said else 'not '}printed:\n{err}"
     if finest == 256:
-        assert "--config resolutions=48,96,224 keeps the default grids" in err, f"{flags}: no way back said:\n{err}"
+        assert "--config resolutions=32,96,224 keeps the default grids" in err, f"{flags}: no way back said:\n{err}"
     said = ("detail      a finer grid for the last 30 % where a voxel spans more than 3.5 of the photos' pixels, "
             "not 6: it fits better from a 30-minute budget on") in err
     assert said == (pixels == 3.5), f"{flags}: the detail grid's sizing was {'' if said else 'not '}printed:\n{err}"
