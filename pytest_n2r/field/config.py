@@ -36,9 +36,9 @@ class FieldConfig:
         grid of 224³ won against 192³ (which had won against 160³) at equal training time on both scenes
         the priors were chosen on, once the learning rates were doubled. A 32³ first grid, not 48³: on a
         capture that orbits its subject with sky behind it, a 48³ start grows floaters of sky on the camera
-        circle that no later grid removes (the object's phone capture, validation views at 10 minutes: 20.48
-        against 24.89 dB), and at equal time the 32³ start tied on the wall's capture and gained 0.55 dB on
-        the fox's (docs/scene-field-log.md, "A 32³ start").
+        circle that no later grid removes (the object's phone capture, validation views at 10 minutes: 24.89 dB
+        started on 32³, 20.48 on 48³), and at equal time the 32³ start tied on the wall's capture and gained
+        0.55 dB on the fox's (docs/scene-field-log.md, "A 32³ start").
         ``max_pixels_per_voxel``: with the library's ladders (the default, or a long budget's ending on 256³),
         where a voxel of their last grid would span more training pixels than this where the cameras look
         closest (:mod:`pytest_n2r.fit.detail`), the fit trains one finer grid for the last 30 % of the run,

@@ -20,7 +20,8 @@ better held out than 20 minutes, nor on its fitted views: more steps on that gri
 (docs/scene-field-log.md, "An hour on the fox"). A capture finer than the 256³ voxel still gets its finer grid
 for the end of the fit (:func:`~pytest_n2r.fit.detail.detailed_config`). It starts on 32³, as the default
 ladder does: a 48³ start grows floaters of sky on captures that orbit their subject, with this ladder too (the
-object's phone capture in 3-minute fits: 18.41 against 25.77 dB held out; docs/scene-field-log.md, "A 32³ start").
+object's phone capture in 3-minute fits: 25.77 dB held out started on 32³, 18.41 on 48³; docs/scene-field-log.md,
+"A 32³ start").
 
 From 30 minutes (:data:`FINE_BUDGET_S`) that finer grid is sized for 3.5 of the photos' pixels a voxel where the
 cameras look closest, not 6 (:data:`FINE_BUDGET_PIXELS_PER_VOXEL`): on the fox, whose 256³ voxel spans 4.4 pixels,
