@@ -9,8 +9,11 @@ beside.
 Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. The poses are
 the ones the fox was published with (its ``transforms.json``), or with ``--sfm`` those our structure from motion
 finds from the photos alone, as ``n2r fit photos/`` fits a user's capture (the same photos held out). Evaluation
-time is not counted as training time. The fitted scene is written to ``--out`` so that
-``benchmarks/render_speed.py`` can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only
+time is not counted as training time. A ``--budget`` trains what ``n2r fit --time-budget`` does for it
+(:func:`pytest_n2r.fit.budget.budget_config`: from 20 minutes SH degree 2 and a 256³ last grid, from 30 a finer
+end), keeping each setting ``--config`` gives (before 6 December 14:30 UTC it trained the defaults for any budget);
+a ``--steps`` fit keeps the defaults. The fitted scene is written to ``--out`` so that ``benchmarks/render_speed.py``
+can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only
 data, never copied into this repository). Results: docs/performance.md.
 """
 
@@ -29,6 +32,7 @@ from _arguments import field_config
 from pytest_n2r.cli.fit import parse_duration, parse_durations
 from pytest_n2r.data import ingest
 from pytest_n2r.fit import fit
+from pytest_n2r.fit.budget import budget_config
 from pytest_n2r.scene import save_scene
 
 FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "transforms.json"
@@ -52,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.eval_at is not None and args.eval_at[-1] >= budget:
         parser.error(f"--eval-at {args.eval_at[-1]:g} s: expected training times below --budget {budget:g} s "
                      "(the end of the fit is always scored)")
-    config, _ = field_config(parser, args.config)
+    given, keys = field_config(parser, args.config)
+    config = budget_config(given, None if args.steps is not None else budget, max_steps=args.steps, fixed=keys)
     if not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         return 0
@@ -65,6 +70,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"ingest ({'structure from motion' if args.sfm else 'transforms.json'}): {time.perf_counter() - t0:.1f} s, "
           f"{len(capture.train_views)} train / "
           f"{len(capture.heldout_views)} held-out views of {width}×{height}")
+    if config != given:
+        grids = " → ".join(f"{r}³" for r in config.resolutions)
+        print(f"recipe for {budget / 60:g} minutes (as n2r fit --time-budget): SH degree {config.sh_degree}, grids "
+              f"{grids}, max_pixels_per_voxel {config.max_pixels_per_voxel:g}")
     defaults = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget] if args.steps is None else []
     marks = defaults if args.eval_at is None else list(args.eval_at)
     c0 = time.process_time()

@@ -8,14 +8,15 @@ or, to compare other settings of the fit at the same steps, ``--base default --v
 ``FieldConfig`` settings as ``n2r fit --config`` takes them; ``steps=N`` overrides ``--steps`` for it;
 ``appearance=True`` fits a colour gain per photo, as ``n2r fit --appearance`` does).
 
-Each demo scene is photographed like a phone does (:func:`pytest_n2r.demo.phone_capture.write_phone_capture`:
-mixed orientation, exposure and white balance, blur, JPEG), read with its poses, and fitted once per
-(ladder, steps) with the same config and seed. Every 8th training photo (from the 4th) is a **validation**
-view: it is not fitted, and it is where variants are compared and chosen. The demo's held-out views are
-never fitted and never used for choosing: they are what is reported. Both are scored against the exact
-render at the same pose: PSNR, SSIM and the repeatability (2 px) of ORB, SIFT and AKAZE between the exact
-image and the field's (a view where a detector has nothing to compare is counted apart). ``pixels/voxel``:
-how many training pixels one voxel of the finest grid spans where the cameras look closely
+Each demo scene is photographed like a phone does (:func:`pytest_n2r.demo.phone_capture.write_phone_capture`: mixed
+orientation, exposure and white balance, blur, JPEG), read with its poses, and fitted once per (ladder, steps) with
+the same config and seed, as given: what a long ``n2r fit --time-budget`` would choose
+(:func:`pytest_n2r.fit.budget.budget_config`) is not applied, so a long screen names its settings. Every 8th
+training photo (from the 4th) is a **validation** view: it is not fitted, and it is where variants are compared and
+chosen. The demo's held-out views are never fitted and never used for choosing: they are what is reported. Both are
+scored against the exact render at the same pose: PSNR, SSIM and the repeatability (2 px) of ORB, SIFT and AKAZE
+between the exact image and the field's (a view where a detector has nothing to compare is counted apart).
+``pixels/voxel``: how many training pixels one voxel of the finest grid spans where the cameras look closely
 (:mod:`pytest_n2r.fit.detail`; 1 would match the photos).
 
 ``--fox-steps N`` (or ``--fox 10m``, a time budget) also fits the fox (``../shared/scenes/fox``, 1/4

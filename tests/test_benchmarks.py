@@ -203,3 +203,42 @@ def test_capture_poses_scores_a_reconstruction_up_to_a_similarity_and_sets_turne
     assert wrong["consistent"] == 8, f"four photos turned by 180° counted as consistent: {wrong}"
     assert wrong["rotation_deg"][1] < 1e-5 and wrong["centre_pct"][1] < 1e-5, f"the right eight scored: {wrong}"
     assert abs(wrong["others_rotation_deg"] - 180.0) < 1e-5, f"four photos turned by 180° scored: {wrong}"
+
+
+class _Fitted(Exception):
+    """Raised by a stand-in for ``fit``, carrying the config it was given."""
+
+
+@pytest.mark.parametrize("args, fixed", [
+    (["--budget", "20m"], {}),
+    (["--budget", "40m", "--config", "sh_degree=1"], {"sh_degree": 1}),
+    (["--budget", "10m"], {}),
+    (["--steps", "5"], {}),
+], ids=["long", "long-degree-given", "default", "steps"])
+def test_field_fit_trains_what_n2r_fit_trains_for_the_budget(monkeypatch, tmp_path, args: list[str],
+                                                              fixed: dict[str, int]):
+    from types import SimpleNamespace
+
+    from pytest_n2r.cli.fit import parse_duration
+    from pytest_n2r.field.config import FieldConfig
+    from pytest_n2r.fit.budget import budget_config
+
+    module = _benchmark_module(monkeypatch, "field_fit")
+    view = SimpleNamespace(image=np.zeros((9, 16, 3), np.float32))
+    monkeypatch.setattr(module, "FOX", tmp_path)  # present, so the fit is reached without ../shared
+    monkeypatch.setattr(module, "ingest", lambda *a, **k: SimpleNamespace(views=[view], train_views=[view],
+                                                                          heldout_views=[]))
+
+    def fake_fit(capture, config, **kwargs):
+        raise _Fitted(config)
+
+    monkeypatch.setattr(module, "fit", fake_fit)
+    with pytest.raises(_Fitted) as fitted:
+        module.main(args)
+    steps = int(args[1]) if args[0] == "--steps" else None
+    budget = None if steps is not None else parse_duration(args[1])
+    expected = budget_config(FieldConfig().replace(**fixed), budget, max_steps=steps, fixed=set(fixed))
+    long = budget is not None and budget >= 1200
+    assert (expected != FieldConfig().replace(**fixed)) == long, f"{args}: the case does not test what it names"
+    assert fitted.value.args[0] == expected, (
+        f"field_fit.py {' '.join(args)} fitted {fitted.value.args[0]}, not what n2r fit trains: {expected}")
