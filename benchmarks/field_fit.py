@@ -6,15 +6,15 @@ Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--eval-at 1
 default recipe reached 6 051-6 582 steps in 10 minutes on the idle AVX-512 2-core host of 2 December; the AVX2
 host of 3 December takes 12 min 52 s for 6 500: docs/performance.md), with the CPU seconds it took printed
 beside.
-Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. The poses are
-the ones the fox was published with (its ``transforms.json``), or with ``--sfm`` those our structure from motion
-finds from the photos alone, as ``n2r fit photos/`` fits a user's capture (the same photos held out). Evaluation
-time is not counted as training time. A ``--budget`` trains what ``n2r fit --time-budget`` does for it
+Fox at 1/4 resolution (270×480 training images), every 8th image held out, as issue 3 specifies. The poses are the
+ones the fox was published with (its ``transforms.json``), or with ``--sfm`` those our structure from motion finds
+from the photos alone, as ``n2r fit photos/`` fits a user's capture (the same photos held out). Evaluation time is
+not counted as training time. A ``--budget`` trains what ``n2r fit --time-budget`` does for it
 (:func:`pytest_n2r.fit.budget.budget_config`: from 20 minutes SH degree 2 and a 256³ last grid, from 30 a finer
-end), keeping each setting ``--config`` gives (before 6 December 14:30 UTC it trained the defaults for any budget);
-a ``--steps`` fit keeps the defaults. The fitted scene is written to ``--out`` so that ``benchmarks/render_speed.py``
-can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only
-data, never copied into this repository). Results: docs/performance.md.
+end), keeping each setting ``--config`` gives (before 6 December 14:30 UTC it trained its config as given for any
+budget); a ``--steps`` fit keeps the defaults. The fitted scene is written to ``--out`` so that
+``benchmarks/render_speed.py`` can measure the same field. Needs ``../shared/scenes/fox`` (research-use-only data,
+never copied into this repository). Results: docs/performance.md.
 """
 
 from __future__ import annotations

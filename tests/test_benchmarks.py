@@ -221,7 +221,7 @@ def test_field_fit_trains_what_n2r_fit_trains_for_the_budget(monkeypatch, tmp_pa
 
     from pytest_n2r.cli.fit import parse_duration
     from pytest_n2r.field.config import FieldConfig
-    from pytest_n2r.fit.budget import budget_config
+    from pytest_n2r.fit.budget import LONG_BUDGET_S, budget_config
 
     module = _benchmark_module(monkeypatch, "field_fit")
     view = SimpleNamespace(image=np.zeros((9, 16, 3), np.float32))
@@ -238,7 +238,7 @@ def test_field_fit_trains_what_n2r_fit_trains_for_the_budget(monkeypatch, tmp_pa
     steps = int(args[1]) if args[0] == "--steps" else None
     budget = None if steps is not None else parse_duration(args[1])
     expected = budget_config(FieldConfig().replace(**fixed), budget, max_steps=steps, fixed=set(fixed))
-    long = budget is not None and budget >= 1200
+    long = budget is not None and budget >= LONG_BUDGET_S
     assert (expected != FieldConfig().replace(**fixed)) == long, f"{args}: the case does not test what it names"
     assert fitted.value.args[0] == expected, (
         f"field_fit.py {' '.join(args)} fitted {fitted.value.args[0]}, not what n2r fit trains: {expected}")
