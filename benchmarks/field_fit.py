@@ -40,7 +40,8 @@ FOX = Path(__file__).resolve().parents[2] / "shared" / "scenes" / "fox" / "trans
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--budget", default="10m", help="training time (e.g. 90s, 10m)")
+    parser.add_argument("--budget", type=parse_duration, default="10m", metavar="DURATION",
+                        help="training time (e.g. 90s, 10m)")
     parser.add_argument("--steps", type=int, default=None, help="fit this many steps instead of --budget")
     parser.add_argument("--eval-at", type=parse_durations, default=None, metavar="DURATIONS",
                         help="training times at which the held-out views are scored, within the budget "
@@ -50,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sfm", action="store_true",
                         help="poses from our structure from motion on the photos, not the published transforms.json")
     args = parser.parse_args(argv)
-    budget = parse_duration(args.budget)
+    budget = args.budget
     if args.eval_at is not None and args.steps is not None:
         parser.error("--eval-at: scores at training times within --budget; a fit of --steps takes none")
     if args.eval_at is not None and args.eval_at[-1] >= budget:

@@ -153,6 +153,15 @@ def test_every_smoke_run_names_an_existing_script():
     assert not missing, f"SMOKE names scripts that do not exist: {missing}"
 
 
+def test_field_fit_refuses_a_budget_that_is_not_a_duration(monkeypatch, capsys):
+    module = _benchmark_module(monkeypatch, "field_fit")
+    with pytest.raises(SystemExit) as exit_info:
+        module.main(["--budget", "abc"])
+    err = capsys.readouterr().err
+    assert exit_info.value.code == 2 and "argument --budget: 'abc' is not a duration" in err, (
+        f"field_fit.py --budget abc: exit {exit_info.value}, expected a usage error naming it: {err}")
+
+
 def _benchmark_module(monkeypatch, name: str):
     monkeypatch.syspath_prepend(str(ROOT / "benchmarks"))
     spec = importlib.util.spec_from_file_location(f"_{name}", ROOT / "benchmarks" / f"{name}.py")
