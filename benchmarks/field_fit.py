@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--eval-at {args.eval_at[-1]:g} s: expected training times below --budget {budget:g} s "
                      "(the end of the fit is always scored)")
     given, keys = field_config(parser, args.config)
-    config = budget_config(given, None if args.steps is not None else budget, max_steps=args.steps, fixed=keys)
+    config = budget_config(given, budget, max_steps=args.steps, fixed=keys)  # a --steps fit keeps its config
     if not FOX.exists():
         print(f"skipped: {FOX} is absent (the fox capture lives in ../shared beside the checkout)")
         return 0
