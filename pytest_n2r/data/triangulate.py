@@ -7,7 +7,8 @@ SIFT features (OpenCV) in every image; each image is matched with its ``neighbou
 Lowe's ratio test (0.75); each match is triangulated linearly (``cv2.triangulatePoints``) with the
 given poses and kept only when it lies in front of both cameras, reprojects within
 ``max_reprojection_px`` pixels in both images and is seen under at least ``min_angle_deg`` degrees of
-parallax. A point seen in several pairs is counted once per pair, which does not bias the medians and
+parallax (:func:`matched_pairs` gives these matches pair by pair; :mod:`.exposure` reads the photos'
+colours at them). A point seen in several pairs is counted once per pair, which does not bias the medians and
 percentiles it feeds (:mod:`pytest_n2r.data.extent`).
 
 Convention
@@ -19,13 +20,14 @@ camera-to-world, OpenCV axes. Points are returned in world units.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import InvalidArgument
 from ..geometry import Camera, invert_pose
 
-__all__ = ["neighbour_pairs", "triangulate_views"]
+__all__ = ["neighbour_pairs", "PairMatches", "matched_pairs", "triangulate_views"]
 
 
 def neighbour_pairs(
@@ -45,14 +47,27 @@ def neighbour_pairs(
     return sorted(pairs)
 
 
-def triangulate_views(
+@dataclass(frozen=True, eq=False)
+class PairMatches:
+    """The matches between views ``i`` and ``j`` (``i < j``) that triangulate consistently with their poses:
+    ``ui`` and ``uj`` are ``(M, 2)`` pixel positions in each (x right, y down, pixel centres at integers),
+    ``points`` the ``(M, 3)`` world points they meet at."""
+
+    i: int
+    j: int
+    ui: np.ndarray
+    uj: np.ndarray
+    points: np.ndarray
+
+
+def matched_pairs(
     images: Sequence[np.ndarray], cameras: Sequence[Camera], c2ws: Sequence[np.ndarray], *,
     neighbours: int = 4, max_reprojection_px: float = 2.0, min_angle_deg: float = 1.5, max_features: int = 2000,
-) -> np.ndarray:
-    """Triangulate SIFT matches between neighbouring views with known poses → ``(N, 3)`` world points.
-
-    See the module docstring for the method. Returns an empty ``(0, 3)`` array when nothing survives.
-    """
+) -> list[PairMatches]:
+    """SIFT matches between neighbouring views with known poses, each kept only where it triangulates in front
+    of both cameras, reprojects within ``max_reprojection_px`` in both and is seen under at least
+    ``min_angle_deg`` of parallax (0 keeps matches of views taken from one spot). One entry per pair with at
+    least 8 ratio-test matches before the checks; see the module docstring."""
     import cv2
 
     if not len(images) == len(cameras) == len(c2ws):
@@ -75,7 +90,7 @@ def triangulate_views(
 
     matcher = cv2.BFMatcher(cv2.NORM_L2)
     w2cs = [invert_pose(c) for c in c2ws]
-    chunks = []
+    out = []
     for i, j in neighbour_pairs(c2ws, neighbours):
         (pi, di), (pj, dj) = features[i], features[j]
         if di is None or dj is None or len(di) < 2 or len(dj) < 2:
@@ -86,16 +101,30 @@ def triangulate_views(
             continue
         ui = pi[[m.queryIdx for m in good]]
         uj = pj[[m.trainIdx for m in good]]
-        chunks.append(_triangulate_pair(
+        points, ok = _triangulate_pair(
             ui, uj, cameras[i], cameras[j], w2cs[i], w2cs[j], max_reprojection_px, min_angle_deg
-        ))
-    return np.concatenate(chunks, axis=0) if chunks else np.zeros((0, 3))
+        )
+        out.append(PairMatches(i, j, ui[ok], uj[ok], points[ok]))
+    return out
+
+
+def triangulate_views(
+    images: Sequence[np.ndarray], cameras: Sequence[Camera], c2ws: Sequence[np.ndarray], *,
+    neighbours: int = 4, max_reprojection_px: float = 2.0, min_angle_deg: float = 1.5, max_features: int = 2000,
+) -> np.ndarray:
+    """Triangulate SIFT matches between neighbouring views with known poses → ``(N, 3)`` world points.
+
+    See the module docstring for the method. Returns an empty ``(0, 3)`` array when nothing survives.
+    """
+    pairs = matched_pairs(images, cameras, c2ws, neighbours=neighbours, max_reprojection_px=max_reprojection_px,
+                          min_angle_deg=min_angle_deg, max_features=max_features)
+    return np.concatenate([p.points for p in pairs], axis=0) if pairs else np.zeros((0, 3))
 
 
 def _triangulate_pair(
     ui: np.ndarray, uj: np.ndarray, cam_i: Camera, cam_j: Camera, w2c_i: np.ndarray, w2c_j: np.ndarray,
     max_err: float, min_angle_deg: float,
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     import cv2
 
     P_i = cam_i.K @ w2c_i[:3]
@@ -117,4 +146,4 @@ def _triangulate_pair(
     with np.errstate(divide="ignore", invalid="ignore"):
         cos = np.sum(ri * rj, axis=1) / (np.linalg.norm(ri, axis=1) * np.linalg.norm(rj, axis=1))
     ok &= cos < np.cos(np.radians(min_angle_deg))
-    return X[ok]
+    return X, ok
