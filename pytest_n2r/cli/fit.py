@@ -26,6 +26,8 @@ if TYPE_CHECKING:
 
 __all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override"]
 
+#: ``--appearance`` as ``fit(appearance=...)`` takes it.
+APPEARANCE = {"auto": "auto", "on": True, "off": False}
 _DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
 
 
@@ -111,9 +113,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=parse_config_override, action="append", default=[], metavar="KEY=VALUE",
                    help="change a field setting (repeatable), e.g. --config resolutions=48,96 "
                         "--config stage_fractions=0.2 (the fields of pytest_n2r.field.config.FieldConfig)")
-    p.add_argument("--appearance", action="store_true",
-                   help="fit a colour gain per photo (exposure, white balance) for captures whose exposure varies, "
-                        "as a phone's does; renders keep the capture's average (see docs/scene-field.md)")
+    p.add_argument("--appearance", nargs="?", choices=("auto", "on", "off"), const="on", default="auto",
+                   help="a colour gain per photo (exposure, white balance) in the fit, for captures whose exposure "
+                        "varies as a phone's does; renders keep the capture's average. auto (the default) measures "
+                        "how much neighbouring photos' colours differ where they see the same points and fits the "
+                        "gains above 5 %%; --appearance alone is on (see docs/scene-field.md)")
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
@@ -178,12 +182,13 @@ def run(args: argparse.Namespace) -> int:
 
     from .. import fit as fitting
     from ..data import ingest
+    from ..fit.appearance import measured_appearance
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..fit.detail import DETAIL_STAGE_AT
     from ..scene.file import read_scene_file, save_scene
     from ._interrupt import first_ctrl_c_deferred, interrupted
     from ._output import SCENE, check_output
-    from .info import format_info
+    from .info import format_exposure, format_info
     from .poses import format_skipped
 
     check_arguments(args)
@@ -218,8 +223,14 @@ def run(args: argparse.Namespace) -> int:
                      f"{config.max_pixels_per_voxel:g} of the photos' pixels, not {was}: it fits better from a "
                      f"{FINE_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
                      f"--config max_pixels_per_voxel={was} keeps {was}")
+    appearance = APPEARANCE[args.appearance]
+    exposure = measured_appearance(capture) if appearance == "auto" else None
+    if exposure is not None:
+        appearance = exposure["appearance"]
+        lines.append(format_exposure(exposure))
     print("\n".join(lines), file=sys.stderr)
-    context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2)}
+    context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2),
+               **({} if exposure is None else {"exposure": exposure})}
     last: dict = {}
 
     def save(result: fitting.FitResult, report: dict) -> None:
@@ -251,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
                 result = fitting.fit(capture, config, time_budget_s=time_budget, max_steps=args.max_steps,
                                      device=args.device, progress=progress, checkpoint=checkpoint,
                                      checkpoint_every_s=args.checkpoint_every, eval_at_s=args.eval_at,
-                                     appearance=args.appearance, stop=stop)
+                                     appearance=appearance, stop=stop)
             progress.close()
             save(result, {**result.report, "complete": True})
             late = pressed() and not result.report["stopped"]  # pressed after the last step: the field is complete

@@ -179,6 +179,10 @@ def _report_lines(report: dict) -> list[str]:
             lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
         elif report.get("complete", True):
             lines.append("held out    no held-out view with a photo (nothing to score)")
+    with _reading("'exposure'"):
+        exposure = report.get("exposure")
+        if exposure:
+            lines.append(format_exposure(exposure))
     with _reading("'appearance'"):
         gains = report.get("appearance")
         if gains:
@@ -195,6 +199,18 @@ def _report_lines(report: dict) -> list[str]:
         if versions:
             lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
     return lines
+
+
+def format_exposure(exposure: dict) -> str:
+    """The line saying how much a capture's photos differ in exposure and white balance and whether the fit
+    corrected it (a fit's ``report["exposure"]``, :func:`pytest_n2r.fit.appearance.measured_appearance`)."""
+    if exposure["jump"] is None:
+        measured = "not measured (no two photos linked by matches)"
+    else:
+        measured = (f"neighbouring photos' colours differ by {100 * exposure['jump']:.1f} % (median of "
+                    f"{exposure['pairs']} pairs), the whole capture's by {100 * exposure['spread']:.1f} %")
+    return (f"exposure    {measured}: per-photo correction {'on' if exposure['appearance'] else 'off'} "
+            f"(auto: on above {100 * exposure['threshold']:g} % between neighbours)")
 
 
 def _num(value: float | None, width: int, digits: int) -> str:

@@ -6,7 +6,12 @@ from collections.abc import Sequence
 
 import torch
 
-__all__ = ["APPEARANCE_LR", "Appearance"]
+from ..data.capture import Capture
+from ..data.exposure import ExposureSpread, measure_exposure
+from ..errors import InvalidArgument
+
+__all__ = ["APPEARANCE_LR", "Appearance", "APPEARANCE_JUMP", "needs_appearance", "measured_appearance",
+           "decide_appearance"]
 
 
 #: Adam learning rate of the per-photo log colour gains (``appearance=True``).
@@ -36,3 +41,46 @@ class Appearance:
     def report(self) -> dict:
         gains = self.gains().detach().cpu().numpy()
         return {name: [round(float(x), 4) for x in g] for name, g in zip(self.names, gains)}
+
+
+#: How much neighbouring photos' colours may differ (``jump`` of :mod:`pytest_n2r.data.exposure`, natural log)
+#: before ``appearance="auto"`` fits the correction. See :func:`needs_appearance` for the measurements behind it.
+APPEARANCE_JUMP = 0.05
+
+
+def needs_appearance(exposure: ExposureSpread) -> bool:
+    """Whether a capture's photos differ enough from one to the next for the per-photo correction: their
+    measured ``jump`` exceeds :data:`APPEARANCE_JUMP`. A capture that could not be measured (no two photos
+    linked by matches) gets no correction.
+
+    Measured (6 December 2026, docs/scene-field-log.md "Exposure measured from the photos"; ``python
+    benchmarks/exposure.py``, ``python benchmarks/phone_capture.py --exposure-stops S --white-balance W``), on
+    captures whose truth is known and on the fox's validation views, never on reported views: the demo scenes'
+    phone captures jump 0.003-0.005 with exposure and white balance held, 0.011-0.012 with ±0.05 stops and ±1 %,
+    0.026-0.033 with ±0.15 stops and ±3 % (there the correction moved held-out PSNR against the exact scene by
+    −0.22 dB on the wall and +0.20 on the object: a wash), 0.079-0.099 with ±0.5 stops and ±8 % (+0.45 and
+    +1.46 dB). The fox, a handheld video whose colour drifts along the path (spread 0.15), jumps 0.019; there the
+    correction cost 0.49 dB on the validation views (4 December): its fit keeps most of a drift in the
+    view-dependent colour, which follows a drift but not a jump.
+    """
+    jump = exposure.jump
+    return jump is not None and jump > APPEARANCE_JUMP
+
+
+def measured_appearance(capture: Capture) -> dict:
+    """Measure the training photos' exposure (:func:`~pytest_n2r.data.exposure.measure_exposure`) and decide
+    the correction: the record a fit's ``report["exposure"]`` holds, with ``"appearance"`` the decision and
+    ``"threshold"`` :data:`APPEARANCE_JUMP`."""
+    exposure = measure_exposure([v for v in capture.train_views if v.image is not None])
+    return {**exposure.summary(), "threshold": APPEARANCE_JUMP, "appearance": needs_appearance(exposure)}
+
+
+def decide_appearance(capture: Capture, appearance: bool | str) -> tuple[bool, dict | None]:
+    """``fit``'s ``appearance`` argument resolved: ``(fit the gains?, the measurement or None)``; ``"auto"``
+    measures the capture (:func:`measured_appearance`), ``True`` and ``False`` are taken as given."""
+    if appearance is True or appearance is False:
+        return appearance, None
+    if appearance != "auto":
+        raise InvalidArgument(f"appearance={appearance!r}: expected True, False or 'auto'")
+    exposure = measured_appearance(capture)
+    return exposure["appearance"], exposure

@@ -17,6 +17,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from dataclasses import field as dataclass_field
+from typing import Literal
 
 import numpy as np
 import torch
@@ -31,7 +32,7 @@ from ..field.lattice import grid_coords, lattice_position
 from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
-from .appearance import Appearance
+from .appearance import Appearance, decide_appearance
 from .compile_clock import CompileClock
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, mean_scores
@@ -270,7 +271,7 @@ def fit(
     checkpoint: Callable[[FitResult], None] | None = None,
     checkpoint_every_s: float = 60.0,
     eval_at_s: Sequence[float] = (),
-    appearance: bool = False,
+    appearance: bool | Literal["auto"] = False,
     stop: Callable[[], bool] | None = None,
 ) -> FitResult:
     """Fit a scene field to ``capture`` (images loaded) within ``time_budget_s`` seconds of training and/or
@@ -287,9 +288,11 @@ def fit(
     in ``report["history"]``. Neither evaluation nor compiling the training kernels (a fresh installation's first
     fit, ``report["compile_seconds"]``) counts as training time.
 
-    ``appearance`` fits a colour gain per training photo and channel alongside the field, for captures whose
-    exposure and white balance vary (a phone's automatic exposure); the field keeps their average and renders
-    no gain at any pose. ``report["appearance"]`` holds the fitted gains by photo.
+    ``appearance=True`` fits a colour gain per training photo and channel alongside the field, for captures whose
+    exposure and white balance change from photo to photo; the field keeps their average and renders no gain at any
+    pose (``report["appearance"]``: the gains by photo). ``"auto"`` (``n2r fit``'s default) fits them where
+    neighbouring photos differ by more than :data:`~pytest_n2r.fit.appearance.APPEARANCE_JUMP` (measured in
+    seconds, not training time; ``report["exposure"]``); ``False``, the default here, keeps older fits bit for bit.
 
     ``stop`` is asked after every step whether to end the fit there (say the user pressed Ctrl-C); the field
     is then pruned and evaluated as at the end of the budget, and ``report["stopped"]`` is true unless that
@@ -302,6 +305,7 @@ def fit(
         raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected seconds > 0")
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
+    appearance, exposure = decide_appearance(capture, appearance)
     dev = resolve_device(device)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
@@ -390,6 +394,7 @@ def fit(
         "history": history,
         "versions": _versions(),
     }
+    report.update({"exposure": exposure} if exposure is not None else {})
     if trainer.appearance is not None:
         report["appearance"] = trainer.appearance.report()
     return FitResult(final, config, report)

@@ -14,6 +14,7 @@ from pytest_n2r.data.images import read_image
 from pytest_n2r.demo import ground_truth
 from pytest_n2r.demo.phone_capture import EXIF_ORIENTATION, ROTATE_90_CW, PhoneSettings, write_phone_capture
 from pytest_n2r.metrics.image_quality import psnr
+from pytest_n2r.scene.file import read_scene_file
 from pytest_n2r.study.sampling import sample_transform
 
 TINY_FIT = ["--downscale", "1", "--max-steps", "150", "--config", "resolutions=24,48", "--config",
@@ -100,6 +101,40 @@ def test_n2r_fit_appearance_fits_a_gain_per_photo_and_info_says_so(tmp_path, cap
     assert "appearance  a colour gain per training photo (6 photos," in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("stops, wb, decided", [(0.5, 0.08, "on"), (0.0, 0.0, "off")])
+def test_n2r_fit_measures_the_exposure_and_decides_the_correction(tmp_path, capsys, stops, wb, decided):
+    """By default (--appearance auto) n2r fit measures how much neighbouring photos differ before it trains,
+    says so, stores the measurement in the report and fits the gains only for a camera that changed them."""
+    write_phone_capture("wall", tmp_path / "photos", PhoneSettings(exposure_stops=stops, white_balance=wb))
+    out = tmp_path / "wall-phone.n2r"
+    assert main(["fit", str(tmp_path / "photos"), "-o", str(out), "--downscale", "1", "--max-steps", "5",
+                 "--config", "resolutions=16,24", "--config", "stage_fractions=0.5", "--config", "batch_rays=256"]) == 0
+    captured = capsys.readouterr()
+    line = f"per-photo correction {decided} (auto: on above 5 % between neighbours)"
+    assert line in captured.err and line in captured.out, "the decision is said before the fit and in its summary"
+    report = read_scene_file(out, images=False).report
+    assert report["exposure"]["appearance"] is (decided == "on") and report["exposure"]["photos"] == 42
+    assert ("appearance" in report) is (decided == "on"), "the gains are fitted exactly when the measurement says"
+
+
+def test_n2r_fit_appearance_off_measures_nothing(tmp_path, capsys):
+    write_phone_capture("wall", tmp_path / "photos", PhoneSettings(size=64), views=range(0, 48, 4))
+    out = tmp_path / "wall-phone.n2r"
+    assert main(["fit", str(tmp_path / "photos"), "-o", str(out), "--appearance", "off", "--downscale", "1",
+                 "--max-steps", "5", "--config", "resolutions=16,24", "--config", "stage_fractions=0.5"]) == 0
+    assert "exposure" not in capsys.readouterr().err
+    report = read_scene_file(out, images=False).report
+    assert "exposure" not in report and "appearance" not in report
+
+
+def test_the_cli_names_the_threshold_the_fit_uses():
+    from pytest_n2r.cli.main import build_parser
+    from pytest_n2r.fit.appearance import APPEARANCE_JUMP
+
+    fit_help = build_parser()._subparsers._group_actions[0].choices["fit"].format_help()
+    assert f"gains above {100 * APPEARANCE_JUMP:g} %" in " ".join(fit_help.split())
+
+
 def _phone_benchmark(monkeypatch):
     """``benchmarks/phone_capture.py`` loaded as a module, with its folder on the path as when it runs (its
     helpers sit beside it)."""
@@ -119,7 +154,8 @@ def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
     module = _phone_benchmark(monkeypatch)
     out = tmp_path / "phone.json"
     assert module.main(["--scenes", "wall", "--size", "96", "--steps", "10", "--config", "resolutions=16,24",
-                        "stage_fractions=0.5", "batch_rays=256", "--json", str(out)]) == 0
+                        "stage_fractions=0.5", "batch_rays=256", "--exposure-stops", "0", "--white-balance", "0",
+                        "--json", str(out)]) == 0
     printed = capsys.readouterr().out
     row = "| wall | corrected | 10 | "
     for where in ("held out (6)", "moved (12)", "fitted (6)"):
@@ -127,6 +163,9 @@ def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
                    for line in printed.splitlines()), \
             f"no row for the corrected fit's {where} poses after 10 steps on 16³→24³:\n{printed}"
     result = json.loads(out.read_text())["wall"]
+    exposure = result.pop("exposure")  # the photos were taken with one exposure and white balance
+    assert exposure["appearance"] is False and exposure["jump"] < exposure["threshold"], exposure
+    assert "wall: exposure    neighbouring photos' colours differ by" in printed
     assert set(result) == {"plain", "corrected"} and len(result["corrected"]["gain_range"]) == 2
     assert result["plain"]["steps"] == 10 and result["plain"]["grids"] == [16, 24], result["plain"]
     # at 96 px after 10 steps ORB finds nothing to compare on some views: counted apart, never scored

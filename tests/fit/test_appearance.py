@@ -6,8 +6,10 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from pytest_n2r.data.capture import Capture
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.fit import fit
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import FieldRenderer
@@ -58,3 +60,16 @@ def test_appearance_off_changes_nothing(capture48, short_fit):
     """The default fit is the one every shipped scene was made with, bit for bit."""
     again = fit(capture48, SHORT_CONFIG, max_steps=80, device="cpu", appearance=False)
     assert all(np.array_equal(a, b) for a, b in zip(again.field.tensors().values(), short_fit.field.tensors().values()))
+
+
+def test_auto_without_a_jump_is_the_plain_fit_bit_for_bit(capture48, short_fit):
+    """``appearance="auto"`` on photos taken with one exposure decides "off" and trains exactly what the default
+    trains; the measurement is in the report (n2r fit on a phone capture: tests/demo/test_phone_capture.py)."""
+    auto = fit(capture48, SHORT_CONFIG, max_steps=80, device="cpu", appearance="auto")
+    assert auto.report["exposure"]["appearance"] is False and "appearance" not in auto.report, auto.report["exposure"]
+    assert all(np.array_equal(a, b) for a, b in zip(auto.field.tensors().values(), short_fit.field.tensors().values()))
+
+
+def test_appearance_takes_true_false_or_auto(capture48):
+    with pytest.raises(InvalidArgument, match="appearance='yes': expected True, False or 'auto'"):
+        fit(capture48, SHORT_CONFIG, max_steps=1, device="cpu", appearance="yes")
