@@ -1,7 +1,7 @@
 """Fitting speed and quality on the fox capture: held-out PSNR / SSIM after 1, 3, 6 and 10 minutes.
 
 Run: ``python benchmarks/field_fit.py [--budget 10m | --steps 6500] [--eval-at 10m,20m] [--out /tmp/fox.n2r]
-[--config key=value ...] [--sfm]``.
+[--config key=value ...] [--sfm] [--appearance auto|on|off]``.
 ``--steps N`` fits N steps instead of a time budget: the same fit on a loaded machine as on an idle one (the
 default recipe reached 6 051-6 582 steps in 10 minutes on the idle AVX-512 2-core host of 2 December; the AVX2
 host of 3 December takes 12 min 52 s for 6 500: docs/performance.md), with the CPU seconds it took printed
@@ -29,7 +29,8 @@ from pathlib import Path
 import torch
 from _arguments import field_config
 
-from pytest_n2r.cli.fit import parse_duration, parse_durations
+from pytest_n2r.cli.fit import APPEARANCE, parse_duration, parse_durations
+from pytest_n2r.cli.info import format_exposure
 from pytest_n2r.data import ingest
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.budget import budget_config
@@ -50,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", nargs="*", default=[], metavar="KEY=VALUE", help="FieldConfig overrides")
     parser.add_argument("--sfm", action="store_true",
                         help="poses from our structure from motion on the photos, not the published transforms.json")
+    parser.add_argument("--appearance", choices=sorted(APPEARANCE), default="auto",
+                        help="a colour gain per photo, as n2r fit --appearance decides it (default auto: measured "
+                             "from the photos; the fox's is off)")
     args = parser.parse_args(argv)
     budget = args.budget
     if args.eval_at is not None and args.steps is not None:
@@ -79,9 +83,9 @@ def main(argv: list[str] | None = None) -> int:
     marks = defaults if args.eval_at is None else list(args.eval_at)
     c0 = time.process_time()
     if args.steps is None:
-        result = fit(capture, config, time_budget_s=budget, eval_at_s=marks)
+        result = fit(capture, config, time_budget_s=budget, eval_at_s=marks, appearance=APPEARANCE[args.appearance])
     else:
-        result = fit(capture, config, max_steps=args.steps)
+        result = fit(capture, config, max_steps=args.steps, appearance=APPEARANCE[args.appearance])
         budget = result.report["train_seconds"]
     report = result.report
     print(f"\n{'train time':>10} {'steps':>6} {'PSNR dB':>8} {'SSIM':>6}")
@@ -92,6 +96,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{time.process_time() - c0:.0f} CPU s (training and evaluation); "
           f"{report['compile_seconds']:.1f} s compiling the training kernels (not training time)")
     print("held-out views:", ", ".join(f"{r['view']} {r['psnr']:.2f} dB" for r in report["heldout"]))
+    if "exposure" in report:
+        print(format_exposure(report["exposure"]))
     save_scene(args.out, result.field, result.config, capture, report)
     print(f"wrote {args.out}")
     return 0

@@ -44,6 +44,9 @@ SMOKE = {
     "render_fingerprint.py": (["--twins", "--steps", "4"], "| short-fit/file |"),
     "fit_profile.py": (["--capture", "wall", "--steps", "30", "--threads", "1", "--config", "resolutions=16,24",
                         "stage_fractions=0.5", "batch_rays=256"], "| 1 | all | 30 |"),
+    # two small phone captures of the wall measured against their drawn gains (and the fox's, where ../shared is)
+    "exposure.py": (["--scenes", "wall", "--size", "160", "--settings", "0.5:0.08", "0:0"], ("| wall | 0.5 : 0.08 |",
+                                                                                            "| wall | 0 : 0 |")),
     # structure from motion at 160 px registers a few photos, or none (a row saying so): either way a table row
     "capture_poses.py": (["sfm", "--scenes", "wall", "--size", "160"], "| wall | 160 |"),
     # a variant fitted with the per-photo appearance correction: the fit option a variant passes through
