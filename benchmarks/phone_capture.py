@@ -8,8 +8,9 @@ For each demo scene: :func:`pytest_n2r.demo.phone_capture.write_phone_capture` p
 (every third photo in portrait, half of those EXIF-rotated; ±0.5 stops of exposure, ±8 % white balance unless
 ``--exposure-stops`` and ``--white-balance`` say otherwise,
 blur up to 0.8 px, JPEG 90) with its poses in a transforms.json; :func:`pytest_n2r.data.ingest` reads it at
-full size; the field is fitted twice with the same settings and seed, as ``n2r fit DIR --downscale 1`` and
-``n2r fit DIR --downscale 1 --appearance`` fit it: the library's defaults, what the time budget chooses
+full size; the field is fitted twice with the same settings and seed, as ``n2r fit DIR --downscale 1
+--appearance off`` and ``--appearance on`` fit it (what the default, ``auto``, decides from the photos is printed
+beside): the library's defaults, what the time budget chooses
 (:func:`pytest_n2r.fit.budget.budget_config`) and the finer grid for the end where the photos are finer than
 the voxel (:mod:`pytest_n2r.fit.detail`); ``--config`` changes a setting as ``n2r fit --config`` does.
 
