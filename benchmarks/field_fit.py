@@ -33,6 +33,7 @@ from pytest_n2r.cli.fit import APPEARANCE, parse_duration, parse_durations
 from pytest_n2r.cli.info import format_exposure
 from pytest_n2r.data import ingest
 from pytest_n2r.fit import fit
+from pytest_n2r.fit.appearance import decide_appearance
 from pytest_n2r.fit.budget import budget_config
 from pytest_n2r.scene import save_scene
 
@@ -81,11 +82,14 @@ def main(argv: list[str] | None = None) -> int:
               f"{grids}, max_pixels_per_voxel {config.max_pixels_per_voxel:g}")
     defaults = [m for m in (60.0, 180.0, 360.0, 600.0) if m < budget] if args.steps is None else []
     marks = defaults if args.eval_at is None else list(args.eval_at)
+    appearance, exposure = decide_appearance(capture, APPEARANCE[args.appearance])  # before the CPU clock
+    if exposure is not None:
+        print(format_exposure(exposure))
     c0 = time.process_time()
     if args.steps is None:
-        result = fit(capture, config, time_budget_s=budget, eval_at_s=marks, appearance=APPEARANCE[args.appearance])
+        result = fit(capture, config, time_budget_s=budget, eval_at_s=marks, appearance=appearance)
     else:
-        result = fit(capture, config, max_steps=args.steps, appearance=APPEARANCE[args.appearance])
+        result = fit(capture, config, max_steps=args.steps, appearance=appearance)
         budget = result.report["train_seconds"]
     report = result.report
     print(f"\n{'train time':>10} {'steps':>6} {'PSNR dB':>8} {'SSIM':>6}")
@@ -96,9 +100,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{time.process_time() - c0:.0f} CPU s (training and evaluation); "
           f"{report['compile_seconds']:.1f} s compiling the training kernels (not training time)")
     print("held-out views:", ", ".join(f"{r['view']} {r['psnr']:.2f} dB" for r in report["heldout"]))
-    if "exposure" in report:
-        print(format_exposure(report["exposure"]))
-    save_scene(args.out, result.field, result.config, capture, report)
+    save_scene(args.out, result.field, result.config, capture, {**report, **({} if exposure is None else
+                                                                             {"exposure": exposure})})
     print(f"wrote {args.out}")
     return 0
 

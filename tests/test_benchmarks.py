@@ -245,6 +245,7 @@ def test_field_fit_trains_what_n2r_fit_trains_for_the_budget(monkeypatch, tmp_pa
         raise _Fitted(config)
 
     monkeypatch.setattr(module, "fit", fake_fit)
+    monkeypatch.setattr(module, "decide_appearance", lambda capture, appearance: (False, None))  # no photos here
     with pytest.raises(_Fitted) as fitted:
         module.main(args)
     steps = int(args[1]) if args[0] == "--steps" else None

@@ -24,7 +24,7 @@ from ._output import FORCE_HELP
 if TYPE_CHECKING:
     from ..field.config import FieldConfig
 
-__all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override"]
+__all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override", "APPEARANCE"]
 
 #: ``--appearance`` as ``fit(appearance=...)`` takes it.
 APPEARANCE = {"auto": "auto", "on": True, "off": False}
@@ -113,11 +113,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--config", type=parse_config_override, action="append", default=[], metavar="KEY=VALUE",
                    help="change a field setting (repeatable), e.g. --config resolutions=48,96 "
                         "--config stage_fractions=0.2 (the fields of pytest_n2r.field.config.FieldConfig)")
-    p.add_argument("--appearance", nargs="?", choices=("auto", "on", "off"), const="on", default="auto",
+    p.add_argument("--appearance", choices=tuple(APPEARANCE), default="auto",
                    help="a colour gain per photo (exposure, white balance) in the fit, for captures whose exposure "
                         "varies as a phone's does; renders keep the capture's average. auto (the default) measures "
                         "how much neighbouring photos' colours differ where they see the same points and fits the "
-                        "gains above 5 %%; --appearance alone is on (see docs/scene-field.md)")
+                        "gains above 5 %%; on always fits them, off never (see docs/scene-field.md)")
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",

@@ -208,7 +208,8 @@ def format_exposure(exposure: dict) -> str:
         measured = "not measured (no two photos linked by matches)"
     else:
         measured = (f"neighbouring photos' colours differ by {100 * exposure['jump']:.1f} % (median of "
-                    f"{exposure['pairs']} pairs), the whole capture's by {100 * exposure['spread']:.1f} %")
+                    f"{exposure['pairs']} pairs; {exposure['photos']} of {exposure['of']} photos measured), the "
+                    f"whole capture's by {100 * exposure['spread']:.1f} %")
     return (f"exposure    {measured}: per-photo correction {'on' if exposure['appearance'] else 'off'} "
             f"(auto: on above {100 * exposure['threshold']:g} % between neighbours)")
 

@@ -66,8 +66,8 @@ def matched_pairs(
 ) -> list[PairMatches]:
     """SIFT matches between neighbouring views with known poses, each kept only where it triangulates in front
     of both cameras, reprojects within ``max_reprojection_px`` in both and is seen under at least
-    ``min_angle_deg`` of parallax (0 keeps matches of views taken from one spot). One entry per pair with at
-    least 8 ratio-test matches before the checks; see the module docstring."""
+    ``min_angle_deg`` of parallax (0: any parallax, however small; cameras at one spot still triangulate nothing).
+    One entry per pair with at least 8 ratio-test matches before the checks; see the module docstring."""
     import cv2
 
     if not len(images) == len(cameras) == len(c2ws):

@@ -305,8 +305,8 @@ def fit(
         raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected seconds > 0")
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
-    appearance, exposure = decide_appearance(capture, appearance)
     dev = resolve_device(device)
+    appearance, exposure = decide_appearance(capture, appearance)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
     trainer = _Trainer(capture, config, dev, appearance=appearance, haze_from=len(given.resolutions) - 1)

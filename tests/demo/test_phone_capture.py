@@ -95,7 +95,7 @@ def test_a_mixed_orientation_phone_capture_fits_without_manual_steps(tmp_path, c
 def test_n2r_fit_appearance_fits_a_gain_per_photo_and_info_says_so(tmp_path, capsys):
     write_phone_capture("object", tmp_path / "photos", PhoneSettings(size=64), views=range(0, 48, 4))
     out = tmp_path / "object-phone.n2r"
-    assert main(["fit", str(tmp_path / "photos"), "-o", str(out), "--appearance", "--downscale", "1",
+    assert main(["fit", str(tmp_path / "photos"), "-o", str(out), "--appearance", "on", "--downscale", "1",
                  "--max-steps", "20", "--config", "resolutions=16,24", "--config", "stage_fractions=0.5",
                  "--config", "batch_rays=256", "--config", "alpha_init=0.01"]) == 0
     assert "appearance  a colour gain per training photo (6 photos," in capsys.readouterr().out

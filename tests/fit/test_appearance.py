@@ -62,11 +62,14 @@ def test_appearance_off_changes_nothing(capture48, short_fit):
     assert all(np.array_equal(a, b) for a, b in zip(again.field.tensors().values(), short_fit.field.tensors().values()))
 
 
-def test_auto_without_a_jump_is_the_plain_fit_bit_for_bit(capture48, short_fit):
-    """``appearance="auto"`` on photos taken with one exposure decides "off" and trains exactly what the default
-    trains; the measurement is in the report (n2r fit on a phone capture: tests/demo/test_phone_capture.py)."""
+def test_auto_with_nothing_measured_is_the_plain_fit_bit_for_bit(capture48, short_fit):
+    """``appearance="auto"`` on photos too small to match (48×27: no pair, nothing measured) is no evidence of a
+    changing exposure: it decides "off", says why in the report and trains exactly what the default trains
+    (measured captures: tests/data/test_exposure.py and n2r fit in tests/demo/test_phone_capture.py)."""
     auto = fit(capture48, SHORT_CONFIG, max_steps=80, device="cpu", appearance="auto")
-    assert auto.report["exposure"]["appearance"] is False and "appearance" not in auto.report, auto.report["exposure"]
+    exposure = auto.report["exposure"]
+    assert exposure["jump"] is None and exposure["pairs"] == 0, exposure
+    assert exposure["appearance"] is False and "appearance" not in auto.report, exposure
     assert all(np.array_equal(a, b) for a, b in zip(auto.field.tensors().values(), short_fit.field.tensors().values()))
 
 

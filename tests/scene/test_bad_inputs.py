@@ -74,6 +74,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--checkpoint-every 0\.0: expected a finite number of seconds > 0"),
     ("fit --checkpoint-every inf", "fit {capture} -o {new_n2r} --checkpoint-every inf",
      r"--checkpoint-every inf"),
+    ("fit --appearance maybe", "fit {capture} -o {new_n2r} --appearance maybe",
+     r"argument --appearance: invalid choice: 'maybe'"),
     ("fit --eval-at 1m,,3m", "fit {capture} -o {new_n2r} --eval-at 1m,,3m", r"'' is not a duration"),
     ("fit --device tpu", "fit {capture} -o {new_n2r} --device tpu",
      r"device='tpu': expected 'auto', 'cpu' or 'cuda\[:N\]'"),
@@ -166,6 +168,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"odd_limits\.n2r: scene\.json report 'grid_limits': KeyError: 'wanted' \(not as n2r fit writes it\); n2r info"),
     ("info on a report whose detail holds text", "info {odd_detail}",
      r"odd_detail\.n2r: scene\.json report 'detail': ValueError: Unknown format code 'f'"),
+    ("info on a report whose exposure holds text", "info {odd_exposure}",
+     r"odd_exposure\.n2r: scene\.json report 'exposure': TypeError"),
     # -- n2r poses
     ("poses of a missing source", "poses {tmp}/nowhere", r"SOURCE .*nowhere: does not exist"),
     ("poses over the capture's transforms.json", "poses {capture} -o {capture}/transforms.json",
@@ -264,13 +268,15 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     with zipfile.ZipFile(tmp / "plain.n2r", "w") as archive:
         archive.writestr("readme.txt", "no scene here")
     for name, report in (("odd_limits", {"grid_limits": [{"step": 21}]}),
-                         ("odd_detail", {"detail": {"pixels_per_voxel": "fine", "matching_resolution": 1}})):
+                         ("odd_detail", {"detail": {"pixels_per_voxel": "fine", "matching_resolution": 1}}),
+                         ("odd_exposure", {"exposure": "varied"})):
         save_scene(tmp / f"{name}.n2r", random_field(), FieldConfig(), tiny_views(), report, reference_length=3.0)
     return {"tmp": str(tmp), "scene": str(scene), "capture": str(capture), "notes_txt": str(tmp / "notes.txt"),
             "fake_n2r": str(tmp / "fake.n2r"), "fake_png": str(tmp / "fake.png"), "new_n2r": str(tmp / "new.n2r"),
             "new_png": str(tmp / "new.png"), "other_json": str(tmp / "other.json"),
             "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r"),
-            "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r")}
+            "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r"),
+            "odd_exposure": str(tmp / "odd_exposure.n2r")}
 
 
 def _argv(template: str, workspace: dict[str, str]) -> list[str]:
