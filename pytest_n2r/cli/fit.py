@@ -182,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
 
     from .. import fit as fitting
     from ..data import ingest
-    from ..fit.appearance import measured_appearance
+    from ..fit.appearance import decide_appearance
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..fit.detail import DETAIL_STAGE_AT
     from ..scene.file import read_scene_file, save_scene
@@ -223,10 +223,8 @@ def run(args: argparse.Namespace) -> int:
                      f"{config.max_pixels_per_voxel:g} of the photos' pixels, not {was}: it fits better from a "
                      f"{FINE_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
                      f"--config max_pixels_per_voxel={was} keeps {was}")
-    appearance = APPEARANCE[args.appearance]
-    exposure = measured_appearance(capture) if appearance == "auto" else None
+    appearance, exposure = decide_appearance(capture, APPEARANCE[args.appearance])
     if exposure is not None:
-        appearance = exposure["appearance"]
         lines.append(format_exposure(exposure))
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2),

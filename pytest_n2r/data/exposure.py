@@ -163,17 +163,17 @@ def measure_exposure(views: Sequence[CapturedView], *, patch_px: float = 3.0, ne
     cameras = [v.camera.fit_within(max_side) for v in views]
     images = [v.image if c is v.camera else resize_image(v.image, c.width, c.height) for v, c in zip(views, cameras)]
     found = matched_pairs(images, cameras, [v.c2w for v in views], neighbours=neighbours, min_angle_deg=0.0)
-    wanted: dict[int, list[np.ndarray]] = {}  # photo -> the positions read in it, pair by pair
-    for m in found:
-        wanted.setdefault(m.i, []).append(m.ui)
-        wanted.setdefault(m.j, []).append(m.uj)
-    colours: dict[int, list[np.ndarray]] = {}
-    for k, positions in wanted.items():  # one smoothed photo at a time: memory does not grow with the capture
+    read: list[list[np.ndarray]] = [[np.empty(0), np.empty(0)] for _ in found]  # pair -> colours in i, in j
+    by_photo: dict[int, list[tuple[int, int, np.ndarray]]] = {}
+    for p, m in enumerate(found):
+        by_photo.setdefault(m.i, []).append((p, 0, m.ui))
+        by_photo.setdefault(m.j, []).append((p, 1, m.uj))
+    for k, wanted in by_photo.items():  # one smoothed photo at a time: memory does not grow with the capture
         smooth = cv2.GaussianBlur(images[k].astype(np.float32), (0, 0), patch_px)
-        colours[k] = [_read(smooth, uv) for uv in positions]
+        for p, side, uv in wanted:
+            read[p][side] = _read(smooth, uv)
     pairs, ratios, reads = [], [], 0
-    for m in found:
-        ci, cj = colours[m.i].pop(0), colours[m.j].pop(0)
+    for m, (ci, cj) in zip(found, read):
         ok = np.all((ci > DARKEST) & (ci < BRIGHTEST) & (cj > DARKEST) & (cj < BRIGHTEST), axis=1)
         if ok.sum() < MIN_READS:
             continue
