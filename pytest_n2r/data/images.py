@@ -3,17 +3,22 @@
 Convention
 ----------
 Every image leaves this module as an ``H x W x 3`` ``uint8`` array in **RGB** order (OpenCV reads BGR;
-the conversion happens here and nowhere else). EXIF orientation is applied, so the array is upright
-as a person would view the photo. Grayscale is repeated to three channels, an alpha channel is
+the conversion happens here and nowhere else). The photo's orientation is applied, so the array is upright
+as a person would view the photo: the EXIF orientation tag of a JPEG (or PNG, TIFF, WebP); for a HEIF photo
+(``.heic``, what iPhones store by default), the container's own rotation and mirror (``irot``, ``imir``), as the
+HEIF standard and libheif do, since there an EXIF tag only describes them. A file is read as HEIF by its
+content (an ISO media ``ftyp`` box), not by its name. Grayscale is repeated to three channels, an alpha channel is
 dropped (the colour under it is kept), 16-bit images are scaled by ``255 / 65535`` and floating-point
 images are clipped to ``[0, 1]`` then scaled by 255.
 """
 
 from __future__ import annotations
 
+import io
 import os
 import warnings
 from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +28,12 @@ from ..errors import IngestError
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
            "iter_readable"]
 
+#: File suffixes of HEIF photos (``.hif``: some cameras' name for the same format), decoded by pillow-heif.
+HEIF_SUFFIXES: tuple[str, ...] = (".heic", ".heif", ".hif")
 #: File suffixes treated as images when a folder is listed (compared lower-case).
-IMAGE_SUFFIXES: tuple[str, ...] = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm")
+IMAGE_SUFFIXES: tuple[str, ...] = (
+    ".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm", *HEIF_SUFFIXES,
+)
 
 
 def list_images(folder: str | os.PathLike) -> list[Path]:
@@ -90,6 +99,8 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     if not path.is_file():
         raise IngestError(f"image file {str(path)!r} does not exist")
     data = np.fromfile(path, dtype=np.uint8)
+    if _is_iso_media(data[:12].tobytes()):
+        return to_rgb8(_decode_heif(path, data.tobytes()), bgr=False)
     # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation.
     img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if img is None:
@@ -98,10 +109,17 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
 
 
 def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
-    """``(width, height)`` of an upright image without decoding its pixels when possible (EXIF applied)."""
+    """``(width, height)`` of an upright image without decoding its pixels when possible (orientation applied)."""
     from PIL import Image, UnidentifiedImageError
 
     path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(12)
+    except OSError:
+        head = b""  # read_image below names the file
+    if _is_iso_media(head):
+        return _heif_size(path)
     try:
         with Image.open(path) as im:
             width, height = im.size
@@ -110,6 +128,41 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         height, width = read_image(path).shape[:2]
         return width, height
     return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+
+
+def _is_iso_media(head: bytes) -> bool:
+    """Whether a file's first 12 bytes open an ISO base media file (its ``ftyp`` box), as HEIF photos do."""
+    return head[4:8] == b"ftyp"
+
+
+@contextmanager
+def _heif_errors(path: Path) -> Iterator[None]:
+    """Turn pillow-heif's errors on a corrupt or truncated file into an :class:`IngestError` naming it."""
+    try:
+        yield
+    except (ValueError, RuntimeError, OSError) as exc:
+        raise IngestError(
+            f"image file {str(path)!r} cannot be decoded as a HEIF photo (corrupt, truncated or not a photo): {exc}"
+        ) from exc
+
+
+def _decode_heif(path: Path, data: bytes) -> np.ndarray:
+    """The HEIF photo held in ``data`` (read from ``path``), upright: libheif applies ``irot`` / ``imir``.
+
+    HDR (10- and 12-bit) photos are converted to 8 bits by libheif.
+    """
+    import pillow_heif
+
+    with _heif_errors(path):
+        return np.asarray(pillow_heif.open_heif(io.BytesIO(data), convert_hdr_to_8bit=True))
+
+
+def _heif_size(path: Path) -> tuple[int, int]:
+    """Upright ``(width, height)`` of the HEIF photo at ``path``, read from its container without decoding."""
+    import pillow_heif
+
+    with _heif_errors(path):
+        return pillow_heif.open_heif(path).size
 
 
 def resize_image(image: np.ndarray, width: int, height: int) -> np.ndarray:

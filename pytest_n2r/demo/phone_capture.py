@@ -1,16 +1,16 @@
-"""A demo scene photographed the way a phone does it: a folder of JPEG photos to ingest like a real capture.
+"""A demo scene photographed the way a phone does it: a folder of photos to ingest like a real capture.
 
 What a phone capture does that :mod:`.rendered_capture` does not, each drawn per photo from a seeded
 generator (:class:`PhoneSettings`):
 
 - **orientation**: every ``portrait_every``-th photo is taken in portrait (the camera rolled 90° about its
   optical axis, the sensor's width and height swapped); of those, every other one is stored as the phone
-  stores it, landscape pixels with the EXIF orientation tag 6 ("rotate 90° clockwise to view"), the others
-  already upright;
+  stores it, landscape pixels with the EXIF orientation tag 6 ("rotate 90° clockwise to view"; in a HEIC,
+  the container's rotation box ``irot`` as well, as an iPhone writes it), the others already upright;
 - **exposure and white balance**: a gain of ``2 ** u`` stops, ``u`` uniform in ``±exposure_stops``, and a
   per-channel gain uniform in ``1 ± white_balance``, applied to linear light (sRGB decoded with gamma 2.2);
 - **slight blur**: a Gaussian of sigma uniform in ``[0, blur_px]`` pixels (hand shake, focus);
-- **JPEG** at ``jpeg_quality``.
+- **JPEG**, or **HEIC** as iPhones store photos (``file_format``), at ``jpeg_quality``.
 
 The ground truth of every photo (its camera-to-world pose, OpenCV axes, world frame of the demo scene; its
 upright camera; the drawn degradations) is returned with the folder, so a test can align what structure from
@@ -35,11 +35,14 @@ __all__ = ["PhonePhoto", "PhoneSettings", "portrait_pose", "write_phone_capture"
 #: EXIF tag number of the orientation, and the value meaning "rotate 90° clockwise to view".
 EXIF_ORIENTATION = 0x0112
 ROTATE_90_CW = 6
+#: The photo files a phone writes, by :attr:`PhoneSettings.file_format`: suffix and Pillow's format name.
+FILE_FORMATS = {"jpeg": (".jpg", "JPEG"), "heic": (".heic", "HEIF")}
 
 
 @dataclass(frozen=True)
 class PhoneSettings:
-    """How the phone photographs (see the module docstring); ``size`` is the longer side in pixels."""
+    """How the phone photographs (see the module docstring); ``size`` is the longer side in pixels;
+    ``jpeg_quality`` is the quality of either codec of :data:`FILE_FORMATS`."""
 
     size: int = 480
     portrait_every: int = 3
@@ -48,8 +51,12 @@ class PhoneSettings:
     blur_px: float = 0.8
     jpeg_quality: int = 90
     seed: int = 0
+    file_format: str = "jpeg"
 
     def __post_init__(self) -> None:
+        if self.file_format not in FILE_FORMATS:
+            raise InvalidArgument(
+                f"PhoneSettings.file_format={self.file_format!r}: expected one of {list(FILE_FORMATS)}")
         if not 1 <= self.jpeg_quality <= 100:
             raise InvalidArgument(f"PhoneSettings.jpeg_quality={self.jpeg_quality!r}: expected 1..100")
         for name in ("exposure_stops", "white_balance", "blur_px"):
@@ -108,19 +115,21 @@ def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float) -> np.n
 def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSettings = PhoneSettings(), *,
                         views: Sequence[int] | None = None, poses: bool = True) -> list[PhonePhoto]:
     """Photograph the exact demo scene ``name`` at its trajectory's poses (``views``: indices, default all)
-    into ``out_dir`` as ``photo_<index>.jpg`` files; return each photo's truth.
+    into ``out_dir`` as ``photo_<index>.jpg`` (or ``.heic``) files; return each photo's truth.
 
     With ``poses``, also write ``out_dir/transforms.json`` (nerfstudio; one camera per photo, as the photo
     is viewed upright; the demo trajectory's train / held-out split), so ``n2r fit out_dir`` fits it
     without structure from motion, in the demo scene's world frame. Without it, ``n2r fit`` runs
     structure from motion on the folder.
     """
+    import pillow_heif
     from PIL import Image
 
     from ..data.poses import SourceFrame
     from ..data.transforms_json import write_transforms_json
     from . import ground_truth
 
+    pillow_heif.register_heif_opener()  # Pillow's "HEIF" format; it writes the EXIF orientation as irot
     scene = ground_truth(name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -140,7 +149,8 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
         wb = rng.uniform(1 - settings.white_balance, 1 + settings.white_balance, 3)
         sigma = float(rng.uniform(0.0, settings.blur_px))
         upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma)
-        path = out / f"photo_{index:03d}.jpg"
+        suffix, codec = FILE_FORMATS[settings.file_format]
+        path = out / f"photo_{index:03d}{suffix}"
         exif = Image.Exif()
         if exif_rotated:  # the phone keeps the sensor's landscape pixels and says how to turn them
             exif[EXIF_ORIENTATION] = ROTATE_90_CW
@@ -148,8 +158,8 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
         else:
             stored = upright
         tmp = path.with_suffix(".tmp")
-        Image.fromarray(np.ascontiguousarray(stored)).save(tmp, format="JPEG", quality=settings.jpeg_quality,
-                                                           exif=exif)
+        Image.fromarray(np.ascontiguousarray(stored)).save(tmp, format=codec, quality=settings.jpeg_quality,
+                                                           exif=exif.tobytes())
         os.replace(tmp, path)
         photos.append(PhonePhoto(path, camera, c2w, portrait, exif_rotated, gain,
                                  (float(wb[0]), float(wb[1]), float(wb[2])), sigma))
