@@ -3,10 +3,12 @@
 What a phone capture does that :mod:`.rendered_capture` does not, each drawn per photo from a seeded
 generator (:class:`PhoneSettings`):
 
-- **orientation**: every ``portrait_every``-th photo is taken in portrait (the camera rolled 90° about its
-  optical axis, the sensor's width and height swapped); of those, every other one is stored as the phone
-  stores it, landscape pixels with the EXIF orientation tag 6 ("rotate 90° clockwise to view"; in a HEIC,
-  the container's rotation box ``irot`` as well, as an iPhone writes it), the others already upright;
+- **orientation**: every ``portrait_every``-th photo is taken in portrait: the phone rolled 90° about its optical
+  axis, so the photo, viewed upright, is taller than wide and the world's up is still at its top (the same pose,
+  the sensor's width and height swapped). Of those, every other one is stored as the phone stores it: the
+  sensor's landscape pixels, which show the world on its side, with the EXIF orientation tag 6 ("rotate 90°
+  clockwise to view"; in a HEIC, the container's rotation box ``irot`` as well, as an iPhone writes it); the
+  others are stored upright;
 - **exposure and white balance**: a gain of ``2 ** u`` stops, ``u`` uniform in ``±exposure_stops``, and a
   per-channel gain uniform in ``1 ± white_balance``, applied to linear light (sRGB decoded with gamma 2.2);
 - **slight blur**: a Gaussian of sigma uniform in ``[0, blur_px]`` pixels (hand shake, focus);
@@ -30,7 +32,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera
 from .rendered_capture import check_size
 
-__all__ = ["PhonePhoto", "PhoneSettings", "portrait_pose", "write_phone_capture"]
+__all__ = ["PhonePhoto", "PhoneSettings", "write_phone_capture"]
 
 #: EXIF tag number of the orientation, and the value meaning "rotate 90° clockwise to view".
 EXIF_ORIENTATION = 0x0112
@@ -70,8 +72,8 @@ class PhoneSettings:
 
 @dataclass(frozen=True)
 class PhonePhoto:
-    """One photo of a phone capture and its truth: the file, the upright camera and camera-to-world pose
-    (OpenCV axes, the demo scene's world frame), whether it was taken in portrait and stored with an EXIF
+    """One photo of a phone capture and its truth: the file, the camera and camera-to-world pose of the photo
+    viewed upright (OpenCV axes, the demo scene's world frame), whether it was taken in portrait and stored with an EXIF
     rotation, and the drawn exposure gain, white-balance gains (R, G, B) and blur sigma (pixels)."""
 
     path: Path
@@ -84,21 +86,9 @@ class PhonePhoto:
     blur_px: float
 
 
-def portrait_pose(c2w: np.ndarray) -> np.ndarray:
-    """The pose of a camera rolled 90° about its optical axis so its image x axis points where the landscape
-    camera's "up" (−y) pointed: a phone turned to portrait.
-
-    >>> p = portrait_pose(np.eye(4))
-    >>> p[:3, 0].tolist(), p[:3, 1].tolist(), p[:3, 2].tolist()
-    ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
-    """
-    out = np.array(c2w, dtype=np.float64, copy=True)
-    out[:3, 0], out[:3, 1] = -c2w[:3, 1], c2w[:3, 0]
-    return out
-
-
 def _portrait_camera(camera: Camera) -> Camera:
-    """The landscape ``camera`` turned to portrait: width and height swapped, square pixels kept."""
+    """The upright camera of the landscape ``camera``'s sensor turned to portrait: width and height swapped, the
+    principal point turned with the sensor (90° clockwise, as the photo is viewed), square pixels kept."""
     return Camera(camera.height, camera.width, camera.fy, camera.fx, camera.height - 1 - camera.cy, camera.cx)
 
 
@@ -143,7 +133,7 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
         camera = check_size(settings.size, view.camera)
         portrait = settings.portrait_every > 0 and k % settings.portrait_every == settings.portrait_every - 1
         exif_rotated = portrait and (k // settings.portrait_every) % 2 == 0
-        c2w = portrait_pose(view.c2w) if portrait else view.c2w.copy()
+        c2w = view.c2w.copy()  # viewed upright, a portrait photo keeps the landscape one's pose
         camera = _portrait_camera(camera) if portrait else camera
         gain = float(2.0 ** rng.uniform(-settings.exposure_stops, settings.exposure_stops))
         wb = rng.uniform(1 - settings.white_balance, 1 + settings.white_balance, 3)

@@ -57,9 +57,10 @@ def _folder_of(tmp_path, sizes):
 
 @pytest.mark.slow
 def test_a_phone_capture_mixing_portrait_and_landscape_gets_one_camera_per_orientation(tmp_path):
-    """Every third photo taken in portrait (the camera rolled 90°), half of those stored as phones store them
-    (landscape pixels + EXIF orientation 6), JPEG: all register, each with its upright camera."""
-    from pytest_n2r.demo.phone_capture import ROTATE_90_CW, portrait_pose
+    """Every third photo taken in portrait (the phone rolled 90°: viewed upright, the same pose with width and
+    height swapped), half of those stored as phones store them (the sensor's landscape pixels + EXIF orientation
+    6), JPEG: all register, each with its upright camera."""
+    from pytest_n2r.demo.phone_capture import ROTATE_90_CW
 
     from .synthetic import orbit_poses, render, texture
 
@@ -71,7 +72,7 @@ def test_a_phone_capture_mixing_portrait_and_landscape_gets_one_camera_per_orien
     truth = {}
     for k, c2w in enumerate(orbit_poses(10)):
         turned = k % 3 == 2
-        camera, pose = (portrait, portrait_pose(c2w)) if turned else (landscape, c2w)
+        camera, pose = (portrait if turned else landscape), c2w
         rgb, _ = render(camera, pose, textures)
         exif = Image.Exif()
         if turned and k % 2 == 0:
