@@ -1,6 +1,6 @@
 """How wrong poses show in a capture, on phone-style captures of the exact demo scenes (whose true poses are known).
 
-Run: ``python benchmarks/capture_poses.py sfm [--scenes wall object] [--size 320] [--matcher auto]`` or
+Run: ``python benchmarks/capture_poses.py sfm [--scenes wall object] [--size 320] [--matcher auto] [--runs 1]`` or
 ``python benchmarks/capture_poses.py perturb [--scene wall] [--size 160] [--steps 400] [--degrees 1 3 10]``
 
 ``sfm``: structure from motion (:func:`pytest_n2r.data.sfm.run_sfm`, the call ``n2r fit photos/`` makes) on the
@@ -10,7 +10,10 @@ the true poses. A reconstruction is right up to a similarity of the world, so ea
 5° of the one most photos agree with are *consistent*. Rotation errors are against the mean of the consistent
 photos' rotations; centre errors (% of the trajectory's extent) after the best similarity of the consistent
 photos' centres (Umeyama); both for the consistent photos and, apart, for the others. Printed with the photos
-registered, the models and the focal length found against the true one.
+registered, the models and the focal length found against the true one, and the up check
+(:mod:`pytest_n2r.data.upright`) on every registered photo: how many it finds upside down, how many of those the
+truth calls inconsistent, the others' largest angle from their consensus, and what ``n2r fit`` then does (keeps
+all, drops the upside-down photos, or refuses the reconstruction).
 
 ``perturb``: the capture written with its true poses, fitted (:data:`CONFIG`, ``--steps``) after
 the poses of some training photos were turned about their camera's vertical axis by ``--degrees``; printed:
@@ -35,6 +38,7 @@ from pytest_n2r.data.atomic import atomic_write_text
 from pytest_n2r.data.compare import compare_poses
 from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.data.sfm import MATCHERS, run_sfm
+from pytest_n2r.data.upright import UPSIDE_DOWN_SHARE
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.errors import IngestError, InvalidArgument
 from pytest_n2r.field.config import FieldConfig
@@ -67,7 +71,8 @@ def score_poses(estimated: dict[str, np.ndarray], truth: dict[str, np.ndarray]) 
     consensus = _mean_rotation([world[j] for j in consistent])
     others = [rotation_angle_deg(consensus, world[j]) for j in range(len(names)) if j not in consistent]
     row = {"consistent": len(consistent), "others_rotation_deg": float(np.median(others)) if others else None,
-           "rotation_deg": None, "centre_pct": None}
+           "rotation_deg": None, "centre_pct": None,
+           "inconsistent": [names[j] for j in range(len(names)) if j not in consistent]}
     if len(consistent) >= 3:  # fewer cannot be aligned
 
         def pose_set(poses: dict[str, np.ndarray]) -> PoseSet:
@@ -85,15 +90,21 @@ def sfm_row(name: str, size: int, matcher: str, folder: Path) -> dict:
     row = {"scene": name, "size": size, "matcher": matcher, "photos": len(photos)}
     start = time.perf_counter()
     try:
-        poses = run_sfm(folder, matcher=matcher)
+        poses = run_sfm(folder, matcher=matcher, upright=False)  # every registered photo, to score the check
     except IngestError as error:
         return {**row, "error": str(error), "seconds": round(time.perf_counter() - start, 1)}
     truth = {p.path.name: p.c2w for p in photos}
     fx = {p.path.name: p.camera.fx for p in photos}
     focal = [f.camera.fx / fx[f.name] - 1.0 for f in poses.frames]
+    scored = score_poses({f.name: f.c2w for f in poses.frames}, truth)
+    upright = poses.report["upright"]
+    turned = set(upright["upside_down"])
+    default = ("refused" if len(turned) > UPSIDE_DOWN_SHARE * len(poses.frames)
+               else f"drops {len(turned)}" if turned else "keeps all")
     return {**row, "seconds": round(time.perf_counter() - start, 1), "registered": len(poses.frames),
-            "models": poses.report["models"], "focal_error_pct": float(np.max(np.abs(focal)) * 100.0),
-            **score_poses({f.name: f.c2w for f in poses.frames}, truth)}
+            "models": poses.report["models"], "focal_error_pct": float(np.max(np.abs(focal)) * 100.0), **scored,
+            "upside_down": len(turned), "upside_down_inconsistent": len(turned & set(scored["inconsistent"])),
+            "largest_upright_deg": upright["largest_upright_deg"], "default": default}
 
 
 def _turned(c2w: list[list[float]], degrees: float) -> list[list[float]]:
@@ -143,23 +154,25 @@ def run(args: argparse.Namespace) -> list[dict]:
             row = perturb_rows(args.scene, args.size, args.steps, args.degrees, Path(tmp) / "capture")
             print_perturb(row)
             return [row]
-        rows = [sfm_row(name, size, args.matcher, Path(tmp) / f"{name}-{size}")
-                for name in args.scenes for size in args.size]
+        rows = [sfm_row(name, size, args.matcher, Path(tmp) / f"{name}-{size}-{run}")
+                for name in args.scenes for size in args.size for run in range(args.runs)]
     print(f"structure from motion on phone-style demo captures (no poses given), matcher {args.matcher}; "
           f"consistent: world rotation within {CONSISTENT_DEG:g}° of the consensus\n")
     print("| scene | px | registered | models | consistent | their rotation error, median / max ° "
           "| their centre error, median / max % of the camera spread | the others' rotation error, median ° "
-          "| focal error, max % | s |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "| focal error, max % | upside down (of them not consistent) | the others' up, largest ° "
+          "| `n2r fit` | s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         if "error" in r:
-            print(f"| {r['scene']} | {r['size']} | 0 of {r['photos']} |" + " — |" * 6 + f" {r['seconds']} |"
+            print(f"| {r['scene']} | {r['size']} | 0 of {r['photos']} |" + " — |" * 9 + f" {r['seconds']} |"
                   f"\n\n{r['scene']}: {r['error']}\n")
             continue
         print(f"| {r['scene']} | {r['size']} | {r['registered']} of {r['photos']} | {r['models']} | "
               f"{r['consistent']} | {_pair(r['rotation_deg'])} | {_pair(r['centre_pct'])} | "
               + ("—" if r["others_rotation_deg"] is None else f"{r['others_rotation_deg']:.1f}")
-              + f" | {r['focal_error_pct']:.1f} | {r['seconds']} |")
+              + f" | {r['focal_error_pct']:.1f} | {r['upside_down']} ({r['upside_down_inconsistent']}) | "
+              f"{r['largest_upright_deg']:.1f} | {r['default']} | {r['seconds']} |")
     return rows
 
 
@@ -183,6 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     sfm.add_argument("--scenes", nargs="+", default=["wall", "object"], choices=["wall", "object"])
     sfm.add_argument("--size", type=int, nargs="+", default=[320], help="the photos' longer side, pixels")
     sfm.add_argument("--matcher", default="auto", choices=MATCHERS)
+    sfm.add_argument("--runs", type=int, default=1, help="structure from motion runs a capture (it is not "
+                     "deterministic on several threads)")
     turn = modes.add_parser("perturb", help="a fit with some photos' poses turned")
     turn.add_argument("--scene", default="wall", choices=["wall", "object"])
     turn.add_argument("--size", type=int, default=160)

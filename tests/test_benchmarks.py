@@ -215,6 +215,7 @@ def test_capture_poses_scores_a_reconstruction_up_to_a_similarity_and_sets_turne
     assert wrong["consistent"] == 8, f"four photos turned by 180° counted as consistent: {wrong}"
     assert wrong["rotation_deg"][1] < 1e-5 and wrong["centre_pct"][1] < 1e-5, f"the right eight scored: {wrong}"
     assert abs(wrong["others_rotation_deg"] - 180.0) < 1e-5, f"four photos turned by 180° scored: {wrong}"
+    assert wrong["inconsistent"] == ["p08", "p09", "p10", "p11"] and right["inconsistent"] == [], wrong
 
 
 class _Fitted(Exception):

@@ -189,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     from ._interrupt import first_ctrl_c_deferred, interrupted
     from ._output import SCENE, check_output
     from .info import format_exposure, format_info
-    from .poses import format_skipped
+    from .poses import format_skipped, format_upright
 
     check_arguments(args)
     time_budget = args.time_budget
@@ -207,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
     shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))
     lines = [(f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
               f"held out, {shown} ({ingest_s:.1f} s)"),
-             *format_skipped(capture.skipped)]
+             *format_skipped(capture.skipped), *format_upright(capture.report)]
     if config.sh_degree != given.sh_degree:
         lines.append(f"colour      SH degree {config.sh_degree}: it fits better than {given.sh_degree} from a "
                      f"{LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "

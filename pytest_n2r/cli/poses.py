@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 
     from ..data.poses import PoseSet
 
-__all__ = ["add_parser", "run", "format_summary", "format_skipped"]
+__all__ = ["add_parser", "run", "format_summary", "format_skipped", "format_upright"]
 
 _MAX_SKIPPED_SHOWN = 10
 
@@ -44,6 +44,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
     p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
                    help="for a video: where to write its frames (default: <video stem>_frames beside it)")
+    p.add_argument("--any-roll", action="store_true",
+                   help="the photos were not all taken upright (a camera that rolls, on a robot arm or a drone): "
+                        "keep the photos structure from motion registers upside down against the others, which "
+                        "are otherwise skipped as put half a turn wrong")
     p.add_argument("--compare", metavar="OTHER", default=None,
                    help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
                         "image by image after a similarity alignment")
@@ -60,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
         poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher,
-                           max_frames=args.max_frames, frames_dir=args.frames_dir)
+                           max_frames=args.max_frames, frames_dir=args.frames_dir, upright=not args.any_roll)
         complete_points(poses)
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
@@ -71,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             other = load_poses(args.compare, sfm_max_size=args.max_size, matcher=args.matcher,
-                               max_frames=args.max_frames)
+                               max_frames=args.max_frames, upright=not args.any_roll)
         print(f"compare     against {other.source} ({other.kind}): {compare_poses(poses, other).summary()}")
     if args.output is not None:
         extra = {"n2r": {"source": str(args.source), "reference_length": ref, "bounds": bounds.tolist(),
@@ -113,6 +117,14 @@ def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:
     return lines
 
 
+def format_upright(report: dict) -> list[str]:
+    """The line saying whether structure from motion's photos agree on which way is up (none for given poses)."""
+    from ..data.upright import upright_summary
+
+    record = report.get("upright")
+    return [f"upright     {upright_summary(record)}"] if record else []
+
+
 def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: float) -> str:
     """The plain-text summary ``n2r poses`` prints (``bounds`` and ``ref`` in scene units, time in seconds)."""
     frames = poses.frames
@@ -121,7 +133,7 @@ def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: floa
         f"source      {poses.source} ({poses.kind})",
         f"images      {listed} found, {len(frames)} registered, {len(poses.skipped)} skipped",
     ]
-    lines += format_skipped(poses.skipped)
+    lines += format_skipped(poses.skipped) + format_upright(poses.report)
     cameras = list(dict.fromkeys(f.camera for f in frames))
     lines.append(f"cameras     {len(cameras)} (OpenCV pixel centres; COLMAP/nerfstudio cx = cx + 0.5)")
     for cam in cameras[:3]:

@@ -66,7 +66,7 @@ def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
 
 def load_poses(
     source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto", max_frames: int = 120,
-    frames_dir: str | os.PathLike | None = None,
+    frames_dir: str | os.PathLike | None = None, upright: bool = True,
 ) -> PoseSet:
     """Read or compute the poses of a source (see :func:`source_kind`); no images are kept.
 
@@ -75,7 +75,8 @@ def load_poses(
     ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images; sequential
     for a video). A video is first cut into its ``max_frames`` sharpest frames, written to
     ``frames_dir`` (default ``<video stem>_frames`` beside it). Points of a transforms.json are not
-    triangulated here (see :func:`ingest`).
+    triangulated here (see :func:`ingest`). ``upright=False`` keeps the photos structure from motion registers
+    upside down against the others (photos not taken upright; :func:`~pytest_n2r.data.sfm.run_sfm`).
     """
     kind, path = source_kind(source)
     start = time.perf_counter()
@@ -90,14 +91,15 @@ def load_poses(
 
         frames = extract_frames(path, frames_dir, max_frames=max_frames)
         extracted = time.perf_counter() - start
-        poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher)
+        poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher,
+                        upright=upright)
         poses.kind = "video"
         poses.report["video"] = str(path)
         poses.report["time_s"] = {"frames": extracted, **poses.report["time_s"]}
     else:
         from .sfm import run_sfm
 
-        poses = run_sfm(path, max_size=sfm_max_size, matcher=matcher)
+        poses = run_sfm(path, max_size=sfm_max_size, matcher=matcher, upright=upright)
     if kind in ("transforms.json", "colmap"):  # SfM reports its own stages
         poses.report.setdefault("time_s", {})["poses"] = time.perf_counter() - start
     return poses
@@ -107,6 +109,7 @@ def ingest(
     source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
     load_images: bool = True, heldout_every: int | None = None, sfm_max_size: int = 960,
     matcher: str = "auto", max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
+    upright: bool = True,
 ) -> Capture:
     """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
 
@@ -125,7 +128,7 @@ def ingest(
     heldout_every:
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
         ``None``: the source's own split where it has one (a transforms.json's ``val_filenames``), else 8.
-    sfm_max_size, matcher, max_frames, frames_dir:
+    sfm_max_size, matcher, max_frames, frames_dir, upright:
         Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
     Returns
@@ -150,7 +153,7 @@ def ingest(
         raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0 or None")
 
     poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
-                       frames_dir=frames_dir)
+                       frames_dir=frames_dir, upright=upright)
     images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
     frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]

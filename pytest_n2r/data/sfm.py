@@ -12,6 +12,11 @@ Pipeline
    video frames; each image with the next 10 and quadratically spaced ones).
 5. Incremental mapping; the model with the most registered images is kept; images it did not register
    are reported in ``skipped``.
+6. The registered photos' up axes are compared (:mod:`.upright`): a photo upside down against the others was put
+   half a turn wrong (symmetric or repeated structure) and is reported in ``skipped``; more than
+   :data:`~.upright.UPSIDE_DOWN_SHARE` of them upside down is an error, the reconstruction as a whole being
+   doubtful. ``report["upright"]`` holds the check. ``upright=False`` (photos not taken upright: a camera on a
+   robot arm or a drone that rolls) keeps every registered photo and only reports.
 
 Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
 coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
@@ -34,6 +39,7 @@ from ..geometry import invert_pose, orthonormalize
 from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
 from .images import iter_readable, list_images, resize_image
 from .poses import PoseSet, SourceFrame
+from .upright import UPSIDE_DOWN_SHARE, check_upright
 
 __all__ = ["run_sfm", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS"]
 
@@ -44,7 +50,7 @@ MATCHERS = ("auto", "exhaustive", "sequential")
 
 def run_sfm(
     images_dir: str | os.PathLike, *, max_size: int = 960, matcher: str = "auto", max_features: int = 2048,
-    num_threads: int = -1, seed: int = 0,
+    num_threads: int = -1, seed: int = 0, upright: bool = True,
 ) -> PoseSet:
     """Recover cameras, poses and sparse points of the photos in ``images_dir`` (see the module docstring).
 
@@ -153,13 +159,27 @@ def run_sfm(
             f"structure from motion on {str(images_dir)!r} registered only {len(frames)} of {len(names)} images; "
             "at least 3 are needed (more overlap between photos helps)"
         )
+    up_check = check_upright([f.name for f in frames], [f.c2w for f in frames])
+    turned = up_check.as_report()["upside_down"] if upright else {}
+    if len(turned) > UPSIDE_DOWN_SHARE * len(frames):
+        raise IngestError(
+            f"structure from motion on {str(images_dir)!r} registered {len(turned)} of {len(frames)} photos upside "
+            "down against the others: it has likely taken symmetric or repeated structure (a brick wall, an object's "
+            "two alike sides) for the same view, and its poses cannot be trusted; give the poses from elsewhere "
+            "(a transforms.json or a COLMAP model), or add photos that also see something asymmetric; photos not "
+            "taken upright (a camera that rolls) are kept by `n2r poses --any-roll`"
+        )
+    frames = [f for f in frames if f.name not in turned]
+    skipped += [(name, (f"registered upside down against the other photos ({angle:.0f}° from their up): "
+                        "structure from motion has likely put it half a turn wrong on symmetric or repeated structure"))
+                for name, angle in turned.items()]
     points = np.array([p.xyz for _, p in sorted(rec.points3D.items())], dtype=np.float64).reshape(-1, 3)
     registered_sizes = [full_size[image.name] for image in rec.images.values() if image.has_pose]
     cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
                for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
     report = {
         "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
-        "time_s": times, "points_method": "structure from motion",
+        "time_s": times, "points_method": "structure from motion", "upright": up_check.as_report(),
     }
     return PoseSet(frames=frames, points=points, source=str(images_dir), kind="images", skipped=skipped,
                    report=report)

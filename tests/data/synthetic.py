@@ -99,15 +99,20 @@ def orbit_poses(n: int, radius: float = 4.0, spread_deg: float = 50.0) -> list[n
     return poses
 
 
+#: A camera turned half a turn about its own viewing direction (right-multiplied onto a camera-to-world pose).
+HALF_TURN = np.diag([-1.0, -1.0, 1.0, 1.0])
+
+
 def make_capture(root: Path, n: int = 6, camera: Camera | None = None, seed: int = 0,
-                 suffix: str = ".png") -> SyntheticCapture:
-    """Render ``n`` views into ``root/images`` (file names ``view_000.png`` ...)."""
+                 suffix: str = ".png", upside_down: tuple[int, ...] = ()) -> SyntheticCapture:
+    """Render ``n`` views into ``root/images`` (file names ``view_000.png`` ...); the views numbered in
+    ``upside_down`` are taken with the camera held upside down (:data:`HALF_TURN`)."""
     camera = camera or Camera(160, 120, 150.0, 150.0, 79.5, 59.5)
     textures = [texture(seed + k) for k in range(3)]
     images_dir = root / "images"
     images_dir.mkdir(parents=True, exist_ok=True)
     names, depths = [], []
-    c2ws = orbit_poses(n)
+    c2ws = [c2w @ HALF_TURN if k in upside_down else c2w for k, c2w in enumerate(orbit_poses(n))]
     for k, c2w in enumerate(c2ws):
         rgb, depth = render(camera, c2w, textures)
         name = f"view_{k:03d}{suffix}"

@@ -5,11 +5,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from pytest_n2r.cli.main import main
 from pytest_n2r.data import read_transforms_json
 
-from .synthetic import write_transforms
+from .synthetic import make_capture, write_transforms
 
 
 def test_poses_prints_a_summary_and_writes_transforms_json(corner, tmp_path, capsys):
@@ -37,3 +38,14 @@ def test_poses_error_names_the_source(tmp_path, capsys):
     assert main(["poses", str(tmp_path / "missing")]) == 2
     err = capsys.readouterr().err
     assert "n2r poses: error:" in err and "missing" in err and "does not exist" in err
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("flags", "skipped"), [([], 1), (["--any-roll"], 0)])
+def test_poses_says_whether_the_photos_agree_on_up(tmp_path, capsys, flags, skipped):
+    cap = make_capture(tmp_path, n=10, upside_down=(4,))
+    assert main(["poses", str(cap.images_dir), "--matcher", "exhaustive", *flags]) == 0
+    text = capsys.readouterr().out
+    assert f"10 found, {10 - skipped} registered, {skipped} skipped" in text, text
+    assert ("skipped   view_004.png: registered upside down against the other photos" in text) == bool(skipped)
+    assert "upright     1 of 10 photos upside down against the others (view_004.png 1" in text, text

@@ -94,6 +94,28 @@ def test_a_phone_capture_mixing_portrait_and_landscape_gets_one_camera_per_orien
     assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"
 
 
+@pytest.mark.slow
+def test_a_photo_upside_down_against_the_others_is_skipped_unless_the_camera_rolls(tmp_path):
+    """One photo of ten taken with the camera turned half a turn about its viewing direction (the phone held upside
+    down): structure from motion registers it, rightly; against the others it is upside down, which on a capture
+    held upright means a half-turn error (symmetric structure), so it is skipped, and kept with ``upright=False``."""
+    cap = make_capture(tmp_path, n=10, camera=Camera(320, 240, 280.0, 280.0, 159.5, 119.5), upside_down=(4,))
+    truth = dict(zip(cap.names, cap.c2ws))
+    upright = run_sfm(cap.images_dir, matcher="exhaustive")
+    assert [f.name for f in upright.frames] == [n for n in cap.names if n != "view_004.png"], upright.skipped
+    [(name, reason)] = upright.skipped
+    assert name == "view_004.png" and reason.startswith("registered upside down against the other photos (1"), reason
+    record = upright.report["upright"]
+    assert list(record["upside_down"]) == ["view_004.png"] and record["upside_down"]["view_004.png"] > 150, record
+    assert record["photos"] == 10 and record["largest_upright_deg"] < 30, record
+
+    rolling = run_sfm(cap.images_dir, matcher="exhaustive", upright=False)
+    assert [f.name for f in rolling.frames] == cap.names and rolling.skipped == []
+    assert rolling.report["upright"] == record, "the check reports the same with or without dropping"
+    rot, centre = _errors(rolling.frames, truth)
+    assert rot < 0.5 and centre < 0.01, f"the turned photo's pose is right: rotation {rot:.3f} deg, centre {centre:.2%}"
+
+
 def test_too_few_readable_images(tmp_path):
     folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
     (folder / "2.png").write_bytes(b"broken")
