@@ -35,7 +35,7 @@ __all__ = ["UPSIDE_DOWN_DEG", "UPSIDE_DOWN_SHARE", "UprightCheck", "check_uprigh
 #: (``benchmarks/capture_poses.py sfm --size 320 480 960 --runs 2``, 6 December, and the fox): right photos lie
 #: within 31° (the fox, real, orbiting and looking down at its subject) and 36° (the demo captures, even where
 #: their reconstruction was poor); a photo looking straight down has its up on the horizon, 90°, whichever way the
-#: phone guessed its turn; every photo past the threshold was one the truth puts half a turn wrong (49 of 49).
+#: phone guessed its turn; every photo past the threshold was one the truth puts half a turn wrong (51 of 51).
 #: 120° leaves 30° of margin above a nadir photo.
 UPSIDE_DOWN_DEG = 120.0
 #: More than this share of the photos upside down and the reconstruction as a whole is doubtful, not a few photos
