@@ -3,7 +3,8 @@
 Runs what ``n2r poses ../shared/scenes/fox/images`` runs (pycolmap SfM on copies <= 960 px), aligns the
 recovered camera centres to the shipped ones with a similarity (Umeyama), and prints the registered
 count, the time per stage, the rotation error of every camera (degrees) and the camera-centre error as a
-percentage of the camera spread (RMS distance of the shipped centres from their mean).
+percentage of the camera spread (RMS distance of the shipped centres from their mean), and the up check
+(:mod:`pytest_n2r.data.upright`): photos upside down against the others, and the largest angle of the rest.
 
 Usage: ``nice -n 10 python benchmarks/sfm_fox.py [--max-size 960] [--matcher auto]``
 Targets (issue 2): all 50 registered, < 2 min, rotation error < 1 deg, centre error < 1 %.
@@ -25,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 from pytest_n2r.data.compare import compare_poses
 from pytest_n2r.data.sfm import run_sfm
 from pytest_n2r.data.transforms_json import read_transforms_json
+from pytest_n2r.data.upright import UPSIDE_DOWN_DEG
 
 FOX = ROOT.parent / "shared" / "scenes" / "fox"
 
@@ -63,6 +65,8 @@ def main() -> int:
         ("centre error median", f"{np.median(centre_err):.3f} %", ""),
         ("focal length (SfM / shipped)", f"{cam.fx:.1f} / {ref_cam.fx:.1f} px", ""),
         ("sparse points", f"{len(sfm.points)}", ""),
+        ("upside down (up check)", f"{len(sfm.report['upright']['upside_down'])}", "0"),
+        ("up: largest angle", f"{sfm.report['upright']['largest_upright_deg']:.1f} deg", f"< {UPSIDE_DOWN_DEG:g} deg"),
     ]
     width = max(len(r[0]) for r in rows)
     print(f"SfM on {FOX / 'images'} (max size {args.max_size} px) vs transforms.json, similarity-aligned")

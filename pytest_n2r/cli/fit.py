@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ._output import FORCE_HELP
+from .poses import ANY_ROLL_HELP
 
 if TYPE_CHECKING:
     from ..field.config import FieldConfig
@@ -118,6 +119,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "varies as a phone's does; renders keep the capture's average. auto (the default) measures "
                         "how much neighbouring photos' colours differ where they see the same points and fits the "
                         "gains above 5 %%; on always fits them, off never (see docs/scene-field.md)")
+    p.add_argument("--any-roll", action="store_true", help=ANY_ROLL_HELP)
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
@@ -201,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below
-        capture = ingest(args.source, downscale=1.0 / args.downscale)
+        capture = ingest(args.source, downscale=1.0 / args.downscale, upright=not args.any_roll)
     ingest_s = time.perf_counter() - start
     sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)
     shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))

@@ -15,9 +15,13 @@ if TYPE_CHECKING:
 
     from ..data.poses import PoseSet
 
-__all__ = ["add_parser", "run", "format_summary", "format_skipped", "format_upright"]
+__all__ = ["add_parser", "run", "format_summary", "format_skipped", "format_upright", "ANY_ROLL_HELP"]
 
 _MAX_SKIPPED_SHOWN = 10
+#: ``--any-roll``, shared by ``n2r poses`` and ``n2r fit``.
+ANY_ROLL_HELP = ("the photos were not all taken upright (looking straight down, or a camera that rolls, on a robot "
+                 "arm or a drone): keep the photos structure from motion registers upside down against the others, "
+                 "which are otherwise skipped as put half a turn wrong (see docs/ingestion.md)")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -44,10 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                    help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
     p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
                    help="for a video: where to write its frames (default: <video stem>_frames beside it)")
-    p.add_argument("--any-roll", action="store_true",
-                   help="the photos were not all taken upright (a camera that rolls, on a robot arm or a drone): "
-                        "keep the photos structure from motion registers upside down against the others, which "
-                        "are otherwise skipped as put half a turn wrong")
+    p.add_argument("--any-roll", action="store_true", help=ANY_ROLL_HELP)
     p.add_argument("--compare", metavar="OTHER", default=None,
                    help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
                         "image by image after a similarity alignment")

@@ -8,11 +8,12 @@ from .ingest import complete_points, extent, ingest, load_poses, source_kind
 from .poses import PoseSet, SourceFrame
 from .sfm import run_sfm
 from .transforms_json import read_transforms_json, write_transforms_json
+from .upright import UprightCheck, check_upright
 from .video import extract_frames
 
 __all__ = [
     "Capture", "CapturedView", "heldout_split", "ingest", "load_poses", "complete_points", "extent",
     "source_kind", "PoseSet", "SourceFrame", "read_transforms_json", "write_transforms_json",
     "read_colmap_model", "write_colmap_text", "run_sfm", "extract_frames", "compare_poses", "PoseComparison",
-    "measure_exposure", "ExposureSpread",
+    "measure_exposure", "ExposureSpread", "check_upright", "UprightCheck",
 ]

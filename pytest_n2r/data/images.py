@@ -4,7 +4,7 @@ Convention
 ----------
 Every image leaves this module as an ``H x W x 3`` ``uint8`` array in **RGB** order (OpenCV reads BGR;
 the conversion happens here and nowhere else). The photo's orientation is applied, so the array is upright
-as a person would view the photo: the EXIF orientation tag of a JPEG (or PNG, TIFF, WebP); for a HEIF photo
+as a person would view the photo: a JPEG's EXIF orientation tag (as OpenCV's decoder applies it); for a HEIF photo
 (``.heic``, what iPhones store by default), the container's own rotation and mirror (``irot``, ``imir``), as the
 HEIF standard and libheif do, since there an EXIF tag only describes them. A file is read as HEIF by its
 content (an ISO media ``ftyp`` box), not by its name. Grayscale is repeated to three channels, an alpha channel is
@@ -14,7 +14,6 @@ images are clipped to ``[0, 1]`` then scaled by 255.
 
 from __future__ import annotations
 
-import io
 import os
 import warnings
 from collections.abc import Iterator, Sequence
@@ -98,9 +97,9 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise IngestError(f"image file {str(path)!r} does not exist")
+    if _is_iso_media(_head(path)):
+        return to_rgb8(_decode_heif(path), bgr=False)
     data = np.fromfile(path, dtype=np.uint8)
-    if _is_iso_media(data[:12].tobytes()):
-        return to_rgb8(_decode_heif(path, data.tobytes()), bgr=False)
     # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation.
     img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if img is None:
@@ -113,12 +112,7 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
     from PIL import Image, UnidentifiedImageError
 
     path = Path(path)
-    try:
-        with open(path, "rb") as f:
-            head = f.read(12)
-    except OSError:
-        head = b""  # read_image below names the file
-    if _is_iso_media(head):
+    if _is_iso_media(_head(path)):
         return _heif_size(path)
     try:
         with Image.open(path) as im:
@@ -128,6 +122,15 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         height, width = read_image(path).shape[:2]
         return width, height
     return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+
+
+def _head(path: Path) -> bytes:
+    """The first 12 bytes of the file at ``path`` (fewer when it is shorter; none when it cannot be read)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(12)
+    except OSError:
+        return b""  # the decoder that follows names the file
 
 
 def _is_iso_media(head: bytes) -> bool:
@@ -140,21 +143,24 @@ def _heif_errors(path: Path) -> Iterator[None]:
     """Turn pillow-heif's errors on a corrupt or truncated file into an :class:`IngestError` naming it."""
     try:
         yield
-    except (ValueError, RuntimeError, OSError) as exc:
+    # what pillow-heif raises on bad input (its own Pillow plugin catches the same): libheif's errors as ValueError,
+    # RuntimeError, EOFError (truncated) or SyntaxError (an unsupported file type, an AV1 payload); IndexError when
+    # the container holds no image
+    except (ValueError, RuntimeError, OSError, EOFError, SyntaxError, IndexError) as exc:
         raise IngestError(
             f"image file {str(path)!r} cannot be decoded as a HEIF photo (corrupt, truncated or not a photo): {exc}"
         ) from exc
 
 
-def _decode_heif(path: Path, data: bytes) -> np.ndarray:
-    """The HEIF photo held in ``data`` (read from ``path``), upright: libheif applies ``irot`` / ``imir``.
+def _decode_heif(path: Path) -> np.ndarray:
+    """The HEIF photo at ``path``, upright (libheif applies ``irot`` / ``imir``), in an array of its own.
 
-    HDR (10- and 12-bit) photos are converted to 8 bits by libheif.
+    libheif converts HDR (10- and 12-bit) colour photos to 8 bits; a 16-bit result is scaled by :func:`to_rgb8`.
     """
     import pillow_heif
 
     with _heif_errors(path):
-        return np.asarray(pillow_heif.open_heif(io.BytesIO(data), convert_hdr_to_8bit=True))
+        return np.array(pillow_heif.open_heif(path, convert_hdr_to_8bit=True))  # a copy: pillow-heif's is read-only
 
 
 def _heif_size(path: Path) -> tuple[int, int]:

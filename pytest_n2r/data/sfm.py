@@ -15,8 +15,9 @@ Pipeline
 6. The registered photos' up axes are compared (:mod:`.upright`): a photo upside down against the others was put
    half a turn wrong (symmetric or repeated structure) and is reported in ``skipped``; more than
    :data:`~.upright.UPSIDE_DOWN_SHARE` of them upside down is an error, the reconstruction as a whole being
-   doubtful. ``report["upright"]`` holds the check. ``upright=False`` (photos not taken upright: a camera on a
-   robot arm or a drone that rolls) keeps every registered photo and only reports.
+   doubtful. ``report["upright"]`` holds the check (``dropped``: whether photos were skipped for it).
+   ``upright=False`` (photos not all taken upright: looking straight down, or a camera on a robot arm or a drone
+   that rolls) keeps every registered photo and only reports. Sparse points seen by a skipped photo are kept.
 
 Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
 coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
@@ -39,7 +40,7 @@ from ..geometry import invert_pose, orthonormalize
 from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
 from .images import iter_readable, list_images, resize_image
 from .poses import PoseSet, SourceFrame
-from .upright import UPSIDE_DOWN_SHARE, check_upright
+from .upright import check_upright
 
 __all__ = ["run_sfm", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS"]
 
@@ -66,6 +67,8 @@ def run_sfm(
         raise IngestError(f"matcher={matcher!r} is not one of {MATCHERS}")
     if isinstance(max_size, bool) or not isinstance(max_size, int) or max_size < 64:
         raise IngestError(f"max_size={max_size!r} must be an int >= 64 (pixels)")
+    if not isinstance(upright, bool):
+        raise IngestError(f"upright={upright!r} must be True (photos taken upright) or False (a camera that rolls)")
     images_dir = Path(images_dir)
     files = list_images(images_dir)
     times: dict[str, float] = {}
@@ -161,25 +164,27 @@ def run_sfm(
         )
     up_check = check_upright([f.name for f in frames], [f.c2w for f in frames])
     turned = up_check.as_report()["upside_down"] if upright else {}
-    if len(turned) > UPSIDE_DOWN_SHARE * len(frames):
+    if upright and up_check.doubtful:
         raise IngestError(
             f"structure from motion on {str(images_dir)!r} registered {len(turned)} of {len(frames)} photos upside "
             "down against the others: it has likely taken symmetric or repeated structure (a brick wall, an object's "
             "two alike sides) for the same view, and its poses cannot be trusted; give the poses from elsewhere "
-            "(a transforms.json or a COLMAP model), or add photos that also see something asymmetric; photos not "
-            "taken upright (a camera that rolls) are kept by `n2r poses --any-roll`"
+            "(a transforms.json or a COLMAP model), or add photos that also see something asymmetric. Photos not all "
+            "taken upright (looking straight down, or from a camera that rolls) are kept by --any-roll "
+            "(n2r fit, n2r poses) or upright=False"
         )
     frames = [f for f in frames if f.name not in turned]
     skipped += [(name, (f"registered upside down against the other photos ({angle:.0f}° from their up): "
                         "structure from motion has likely put it half a turn wrong on symmetric or repeated structure"))
                 for name, angle in turned.items()]
     points = np.array([p.xyz for _, p in sorted(rec.points3D.items())], dtype=np.float64).reshape(-1, 3)
-    registered_sizes = [full_size[image.name] for image in rec.images.values() if image.has_pose]
+    registered_sizes = [(f.camera.width, f.camera.height) for f in frames]
     cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
                for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
     report = {
         "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
-        "time_s": times, "points_method": "structure from motion", "upright": up_check.as_report(),
+        "time_s": times, "points_method": "structure from motion",
+        "upright": {**up_check.as_report(), "dropped": bool(turned)},
     }
     return PoseSet(frames=frames, points=points, source=str(images_dir), kind="images", skipped=skipped,
                    report=report)

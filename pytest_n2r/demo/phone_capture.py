@@ -112,14 +112,16 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
     without structure from motion, in the demo scene's world frame. Without it, ``n2r fit`` runs
     structure from motion on the folder.
     """
-    import pillow_heif
     from PIL import Image
 
     from ..data.poses import SourceFrame
     from ..data.transforms_json import write_transforms_json
     from . import ground_truth
 
-    pillow_heif.register_heif_opener()  # Pillow's "HEIF" format; it writes the EXIF orientation as irot
+    if settings.file_format == "heic":
+        import pillow_heif
+
+        pillow_heif.register_heif_opener()  # Pillow's "HEIF" format, which writes the EXIF orientation as irot
     scene = ground_truth(name)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -49,3 +49,14 @@ def test_poses_says_whether_the_photos_agree_on_up(tmp_path, capsys, flags, skip
     assert f"10 found, {10 - skipped} registered, {skipped} skipped" in text, text
     assert ("skipped   view_004.png: registered upside down against the other photos" in text) == bool(skipped)
     assert "upright     1 of 10 photos upside down against the others (view_004.png 1" in text, text
+
+
+@pytest.mark.slow
+def test_fit_keeps_a_camera_that_rolls_with_any_roll(tmp_path, capsys):
+    cap = make_capture(tmp_path, n=10, upside_down=(4,))
+    out = tmp_path / "corner.n2r"
+    assert main(["fit", str(cap.images_dir), "-o", str(out), "--any-roll", "--downscale", "1", "--max-steps", "5",
+                 "--config", "resolutions=16,24", "--config", "stage_fractions=0.5", "--appearance", "off"]) == 0
+    text = capsys.readouterr().err
+    assert "8 training views, 2 held out" in text, f"the turned photo was not kept:\n{text}"
+    assert "upright     1 of 10 photos upside down against the others" in text and "skipped" not in text, text

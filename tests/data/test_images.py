@@ -93,6 +93,27 @@ def test_a_truncated_heif_photo_names_the_file(tmp_path):
         read_image_size(tmp_path / "box.heic")
 
 
+@pytest.mark.parametrize("error", [ValueError, RuntimeError, OSError, EOFError, SyntaxError, IndexError])
+def test_every_error_pillow_heif_raises_names_the_file(tmp_path, monkeypatch, error):
+    _save_heic(_pattern(), tmp_path / "a.heic")
+
+    def fails(*args, **kwargs):
+        raise error("as libheif says it")
+
+    monkeypatch.setattr(pillow_heif, "open_heif", fails)
+    with pytest.raises(IngestError, match=r"a\.heic.*cannot be decoded as a HEIF photo.*as libheif says it"):
+        read_image(tmp_path / "a.heic")
+    with pytest.raises(IngestError, match=r"a\.heic.*cannot be decoded as a HEIF photo"):
+        read_image_size(tmp_path / "a.heic")
+
+
+def test_a_heif_photo_is_an_array_of_its_own(tmp_path):
+    _save_heic(_pattern(), tmp_path / "a.heic")
+    img = read_image(tmp_path / "a.heic")
+    assert img.flags.writeable, "the decoded photo is pillow-heif's read-only buffer"
+    img[0, 0] = 0  # as a caller may, on a JPEG's as well
+
+
 def test_gray_rgba_and_16_bit(tmp_path):
     Image.fromarray(np.full((5, 7), 77, np.uint8)).save(tmp_path / "g.png")
     assert read_image(tmp_path / "g.png").tolist() == np.full((5, 7, 3), 77).tolist()

@@ -107,11 +107,13 @@ def test_a_photo_upside_down_against_the_others_is_skipped_unless_the_camera_rol
     assert name == "view_004.png" and reason.startswith("registered upside down against the other photos (1"), reason
     record = upright.report["upright"]
     assert list(record["upside_down"]) == ["view_004.png"] and record["upside_down"]["view_004.png"] > 150, record
-    assert record["photos"] == 10 and record["largest_upright_deg"] < 30, record
+    assert record["photos"] == 10 and record["largest_upright_deg"] < 30 and record["dropped"], record
+    assert upright.report["cameras"] == [{"width": 320, "height": 240, "photos": 10, "registered": 9}]
 
     rolling = run_sfm(cap.images_dir, matcher="exhaustive", upright=False)
     assert [f.name for f in rolling.frames] == cap.names and rolling.skipped == []
-    assert rolling.report["upright"] == record, "the check reports the same with or without dropping"
+    kept = rolling.report["upright"]  # structure from motion runs on several threads: angles move a little
+    assert kept["upside_down"].keys() == record["upside_down"].keys() and not kept["dropped"], kept
     rot, centre = _errors(rolling.frames, truth)
     assert rot < 0.5 and centre < 0.01, f"the turned photo's pose is right: rotation {rot:.3f} deg, centre {centre:.2%}"
 
