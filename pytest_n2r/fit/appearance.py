@@ -66,7 +66,10 @@ def needs_appearance(exposure: ExposureSpread) -> bool:
     wall with the 48³ first grid of the time, +1.46 dB on the object with today's 32³). The fox, a handheld video
     whose colour drifts along the path (spread 0.15), jumps 0.019; there the correction cost 0.49 dB on the
     validation views (4 December): its fit keeps most of a drift in the view-dependent colour, which follows a
-    drift but not a jump.
+    drift but not a jump. Those phone captures had their portrait photos on their side (the generator then rolled
+    the camera); with them upright (18:26 UTC) the jumps are 0.003-0.005, 0.011-0.013, 0.026-0.033 and 0.073-0.099,
+    and at ±0.5 stops the correction gained +0.29 dB held out on the wall, +2.02 dB on the object: the threshold
+    still falls between the wash and the gain.
     """
     jump = exposure.jump
     return jump is not None and jump > APPEARANCE_JUMP
