@@ -17,7 +17,8 @@ Pipeline
    :data:`~.upright.UPSIDE_DOWN_SHARE` of them upside down is an error, the reconstruction as a whole being
    doubtful. ``report["upright"]`` holds the check (``dropped``: whether photos were skipped for it).
    ``upright=False`` (photos not all taken upright: looking straight down, or a camera on a robot arm or a drone
-   that rolls) keeps every registered photo and only reports. Sparse points seen by a skipped photo are kept.
+   that rolls) keeps every registered photo and only reports. The sparse points kept are those at least two of the
+   kept photos see.
 
 Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
 coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
@@ -177,7 +178,10 @@ def run_sfm(
     skipped += [(name, (f"registered upside down against the other photos ({angle:.0f}° from their up): "
                         "structure from motion has likely put it half a turn wrong on symmetric or repeated structure"))
                 for name, angle in turned.items()]
-    points = np.array([p.xyz for _, p in sorted(rec.points3D.items())], dtype=np.float64).reshape(-1, 3)
+    # the points at least two kept photos see (all of them, unless photos were skipped as upside down)
+    kept = {image_id for image_id, image in rec.images.items() if names[image.name].name not in turned}
+    points = np.array([p.xyz for _, p in sorted(rec.points3D.items())
+                       if sum(el.image_id in kept for el in p.track.elements) >= 2], dtype=np.float64).reshape(-1, 3)
     registered_sizes = [(f.camera.width, f.camera.height) for f in frames]
     cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
                for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
