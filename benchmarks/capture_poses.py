@@ -38,7 +38,6 @@ from pytest_n2r.data.atomic import atomic_write_text
 from pytest_n2r.data.compare import compare_poses
 from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.data.sfm import MATCHERS, run_sfm
-from pytest_n2r.data.upright import UPSIDE_DOWN_SHARE
 from pytest_n2r.demo.phone_capture import PhoneSettings, write_phone_capture
 from pytest_n2r.errors import IngestError, InvalidArgument
 from pytest_n2r.field.config import FieldConfig
@@ -99,8 +98,7 @@ def sfm_row(name: str, size: int, matcher: str, folder: Path) -> dict:
     scored = score_poses({f.name: f.c2w for f in poses.frames}, truth)
     upright = poses.report["upright"]
     turned = set(upright["upside_down"])
-    default = ("refused" if len(turned) > UPSIDE_DOWN_SHARE * len(poses.frames)
-               else f"drops {len(turned)}" if turned else "keeps all")
+    default = "refused" if upright["doubtful"] else f"drops {len(turned)}" if turned else "keeps all"
     return {**row, "seconds": round(time.perf_counter() - start, 1), "registered": len(poses.frames),
             "models": poses.report["models"], "focal_error_pct": float(np.max(np.abs(focal)) * 100.0), **scored,
             "upside_down": len(turned), "upside_down_inconsistent": len(turned & set(scored["inconsistent"])),

@@ -99,7 +99,10 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         raise IngestError(f"image file {str(path)!r} does not exist")
     if _is_iso_media(_head(path)):
         return to_rgb8(_decode_heif(path), bgr=False)
-    data = np.fromfile(path, dtype=np.uint8)
+    try:
+        data = np.fromfile(path, dtype=np.uint8)
+    except OSError as exc:  # no permission, a device gone
+        raise IngestError(f"image file {str(path)!r} cannot be read: {exc.strerror or exc}") from exc
     # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation.
     img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
     if img is None:

@@ -22,7 +22,7 @@ Pipeline
 
 Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
 coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
-cameras: upright size, number of photos, and how many of them registered.
+cameras: upright size, number of photos, and how many of them registered and were kept (step 6).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import IngestError
+from ..errors import IngestError, InvalidType
 from ..geometry import invert_pose, orthonormalize
 from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
 from .images import iter_readable, list_images, resize_image
@@ -69,7 +69,7 @@ def run_sfm(
     if isinstance(max_size, bool) or not isinstance(max_size, int) or max_size < 64:
         raise IngestError(f"max_size={max_size!r} must be an int >= 64 (pixels)")
     if not isinstance(upright, bool):
-        raise IngestError(f"upright={upright!r} must be True (photos taken upright) or False (a camera that rolls)")
+        raise InvalidType(f"upright={upright!r} must be True (photos taken upright) or False (a camera that rolls)")
     images_dir = Path(images_dir)
     files = list_images(images_dir)
     times: dict[str, float] = {}

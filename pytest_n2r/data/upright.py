@@ -4,17 +4,18 @@ half a turn wrong.
 A photo read upright (its orientation applied, :mod:`.images`) shows the world's up at its top, within the tilt of
 a hand: people hold a phone upright, and the phone records how it was turned. So in a right reconstruction the
 photos' up axes, carried into the world by their poses, point nearly the same way, whatever frame and scale
-structure from motion chose (the fox's 50 photos: all within 31° of their consensus). On symmetric or repeated
+structure from motion chose (the fox's 50 photos: all within 31.3° of their consensus). On symmetric or repeated
 structure (a brick wall, a van's two sides) structure from motion can register a photo half a turn about its
 viewing direction; its up axis then points down, against the others (on the demo wall's phone capture,
 ``benchmarks/capture_poses.py sfm``). A photo whose up lies more than :data:`UPSIDE_DOWN_DEG` from the consensus
 is *upside down against the others*.
 
 What it cannot see: a photo put half a turn wrong about the world's vertical (the object's far side put on its
-near side) keeps its up; a photo turned in a capture that looks down steeply (more than 60°) stays within
+near side) keeps its up; a photo turned in a capture that looks down steeply (more than 60°) can stay within
 :data:`UPSIDE_DOWN_DEG` of the others; and which side is right when many photos disagree. Photos looking straight
 down can disagree rightly, the phone guessing its turn: a walk to and fro over a floor splits into two opposite
-groups, which the check cannot tell from a half-turn error (``upright=False`` where it reads them).
+groups, which the check cannot tell from a half-turn error: the smaller group is skipped when it is a quarter of the
+photos or less, and the reconstruction refused when more (``upright=False`` where the check reads such photos).
 
 Convention
 ----------
@@ -41,7 +42,7 @@ __all__ = ["UPSIDE_DOWN_DEG", "UPSIDE_DOWN_SHARE", "UprightCheck", "check_uprigh
 #: A photo's up this many degrees or more from the consensus is upside down against the others. Measured
 #: (``benchmarks/capture_poses.py sfm --scenes wall object --size 320 480 960 --runs 2`` and
 #: ``benchmarks/sfm_fox.py``, 6 December 18:27–18:30 UTC): right photos lie within 31° (the fox, real, orbiting and
-#: looking down at its subject) and 36° (the demo captures, even where their reconstruction was poor); a photo
+#: looking down at its subject) and 36.3° (the demo captures, even where their reconstruction was poor); a photo
 #: looking straight down has its up on the horizon, 90°, whichever way the phone guessed its turn; every photo past
 #: the threshold was one the truth puts half a turn wrong (68 of 68, in 12 reconstructions). 120° leaves 30° of
 #: margin above a nadir photo.
@@ -97,7 +98,8 @@ class UprightCheck:
 
 
 def upright_summary(record: dict) -> str:
-    """One line from a check's record (:meth:`UprightCheck.as_report`, as a report stores it).
+    """One line from a check's record (:meth:`UprightCheck.as_report`, as a report stores it; with ``dropped``, as
+    :func:`~pytest_n2r.data.sfm.run_sfm` adds it, what was done with the photos).
 
     >>> upright_summary({"photos": 5, "largest_upright_deg": 0.0, "upside_down": {"e": 180.0}, "doubtful": False})
     '1 of 5 photos upside down against the others (e 180°; the others within 0°)'
@@ -106,9 +108,14 @@ def upright_summary(record: dict) -> str:
         return f"{record['photos']} photos agree on up (all within {record['largest_upright_deg']:.0f}° of it)"
     turned = ", ".join(f"{n} {a:.0f}°" for n, a in list(record["upside_down"].items())[:5])
     more = f" and {len(record['upside_down']) - 5} more" if len(record["upside_down"]) > 5 else ""
-    doubt = ": too many for a few wrong poses" if record.get("doubtful") else ""
+    if record.get("dropped") is True:
+        after = ": skipped (--any-roll keeps them)"
+    elif record.get("dropped") is False:
+        after = ": kept, as --any-roll asks"
+    else:
+        after = ": too many for a few wrong poses" if record.get("doubtful") else ""
     return (f"{len(record['upside_down'])} of {record['photos']} photos upside down against the others "
-            f"({turned}{more}; the others within {record['largest_upright_deg']:.0f}°){doubt}")
+            f"({turned}{more}; the others within {record['largest_upright_deg']:.0f}°){after}")
 
 
 def check_upright(names: Sequence[str], c2w: Sequence[np.ndarray] | np.ndarray) -> UprightCheck:

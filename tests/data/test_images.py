@@ -149,6 +149,17 @@ def test_corrupt_and_missing_files_name_the_file(tmp_path):
         read_image(tmp_path / "empty.png")
 
 
+def test_a_file_that_cannot_be_read_names_the_file(tmp_path, monkeypatch):
+    Image.fromarray(_pattern()).save(tmp_path / "locked.png")
+
+    def denied(*args, **kwargs):  # as reading a file without permission does (CI runs as root, who reads anything)
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(np, "fromfile", denied)
+    with pytest.raises(IngestError, match=r"locked\.png.*cannot be read: Permission denied"):
+        read_image(tmp_path / "locked.png")
+
+
 def test_list_images_sorted_and_filtered(tmp_path):
     for name in ("b.JPG", "a.png", ".hidden.png", "notes.txt", "c.tiff", "d.HEIC", "e.heif", "f.mov"):
         (tmp_path / name).write_bytes(b"x")

@@ -11,7 +11,7 @@ from PIL import Image
 
 from pytest_n2r.data import ingest
 from pytest_n2r.data.sfm import run_sfm
-from pytest_n2r.errors import IngestError
+from pytest_n2r.errors import IngestError, InvalidType
 from pytest_n2r.geometry import Camera, apply_similarity_to_pose, rotation_angle_deg, umeyama
 
 from .synthetic import make_capture
@@ -116,6 +116,16 @@ def test_a_photo_upside_down_against_the_others_is_skipped_unless_the_camera_rol
     assert kept["upside_down"].keys() == record["upside_down"].keys() and not kept["dropped"], kept
     rot, centre = _errors(rolling.frames, truth)
     assert rot < 0.5 and centre < 0.01, f"the turned photo's pose is right: rotation {rot:.3f} deg, centre {centre:.2%}"
+
+
+@pytest.mark.slow
+def test_more_than_a_quarter_upside_down_refuses_the_reconstruction(tmp_path):
+    cap = make_capture(tmp_path, n=10, camera=Camera(320, 240, 280.0, 280.0, 159.5, 119.5), upside_down=(1, 4, 7))
+    with pytest.raises(IngestError, match=r"registered 3 of 10 photos upside down against the others.*--any-roll"):
+        run_sfm(cap.images_dir, matcher="exhaustive")
+    assert len(run_sfm(cap.images_dir, matcher="exhaustive", upright=False).frames) == 10
+    with pytest.raises(InvalidType, match=r"upright='no' must be True .* or False"):
+        run_sfm(cap.images_dir, upright="no")
 
 
 def test_too_few_readable_images(tmp_path):
