@@ -49,6 +49,8 @@ SMOKE = {
                                                                                             "| wall | 0 : 0 |")),
     # structure from motion at 160 px registers a few photos, or none (a row saying so): either way a table row
     "capture_poses.py": (["sfm", "--scenes", "wall", "--size", "160"], "| wall | 160 |"),
+    # three draws of each ring: every turned photo found, whatever the steep rings give
+    "upright_rings.py": (["--draws", "3", "--photos", "3", "8"], ("| 3 | 3 |", "turned photos found in 6 of 6 draws")),
     # a variant fitted with the per-photo appearance correction: the fit option a variant passes through
     "fit_budget.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--base", "default", "--variant", "tiny",
                        "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256", "appearance=True"],

@@ -12,7 +12,8 @@ is *upside down against the others*.
 
 What it cannot see: a photo put half a turn wrong about the world's vertical (the object's far side put on its
 near side) keeps its up; a photo turned in a capture that looks down steeply (more than 60°) can stay within
-:data:`UPSIDE_DOWN_DEG` of the others; and which side is right when many photos disagree. Photos looking straight
+:data:`UPSIDE_DOWN_DEG` of the others, and where the other photos' up axes fan out past :data:`JUDGED_SPREAD_DEG`
+none is judged; and which side is right when many photos disagree. Photos looking straight
 down can disagree rightly, the phone guessing its turn: a walk to and fro over a floor splits into two opposite
 groups, which the check cannot tell from a half-turn error: the smaller group is skipped when it is a quarter of the
 photos or less, and the reconstruction refused when more (``upright=False`` where the check reads such photos).
@@ -37,7 +38,8 @@ import numpy as np
 from .._validation import check_array
 from ..errors import InvalidArgument
 
-__all__ = ["UPSIDE_DOWN_DEG", "UPSIDE_DOWN_SHARE", "UprightCheck", "check_upright", "upright_summary"]
+__all__ = ["UPSIDE_DOWN_DEG", "UPSIDE_DOWN_SHARE", "JUDGED_SPREAD_DEG", "UprightCheck", "check_upright",
+           "upright_summary"]
 
 #: A photo's up this many degrees or more from the consensus is upside down against the others. Measured
 #: (``benchmarks/capture_poses.py sfm --scenes wall object --size 320 480 960 --runs 2`` and
@@ -51,6 +53,13 @@ UPSIDE_DOWN_DEG = 120.0
 #: in it. Measured on the demo wall's phone capture (same runs): 2 of 48 upside down (4 %) beside 44 within 3.6°
 #: (median) of the truth; 21–23 of 48 (44–48 %) beside halves whose centres were off by 65–94 % of the camera spread.
 UPSIDE_DOWN_SHARE = 0.25
+#: A turned photo is told from a steep view only while the other photos' up axes lie within this many degrees of
+#: the consensus; where they fan out wider (a capture looking down steeply, from few photos), none is judged upside
+#: down. Measured (``python benchmarks/upright_rings.py``: rings of 3-48 photos, 3 900 draws each way, 6 December
+#: 19:03 UTC): turned photos found, all and only them, with the others within 25.0°; right photos of rings looking
+#: down 65-85° read as upside down 51 times before this gate, each time with the others spread 50.0° or more; real
+#: captures' right photos within 31.3° (the fox) and 36.3° (the demo captures).
+JUDGED_SPREAD_DEG = 45.0
 #: Rounds of the hemisphere mean from each start, and the most starts from photos' ups (spread over the capture),
 #: beside the one from the mean of all: the check's cost grows with the photos, not with their square.
 _SETTLE_STEPS = 8
@@ -67,8 +76,18 @@ class UprightCheck:
     angles_deg: np.ndarray
 
     @property
+    def judged(self) -> bool:
+        """Whether the photos not past :data:`UPSIDE_DOWN_DEG` lie within :data:`JUDGED_SPREAD_DEG` of the consensus,
+        so that a photo past it can be told from a steep view."""
+        rest = self.angles_deg[self.angles_deg < UPSIDE_DOWN_DEG]
+        return rest.size == 0 or float(rest.max()) <= JUDGED_SPREAD_DEG
+
+    @property
     def upside_down(self) -> tuple[str, ...]:
-        """The photos whose up lies :data:`UPSIDE_DOWN_DEG` or more from the consensus, by name."""
+        """The photos whose up lies :data:`UPSIDE_DOWN_DEG` or more from the consensus, by name; none where the
+        check cannot judge (:attr:`judged`)."""
+        if not self.judged:
+            return ()
         return tuple(n for n, a in zip(self.names, self.angles_deg) if a >= UPSIDE_DOWN_DEG)
 
     @property
@@ -87,7 +106,7 @@ class UprightCheck:
         photos with their angles (degrees), and whether that makes the reconstruction doubtful."""
         turned = set(self.upside_down)
         rest = [float(a) for n, a in zip(self.names, self.angles_deg) if n not in turned]
-        return {"photos": len(self.names), "threshold_deg": UPSIDE_DOWN_DEG,
+        return {"photos": len(self.names), "threshold_deg": UPSIDE_DOWN_DEG, "judged": self.judged,
                 "largest_upright_deg": round(max(rest), 1) if rest else None,
                 "upside_down": {n: round(float(a), 1) for n, a in zip(self.names, self.angles_deg) if n in turned},
                 "doubtful": self.doubtful}
@@ -104,6 +123,9 @@ def upright_summary(record: dict) -> str:
     >>> upright_summary({"photos": 5, "largest_upright_deg": 0.0, "upside_down": {"e": 180.0}, "doubtful": False})
     '1 of 5 photos upside down against the others (e 180°; the others within 0°)'
     """
+    if not record.get("judged", True):
+        return (f"{record['photos']} photos' up axes fan out too widely to tell a photo turned half a turn from one "
+                f"looking steeply down: none judged")
     if not record["upside_down"]:
         return f"{record['photos']} photos agree on up (all within {record['largest_upright_deg']:.0f}° of it)"
     turned = ", ".join(f"{n} {a:.0f}°" for n, a in list(record["upside_down"].items())[:5])

@@ -144,3 +144,35 @@ def distance_to_corner(points: np.ndarray) -> np.ndarray:
     d = np.min(np.abs(points), axis=1)  # distance to the nearest plane through the origin
     outside = np.linalg.norm(points - p, axis=1)
     return np.maximum(d, outside)
+
+
+# Camera rigs for the up check (pytest_n2r.data.upright), world up +z; benchmarks/upright_rings.py uses them too.
+
+
+def rolled(c2w: np.ndarray, degrees: float) -> np.ndarray:
+    """The camera-to-world pose ``c2w`` turned by ``degrees`` about its own viewing direction (z)."""
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    return c2w @ np.array([[c, -s, 0, 0], [s, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+
+
+def ring_poses(n: int, rng: np.random.Generator, elevation_deg: tuple[float, float],
+               roll_deg: float = 8.0) -> list[np.ndarray]:
+    """``n`` cameras around the origin looking at it from ``elevation_deg`` (a range, degrees above the horizon),
+    each rolled by up to ``roll_deg`` as a hand does; world up is +z."""
+    poses = []
+    for k in range(n):
+        azimuth, elevation = 2 * np.pi * k / n, np.radians(rng.uniform(*elevation_deg))
+        eye = 4.0 * np.array([np.cos(azimuth) * np.cos(elevation), np.sin(azimuth) * np.cos(elevation),
+                              np.sin(elevation)])
+        poses.append(rolled(look_at(eye, np.zeros(3), up=np.array([0.0, 0.0, 1.0])),
+                            rng.uniform(-roll_deg, roll_deg)))
+    return poses
+
+
+def in_a_random_frame(poses: list[np.ndarray], rng: np.random.Generator) -> list[np.ndarray]:
+    """The poses in another world frame, as structure from motion is free to choose one."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.diag(r))
+    world = np.eye(4)
+    world[:3, :3], world[:3, 3] = q * np.linalg.det(q), rng.normal(size=3) * 10
+    return [world @ p for p in poses]
