@@ -43,7 +43,7 @@ __all__ = ["UPSIDE_DOWN_DEG", "UPSIDE_DOWN_SHARE", "JUDGED_SPREAD_DEG", "Upright
 
 #: A photo's up this many degrees or more from the consensus is upside down against the others. Measured
 #: (``benchmarks/capture_poses.py sfm --scenes wall object --size 320 480 960 --runs 2`` and
-#: ``benchmarks/sfm_fox.py``, 6 December 18:27–18:30 UTC): right photos lie within 31° (the fox, real, orbiting and
+#: ``benchmarks/sfm_fox.py``, 6 December 18:27–18:30 UTC): right photos lie within 31.3° (the fox, real, orbiting and
 #: looking down at its subject) and 36.3° (the demo captures, even where their reconstruction was poor); a photo
 #: looking straight down has its up on the horizon, 90°, whichever way the phone guessed its turn; every photo past
 #: the threshold was one the truth puts half a turn wrong (68 of 68, in 12 reconstructions). 120° leaves 30° of
