@@ -153,6 +153,9 @@ def check_upright(names: Sequence[str], c2w: Sequence[np.ndarray] | np.ndarray) 
         raise InvalidArgument(f"check_upright: {len(names)} names for {len(poses)} poses; expected one pose a name")
     if len(names) < 3:
         raise InvalidArgument(f"check_upright: {len(names)} photos; at least 3 are needed to find a consensus")
+    if len(set(names)) != len(names):
+        twice = sorted({n for n in names if list(names).count(n) > 1})
+        raise InvalidArgument(f"check_upright: names {twice} given more than once; expected one name a photo")
     ups = -poses[:, :3, 1]
     ups /= np.maximum(np.linalg.norm(ups, axis=1, keepdims=True), 1e-12)
     starts = [ups.sum(axis=0), *ups[:: max(1, -(-len(ups) // _MAX_STARTS))]]  # the mean first, then photos' ups

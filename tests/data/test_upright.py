@@ -133,6 +133,7 @@ def test_the_record_and_its_summary():
 @pytest.mark.parametrize(("names", "poses", "error", "match"), [
     (["a", "b"], [np.eye(4)] * 3, InvalidArgument, "2 names for 3 poses"),
     (["a", "b"], [np.eye(4)] * 2, InvalidArgument, "2 photos; at least 3"),
+    (["a", "b", "a"], [np.eye(4)] * 3, InvalidArgument, r"names \['a'\] given more than once"),
     (["a", "b", "c"], [np.eye(3)] * 3, InvalidType, r"c2w must have shape \(N 4 4\), got \(3, 3, 3\)"),
     (["a", "b", "c"], [np.eye(4), np.eye(3), np.eye(4)], InvalidType, "c2w must be an array of shape"),
     (["a", "b", "c"], [np.eye(4), np.full((4, 4), np.nan), np.eye(4)], InvalidArgument, "c2w contains 16 non-finite"),
