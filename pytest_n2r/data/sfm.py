@@ -163,9 +163,9 @@ def run_sfm(
             f"structure from motion on {str(images_dir)!r} registered only {len(frames)} of {len(names)} images; "
             "at least 3 are needed (more overlap between photos helps)"
         )
-    up_check = check_upright([f.name for f in frames], [f.c2w for f in frames])
-    turned = up_check.as_report()["upside_down"] if upright else {}
-    if upright and up_check.doubtful:
+    up_record = check_upright([f.name for f in frames], [f.c2w for f in frames]).as_report()
+    turned = up_record["upside_down"] if upright else {}
+    if upright and up_record["doubtful"]:
         raise IngestError(
             f"structure from motion on {str(images_dir)!r} registered {len(turned)} of {len(frames)} photos upside "
             "down against the others: it has likely taken symmetric or repeated structure (a brick wall, an object's "
@@ -188,7 +188,7 @@ def run_sfm(
     report = {
         "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
         "time_s": times, "points_method": "structure from motion",
-        "upright": {**up_check.as_report(), "dropped": bool(turned)},
+        "upright": {**up_record, "dropped": bool(turned)},
     }
     return PoseSet(frames=frames, points=points, source=str(images_dir), kind="images", skipped=skipped,
                    report=report)

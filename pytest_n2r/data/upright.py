@@ -30,6 +30,7 @@ cone's axis); the start whose consensus has the most photos within 90° wins.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -154,7 +155,7 @@ def check_upright(names: Sequence[str], c2w: Sequence[np.ndarray] | np.ndarray) 
     if len(names) < 3:
         raise InvalidArgument(f"check_upright: {len(names)} photos; at least 3 are needed to find a consensus")
     if len(set(names)) != len(names):
-        twice = sorted({n for n in names if list(names).count(n) > 1})
+        twice = sorted(n for n, count in Counter(names).items() if count > 1)
         raise InvalidArgument(f"check_upright: names {twice} given more than once; expected one name a photo")
     ups = -poses[:, :3, 1]
     ups /= np.maximum(np.linalg.norm(ups, axis=1, keepdims=True), 1e-12)
