@@ -110,7 +110,12 @@ def _read_npy(path: Path) -> np.ndarray:
     size = int.from_bytes(data[8:10], "little") if data[:8] == b"\x93NUMPY\x01\x00" else 0
     match = _NPY_HEADER.fullmatch(data, 10, 10 + size) if size and len(data) >= 10 + size else None
     if match is None:
-        value = np.load(io.BytesIO(data), allow_pickle=False)
+        if not data.startswith(b"\x93NUMPY"):  # empty, or anything np.load would read another way (a zip)
+            raise ValueError(f"{str(path)!r} is not a .npy file")
+        try:
+            value = np.load(io.BytesIO(data), allow_pickle=False)
+        except EOFError as exc:
+            raise ValueError(f"{str(path)!r} is cut short: {exc}") from None
         value.setflags(write=False)
         return value
     shape = tuple(int(n) for n in match.group(2).split(b", "))

@@ -73,14 +73,23 @@ def test_the_key_changes_with_everything_that_changes_pixels():
     assert render_key(scene, _pose(scene), camera) != base
 
 
-def test_a_corrupt_entry_is_rendered_again(tmp_path):
+@pytest.mark.parametrize("damage", [
+    lambda data: data[:40],  # the header cut
+    lambda data: b"",  # renamed into place, then a crash before its blocks reached the disk
+    lambda data: data[:6],  # the magic alone: numpy reads to the end of the file and stops
+    lambda data: b"PK\x03\x04" + data[4:],  # what np.load would open as a zip archive
+], ids=["header cut", "empty", "magic alone", "zip magic"])
+def test_a_corrupt_entry_is_rendered_again(tmp_path, damage):
     scene = PlaneScene()
     camera = scene.views[0].camera
     RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
     (entry,) = (tmp_path / "renders").glob("*/*.rgb.npy")
-    entry.write_bytes(entry.read_bytes()[:40])
+    entry.write_bytes(damage(entry.read_bytes()))
     view = RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
-    assert scene.calls == 2 and view.rgb.shape == (72, 96, 3)
+    assert scene.calls == 2, f"the damaged entry was not rendered again ({scene.calls} renders)"
+    assert view.rgb.shape == (72, 96, 3)
+    view = RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    assert scene.calls == 2, "the entry rendered again was not stored in place of the damaged one"
 
 
 def test_an_entry_cut_short_in_its_pixels_is_rendered_again(tmp_path):
