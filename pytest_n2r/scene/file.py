@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import json
 import math
 import os
@@ -43,7 +44,8 @@ class SceneFile:
     ``bounds`` is the ``(2, 3)`` box ``[min, max]`` of the captured region and ``reference_length`` the
     median z-depth of the surface seen by the training cameras, both in scene units; ``field_digest`` is the
     SHA-256 of the stored ``field.safetensors`` member (as stored in the archive, with its compression method,
-    size and CRC-32: a digest that needs no inflating); ``background`` the field's (RGB in [0, 1]);
+    size and CRC-32: a digest that needs no inflating) and of the field's settings in ``scene.json`` that
+    change its pixels (normalization, density shift, background); ``background`` the field's (RGB in [0, 1]);
     ``size_bytes`` the size of the file. :attr:`field` is decoded from the member's stored bytes when first
     used (at once unless the file was read with ``lazy_field=True``).
     """
@@ -66,6 +68,13 @@ class SceneFile:
     def field(self) -> SceneField:
         """The scene field (decoded and checked on first use; a :class:`SceneFileError` if it does not check)."""
         return self.decode_field()
+
+
+def _field_digest(member_digest: str, field_meta: dict) -> str:
+    """SHA-256 of the field member's digest and the field's settings read from ``scene.json`` (its space, density
+    shift, background): two files whose tensors agree but whose settings differ render different pixels."""
+    settings = json.dumps(field_meta, sort_keys=True).encode()
+    return hashlib.sha256(member_digest.encode() + b"/" + settings).hexdigest()
 
 
 def save_scene(
@@ -337,7 +346,7 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
     scene = SceneFile(
         path=path, version=schema.FORMAT_VERSION, views=tuple(views), config=config, report=data["report"],
         reference_length=reference_length, metres_per_unit=metres_per_unit, bounds=bounds,
-        field_digest=stored.digest, background=background, size_bytes=size,
+        field_digest=_field_digest(stored.digest, field_meta), background=background, size_bytes=size,
         images_stored=sum(m is not None for *_, m in frames),
         decode_field=functools.partial(decode_field, stored, field_meta, source),
     )

@@ -277,6 +277,24 @@ def test_the_field_digest_names_the_stored_member(tmp_path):
     assert digests[0] == digests[1] != digests[2], f"digests {digests}"
 
 
+@pytest.mark.parametrize("edit", [
+    lambda data: data["field"].__setitem__("density_shift", data["field"]["density_shift"] - 2.0),
+    lambda data: data["field"].__setitem__("background", [0.25, 0.5, 0.75]),
+    lambda data: data["normalization"].__setitem__("radius", data["normalization"]["radius"] * 2),
+    lambda data: data["normalization"].__setitem__("shell", 1.0),
+], ids=["density shift", "background", "radius", "shell"])
+def test_the_field_digest_follows_the_field_settings_that_change_pixels(tmp_path, edit):
+    """The same tensors with another density shift, background or normalization render other pixels, so the
+    digest (and every content hash and render-cache key built on it) must differ."""
+    path = write(tmp_path / "a.n2r", random_field())
+    copied = rewrite(path, tmp_path / "b.n2r", edit_json=lambda data: None)  # the members stored as the edit's
+    edited = rewrite(path, tmp_path / "c.n2r", edit_json=edit)
+    same, other = (read_scene_file(p, lazy_field=True).field_digest for p in (copied, edited))
+    assert same != other, "a field setting that changes pixels left the digest as it was"
+    assert read_scene_file(rewrite(path, tmp_path / "d.n2r", edit_json=lambda data: None)).field_digest == same, \
+        "the same file written twice has two digests"
+
+
 def test_photos_in_subfolders_with_the_same_name_keep_their_own_copy(tmp_path):
     views = [type(v)(v.index, name, v.camera, v.c2w, v.split, v.image)
              for v, name in zip(tiny_views(3), ["left/img 1.png", "right/img 1.png", "img_1"])]
