@@ -8,7 +8,10 @@ from dataclasses import dataclass
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 
-__all__ = ["RenderSize"]
+__all__ = ["MAX_SIDE", "RenderSize"]
+
+#: The largest image side (pixels) a render is asked for, and a scene file's camera may have.
+MAX_SIDE = 16384
 
 
 @dataclass(frozen=True)
@@ -43,8 +46,8 @@ class RenderSize:
                 "or an int for the longer side"
             )
         for label, v in (("width", width), ("height", height), ("longer side", longer)):
-            if v is not None and not 1 <= v <= 16384:
-                raise InvalidArgument(f"{name}={value!r}: {label} {v} must be in [1, 16384] pixels")
+            if v is not None and not 1 <= v <= MAX_SIDE:
+                raise InvalidArgument(f"{name}={value!r}: {label} {v} must be in [1, {MAX_SIDE}] pixels")
         return cls(width, height, longer)
 
     def apply(self, camera: Camera) -> Camera:

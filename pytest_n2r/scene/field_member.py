@@ -8,7 +8,6 @@ import zipfile
 import zlib
 
 from ..errors import SceneFileError
-from ..field.config import SH_DEGREES
 from ..field.grid import SceneField, n_sh_coefficients
 from . import schema
 from .archive import StoredMember
@@ -23,13 +22,8 @@ def field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
     """The size of ``field.safetensors`` by its own header, once that is checked against the most the grid
     ``field_meta`` declares can take (the occupancy: one byte per cell; at most every vertex stored, an int64
     index and float16 values each). Only the header is read, so a member that would inflate to gigabytes
-    is refused before it is."""
-    res, sh_degree = field_meta.get("resolution"), field_meta.get("sh_degree")
-    if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.resolution={res!r}; expected an integer in "
-                             "4..2048 (grid vertices per axis)")
-    if sh_degree not in SH_DEGREES or isinstance(sh_degree, bool):
-        raise SceneFileError(f"{source}: {schema.SCENE_JSON} field.sh_degree={sh_degree!r}; expected 0, 1 or 2")
+    is refused before it is. ``field_meta`` is checked first (:func:`~pytest_n2r.field.grid.check_field_metadata`)."""
+    res, sh_degree = field_meta["resolution"], field_meta["sh_degree"]
     width = 1 + 3 * n_sh_coefficients(sh_degree)
     where = f"{source}: {schema.FIELD_FILE}"
     try:

@@ -28,7 +28,7 @@ from ..data.atomic import atomic_write_bytes
 from ..data.capture import Capture
 from ..errors import InvalidArgument, SceneFileError
 from ..field.config import FieldConfig
-from ..field.grid import SceneField
+from ..field.grid import SceneField, check_field_metadata
 from . import schema
 from .archive import StoredMember, read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
@@ -253,9 +253,9 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
         bounds = np.asarray(data["bounds"], dtype=np.float64)
     except (TypeError, ValueError):
         bounds = np.zeros(0)
-    if bounds.shape != (2, 3) or not np.isfinite(bounds).all():
+    if bounds.shape != (2, 3) or not np.isfinite(bounds).all() or not (bounds[0] <= bounds[1]).all():
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} bounds={data['bounds']!r}; expected [[min x, y, z], "
-                             "[max x, y, z]] (scene units)")
+                             "[max x, y, z]] (scene units, each min at most its max)")
     _check_normalization(data["normalization"], reference_length, bounds, source)
     limit = MAX_CAMERA_DISTANCE * reference_length
     for i, (_, _, c2w, _, _) in enumerate(frames):
@@ -273,6 +273,13 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
     field_meta = schema.require(data, "field", schema.SCENE_JSON, source)
     if not isinstance(field_meta, dict):
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} 'field' must be a JSON object")
+    if "background" not in field_meta:
+        # written before fields stored their background: a fit whose config has random_background on was
+        # composited over random colours (mid-grey in expectation), an older one over black
+        grey = data["config"].get("random_background") is True
+        field_meta = {**field_meta, "background": [0.5 if grey else 0.0] * 3}
+    field_meta = {**field_meta, "space": data["normalization"]}
+    check_field_metadata(field_meta, f"{source}: {schema.SCENE_JSON}")
     return frames, reference_length, metres_per_unit, bounds, config, field_meta
 
 
@@ -324,16 +331,7 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
         limit = field_limit(archive, field_meta, source)
         stored = StoredMember.read(archive, path, schema.FIELD_FILE, source, limit, "its safetensors header")
-        if "background" not in field_meta:
-            # written before fields stored their background: a fit whose config has random_background on was
-            # composited over random colours (mid-grey in expectation), an older one over black
-            grey = data["config"].get("random_background") is True
-            field_meta = {**field_meta, "background": [0.5 if grey else 0.0] * 3}
-        field_meta = {**field_meta, "space": data["normalization"]}
-        background = as_unit_rgb(field_meta["background"])
-        if background is None:
-            raise SceneFileError(f"{source}: {schema.FIELD_FILE}: field background {field_meta['background']!r} "
-                                 "is not three values in [0, 1]")
+        background = as_unit_rgb(field_meta["background"])  # checked by _check_json
         views = []
         for index, (name, camera, c2w, split, member) in enumerate(frames):
             image = None

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import InvalidArgument, InvalidType, SceneFileError
 from ..geometry import Camera, check_pose
+from ..render.size import MAX_SIDE
 
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "SCENE_JSON", "FIELD_FILE", "REQUIRED_KEYS", "FRAME_KEYS", "SPLITS",
@@ -136,8 +137,18 @@ def check_header(data: Any, source: str) -> None:
 
 def read_frames(data: dict, source: str) -> list[tuple[str, Camera, np.ndarray, str, str | None]]:
     """``(name, camera, c2w, split, image member)`` of each frame of ``scene.json``, checked."""
+    records = require(data, "cameras", SCENE_JSON, source)
+    if not isinstance(records, list) or not records:
+        raise SceneFileError(f"{source}: {SCENE_JSON} 'cameras' must be a non-empty list of camera objects")
     cameras = []
-    for i, record in enumerate(require(data, "cameras", SCENE_JSON, source)):
+    for i, record in enumerate(records):
+        if not isinstance(record, dict):
+            raise SceneFileError(f"{source}: {SCENE_JSON} cameras[{i}]={record!r}; expected a camera object")
+        for key in ("width", "height"):
+            side = record.get(key)
+            if isinstance(side, bool) or not isinstance(side, int) or not 1 <= side <= MAX_SIDE:
+                raise SceneFileError(f"{source}: {SCENE_JSON} cameras[{i}].{key}={side!r}; expected a whole "
+                                     f"number of pixels in 1..{MAX_SIDE}")
         try:
             cameras.append(Camera.from_dict(record))
         except (InvalidArgument, InvalidType, TypeError, ValueError) as exc:

@@ -241,9 +241,9 @@ def _broken(change: str) -> tuple[dict, dict]:
     ("nan", r"tensor 'vertex_values' holds NaN or Inf"),
     ("index outside", r"tensor 'vertex_index' points outside the 8³ grid"),
     ("index not the used vertices", r"'vertex_index' does not list exactly the vertices of occupied cells"),
-    ("sh_degree", r"sh_degree=3: expected 0 \(view-independent colour\), 1 or 2"),
+    ("sh_degree", r"field\.sh_degree=3; expected 0, 1 or 2"),
     ("metadata", r"field metadata is incomplete or invalid \('density_shift'\)"),
-    ("background", r"field background \[0.5, 2.0, 0.5\] is not three values in \[0, 1\]"),
+    ("background", r"field\.background=\[0.5, 2.0, 0.5\]; expected three values in \[0, 1\]"),
     ("no background", r"field metadata is incomplete or invalid \('background'\)"),
 ])
 def test_bad_field_tensors_are_scene_file_errors_naming_the_problem(change, message):

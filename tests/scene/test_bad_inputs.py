@@ -23,6 +23,7 @@ from pytest_n2r.cli.main import main
 from pytest_n2r.errors import SceneFileError
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.scene import read_scene_file, save_scene
+from pytest_n2r.scene.file import check_scene_file
 from pytest_n2r.scene.schema import FIELD_FILE, SCENE_JSON
 
 from .conftest import random_field, tiny_views
@@ -396,7 +397,21 @@ SCENE_FILE_CASES = [
      r"frames\[0\]\.camera=7; expected an index into the 1 cameras"),
     ("an image member outside images/", {"edit": _set("frames.0.image", "../../etc/passwd")},
      r"frames\[0\]\.image='\.\./\.\./etc/passwd'"),
-    ("a camera of negative width", {"edit": _set("cameras.0.width", -20)}, r"cameras\[0\] is not a valid camera"),
+    ("a camera of negative width", {"edit": _set("cameras.0.width", -20)},
+     r"cameras\[0\]\.width=-20; expected a whole number of pixels in 1\.\.16384"),
+    ("a camera width as a string", {"edit": _set("cameras.0.width", "20")}, r"cameras\[0\]\.width='20'"),
+    ("a camera a trillion pixels wide", {"edit": _set("cameras.0.width", 10**12)},
+     r"cameras\[0\]\.width=1000000000000; expected a whole number of pixels in 1\.\.16384"),
+    ("a camera of negative focal length", {"edit": _set("cameras.0.fx", -1)}, r"cameras\[0\] is not a valid camera"),
+    ("cameras a number", {"edit": _set("cameras", 5)}, r"'cameras' must be a non-empty list of camera objects"),
+    ("a camera that is a list", {"edit": _set("cameras.0", [1, 2])}, r"cameras\[0\]=\[1, 2\]; expected a camera"),
+    ("bounds min above max", {"edit": _set("bounds", [[1, 1, 1], [-1, -1, -1]])},
+     r"expected \[\[min x, y, z\], \[max x, y, z\]\] \(scene units, each min at most its max\)"),
+    ("normalization shell -5", {"edit": _set("normalization.shell", -5)},
+     r"field metadata is incomplete or invalid \(shell=-5\.0: expected a thickness in \(0, 4\]"),
+    ("density_shift a string", {"edit": _set("field.density_shift", "x")},
+     r"field\.density_shift='x'; expected a finite number"),
+    ("background a string", {"edit": _set("field.background", "x")}, r"field\.background='x'; expected three values"),
     ("bounds not a box", {"edit": _set("bounds", [1, 2])}, r"bounds=\[1, 2\]; expected \[\[min x, y, z\]"),
     ("density_shift 1e30", {"edit": _set("field.density_shift", 1e30)},
      r"density_shift=1e\+30; expected a finite number within ±100"),
@@ -437,6 +452,19 @@ def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected,
     how = {**how, "replace": {k: built[v]() if isinstance(v, str) else v for k, v in how.get("replace", {}).items()}}
     bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=how.get("edit"), replace=how["replace"])
     _refused_in_bounded_memory(read_scene_file, bad, expected)
+
+
+JSON_CASES = [c for c in SCENE_FILE_CASES if set(c[1]) == {"edit"}]
+
+
+@pytest.mark.parametrize("edit, expected", [c[1:] for c in JSON_CASES], ids=[c[0] for c in JSON_CASES])
+def test_check_scene_file_refuses_what_the_reader_refuses_in_scene_json(edit, expected, good_scene, tmp_path):
+    """The plugin checks every scene file at start-up with :func:`check_scene_file` (no inflating): a fault
+    of ``scene.json`` must stop it there, not at the first render."""
+    bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=edit["edit"])
+    with pytest.raises(SceneFileError) as info:
+        check_scene_file(bad)
+    assert re.search(expected, str(info.value)), f"expected /{expected}/ in:\n{info.value}"
 
 
 def _refused_in_bounded_memory(read, bad: Path, expected: str) -> None:
