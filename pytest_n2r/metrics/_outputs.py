@@ -12,18 +12,25 @@ import numpy as np
 
 from ..errors import MetricUndefined, SUTOutputError
 
-__all__ = ["as_numeric", "as_vector", "as_keypoints"]
+__all__ = ["as_numeric", "as_vector", "as_keypoints", "as_image", "float_eps"]
+
+_FLOAT64_EPS = float(np.finfo(np.float64).eps)
+
+
+def _is_tensor(value: Any) -> bool:
+    """Whether ``value`` is a tensor (torch: any device, any dtype)."""
+    return hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double")
 
 
 def _to_numpy(value: Any) -> Any:
     """Tensors (torch: any device, any float dtype incl. bfloat16) to float64 numpy; others unchanged."""
-    if hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double"):
+    if _is_tensor(value):
         return value.detach().cpu().double().numpy()
     return value
 
 
-def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
-    """``value`` as a finite float64 array; ``expected`` describes the accepted form for messages."""
+def _as_float_array(value: Any, which: str, expected: str) -> np.ndarray:
+    """``value`` as a float64 array (NaN and Inf kept); ``None``, complex or non-numeric is a SUTOutputError."""
     if value is None:
         raise SUTOutputError(f"{which} output is None; expected {expected}")
     value = _to_numpy(value)
@@ -38,6 +45,12 @@ def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
         ) from exc
     if kind == "c":
         raise SUTOutputError(f"{which} output is complex; expected {expected}")
+    return arr
+
+
+def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
+    """``value`` as a finite float64 array; ``expected`` describes the accepted form for messages."""
+    arr = _as_float_array(value, which, expected)
     if not np.all(np.isfinite(arr)):
         n_nan = int(np.count_nonzero(np.isnan(arr)))
         n_inf = int(np.count_nonzero(np.isinf(arr)))
@@ -49,23 +62,46 @@ def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
 def as_vector(value: Any, which: str) -> np.ndarray:
     """A classifier output as a 1-D float64 vector; a batch of one (``(1, C)``, Keras style) is accepted.
 
-    An empty or all-NaN vector is the SUT saying nothing: :class:`MetricUndefined` (the pair tests
-    nothing), not an error; a vector with *some* NaN values is a :class:`SUTOutputError`.
+    An empty or all-NaN output (array, tensor or list alike) is the SUT saying nothing:
+    :class:`MetricUndefined` (the pair tests nothing), not an error; a vector with *some* NaN values is a
+    :class:`SUTOutputError`.
     """
     expected = "a 1-D vector of class scores of shape (C,) or a batch of one (1, C)"
-    raw = _to_numpy(value)
-    if (isinstance(raw, (list, tuple)) and len(raw) == 0) or (isinstance(raw, np.ndarray) and raw.size == 0):
+    arr = _as_float_array(value, which, expected)
+    if arr.size == 0:
         raise MetricUndefined(f"the {which} output is empty (nothing to compare)")
-    if isinstance(raw, np.ndarray) and raw.dtype.kind == "f" and np.isnan(raw).all():
+    if np.isnan(arr).all():
         raise MetricUndefined(f"the {which} output is all NaN (nothing to compare)")
-    arr = as_numeric(raw, which, expected)
+    arr = as_numeric(arr, which, expected)
     if arr.ndim == 2 and arr.shape[0] == 1:
         arr = arr[0]
     if arr.ndim != 1:
         raise SUTOutputError(f"{which} output has shape {arr.shape}; expected {expected}")
-    if arr.size == 0:
-        raise SUTOutputError(f"{which} output is empty; expected {expected}")
     return arr
+
+
+def float_eps(value: Any) -> float:
+    """Machine epsilon of the floating dtype a SUT output came in (bfloat16 2**-7, float16 2**-10, float32
+    2**-23); that of float64 for Python floats, integers and anything else."""
+    if _is_tensor(value):
+        import torch
+
+        return float(torch.finfo(value.dtype).eps) if value.dtype.is_floating_point else _FLOAT64_EPS
+    dtype = value.dtype if isinstance(value, np.ndarray) else np.asarray(value).dtype
+    return float(np.finfo(dtype).eps) if dtype.kind == "f" else _FLOAT64_EPS
+
+
+def as_image(value: Any, which: str, expected: str) -> np.ndarray:
+    """An image output as a numpy array of its own dtype (uint8 stays uint8): tensors are detached and moved
+    to the CPU, bfloat16 (which numpy lacks) becomes float32. ``None``, non-numeric, complex, NaN or Inf
+    outputs are a :class:`SUTOutputError` naming the output, as in :func:`as_numeric`."""
+    as_numeric(value, which, expected)
+    if _is_tensor(value):
+        import torch
+
+        value = value.detach().cpu()
+        return (value.float() if value.dtype == torch.bfloat16 else value).numpy()
+    return np.asarray(value)
 
 
 def as_keypoints(value: Any, which: str) -> np.ndarray:

@@ -5,15 +5,23 @@ CPU/GPU tensor). Both outputs of a pair must have the same length ``C``.
 
 What the scores mean depends on ``inputs``:
 
-- ``"probabilities"``: the vectors are probability distributions (non-negative, summing to 1 within
-  ``1e-3``); anything else is a :class:`~pytest_n2r.errors.SUTOutputError`.
+- ``"probabilities"``: the vectors are probability distributions (entries in [0, 1] summing to 1 within
+  :func:`probability_sum_tolerance`: 1e-3, more for low-precision dtypes such as bfloat16); they are
+  renormalized to sum 1. Anything else is a :class:`~pytest_n2r.errors.SUTOutputError`.
 - ``"logits"``: the vectors are logits; both are turned into probabilities with a softmax first.
-- ``"auto"`` (default): if **both** vectors are probability distributions they are used as they are,
-  otherwise **both** are softmaxed (decided per pair, so the two sides are always treated alike).
+- ``"auto"`` (default): each vector is read on its own: every entry in [0, 1] → probabilities (renormalized,
+  never softmaxed), which must then sum to 1 within the tolerance; an entry outside [0, 1] → logits
+  (softmaxed). The two must read alike. A vector in [0, 1] that does not sum to 1, or a pair read one
+  each way, is a :class:`~pytest_n2r.errors.SUTOutputError` saying which ``inputs`` to pass: a softmax of
+  entries in [0, 1] is nearly uniform (they lie within a factor e of each other), so softmaxing probabilities
+  made any two outputs look alike.
 - ``"raw"``: the vectors are compared as given (e.g. embeddings); only :func:`cosine_similarity` and
   :func:`l2_norm` accept it.
 
-Class invariance only looks at the ranking of classes, which the softmax does not change.
+Except with ``"raw"``, a constant output (all zeros, all equal logits, a uniform distribution; any output of
+one class) favours no class: the pair is *undefined* (nothing to compare), never a perfect score. Class
+invariance only looks at the ranking of the given scores, which no reading changes, and is undefined where
+that ranking ties at the decisive place.
 """
 
 from __future__ import annotations
@@ -24,7 +32,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
-from ._outputs import as_vector
+from ._outputs import as_vector, float_eps
 from .base import Metric, MetricResult
 
 __all__ = [
@@ -36,12 +44,31 @@ __all__ = [
     "class_invariance",
     "softmax",
     "is_probability_vector",
+    "probability_sum_tolerance",
 ]
 
 Inputs = Literal["auto", "probabilities", "logits", "raw"]
 _INPUTS = ("auto", "probabilities", "logits", "raw")
-#: How far from 1 the sum of a probability vector may be (float32 outputs of 1000 classes drift ~1e-6).
+#: The least tolerance on the sum of a probability vector (float32 outputs of 1000 classes drift up to 6e-7).
 PROBABILITY_SUM_TOLERANCE = 1e-3
+_FLOAT32_EPS = float(np.finfo(np.float32).eps)
+
+
+def probability_sum_tolerance(n_classes: int, eps: float) -> float:
+    """How far from 1 the sum of a probability vector of ``n_classes`` entries, stored in a dtype of machine
+    epsilon ``eps``, may be: ``max(1e-3, 2 eps, n_classes eps(float32))``.
+
+    Rounding each entry to the output dtype moves it by at most ``eps / 2`` of itself, so the sum by at most
+    ``eps / 2`` whatever the length; the normalising sum, which torch (its accumulation type for float16 and
+    bfloat16 is float32) and numpy (float16 sums included) accumulate in float32 or wider, adds at most about
+    ``n_classes eps(float32) / 2``. Measured (2000 softmax outputs per case, of randn logits times 1, 3 or 10;
+    ``|sum - 1|`` in float64; 10 to 10 000 classes): bfloat16 at most 2.9e-3 = 0.37 eps (torch in bfloat16,
+    or float32 cast to it; 15-34 % of them stray past 1e-3); float16 3.5e-4 = 0.36 eps (torch), 6.9e-4 =
+    0.73 eps (numpy, exp and division in float16); float32 5.9e-7 at 1000 classes, 3.0e-6 = 25 eps at 10 000.
+    ``2 eps`` covers the worst of them (0.73 eps) 2.7 times over: 0.0156 for bfloat16, 0.00195 for float16;
+    float32 and float64 get 1e-3 up to 8389 classes.
+    """
+    return max(PROBABILITY_SUM_TOLERANCE, 2.0 * eps, n_classes * _FLOAT32_EPS)
 
 
 def softmax(logits: np.ndarray) -> np.ndarray:
@@ -54,13 +81,20 @@ def softmax(logits: np.ndarray) -> np.ndarray:
     return z / z.sum()
 
 
-def is_probability_vector(v: np.ndarray) -> bool:
-    """True when all entries are in [0, 1] and they sum to 1 within :data:`PROBABILITY_SUM_TOLERANCE`."""
-    return bool(np.all(v >= 0) and np.all(v <= 1) and abs(float(v.sum()) - 1.0) <= PROBABILITY_SUM_TOLERANCE)
+def is_probability_vector(v: np.ndarray, eps: float = float(np.finfo(np.float64).eps)) -> bool:
+    """True when all entries are in [0, 1] and they sum to 1 within :func:`probability_sum_tolerance` for a
+    vector of this length stored in a dtype of machine epsilon ``eps`` (float64's by default)."""
+    return bool(np.all(v >= 0) and np.all(v <= 1)
+                and abs(float(v.sum()) - 1.0) <= probability_sum_tolerance(v.size, eps))
+
+
+def _describe(v: np.ndarray) -> str:
+    return f"min {v.min():.4g}, max {v.max():.4g}, sum {v.sum():.6g}"
 
 
 class _VectorMetric(Metric):
-    """Parse the two outputs, check their lengths, convert them as ``inputs`` says."""
+    """Parse the two outputs, check their lengths and that they favour some class, read them as ``inputs``
+    says."""
 
     allowed_inputs: tuple[str, ...] = _INPUTS
     nan_means_no_output = True
@@ -70,42 +104,82 @@ class _VectorMetric(Metric):
             raise InvalidArgument(f"inputs={inputs!r}; expected one of {self.allowed_inputs}")
         self.inputs = inputs
 
-    def vectors(self, out_source: Any, out_follow: Any) -> tuple[np.ndarray, np.ndarray, str]:
-        """The two outputs as comparable vectors, and how they were read (``probabilities``, ``logits``,
-        ``raw``)."""
-        a, b = as_vector(out_source, "source"), as_vector(out_follow, "follow-up")
+    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
+        try:
+            a, b = as_vector(out_source, "source"), as_vector(out_follow, "follow-up")
+        except MetricUndefined as exc:
+            return MetricResult.undefined(self.name, str(exc))
         if a.shape != b.shape:
             raise SUTOutputError(
                 f"source output has {a.size} classes but follow-up output has {b.size}; "
                 "a classifier must return the same number of class scores for every image"
             )
+        eps = (float_eps(out_source), float_eps(out_follow))
+        if self.inputs == "probabilities":
+            for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
+                if not is_probability_vector(v, e):
+                    raise SUTOutputError(
+                        f"{which} output is not a probability vector ({_describe(v)}; expected entries in [0, 1] "
+                        f"summing to 1 within {probability_sum_tolerance(v.size, e):.3g}); pass "
+                        "inputs='logits' (or 'auto') if the SUT returns logits"
+                    )
+        if self.inputs != "raw":
+            for which, v in (("source", a), ("follow-up", b)):
+                if v.min() == v.max():  # a softmax or a renormalization makes it uniform: no class stands out
+                    raw_hint = "; inputs='raw' compares the values as given" if "raw" in self.allowed_inputs else ""
+                    return MetricResult.undefined(
+                        self.name, f"the {which} output is constant (all {v.size} class scores are {v[0]:.6g}): "
+                        f"it favours no class, so there is nothing to compare{raw_hint}", classes=int(v.size))
+        return self._score(a, b, eps)
+
+    def read(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, str]:
+        """The two vectors as compared (probability vectors renormalized to sum 1, logits softmaxed, raw as
+        given) and how they were read; ``eps``: machine epsilon of each output's dtype.
+
+        ``"auto"`` reads a vector with every entry in [0, 1] as probabilities if it sums to 1 within
+        :func:`probability_sum_tolerance`, and is a :class:`SUTOutputError` otherwise: its softmax would be
+        nearly uniform (its entries all lie within a factor e of each other), and two such outputs would score
+        alike whatever they said. A vector with an entry outside [0, 1] reads as logits. The two outputs must
+        read alike (a classifier returns one kind of score), or it is a :class:`SUTOutputError`.
+        """
         mode = self.inputs
         if mode == "auto":
-            mode = "probabilities" if is_probability_vector(a) and is_probability_vector(b) else "logits"
-        elif mode == "probabilities":
-            for which, v in (("source", a), ("follow-up", b)):
-                if not is_probability_vector(v):
+            kinds = []
+            for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
+                in_unit_range = bool(np.all(v >= 0) and np.all(v <= 1))
+                if in_unit_range and not is_probability_vector(v, e):
                     raise SUTOutputError(
-                        f"{which} output is not a probability vector (min {v.min():.4g}, max {v.max():.4g}, "
-                        f"sum {v.sum():.6g}); pass inputs='logits' (or 'auto') if the SUT returns logits"
-                    )
-        if mode == "logits":
+                        f"{which} output has every entry in [0, 1] but does not sum to 1 within "
+                        f"{probability_sum_tolerance(v.size, e):.3g} ({_describe(v)}): it is no probability "
+                        "vector, and a softmax would flatten it to nearly uniform; pass inputs='logits' if the "
+                        "SUT returns logits, or inputs='raw' to compare the values as given (e.g. independent "
+                        "sigmoid scores)")
+                kinds.append("probabilities" if in_unit_range else "logits")
+            if kinds[0] != kinds[1]:
+                raise SUTOutputError(
+                    f"source output reads as {kinds[0]} but follow-up output as {kinds[1]} (source "
+                    f"{_describe(a)}; follow-up {_describe(b)}); a classifier returns one kind of score for every "
+                    "image: pass inputs='logits' or inputs='probabilities' to say which")
+            mode = kinds[0]
+        if mode == "probabilities":
+            a, b = a / a.sum(), b / b.sum()
+        elif mode == "logits":
             a, b = softmax(a), softmax(b)
         return a, b, mode
 
-    def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        try:
-            a, b, mode = self.vectors(out_source, out_follow)
-        except MetricUndefined as exc:
-            return MetricResult.undefined(self.name, str(exc))
-        return self._score(a, b, mode)
-
     @abstractmethod
-    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
-        """Score two comparable vectors (read as ``mode``)."""
+    def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
+        """Score the two given vectors (``eps``: machine epsilon of each output's dtype)."""
 
     def _repr_inputs(self) -> str:
         return "" if self.inputs == "auto" else f"inputs={self.inputs!r}"
+
+
+def _unit_max(v: np.ndarray) -> np.ndarray:
+    """``v`` divided by its largest absolute entry (unchanged if zero): entries in [-1, 1], so squares neither
+    overflow (1e200) nor underflow (1e-200)."""
+    top = float(np.abs(v).max())
+    return v / top if top > 0.0 else v
 
 
 class CosineSimilarity(_VectorMetric):
@@ -113,14 +187,19 @@ class CosineSimilarity(_VectorMetric):
 
     A zero vector has no direction: two zero vectors are *undefined* (the SUT said nothing either time,
     which is not agreement), a zero vector against a non-zero one scores 0 (they share nothing). Only
-    ``inputs="raw"`` can produce zero vectors. Empty or all-NaN outputs are undefined for every vector
-    metric (see :func:`~pytest_n2r.metrics._outputs.as_vector`).
+    ``inputs="raw"`` can get zero vectors to this point: in the other readings a constant output (all zeros
+    included) favours no class and is undefined. Empty or all-NaN outputs are undefined for every vector
+    metric (see :func:`~pytest_n2r.metrics._outputs.as_vector`). Each vector is scaled by its largest
+    absolute entry first (the cosine does not change), so ``[1e200, 1e200]`` or ``[1e-200, 2e-200]`` score
+    like ``[1, 1]`` and ``[1, 2]``.
     """
 
     name = "cosine_similarity"
     ideal = 1.0
 
-    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
+    def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
+        a, b, mode = self.read(a, b, eps)
+        a, b = _unit_max(a), _unit_max(b)
         na, nb = float(np.linalg.norm(a)), float(np.linalg.norm(b))
         if na == 0.0 and nb == 0.0:
             return MetricResult.undefined(self.name, "both outputs are zero vectors (nothing to compare)",
@@ -137,13 +216,18 @@ class CosineSimilarity(_VectorMetric):
 
 class L2Norm(_VectorMetric):
     """Euclidean distance ``|a - b|_2`` (not squared). Range [0, √2] for probability vectors (two
-    different one-hot vectors), unbounded for ``"raw"``; ideal 0, deviation = score."""
+    different one-hot vectors), unbounded for ``"raw"`` (computed on the vectors scaled by their largest
+    absolute entry, so ``[1e200, 0]`` and ``[-1e200, 0]`` are 2e200 apart, not infinitely); ideal 0,
+    deviation = score."""
 
     name = "l2_norm"
     ideal = 0.0
 
-    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
-        return self.result(float(np.linalg.norm(a - b)), inputs=mode, classes=int(a.size))
+    def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
+        a, b, mode = self.read(a, b, eps)
+        top = max(float(np.abs(a).max()), float(np.abs(b).max()))
+        distance = top * float(np.linalg.norm(a / top - b / top)) if top > 0.0 else 0.0
+        return self.result(distance, inputs=mode, classes=int(a.size))
 
     def __repr__(self) -> str:
         return f"l2_norm({self._repr_inputs()})"
@@ -152,8 +236,12 @@ class L2Norm(_VectorMetric):
 class ClassInvariance(_VectorMetric):
     """1 when the source's top-1 class is among the follow-up's ``top_k`` classes, else 0.
 
-    With ``top_k=1`` this is "the predicted class did not change". Ties are broken toward the lower
-    class index (as ``numpy.argmax``). Range {0, 1}, ideal 1, deviation ``1 - score``.
+    With ``top_k=1`` this is "the predicted class did not change". Only the ranking of the given scores counts
+    (a softmax or a renormalization does not change it), so ``inputs`` only decides whether outputs that are
+    not probability vectors are an error (``"probabilities"``). Ties are never broken by class index: the
+    pair is *undefined* when the source's top-1 is a tie (there is no predicted class), or when the follow-up
+    scores the source class level with others across its ``top_k`` boundary (whether it is among the top
+    ``top_k`` would depend on the tie-break). Range {0, 1}, ideal 1, deviation ``1 - score``.
     """
 
     name = "class_invariance"
@@ -168,19 +256,36 @@ class ClassInvariance(_VectorMetric):
         self.top_k = int(top_k)
         super().__init__(inputs)
 
-    def _score(self, a: np.ndarray, b: np.ndarray, mode: str) -> MetricResult:
+    def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
         if self.top_k > b.size:
             raise InvalidArgument(f"top_k={self.top_k} exceeds the {b.size} classes the classifier returns")
-        source_class = int(np.argmax(a))
+        top = np.flatnonzero(a == a.max())
+        if len(top) > 1:
+            return MetricResult.undefined(
+                self.name, f"the source's top-1 is a tie between classes {_listed(top)}: there is no predicted "
+                "class to keep", source_classes=[int(c) for c in top[:10]])
+        source_class = int(top[0])
         follow_top = np.argsort(-b, kind="stable")[: self.top_k]
-        score = 1.0 if source_class in follow_top else 0.0
-        return self.result(score, inputs=mode, source_class=source_class,
-                           follow_classes=[int(c) for c in follow_top])
+        above = int(np.count_nonzero(b > b[source_class]))
+        level = np.flatnonzero(b == b[source_class])
+        if above < self.top_k < above + len(level):
+            return MetricResult.undefined(
+                self.name, f"the follow-up scores the source class {source_class} level with classes "
+                f"{_listed(level[level != source_class])} across its top-{self.top_k} boundary: whether it is "
+                "among them depends on how the tie is broken", source_class=source_class)
+        score = 1.0 if above < self.top_k else 0.0
+        return self.result(score, source_class=source_class, follow_classes=[int(c) for c in follow_top])
 
     def __repr__(self) -> str:
         parts = [f"top_k={self.top_k}"] if self.top_k != 1 else []
         parts += [self._repr_inputs()] if self.inputs != "auto" else []
         return f"class_invariance({', '.join(parts)})"
+
+
+def _listed(classes: np.ndarray, most: int = 10) -> str:
+    """Class indices for a message: ``0, 3, 7`` (the first ``most`` and how many more)."""
+    shown = ", ".join(str(int(c)) for c in classes[:most])
+    return shown + (f" and {len(classes) - most} more" if len(classes) > most else "")
 
 
 def cosine_similarity(inputs: Inputs = "auto") -> CosineSimilarity:

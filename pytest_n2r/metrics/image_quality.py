@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_array, check_positive
-from ..errors import InvalidArgument, InvalidType
-from ._outputs import as_numeric
+from ..errors import InvalidArgument, InvalidType, SUTOutputError
+from ._outputs import as_image
 from .base import Metric, MetricResult
 
 __all__ = ["psnr", "ssim", "lpips", "lpips_unavailable_reason", "LPIPSUnavailable", "SSIM", "ssim_metric"]
@@ -34,27 +34,33 @@ LPIPS_BACKBONES = {
 }
 
 
+#: What an image-returning SUT's output must be, for messages.
+_IMAGE = "an H×W×3 or H×W image (uint8, or floats in [0, 1] unless data_range is given)"
+
+
 class LPIPSUnavailable(UserWarning):
     """LPIPS cannot run here (package, torchvision or backbone weights missing); it is skipped."""
 
 
-def _pair(image_true: Any, image_test: Any, data_range: float | None) -> tuple[np.ndarray, np.ndarray, float]:
-    a = check_array("image_true", image_true, "H W" if np.ndim(image_true) == 2 else "H W 3")
-    b = check_array("image_test", image_test, "H W" if np.ndim(image_test) == 2 else "H W 3")
+def _pair(image_true: Any, image_test: Any, data_range: float | None,
+          names: tuple[str, str] = ("image_true", "image_test")) -> tuple[np.ndarray, np.ndarray, float]:
+    """Both images as float64 arrays and their data range; errors name the images by ``names``."""
+    a = check_array(names[0], image_true, "H W" if np.ndim(image_true) == 2 else "H W 3")
+    b = check_array(names[1], image_test, "H W" if np.ndim(image_test) == 2 else "H W 3")
     if a.shape != b.shape:
-        raise InvalidArgument(f"image_true has shape {a.shape} but image_test has {b.shape}; expected equal shapes")
+        raise InvalidArgument(f"{names[0]} has shape {a.shape} but {names[1]} has {b.shape}; expected equal shapes")
     if a.dtype != b.dtype:
-        raise InvalidType(f"image_true is {a.dtype} but image_test is {b.dtype}; expected the same dtype")
+        raise InvalidType(f"{names[0]} is {a.dtype} but {names[1]} is {b.dtype}; expected the same dtype")
     if data_range is not None:
         data_range = check_positive("data_range", data_range)
     elif a.dtype == np.uint8:
         data_range = 255.0
     elif a.dtype.kind == "f":
-        lo, hi = float(min(a.min(), b.min())), float(max(a.max(), b.max()))
-        if lo < 0.0 or hi > 1.0:
-            raise InvalidArgument(
-                f"float images have values in [{lo:.4g}, {hi:.4g}], not [0, 1]; pass data_range= explicitly"
-            )
+        for name, image in zip(names, (a, b), strict=True):
+            lo, hi = float(image.min()), float(image.max())
+            if lo < 0.0 or hi > 1.0:
+                raise InvalidArgument(f"{name} is a float image with values in [{lo:.4g}, {hi:.4g}], not [0, 1]; "
+                                      "pass data_range= (the span of values an image can take, e.g. 255)")
         data_range = 1.0
     else:
         raise InvalidType(f"images of dtype {a.dtype} need data_range=; expected uint8 (0..255) or float (0..1)")
@@ -79,9 +85,13 @@ def ssim(image_true: np.ndarray, image_test: np.ndarray, *, data_range: float | 
     scikit-image with the paper's settings: an 11×11 Gaussian window (σ = 1.5), population covariance,
     averaged over channels. Images must be at least 11 pixels on each side.
     """
+    return _ssim(*_pair(image_true, image_test, data_range))
+
+
+def _ssim(a: np.ndarray, b: np.ndarray, data_range: float) -> float:
+    """SSIM of two float64 images of one shape (as :func:`_pair` returns them)."""
     from skimage.metrics import structural_similarity
 
-    a, b, data_range = _pair(image_true, image_test, data_range)
     if min(a.shape[:2]) < 11:
         raise InvalidArgument(f"images of {a.shape[1]}x{a.shape[0]} pixels are too small for SSIM; expected >= 11x11")
     return float(structural_similarity(
@@ -141,21 +151,31 @@ def lpips(image_true: np.ndarray, image_test: np.ndarray, *, net: str = "alex") 
 class SSIM(Metric):
     """SSIM between the SUT's two output *images* (for SUTs that return images: denoisers, enhancers).
 
-    Range [-1, 1], ideal 1, deviation ``1 - score``; see :func:`ssim`.
+    Range [-1, 1], ideal 1, deviation ``1 - score``; see :func:`ssim`. The outputs may be numpy arrays or
+    tensors (any device, ``requires_grad`` or not; bfloat16 is read as float32). ``data_range`` is the span of
+    values an output image can take: 255 for uint8 and 1 for floats unless given (float images in 0..255 need
+    ``data_range=255``). Any output it cannot use is a :class:`~pytest_n2r.errors.SUTOutputError` naming it.
     """
 
     name = "ssim"
     ideal = 1.0
 
+    def __init__(self, data_range: float | None = None) -> None:
+        self.data_range = None if data_range is None else check_positive("data_range", data_range)
+
     def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        for which, out in (("source", out_source), ("follow-up", out_follow)):
-            as_numeric(out, which, "an H×W×3 or H×W image")  # None / NaN / Inf named by the output
-        return self.result(ssim(out_source, out_follow))
+        a, b = (as_image(out, which, _IMAGE) for which, out in (("source", out_source), ("follow-up", out_follow)))
+        try:
+            score = _ssim(*_pair(a, b, self.data_range, ("source output", "follow-up output")))
+        except (InvalidArgument, InvalidType) as exc:  # about the outputs (data_range was checked when built)
+            raise SUTOutputError(str(exc)) from None
+        return self.result(score)
 
     def __repr__(self) -> str:
-        return "ssim_metric()"
+        return "ssim_metric()" if self.data_range is None else f"ssim_metric(data_range={self.data_range!r})"
 
 
-def ssim_metric() -> SSIM:
-    """The :class:`SSIM` metric for relations whose SUT returns images."""
-    return SSIM()
+def ssim_metric(data_range: float | None = None) -> SSIM:
+    """The :class:`SSIM` metric for relations whose SUT returns images; ``data_range``: the span of an image's
+    values (default: 255 for uint8, 1 for floats in [0, 1])."""
+    return SSIM(data_range)

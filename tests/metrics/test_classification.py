@@ -8,7 +8,7 @@ import hypothesis.strategies as st
 import numpy as np
 import pytest
 import torch
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis.extra.numpy import arrays
 
 from pytest_n2r.errors import InvalidArgument, InvalidType, SUTOutputError
@@ -17,6 +17,7 @@ from pytest_n2r.metrics.classification import (
     cosine_similarity,
     is_probability_vector,
     l2_norm,
+    probability_sum_tolerance,
     softmax,
 )
 
@@ -24,40 +25,65 @@ logits = st.integers(2, 12).flatmap(
     lambda n: arrays(np.float64, n, elements=st.floats(-30, 30)))
 logit_pairs = st.integers(2, 12).flatmap(
     lambda n: st.tuples(*[arrays(np.float64, n, elements=st.floats(-30, 30))] * 2))
-probability_pairs = logit_pairs.map(lambda ab: (softmax(ab[0]), softmax(ab[1])))
 ALL = [cosine_similarity(), l2_norm(), class_invariance(), class_invariance(top_k=2)]
+LOGITS = [cosine_similarity(inputs="logits"), l2_norm(inputs="logits"), class_invariance(inputs="logits"),
+          class_invariance(top_k=2, inputs="logits")]
+
+
+def undefined_for_want_of_a_class(result, v) -> bool:
+    """Whether ``result`` is undefined because ``v`` (the source) favours no class or ties at its top."""
+    reason = result.details.get("reason", "")
+    return (not result.valid) and (("is constant" in reason and v.min() == v.max())
+                                   or ("tie" in reason and np.count_nonzero(v == v.max()) > 1))
 
 
 @settings(max_examples=50)
 @given(v=logits, as_probabilities=st.booleans())
-def test_identical_outputs_score_the_ideal(v, as_probabilities):
+def test_identical_outputs_score_the_ideal_unless_they_favour_no_class(v, as_probabilities):
     v = softmax(v) if as_probabilities else v
-    for metric in ALL:
+    for metric in ALL if as_probabilities else LOGITS:
         result = metric(v, v.copy())
+        if not result.valid:
+            assert undefined_for_want_of_a_class(result, v), f"{metric!r} undefined for {v} without cause: {result}"
+            continue
         assert result.score == pytest.approx(metric.ideal, abs=1e-12) and result.deviation < 1e-12, (metric, result)
 
 
 @settings(max_examples=50)
-@given(pair=st.one_of(probability_pairs, logit_pairs))
-def test_scores_stay_in_range_and_symmetric_metrics_are_symmetric(pair):
-    a, b = pair
-    cos, l2 = cosine_similarity()(a, b), l2_norm()(a, b)
+@given(pair=logit_pairs, as_probabilities=st.booleans())
+def test_scores_stay_in_range_and_symmetric_metrics_are_symmetric(pair, as_probabilities):
+    a, b = (softmax(pair[0]), softmax(pair[1])) if as_probabilities else pair
+    inputs = "auto" if as_probabilities else "logits"
+    cos, l2 = cosine_similarity(inputs)(a, b), l2_norm(inputs)(a, b)
+    if a.min() == a.max() or b.min() == b.max():
+        assert not cos.valid and not l2.valid, f"a constant output scored: {cos}, {l2}"
+        return
     assert 0.0 <= cos.score <= 1.0 + 1e-12, cos  # probabilities (given or softmaxed) are non-negative
     assert 0.0 <= l2.score <= math.sqrt(2) + 1e-12, l2
-    assert cos.score == pytest.approx(cosine_similarity()(b, a).score, abs=1e-12)
-    assert l2.score == pytest.approx(l2_norm()(b, a).score, abs=1e-12)
-    assert class_invariance()(a, b).score in (0.0, 1.0)
-    assert class_invariance()(a, b).score == class_invariance()(b, a).score  # top-1 equality is symmetric
+    assert cos.score == pytest.approx(cosine_similarity(inputs)(b, a).score, abs=1e-12)
+    assert l2.score == pytest.approx(l2_norm(inputs)(b, a).score, abs=1e-12)
+    forward, backward = class_invariance(inputs=inputs)(a, b), class_invariance(inputs=inputs)(b, a)
+    for result, source in ((forward, a), (backward, b)):
+        assert result.valid or undefined_for_want_of_a_class(result, source) or "level with" in result.details[
+            "reason"], f"class invariance undefined without a tie: {result}"
+    if forward.valid and backward.valid:
+        assert forward.score == backward.score in (0.0, 1.0), (forward, backward)  # top-1 equality is symmetric
 
 
 @settings(max_examples=50)
 @given(pair=logit_pairs, shift=st.floats(-50, 50))
 def test_logits_are_read_through_a_softmax(pair, shift):
     a, b = pair
+    assume(a.min() < a.max() and b.min() < b.max() and np.ptp(a + shift) > 0)
     # a softmax ignores a constant shift, so shifted logits are the same prediction
-    assert l2_norm(inputs="logits")(a, a + shift).score < 1e-9
-    assert l2_norm()(a, b).score == pytest.approx(np.linalg.norm(softmax(a) - softmax(b)), abs=1e-12)
-    assert l2_norm()(a, b).details["inputs"] in ("logits", "probabilities")
+    shifted = l2_norm(inputs="logits")(a, a + shift)
+    assert shifted.score < 1e-9, f"logits shifted by {shift} read as another prediction: {shifted}"
+    assert l2_norm(inputs="logits")(a, b).score == pytest.approx(np.linalg.norm(softmax(a) - softmax(b)), abs=1e-12), (
+        "logits were not compared through their softmax")
+    if np.any((a < 0) | (a > 1)) and np.any((b < 0) | (b > 1)):  # both read as logits by "auto" too
+        result = l2_norm()(a, b)
+        assert result.details["inputs"] == "logits", f"auto read logits {a}, {b} as {result.details['inputs']}"
+        assert result.score == l2_norm(inputs="logits")(a, b).score, "auto's logits reading differs from 'logits'"
 
 
 def test_known_values():
@@ -71,19 +97,14 @@ def test_known_values():
     assert (result.score, result.details["source_class"], result.details["follow_classes"]) == (0.0, 1, [0, 2])
 
 
-def test_auto_treats_both_sides_alike():
-    probabilities = np.array([0.2, 0.8])
-    logits_ = np.array([2.0, -1.0])
-    assert l2_norm()(probabilities, logits_).details["inputs"] == "logits"
-    assert l2_norm()(probabilities, probabilities[::-1]).details["inputs"] == "probabilities"
-
-
-@pytest.mark.parametrize("empty", [[], np.zeros(0), np.full(5, np.nan), np.full((1, 3), np.nan)],
-                         ids=["list", "array", "all-nan", "all-nan-batch"])
+@pytest.mark.parametrize("empty", [[], np.zeros(0), np.full(5, np.nan), np.full((1, 3), np.nan), [np.nan, np.nan],
+                                   [[np.nan, np.nan]], torch.full((3,), torch.nan)],
+                         ids=["list", "array", "all-nan", "all-nan-batch", "all-nan-list", "all-nan-batch-list",
+                              "all-nan-tensor"])
 @pytest.mark.parametrize("metric", ALL, ids=repr)
 def test_empty_or_all_nan_outputs_are_undefined_never_ideal(metric, empty):
     """Nothing to compare is never a perfect score: the pair is undefined, with the reason."""
-    for a, b, which in ((empty, [0.5, 0.5], "source"), ([0.5, 0.5], empty, "follow-up")):
+    for a, b, which in ((empty, [0.3, 0.7], "source"), ([0.3, 0.7], empty, "follow-up")):
         result = metric(a, b)
         assert not result.valid and math.isnan(result.deviation), (metric, a, b, result)
         assert result.details["reason"].startswith(f"the {which} output is "), result.details
@@ -96,7 +117,6 @@ def test_zero_vectors_in_raw_mode():
     both_zero = cosine_similarity(inputs="raw")(zero, zero)  # the SUT said nothing twice: not agreement
     assert not both_zero.valid and "both outputs are zero vectors" in both_zero.details["reason"]
     assert cosine_similarity(inputs="raw")(zero, np.ones(4)).score == 0.0
-    assert cosine_similarity(inputs="logits")(zero, zero).score == pytest.approx(1.0)  # uniform distributions
     with pytest.raises(SUTOutputError, match="source output is not a probability vector"):
         cosine_similarity(inputs="probabilities")(zero, zero)
 
@@ -165,3 +185,141 @@ def test_accepts_cuda_tensors():
     v = torch.tensor([0.1, 0.7, 0.2], device="cuda")
     assert class_invariance()(v, v.cpu()).score == 1.0
     assert l2_norm()(v, v).score == 0.0
+
+
+# -- how "auto" reads class scores -----------------------------------------------------------------------------
+
+def softmax_in(dtype: str, logits: torch.Tensor) -> torch.Tensor | np.ndarray:
+    """A softmax the way a SUT may compute it in a low-precision ``dtype``."""
+    if dtype == "numpy float16":  # exp, sum and division all in float16
+        e = np.exp((logits - logits.max()).numpy().astype(np.float16))
+        return e / e.sum()
+    low = getattr(torch, dtype.split()[-1])
+    return torch.softmax(logits.to(low), 0) if dtype.startswith("torch") else torch.softmax(logits, 0).to(low)
+
+
+@settings(max_examples=80, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), classes=st.sampled_from([2, 10, 100, 1000, 10000]), scale=st.floats(0.5, 12),
+       dtype=st.sampled_from(["torch bfloat16", "cast bfloat16", "torch float16", "cast float16", "numpy float16",
+                              "torch float32"]))
+def test_low_precision_probabilities_are_read_as_probabilities_never_softmaxed(seed, classes, scale, dtype):
+    """bfloat16 softmax outputs over 1000 classes sum to 1 within 2.9e-3, past the 1e-3 of float64 for 16 % of
+    them: they were softmaxed a second time (nearly uniform), and two different predictions scored alike."""
+    x = torch.randn(2, classes, generator=torch.Generator().manual_seed(seed), dtype=torch.float32) * scale
+    a, b = softmax_in(dtype, x[0]), softmax_in(dtype, x[1])
+    exact = [np.asarray(v.double() if isinstance(v, torch.Tensor) else v, np.float64) for v in (a, b)]
+    assume(all(v.min() < v.max() for v in exact))  # a constant output is undefined: tested below
+    exact = [v / v.sum() for v in exact]
+    for metric, raw in ((cosine_similarity(), cosine_similarity(inputs="raw")), (l2_norm(), l2_norm(inputs="raw"))):
+        result = metric(a, b)
+        assert result.details["inputs"] == "probabilities", (
+            f"{dtype} softmax outputs of {classes} classes summing to {[float(v.sum()) for v in exact]} were read "
+            f"as {result.details['inputs']}")
+        assert result.score == pytest.approx(raw(*exact).score, abs=1e-12), "not the renormalized vectors' score"
+
+
+def test_two_confident_different_bfloat16_predictions_score_far_apart():
+    """The reviewer's case: classes 1 and 2 predicted with 0.81 and 0.93, stored in bfloat16 (sums 0.99836 and
+    1.00106): cosine 0.9994 and L2 0.001 when softmaxed again; they share almost nothing."""
+    x = torch.randn(2, 1000, generator=torch.Generator().manual_seed(2))
+    x[0, 1] += 8.0
+    x[1, 2] += 8.0
+    a, b = torch.softmax(x, 1).to(torch.bfloat16)
+    sums = [float(v.double().sum()) for v in (a, b)]
+    assert all(abs(s - 1.0) > 1e-3 for s in sums), f"the case needs sums past 1e-3 of 1: {sums}"
+    cos, l2 = cosine_similarity()(a, b), l2_norm()(a, b)
+    assert cos.score < 0.05 and l2.score > 1.0, f"different predictions scored alike: {cos}, {l2}"
+    assert class_invariance()(a, b).score == 0.0
+
+
+def test_tolerance_follows_the_dtype_and_the_length():
+    eps16, eps_bf16 = float(np.finfo(np.float16).eps), 2.0**-7
+    assert probability_sum_tolerance(1000, float(np.finfo(np.float64).eps)) == 1e-3, "float64 should get the floor"
+    assert probability_sum_tolerance(1000, eps16) == 2 * eps16, "float16 should get 2 eps"
+    assert probability_sum_tolerance(1000, eps_bf16) == 2**-6, "bfloat16 should get 2 eps"
+    assert probability_sum_tolerance(100_000, float(np.finfo(np.float32).eps)) == pytest.approx(0.0119, abs=1e-4), (
+        "100 000 float32-accumulated classes should get C eps(float32)")
+    almost = np.array([0.9, 0.1015])  # sums to 1.0015: bfloat16 rounding, not float64 rounding
+    assert is_probability_vector(almost, eps_bf16), "a sum 1.5e-3 off is within bfloat16's tolerance"
+    assert not is_probability_vector(almost), "a sum 1.5e-3 off is past float64's tolerance"
+    reading = cosine_similarity()(torch.tensor(almost, dtype=torch.bfloat16), torch.tensor([0.2, 0.8]))
+    assert reading.details["inputs"] == "probabilities", f"the tensor's bfloat16 dtype was not used: {reading}"
+    with pytest.raises(SUTOutputError, match=r"source output has every entry in \[0, 1\] but does not sum to 1 "
+                                             r"within 0\.001 \(min 0\.1015, max 0\.9, sum 1\.0015\)"):
+        cosine_similarity()(almost, [0.2, 0.8])  # float64: the SUT did not round that much
+
+
+@pytest.mark.parametrize("metric", [cosine_similarity(), l2_norm()], ids=repr)
+def test_auto_never_softmaxes_scores_in_the_unit_range_and_reads_both_sides_alike(metric):
+    """A softmax of entries in [0, 1] is nearly uniform, so any two such outputs looked alike: a vector in [0, 1]
+    reads as probabilities or is an error, and a pair read one way each is an error naming both."""
+    with pytest.raises(SUTOutputError, match=r"follow-up output has every entry in \[0, 1\] but does not sum to 1"
+                                             r".*pass inputs='logits' if the SUT returns logits, or inputs='raw'"):
+        metric([0.2, 0.8, 0.0], [0.9, 0.8, 0.1])  # independent sigmoid scores
+    with pytest.raises(SUTOutputError, match=r"source output reads as probabilities but follow-up output as logits "
+                                             r"\(source min 0\.2, max 0\.8, sum 1; follow-up min -1, max 2"):
+        metric([0.2, 0.8], [2.0, -1.0])
+    assert metric([0.2, 0.8], [0.3, 0.7]).details["inputs"] == "probabilities", "probability vectors misread"
+    assert metric([2.0, -1.0], [0.5, 1.5]).details["inputs"] == "logits", "logits misread"
+    assert type(metric)(inputs="logits")([0.2, 0.8], [2.0, -1.0]).valid, "the error's advice (inputs=) fails"
+
+
+@pytest.mark.parametrize("inputs", ["auto", "logits"])
+@pytest.mark.parametrize("metric", [cosine_similarity, l2_norm, class_invariance], ids=lambda f: f.__name__)
+def test_outputs_that_favour_no_class_are_undefined_never_ideal(metric, inputs):
+    """All zeros (no answer), equal logits or a uniform distribution say nothing about the class: zeros against
+    zeros scored cosine 1, L2 0 and class invariance 1, and zeros against a one-hot vector cosine 0.9985."""
+    zero, one_hot, uniform = np.zeros(1000), np.eye(1000)[7], np.full(1000, 1e-3)
+    m = metric(inputs=inputs)
+    cases = [(zero, zero, "source"), (zero, one_hot, "source"), (one_hot, zero, "follow-up"),
+             (np.full(10, 3.0), np.arange(10.0), "source"), (one_hot, uniform, "follow-up"), ([0.4], [0.6], "source")]
+    for a, b, which in cases:
+        result = m(a, b)
+        assert not result.valid and math.isnan(result.deviation), f"{m!r} scored a constant output: {result}"
+        assert result.details["reason"].startswith(f"the {which} output is constant"), result.details
+    assert not class_invariance(inputs="probabilities")(uniform, one_hot).valid, "a uniform distribution scored"
+
+
+def test_class_invariance_is_undefined_where_a_tie_decides():
+    tied_source = class_invariance()([0.4, 0.4, 0.2], [0.1, 0.2, 0.7])
+    assert not tied_source.valid, f"a tied source top-1 was scored (class 0 won by index): {tied_source}"
+    assert "the source's top-1 is a tie between classes 0, 1" in tied_source.details["reason"], (
+        f"the reason does not name the tie: {tied_source}")
+    level = class_invariance()([0.2, 0.7, 0.1], [0.45, 0.45, 0.1])  # class 1 level with class 0 at the top
+    assert not level.valid and "level with classes 0 across its top-1 boundary" in level.details["reason"], (
+        f"a follow-up tie across the top-1 boundary was broken by index: {level}")
+    both_in = class_invariance(top_k=2)([0.2, 0.7, 0.1], [0.45, 0.45, 0.1])  # the tie lies within the top 2
+    assert both_in.valid and both_in.score == 1.0, f"a tie inside the top 2 decides nothing: {both_in}"
+    below = class_invariance()([0.2, 0.7, 0.1], [0.8, 0.1, 0.1])  # tied, but below class 0 whatever the tie-break
+    assert below.valid and below.score == 0.0, f"a tie below the top-1 decides nothing: {below}"
+    ranks = class_invariance(top_k=2, inputs="logits")([0.0, -800.0, -900.0], [0.0, -800.0, -900.0])
+    assert ranks.valid and ranks.score == 1.0, f"softmax underflow (0 and 0) is no tie of the logits: {ranks}"
+
+
+# -- raw vectors of any magnitude ------------------------------------------------------------------------------
+
+magnitudes = st.one_of(st.just(0.0), st.floats(1e-3, 1e3), st.floats(-1e3, -1e-3))
+raw_pairs = st.integers(1, 8).flatmap(lambda n: st.tuples(*[arrays(np.float64, n, elements=magnitudes)] * 2))
+
+
+@settings(max_examples=60)
+@given(pair=raw_pairs, scales=st.tuples(st.integers(-300, 300), st.integers(-300, 300)))
+def test_raw_cosine_is_scale_invariant_and_l2_scales_at_any_magnitude(pair, scales):
+    """[1e200, 1e200] against itself scored cosine 0.0 (the squares overflowed), [1e-200, 2e-200] was called
+    a zero vector (they underflowed), and [1e200, 0] was infinitely far from [-1e200, 0]."""
+    a, b = pair
+    sa, sb = 10.0 ** scales[0], 10.0 ** scales[1]
+    cos, scaled = cosine_similarity(inputs="raw")(a, b), cosine_similarity(inputs="raw")(a * sa, b * sb)
+    assert cos.valid == scaled.valid, f"scaling by {sa:g}, {sb:g} changed validity: {cos} vs {scaled}"
+    if cos.valid:
+        assert scaled.score == pytest.approx(cos.score, abs=1e-9), f"scaled by {sa:g}, {sb:g}: {scaled} vs {cos}"
+    l2 = l2_norm(inputs="raw")(a * sa, b * sa).score
+    assert l2 == pytest.approx(sa * l2_norm(inputs="raw")(a, b).score, rel=1e-9), f"L2 scaled by {sa:g}: {l2}"
+
+
+def test_raw_extremes():
+    big, tiny = np.array([1e200, 1e200]), np.array([1e-200, 2e-200])
+    assert cosine_similarity(inputs="raw")(big, big).score == pytest.approx(1.0), "[1e200, 1e200] overflowed"
+    assert cosine_similarity(inputs="raw")(tiny, tiny * 1e200).score == pytest.approx(1.0), "[1e-200, ..] underflowed"
+    assert l2_norm(inputs="raw")([1e200, 0.0], [-1e200, 0.0]).score == pytest.approx(2e200), "L2 overflowed"
+    assert not cosine_similarity(inputs="raw")(np.zeros(3), np.zeros(3)).valid, "true zero vectors have no direction"

@@ -113,3 +113,66 @@ def test_lpips_runs_the_model_when_it_is_available(monkeypatch):
     assert iq.lpips(a, a) == 0.0
     assert iq.lpips(a, np.full_like(a, 255)) == pytest.approx(2.0)
     assert seen == ["alex"], "the model is built once and reused"
+
+
+containers = {
+    "numpy": lambda x: x,
+    "tensor": torch.from_numpy,
+    "tensor requiring grad": lambda x: torch.tensor(x, dtype=torch.float32, requires_grad=True),
+    "bfloat16 tensor": lambda x: torch.tensor(x, dtype=torch.bfloat16),
+}
+
+
+@settings(max_examples=30, deadline=None)
+@given(image=images, seed=st.integers(0, 2**16), container=st.sampled_from(sorted(containers)))
+def test_ssim_metric_reads_arrays_and_tensors_alike(image, seed, container):
+    """A tensor requiring grad raised torch's bare RuntimeError, bfloat16 an InvalidType: the metric now reads
+    them as the other metrics do (detached, on the CPU, bfloat16 as float32)."""
+    other = np.random.default_rng(seed).integers(0, 256, size=image.shape, dtype=np.uint8)
+    a, b = image / 255.0, other / 255.0  # in [0, 1], exact in bfloat16 only to 8 bits: compare with what it holds
+    wrap = containers[container]
+    expected = iq.ssim(*(np.asarray(torch.as_tensor(wrap(x)).detach().float().numpy(), np.float64) for x in (a, b)))
+    result = iq.ssim_metric()(wrap(a), wrap(b))
+    assert result.score == pytest.approx(expected, abs=1e-6), f"{container}: {result.score} vs {expected}"
+
+
+def test_ssim_metric_takes_a_data_range_for_float_images_in_0_to_255():
+    rng = np.random.default_rng(0)
+    a, b = rng.random((32, 32, 3)) * 255, rng.random((32, 32, 3)) * 255
+    with pytest.raises(SUTOutputError, match=r"source output is a float image with values in \[.*\], not \[0, 1\]; "
+                                             r"pass data_range="):
+        iq.ssim_metric()(a, b)
+    assert iq.ssim_metric(data_range=255)(a, b).score == pytest.approx(iq.ssim(a / 255, b / 255), abs=1e-9), (
+        "data_range=255 on 0..255 images should equal SSIM of the images scaled to 0..1")
+    assert repr(iq.ssim_metric(data_range=255)) == "ssim_metric(data_range=255.0)", "repr drops data_range"
+    assert repr(iq.ssim_metric()) == "ssim_metric()", "repr of the default changed"
+    with pytest.raises(InvalidArgument, match="data_range"):
+        iq.ssim_metric(data_range=0)
+
+
+@pytest.mark.parametrize(
+    ("a", "b", "match"),
+    [
+        (np.zeros((16, 16, 3)), np.zeros((16, 17, 3)),
+         r"source output has shape \(16, 16, 3\) but follow-up output has \(16, 17, 3\)"),
+        (np.zeros((16, 16, 3), np.uint8), np.zeros((16, 16, 3)),
+         "source output is uint8 but follow-up output is float64"),
+        (np.zeros((16, 16, 3)), np.zeros((3, 16, 16)),
+         r"follow-up output must have shape \(H W 3\), got \(3, 16, 16\)"),
+        (np.zeros((16, 16, 3)), np.full((16, 16, 3), 2.0),
+         r"follow-up output is a float image with values in \[2, 2\]"),
+        (np.zeros((5, 16, 3)), np.zeros((5, 16, 3)), "too small for SSIM"),
+        (np.zeros((16, 16), np.int64), np.zeros((16, 16), np.int64), "images of dtype int64 need data_range="),
+        (None, np.zeros((16, 16)), "source output is None; expected an H×W×3 or H×W image"),
+    ],
+)
+def test_ssim_metric_errors_name_the_output(a, b, match):
+    """The metric's errors named image_true / image_test, arguments its caller never passed."""
+    with pytest.raises(SUTOutputError, match=match):
+        iq.ssim_metric()(a, b)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+def test_ssim_metric_reads_cuda_tensors_requiring_grad():
+    a = torch.rand(32, 32, 3, device="cuda", requires_grad=True)
+    assert iq.ssim_metric()(a, a * 1).score == pytest.approx(1.0), "a CUDA tensor requiring grad scored wrong"

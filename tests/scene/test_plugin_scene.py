@@ -22,7 +22,7 @@ def test_the_fixture_is_the_fitted_scene(n2r_scene):
 
 
 # A 30-step fit is a blur with unreliable depth: the coverage check would reject every view.
-@metamorphic(l2_norm(), eps=1.0, transform=transforms(yaw=2), examples=3, validity=Validity(min_coverage=0))
+@metamorphic(l2_norm(inputs="raw"), eps=1.0, transform=transforms(yaw=2), examples=3, validity=Validity(min_coverage=0))
 def test_mean_colour(n2r_scene):
     return lambda rgb: [float(rgb.mean()) / 255.0]
 """
@@ -50,7 +50,7 @@ def test_the_scene_renders_at_half_size(n2r_scene):
     assert n2r_scene.settings.scale == 0.5, n2r_scene.settings
 
 
-@metamorphic(l2_norm(), eps=1.0, transform=transforms(yaw=2), examples=2, validity=Validity(min_coverage=0))
+@metamorphic(l2_norm(inputs="raw"), eps=1.0, transform=transforms(yaw=2), examples=2, validity=Validity(min_coverage=0))
 def test_full_size_images_reach_the_sut(n2r_scene):
     def sut(rgb):
         assert max(rgb.shape[:2]) == 48, rgb.shape  # --n2r-size 48, not the 24 pixels rendered
