@@ -25,30 +25,44 @@ def _kd_tree() -> Any:
 
 def nearest_within(queries: np.ndarray, points: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
     """Index into ``points`` of each query's nearest point, or ``-1`` when none lies within ``radius``
-    (Euclidean distance, inclusive)."""
-    if len(points) == 0 or len(queries) == 0:
-        return np.full(len(queries), -1, dtype=np.intp)
+    (Euclidean distance, inclusive). Of points equally near, the lowest index wins, with SciPy or without.
+
+    >>> nearest_within(np.array([[0.0, 0.0]]), np.array([[1.0, 0.0], [-1.0, 0.0]]), 2.0).tolist()
+    [0]
+    """
+    q, p, d2 = _close_pairs(queries, points, radius, use_scipy)
+    nearest = np.full(len(queries), -1, dtype=np.intp)
+    first = _firsts(q, d2, p)
+    nearest[q[first]] = p[first]
+    return nearest
+
+
+def _firsts(key: np.ndarray, d2: np.ndarray, other: np.ndarray) -> np.ndarray:
+    """Indices of the pairs that are nearest for their ``key`` point, ties going to the lowest ``other`` index
+    (the pairs sorted by ``(key, d2, other)``, the first of each key)."""
+    order = np.lexsort((other, d2, key))
+    return order[np.r_[True, key[order][1:] != key[order][:-1]]] if len(order) else order
+
+
+def _close_pairs(a: np.ndarray, b: np.ndarray, radius: float,
+                 use_scipy: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(i, j, d2)``: every pair of ``a[i]`` and ``b[j]`` at most ``radius`` apart (inclusive) and its squared
+    distance, in no particular order. The k-d tree (``use_scipy`` and SciPy present) and the binned numpy
+    search only propose candidates; the squared distances and the test against ``radius`` are the same
+    numpy arithmetic on both paths, so both give the same pairs to the bit."""
+    empty = np.zeros(0, dtype=np.intp)
+    if len(a) == 0 or len(b) == 0:
+        return empty, empty, np.zeros(0)
     tree = _kd_tree() if use_scipy else None
-    if tree is not None:
-        # distance_upper_bound is exclusive; nudge it so a point exactly at `radius` still counts
-        dist, idx = tree(points).query(queries, k=1, distance_upper_bound=np.nextafter(radius, np.inf))
-        return np.where(np.isfinite(dist) & (dist <= radius), idx, -1).astype(np.intp)
-    return _nearest_within_grid(queries, points, radius)
-
-
-def _nearest_within_grid(queries: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
-    """Numpy-only :func:`nearest_within`: see :func:`_cell_pairs`."""
-    best = np.full(len(queries), -1, dtype=np.intp)
-    best_d2 = np.full(len(queries), np.inf)
-    for qi, pi, d2 in _cell_pairs(queries, points, radius):
-        # the nearest candidate per query in this cell: sort by (query, distance, index), keep firsts
-        o = np.lexsort((pi, d2, qi))
-        first = o[np.r_[True, qi[o][1:] != qi[o][:-1]]]
-        q_first, d_first, p_first = qi[first], d2[first], pi[first]
-        better = (d_first < best_d2[q_first]) | ((d_first == best_d2[q_first]) & (p_first < best[q_first]))
-        best[q_first[better]] = p_first[better]
-        best_d2[q_first[better]] = d_first[better]
-    return np.where(best_d2 <= radius * radius, best, -1)
+    if tree is not None:  # candidates a little past radius; the test below decides
+        found = tree(a).sparse_distance_matrix(tree(b), np.nextafter(radius, np.inf), output_type="ndarray")
+        i, j = found["i"].astype(np.intp), found["j"].astype(np.intp)
+        d2 = ((a[i] - b[j]) ** 2).sum(axis=1)
+    else:
+        cells = list(_cell_pairs(a, b, radius))
+        i, j, d2 = (np.concatenate([c[k] for c in cells]) for k in range(3)) if cells else (empty, empty, np.zeros(0))
+    near = d2 <= radius * radius
+    return i[near], j[near], d2[near]
 
 
 def _cell_pairs(queries: np.ndarray, points: np.ndarray,
@@ -80,19 +94,8 @@ def pairs_within(a: np.ndarray, b: np.ndarray, radius: float, *,
                  use_scipy: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every pair ``(i, j)`` with ``a[i]`` and ``b[j]`` at most ``radius`` apart (Euclidean, inclusive), as the
     index arrays ``i``, ``j`` and the distances, nearest first (ties by ``i``, then ``j``)."""
-    empty = np.zeros(0, dtype=np.intp)
-    if len(a) == 0 or len(b) == 0:
-        return empty, empty, np.zeros(0)
-    tree = _kd_tree() if use_scipy else None
-    if tree is not None:  # candidates a little past radius; the test below is the numpy path's, to the bit
-        found = tree(a).sparse_distance_matrix(tree(b), np.nextafter(radius, np.inf), output_type="ndarray")
-        i, j = found["i"].astype(np.intp), found["j"].astype(np.intp)
-        d2 = ((a[i] - b[j]) ** 2).sum(axis=1)
-    else:
-        cells = list(_cell_pairs(a, b, radius))
-        i, j, d2 = (np.concatenate([c[k] for c in cells]) for k in range(3)) if cells else (empty, empty, np.zeros(0))
-    near = d2 <= radius * radius
-    i, j, d = i[near], j[near], np.sqrt(d2[near])
+    i, j, d2 = _close_pairs(a, b, radius, use_scipy)
+    d = np.sqrt(d2)
     order = np.lexsort((j, i, d))
     return i[order], j[order], d[order]
 
@@ -160,12 +163,14 @@ def _augment(root: int, adjacency: list[list[int]], mate_a: list[int], mate_b: l
 
 def mutual_nearest(a: np.ndarray, b: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
     """``(M, 2)`` index pairs ``(i, j)`` such that ``b[j]`` is ``a[i]``'s nearest neighbour, ``a[i]`` is
-    ``b[j]``'s, and they are at most ``radius`` apart. Each point is in at most one pair."""
-    ab = nearest_within(a, b, radius, use_scipy=use_scipy)
-    i = np.flatnonzero(ab >= 0)
-    j = ab[i]
-    hit = np.unique(j)  # only the points of b that some point of a chose need a reverse look-up
-    ba = np.full(len(b), -1, dtype=np.intp)
-    ba[hit] = nearest_within(b[hit], a, radius, use_scipy=use_scipy)
-    mutual = ba[j] == i
+    ``b[j]``'s, and they are at most ``radius`` apart. Each point is in at most one pair, sorted by ``i``. Of
+    points equally near, the lowest index is the nearest (as :func:`nearest_within`), with SciPy or without,
+    so points added far away (more than ``radius`` from every point) change no pair."""
+    i, j, d2 = _close_pairs(a, b, radius, use_scipy)
+    nearest_of_a = np.zeros(len(i), dtype=bool)
+    nearest_of_a[_firsts(i, d2, j)] = True
+    nearest_of_b = np.zeros(len(i), dtype=bool)
+    nearest_of_b[_firsts(j, d2, i)] = True
+    mutual = np.flatnonzero(nearest_of_a & nearest_of_b)
+    mutual = mutual[np.argsort(i[mutual], kind="stable")]
     return np.stack([i[mutual], j[mutual]], axis=1)

@@ -255,14 +255,21 @@ class HomographyMapping(PointMapping):
     Exact for a planar scene (:meth:`from_views` with ``plane``) or a pure camera rotation (``plane=None``);
     points landing outside the other image are rejected. No depth or opacity is used. Built with
     :meth:`from_views`, it also rejects points whose scene point is behind either camera (a homography
-    alone maps those to plausible-looking pixels); built from a bare ``H`` it cannot tell.
+    alone maps those to plausible-looking pixels); built from a bare ``H`` it cannot tell. ``H`` may have any
+    scale (``s H`` is the same homography); it is singular when ``det(H / max|H|)`` is below 1e-12.
     """
 
     def __init__(self, H: np.ndarray, source_camera: Camera, follow_camera: Camera) -> None:
         self.H = check_array("H", H, "3 3", dtype=np.float64)
-        if abs(np.linalg.det(self.H)) < 1e-12 * max(1.0, float(np.abs(self.H).max()) ** 3):
-            raise InvalidArgument("H is singular; a homography between two views must be invertible")
-        self.H_inv = np.linalg.inv(self.H)
+        # H and s H are one homography: test and apply H / max|H| (entries in [-1, 1]), whatever the scale given
+        scale = float(np.abs(self.H).max())
+        if scale == 0.0 or abs(np.linalg.det(self.H / scale)) < 1e-12:
+            raise InvalidArgument("H is singular (the determinant of H / max|H| is below 1e-12); a homography "
+                                  "between two views must be invertible")
+        self._H = self.H / scale
+        inverse = np.linalg.inv(self._H)
+        #: The inverse homography (follow-up → source pixels), scaled so that its largest entry is ±1.
+        self.H_inv = inverse / np.abs(inverse).max()
         self.source_camera = source_camera
         self.follow_camera = follow_camera
         self._views: tuple[RenderedView, RenderedView] | None = None
@@ -288,7 +295,7 @@ class HomographyMapping(PointMapping):
         return mapping
 
     def to_follow(self, uv_source: np.ndarray) -> MappedPoints:
-        return self._map(uv_source, self.H, self.source_camera, self.follow_camera, forward=True)
+        return self._map(uv_source, self._H, self.source_camera, self.follow_camera, forward=True)
 
     def to_source(self, uv_follow: np.ndarray) -> MappedPoints:
         return self._map(uv_follow, self.H_inv, self.follow_camera, self.source_camera, forward=False)

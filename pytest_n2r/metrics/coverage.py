@@ -37,6 +37,8 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     """
     radius = check_positive("radius", radius) + DISC_SLACK
     h, w = camera.height, camera.width
+    # discs that miss the image go before the integer casts below (a point at 1e19 px or inf would not fit)
+    points = points[np.all((points + radius >= 0) & (points - radius <= [w - 1, h - 1]), axis=1)]
     if len(points) == 0:
         return np.zeros((h, w), dtype=bool)
     r = int(np.ceil(radius))
@@ -48,7 +50,7 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     first = np.clip(np.ceil(u - half), 0, w).astype(np.intp)
     last = np.clip(np.floor(u + half) + 1, 0, w).astype(np.intp)  # one past the run's last column
     ok &= first < last
-    if not ok.any():  # every disc outside the image
+    if not ok.any():  # no disc holds a pixel centre of the image (radius under √0.5 px)
         return np.zeros((h, w), dtype=bool)
     row_start = rows[ok] * (w + 1)
     order = np.argsort(row_start + first[ok])

@@ -66,6 +66,9 @@ _MATCHINGS = ("maximum", "mutual")
 #: shipped OpenCV detectors cover at most 0.67 (SIFT on the wall), ORB 0.35; a grid of points every 8 px
 #: covers 1.0 and scored 0.99 interest-point spread under any motion before this rule.
 MAX_COVERAGE = 0.9
+#: The least disc radius (pixels) that holds a pixel centre wherever its point lies in the image: √0.5, the
+#: distance from the middle of four pixel centres to each.
+_ALWAYS_HOLDS = float(np.sqrt(0.5))
 #: Source renders whose lifted keypoints a metric keeps (least recently used first out): a relation's
 #: examples draw their source from a few views, and a warm main job's 714 keypoint pairs come from far fewer.
 _KEPT_SOURCES = 32
@@ -77,7 +80,9 @@ def _unique_rows(points: np.ndarray) -> np.ndarray:
     Rounding first means two detections closer than round-off count once, so mapping round-off
     (~1e-12 px) can never swap which of them is whose nearest neighbour. Faster than ``np.unique``.
     """
-    points = np.round(points, 6)
+    with np.errstate(over="ignore"):  # past 1.8e302 px rounding overflows: such points (far off) stay as given
+        rounded = np.round(points, 6)
+    points = np.where(np.isfinite(rounded), rounded, points)
     if len(points) < 2:
         return points
     sorted_points = points[np.lexsort((points[:, 1], points[:, 0]))]
@@ -258,7 +263,7 @@ class Repeatability(_KeypointMetric):
 
     name = "repeatability"
     ideal = 1.0
-    result_version = "2"
+    result_version = "3"  # 3: mutual nearest ties go to the lowest index; homographies applied as H / max|H|
 
     def __init__(
         self, px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",
@@ -306,11 +311,14 @@ class InterestPointSpread(_KeypointMetric):
     Each set of points visible in both views covers the union of discs of ``radius`` pixels around its
     points, rasterized on the follow-up image's pixel grid (source points mapped into it). The score is
     the intersection over union of the two coverage areas. Range [0, 1], ideal 1, deviation ``1 - score``.
+
+    A ``radius`` under √0.5 px (0.7071) is allowed, but such a disc can hold no pixel centre (a point at
+    ``(10.5, 10.5)`` with radius 0.5): when one side's discs hold none, the pair is undefined, not scored.
     """
 
     name = "interest_point_spread"
     ideal = 1.0
-    result_version = "1"
+    result_version = "2"  # 2: undefined where one side's discs hold no pixel centre; H applied as H / max|H|
 
     def __init__(
         self, radius: float = 8.0, mapping: Mapping = "depth", *,
@@ -324,8 +332,14 @@ class InterestPointSpread(_KeypointMetric):
         a = coverage_mask(c.source_in_follow[c.source_visible], camera, self.radius)
         b = coverage_mask(c.follow[c.follow_visible], camera, self.radius)
         inter, union = int(np.count_nonzero(a & b)), int(np.count_nonzero(a | b))
-        return self.result(inter / union, covered_source=int(a.sum()), covered_follow=int(b.sum()),
-                           covered_both=inter, **details)
+        covered = {"covered_source": int(a.sum()), "covered_follow": int(b.sum()), "covered_both": inter}
+        for which, n in (("source", covered["covered_source"]), ("follow-up", covered["covered_follow"])):
+            if n == 0:  # only a radius under √0.5 px can miss every pixel centre (one lies within √0.5 of any point)
+                return MetricResult.undefined(
+                    self.name, f"the {which} keypoints' discs of radius {self.radius:g} px hold no pixel centre "
+                    f"(a radius under √0.5 = {_ALWAYS_HOLDS:.4f} px can miss them all): nothing to compare",
+                    **covered, **details)
+        return self.result(inter / union, **covered, **details)
 
     def __repr__(self) -> str:
         return f"interest_point_spread(radius={self.radius!r}, {self._mapping_repr()})"

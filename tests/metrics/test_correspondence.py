@@ -1,4 +1,5 @@
-"""Depth sampling: exact on planes (inverse depth is affine in pixels), never in between at depth edges."""
+"""Depth sampling: exact on planes (inverse depth is affine in pixels), never in between at depth edges; homographies
+at any scale."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 
-from pytest_n2r.geometry import Camera, Transform, camera_rays
-from pytest_n2r.metrics.correspondence import sample_depth
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import Camera, Transform, camera_rays, plane_homography
+from pytest_n2r.metrics.correspondence import HomographyMapping, sample_depth
 
 from .scenes import CAMERA
 
@@ -63,3 +65,30 @@ def test_a_float32_depth_map_samples_as_its_float64_widening():
     got, widened = sample_depth(depth, uv), sample_depth(depth.astype(np.float64), uv)
     assert got.dtype == np.float64
     np.testing.assert_array_equal(got, widened)
+
+
+@settings(max_examples=50, deadline=None)
+@given(tau=st.builds(Transform, pitch=st.floats(-20, 20), yaw=st.floats(-20, 20), roll=st.floats(-45, 45),
+                     x=st.floats(-0.5, 0.5), z=st.floats(-0.5, 0.5)),
+       exponent=st.integers(-15, 15))
+def test_a_homography_maps_alike_at_any_scale_and_a_singular_one_is_rejected_at_any(tau, exponent):
+    """H and s H are one homography: np.eye(3) * 1e-5 was called singular, as the determinant test took H's
+    scale for its invertibility."""
+    H = plane_homography(CAMERA, np.eye(4), CAMERA, tau.apply(np.eye(4)), np.array([0.0, 0.0, 1.0]), -4.0)
+    uv = np.array([[3.0, 4.0], [80.0, 60.0], [150.0, 110.0]])
+    reference = HomographyMapping(H, CAMERA, CAMERA).to_follow(uv)
+    scaled = HomographyMapping(H * 10.0**exponent, CAMERA, CAMERA).to_follow(uv)
+    np.testing.assert_array_equal(scaled.visible, reference.visible, err_msg=f"H * 1e{exponent} sees other points")
+    np.testing.assert_allclose(scaled.uv, reference.uv, rtol=1e-9, atol=1e-9, err_msg=f"H * 1e{exponent} maps apart")
+    singular = H.copy()
+    singular[2] = singular[0] + singular[1]  # rank 2
+    with pytest.raises(InvalidArgument, match=r"H is singular \(the determinant of H / max\|H\| is below 1e-12\)"):
+        HomographyMapping(singular * 10.0**exponent, CAMERA, CAMERA)
+
+
+def test_small_and_zero_homographies():
+    for scale in (1.0, 1e-3, 1e-5, 1e-300):
+        mapped = HomographyMapping(np.eye(3) * scale, CAMERA, CAMERA).to_follow(np.array([[3.0, 4.0]]))
+        assert mapped.uv.tolist() == [[3.0, 4.0]], f"np.eye(3) * {scale:g} is the identity, got {mapped.uv}"
+    with pytest.raises(InvalidArgument, match="H is singular"):
+        HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)

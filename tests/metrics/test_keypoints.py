@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 
 import cv2
 import hypothesis.strategies as st
@@ -407,3 +408,66 @@ def test_correspondences_explain_the_score():
     assert np.isnan(c.source_in_follow[~c.source_visible]).all()
     assert result.score == pytest.approx(len(c.matches) / min(c.source_visible.sum(), c.follow_visible.sum()))
     assert len(interest_point_spread().correspondences(p, q, source, follow).matches) == 0
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=pixel_sets, b=pixel_sets, radius=st.floats(0.05, 1.0), half=st.booleans())
+def test_spread_with_discs_that_hold_no_pixel_centre_is_undefined(a, b, radius, half):
+    """A disc narrower than √0.5 px can miss every pixel centre: two such sets divided 0 by 0 (ZeroDivisionError)
+    and one of them scored 0 against the other. Nothing covered is nothing to compare."""
+    a, b = (np.round(a) + 0.5, np.round(b) + 0.5) if half else (a, b)  # half-pixel points: the worst place
+    view, same = pair(Transform())
+    result = interest_point_spread(radius=radius)(a, b, view, same)
+    empty = [which for which, key in (("source", "covered_source"), ("follow-up", "covered_follow"))
+             if result.details.get(key) == 0]
+    if empty:
+        assert not result.valid, f"scored although the {empty[0]} discs hold no pixel centre: {result}"
+        assert result.details["reason"].startswith(f"the {empty[0]} keypoints' discs of radius {radius:g} px hold "
+                                                   "no pixel centre"), result.details
+    else:
+        assert not result.valid or 0.0 <= result.score <= 1.0, result
+
+
+def test_spread_with_a_radius_of_half_a_pixel():
+    view, same = pair(Transform())
+    between = np.array([[10.5, 10.5]])
+    result = interest_point_spread(radius=0.5)(between, between, view, same)
+    assert not result.valid and "(a radius under √0.5 = 0.7071 px can miss them all)" in result.details["reason"], (
+        f"discs holding no pixel centre were scored (or raised): {result}")
+    on_centres = np.array([[10.0, 10.0], [20.0, 30.0]])
+    assert interest_point_spread(radius=0.5)(on_centres, on_centres, view, same).score == 1.0, (
+        "radius 0.5 should still work for points on pixel centres")
+    assert interest_point_spread(radius=math.sqrt(0.5))(between, between, view, same).score == 1.0, (
+        "a disc of radius √0.5 holds the four pixel centres around (10.5, 10.5)")
+
+
+far_values = st.sampled_from([1e19, -1e19, 9.3e18, 1e300, -1e300, np.inf, -np.inf])
+
+
+@settings(max_examples=60, deadline=None)
+@given(points=st.lists(st.tuples(st.floats(-10, 170), st.floats(-10, 130)), max_size=20),
+       far=st.lists(st.tuples(far_values, st.one_of(far_values, st.floats(-10, 130))), min_size=1, max_size=5),
+       swap=st.booleans(), radius=st.floats(0.3, 12))
+def test_points_far_outside_the_image_cover_nothing_and_raise_no_warning(points, far, swap, radius):
+    """Coordinates past 9.2e18 (or infinite) do not fit the integer cast: "invalid value encountered in cast",
+    an error under -W error. Their discs miss the image, so they go first."""
+    pts = np.array(points, dtype=np.float64).reshape(-1, 2)
+    outside = np.array(far, dtype=np.float64)[:, ::-1] if swap else np.array(far, dtype=np.float64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        mask = coverage_mask(np.vstack([pts, outside]), CAMERA, radius)
+        bound = coverage_bound(np.vstack([pts, outside]), CAMERA, radius)
+    np.testing.assert_array_equal(mask, coverage_mask(pts, CAMERA, radius), err_msg="far points covered pixels")
+    assert bound == coverage_bound(pts, CAMERA, radius), "far points changed the coverage bound"
+
+
+@pytest.mark.parametrize("metric", [repeatability(px=8), interest_point_spread(),
+                                    repeatability(px=8, mapping="homography")], ids=repr)
+def test_keypoint_metrics_ignore_points_far_outside_the_image_without_warning(metric):
+    rng = np.random.default_rng(0)
+    src = np.vstack([rng.random((30, 2)) * [160, 120], [[1e300, 1e300], [-1e300, 5.0], [5.0, np.finfo(float).max]]])
+    view, same = pair(Transform())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = metric(src, src[:30], view, same)
+    assert result.valid and result.score == 1.0, f"points far outside the image changed the score: {result}"

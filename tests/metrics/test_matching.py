@@ -1,14 +1,16 @@
-"""The largest one-to-one matching of two point sets within a distance, against SciPy's Hopcroft-Karp."""
+"""The largest one-to-one matching of two point sets within a distance, against SciPy's Hopcroft-Karp, and nearest
+neighbours whose distance ties go to the lowest index with SciPy and without."""
 
 from __future__ import annotations
 
 import hypothesis.strategies as st
 import numpy as np
 from hypothesis import given, settings
+from hypothesis.extra.numpy import arrays
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
 
-from pytest_n2r.metrics._matching import maximum_matching, mutual_nearest, pairs_within
+from pytest_n2r.metrics._matching import _kd_tree, maximum_matching, mutual_nearest, nearest_within, pairs_within
 
 
 def crowded(seed: int, n: int, spread: float) -> np.ndarray:
@@ -72,3 +74,38 @@ def test_nearest_pairs_are_kept_where_the_count_allows():
     a = np.array([[0.0, 0.0], [30.0, 0.0]])
     b = np.array([[1.5, 0.0], [0.5, 0.0], [30.0, 1.9], [31.0, 0.0]])
     assert maximum_matching(a, b, 2.0).tolist() == [[0, 1], [1, 3]]
+
+
+grid_points = st.integers(0, 30).flatmap(
+    lambda n: arrays(np.float64, (n, 2), elements=st.integers(0, 10).map(float)))  # many equidistant points
+
+
+@settings(max_examples=200, deadline=None)
+@given(a=grid_points, b=grid_points, radius=st.sampled_from([0.5, 1.0, 1.5, 2.0, 3.0]))
+def test_scipy_and_numpy_paths_break_distance_ties_alike_by_the_lowest_index(a, b, radius):
+    """On an integer grid many points are equally near. cKDTree broke such ties by its tree layout, the numpy
+    path by the lowest index: the mutual pairs differed with and without SciPy (25 of 400 random cases)."""
+    assert _kd_tree() is not None, "SciPy is needed to compare its path with the numpy one"
+    d2 = ((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=2)  # what the metric computes, to the bit
+    within = d2 <= radius * radius
+    lowest = np.where(within.any(axis=1), np.argmin(np.where(within, d2, np.inf), axis=1), -1) if len(b) else (
+        np.full(len(a), -1))
+    for use_scipy in (True, False):
+        path = "cKDTree" if use_scipy else "numpy"
+        nearest = nearest_within(a, b, radius, use_scipy=use_scipy)
+        assert nearest.tolist() == lowest.tolist(), f"{path}: nearest {nearest} is not the lowest index {lowest}"
+    fast, slow = mutual_nearest(a, b, radius), mutual_nearest(a, b, radius, use_scipy=False)
+    assert fast.tolist() == slow.tolist(), f"mutual pairs with SciPy {fast.tolist()} != without {slow.tolist()}"
+
+
+@settings(max_examples=100, deadline=None)
+@given(a=grid_points, b=grid_points, far_a=grid_points, far_b=grid_points)
+def test_points_added_far_away_change_no_mutual_pair(a, b, far_a, far_b):
+    """Points more than the radius from every other change nobody's nearest neighbour, so no mutual pair
+    (before, they changed cKDTree's layout and with it which of two equally near points it returned)."""
+    radius = 2.0
+    pairs = mutual_nearest(a, b, radius).tolist()
+    for use_scipy in (True, False):
+        more = mutual_nearest(np.vstack([a, far_a + 100.0]), np.vstack([b, far_b - 100.0]), radius,
+                              use_scipy=use_scipy).tolist()
+        assert more == pairs, f"{len(far_a) + len(far_b)} far points changed the mutual pairs {pairs} to {more}"
