@@ -256,17 +256,21 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     from .report import baseline_examples
 
     replay = baseline_examples(pyfuncitem.config, pyfuncitem.nodeid, funcargs["n2r_scene"], relation)
-    failure = None
+    failure, verdict = None, False
     try:
         session.run(funcargs["n2r_scene"], sut, relation, test_id=pyfuncitem.nodeid, replay=replay)
-    except (RelationFailure, CallTimeout, SUTNotDeterministic) as exc:
+        verdict = True
+    except RelationFailure as exc:
+        failure, verdict = str(exc), True
+    except (CallTimeout, SUTNotDeterministic) as exc:
         failure = str(exc)
     finally:
         record = session.records[-1] if session.records else None
         if record is not None and record.nodeid == pyfuncitem.nodeid:  # kept whatever happened
-            start = time.perf_counter()
-            record.floor = _floor(session, funcargs["n2r_scene"], sut, relation, record.examples)
-            record.timings["floor"] = time.perf_counter() - start
+            if verdict:  # not after an error, a time-out or an interrupt: the floor runs the SUT again
+                start = time.perf_counter()
+                record.floor = _floor(session, funcargs["n2r_scene"], sut, relation, record.examples)
+                record.timings["floor"] = time.perf_counter() - start
             pyfuncitem.stash[_RECORD] = record.to_dict()
     if failure is not None:  # outside the except block, so the report shows the message once
         floor = pyfuncitem.stash.get(_RECORD, {}).get("floor") or {}
@@ -280,7 +284,7 @@ def _floor(session: Any, scene: Any, sut: Any, relation: Any, records: list) -> 
     from ..relation.floor import annotate_relation
 
     return annotate_relation(scene, sut, relation, records, size=relation.size or session.settings.size,
-                             cache=session.cache, cache_dir=session.cache_dir)
+                             cache=session.cache, cache_dir=session.cache_dir, timeout=session.settings.timeout)
 
 
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on

@@ -82,11 +82,33 @@ class Option:
         if value not in (None, False):
             return value, Where(self.flag, Path.cwd(), root)
         if self.ini is not None:
-            value = config.getini(self.ini)
+            try:
+                value = config.getini(self.ini)
+            except TypeError:  # pytest 9's TOML table ([pytest], [tool.pytest]) holds a number, a bool, ...
+                value = self._typed_ini(config)
             if value not in (None, "", []):
                 base = Path(config.inipath).parent if config.inipath else root
                 return value, Where(f"ini {self.ini}", base, root)
         return None
+
+    def _typed_ini(self, config: pytest.Config) -> str | list[str] | None:
+        """The ini value as a TOML configuration file types it (``n2r_examples = 7``, ``n2r_derandomize = true``),
+        which pytest 9 refuses for an option registered as text, written as text for :attr:`parse` (a bool as
+        ``yes`` / ``no``; a list option's string split at whitespace, as in an ini file)."""
+        try:
+            import tomllib
+        except ImportError:  # Python 3.10: pytest's own TOML reader
+            import tomli as tomllib
+
+        path = Path(config.inipath)
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        table = data.get("tool", {}).get("pytest", {}) if path.name == "pyproject.toml" else data.get("pytest", {})
+        value = table.get(self.ini)
+        if isinstance(value, list):
+            return [_ini_text(v) for v in value]
+        if self.action == "append" and isinstance(value, str):
+            return value.split()
+        return None if value is None else _ini_text(value)
 
     def value(self, config: pytest.Config) -> Any:
         """The parsed value: given (command line, ini file) or the default; a bad one is a usage error."""
@@ -102,6 +124,13 @@ class Option:
         except N2RError as exc:
             where = "" if self.names_itself else f"{self.flag}{f' / ini {self.ini}' if self.ini else ''}: "
             raise pytest.UsageError(f"pytest-n2r: {where}{exc}") from None
+
+
+def _ini_text(value: Any) -> str:
+    """A TOML value as an ini file writes it: ``true`` as ``yes``, ``7`` as ``7``, a string as itself."""
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return value if isinstance(value, str) else f"{value}"
 
 
 # -- parsers (each imports what it needs when it runs) -----------------------------------------------------
@@ -232,6 +261,10 @@ def _text(number: float) -> str:
     return f"{number:g}"
 
 
+#: The longest ``--n2r-timeout``, a day: no render or SUT call needs more, and far longer ones overflow the
+#: platform's timer (``inf``, 1e12); 0 is the way to say "no limit".
+MAX_TIMEOUT_S = 86400.0
+
 #: Every option, in the order ``pytest --help`` lists them.
 OPTIONS: tuple[Option, ...] = (
     Option("--n2r-scene", "n2r_scenes", "PATH",
@@ -258,8 +291,9 @@ OPTIONS: tuple[Option, ...] = (
            "where failure pictures go, relative to the rootdir; 'none' saves none (default: {default})",
            default="n2r-artifacts", parse=_folder),
     Option("--n2r-timeout", "n2r_timeout", "SECONDS",
-           "time limit of one render or one SUT call; 0 disables (default: {default})",
-           default=_text(defaults.TIMEOUT_S), parse=_number_in(0.0, math.inf, "a number of seconds >= 0")),
+           f"time limit of one render or one SUT call, at most {MAX_TIMEOUT_S:g} (a day); 0 disables "
+           "(default: {default})", default=_text(defaults.TIMEOUT_S),
+           parse=_number_in(0.0, MAX_TIMEOUT_S, f"a number of seconds >= 0 and <= {MAX_TIMEOUT_S:g} (0: no limit)")),
     Option("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
            "draw the same examples every run; 'auto' means yes when the CI environment variable is set "
            "(default: {default})", default="auto", parse=_derandomize),

@@ -7,6 +7,7 @@ Anything else is saved undecorated. Files are written atomically (temporary name
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 from typing import Any
@@ -21,9 +22,15 @@ _GREEN, _RED = (40, 220, 40), (235, 50, 50)  # RGB
 
 
 def artifact_dir(root: str | Path, test_id: str) -> Path:
-    """``root/<test id made filename-safe>`` (``test_a.py::test_b[fox]`` → ``test_a.py-test_b-fox``)."""
-    safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", test_id).strip("-") or "relation"
-    return Path(root) / safe[:150]
+    """``root/<test id made filename-safe, at most 150 characters>-<8 hex digits of its SHA-256>``
+    (``test_a.py::test_b[fox]`` → ``test_a.py-test_b-fox-b2d5e930``): readable, and one folder per test id,
+    also for ids that differ only in punctuation or after 150 characters.
+
+    >>> artifact_dir("n2r-artifacts", "test_a.py::test_b[fox]").as_posix()
+    'n2r-artifacts/test_a.py-test_b-fox-b2d5e930'
+    """
+    safe = re.sub(r"[^A-Za-z0-9_.-]+", "-", test_id).strip("-")[:150].rstrip("-") or "relation"
+    return Path(root) / f"{safe}-{hashlib.sha256(test_id.encode()).hexdigest()[:8]}"
 
 
 def _keypoints(output: Any) -> np.ndarray | None:

@@ -88,8 +88,9 @@ def too_many_invalid(run: RelationRecord, relation: Relation) -> str:
     drawn = len(run.examples)
     share = run.rejected / drawn if drawn else 1.0
     reasons = ", ".join(f"{r}: {n}" for r, n in run.rejected_reasons.most_common()) or "no valid example"
+    nothing = "" if run.valid_examples or not drawn else ": no follow-up view was valid, so nothing was compared"
     return (
         f"{relation.transform!r} leaves what the scene {run.scene!r} can render faithfully in {share:.0%} of "
-        f"{drawn} draws ({reasons}); narrow the bounds (or use look_at=True) so most follow-up views stay "
-        "in the captured region"
+        f"{drawn} draws ({reasons}){nothing}; narrow the bounds (or use look_at=True) so most follow-up views "
+        "stay in the captured region"
     )

@@ -15,6 +15,7 @@ caught by the per-call time limit instead (:mod:`pytest_n2r.relation.timeout`).
 
 from __future__ import annotations
 
+import hashlib
 import random
 import time
 from collections.abc import Callable, Iterator
@@ -23,18 +24,20 @@ from typing import Any
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, given
+from hypothesis import core as hypothesis_core
 from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
 from hypothesis.database import ReadOnlyDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
-from ..errors import InvalidArgument, InvalidType
+from ..errors import InvalidArgument, InvalidType, SUTOutputError
 from ..scene.base import Scene, SceneView
 from ..scene.render_cache import RenderCache
 from ..strategies.view_strategies import views as source_views
 from .determinism import NotDeterministic, SUTNotDeterministic
 from .engine import Engine, recorded_view
 from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
+from .outputs import SUTError
 from .record import MORE_TIMINGS, TIMINGS, ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation
@@ -89,8 +92,13 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     except (TimeLimitReached, NotDeterministic) as exc:  # escaped Hypothesis: the example ran once
         record.outcome, record.message = "error", str(exc)
         raise exc.error() from None
-    except Flaky:  # a failure that passed on replay without the SUT changing its outputs: the scene's render
+    except Flaky as exc:
         record.outcome = "error"
+        sut_error = _sut_error(exc)
+        if sut_error is not None:  # the SUT raised (or returned garbage) once, then not on the same example
+            record.message = _intermittent(sut_error)
+            raise type(sut_error)(record.message) from sut_error
+        # a failure that passed on replay without the SUT changing its outputs: the scene's render
         record.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
                          "is not deterministic. The system under test gave the same outputs twice on the first "
                          "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
@@ -124,6 +132,24 @@ def replay_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Re
     return record
 
 
+def _sut_error(exc: BaseException) -> SUTError | SUTOutputError | None:
+    """The SUT's own error inside Hypothesis's ``FlakyFailure`` (an exception group, perhaps nested), if any."""
+    for inner in getattr(exc, "exceptions", ()):
+        found = inner if isinstance(inner, (SUTError, SUTOutputError)) else _sut_error(inner)
+        if found is not None:
+            return found
+    return None
+
+
+def _intermittent(error: SUTError | SUTOutputError) -> str:
+    """Why a run stopped on a SUT error that did not happen again when Hypothesis replayed its example."""
+    cause = error.__cause__ if isinstance(error, SUTError) else None
+    what = f"raised {type(cause).__name__}: {cause}" if cause is not None else "gave an output it cannot use"
+    told = "its traceback and the example it broke on are above" if cause is not None else f"the first time: {error}"
+    return (f"the system under test {what} on an example and not when it was replayed: it fails intermittently "
+            f"(its state, a race, a resource running out?); {told}")
+
+
 def _new_record(scene: Scene, relation: Relation, test_id: str) -> RelationRecord:
     """The still empty record of a run of ``relation`` on ``scene``, its clock at zero."""
     return RelationRecord(nodeid=test_id, metric=repr(relation.metric), eps=relation.eps, scene=scene.name,
@@ -139,8 +165,9 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
         __tracebackhide__ = True
         engine.example(view, tau)
 
-    # key this run's database entries and (with derandomize) its seed to the test, scene and relation
-    example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
+    # key this run's database entries and (with derandomize or --hypothesis-seed) its seed to the test, scene and
+    # relation
+    identity = example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
     options: dict[str, Any] = {
         "max_examples": relation.examples or settings.examples, "deadline": None,
         "derandomize": settings.derandomize,
@@ -150,7 +177,7 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     }
     database = None if settings.derandomize else (
         hsettings().database if settings.database == "default" else settings.database)
-    seed = None if settings.derandomize else random.getrandbits(64)  # both passes draw the same examples
+    seed = None if settings.derandomize else _seed(identity)  # both passes draw the same examples
 
     def search(db: Any) -> None:
         test = given(view=source_views(scene, split=relation.views, interpolate=relation.interpolate),
@@ -167,7 +194,8 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     drawn, undefined = len(run.examples), run.undefined
     if undefined and undefined / (len(run.valid_examples) + undefined) > MAX_UNDEFINED:
         raise RelationFailure(nothing_to_test(run, relation), run)
-    if engine.gave_up == "invalid" or not drawn or run.rejected / drawn > relation.validity.max_rejected:
+    # no valid example (every draw rejected) compared nothing: never a pass, even with max_rejected=1
+    if engine.gave_up == "invalid" or not run.valid_examples or run.rejected / drawn > relation.validity.max_rejected:
         raise InvalidArgument(too_many_invalid(run, relation))
     if not run.inconsistencies:
         return
@@ -183,6 +211,16 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     view, tau = recorded_view(worst, "drawn"), worst.follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
                 note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
+
+
+def _seed(identity: bytes) -> int:
+    """The seed of a search that is not derandomized: drawn at random, or with pytest's ``--hypothesis-seed``
+    (Hypothesis's ``global_force_seed``) derived from it and the run's ``identity``, so that the same seed draws
+    the same examples again and each relation draws its own."""
+    forced = getattr(hypothesis_core, "global_force_seed", None)
+    if forced is None:
+        return random.getrandbits(64)
+    return int.from_bytes(hashlib.sha256(f"{forced!r}|".encode() + identity).digest()[:8], "big")
 
 
 @contextmanager

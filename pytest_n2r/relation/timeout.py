@@ -13,6 +13,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 from ..errors import N2RError
 
@@ -47,8 +48,10 @@ def _message(what: str, seconds: float) -> str:
 @contextmanager
 def time_limit(seconds: float | None, what: str, *, escape: bool = False) -> Iterator[None]:
     """Raise :class:`CallTimeout` naming ``what`` when the block runs longer than ``seconds``
-    (``None`` or 0: no limit), or :class:`TimeLimitReached` with ``escape=True``. Restores any timer set
-    before (pytest-timeout's) when it ends."""
+    (``None`` or 0: no limit), or :class:`TimeLimitReached` with ``escape=True``.
+
+    A timer set before (pytest-timeout's, an enclosing limit's) keeps its deadline: when it expires first, its
+    handler runs as if this limit were not there; else it gets back what is left of it when the block ends."""
     if not seconds:
         yield
         return
@@ -61,20 +64,43 @@ def time_limit(seconds: float | None, what: str, *, escape: bool = False) -> Ite
             raise expired(_message(what, seconds))
         return
 
-    def on_alarm(signum, frame):
-        raise _Expired
+    previous_handler = signal.getsignal(signal.SIGALRM)
+    previous_delay, previous_interval = signal.getitimer(signal.ITIMER_REAL)
+    start, ours = time.monotonic(), object()  # ``ours`` tells this limit's expiry from a nested one's
+    outer_first = 0 < previous_delay < seconds
+    handed_over = False
 
-    previous_handler = signal.signal(signal.SIGALRM, on_alarm)
-    previous_delay, _ = signal.getitimer(signal.ITIMER_REAL)
-    start = time.monotonic()
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    def on_alarm(signum: int, frame: Any) -> None:
+        nonlocal handed_over
+        if not outer_first or handed_over:
+            raise _Expired(ours)
+        handed_over = True  # the earlier deadline is the outer timer's: its handler's turn
+        signal.signal(signal.SIGALRM, _restorable(previous_handler))
+        if callable(previous_handler):
+            previous_handler(signum, frame)
+        elif previous_handler == signal.SIG_DFL:
+            signal.raise_signal(signum)  # what SIGALRM would have done without this limit: end the process
+        signal.signal(signal.SIGALRM, on_alarm)  # the outer handler returned: this limit holds for the rest
+        signal.setitimer(signal.ITIMER_REAL, max(seconds - (time.monotonic() - start), 1e-3))
+
     try:
+        signal.signal(signal.SIGALRM, on_alarm)
+        signal.setitimer(signal.ITIMER_REAL, previous_delay if outer_first else seconds)
         yield
-    except _Expired:
+    except _Expired as exc:
+        if exc.args != (ours,):
+            raise
         raise expired(_message(what, seconds)) from None
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous_handler)
-        if previous_delay:  # someone else's timer was running: give it back what is left of it
+        signal.signal(signal.SIGALRM, _restorable(previous_handler))
+        if previous_delay and not handed_over:  # someone else's timer was running: give it back what is left
             left = previous_delay - (time.monotonic() - start)
-            signal.setitimer(signal.ITIMER_REAL, max(left, 1e-3))
+            signal.setitimer(signal.ITIMER_REAL, max(left, 1e-3), previous_interval)
+        elif handed_over and previous_interval:  # it expired meanwhile, and repeats
+            signal.setitimer(signal.ITIMER_REAL, previous_interval, previous_interval)
+
+
+def _restorable(handler: Any) -> Any:
+    """A handler :func:`signal.signal` takes back: ``None`` (one installed outside Python) as the default."""
+    return signal.SIG_DFL if handler is None else handler

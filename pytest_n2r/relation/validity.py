@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .._validation import check_range
+from .._validation import check_int, check_range
 from ..geometry import CameraStack, backproject
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
@@ -56,19 +56,23 @@ class Verdict:
 
 @dataclass(frozen=True)
 class Validity:
-    """Thresholds of the validity checks (fractions in [0, 1]; 0 disables a check)."""
+    """Thresholds of the validity checks: fractions in [0, 1] and the ``grid`` size (an int in [2, 256]).
+
+    ``max_empty_increase=1`` disables the empty-view check and ``min_coverage=0`` the coverage check."""
 
     max_empty_increase: float = 0.1
     min_coverage: float = 0.8
     grid: int = 16
     #: Fail the relation (a usage error, not an inconsistency) when more than this fraction of the draws
-    #: were invalid: the transform bounds leave the captured region.
+    #: were invalid: the transform bounds leave the captured region. 0 is the strictest (no invalid draw
+    #: allowed); 1 allows any share, but a relation with no valid example at all still fails: it compared
+    #: nothing.
     max_rejected: float = 0.9
 
     def __post_init__(self) -> None:
         for name in ("max_empty_increase", "min_coverage", "max_rejected"):
             check_range(name, getattr(self, name), 0.0, 1.0)
-        check_range("grid", self.grid, 2, 256)
+        check_int("grid", self.grid, 2, 256)
 
     @property
     def outputs(self) -> tuple[str, ...]:

@@ -1,8 +1,8 @@
-"""Hypothesis strategies of source views: captured views of a split, or poses along the capture trajectory.
+"""Hypothesis strategies of source views: captured views of a split, or poses between them.
 
 The view selection itself (splits, interpolation) belongs to the scene (:mod:`pytest_n2r.scene.splits`,
-:mod:`pytest_n2r.scene.trajectory`); this module only draws from it. Draws shrink toward the first view
-(and toward the captured pose itself when interpolating).
+:mod:`pytest_n2r.scene.trajectory`); this module only draws from it. Draws shrink toward the first view of
+the split (and toward that captured view itself when interpolating).
 """
 
 from __future__ import annotations
@@ -33,9 +33,11 @@ class ViewPick:
     t: float = 0.0
 
     def resolve(self, scene: Scene) -> SceneView:
-        if self.t:
-            return trajectory_view(list(scene.views), self.index, self.t)
+        """The scene's view of :attr:`split` (``t = 0``), or the pose a fraction ``t`` along a segment between
+        two consecutive views of the split."""
         candidates = scene_views(scene, self.split)
+        if self.t:
+            return trajectory_view(candidates, self.index, self.t)
         return candidates[self.index % len(candidates)]
 
 
@@ -43,13 +45,17 @@ def views(
     scene: Scene | None = None, *, split: str = "heldout", interpolate: bool = False
 ) -> st.SearchStrategy[Any]:
     """Source views: captured views of ``split`` (``"heldout"``, ``"train"`` or ``"all"``), or with
-    ``interpolate=True`` poses interpolated along the capture trajectory (consecutive views in capture
-    order: slerp of rotations, linear centres), which the field has not seen either.
+    ``interpolate=True`` poses interpolated between consecutive views *of that split* in capture order
+    (slerp of rotations, linear centres), which the field has not seen either.
 
-    With a ``scene`` it draws :class:`~pytest_n2r.scene.SceneView` objects (a scene with fewer than two
-    views has no trajectory: it draws from ``split`` then); without one it draws :class:`ViewPick` values
-    that ``scene.pair(view, tau)`` resolves. Shrinks toward the first view (and toward the captured pose
-    itself when interpolating).
+    Interpolation keeps to the split: with ``"heldout"`` every draw is a held-out view or a pose between two
+    of them, never a training view (``t = 0`` is the segment's first held-out view itself, which a failure
+    shrinks toward); ``"all"`` interpolates along the whole capture trajectory.
+
+    With a ``scene`` it draws :class:`~pytest_n2r.scene.SceneView` objects (a split with fewer than two
+    views has nothing to interpolate between: it draws its view then); without one it draws
+    :class:`ViewPick` values that ``scene.pair(view, tau)`` resolves. Shrinks toward the first view of the
+    split.
     """
     check_source_split("split", split)
     if not isinstance(interpolate, bool):
@@ -59,9 +65,9 @@ def views(
         return st.builds(ViewPick, st.just(split), st.integers(0, 4095), t)
     if not isinstance(scene, Scene):
         raise InvalidType(f"scene={scene!r} must be a pytest_n2r.Scene, not {type(scene).__name__}")
-    trajectory = list(scene.views)
-    if interpolate and len(trajectory) >= 2:
-        return st.builds(lambda i, k: trajectory_view(trajectory, i, k / _STEPS),
-                         st.integers(0, len(trajectory) - 2), st.integers(0, _STEPS))
-    names = [v.name for v in scene_views(scene, split)]  # by name, so a report names the view
+    candidates = scene_views(scene, split)
+    if interpolate and len(candidates) >= 2:
+        return st.builds(lambda i, k: trajectory_view(candidates, i, k / _STEPS),
+                         st.integers(0, len(candidates) - 2), st.integers(0, _STEPS))
+    names = [v.name for v in candidates]  # by name, so a report names the view
     return st.sampled_from(names).map(scene.view)

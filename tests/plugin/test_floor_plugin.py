@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import re
+
+import pytest
 
 BLURRED = "tests.plugin.fakefield:blurred_plane"
 SHARP = "tests.plugin.fakefield:sharp_plane_field"
@@ -93,3 +96,53 @@ def test_orb(n2r_scene):
     field_part = text.split(n2r_project.summary(result, "test_orb[wall-field]"))[1].splitlines()[1:3]
     assert "exact render vs field render" in field_part[0], field_part
     assert "same poses on exact renders: mean deviation" in field_part[1] and "3 examples" in field_part[1]
+
+
+COUNTED = """
+import time
+from pytest_n2r import Transform
+from pytest_n2r.metrics import repeatability
+from tests.plugin.fakefield import corners
+
+
+def sut(rgb):
+    {misbehave}
+    return corners(rgb)
+
+
+@metamorphic(repeatability(px=2), eps=1.0, transform=Transform(), examples=2)
+def test_counted(n2r_scene):
+    return sut
+"""
+
+
+@pytest.mark.parametrize(("misbehave", "exit_code"), [
+    ("time.sleep(3)", pytest.ExitCode.TESTS_FAILED),  # a hang, ended by --n2r-timeout 1
+    ('raise ValueError("boom")', pytest.ExitCode.TESTS_FAILED),
+    ("raise KeyboardInterrupt", pytest.ExitCode.INTERRUPTED),
+])
+def test_no_floor_is_measured_after_an_error_a_time_out_or_an_interrupt(n2r_project, monkeypatch, misbehave,
+                                                                         exit_code):
+    import pytest_n2r.plugin
+
+    measured = []
+    floor = pytest_n2r.plugin._floor  # the inner run is in this process: it calls the plugin module's _floor
+    monkeypatch.setattr(pytest_n2r.plugin, "_floor", lambda *args: measured.append(args) or floor(*args))
+    n2r_project.write(COUNTED.format(misbehave=misbehave))
+    result = n2r_project.pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", BLURRED, "--n2r-size", "96",
+                                            "--n2r-timeout", "1", "--n2r-cache-dir", "none", no_reraise_ctrlc=True)
+    assert result.ret == exit_code, f"expected exit code {exit_code!r}, not {result.ret!r}:\n{result.stdout.str()}"
+    assert not measured, "the field floor ran the SUT again after the relation stopped without a verdict"
+    assert not re.search(r"^\s+field floor", result.stdout.str(), re.MULTILINE), "a floor line without a verdict"
+
+
+def test_the_floors_sut_calls_are_under_the_time_limit(n2r_project):
+    # the SUT hangs on sharp images only: the blurred renders of the relation pass, the floor's photos hang
+    n2r_project.write(COUNTED.format(misbehave="""if np.abs(np.diff(rgb.astype(int), axis=1)).max() > 100:
+        time.sleep(30)"""))
+    result = n2r_project.run("--n2r-scene", BLURRED, "--n2r-timeout", "1", "--n2r-cache-dir", "none",
+                             "--n2r-size", "160x120")  # the photos' own size: not resized, so sharp
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines([("*field floor n/a: measuring it failed: CallTimeout: the system under test, "
+                                  "measuring the field floor did not finish within 1 s*")])
+    assert result.duration < 20, f"the 1 s limit did not stop the floor's 30 s hang: {result.duration:.1f} s"

@@ -85,6 +85,49 @@ def test_noisy(n2r_scene):
     assert "FlakyFailure" not in text and "Traceback" not in text, text
 
 
+ONCE = """
+calls = []
+
+
+def once(rgb):
+    calls.append(1)
+    if len(calls) == 3:  # the third call only: Hypothesis's replay of that example does not do it again
+        {misbehave}
+    return float(rgb.mean())
+
+
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=2), examples=20)
+def test_once(n2r_scene):
+    return once
+"""
+
+
+def test_a_sut_that_raises_once_is_named_with_its_error_not_as_a_flaky_relation(n2r_project):
+    n2r_project.write(ONCE.format(misbehave='raise RuntimeError("intermittent crash")'))
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "the relation failed on an example and passed when Hypothesis replayed it" not in text, (
+        f"an intermittent SUT error was reported as a flaky relation verdict:\n{text}")
+    result.stdout.fnmatch_lines([("*SUTError: the system under test raised RuntimeError: intermittent crash on an "
+                                  "example and not when it was replayed: it fails intermittently*")])
+    assert re.search(r"^E\s+RuntimeError: intermittent crash$", text, re.MULTILINE), (
+        f"the SUT's own exception should be chained, with its traceback:\n{text}")
+    assert 'raise RuntimeError("intermittent crash")' in text, f"the traceback should reach the SUT's code:\n{text}"
+
+
+def test_a_sut_that_returns_none_once_is_named_with_its_output_not_as_a_flaky_relation(n2r_project):
+    n2r_project.write(ONCE.format(misbehave="return None"))
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "the relation failed on an example and passed when Hypothesis replayed it" not in text, (
+        f"an intermittent unusable output was reported as a flaky relation verdict:\n{text}")
+    result.stdout.fnmatch_lines([("*SUTOutputError: the system under test gave an output it cannot use on an example "
+                                  "and not when it was replayed: it fails intermittently*the first time: the system "
+                                  "under test returned None on the * view*")])
+
+
 @pytest.mark.parametrize(("a", "b", "same"), [
     (np.array([[1.0, np.nan]]), np.array([[1.0, np.nan]]), True),
     (np.array([[1.0, 2.0]]), np.array([[1.0, 2.5]]), False),

@@ -86,3 +86,53 @@ def test_command_line_beats_ini_beats_default(pytester):
     assert option("examples").value(config) == 3  # command line over ini
     assert option("timeout").value(config) == 9  # ini over default
     assert option("size").value(config).longer == 480  # the default
+
+
+TYPED_TOML = """
+n2r_examples = 7
+n2r_timeout = 0
+n2r_derandomize = true
+n2r_precompile = false
+n2r_render_scale = 0.5
+n2r_size = 120
+n2r_scenes = "tests.plugin.fakescene:plane tests.plugin.fakescene:ramp"
+"""
+
+
+@pytest.mark.parametrize(("name", "table"), [("pyproject.toml", "[tool.pytest]"), ("pytest.toml", "[pytest]"),
+                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+def test_typed_values_of_a_toml_config_file_parse(pytester, name, table):
+    pytester.makefile(".toml", **{name.removesuffix(".toml"): table + TYPED_TOML})
+    config = pytester.parseconfig()
+    got = {n: option(n).value(config) for n in ("examples", "timeout", "derandomize", "precompile", "render_scale")}
+    assert got == {"examples": 7, "timeout": 0.0, "derandomize": True, "precompile": False, "render_scale": 0.5}, (
+        f"{name} {table}: typed values parsed as {got}")
+    assert option("size").value(config).longer == 120, f"{name} {table}: n2r_size = 120 is not a 120-pixel size"
+    scenes = [spec.name for spec in option("scene").value(config)]
+    assert scenes == ["plane", "ramp"], f"{name} {table}: n2r_scenes gave {scenes}"
+
+
+def test_a_bad_typed_value_of_a_toml_table_is_a_usage_error_naming_the_key(pytester):
+    pytester.makepyprojecttoml("[tool.pytest]\nn2r_examples = 0\nn2r_timeout = 1e12\n")
+    config = pytester.parseconfig()
+    for name, expected in (("examples", "--n2r-examples / ini n2r_examples: '0' is not a whole number >= 1"),
+                           ("timeout", ("--n2r-timeout / ini n2r_timeout: '1000000000000.0' is not a number of "
+                                        "seconds >= 0 and <= 86400"))):
+        with pytest.raises(pytest.UsageError) as caught:
+            option(name).value(config)
+        assert expected in str(caught.value), f"the usage error should say {expected!r}, not {caught.value}"
+
+
+def test_a_run_configured_with_typed_toml_values_runs(n2r_project):
+    n2r_project.pytester.makepyprojecttoml(
+        "[tool.pytest]\nn2r_examples = 7\nn2r_timeout = 0\nn2r_derandomize = true\n"
+        'n2r_scenes = ["tests.plugin.fakescene:plane"]\n')
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=2))
+def test_a(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run()
+    assert "INTERNALERROR" not in result.stdout.str() + result.stderr.str(), result.stderr.str()
+    result.assert_outcomes(passed=1)
+    assert "7 examples" in n2r_project.summary(result, "test_a[plane]"), "n2r_examples = 7 was not applied"

@@ -264,6 +264,23 @@ def test_far(n2r_scene):
     assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
 
 
+def test_a_relation_with_no_valid_example_fails_even_when_any_share_of_rejections_is_allowed(n2r_project):
+    n2r_project.write("""
+from pytest_n2r import Validity
+
+
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=(80, 89)), examples=5,
+             validity=Validity(max_rejected=1.0))
+def test_tolerant(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    assert result.parseoutcomes().get("passed", 0) == 0, "a relation that compared nothing must not pass"
+    result.assert_outcomes(failed=1)
+    result.stdout.fnmatch_lines([("*in 100% of * draws (empty view: *): no follow-up view was valid, so nothing was "
+                                  "compared*")])
+
+
 def test_a_second_run_renders_nothing(n2r_project):
     n2r_project.write("""
 @metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4, x=0.05), examples=15)
@@ -285,6 +302,30 @@ def test_b(n2r_scene):
     result.stdout.fnmatch_lines(["*3 relations: * 0 renders (the rest from the cache)*"])
     n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "--n2r-derandomize", "yes", "--n2r-cache-clear")
     assert n2r_project.renders() == 2 * cold, "--n2r-cache-clear should have forced every render again"
+
+
+def test_hypothesis_seed_reproduces_the_draws_of_a_run(n2r_project, monkeypatch, tmp_path):
+    from hypothesis import core
+
+    # the inner runs are in this process: Hypothesis's pytest plugin sets its global seed and never unsets it
+    monkeypatch.setattr(core, "global_force_seed", None)
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=4, x=0.05), examples=8)
+def test_a(n2r_scene):
+    return mean_colour
+""")
+
+    def drawn(*args: str) -> list:
+        out = tmp_path / "run.json"
+        # --n2r-json=PATH in one argument: pytest takes an existing path argument into its choice of rootdir
+        n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none", f"--n2r-json={out}",
+                        *args).assert_outcomes(passed=1)
+        [record] = json.loads(out.read_text())["relations"]
+        return [(e["view"], e["transform"]) for e in record["examples"]]
+
+    first, again, other = drawn("--hypothesis-seed=1"), drawn("--hypothesis-seed=1"), drawn("--hypothesis-seed=2")
+    assert first == again, f"the same --hypothesis-seed drew other examples:\n{first}\n{again}"
+    assert first != other, f"--hypothesis-seed=1 and 2 drew the same examples: {first}"
 
 
 def test_ci_derandomizes(n2r_project, monkeypatch):

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from pytest_n2r import InvalidArgument, Transform
-from pytest_n2r.relation import Validity
+from pytest_n2r import InvalidArgument, InvalidType, Transform
+from pytest_n2r.relation import Relation, RunSettings, Validity, check_relation
+from pytest_n2r.strategies import transforms
+from tests.plugin.fakemetrics import AbsDifference
 from tests.plugin.fakescene import PlaneScene
 
 
@@ -40,3 +42,32 @@ def test_a_verdict_key_names_the_thresholds_the_renders_and_the_training_cameras
               Validity().verdict_key(scene, follow, source),
               Validity().verdict_key(PlaneScene(n_views=6), source, follow)}
     assert key not in others and len(others) == 3
+
+
+def test_a_relation_whose_every_draw_is_rejected_fails_even_when_max_rejected_allows_all():
+    # yaw 80-89 degrees turns every follow-up away from the plane: every draw is an empty view
+    relation = Relation.build(AbsDifference(), 0.0, transforms(yaw=(80, 89)), validity=Validity(max_rejected=1.0))
+    with pytest.raises(InvalidArgument, match="no follow-up view was valid, so nothing was compared") as caught:
+        check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation,
+                       settings=RunSettings(examples=5, database=None))
+    assert "in 100% of" in str(caught.value), f"the message should give the share of rejected draws: {caught.value}"
+
+
+def test_max_rejected_one_still_passes_a_relation_with_some_valid_examples():
+    # yaw up to 40 degrees: some follow-ups leave the plane, the small ones stay on it
+    relation = Relation.build(AbsDifference(), 255.0, transforms(yaw=(0, 40)), validity=Validity(max_rejected=1.0))
+    record = check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation,
+                            settings=RunSettings(examples=10, database=None, derandomize=True))
+    assert record.outcome == "passed" and record.valid_examples, (
+        f"a relation with valid examples should pass under max_rejected=1: {record.summary_line()}")
+
+
+@pytest.mark.parametrize("grid", [2.5, 16.0, "16", True])
+def test_the_grid_must_be_an_int(grid):
+    with pytest.raises((InvalidArgument, InvalidType), match=r"grid=.* must be an int"):
+        Validity(grid=grid)
+
+
+def test_the_grid_must_be_in_range():
+    with pytest.raises(InvalidArgument, match=r"grid=1 is out of range; expected an int in \[2, 256\]"):
+        Validity(grid=1)

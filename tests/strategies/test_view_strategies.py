@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from pytest_n2r import InvalidArgument, InvalidType, Transform
 from pytest_n2r import strategies as n2r
+from pytest_n2r.scene.splits import scene_views
 from pytest_n2r.scene.trajectory import trajectory_view
 
 from ..plugin.fakescene import PlaneScene
@@ -51,14 +52,44 @@ def test_interpolating_views_draws_poses_between_neighbours(data):
 @settings(max_examples=20)
 @given(pick=n2r.views(interpolate=True))
 def test_an_interpolated_pick_resolves_to_the_trajectory_view_of_the_same_segment(pick):
-    scene = PlaneScene(n_views=3)
+    scene = PlaneScene(n_views=6)
     view = scene.view(pick)
     if pick.t:
-        expected = trajectory_view(list(scene.views), pick.index, pick.t)
+        expected = trajectory_view(scene_views(scene, "heldout"), pick.index, pick.t)
         np.testing.assert_array_equal(view.c2w, expected.c2w)
-        assert view.split == "interpolated"
+        assert view.split == "interpolated", f"{pick} resolved to {view.name} of split {view.split!r}"
     else:
-        assert view in scene.views
+        assert view in scene.views and view.split == "heldout", f"{pick} resolved to {view.name} ({view.split})"
+
+
+def _in_split(view, scene, split: str) -> bool:
+    """Whether ``view`` is a captured view of ``split`` or a pose between two consecutive ones."""
+    names = [v.name for v in scene_views(scene, split)]
+    if view.split != "interpolated":
+        return view.name in names
+    start, end = view.name.split("@")[0].split("~")
+    return start in names and end in names and names.index(end) == names.index(start) + 1
+
+
+@settings(max_examples=50)
+@given(data=st.data(), split=st.sampled_from(["heldout", "train"]))
+def test_interpolated_views_keep_to_the_requested_split(data, split):
+    scene = PlaneScene(n_views=6)  # train: view0, view2, view4; held out: view1, view3, view5
+    view = data.draw(n2r.views(scene, split=split, interpolate=True))
+    assert _in_split(view, scene, split), f"split={split!r} drew {view.name} (split {view.split!r})"
+    pick = data.draw(n2r.views(split=split, interpolate=True))
+    resolved = scene.view(pick)
+    assert _in_split(resolved, scene, split), f"split={split!r} resolved {pick} to {resolved.name} ({resolved.split})"
+
+
+@pytest.mark.parametrize("scene_given", [True, False])
+def test_an_interpolated_held_out_draw_shrinks_to_a_held_out_view(scene_given):
+    scene = PlaneScene(n_views=6)
+    strategy = n2r.views(scene if scene_given else None, split="heldout", interpolate=True)
+    drawn = find(strategy, lambda v: True)
+    view = drawn if scene_given else scene.view(drawn)
+    assert (view.name, view.split) == ("view1", "heldout"), (
+        f"the minimal held-out draw is {view.name} of split {view.split!r}, not the first held-out view")
 
 
 def test_a_scene_with_one_view_has_no_trajectory_and_draws_its_view():
