@@ -51,6 +51,10 @@ SMOKE = {
     "capture_poses.py": (["sfm", "--scenes", "wall", "--size", "160"], "| wall | 160 |"),
     # three draws of each ring: every turned photo found, whatever the steep rings give
     "upright_rings.py": (["--draws", "3", "--photos", "3", "8"], ("| 3 | 3 |", "turned photos found in 6 of 6 draws")),
+    # the three fields of a tiny capture with shaken photos: every photo, the shaken left out, none shaken
+    "shaken_photos.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--config", "resolutions=16,24",
+                          "stage_fractions=0.5", "batch_rays=256"], ("| wall | shaken left out | 32 | 10 |",
+                                                                     "wall: 10 photos shaken (10 of them fitted)")),
     # a variant fitted with the per-photo appearance correction: the fit option a variant passes through
     "fit_budget.py": (["--scenes", "wall", "--size", "96", "--steps", "10", "--base", "default", "--variant", "tiny",
                        "resolutions=16,24", "stage_fractions=0.5", "batch_rays=256", "appearance=True"],

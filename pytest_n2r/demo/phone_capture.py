@@ -12,6 +12,10 @@ generator (:class:`PhoneSettings`):
 - **exposure and white balance**: a gain of ``2 ** u`` stops, ``u`` uniform in ``±exposure_stops``, and a
   per-channel gain uniform in ``1 ± white_balance``, applied to linear light (sRGB decoded with gamma 2.2);
 - **slight blur**: a Gaussian of sigma uniform in ``[0, blur_px]`` pixels (hand shake, focus);
+- **shaken photos** (off by default): with probability ``shaken``, a photo is also smeared along a straight streak of
+  ``shake_px`` pixels at an angle uniform in ``[0°, 180°)``, in linear light, as a phone moved during the exposure
+  records it (drawn from a generator of its own, so a capture with shaken photos differs from the same capture
+  without them in those photos alone);
 - **JPEG**, or **HEIC** as iPhones store photos (``file_format``), at ``jpeg_quality``.
 
 The ground truth of every photo (its camera-to-world pose, OpenCV axes, world frame of the demo scene; its
@@ -32,7 +36,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera
 from .rendered_capture import check_size
 
-__all__ = ["PhonePhoto", "PhoneSettings", "write_phone_capture"]
+__all__ = ["PhonePhoto", "PhoneSettings", "streak_kernel", "write_phone_capture"]
 
 #: EXIF tag number of the orientation, and the value meaning "rotate 90° clockwise to view".
 EXIF_ORIENTATION = 0x0112
@@ -51,6 +55,8 @@ class PhoneSettings:
     exposure_stops: float = 0.5
     white_balance: float = 0.08
     blur_px: float = 0.8
+    shaken: float = 0.0
+    shake_px: float = 6.0
     jpeg_quality: int = 90
     seed: int = 0
     file_format: str = "jpeg"
@@ -61,11 +67,13 @@ class PhoneSettings:
                 f"PhoneSettings.file_format={self.file_format!r}: expected one of {list(FILE_FORMATS)}")
         if not 1 <= self.jpeg_quality <= 100:
             raise InvalidArgument(f"PhoneSettings.jpeg_quality={self.jpeg_quality!r}: expected 1..100")
-        for name in ("exposure_stops", "white_balance", "blur_px"):
+        for name in ("exposure_stops", "white_balance", "blur_px", "shake_px"):
             if not getattr(self, name) >= 0:
                 raise InvalidArgument(f"PhoneSettings.{name}={getattr(self, name)!r}: expected a number >= 0")
         if self.white_balance >= 1:
             raise InvalidArgument(f"PhoneSettings.white_balance={self.white_balance!r}: expected less than 1")
+        if not 0 <= self.shaken <= 1:
+            raise InvalidArgument(f"PhoneSettings.shaken={self.shaken!r}: expected a probability in [0, 1]")
         if self.portrait_every < 0:
             raise InvalidArgument(f"PhoneSettings.portrait_every={self.portrait_every!r}: expected >= 0 (0: none)")
 
@@ -74,7 +82,9 @@ class PhoneSettings:
 class PhonePhoto:
     """One photo of a phone capture and its truth: the file, the camera and camera-to-world pose of the photo
     viewed upright (OpenCV axes, the demo scene's world frame), whether it was taken in portrait and stored with an EXIF
-    rotation, and the drawn exposure gain, white-balance gains (R, G, B) and blur sigma (pixels)."""
+    rotation, the drawn exposure gain, white-balance gains (R, G, B) and blur sigma (pixels), and the streak of a
+    shaken photo: its length (pixels; 0 for a photo not shaken) and angle (degrees from the image's x axis towards
+    its y axis, as the photo is viewed upright)."""
 
     path: Path
     camera: Camera
@@ -84,6 +94,8 @@ class PhonePhoto:
     gain: float
     white_balance: tuple[float, float, float]
     blur_px: float
+    shake_px: float = 0.0
+    shake_deg: float = 0.0
 
 
 def _portrait_camera(camera: Camera) -> Camera:
@@ -92,10 +104,35 @@ def _portrait_camera(camera: Camera) -> Camera:
     return Camera(camera.height, camera.width, camera.fy, camera.fx, camera.height - 1 - camera.cy, camera.cx)
 
 
-def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float) -> np.ndarray:
+def streak_kernel(length_px: float, angle_deg: float) -> np.ndarray:
+    """The normalized kernel of a straight motion streak ``length_px`` pixels long at ``angle_deg`` (from the x axis
+    towards y, image axes), centred: the segment sampled every 1/8 pixel, each sample spread bilinearly.
+
+    >>> k = streak_kernel(4.0, 0.0)
+    >>> k.shape, round(float(k.sum()), 6), bool(k[k.shape[0] // 2].sum() > 0.99)
+    ((7, 7), 1.0, True)
+    """
+    half = length_px / 2
+    size = 2 * int(np.ceil(half)) + 3
+    c = size // 2
+    t = np.linspace(-half, half, max(2, int(np.ceil(length_px * 8)) + 1))
+    x = c + t * np.cos(np.radians(angle_deg))
+    y = c + t * np.sin(np.radians(angle_deg))
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    kernel = np.zeros((size, size))
+    for dy, wy in ((0, 1 - fy), (1, fy)):
+        for dx, wx in ((0, 1 - fx), (1, fx)):
+            np.add.at(kernel, (y0 + dy, x0 + dx), wy * wx)
+    return kernel / kernel.sum()
+
+
+def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float, streak: np.ndarray | None) -> np.ndarray:
     import cv2
 
     linear = (rgb.astype(np.float32) / 255.0) ** 2.2 * (gain * wb.astype(np.float32))
+    if streak is not None:  # the sensor integrates light while the phone moves: a smear in linear light
+        linear = cv2.filter2D(linear, -1, streak.astype(np.float32), borderType=cv2.BORDER_REFLECT)
     out = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
     if sigma > 0.05:
         out = cv2.GaussianBlur(out, (0, 0), sigma)
@@ -126,6 +163,7 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(settings.seed)
+    shaking = np.random.default_rng([settings.seed, 1])  # a stream of its own: the other draws do not depend on it
     indices = list(range(len(scene.views))) if views is None else [int(i) for i in views]
     photos: list[PhonePhoto] = []
     train: list[str] = []
@@ -140,7 +178,13 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
         gain = float(2.0 ** rng.uniform(-settings.exposure_stops, settings.exposure_stops))
         wb = rng.uniform(1 - settings.white_balance, 1 + settings.white_balance, 3)
         sigma = float(rng.uniform(0.0, settings.blur_px))
-        upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma)
+        shake_px = shake_deg = 0.0
+        if settings.shaken > 0:
+            draw, angle = shaking.uniform(size=2)
+            if draw < settings.shaken:
+                shake_px, shake_deg = settings.shake_px, 180.0 * float(angle)
+        streak = streak_kernel(shake_px, shake_deg) if shake_px > 0 else None
+        upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma, streak)
         suffix, codec = FILE_FORMATS[settings.file_format]
         path = out / f"photo_{index:03d}{suffix}"
         exif = Image.Exif()
@@ -154,7 +198,7 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
                                                            exif=exif.tobytes())
         os.replace(tmp, path)
         photos.append(PhonePhoto(path, camera, c2w, portrait, exif_rotated, gain,
-                                 (float(wb[0]), float(wb[1]), float(wb[2])), sigma))
+                                 (float(wb[0]), float(wb[1]), float(wb[2])), sigma, shake_px, shake_deg))
         (train if view.split == "train" else heldout).append(path.name)
     if poses:
         frames = [SourceFrame(name=p.path.name, path=p.path, camera=p.camera, c2w=p.c2w) for p in photos]

@@ -12,7 +12,14 @@ from PIL import Image
 from pytest_n2r.cli.main import main
 from pytest_n2r.data.images import read_image
 from pytest_n2r.demo import ground_truth
-from pytest_n2r.demo.phone_capture import EXIF_ORIENTATION, ROTATE_90_CW, PhoneSettings, write_phone_capture
+from pytest_n2r.demo.phone_capture import (
+    EXIF_ORIENTATION,
+    ROTATE_90_CW,
+    PhoneSettings,
+    streak_kernel,
+    write_phone_capture,
+)
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.scene.file import read_scene_file
 from pytest_n2r.study.sampling import sample_transform
@@ -64,6 +71,45 @@ def test_phone_photos_are_stored_as_phones_store_them_and_read_upright(tmp_path,
         assert np.abs(upright.astype(int) - exact).mean() > 1.0, "no exposure / blur / JPEG change at all"
     gains = [p.gain for p in photos]
     assert max(gains) / min(gains) > 1.3, "exposure varies across the capture"
+
+
+def _smeared(rgb: np.ndarray, length_px: float, angle_deg: float) -> np.ndarray:
+    import cv2
+
+    kernel = streak_kernel(length_px, angle_deg).astype(np.float32)
+    return cv2.filter2D(rgb.astype(np.float32), -1, kernel, borderType=cv2.BORDER_REFLECT)
+
+
+def test_shaken_photos_are_smeared_along_their_streak_and_leave_the_others_as_they_were(tmp_path):
+    views = range(0, 48, 4)
+    steady = write_phone_capture("wall", tmp_path / "steady", PhoneSettings(size=160), views=views)
+    shaken = write_phone_capture("wall", tmp_path / "shaken", PhoneSettings(size=160, shaken=0.5, shake_px=8.0),
+                                 views=views)
+    assert 0 < sum(p.shake_px > 0 for p in shaken) < len(shaken), "a share of 0.5 shook none or all of 12 photos"
+    for a, b in zip(steady, shaken):
+        assert (a.gain, a.white_balance, a.blur_px) == (b.gain, b.white_balance, b.blur_px), \
+            f"{b.path.name}: shaking some photos changed another draw"
+        before, after = read_image(a.path), read_image(b.path).astype(np.float32)
+        if b.shake_px == 0:
+            assert np.array_equal(before, after), f"{b.path.name}: not shaken, yet its pixels changed"
+            continue
+        assert b.shake_px == 8.0 and 0 <= b.shake_deg < 180, (b.shake_px, b.shake_deg)
+        # the steady photo smeared along the drawn streak explains the shaken one (up to the smear being done in
+        # linear light before JPEG): 0.09-0.34 of what the same smear across it leaves, 0.03-0.1 of no smear
+        error = {which: float(((after - image)[8:-8, 8:-8] ** 2).mean()) for which, image in (
+            ("along", _smeared(before, 8.0, b.shake_deg)), ("across", _smeared(before, 8.0, b.shake_deg + 90)),
+            ("none", before))}
+        assert error["along"] < 0.5 * error["across"] and error["along"] < 0.2 * error["none"], \
+            f"{b.path.name}: a streak at {b.shake_deg:.0f}° does not explain the shaken photo: {error}"
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"shaken": 1.5}, r"PhoneSettings\.shaken=1\.5: expected a probability in \[0, 1\]"),
+    ({"shake_px": -1.0}, r"PhoneSettings\.shake_px=-1\.0: expected a number >= 0"),
+])
+def test_bad_shake_settings_are_named(settings, message):
+    with pytest.raises(InvalidArgument, match=message):
+        PhoneSettings(**settings)
 
 
 @pytest.mark.slow
