@@ -139,9 +139,9 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
         gaussians = Gaussians(**tensors)
     except (ValueError, TypeError) as exc:
         raise SceneFileError(f"{source}: {SPLATS_FILE}: {exc}") from None
-    if len(gaussians) != meta.get("count"):
-        raise SceneFileError(f"{source}: {SPLATS_FILE} holds {len(gaussians)} Gaussians; {schema.SCENE_JSON} says "
-                             f"{meta.get('count')!r}")
+    if len(gaussians) != count or gaussians.sh_degree != degree:
+        raise SceneFileError(f"{source}: {SPLATS_FILE} holds {len(gaussians)} Gaussians of SH degree "
+                             f"{gaussians.sh_degree}; {schema.SCENE_JSON} says {count!r} of degree {degree!r}")
     views = [SceneView(i, name_, camera, c2w, split) for i, (name_, camera, c2w, split, _) in enumerate(frames)]
     return SplatScene(gaussians, views, name=name or path.stem, reference_length=reference_length,
                       background=background, settings=settings, metres_per_unit=metres_per_unit)

@@ -128,7 +128,8 @@ def test_n2r_import_without_cameras_says_how_to_give_them(tmp_path, capsys):
 
 @pytest.mark.parametrize("damage, expected", [
     ("no_tensors", "the archive has no 'splats.safetensors'"),
-    ("count", "holds 4000 Gaussians; scene.json says 3"),
+    ("count", "holds 4000 Gaussians of SH degree 0; scene.json says 3 of degree 0"),
+    ("degree", "holds 4000 Gaussians of SH degree 0; scene.json says 4000 of degree 2"),
     ("nan", "Gaussians.means of Gaussian 0"),
 ])
 def test_a_damaged_splat_file_is_named(tmp_path, damage, expected):
@@ -145,6 +146,10 @@ def test_a_damaged_splat_file_is_named(tmp_path, damage, expected):
     elif damage == "count":
         data = json.loads(members["scene.json"])
         data["splats"]["count"] = 3
+        members["scene.json"] = json.dumps(data).encode()
+    elif damage == "degree":  # declared above what the tensors hold: n2r info would say degree 2
+        data = json.loads(members["scene.json"])
+        data["splats"]["sh_degree"] = 2
         members["scene.json"] = json.dumps(data).encode()
     else:
         tensors = safetensors.numpy.load(members["splats.safetensors"])
