@@ -23,12 +23,18 @@ from ._output import FORCE_HELP
 from .poses import ANY_ROLL_HELP
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from ..data.capture import CapturedView
     from ..field.config import FieldConfig
 
 __all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override", "APPEARANCE"]
 
 #: ``--appearance`` as ``fit(appearance=...)`` takes it.
 APPEARANCE = {"auto": "auto", "on": True, "off": False}
+#: The fewest pixels a view may have on a side after ``--downscale``: the fit scores its held-out views with SSIM,
+#: whose window is 11×11 pixels (:func:`pytest_n2r.metrics.image_quality.ssim`).
+MIN_VIEW_SIDE = 11
 _DURATION = re.compile(r"(?:(\d+(?:\.\d*)?)h)?(?:(\d+(?:\.\d*)?)m)?(?:(\d+(?:\.\d*)?)s?)?")
 
 
@@ -204,6 +210,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below
         capture = ingest(args.source, downscale=1.0 / args.downscale, upright=not args.any_roll)
+    check_view_sizes(capture.views, args.downscale)
     ingest_s = time.perf_counter() - start
     sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)
     shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))
@@ -305,6 +312,19 @@ def check_arguments(args: argparse.Namespace) -> None:
         raise InvalidArgument(f"SOURCE {args.source}: does not exist; expected a transforms.json, a COLMAP "
                               "model folder, a folder of photos or a video")
     resolve_device(args.device)
+
+
+def check_view_sizes(views: Sequence[CapturedView], downscale: float) -> None:
+    """Every view downscaled by ``downscale`` must keep :data:`MIN_VIEW_SIDE` pixels a side: checked once the capture
+    is read, before any step is fitted (a fit of 1×1 views would run its whole budget, then fail to score them)."""
+    from ..errors import InvalidArgument
+
+    small = min(views, key=lambda view: min(view.camera.width, view.camera.height))
+    if min(small.camera.width, small.camera.height) < MIN_VIEW_SIDE:
+        raise InvalidArgument(
+            f"--downscale {downscale:g}: the photo {small.name!r} would be {small.camera.width}x{small.camera.height} "
+            f"pixels; expected views of at least {MIN_VIEW_SIDE} pixels a side (the held-out views are scored with "
+            f"SSIM's {MIN_VIEW_SIDE}x{MIN_VIEW_SIDE} window): a smaller factor (4: a quarter of the width)")
 
 
 def _kept(output: Path, last: dict) -> str:

@@ -47,7 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", metavar="N", type=int, default=120,
                    help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
     p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
-                   help="for a video: where to write its frames (default: <video stem>_frames beside it)")
+                   help="for a video: where to write its frames (default: <video stem>_frames beside it); a new or "
+                        "empty folder, or one frames were extracted into before (--force: any)")
     p.add_argument("--any-roll", action="store_true", help=ANY_ROLL_HELP)
     p.add_argument("--compare", metavar="OTHER", default=None,
                    help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
@@ -65,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
         poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher,
-                           max_frames=args.max_frames, frames_dir=args.frames_dir, upright=not args.any_roll)
+                           max_frames=args.max_frames, frames_dir=args.frames_dir, upright=not args.any_roll,
+                           force_frames_dir=args.force)
         complete_points(poses)
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
@@ -88,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
 
 def check_arguments(args: argparse.Namespace) -> None:
     """The sources, numbers and output paths, checked before any structure from motion runs."""
+    from ..data.video import is_frames_dir
     from ..errors import InvalidArgument
     from ._output import POSES_JSON, check_output, check_output_dir
 
@@ -106,8 +109,8 @@ def check_arguments(args: argparse.Namespace) -> None:
     if args.output is not None:
         check_output(args.output, POSES_JSON, inputs=sources, force=args.force)
     if args.frames_dir is not None:
-        check_output_dir(args.frames_dir, lambda folder: True, "the video's frames", option="--frames-dir",
-                         force=True)
+        check_output_dir(args.frames_dir, is_frames_dir, "the video's frames", option="--frames-dir",
+                         force=args.force)
 
 
 def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:

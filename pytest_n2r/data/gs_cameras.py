@@ -32,12 +32,15 @@ __all__ = ["is_gs_cameras", "read_gs_cameras", "write_gs_cameras"]
 
 def is_gs_cameras(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a JSON file in the 3DGS layout: a list at the top level (a ``transforms.json`` is an
-    object), so that a malformed ``cameras.json`` gets :func:`read_gs_cameras`' errors, not transforms.json's."""
+    object), so that a malformed ``cameras.json`` gets :func:`read_gs_cameras`' errors, not transforms.json's. Only
+    the file's first character after white space is looked at, not the whole parsed (the reader that follows names
+    what is wrong)."""
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        with open(path, encoding="utf-8") as fh:
+            start = fh.read(2**16).lstrip()
+    except (OSError, UnicodeDecodeError):
         return False
-    return isinstance(data, list)
+    return start.startswith("[")
 
 
 def _number(record: dict, key: str, where: str, positive: bool = True) -> float:

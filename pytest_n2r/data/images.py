@@ -10,6 +10,11 @@ HEIF standard and libheif do, since there an EXIF tag only describes them. A fil
 content (an ISO media ``ftyp`` box), not by its name. Grayscale is repeated to three channels, an alpha channel is
 dropped (the colour under it is kept), 16-bit images are scaled by ``255 / 65535`` and floating-point
 images are clipped to ``[0, 1]`` then scaled by 255.
+
+``read_image(path, oriented=False)`` reads the pixels **as stored** instead, as COLMAP does (its cameras and poses
+describe those): no EXIF orientation (OpenCV's ``IMREAD_IGNORE_ORIENTATION``; OpenCV's TIFF decoder orients
+whatever the flags, so a TIFF's tag is undone afterwards) and, for a HEIF photo, its ``irot`` / ``imir`` undone (COLMAP
+reads through OpenImageIO with ``oiio:reorient=0``, which has libheif ignore them); a HEIF ``clap`` crop stays.
 """
 
 from __future__ import annotations
@@ -87,8 +92,9 @@ def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
     return np.ascontiguousarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB) if bgr else img)
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read one photo as an upright ``H x W x 3`` RGB uint8 array (see the module's *Convention*).
+def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
+    """Read one photo as an ``H x W x 3`` RGB uint8 array: upright, or with ``oriented=False`` its pixels as stored
+    (see the module's *Convention*).
 
     Raises :class:`IngestError` naming the file when it is missing or cannot be decoded.
     """
@@ -97,21 +103,27 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise IngestError(f"image file {str(path)!r} does not exist")
-    if _is_iso_media(_head(path)):
-        return to_rgb8(_decode_heif(path), bgr=False)
+    head = _head(path)
+    if _is_iso_media(head):
+        return to_rgb8(_decode_heif(path, oriented), bgr=False)
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as exc:  # no permission, a device gone
         raise IngestError(f"image file {str(path)!r} cannot be read: {exc.strerror or exc}") from exc
-    # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation.
-    img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR) if data.size else None
+    # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation (unless told
+    # to ignore it, which OpenCV's TIFF decoder does not heed: there the tag is undone below).
+    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | (0 if oriented else cv2.IMREAD_IGNORE_ORIENTATION)
+    img = cv2.imdecode(data, flags) if data.size else None
     if img is None:
         raise IngestError(f"image file {str(path)!r} cannot be decoded as an image (corrupt or not an image)")
+    if not oriented and _is_tiff(head):
+        img = _UNDO_ORIENTATION[_orientation(path)](img)
     return to_rgb8(img)
 
 
 def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
-    """``(width, height)`` of an upright image without decoding its pixels when possible (orientation applied)."""
+    """``(width, height)`` of the upright image, as :func:`read_image` decodes it, without decoding its pixels when
+    possible."""
     from PIL import Image, UnidentifiedImageError
 
     path = Path(path)
@@ -119,12 +131,44 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         return _heif_size(path)
     try:
         with Image.open(path) as im:
-            width, height = im.size
+            # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
+            width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(_head(path)) else im.size
             orientation = im.getexif().get(0x0112, 1)
-    except (OSError, UnidentifiedImageError):
+    except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]
         return width, height
     return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+
+
+def _orientation(path: Path) -> int:
+    """The EXIF orientation tag of the photo at ``path`` (1 when it has none or it cannot be read)."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            orientation = im.getexif().get(0x0112, 1)
+    except (OSError, UnidentifiedImageError):
+        return 1
+    return orientation if orientation in _UNDO_ORIENTATION else 1
+
+
+#: EXIF orientation → what takes the upright pixels back to the stored ones (the inverse of the tag's transform:
+#: 6 shows the stored pixels turned a quarter clockwise, so undoing it turns them back anticlockwise)
+_UNDO_ORIENTATION = {
+    1: lambda img: img,
+    2: lambda img: img[:, ::-1],
+    3: lambda img: img[::-1, ::-1],
+    4: lambda img: img[::-1],
+    5: lambda img: img.swapaxes(0, 1),
+    6: lambda img: np.rot90(img, 1),
+    7: lambda img: np.rot90(img, -1)[::-1],
+    8: lambda img: np.rot90(img, -1),
+}
+
+
+def _is_tiff(head: bytes) -> bool:
+    """Whether a file's first bytes open a TIFF (classic or BigTIFF, either byte order)."""
+    return head[:4] in (b"II*\0", b"MM\0*", b"II+\0", b"MM\0+")
 
 
 def _head(path: Path) -> bytes:
@@ -155,15 +199,31 @@ def _heif_errors(path: Path) -> Iterator[None]:
         ) from exc
 
 
-def _decode_heif(path: Path) -> np.ndarray:
-    """The HEIF photo at ``path``, upright (libheif applies ``irot`` / ``imir``), in an array of its own.
+def _decode_heif(path: Path, oriented: bool = True) -> np.ndarray:
+    """The HEIF photo at ``path``, upright (libheif applies ``irot`` / ``imir``) or, with ``oriented=False``, with
+    those undone (last applied, first undone), in an array of its own.
 
     libheif converts HDR (10- and 12-bit) colour photos to 8 bits; a 16-bit result is scaled by :func:`to_rgb8`.
     """
     import pillow_heif
 
     with _heif_errors(path):
-        return np.array(pillow_heif.open_heif(path, convert_hdr_to_8bit=True))  # a copy: pillow-heif's is read-only
+        heif = pillow_heif.open_heif(path, convert_hdr_to_8bit=True)
+        image = np.array(heif)  # a copy: pillow-heif's is read-only
+    if oriented:
+        return image
+    # the primary image's transformative properties in the order libheif applied them (pillow-heif keeps them on its
+    # decoded image, not yet under a public name)
+    transformations = getattr(getattr(heif[heif.primary_index], "_c_image", None), "transformations", None)
+    if transformations is None:
+        raise IngestError(f"image file {str(path)!r}: this pillow-heif does not tell the HEIF photo's rotation and "
+                          "mirror, so its pixels cannot be read as stored (as COLMAP reads them); upgrade pillow-heif")
+    for name, *values in reversed(transformations):
+        if name == "imir":  # libheif's mirror direction: 0 flips top and bottom, 1 left and right
+            image = image[::-1] if values[0] == 0 else image[:, ::-1]
+        elif name == "irot":  # degrees anticlockwise
+            image = np.rot90(image, -values[0] // 90)
+    return np.ascontiguousarray(image)
 
 
 def _heif_size(path: Path) -> tuple[int, int]:

@@ -66,7 +66,7 @@ def source_kind(source: str | os.PathLike) -> tuple[str, Path]:
 
 def load_poses(
     source: str | os.PathLike, *, sfm_max_size: int = 960, matcher: str = "auto", max_frames: int = 120,
-    frames_dir: str | os.PathLike | None = None, upright: bool = True,
+    frames_dir: str | os.PathLike | None = None, upright: bool = True, force_frames_dir: bool = False,
 ) -> PoseSet:
     """Read or compute the poses of a source (see :func:`source_kind`); no images are kept.
 
@@ -74,9 +74,11 @@ def load_poses(
     copies downscaled to at most ``sfm_max_size`` pixels, matching ``"exhaustive"``-ly,
     ``"sequential"``-ly (ordered video frames) or ``"auto"`` (exhaustive up to 100 images; sequential
     for a video). A video is first cut into its ``max_frames`` sharpest frames, written to
-    ``frames_dir`` (default ``<video stem>_frames`` beside it). Points of a transforms.json are not
-    triangulated here (see :func:`ingest`). ``upright=False`` keeps the photos structure from motion registers
-    upside down against the others (photos not taken upright; :func:`~pytest_n2r.data.sfm.run_sfm`).
+    ``frames_dir`` (default ``<video stem>_frames`` beside it: a new or empty folder, or one frames were extracted
+    into before, unless ``force_frames_dir``), and structure from motion runs on those frames only. Points of a
+    transforms.json are not triangulated here (see :func:`ingest`). ``upright=False`` keeps the photos structure
+    from motion registers upside down against the others (photos not taken upright;
+    :func:`~pytest_n2r.data.sfm.run_sfm`).
     """
     kind, path = source_kind(source)
     start = time.perf_counter()
@@ -89,10 +91,10 @@ def load_poses(
     elif kind == "video":
         from .sfm import run_sfm
 
-        frames = extract_frames(path, frames_dir, max_frames=max_frames)
+        frames = extract_frames(path, frames_dir, max_frames=max_frames, force=force_frames_dir)
         extracted = time.perf_counter() - start
         poses = run_sfm(frames[0].parent, max_size=sfm_max_size, matcher="sequential" if matcher == "auto" else matcher,
-                        upright=upright)
+                        upright=upright, files=frames)
         poses.kind = "video"
         poses.report["video"] = str(path)
         poses.report["time_s"] = {"frames": extracted, **poses.report["time_s"]}
@@ -127,7 +129,8 @@ def ingest(
         images once at low resolution to triangulate points).
     heldout_every:
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
-        ``None``: the source's own split where it has one (a transforms.json's ``val_filenames``), else 8.
+        ``None``: the source's own split where it has one (a transforms.json's ``val_filenames``, else its
+        ``test_filenames``), else 8.
     sfm_max_size, matcher, max_frames, frames_dir, upright:
         Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
@@ -215,6 +218,7 @@ def _load_pixels(
     if len(poses.frames) < 3:
         raise IngestError(f"{poses.source}: only {len(poses.frames)} registered images; at least 3 are needed")
     need_points = len(poses.points) == 0
+    as_stored = poses.kind == "colmap"  # COLMAP's cameras describe the pixels as stored (it ignores orientation)
     kept: list[SourceFrame] = []
     images: list[np.ndarray | None] = []
     small: list[np.ndarray] = []
@@ -226,7 +230,7 @@ def _load_pixels(
             images.append(None)
             continue
         try:
-            full = _undistorted_image(frame)
+            full = _undistorted_image(frame, as_stored)
         except _Undecodable as exc:
             warnings.warn(f"skipping frame {frame.name!r}: {exc}", stacklevel=3)
             poses.skipped.append((frame.name, str(exc)))
@@ -269,7 +273,9 @@ class _Undecodable(IngestError):
     """An image file that exists but cannot be decoded (the frame is skipped, not fatal)."""
 
 
-def _undistorted_image(frame: SourceFrame) -> np.ndarray:
+def _undistorted_image(frame: SourceFrame, as_stored: bool) -> np.ndarray:
+    """The frame's photo with its lens distortion removed: upright, or its pixels as stored (``as_stored``: a
+    COLMAP model's photo, whose camera and pose describe the pixels as COLMAP reads them, the orientation ignored)."""
     if frame.path is None:
         raise IngestError(
             f"image {frame.name!r} listed in the COLMAP model was not found; put the images in an 'images' "
@@ -277,13 +283,16 @@ def _undistorted_image(frame: SourceFrame) -> np.ndarray:
             "model has none)"
         )
     try:
-        image = read_image(frame.path)
+        image = read_image(frame.path, oriented=not as_stored)
     except IngestError as exc:
         raise _Undecodable(str(exc)) from None
     cam = frame.camera
     if image.shape[:2] != (cam.height, cam.width):
         raise IngestError(
             f"image {str(frame.path)!r} is {image.shape[1]}x{image.shape[0]} pixels but its camera says "
-            f"{cam.width}x{cam.height} (after EXIF orientation)"
+            f"{cam.width}x{cam.height} ("
+            + ("its pixels as stored: COLMAP ignores a photo's orientation tag, so a model made from these files has "
+               "cameras of their stored size; was it made from turned copies? give it those)"
+               if as_stored else "after EXIF orientation)")
         )
     return cam.undistort_image(image)

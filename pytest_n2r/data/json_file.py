@@ -15,7 +15,8 @@ __all__ = ["read_json_file"]
 def read_json_file(path: str | os.PathLike, kind: str) -> Any:
     """The parsed JSON of ``path``; ``kind`` names the file in errors (``"transforms"``, ``"cameras"``).
 
-    Raises :class:`IngestError` naming the file when it does not exist or is not readable JSON.
+    Raises :class:`IngestError` naming the file when it does not exist or is not readable JSON (nesting too deep
+    for the parser included).
     """
     path = Path(path)
     if not path.is_file():
@@ -24,3 +25,6 @@ def read_json_file(path: str | os.PathLike, kind: str) -> Any:
         return json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise IngestError(f"{path}: not a readable JSON file ({exc})") from None
+    except RecursionError:
+        raise IngestError(f"{path}: not a readable JSON file (nested too deeply for the JSON parser); expected a "
+                          f"{kind} file") from None

@@ -57,8 +57,8 @@ class PoseSet:
     report:
         Plain JSON-ready facts: timings in seconds per stage, counts, the method used for points.
     heldout:
-        Names of the frames the source itself holds out (a transforms.json's ``val_filenames``); ``None``
-        when the source has no split.
+        Names (:attr:`SourceFrame.name`) of the frames the source itself holds out (a transforms.json's
+        ``val_filenames``, else its ``test_filenames``); ``None`` when the source has no split.
     """
 
     frames: list[SourceFrame]

@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -52,9 +52,10 @@ MATCHERS = ("auto", "exhaustive", "sequential")
 
 def run_sfm(
     images_dir: str | os.PathLike, *, max_size: int = 960, matcher: str = "auto", max_features: int = 2048,
-    num_threads: int = -1, seed: int = 0, upright: bool = True,
+    num_threads: int = -1, seed: int = 0, upright: bool = True, files: Sequence[str | os.PathLike] | None = None,
 ) -> PoseSet:
-    """Recover cameras, poses and sparse points of the photos in ``images_dir`` (see the module docstring).
+    """Recover cameras, poses and sparse points of the photos in ``images_dir`` (see the module docstring), or of
+    only those ``files`` there (a video's frames, whatever else their folder holds).
 
     Returns a :class:`PoseSet` whose frames are the registered images sorted by file name, with the
     full-resolution camera. ``report["time_s"]`` holds seconds per stage (``read``, ``features``,
@@ -71,7 +72,7 @@ def run_sfm(
     if not isinstance(upright, bool):
         raise InvalidType(f"upright={upright!r} must be True (photos taken upright) or False (a camera that rolls)")
     images_dir = Path(images_dir)
-    files = list_images(images_dir)
+    files = list_images(images_dir) if files is None else [Path(f) for f in files]
     times: dict[str, float] = {}
     skipped: list[tuple[str, str]] = []
 

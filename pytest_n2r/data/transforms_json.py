@@ -9,8 +9,18 @@ Convention
   ``cx_ours = cx - 0.5``. Without ``fl_x`` the focal length comes from ``camera_angle_x`` (radians,
   full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; ``fl_y`` falls back to
   ``camera_angle_y``, then to ``fl_x``; ``cx, cy`` fall back to the image centre.
-- Distortion ``k1 k2 p1 p2 [k3 [k4 k5 k6]]`` is OpenCV's radial-tangential model; fisheye camera
-  models are refused.
+- ``camera_model`` is one of nerfstudio's pinhole models (``OPENCV`` when absent, ``PINHOLE``, ``SIMPLE_PINHOLE``,
+  ``SIMPLE_RADIAL``, ``RADIAL``), whose distortion is nerfstudio's ``k1 k2 k3`` (radial, the terms in r², r⁴, r⁶ of
+  OpenCV's model) and ``p1 p2`` (tangential); nerfstudio's ``k4`` is a further radial term in r⁸, which OpenCV's
+  model cannot hold, so a non-zero ``k4`` (or ``k5``, ``k6``, no part of these models) is refused. ``FULL_OPENCV``
+  (COLMAP's name for OpenCV's rational model, what :func:`write_transforms_json` writes for such a lens) reads
+  ``k1 k2 p1 p2 k3 k4 k5 k6`` as OpenCV's. Every other model (fisheye, omnidirectional, VR180, equirectangular,
+  orthographic, a typo) and instant-ngp's other lenses (``is_fisheye`` true, ``latlong``, ``equirectangular``,
+  ``ftheta_p0``) are refused.
+- The split: ``val_filenames`` are held out (else ``test_filenames``: a file that lists only training and test views
+  holds the test views out of training); ``train_filenames`` is checked, not used. Each listed name is matched
+  to a frame's ``file_path`` as nerfstudio does, as paths relative to the json's folder (``./a.jpg`` is ``a.jpg``);
+  one that names no frame is refused.
 - ``file_path`` is relative to the json's folder; a path without a suffix gets ``.png`` (the NeRF
   synthetic data sets list ``./train/r_0``).
 """
@@ -21,7 +31,7 @@ import json
 import math
 import os
 import warnings
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
@@ -36,7 +46,13 @@ from .poses import PoseSet, SourceFrame
 __all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json"]
 
 _DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
-_FISHEYE_MODELS = ("OPENCV_FISHEYE", "EQUIRECTANGULAR", "FISHEYE")
+#: camera models read as they are meant (see the module's *Convention*)
+_PINHOLE_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL")
+_RATIONAL_MODEL = "FULL_OPENCV"
+#: instant-ngp's fields for lenses other than a pinhole one
+_OTHER_LENS_FIELDS = ("is_fisheye", "latlong", "equirectangular", "ftheta_p0")
+#: nerfstudio's split fields; the first one present of the last two is held out
+_SPLIT_FIELDS = ("train_filenames", "val_filenames", "test_filenames")
 
 
 def find_transforms_json(source: str | os.PathLike) -> Path | None:
@@ -53,10 +69,11 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
 
     Frames whose image file is missing are skipped with a warning naming the file; with ``images=False``
     (cameras only, e.g. of a splat scene trained elsewhere) they are kept with ``path=None`` and their
-    size must be in the json (``w`` and ``h``). A ``val_filenames``
-    list (nerfstudio's split) becomes :attr:`PoseSet.heldout`. Raises
-    :class:`IngestError` naming the file, the frame index and the field when a field is missing or
-    malformed, a matrix is not a finite rigid transform, or no frame has its image.
+    size must be in the json (``w`` and ``h``). The split (``val_filenames``, else ``test_filenames``) becomes
+    :attr:`PoseSet.heldout`, as the names of the frames it lists. Raises :class:`IngestError` naming the file, the
+    frame index and the field when a field is missing or malformed or names a camera model or lens that is not read
+    correctly (see the module's *Convention*), a matrix is not a finite rigid transform, a split names no frame, or
+    no frame has its image.
     """
     path = Path(path)
     meta = read_json_file(path, 'transforms')
@@ -65,9 +82,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     raw_frames = meta.get("frames")
     if not isinstance(raw_frames, list) or not raw_frames:
         raise IngestError(f"{path}: field 'frames' is missing or empty; expected a list of frames")
-    model = str(meta.get("camera_model", "OPENCV")).upper()
-    if model in _FISHEYE_MODELS:
-        raise IngestError(f"{path}: camera_model={model!r} is not supported; expected a pinhole (OPENCV) model")
+    model = _camera_model(meta, str(path), "OPENCV")
 
     root = path.parent
     frames: list[SourceFrame] = []
@@ -81,25 +96,61 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
             raise IngestError(f"{where}: field 'file_path' is missing or not a string")
         image = _resolve_image(root, name)
         c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
+        frame_model = _camera_model(raw, where, model)
         if image is None and not images:
-            frames.append(SourceFrame(name=name, path=None, camera=_read_camera(meta, raw, where, None), c2w=c2w))
+            camera = _read_camera(meta, raw, where, None, frame_model)
+            frames.append(SourceFrame(name=name, path=None, camera=camera, c2w=c2w))
             continue
         if image is None:
             reason = f"image file {str(root / name)!r} listed in {path.name} frames[{i}] does not exist"
             warnings.warn(f"skipping frame: {reason}", stacklevel=2)
             skipped.append((name, reason))
             continue
-        camera = _read_camera(meta, raw, where, image)
+        camera = _read_camera(meta, raw, where, image, frame_model)
         frames.append(SourceFrame(name=name, path=image, camera=camera, c2w=c2w))
     if not frames:
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
-    heldout = meta.get("val_filenames")
-    if heldout is not None:
-        if not isinstance(heldout, list) or not all(isinstance(n, str) for n in heldout):
-            raise IngestError(f"{path}: field 'val_filenames' must be a list of frame file paths")
-        heldout = frozenset(heldout)
+    heldout = _read_split(meta, path, [raw["file_path"] for raw in raw_frames])
     return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped,
                    report={"listed": len(raw_frames)}, heldout=heldout)
+
+
+def _camera_model(fields: dict, where: str, default: str) -> str:
+    """The camera model ``fields`` (the file's top level, or a frame's) declare, upper case, when it is one read
+    correctly (see the module's *Convention*); otherwise an :class:`IngestError` naming ``where`` and the field."""
+    model = fields.get("camera_model", default)
+    accepted = (*_PINHOLE_MODELS, _RATIONAL_MODEL)
+    if not isinstance(model, str) or model.upper() not in accepted:
+        raise IngestError(f"{where}: field 'camera_model'={model!r} is not supported; expected one of "
+                          f"{', '.join(accepted)} (a pinhole camera with OpenCV's lens model: fisheye, "
+                          "omnidirectional, VR180, equirectangular and orthographic cameras are not read)")
+    for key in _OTHER_LENS_FIELDS:
+        if fields.get(key) not in (None, False):
+            raise IngestError(f"{where}: field {key!r}={fields[key]!r} declares an instant-ngp lens other than a "
+                              "pinhole one, which is not supported; expected a pinhole camera (no such field, or "
+                              "'is_fisheye': false)")
+    return model.upper()
+
+
+def _read_split(meta: dict, path: Path, listed: list[str]) -> frozenset[str] | None:
+    """The names (``file_path`` as listed) of the frames the file holds out: those ``val_filenames`` names, else
+    ``test_filenames``; ``None`` without either. A split's name matches a frame's ``file_path`` as nerfstudio matches
+    them, both taken as paths relative to the json's folder."""
+    frames = {PurePosixPath(name): name for name in reversed(listed)}  # the first frame of a path wins
+    splits: dict[str, frozenset[str]] = {}
+    for key in _SPLIT_FIELDS:
+        names = meta.get(key)
+        if names is None:
+            continue
+        if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+            raise IngestError(f"{path}: field {key!r} must be a list of frame file paths")
+        unknown = [n for n in names if PurePosixPath(n) not in frames]
+        if unknown:
+            more = f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else ""
+            raise IngestError(f"{path}: field {key!r} lists {unknown[0]!r}{more}, which is no frame's file_path; "
+                              "expected the file_path of a frame, relative to the json's folder as in 'frames'")
+        splits[key] = frozenset(frames[PurePosixPath(n)] for n in names)
+    return splits.get("val_filenames", splits.get("test_filenames"))
 
 
 def _resolve_image(root: Path, name: str) -> Path | None:
@@ -148,7 +199,7 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _read_camera(meta: dict, raw: dict, where: str, image: Path | None) -> Camera:
+def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: str) -> Camera:
     w, h = _number(meta, raw, "w", where), _number(meta, raw, "h", where)
     if (w is None or h is None) and image is None:
         raise IngestError(f"{where}: no image size; expected fields 'w' and 'h' (the image is not there to read it)")
@@ -174,6 +225,13 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None) -> Camer
     cx = _number(meta, raw, "cx", where)
     cy = _number(meta, raw, "cy", where)
     coeffs = [_number(meta, raw, k, where) or 0.0 for k in _DISTORTION_KEYS]  # Camera drops trailing zeros
+    beyond = [(k, v) for k, v in zip(_DISTORTION_KEYS[5:], coeffs[5:]) if v]
+    if beyond and model != _RATIONAL_MODEL:
+        key, value = beyond[0]
+        meaning = ("in nerfstudio's pinhole models k4 is a radial term in r⁸ (1 + k1·r² + k2·r⁴ + k3·r⁶ + k4·r⁸), "
+                   "which OpenCV's lens model cannot hold" if key == "k4" else f"it is no part of nerfstudio's {model}")
+        raise IngestError(f"{where}: field {key!r}={value!r}: {meaning}; expected 0 (camera_model {_RATIONAL_MODEL} "
+                          "reads k4 k5 k6 as OpenCV's rational terms)")
     try:
         return Camera.from_colmap_pixels(
             int(round(w)), int(round(h)), fx, fy, w / 2 if cx is None else cx, h / 2 if cy is None else cy,
@@ -190,22 +248,30 @@ def write_transforms_json(
 
     ``file_path`` is the image's path relative to the json's folder when the frame knows its file
     (else the frame's name), so two pose sets of the same images can be compared frame by frame.
-    Intrinsics shared by every frame are written once at the top level, otherwise per frame.
-    ``extra`` adds top-level fields (e.g. ``{"reference_length": ...}``).
+    Intrinsics shared by every frame are written once at the top level, otherwise per frame;
+    ``camera_model`` is ``OPENCV``, or ``FULL_OPENCV`` when a lens has OpenCV's rational terms (k4 k5 k6).
+    A pose set's own split (:attr:`PoseSet.heldout`) is written as ``train_filenames`` and ``val_filenames``
+    (the same ``file_path`` strings). ``extra`` adds top-level fields (e.g. ``{"reference_length": ...}``).
     """
     path = Path(path)
+    heldout = frames.heldout if isinstance(frames, PoseSet) else None
     frames = frames.frames if isinstance(frames, PoseSet) else list(frames)
     if not frames:
         raise IngestError(f"cannot write {path}: no frames")
     cameras = [_camera_fields(f.camera) for f in frames]
     shared = cameras[0] if all(c == cameras[0] for c in cameras) else None
-    out: dict[str, Any] = {"camera_model": "OPENCV"}
+    rational = any(len(f.camera.distortion) == 8 for f in frames)
+    out: dict[str, Any] = {"camera_model": _RATIONAL_MODEL if rational else "OPENCV"}
     if shared is not None:
         out.update(shared)
+    names = [_relative_name(frame, path.parent) for frame in frames]
+    if heldout is not None:
+        out["train_filenames"] = [n for f, n in zip(frames, names) if f.name not in heldout]
+        out["val_filenames"] = [n for f, n in zip(frames, names) if f.name in heldout]
     out.update(extra or {})
     records = []
-    for frame, cam in zip(frames, cameras):
-        record: dict[str, Any] = {"file_path": _relative_name(frame, path.parent)}
+    for frame, name, cam in zip(frames, names, cameras):
+        record: dict[str, Any] = {"file_path": name}
         if shared is None:
             record.update(cam)
         record["transform_matrix"] = opencv_to_opengl(frame.c2w).tolist()

@@ -71,6 +71,17 @@ def test_a_malformed_cameras_json_gets_the_3dgs_reader_s_error(tmp_path, content
         read_cameras(path)
     assert expected in str(info.value) and "transforms" not in str(info.value), str(info.value)
 
+
+@pytest.mark.parametrize("name, opening", [("cameras.json", "["), ("transforms.json", '{"frames": ')])
+def test_json_nested_deeper_than_the_parser_goes_is_an_error_naming_the_file(tmp_path, name, opening):
+    """A RecursionError out of the JSON parser was a bare traceback (exit 1)."""
+    path = tmp_path / name
+    path.write_text(" \n" + opening + "[" * 100_000 + "]" * 100_000 + ("]" if opening == "[" else "}"))
+    with pytest.raises(IngestError) as info:
+        read_cameras(path)
+    assert f"{path}: not a readable JSON file (nested too deeply" in str(info.value), \
+        f"deeply nested {name} was not refused naming the file: {info.value}"
+
 def test_cameras_json_refuses_what_it_cannot_hold(tmp_path):
     frames = [SourceFrame("a.png", None, Camera(30, 20, 25.0, 25.0, 10.0, 9.5), np.eye(4))]
     with pytest.raises(IngestError, match="principal point off the image centre"):

@@ -34,6 +34,18 @@ def test_poses_prints_a_summary_and_writes_transforms_json(corner, tmp_path, cap
     assert abs(meta["n2r"]["reference_length"] - ref) <= 1e-3 * ref
 
 
+def test_poses_output_keeps_the_sources_split(corner, tmp_path):
+    src = write_transforms(corner, val_filenames=[f"./images/{corner.names[3]}"])
+    out = tmp_path / "out" / "poses.json"
+    assert main(["poses", str(src), "-o", str(out)]) == 0
+    meta = json.loads(out.read_text())
+    paths = [f["file_path"] for f in meta["frames"]]
+    assert meta.get("val_filenames") == [paths[3]], f"n2r poses -o lost the split: {meta.get('val_filenames')}"
+    assert meta.get("train_filenames") == paths[:3] + paths[4:]
+    assert [f.name in read_transforms_json(out).heldout for f in read_transforms_json(out).frames] == \
+        [k == 3 for k in range(6)], "the written split reads back as other views"
+
+
 def test_poses_error_names_the_source(tmp_path, capsys):
     assert main(["poses", str(tmp_path / "missing")]) == 2
     err = capsys.readouterr().err

@@ -55,6 +55,28 @@ def test_images_only_in_one_set_are_listed():
     assert cmp.names == ["b", "c", "d", "e"] and cmp.only_a == ["a"] and cmp.only_b == ["f"]
 
 
+def test_two_cameras_whose_file_names_repeat_are_matched_on_their_folders():
+    """cam0/0000.jpg and cam1/0000.jpg were one key: identical pose sets of a two-camera rig compared as far apart."""
+    poses = orbit_poses(8)
+    names = [f"cam{k % 2}/{k // 2:04d}.jpg" for k in range(8)]
+    same = compare_poses(_set(names, poses), _set(names, poses))
+    assert sorted(same.names) == sorted(names), f"matched {same.names}"
+    assert same.rotation_deg.max() < 1e-9 and same.centre_error.max() < 1e-9, \
+        f"identical pose sets compare {same.rotation_deg.max():.1f} deg apart: images were paired wrongly"
+    deeper = compare_poses(_set([f"images/{n}" for n in names], poses), _set(names, poses))
+    assert deeper.rotation_deg.max() < 1e-9 and len(deeper.names) == 8, "images/cam0/0000.jpg is cam0/0000.jpg"
+
+
+def test_file_names_several_images_share_without_telling_folders_are_an_error_naming_them():
+    poses = orbit_poses(8)
+    names = [f"cam{k % 2}/{k // 2:04d}.jpg" for k in range(8)]
+    with pytest.raises(IngestError) as info:
+        compare_poses(_set([n.split("/")[1] for n in names[::2]], poses[::2]), _set(names, poses))
+    assert "cannot tell which image is which: 0000.jpg, 0001.jpg, 0002.jpg, 0003.jpg, cam0/0000.jpg, " \
+           "cam0/0001.jpg and 6 more share file names" in str(info.value), \
+        f"an ambiguous file name was not refused naming the images: {info.value}"
+
+
 def test_too_few_common_images():
     poses = orbit_poses(4)
     with pytest.raises(IngestError, match="only 2 images are in both pose sets"):

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pillow_heif
 import pytest
-from PIL import Image
+from PIL import Image, ImageOps
 
 from pytest_n2r.data.images import iter_readable, list_images, read_image, read_image_size, to_rgb8
 from pytest_n2r.errors import IngestError
@@ -45,6 +45,34 @@ def test_exif_orientation_is_applied(tmp_path, orientation, corner):
     assert img[r, c, 0] > 200 and img[r, c, 2] < 60, f"orientation {orientation}: red pixel not at {corner}"
 
 
+#: how each format is saved losslessly (JPEG as near as it gets)
+_FORMATS = {"jpg": {"quality": 100}, "png": {}, "tif": {}, "webp": {"lossless": True}}
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+@pytest.mark.parametrize("suffix", list(_FORMATS))
+def test_every_format_reads_upright_or_as_stored_and_its_size_is_the_upright_one(tmp_path, suffix, orientation):
+    """read_image's upright pixels match Pillow's exif_transpose, read_image(oriented=False) gives the stored pixels
+    (as COLMAP reads them), and read_image_size says the size read_image decodes (a TIFF's was swapped twice)."""
+    stored = cv2.resize(_pattern(), (40, 60), interpolation=cv2.INTER_NEAREST)
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    path = tmp_path / f"a.{suffix}"
+    Image.fromarray(stored).save(path, exif=exif, **_FORMATS[suffix])
+    Image.fromarray(stored).save(tmp_path / "ref.png", exif=exif)
+    expected = np.asarray(ImageOps.exif_transpose(Image.open(tmp_path / "ref.png")))
+    upright = read_image(path)
+    assert read_image_size(path) == (upright.shape[1], upright.shape[0]), \
+        f"{suffix}, orientation {orientation}: read_image_size says {read_image_size(path)}, read_image decodes " \
+        f"{upright.shape[1]}x{upright.shape[0]}"
+    as_stored = read_image(path, oriented=False)
+    for got, want, what in ((upright, expected, "upright"), (as_stored, stored, "as stored")):
+        assert got.shape == want.shape, \
+            f"{suffix}, orientation {orientation}: read {what} as {got.shape}, not {want.shape}"
+        error = np.abs(got.astype(int) - want).mean()
+        assert error < 2.0, f"{suffix}, orientation {orientation}: the pixels read {what} differ by {error:.1f} on mean"
+
+
 def _save_heic(image: np.ndarray, path, orientation: int = 1) -> None:
     """Save as an iPhone does: the pixels as given, the EXIF orientation written into the container as irot/imir."""
     pillow_heif.register_heif_opener()
@@ -70,6 +98,17 @@ def test_a_heif_photo_is_upright_as_the_same_jpeg(tmp_path, orientation):
     # 4:2:0 chroma smears the colour blocks' edges; away from them the two codecs agree
     difference = np.abs(heif.astype(int) - jpeg).mean()
     assert difference < 2.0, f"orientation {orientation}: HEIF and JPEG differ by {difference:.2f} grey levels on mean"
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_a_heif_photo_as_stored_has_its_rotation_and_mirror_undone(tmp_path, orientation):
+    """COLMAP reads a HEIF photo without its irot / imir (OpenImageIO's oiio:reorient=0): oriented=False does too."""
+    stored = cv2.resize(_pattern(), (40, 60), interpolation=cv2.INTER_NEAREST)
+    _save_heic(stored, tmp_path / "a.heic", orientation)
+    got = read_image(tmp_path / "a.heic", oriented=False)
+    assert got.shape == stored.shape, f"orientation {orientation}: the HEIF read as stored is {got.shape}"
+    error = np.abs(got.astype(int) - stored).mean()
+    assert error < 2.0, f"orientation {orientation}: the HEIF read as stored differs from its pixels by {error:.1f}"
 
 
 def test_a_heif_photo_is_read_by_its_content_whatever_its_name(tmp_path):

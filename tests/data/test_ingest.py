@@ -49,6 +49,18 @@ def test_a_split_in_the_file_is_kept_unless_one_is_asked_for(capture_json):
         ingest(capture_json, load_images=False)
 
 
+def test_a_split_matches_the_frames_as_nerfstudio_matches_them(capture_json):
+    """``./images/a.png`` in the frames and ``images/a.png`` in val_filenames are one file (nerfstudio joins both to
+    the json's folder): the split must hold, not silently become every view trained on."""
+    meta = json.loads(capture_json.read_text())
+    for frame in meta["frames"]:
+        frame["file_path"] = "./" + frame["file_path"]
+    meta["val_filenames"] = [meta["frames"][2]["file_path"][2:]]
+    capture_json.write_text(json.dumps(meta))
+    splits = [v.split for v in ingest(capture_json, load_images=False).views]
+    assert splits == ["train", "train", "heldout", "train", "train", "train"], f"the file's split was lost: {splits}"
+
+
 def test_triangulated_points_lie_on_the_scene(corner, capture_json):
     cap = ingest(capture_json, load_images=False)
     assert all(v.image is None for v in cap.views)
@@ -198,3 +210,40 @@ def test_too_few_decodable_images(corner, capture_json):
         (corner.images_dir / name).write_bytes(b"")
     with pytest.warns(UserWarning), pytest.raises(IngestError, match="only 2 images could be read; at least 3"):
         ingest(capture_json)
+
+
+def _tag_orientation(path, orientation: int) -> None:
+    """Rewrite the PNG at ``path`` with the same stored pixels and an EXIF orientation tag."""
+    from PIL import Image
+
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.open(path).save(path, exif=exif)
+
+
+def test_a_colmap_model_describes_its_photos_as_stored(corner):
+    """COLMAP ignores the EXIF orientation, so its cameras and poses describe the pixels as stored: a photo tagged
+    'turned half a turn' (3) must not be turned against its pose, nor a 'quarter turn' (6) one refused."""
+    poses = read_transforms_json(write_transforms(corner))
+    write_colmap_text(corner.root / "sparse" / "0", poses)
+    (corner.root / "transforms.json").unlink()
+    stored = [cv2.cvtColor(cv2.imread(str(corner.images_dir / n)), cv2.COLOR_BGR2RGB) for n in corner.names]
+    _tag_orientation(corner.images_dir / corner.names[0], 3)
+    _tag_orientation(corner.images_dir / corner.names[1], 6)
+    cap = ingest(corner.root)
+    for k in (0, 1):
+        assert cap.views[k].image.shape == stored[k].shape, \
+            f"{corner.names[k]} was read as {cap.views[k].image.shape}, not as stored {stored[k].shape}"
+        assert np.array_equal(cap.views[k].image, stored[k]), f"{corner.names[k]} was turned against its pose"
+
+
+def test_a_colmap_camera_of_the_upright_size_is_refused_naming_the_orientation(corner, tmp_path):
+    from dataclasses import replace
+
+    poses = read_transforms_json(write_transforms(corner, path=tmp_path / "t.json"))
+    poses.frames[0] = replace(poses.frames[0], camera=poses.frames[0].camera.resized(120, 160))
+    write_colmap_text(corner.root / "sparse" / "0", poses)
+    _tag_orientation(corner.images_dir / corner.names[0], 6)
+    with pytest.raises(IngestError, match=rf"{corner.names[0]}' is 160x120 pixels but its camera says 120x160 "
+                                          r"\(its pixels as stored: COLMAP ignores a photo's orientation tag"):
+        ingest(corner.root, load_images=False)

@@ -136,6 +136,18 @@ def test_too_few_readable_images(tmp_path):
         run_sfm(folder)
 
 
+def test_given_files_are_the_only_photos_read(tmp_path):
+    """A video's frames share their folder with whatever else is there: only the files given are photos of it."""
+    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
+    (folder / "2.png").write_bytes(b"broken")
+    (folder / "other.png").write_bytes(b"someone else's")
+    given = [folder / f"{k}.png" for k in range(3)]
+    with pytest.warns(UserWarning, match=r"2\.png") as warned, \
+            pytest.raises(IngestError, match="only 2 of 3 images are readable"):
+        run_sfm(folder, files=given)
+    assert not [w for w in warned if "other.png" in str(w.message)], "a file that was not given was read"
+
+
 @pytest.mark.parametrize(("kwargs", "match"),
                          [({"matcher": "vocab"}, "matcher='vocab'"), ({"max_size": 10}, "max_size=10")])
 def test_bad_settings(tmp_path, kwargs, match):

@@ -160,10 +160,86 @@ def test_missing_frames_field(corner):
     assert "'frames' is missing or empty" in _break(corner, lambda m: m.pop("frames"))
 
 
-def test_fisheye_is_refused(corner):
+@pytest.mark.parametrize("model", ["OPENCV_FISHEYE", "FISHEYE624", "VR180_L", "OMNIDIRECTIONALSTEREO_L", "ORTHOPHOTO",
+                                   "EQUIRECTANGULAR", "OPNECV", 5])
+def test_a_camera_model_not_read_as_it_is_meant_is_refused_naming_it(corner, model):
     def mutate(m):
-        m["camera_model"] = "OPENCV_FISHEYE"
-    assert "OPENCV_FISHEYE" in _break(corner, mutate)
+        m["camera_model"] = model
+    msg = _break(corner, mutate)
+    assert f"field 'camera_model'={model!r} is not supported; expected one of OPENCV, PINHOLE" in msg, \
+        f"camera_model {model!r} was not refused naming the field, the value and what is accepted: {msg}"
+
+
+@pytest.mark.parametrize("model", ["OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "opencv"])
+def test_nerfstudios_pinhole_models_are_read(corner, model):
+    frames = read_transforms_json(write_transforms(corner, camera_model=model)).frames
+    assert frames[0].camera == corner.camera, f"camera_model {model!r} read as {frames[0].camera}"
+
+
+@pytest.mark.parametrize(("where", "field"), [("top", "is_fisheye"), ("frame", "is_fisheye"), ("top", "latlong")])
+def test_an_instant_ngp_lens_other_than_a_pinhole_is_refused(corner, where, field):
+    def mutate(m):
+        (m if where == "top" else m["frames"][2])[field] = True
+    msg = _break(corner, mutate)
+    assert f"field {field!r}=True declares an instant-ngp lens other than a pinhole one" in msg, \
+        f"{field}: true ({where}) was not refused: {msg}"
+    assert where == "top" or "frames[2]" in msg, f"the error does not name the frame: {msg}"
+    assert read_transforms_json(write_transforms(corner, is_fisheye=False)).frames, "is_fisheye: false was refused"
+
+
+def test_nerfstudios_k4_a_radial_term_in_r8_is_refused_not_read_as_opencvs(corner):
+    """nerfstudio's OPENCV distortion is 1 + k1 r² + k2 r⁴ + k3 r⁶ + k4 r⁸ (cameras/camera_utils.py); OpenCV's k4 is
+    the first term of a denominator. A k4 of one read as the other is a silently wrong lens."""
+    msg = _break(corner, lambda m: m.update(k4=0.05))
+    assert "field 'k4'=0.05: in nerfstudio's pinhole models k4 is a radial term in r⁸" in msg, \
+        f"a non-zero nerfstudio k4 was not refused: {msg}"
+    assert "field 'k5'=0.1: it is no part of nerfstudio's OPENCV" in _break(corner, lambda m: m.update(k5=0.1))
+    cam = read_transforms_json(write_transforms(corner, k1=0.1, k3=0.01, k4=0.0)).frames[0].camera
+    assert cam.distortion == (0.1, 0.0, 0.0, 0.0, 0.01), f"k1 and k3 read as {cam.distortion}"
+    rational = read_transforms_json(write_transforms(corner, camera_model="FULL_OPENCV", k1=0.1, k4=0.05))
+    assert rational.frames[0].camera.distortion == (0.1, 0.0, 0.0, 0.0, 0.0, 0.05, 0.0, 0.0), \
+        f"FULL_OPENCV's k4 is not OpenCV's rational k4: {rational.frames[0].camera.distortion}"
+
+
+def _split_file(corner, **fields):
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    meta["frames"][0]["file_path"] = "./" + meta["frames"][0]["file_path"]
+    meta.update(fields)
+    path.write_text(json.dumps(meta))
+    return path
+
+
+def test_the_split_is_matched_on_paths_and_test_filenames_hold_out_without_val_filenames(corner):
+    names = [f"images/{n}" for n in corner.names]
+    poses = read_transforms_json(_split_file(corner, val_filenames=[names[0], "./" + names[3]]))
+    assert poses.heldout == {"./" + names[0], names[3]}, f"val_filenames matched {poses.heldout}"
+    only_test = read_transforms_json(_split_file(corner, train_filenames=names[1:], test_filenames=[names[0]]))
+    assert only_test.heldout == {"./" + names[0]}, f"test_filenames without val_filenames held out {only_test.heldout}"
+    both = read_transforms_json(_split_file(corner, val_filenames=[names[1]], test_filenames=[names[2]]))
+    assert both.heldout == {names[1]}, f"val_filenames did not win over test_filenames: {both.heldout}"
+
+
+@pytest.mark.parametrize("field", ["val_filenames", "test_filenames", "train_filenames"])
+def test_a_split_name_that_is_no_frame_is_refused_naming_the_field_and_the_name(corner, field):
+    path = _split_file(corner, **{field: [f"images/{corner.names[1]}", f"photos/{corner.names[2]}"]})
+    with pytest.raises(IngestError) as info:
+        read_transforms_json(path)
+    assert f"field {field!r} lists 'photos/{corner.names[2]}', which is no frame's file_path" in str(info.value), \
+        f"a {field} name matching no frame was not refused naming it: {info.value}"
+
+
+def test_written_poses_keep_their_split_with_the_file_paths_they_are_written_with(corner, tmp_path):
+    names = [f"images/{n}" for n in corner.names]
+    poses = read_transforms_json(_split_file(corner, val_filenames=[names[0], names[4]]))
+    out = write_transforms_json(tmp_path / "elsewhere" / "poses.json", poses)
+    meta = json.loads(out.read_text())
+    paths = [f["file_path"] for f in meta["frames"]]
+    assert meta.get("val_filenames") == [paths[0], paths[4]], f"the split was not written: {meta.get('val_filenames')}"
+    assert meta["train_filenames"] == [p for k, p in enumerate(paths) if k not in (0, 4)]
+    again = read_transforms_json(out)
+    assert [f.name in again.heldout for f in again.frames] == [k in (0, 4) for k in range(6)], \
+        "the written split does not read back as the same views"
 
 
 def test_no_frame_has_its_image(corner):
@@ -177,6 +253,9 @@ def test_not_json(tmp_path):
     path = tmp_path / "transforms.json"
     path.write_text("{not json")
     with pytest.raises(IngestError, match="not a readable JSON file"):
+        read_transforms_json(path)
+    path.write_text("[" * 100_000 + "]" * 100_000)  # deeper than the JSON parser goes: a RecursionError
+    with pytest.raises(IngestError, match=r"transforms\.json: not a readable JSON file \(nested too deeply"):
         read_transforms_json(path)
     with pytest.raises(IngestError, match="does not exist"):
         read_transforms_json(tmp_path / "nope.json")
@@ -213,7 +292,8 @@ def _frames(draw):
     from pytest_n2r.data import SourceFrame
     from pytest_n2r.geometry import Camera, Transform
 
-    dist = draw(st.sampled_from([(), (0.1, -0.02, 0.001, 0.002), (0.1, -0.02, 0.001, 0.002, 0.01)]))
+    dist = draw(st.sampled_from([(), (0.1, -0.02, 0.001, 0.002), (0.1, -0.02, 0.001, 0.002, 0.01),
+                                 (0.1, -0.02, 0.001, 0.002, 0.01, 0.3, -0.05, 0.002)]))
     cam = Camera(draw(st.integers(16, 4000)), draw(st.integers(16, 4000)), draw(st.floats(10, 5000)),
                  draw(st.floats(10, 5000)), draw(st.floats(-100, 4000)), draw(st.floats(-100, 4000)), dist)
     angles = st.floats(-179, 179)

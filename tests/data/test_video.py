@@ -82,6 +82,60 @@ def test_unwritable_frames_folder(tmp_path, corner_frames):
         extract_frames(video, tmp_path / "a_file" / "f")
 
 
+def _snapshot(folder):
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def test_a_folder_of_other_files_is_refused_and_left_as_it_was(tmp_path, corner_frames):
+    """nerfstudio names its processed images frame_00001.png: they were deleted as if they were our frames."""
+    video = _write_video(tmp_path / "v.avi", corner_frames)
+    mine = tmp_path / "photos"
+    mine.mkdir()
+    for name in ("frame_00001.png", "frame_01.png", "notes.txt"):
+        (mine / name).write_bytes(name.encode())
+    before = _snapshot(mine)
+    with pytest.raises(IngestError, match=r"frames folder '.*photos' holds other files and no frames\.json"):
+        extract_frames(video, mine, max_frames=4)
+    assert _snapshot(mine) == before, "the user's files were changed"
+
+
+def test_of_a_folder_of_ours_only_the_frames_its_manifest_lists_are_replaced(tmp_path, corner_frames):
+    video = _write_video(tmp_path / "v.avi", corner_frames)
+    extract_frames(video, tmp_path / "f", max_frames=5)
+    (tmp_path / "f" / "frame_99.png").write_bytes(b"the user's")  # put there since, named like a frame
+    again = extract_frames(video, tmp_path / "f", max_frames=3)
+    left = sorted(p.name for p in (tmp_path / "f").iterdir())
+    assert left == sorted([p.name for p in again] + ["frame_99.png", "frames.json"]), \
+        f"after re-extracting, the folder holds {left}: earlier frames kept or the user's file deleted"
+    assert (tmp_path / "f" / "frame_99.png").read_bytes() == b"the user's"
+
+
+def test_force_writes_among_other_files_and_structure_from_motion_sees_the_frames_only(tmp_path, corner_frames,
+                                                                                     monkeypatch):
+    from pytest_n2r.data import PoseSet, load_poses, sfm
+
+    video = _write_video(tmp_path / "v.avi", corner_frames)
+    mine = tmp_path / "photos"
+    mine.mkdir()
+    (mine / "holiday.jpg").write_bytes(b"a photo")
+    seen = {}
+
+    def fake_sfm(images_dir, **kwargs):
+        seen.update(kwargs, images_dir=images_dir)
+        return PoseSet(frames=[], report={"time_s": {}})
+
+    monkeypatch.setattr(sfm, "run_sfm", fake_sfm)
+    with pytest.raises(IngestError, match="holds other files"):
+        load_poses(video, frames_dir=mine, max_frames=4)
+    load_poses(video, frames_dir=mine, max_frames=4, force_frames_dir=True)
+    assert (mine / "holiday.jpg").read_bytes() == b"a photo"
+    frames = sorted(p for p in mine.glob("frame_*.png"))
+    assert seen.get("files") == frames and len(frames) == 4, \
+        f"structure from motion was given {seen.get('files')}, not the video's 4 frames only"
+    assert not [p for p in mine.iterdir() if p.name.startswith(".")], "a temporary file was left behind"
+    assert json.loads((mine / "frames.json").read_text())["complete"] is True
+
+
 def test_a_video_is_a_source_of_its_own_kind(tmp_path, corner_frames):
     video = _write_video(tmp_path / "v.avi", corner_frames)
     assert source_kind(video) == ("video", video)

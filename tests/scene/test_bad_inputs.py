@@ -26,6 +26,7 @@ from pytest_n2r.scene import read_scene_file, save_scene
 from pytest_n2r.scene.file import check_scene_file
 from pytest_n2r.scene.schema import FIELD_FILE, SCENE_JSON
 
+from ..data.synthetic import make_capture, write_transforms
 from .conftest import random_field, tiny_views
 from .test_file import rewrite
 
@@ -64,6 +65,9 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--downscale 0\.5: expected a finite factor >= 1"),
     ("fit --downscale nan", "fit {capture} -o {new_n2r} --downscale nan",
      r"--downscale nan: expected a finite"),
+    ("fit --downscale 1000", "fit {corner} -o {new_n2r} --downscale 1000 --max-steps 2",
+     (r"--downscale 1000: the photo 'images/view_000\.png' would be 1x1 pixels; expected views of at least 11 pixel"
+      r"s a side")),
     ("fit --max-steps 0", "fit {capture} -o {new_n2r} --max-steps 0",
      r"--max-steps 0: expected an integer >= 1"),
     ("fit --max-steps 1.5", "fit {capture} -o {new_n2r} --max-steps 1.5", r"invalid int value: '1\.5'"),
@@ -187,6 +191,12 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--compare .*nowhere: does not exist"),
     ("poses --frames-dir is a file", "poses {capture} --frames-dir {notes_txt}",
      r"--frames-dir .*notes\.txt: is a file; expected a folder for the video's frames"),
+    ("poses --frames-dir a folder of other files", "poses {capture} --frames-dir {capture}",
+     r"--frames-dir .*capture: the folder holds other files, and the video's frames would be written among them"),
+    ("poses of a transforms.json nested 100 000 deep", "poses {deep_json}",
+     r"deep\.json: not a readable JSON file \(nested too deeply for the JSON parser\)"),
+    ("poses of a fisheye transforms.json", "poses {fisheye_json}",
+     r"fisheye\.json: field 'camera_model'='FISHEYE624' is not supported; expected one of OPENCV, PINHOLE"),
     ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
     # -- n2r import
     ("import a missing ply", "import {tmp}/nowhere.ply -o {new_n2r}", r"PLY .*nowhere\.ply: does not exist"),
@@ -265,6 +275,10 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     for name in ("fake.n2r", "fake.png", "note.depth.png", "note.opacity.png"):
         (tmp / name).write_text("not what it seems\n")
     (tmp / "other.json").write_text('{"camera_model": "OPENCV", "frames": []}\n')
+    (tmp / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    (tmp / "fisheye.json").write_text(json.dumps({"camera_model": "FISHEYE624", "frames": [
+        {"file_path": "x.png", "transform_matrix": np.eye(4).tolist()}]}))
+    corner = write_transforms(make_capture(tmp / "corner", n=4))
     (tmp / "empty.n2r").write_bytes(b"")
     with zipfile.ZipFile(tmp / "plain.n2r", "w") as archive:
         archive.writestr("readme.txt", "no scene here")
@@ -277,7 +291,8 @@ def workspace(tmp_path_factory) -> dict[str, str]:
             "new_png": str(tmp / "new.png"), "other_json": str(tmp / "other.json"),
             "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r"),
             "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r"),
-            "odd_exposure": str(tmp / "odd_exposure.n2r")}
+            "odd_exposure": str(tmp / "odd_exposure.n2r"), "deep_json": str(tmp / "deep.json"),
+            "fisheye_json": str(tmp / "fisheye.json"), "corner": str(corner)}
 
 
 def _argv(template: str, workspace: dict[str, str]) -> list[str]:
