@@ -2,6 +2,8 @@
 
 - :mod:`~pytest_n2r.field.space`: the normalized, contracted scene space (the contraction's definition);
 - :mod:`~pytest_n2r.field.grid`: the sparse voxel grid of density and colour (:class:`SceneField`);
+- :mod:`~pytest_n2r.field.density`: the density's shift, set from an initial opacity, and the shifts a scene
+  file holds;
 - :mod:`~pytest_n2r.field.lattice`: where a ray is sampled, and the contraction and grid lookup in torch;
 - :mod:`~pytest_n2r.field.kernels`: the same maths compiled (numba), and the marching kernels;
 - :mod:`~pytest_n2r.field.march`: a ray batch's occupied samples, packed;

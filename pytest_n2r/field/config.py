@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields, replace
 
 from ..errors import InvalidArgument
+from .density import MAX_DENSITY_SHIFT, alpha_range, density_shift_for, step_ratio_range
 
-__all__ = ["LATER_SETTINGS", "SH_DEGREES", "FieldConfig"]
+__all__ = ["LATER_SETTINGS", "SH_DEGREES", "FieldConfig", "check_setting_types"]
 
 #: The spherical-harmonics degrees a field's colour can have (:func:`pytest_n2r.field.grid.n_sh_coefficients`).
 SH_DEGREES = (0, 1, 2)
@@ -17,6 +20,37 @@ def _is_number(value: object, kind: type) -> bool:
     """``value`` is an int (``kind`` int) or an int or float (``kind`` float), not a bool."""
     allowed = (int,) if kind is int else (int, float)
     return isinstance(value, allowed) and not isinstance(value, bool)
+
+
+#: What a setting of each declared type accepts: (what is expected, the check); ``X | None`` also takes None.
+_KINDS: dict[str, tuple[str, Callable[[object], bool]]] = {
+    "bool": ("True or False", lambda v: isinstance(v, bool)),
+    "int": ("an integer", lambda v: _is_number(v, int)),
+    "float": ("a number", lambda v: _is_number(v, float)),
+    "str": ("a string", lambda v: isinstance(v, str)),
+    "tuple[int, ...]": ("a list of integers",
+                        lambda v: isinstance(v, (tuple, list)) and all(_is_number(x, int) for x in v)),
+    "tuple[float, ...]": ("a list of numbers",
+                          lambda v: isinstance(v, (tuple, list)) and all(_is_number(x, float) for x in v)),
+}
+#: a colour: also a NumPy array of numbers (the caller checks its length and range and stores plain floats)
+_KINDS["tuple[float, float, float]"] = (
+    "three numbers", lambda v: (isinstance(v, (tuple, list)) or type(v).__name__ == "ndarray")
+    and all(isinstance(x, numbers.Real) and not isinstance(x, bool) for x in v))
+
+
+def check_setting_types(settings: object) -> None:
+    """Every field of the dataclass ``settings`` has its declared type, before any range is checked (a string,
+    None or a bool where a number belongs is named, with the type expected and the default), else
+    :class:`~pytest_n2r.errors.InvalidArgument`."""
+    for f in fields(settings):
+        value, declared = getattr(settings, f.name), str(f.type)
+        optional = declared.endswith(" | None")
+        kind, ok = _KINDS[declared.removesuffix(" | None")]
+        if not (ok(value) or (optional and value is None)):
+            default = ",".join(map(str, f.default)) if isinstance(f.default, tuple) else f.default
+            raise InvalidArgument(f"{type(settings).__name__}.{f.name}={value!r}: expected {kind}"
+                                  f"{' or None' if optional else ''} (default: {default})")
 
 
 #: Settings added after scene files were first written. A config stores them only where they differ from their
@@ -67,7 +101,8 @@ class FieldConfig:
         contracted shell). Opaque surfaces also stop rays early when rendering. ``distortion``: weight of
         mip-NeRF 360's distortion loss (mean over rays, positions in contracted units): it gathers each
         ray's compositing weight into one short interval, turning fog and floaters into surfaces.
-        ``alpha_init``: opacity per sample of the empty field. ``sparsity``: weight of the mean sample
+        ``alpha_init``: opacity per sample of the empty field (with ``step_ratio``, one whose density shift a scene
+        file holds: :mod:`pytest_n2r.field.density`). ``sparsity``: weight of the mean sample
         opacity in the loss (keeps empty space empty). ``prune_alpha``: cells whose densest corner gives
         less opacity per sample are dropped from the occupancy every ``prune_every`` steps, and so are cells
         that training rays sampled in that time without any sample reaching a compositing weight of
@@ -110,7 +145,7 @@ class FieldConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        self._check_types()
+        check_setting_types(self)
         object.__setattr__(self, "resolutions", tuple(int(r) for r in self.resolutions))
         object.__setattr__(self, "stage_fractions", tuple(float(f) for f in self.stage_fractions))
         res, fr = self.resolutions, self.stage_fractions
@@ -125,6 +160,7 @@ class FieldConfig:
                 raise InvalidArgument(f"FieldConfig.{name}={value!r}: expected a finite number > 0")
         if not 0 < self.alpha_init < 1:
             raise InvalidArgument(f"FieldConfig.alpha_init={self.alpha_init!r}: expected an opacity in (0, 1)")
+        self._check_density_shift()
         for name in ("prune_alpha", "final_prune_alpha", "prune_weight"):
             if not 0 <= getattr(self, name) < 1:
                 raise InvalidArgument(f"FieldConfig.{name}={getattr(self, name)!r}: expected a threshold in [0, 1)")
@@ -143,23 +179,19 @@ class FieldConfig:
         if self.sh_degree not in SH_DEGREES:
             raise InvalidArgument(f"FieldConfig.sh_degree={self.sh_degree!r}: expected 0, 1 or 2")
 
-    def _check_types(self) -> None:
-        """Every setting has its declared kind (a string, None or a bool where a number belongs is named)."""
-        for f in fields(self):
-            value, default = getattr(self, f.name), f.default
-            if isinstance(default, tuple):
-                kind, ok = "a list of numbers", isinstance(value, (tuple, list)) and all(
-                    _is_number(v, int if isinstance(default[0], int) else float) for v in value)
-                kind = "a list of integers" if isinstance(default[0], int) else kind
-            elif isinstance(default, bool):
-                kind, ok = "True or False", isinstance(value, bool)
-            elif isinstance(default, int):
-                kind, ok = "an integer", _is_number(value, int)
-            else:
-                kind, ok = "a number", _is_number(value, float)
-            if not ok:
-                raise InvalidArgument(f"FieldConfig.{f.name}={value!r}: expected {kind} (default: "
-                                      f"{','.join(map(str, default)) if isinstance(default, tuple) else default})")
+    def _check_density_shift(self) -> None:
+        """The field's density shift (:func:`~pytest_n2r.field.density.density_shift_for`) is one a scene file can
+        hold: refused here, not after the whole fit when the scene is saved."""
+        alpha, ratio = self.alpha_init, self.step_ratio
+        shift = density_shift_for(alpha, ratio)
+        if abs(shift) <= MAX_DENSITY_SHIFT:
+            return
+        (alpha_lo, alpha_hi), (ratio_lo, ratio_hi) = alpha_range(ratio), step_ratio_range(alpha)
+        raise InvalidArgument(
+            f"FieldConfig.alpha_init={alpha!r} with step_ratio={ratio!r} gives the field a density shift of "
+            f"{shift:.4g}, beyond the ±{MAX_DENSITY_SHIFT:g} a scene file holds (every sample would be empty or "
+            f"opaque alike): at step_ratio={ratio!r}, alpha_init must be in [{alpha_lo:.3g}, {alpha_hi:.3g}]; at "
+            f"alpha_init={alpha!r}, step_ratio in [{ratio_lo:.3g}, {ratio_hi:.3g}]")
 
     def stage(self, progress: float) -> int:
         """The index into ``resolutions`` at ``progress`` (0..1) of the run."""

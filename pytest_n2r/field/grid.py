@@ -30,15 +30,13 @@ import torch.nn.functional as F
 from .._validation import as_unit_rgb
 from ..errors import InvalidArgument, SceneFileError
 from .config import SH_DEGREES
-from .query import trilinear
+from .density import MAX_DENSITY_SHIFT, density_shift_for
+from .query import interpolate, trilinear
 from .space import SceneSpace
 
 __all__ = ["SceneField", "check_field_metadata", "dilated", "n_sh_coefficients", "opacity", "used_vertex_index",
            "used_vertex_mask", "vertex_ijk", "FIELD_TENSORS", "UPSAMPLE_CHUNK"]
 
-#: The largest |density_shift| a scene file may hold: a fit's shift is -14.5..69 for alpha_init 1e-6..0.999
-#: over steps of 0.1..2 voxels (-8.5 by default); beyond ±100, every sample is empty or opaque alike.
-_MAX_DENSITY_SHIFT = 100.0
 #: Names of the tensors a scene file stores for the field.
 FIELD_TENSORS = ("occupancy", "vertex_index", "vertex_values")
 #: Vertices :meth:`SceneField.upsampled` resamples (and :meth:`SceneField.quantized` rounds) at a time: the
@@ -56,12 +54,6 @@ def n_sh_coefficients(sh_degree: int) -> int:
     if sh_degree not in SH_DEGREES or isinstance(sh_degree, bool):
         raise InvalidArgument(f"sh_degree={sh_degree!r}: expected 0 (view-independent colour), 1 or 2")
     return (sh_degree + 1) ** 2
-
-
-def density_shift_for(alpha: float, step_ratio: float) -> float:
-    """The shift that makes a raw density of 0 give opacity ``alpha`` over one sample of ``step_ratio`` voxels."""
-    sigma = -math.log1p(-alpha) / step_ratio
-    return float(sigma + math.log(-math.expm1(-sigma)))  # softplus⁻¹(σ)
 
 
 def opacity(raw: torch.Tensor, density_shift: float, step_ratio: float) -> torch.Tensor:
@@ -218,9 +210,8 @@ class SceneField:
         for start in range(0, flat.numel(), chunk):
             ijk = vertex_ijk(flat[start:start + chunk], resolution).to(self.values.dtype)
             corners, weights = trilinear(ijk * ((self.resolution - 1) / (resolution - 1)), self.resolution)
-            corner_rows = self.vertex_rows(corners)
-            weights[corner_rows < 0] = 0.0  # a vertex the coarse field does not store counts as zeros
-            values[start:start + chunk] = torch.einsum("nk,nkf->nf", weights, self.values[corner_rows.clamp(min=0)])
+            # a vertex the coarse field does not store counts as zeros
+            values[start:start + chunk] = interpolate(self.values, self.vertex_rows(corners), weights)
         ratio = (resolution - 1) / (self.resolution - 1)
         sigma = F.softplus(values[:, 0] + self.density_shift) / ratio
         values[:, 0] = inverse_softplus(sigma) - self.density_shift
@@ -344,9 +335,9 @@ def check_field_metadata(metadata: dict, source: str) -> tuple[SceneSpace, int, 
                              "per axis)")
     if isinstance(sh_degree, bool) or sh_degree not in SH_DEGREES:
         raise SceneFileError(f"{source}: field.sh_degree={sh_degree!r}; expected 0, 1 or 2")
-    if isinstance(shift, bool) or not isinstance(shift, (int, float)) or not abs(shift) <= _MAX_DENSITY_SHIFT:
+    if isinstance(shift, bool) or not isinstance(shift, (int, float)) or not abs(shift) <= MAX_DENSITY_SHIFT:
         raise SceneFileError(f"{source}: field.density_shift={shift!r}; expected a finite number within "
-                             f"±{_MAX_DENSITY_SHIFT:g} (a fit writes -8.5 by default; beyond the limit every "
+                             f"±{MAX_DENSITY_SHIFT:g} (a fit writes -8.5 by default; beyond the limit every "
                              "sample is empty or opaque and the scene renders flat)")
     if background is None:
         raise SceneFileError(f"{source}: field.background={metadata['background']!r}; expected three values in [0, 1]")

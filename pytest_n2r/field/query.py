@@ -11,7 +11,7 @@ import torch.nn.functional as F
 
 from .kernels import SH_C0, SH_C1, SH_C2
 
-__all__ = ["trilinear", "interpolate", "sh_basis", "shade", "composite", "distortion", "ALPHA_MAX"]
+__all__ = ["trilinear", "interpolate", "distinct_rows", "sh_basis", "shade", "composite", "distortion", "ALPHA_MAX"]
 
 #: Per-sample opacity is capped here so ``log(1 - alpha)`` stays finite (transmittance cannot underflow).
 ALPHA_MAX = 1.0 - 1e-6
@@ -50,8 +50,23 @@ def sh_basis(directions: torch.Tensor, sh_degree: int) -> torch.Tensor:
 
 
 def interpolate(values: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
-    """Trilinear interpolation ``(N, F)`` of ``values`` at the corner ``rows`` / ``weights`` of :func:`trilinear`."""
-    return torch.einsum("nk,nkf->nf", weights, values[rows])
+    """Trilinear interpolation ``(N, F)`` of ``values`` at the corner ``rows`` / ``weights`` of :func:`trilinear`. A
+    corner of row -1 (a vertex a sparse field does not store) counts as zeros: its weight is dropped (row 0 stands
+    in as its index), so no other vertex's row reaches the sum, nor its gradient. Such corners are, in
+    :meth:`~pytest_n2r.field.grid.SceneField.upsampled`, coarse vertices not stored; in a render or a training step,
+    corners of a sample marched in an occupied cell at a float64 ``t`` and stored at float32, which can round it
+    into an unoccupied neighbour."""
+    stored = rows >= 0
+    return torch.einsum("nk,nkf->nf", weights.masked_fill(~stored, 0.0), values[rows.clamp(min=0)])
+
+
+def distinct_rows(rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(unique, inverse)``: the distinct stored rows of the corner ``rows`` (ascending) and ``rows`` as indices
+    into them; a row of -1 (a vertex not stored) is left out and stays -1, so no row answers for it."""
+    unique, inverse = torch.unique(rows, return_inverse=True)
+    if unique.numel() and bool(unique[0] < 0):  # the vertex map's -1 sorts first
+        return unique[1:], inverse - 1
+    return unique, inverse
 
 
 def shade(v: torch.Tensor, basis: torch.Tensor, density_shift: float, step_ratio: float

@@ -30,7 +30,7 @@ from ..field.device import resolve_device
 from ..field.grid import SceneField
 from ..field.lattice import grid_coords, lattice_position
 from ..field.march import MarchGrid, march_compiled, march_dense
-from ..field.query import ALPHA_MAX, composite, distortion, interpolate, sh_basis, shade, trilinear
+from ..field.query import ALPHA_MAX, composite, distinct_rows, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
 from .appearance import Appearance, decide_appearance
 from .compile_clock import CompileClock
@@ -42,7 +42,7 @@ from .optim import RowAdam
 from .phases import StepPhases
 from .prior import add_tv_gradient, tv_gradient, tv_neighbours
 from .prune import pruned_occupancy, pruned_occupancy_dense
-from .rays import TrainingRays
+from .rays import TrainingRays, fit_views
 from .train_kernels import Composite, RowIndex, lattice_positions, sample_corners, scatter_max
 
 __all__ = ["fit", "fit_space", "FitResult"]
@@ -76,9 +76,7 @@ def fit_space(capture: Capture, config: FieldConfig) -> SceneSpace:
 class _Trainer:
     def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False,
                  haze_from: int | None = None):
-        train = [v for v in capture.train_views if v.image is not None]
-        if not train:
-            raise FitError(f"capture {capture.source!r} has no training view with an image; load it with images")
+        train = fit_views(capture)
         self.config, self.device = config, device
         #: The first stage whose prunes drop thin haze (``final_prune_alpha``): the ladder's last grid, or the
         #: caller's last where a finer grid for the end was added (:func:`~pytest_n2r.fit.detail.detailed_config`).
@@ -182,7 +180,7 @@ class _Trainer:
             p = o[ray_idx] + t[:, None] * d[ray_idx]
             coords = grid_coords(p, self.space.shell, f.resolution)
             corners, weights = trilinear(coords, f.resolution)
-            unique, inverse = torch.unique(f.vertex_rows(corners), return_inverse=True)
+            unique, inverse = distinct_rows(f.vertex_rows(corners))
             sub = f.values[unique].requires_grad_(True)
             clock.lap("corners")
             alpha, colors = shade(interpolate(sub, inverse, weights), sh_basis(unit[ray_idx], f.sh_degree),
@@ -306,6 +304,7 @@ def fit(
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
+    fit_views(capture)  # every view checked before its photos are measured or its rays built
     appearance, exposure = decide_appearance(capture, appearance)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)

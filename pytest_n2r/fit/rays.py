@@ -8,6 +8,10 @@ too large for the machine is refused with its pixels, the bytes and how much sma
 kernel while its rays are built (``n2r fit --downscale 1`` on a hundred 12-megapixel photos would hold 28 GB of
 rays).
 
+Every view of a capture is checked before a fit spends any time on it (:func:`fit_views`): its pose is a rigid
+transform, and its photo, where loaded, is the RGB image its ideal pinhole camera takes (one colour for each ray
+of its camera, in order); a view that is not is refused naming it.
+
 Convention
 ----------
 Rays in the field's normalized space (:meth:`~pytest_n2r.field.space.SceneSpace.normalize_rays`), float32, on the
@@ -22,20 +26,57 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from ..data.capture import CapturedView
-from ..errors import FitError
+from ..data.capture import Capture, CapturedView
+from ..errors import FitError, InvalidArgument
 from ..field.space import SceneSpace
-from ..geometry import camera_rays
+from ..geometry import camera_rays, check_pose
 from .free_memory import free_bytes
 from .memory import HEADROOM, byte_count
 
-__all__ = ["CONVERT_BYTES", "RAY_BYTES", "TrainingRays", "ray_bytes"]
+__all__ = ["CONVERT_BYTES", "RAY_BYTES", "TrainingRays", "check_view", "fit_views", "ray_bytes"]
 
 #: Bytes a training pixel holds for the fit: its direction (3 float32), colour (3 uint8) and photo (int64).
 RAY_BYTES = 3 * 4 + 3 + 8
 #: Bytes a pixel of the photo being converted takes at the peak: its pixel grid, directions and origins in float64
 #: and the normalized float32 copies (measured with ``tracemalloc``: 120).
 CONVERT_BYTES = 128
+
+
+def check_view(view: CapturedView) -> None:
+    """Refuse ``view`` with an :class:`~pytest_n2r.errors.InvalidArgument` naming it where a fit cannot use it:
+    its ``c2w`` is not a rigid transform, or it has a photo that is not ``height × width × 3`` uint8 RGB of an
+    undistorted camera (a fit's rays are ideal pinhole rays, one a pixel of the camera, coloured in order)."""
+    check_pose(view.c2w, f"view {view.name!r}: c2w")
+    image, camera = view.image, view.camera
+    if image is None:
+        return
+    if camera.distortion:
+        raise InvalidArgument(f"view {view.name!r}: its camera has lens distortion {camera.distortion}; a fit's rays "
+                              "are ideal pinhole rays: undistort the photo (Camera.undistort_image) and give its "
+                              "camera.undistorted()")
+    expected = (camera.height, camera.width, 3)
+    if not isinstance(image, np.ndarray) or image.dtype != np.uint8 or image.shape != expected:
+        found = (f"{image.dtype} of shape {image.shape}" if isinstance(image, np.ndarray)
+                 else f"a {type(image).__name__}")
+        raise InvalidArgument(f"view {view.name!r}: image is {found}; expected uint8 RGB of shape {expected}, "
+                              f"the size of its camera ({camera.width}×{camera.height} pixels)")
+
+
+def fit_views(capture: Capture) -> list[CapturedView]:
+    """The training views of ``capture`` with a photo, what a fit draws its rays from, once every view is checked
+    (:func:`check_view`: held-out views' poses and photos are used too); a :class:`~pytest_n2r.errors.FitError`
+    where there is none, saying why."""
+    for view in capture.views:
+        check_view(view)
+    train = capture.train_views
+    if not train:
+        raise FitError(f"capture {capture.source!r} has no training view: " + (
+            f"all {len(capture.views)} of its views are held out" if capture.views else "it has no views"))
+    with_image = [v for v in train if v.image is not None]
+    if not with_image:
+        raise FitError(f"capture {capture.source!r} has no training view with an image: its {len(train)} training "
+                       "views were loaded without images; load it with images")
+    return with_image
 
 
 def ray_bytes(views: Sequence[CapturedView]) -> tuple[int, int]:
@@ -46,12 +87,15 @@ def ray_bytes(views: Sequence[CapturedView]) -> tuple[int, int]:
 
 
 class TrainingRays:
-    """The training pixels of ``views`` as rays in ``space`` on ``device``: ``origins`` ``(views, 3)``, and per
-    pixel ``d`` ``(n, 3)``, ``rgb`` ``(n, 3)`` uint8 and ``view`` ``(n,)``. Refused with a
+    """The training pixels of ``views`` (each with a photo) as rays in ``space`` on ``device``: ``origins``
+    ``(views, 3)``, and per pixel ``d`` ``(n, 3)``, ``rgb`` ``(n, 3)`` uint8 and ``view`` ``(n,)``. A view a fit
+    cannot use is refused naming it (:func:`check_view`); the rays are refused with a
     :class:`~pytest_n2r.errors.FitError` where building them would take more than :data:`HEADROOM` of the host's
     free memory, or holding them more than that of the device's (not checked where it is unknown)."""
 
     def __init__(self, views: Sequence[CapturedView], space: SceneSpace, device: torch.device):
+        for view in views:
+            check_view(view)
         held, building = ray_bytes(views)
         pixels = held // RAY_BYTES
         _check(views, pixels, building, free_bytes(torch.device("cpu")), "")

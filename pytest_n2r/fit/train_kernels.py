@@ -40,7 +40,9 @@ def sample_corners(o: np.ndarray, d: np.ndarray, t: np.ndarray, ray_idx: np.ndar
                    resolution: int, vertex_rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The 8 corner rows ``(N, 8)`` int64 and trilinear weights ``(N, 8)`` float32 of packed samples (same
     corner order as :func:`pytest_n2r.field.query.trilinear`), and each sample's flat cell index ``(N,)``.
-    ``vertex_rows`` maps a flat vertex index to its row (empty: a dense field, the row is the index)."""
+    ``vertex_rows`` maps a flat vertex index to its row (empty: a dense field, the row is the index; -1: not
+    stored, the corner of a sample whose float32 ``t`` rounded into an unoccupied neighbour of the cell it was
+    marched in: :class:`RowIndex` and :class:`Composite` count it as zeros and give it no row)."""
     rows = np.empty((t.shape[0], 8), dtype=np.int64)
     weights = np.empty((t.shape[0], 8), dtype=np.float32)
     cells = np.empty(t.shape[0], dtype=np.int64)
@@ -78,7 +80,8 @@ def scatter_max(cells, values, out):
 def _unique_rows(rows, slot, stamp, tag, unique, inverse):
     flat = rows.reshape(-1)
     for i in range(flat.shape[0]):
-        stamp[flat[i]] = tag
+        if flat[i] >= 0:  # -1, a vertex the field does not store, has no row (indexing wraps to the last one)
+            stamp[flat[i]] = tag
     n = 0
     for r in range(stamp.shape[0]):  # one pass over every row: the distinct ones come out ascending
         if stamp[r] == tag:
@@ -87,7 +90,7 @@ def _unique_rows(rows, slot, stamp, tag, unique, inverse):
             n += 1
     inv = inverse.reshape(-1)
     for i in range(flat.shape[0]):
-        inv[i] = slot[flat[i]]
+        inv[i] = slot[flat[i]] if flat[i] >= 0 else -1
     return n
 
 
@@ -105,7 +108,8 @@ class RowIndex:
         self.tag = 0
 
     def unique(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(unique, inverse)``: the distinct rows in ascending order, and ``rows`` as indices into them."""
+        """``(unique, inverse)``: the distinct rows in ascending order, and ``rows`` as indices into them (a row
+        of -1, a vertex not stored, is left out of ``unique`` and stays -1 in ``inverse``)."""
         self.tag += 1
         unique = np.empty(rows.size, dtype=np.int64)
         inverse = np.empty(rows.shape, dtype=np.int64)
@@ -130,11 +134,13 @@ def adam_rows(values, m, v, rows, grad, lrs, b1, b2, eps, bias1, bias2):
 @njit(cache=True, inline="always")
 def _corner_values(sub, inverse, weights, basis, i, r, v, out):
     """Sample ``i`` (on ray ``r``) from its 8 corners: its values interpolated into the scratch row ``v`` (float64
-    sums over the corners' float32 values), then ``out[i, 0]`` its raw density and ``out[i, 1 + ch]`` its colour
-    logits along the ray's SH ``basis``."""
+    sums over the corners' float32 values; a corner of row -1, not stored, counts as zeros), then ``out[i, 0]`` its
+    raw density and ``out[i, 1 + ch]`` its colour logits along the ray's SH ``basis``."""
     v[:] = 0.0
     for c in range(8):
         row = inverse[i, c]
+        if row < 0:
+            continue
         w = np.float64(weights[i, c])
         for f in range(v.shape[0]):
             v[f] += w * sub[row, f]
@@ -250,7 +256,8 @@ def _corner_backward(grad_raw, inverse, weights, basis, offsets, bounds, grad_su
 
 @njit(cache=True, inline="always")
 def _scatter_sample(grad_raw, inverse, weights, basis, i, r, n_sh, lo, hi, grad_sub):
-    """Add sample ``i``'s (on ray ``r``) raw-value gradients into those of its corners' rows in ``lo..hi``."""
+    """Add sample ``i``'s (on ray ``r``) raw-value gradients into those of its corners' rows in ``lo..hi`` (``lo``
+    >= 0: a corner of row -1, not stored, gets none)."""
     for c in range(8):
         row = inverse[i, c]
         if lo <= row < hi:
@@ -267,7 +274,8 @@ class Composite(torch.autograd.Function):
     """Interpolate, shade and alpha-composite packed samples per ray, compiled (CPU), with its exact gradient.
 
     Inputs: the step's rows of the field ``sub (U, F)``, each sample's 8 corners as indices into them
-    ``inverse (N, 8)`` with their trilinear ``weights (N, 8)``, the SH basis of each ray's direction
+    ``inverse (N, 8)`` (-1: a vertex the field does not store, which counts as zeros and gets no gradient) with
+    their trilinear ``weights (N, 8)``, the SH basis of each ray's direction
     ``(B, n_sh)``, ``offsets (B+1)`` (ray ``r``'s samples are ``offsets[r]`` to ``offsets[r + 1]``, the ``N``
     samples all told), each sample's position ``s (N,)`` along its ray and the length ``delta`` a sample
     stands for (both in contracted units), and ``background`` ``(3,)`` or one colour per ray ``(B, 3)``.

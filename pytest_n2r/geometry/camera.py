@@ -39,12 +39,7 @@ class Camera:
 
     def __post_init__(self) -> None:
         for name in ("width", "height"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise InvalidType(f"Camera {name}={value!r} must be an int (pixels)")
-            if value < 1:
-                raise InvalidArgument(f"Camera {name}={value!r} must be >= 1 pixel")
-            object.__setattr__(self, name, int(value))
+            object.__setattr__(self, name, _pixels(f"Camera {name}", getattr(self, name)))
         for name in ("fx", "fy"):
             object.__setattr__(self, name, check_positive(f"Camera {name}", getattr(self, name)))
         for name in ("cx", "cy"):
@@ -97,14 +92,20 @@ class Camera:
         """The same camera for an image resized to ``width`` x ``height``.
 
         Per axis with scale ``s = new / old``: ``f' = f * s`` and ``c' = (c + 0.5) * s - 0.5``, so the
-        image borders (not the pixel centres) stay where they were.
+        image borders (not the pixel centres) stay where they were. ``width`` and ``height`` are whole pixels
+        (ints >= 1): a fractional size has no image.
 
         >>> Camera(640, 480, 500.0, 500.0, 319.5, 239.5).resized(320, 240).cx
         159.5
+        >>> Camera(640, 480, 500.0, 500.0, 319.5, 239.5).resized(320.5, 240)
+        Traceback (most recent call last):
+        ...
+        pytest_n2r.errors.InvalidType: Camera.resized width=320.5 must be an int (pixels)
         """
+        width, height = _pixels("Camera.resized width", width), _pixels("Camera.resized height", height)
         sx, sy = width / self.width, height / self.height
         return replace(
-            self, width=int(width), height=int(height), fx=self.fx * sx, fy=self.fy * sy,
+            self, width=width, height=height, fx=self.fx * sx, fy=self.fy * sy,
             cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5,
         )
 
@@ -156,6 +157,15 @@ class Camera:
             )
         except KeyError as exc:
             raise InvalidArgument(f"camera record is missing the field {exc.args[0]!r}") from None
+
+
+def _pixels(name: str, value: object) -> int:
+    """``value`` as a whole number of pixels >= 1, or raise naming ``name`` (a bool or a float is not one)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InvalidType(f"{name}={value!r} must be an int (pixels)")
+    if value < 1:
+        raise InvalidArgument(f"{name}={value!r} must be >= 1 pixel")
+    return int(value)
 
 
 @lru_cache(maxsize=8)

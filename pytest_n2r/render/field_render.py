@@ -22,9 +22,10 @@ import torch
 
 from .._validation import as_unit_rgb, check_array
 from ..errors import InvalidArgument
+from ..field.config import check_setting_types
 from ..field.grid import SceneField
 from ..field.lattice import grid_coords
-from ..field.march import MarchGrid, march_dense
+from ..field.march import MarchGrid, dense_rays, march_dense
 from ..field.query import composite, interpolate, sh_basis, shade, trilinear
 from ..geometry import Camera
 from .adaptive import sample_adaptively
@@ -34,7 +35,7 @@ from .field_kernels import bake_logits, colour_columns, pixel_rays, render_pixel
 from .ray_order import tiled_pixels
 from .threads import run_balanced, run_parts
 
-__all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "RENDER_VERSION"]
+__all__ = ["RenderSettings", "FieldRenderer", "BACKENDS", "DENSE_MARCH_BUDGET", "RENDER_VERSION"]
 
 BACKENDS = ("auto", "compiled", "torch")
 #: Where a sample's view-dependent colour takes its direction from (see ``RenderSettings.colour_direction``).
@@ -43,6 +44,13 @@ COLOUR_DIRECTIONS = ("vertex", "ray")
 #: changes (a kernel or lattice change), so render caches built by an older pytest-n2r are not reused.
 RENDER_VERSION = 7  # 4: colour logits baked per frame, min_weight; 5: coarser tail; 6: adaptive sampling interpolates
 #  the last split's edge pixels between agreeing ends; 7: and its centres (docs/performance-log.md, "Rendering")
+#: Bytes the torch backend's dense march of one chunk of rays may take (:func:`~pytest_n2r.field.march.dense_rays`):
+#: it lists every lattice slot of every ray before it keeps the occupied ones, up to 662 slots a ray of 128 bytes at
+#: 224³, so the default 65 536 rays took up to 5.2 GiB (3 GiB measured on rays across the cube). 512 MiB leaves a 4 GB
+#: GPU, the smallest the CUDA path is meant for, room for its CUDA context (a few hundred MB), the field (its row map
+#: alone 0.23 GB at 384³) and the shading of the samples kept, and is still millions of lattice slots a chunk (6 335
+#: rays at 224³, 3 685 at 384³), work enough to keep a GPU busy.
+DENSE_MARCH_BUDGET = 512 << 20
 
 
 @dataclass(frozen=True)
@@ -90,7 +98,9 @@ class RenderSettings:
       each channel is off by at most the summed weight of the ray's samples lighter than this (0: colour every
       sample). 1e-2 skipped about half of the fox's samples' colours; 2e-2 (the default) was 1.02–1.10× faster
       again for 0.001–0.008 dB on the fox and the demo twins (docs/performance-log.md);
-    - ``chunk_rays``: rays per batch (bounds memory at any image size);
+    - ``chunk_rays``: rays per batch (bounds memory at any image size); the torch backend takes fewer where its
+      dense march of that many would take more than :data:`DENSE_MARCH_BUDGET` (the same picture, to float32
+      rounding);
     - ``background``: RGB in [0, 1] shown by the transmittance a ray has left (``None``: the field's own,
       :attr:`~pytest_n2r.field.grid.SceneField.background`, the colour it was fitted over in expectation).
     """
@@ -112,6 +122,7 @@ class RenderSettings:
     backend: str = "auto"
 
     def __post_init__(self) -> None:
+        check_setting_types(self)  # a string, None or a bool where a number belongs is named, not a TypeError
         checks = {  # name: (accepted, what is expected)
             "step_ratio": (0.01 <= self.step_ratio <= 8.0, "a value in [0.01, 8]"),
             "far": (math.isfinite(self.far) and 0.0 < self.far <= 1e6, "a value in (0, 1e6]"),
@@ -121,23 +132,20 @@ class RenderSettings:
             "adaptive": (0.0 <= self.adaptive <= 1.0, "a value in [0, 1] (0 traces every pixel)"),
             "adaptive_depth": (0.0 <= self.adaptive_depth <= 1.0, "a relative depth in [0, 1]"),
             "min_weight": (0.0 <= self.min_weight < 1.0, "a value in [0, 1) (0 colours every sample)"),
-            "chunk_rays": (isinstance(self.chunk_rays, int) and self.chunk_rays >= 1, "an int >= 1"),
+            "chunk_rays": (self.chunk_rays >= 1, "an int >= 1"),
         }
         for name, (ok, expected) in checks.items():
             if not ok:
                 value = getattr(self, name)
                 raise InvalidArgument(f"RenderSettings.{name}={value!r} is out of range; expected {expected}")
-        if self.shell_samples is not None \
-                and not (isinstance(self.shell_samples, int) and 1 <= self.shell_samples <= 4096):
+        if self.shell_samples is not None and not 1 <= self.shell_samples <= 4096:
             raise InvalidArgument(f"RenderSettings.shell_samples={self.shell_samples!r}: expected None or 1..4096")
         if self.adaptive_stride is not None and not (
-                isinstance(self.adaptive_stride, int) and 1 <= self.adaptive_stride <= 64
-                and self.adaptive_stride & (self.adaptive_stride - 1) == 0):
+                1 <= self.adaptive_stride <= 64 and self.adaptive_stride & (self.adaptive_stride - 1) == 0):
             raise InvalidArgument(f"RenderSettings.adaptive_stride={self.adaptive_stride!r}: expected None or a "
                                   "power of two in 1..64")
-        tail = tuple(self.tail) if isinstance(self.tail, (tuple, list)) else None
-        if tail is None or not all(isinstance(v, (int, float)) and 0.0 < v < 1.0 for v in tail) \
-                or any(a <= b for a, b in itertools.pairwise(tail)):
+        tail = tuple(self.tail)
+        if not all(0.0 < v < 1.0 for v in tail) or any(a <= b for a, b in itertools.pairwise(tail)):
             raise InvalidArgument(f"RenderSettings.tail={self.tail!r}: expected a decreasing tuple of transmittances "
                                   "in (0, 1), or () to take every lattice sample")
         object.__setattr__(self, "tail", tuple(float(v) for v in tail))
@@ -196,6 +204,10 @@ class FieldRenderer:
                 occupancy = occupancy.clone()
                 occupancy[field.occupancy] = alpha >= s.min_alpha  # a mask takes its cells in nonzero() order
         self.grid = MarchGrid(occupancy, field.space.shell, s.step_ratio, s.shell_samples, s.far)
+        #: Rays traced at a time: ``chunk_rays``, fewer on the torch backend where its dense march would take more
+        #: than :data:`DENSE_MARCH_BUDGET`.
+        self.chunk_rays = s.chunk_rays if self.backend == "compiled" else min(
+            s.chunk_rays, dense_rays(self.grid, DENSE_MARCH_BUDGET))
         #: The background actually rendered over (the settings', else the field's).
         self.background = s.background_of(field)
         self.last_traced = 0
@@ -239,9 +251,9 @@ class FieldRenderer:
 
         def trace(want: np.ndarray, rgb: np.ndarray, depth: np.ndarray, opacity: np.ndarray) -> None:
             index = tiled_pixels(want, w)  # traced tile by tile (render/ray_order.py)
-            for start in range(0, index.size, self.settings.chunk_rays):
-                self._trace_pixels(index[start:start + self.settings.chunk_rays], camera, c2w, logits, want_depth,
-                                   rgb, depth, opacity)
+            for start in range(0, index.size, self.chunk_rays):
+                self._trace_pixels(index[start:start + self.chunk_rays], camera, c2w, logits, want_depth, rgb, depth,
+                                   opacity)
 
         if adaptive:
             rgb, depth, opacity, self.last_traced = sample_adaptively(

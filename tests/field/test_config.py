@@ -1,13 +1,20 @@
-"""FieldConfig: every bad value is refused naming the setting; the dict form round-trips."""
+"""FieldConfig: every bad value is refused naming the setting (an initial opacity and sample spacing whose density
+shift no scene file holds among them); the dict form round-trips."""
 
 from __future__ import annotations
 
 import json
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.field.config import LATER_SETTINGS, FieldConfig
+from pytest_n2r.field.density import alpha_range, step_ratio_range
+from pytest_n2r.field.grid import SceneField, check_field_metadata
+
+from .fields import SPACE
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -64,3 +71,48 @@ def test_settings_added_later_are_stored_only_where_they_differ_from_their_defau
     assert changed.to_dict()["max_pixels_per_voxel"] == 0.0 and changed.to_dict()["detail_grid_max"] == 512
     assert FieldConfig.from_dict(changed.to_dict()) == changed
     assert FieldConfig.from_dict(stored) == FieldConfig()
+
+
+@pytest.mark.parametrize("alpha_init, step_ratio, shift, alphas, ratios", [
+    (1e-60, 0.5, "-137.5", "[1.86e-44, 1]", "[1e-62, 2.69e-17]"),
+    (0.99, 0.001, "4605", "[3.72e-47, 0.0952]", "[0.0461, 1.24e+44]"),
+    (5e-324, 8.0, "-inf", "[2.98e-43, 1]", "[0, 1.33e-280]"),  # the density underflows to 0
+])
+def test_a_density_shift_no_scene_file_holds_is_refused_before_the_fit(alpha_init, step_ratio, shift, alphas, ratios):
+    """The whole fit used to run and then have save_scene refuse its field.density_shift."""
+    with pytest.raises(InvalidArgument) as info:
+        FieldConfig(alpha_init=alpha_init, step_ratio=step_ratio)
+    message = str(info.value)
+    expected = (f"FieldConfig.alpha_init={alpha_init!r} with step_ratio={step_ratio!r} gives the field a density "
+                f"shift of {shift}, beyond the ±100 a scene file holds (every sample would be empty or opaque "
+                f"alike): at step_ratio={step_ratio!r}, alpha_init must be in {alphas}; at alpha_init={alpha_init!r}, "
+                f"step_ratio in {ratios}")
+    assert message == expected, f"the refusal does not name both settings and the combinations allowed: {message}"
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(1e-300, 1.0, exclude_max=True), st.floats(1e-6, 1e6))
+def test_a_config_is_accepted_exactly_where_a_scene_file_holds_its_fields_shift(alpha_init, step_ratio):
+    """The config's check is the scene file's, and the ranges a refusal names are the ones accepted."""
+    field = SceneField.empty(SPACE, 4, 0, alpha_init, step_ratio)
+    try:
+        check_field_metadata(field.metadata(), "scene.n2r")
+        saved = True
+    except SceneFileError:
+        saved = False
+    try:
+        FieldConfig(alpha_init=alpha_init, step_ratio=step_ratio)
+        accepted = True
+    except InvalidArgument:
+        accepted = False
+    assert accepted == saved, (f"alpha_init={alpha_init!r}, step_ratio={step_ratio!r} (density shift "
+                               f"{field.density_shift!r}): the config is {'' if accepted else 'not '}accepted, the "
+                               f"scene file {'would' if saved else 'would not'} hold the field")
+    lowest, highest = alpha_range(step_ratio)
+    inside = lowest * (1 + 1e-9) <= alpha_init <= highest * (1 - 1e-9)
+    assert not inside or accepted, (f"alpha_init={alpha_init!r} lies in the range {lowest!r}..{highest!r} named for "
+                                    f"step_ratio={step_ratio!r}, yet the config is refused")
+    shortest, longest = step_ratio_range(alpha_init)
+    inside = shortest * (1 + 1e-9) <= step_ratio <= longest * (1 - 1e-9)
+    assert not inside or accepted, (f"step_ratio={step_ratio!r} lies in the range {shortest!r}..{longest!r} named for "
+                                    f"alpha_init={alpha_init!r}, yet the config is refused")

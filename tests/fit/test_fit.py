@@ -105,10 +105,25 @@ def test_non_finite_gradients_raise_fit_error_naming_the_step(capture48, monkeyp
     assert len(calls) == 3, f"the fit went on for {len(calls) - 3} steps after the NaN gradient"
 
 
-def test_a_capture_without_training_images_is_a_fit_error(capture48):
-    bare = dataclasses.replace(capture48, views=[dataclasses.replace(v, image=None) for v in capture48.views])
-    with pytest.raises(FitError, match="no training view with an image"):
-        fit(bare, SHORT_CONFIG, max_steps=1, device="cpu")
+@pytest.mark.parametrize("case, expected", [
+    ("no images", ("capture 'demo:object' has no training view with an image: its 42 training views were loaded "
+                   "without images; load it with images")),
+    ("all held out", "capture 'demo:object' has no training view: all 48 of its views are held out"),
+    ("no views", "capture 'demo:object' has no training view: it has no views"),
+])
+def test_a_capture_without_training_images_is_a_fit_error_saying_why(capture48, case, expected):
+    """Held-out views used to be told to load their images, and no views at all to end in a bare ValueError."""
+    views = {"no images": [dataclasses.replace(v, image=None) for v in capture48.views],
+             "all held out": [dataclasses.replace(v, split="heldout") for v in capture48.views],
+             "no views": []}[case]
+    try:
+        fit(dataclasses.replace(capture48, views=views), SHORT_CONFIG, max_steps=1, device="cpu")
+    except FitError as error:
+        assert str(error) == expected, f"{case}: the fit error does not say why there is nothing to train on: {error}"
+    except Exception as error:  # noqa: BLE001 - what the fit raised instead is the finding
+        pytest.fail(f"{case}: the fit raised {error!r}, not a FitError saying why there is nothing to train on")
+    else:
+        pytest.fail(f"{case}: the fit ran without a training view")
 
 
 @pytest.mark.parametrize("kwargs, message", [

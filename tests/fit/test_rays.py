@@ -1,15 +1,18 @@
 """A capture's training rays: one origin per photo (the same rays as one per pixel), priced before they are built,
-and a capture too large for the memory free refused with how much smaller to fit it."""
+a capture too large for the memory free refused with how much smaller to fit it, and a view whose photo is not its
+camera's image, or whose pose is not rigid, refused naming it before the fit spends any time."""
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import tracemalloc
 
 import numpy as np
 import pytest
 import torch
 
-from pytest_n2r.errors import FitError
+from pytest_n2r.errors import FitError, InvalidArgument
 from pytest_n2r.fit import fit
 from pytest_n2r.fit.field_fit import fit_space
 from pytest_n2r.fit.memory import HEADROOM
@@ -80,3 +83,90 @@ def test_a_fit_on_too_little_memory_stops_before_any_step(capture48, monkeypatch
     monkeypatch.setattr("pytest_n2r.fit.rays.free_bytes", lambda device: 1000)
     with pytest.raises(FitError, match=r"as training rays they need 2\.5 MiB, 1000 bytes free"):
         fit(capture48, SHORT_CONFIG, max_steps=10, device="cpu")
+
+
+def _padded(image: np.ndarray) -> np.ndarray:
+    return np.pad(image, ((0, 4), (0, 4), (0, 0)))
+
+
+def _rgba(image: np.ndarray) -> np.ndarray:
+    return np.concatenate([image, np.full(image.shape[:2] + (1,), 255, np.uint8)], -1)
+
+
+#: A photo that is not its camera's image, and what the refusal says it is (the camera is 48×27).
+BAD_IMAGES = {
+    "larger": (_padded, "uint8 of shape (31, 52, 3)"),
+    "smaller": (lambda im: np.ascontiguousarray(im[::2, ::2]), "uint8 of shape (14, 24, 3)"),
+    "rgba": (_rgba, "uint8 of shape (27, 48, 4)"),
+    "float": (lambda im: im.astype(np.float32) / 255, "float32 of shape (27, 48, 3)"),
+    "transposed": (lambda im: np.ascontiguousarray(im.transpose(1, 0, 2)), "uint8 of shape (48, 27, 3)"),
+    "grey": (lambda im: np.ascontiguousarray(im[..., 0]), "uint8 of shape (27, 48)"),
+    "list": (lambda im: im.tolist(), "a list"),
+}
+
+
+def _with_view(capture48, index: int, **changes):
+    """``capture48`` with its view ``index`` changed (a copy), and that view's name."""
+    views = list(capture48.views)
+    views[index] = dataclasses.replace(views[index], **changes)
+    return dataclasses.replace(capture48, views=views), views[index].name
+
+
+@pytest.mark.parametrize("kind", BAD_IMAGES)
+def test_a_photo_that_is_not_its_cameras_image_is_refused_naming_the_view(capture48, kind):
+    """One colour is taken for each ray of a view's camera, in order: a photo of another size, with an alpha
+    channel, in float or transposed used to shift every later view's colours against their rays (or fail with a
+    bare IndexError)."""
+    change, found = BAD_IMAGES[kind]
+    capture, name = _with_view(capture48, 1, image=change(capture48.views[1].image))
+    with pytest.raises(InvalidArgument) as info:
+        TrainingRays(capture.train_views, fit_space(capture48, SHORT_CONFIG), CPU)
+    expected = (f"view {name!r}: image is {found}; expected uint8 RGB of shape (27, 48, 3), the size of its camera "
+                "(48×27 pixels)")
+    assert str(info.value) == expected, f"a {kind} photo: the refusal does not name the view and the image expected: " \
+                                        f"{info.value}"
+
+
+@pytest.mark.parametrize("split", ["train", "heldout"])
+def test_a_fit_refuses_a_bad_view_before_it_measures_or_trains_on_any(capture48, monkeypatch, split):
+    """A held-out photo is compared with the fitted field's render only at the end: refused before the fit too."""
+    index = next(i for i, v in enumerate(capture48.views) if v.split == split)
+    capture, name = _with_view(capture48, index, image=_rgba(capture48.views[index].image))
+
+    def measured(*args, **kwargs):
+        raise AssertionError(f"the fit measured the photos of a capture whose {split} view {name!r} is RGBA")
+
+    monkeypatch.setattr("pytest_n2r.fit.field_fit.decide_appearance", measured)
+    with pytest.raises(InvalidArgument, match=re.escape(f"view {name!r}: image is uint8 of shape (27, 48, 4)")):
+        fit(capture, SHORT_CONFIG, max_steps=1, device="cpu", appearance="auto")
+
+
+def test_a_distorted_camera_is_refused_naming_the_view(capture48):
+    """A fit's rays are ideal pinhole rays: a distorted photo's pixels would be taken for rays they were not."""
+    camera = dataclasses.replace(capture48.views[1].camera, distortion=(-0.2, 0.05, 0.0, 0.0))
+    capture, name = _with_view(capture48, 1, camera=camera)
+    with pytest.raises(InvalidArgument) as info:
+        fit(capture, SHORT_CONFIG, max_steps=1, device="cpu")
+    assert str(info.value).startswith(f"view {name!r}: its camera has lens distortion (-0.2, 0.05, 0.0, 0.0); a "
+                                      "fit's rays are ideal pinhole rays"), \
+        f"the refusal of a distorted camera does not name the view and the distortion: {info.value}"
+
+
+@pytest.mark.parametrize("split", ["train", "heldout"])
+@pytest.mark.parametrize("pose, found", [
+    ("nan", "c2w contains 3 non-finite value(s) (NaN or Inf)"),
+    ("scaled", "c2w rotation block is not a rotation"),
+])
+def test_a_view_without_a_rigid_pose_is_refused_naming_the_view(capture48, split, pose, found):
+    """A NaN pose used to be named only as the fit space's ``center=(nan, nan, nan)``."""
+    index = next(i for i, v in enumerate(capture48.views) if v.split == split)
+    c2w = capture48.views[index].c2w.copy()
+    if pose == "nan":
+        c2w[:3, 3] = np.nan
+    else:
+        c2w[:3, :3] *= 2.0
+    capture, name = _with_view(capture48, index, c2w=c2w)
+    with pytest.raises(InvalidArgument) as info:
+        fit(capture, SHORT_CONFIG, max_steps=1, device="cpu")
+    assert str(info.value).startswith(f"view {name!r}: {found}"), \
+        f"a {split} view with a {pose} pose: the refusal does not name the view and what is wrong: {info.value}"

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import Camera, backproject, project
 
 from .strategies import cameras
@@ -38,6 +39,27 @@ def test_resize_rule_by_hand():
     assert (cam.width, cam.height) == (270, 480)
     assert cam.fx == pytest.approx(343.88)
     assert cam.cx == pytest.approx((554.058 + 0.5) * 0.25 - 0.5)
+
+
+@pytest.mark.parametrize(("width", "height", "error", "message"), [
+    (320.5, 240, InvalidType, "Camera.resized width=320.5 must be an int (pixels)"),
+    (320, 240.0, InvalidType, "Camera.resized height=240.0 must be an int (pixels)"),
+    (True, 240, InvalidType, "Camera.resized width=True must be an int (pixels)"),
+    (320, 0, InvalidArgument, "Camera.resized height=0 must be >= 1 pixel"),
+    (-4, 240, InvalidArgument, "Camera.resized width=-4 must be >= 1 pixel"),
+])
+def test_resized_to_a_size_that_is_not_whole_pixels_is_refused_naming_it(width, height, error, message):
+    """A fractional size would scale the intrinsics by one size and store another: refused, not rounded."""
+    cam = Camera(640, 480, 500.0, 500.0, 319.5, 239.5)
+    with pytest.raises(error) as info:
+        cam.resized(width, height)
+    assert str(info.value) == message, f"resized({width!r}, {height!r}) raised {info.value!r}; expected {message!r}"
+
+
+def test_resized_takes_numpy_ints():
+    small = Camera(640, 480, 500.0, 500.0, 319.5, 239.5).resized(np.int64(320), np.int32(240))
+    assert (small.width, small.height, small.fx) == (320, 240, 250.0), f"resized to numpy ints gave {small}"
+    assert type(small.width) is int, f"the width is stored as {type(small.width).__name__}, not int"
 
 
 def test_colmap_pixels_shift_by_half():

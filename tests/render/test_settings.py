@@ -47,6 +47,35 @@ def test_bad_settings_are_named(changes, name):
     assert "expected" in str(error.value), f"the message does not say what is accepted: {error.value}"
 
 
+@pytest.mark.parametrize("changes, expected", [
+    ({"far": None}, "a number (default: 100.0)"),
+    ({"t_stop": None}, "a number (default: 0.04)"),
+    ({"step_ratio": "0.5"}, "a number (default: 0.5)"),
+    ({"step_ratio": True}, "a number (default: 0.5)"),
+    ({"chunk_rays": True}, "an integer (default: 65536)"),
+    ({"chunk_rays": 2.0}, "an integer (default: 65536)"),
+    ({"shell_samples": "4"}, "an integer or None (default: None)"),
+    ({"adaptive_stride": 2.0}, "an integer or None (default: None)"),
+    ({"tail": (0.3, None)}, "a list of numbers (default: 0.3,0.1)"),
+    ({"background": (1, True, 0)}, "three numbers or None (default: None)"),
+    ({"backend": None}, "a string (default: auto)"),
+])
+def test_settings_of_the_wrong_type_are_named_with_the_type_expected(changes, expected):
+    """A string, None or a bool where a number belongs used to end in a bare TypeError from a comparison, or (a
+    bool) to be taken as 0 or 1."""
+    ((name, value),) = changes.items()
+    try:
+        RenderSettings(**changes)
+    except InvalidArgument as error:
+        message = str(error)
+    except TypeError as error:
+        pytest.fail(f"RenderSettings({name}={value!r}) raised a bare {error!r}, not an error naming the setting")
+    else:
+        pytest.fail(f"RenderSettings({name}={value!r}) was accepted; expected {expected}")
+    assert message == f"RenderSettings.{name}={value!r}: expected {expected}", (
+        f"RenderSettings({name}={value!r}): the message does not name the setting and the type expected: {message}")
+
+
 def test_auto_picks_the_compiled_backend_on_the_cpu_and_settings_round_trip():
     renderer = FieldRenderer(random_field(resolution=8), RenderSettings())
     assert renderer.backend == "compiled", f"backend='auto' on a CPU field chose {renderer.backend!r}"
@@ -106,3 +135,11 @@ def test_compiled_pixel_rays_are_the_geometry_rays_normalized():
     got_o, got_d = FieldRenderer(field, RenderSettings(backend="compiled"))._pixel_rays(index, camera, c2w)
     np.testing.assert_array_equal(got_o, want_o, err_msg="compiled ray origins differ from the geometry's")
     np.testing.assert_allclose(got_d, want_d, rtol=2 ** -23, atol=0, err_msg="compiled ray directions differ")
+
+
+def test_a_background_may_be_a_numpy_array_and_is_stored_as_plain_floats():
+    """A colour computed with NumPy (float32 included) is a colour; it is stored as floats (the content hash dumps
+    the settings as JSON)."""
+    settings = RenderSettings(background=np.array([0.25, 0.5, 1.0], dtype=np.float32))
+    assert settings.background == (0.25, 0.5, 1.0), settings.background
+    assert all(type(c) is float for c in settings.background), [type(c) for c in settings.background]

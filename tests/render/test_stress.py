@@ -10,6 +10,7 @@ where opacity is 0.
 from __future__ import annotations
 
 import tracemalloc
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,7 +19,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r.field.grid import SceneField
-from pytest_n2r.field.march import march_dense
+from pytest_n2r.field.march import MarchGrid, march_dense
+from pytest_n2r.field.query import trilinear
 from pytest_n2r.field.space import SceneSpace
 from pytest_n2r.geometry import Camera, camera_rays
 from pytest_n2r.render.field_render import FieldRenderer, RenderSettings, render_rays_torch
@@ -264,3 +266,38 @@ def test_depth_is_where_the_weight_is_even_where_transmittance_is_left(backend):
     error = np.abs(out["depth"][8:16, 12:20] - expected).max()
     assert error < voxel / 4, \
         f"{backend}: depth is up to {error:.3f} off the wall at {expected}; a voxel is {voxel:.3f}"
+
+
+def _corner_rows(field: SceneField, cell: torch.Tensor) -> torch.Tensor:
+    """The rows of the 8 corners of ``cell`` (its vertex indices ``(3,)``), -1 where the field stores none."""
+    return field.vertex_rows(trilinear(cell[None].double() + 0.5, field.resolution)[0])[0]
+
+
+def test_a_torch_sample_rounded_into_an_unoccupied_cell_reads_no_row_it_does_not_own():
+    """The torch backend marches a sample in an occupied cell at a float64 ``t`` and shades it at the float32 ``t``
+    it stores, which can round it into an unoccupied neighbour; its corners there that the field does not store (row
+    -1) were read from the last stored row (-1 wraps). They count as zeros: the sample is placed in such a cell here,
+    and every row but its stored corners' holds zeros, then 30 (opaque, saturated): the sample must not change."""
+    field = random_field(resolution=16, occupied=0.15, seed=4).compact()
+    half = 1.0 + field.space.shell
+    inside = torch.nonzero(~field.occupancy[2:12, 2:12, 2:12]) + 2  # unoccupied cells inside the unit cube
+    cell = next(ijk for ijk in inside if (_corner_rows(field, ijk) < 0).any() and (_corner_rows(field, ijk) >= 0).any())
+    p = (cell.double() + 0.5) / ((field.resolution - 1) / (2.0 * half)) - half  # its centre, normalized
+    d = torch.tensor([[0.0, 0.0, 1.0]])
+    o = (p[None] - 0.5 * d).float()
+    marched = torch.tensor([0]), torch.tensor([0.5]), torch.tensor([0, 1])
+    corners = _corner_rows(field, cell)
+    others = torch.ones(field.values.shape[0], dtype=torch.bool)
+    others[corners[corners >= 0]] = False
+    assert others[-1], "the sample owns the last row: the test cannot tell a wrapped -1 from it"
+    grid = MarchGrid(field.occupancy, field.space.shell, 0.5, None, 100.0)
+    out = {}
+    for fill in (0.0, 30.0):
+        values = field.values.clone()
+        values[others] = fill
+        out[fill] = render_rays_torch(replace(field, values=values), grid, o, d, torch.zeros(3), True, marched)
+    for name in ("rgb", "opacity", "depth"):
+        assert torch.equal(out[0.0][name], out[30.0][name]), (
+            f"the sample read a row none of its corners stores (the last, where -1 wraps?): its {name} is "
+            f"{out[0.0][name].tolist()} with zeros there, {out[30.0][name].tolist()} with 30")
+    assert float(out[0.0]["opacity"][0]) > 0, "the sample added no opacity: the test would pass vacuously"
