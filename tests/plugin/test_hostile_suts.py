@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from typing import Any
 
 import numpy as np
 import pytest
@@ -102,13 +103,20 @@ def test_once(n2r_scene):
 """
 
 
-def test_a_sut_that_raises_once_is_named_with_its_error_not_as_a_flaky_relation(n2r_project):
-    n2r_project.write(ONCE.format(misbehave='raise RuntimeError("intermittent crash")'))
+def _run_once(n2r_project, misbehave: str) -> Any:
+    """Run the relation whose SUT misbehaves (``misbehave``) on its first call only; it must fail, and not be
+    reported as a flaky relation verdict."""
+    n2r_project.write(ONCE.format(misbehave=misbehave))
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
     result.assert_outcomes(failed=1)
+    assert "the relation failed on an example and passed when Hypothesis replayed it" not in result.stdout.str(), (
+        f"an SUT misbehaving once ({misbehave}) was reported as a flaky relation verdict:\n{result.stdout.str()}")
+    return result
+
+
+def test_a_sut_that_raises_once_is_named_with_its_error_not_as_a_flaky_relation(n2r_project):
+    result = _run_once(n2r_project, 'raise RuntimeError("intermittent crash")')
     text = result.stdout.str()
-    assert "the relation failed on an example and passed when Hypothesis replayed it" not in text, (
-        f"an intermittent SUT error was reported as a flaky relation verdict:\n{text}")
     result.stdout.fnmatch_lines([("*SUTError: the system under test raised RuntimeError: intermittent crash on an "
                                   "example and not when it was replayed: it fails intermittently*")])
     assert re.search(r"^E\s+RuntimeError: intermittent crash$", text, re.MULTILINE), (
@@ -117,12 +125,7 @@ def test_a_sut_that_raises_once_is_named_with_its_error_not_as_a_flaky_relation(
 
 
 def test_a_sut_that_returns_none_once_is_named_with_its_output_not_as_a_flaky_relation(n2r_project):
-    n2r_project.write(ONCE.format(misbehave="return None"))
-    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "none")
-    result.assert_outcomes(failed=1)
-    text = result.stdout.str()
-    assert "the relation failed on an example and passed when Hypothesis replayed it" not in text, (
-        f"an intermittent unusable output was reported as a flaky relation verdict:\n{text}")
+    result = _run_once(n2r_project, "return None")
     result.stdout.fnmatch_lines([("*SUTOutputError: the system under test gave an output it cannot use on an example "
                                   "and not when it was replayed: it fails intermittently*the first time: the system "
                                   "under test returned None on the * view*")])
