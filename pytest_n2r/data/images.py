@@ -127,12 +127,13 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
     from PIL import Image, UnidentifiedImageError
 
     path = Path(path)
-    if _is_iso_media(_head(path)):
+    head = _head(path)
+    if _is_iso_media(head):
         return _heif_size(path)
     try:
         with Image.open(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
-            width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(_head(path)) else im.size
+            width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
             orientation = im.getexif().get(0x0112, 1)
     except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]

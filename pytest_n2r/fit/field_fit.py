@@ -23,7 +23,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..data.capture import Capture
+from ..data.capture import Capture, CapturedView
 from ..errors import FitError, InvalidArgument
 from ..field.config import FieldConfig
 from ..field.device import resolve_device
@@ -75,8 +75,8 @@ def fit_space(capture: Capture, config: FieldConfig) -> SceneSpace:
 
 class _Trainer:
     def __init__(self, capture: Capture, config: FieldConfig, device: torch.device, appearance: bool = False,
-                 haze_from: int | None = None):
-        train = fit_views(capture)
+                 haze_from: int | None = None, train: list[CapturedView] | None = None):
+        train = fit_views(capture) if train is None else train  # fit() has checked them already
         self.config, self.device = config, device
         #: The first stage whose prunes drop thin haze (``final_prune_alpha``): the ladder's last grid, or the
         #: caller's last where a finer grid for the end was added (:func:`~pytest_n2r.fit.detail.detailed_config`).
@@ -304,11 +304,11 @@ def fit(
     if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
-    fit_views(capture)  # every view checked before its photos are measured or its rays built
+    train = fit_views(capture)  # every view checked before its photos are measured or its rays built
     appearance, exposure = decide_appearance(capture, appearance)
     detail = capture_detail(capture, fit_space(capture, config))
     given, config = config, detailed_config(config, detail)
-    trainer = _Trainer(capture, config, dev, appearance=appearance, haze_from=len(given.resolutions) - 1)
+    trainer = _Trainer(capture, config, dev, appearance=appearance, haze_from=len(given.resolutions) - 1, train=train)
     heldout = [v for v in capture.heldout_views if v.image is not None]
     history: list[dict] = []
     pending_evals = sorted(float(s) for s in eval_at_s)

@@ -95,13 +95,13 @@ def as_image(value: Any, which: str, expected: str) -> np.ndarray:
     """An image output as a numpy array of its own dtype (uint8 stays uint8): tensors are detached and moved
     to the CPU, bfloat16 (which numpy lacks) becomes float32. ``None``, non-numeric, complex, NaN or Inf
     outputs are a :class:`SUTOutputError` naming the output, as in :func:`as_numeric`."""
-    as_numeric(value, which, expected)
     if _is_tensor(value):
         import torch
 
-        value = value.detach().cpu()
-        return (value.float() if value.dtype == torch.bfloat16 else value).numpy()
-    return np.asarray(value)
+        value = value.detach().cpu()  # once: checked and returned from the host copy
+        value = value.float() if value.dtype == torch.bfloat16 else value
+    as_numeric(value, which, expected)
+    return value.numpy() if _is_tensor(value) else np.asarray(value)
 
 
 def as_keypoints(value: Any, which: str) -> np.ndarray:
