@@ -30,10 +30,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..errors import InvalidArgument
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView
 from .portable_math import norm3
-from .primitives import T_MIN, Group, Primitive, slab_hits
+from .primitives import T_MIN, Group, Primitive, primitive_bounds, slab_hits
 
 if TYPE_CHECKING:  # the ray caster (numba and its kernels) is imported by the first render, not with the scene: a
     # run that takes every render from the cache compiles and loads none of it
@@ -45,6 +46,20 @@ __all__ = ["GroundTruthScene"]
 #: fitted twins stale). Kept at "1" by both compiled kernels: their images are those of the numpy definition,
 #: to one grey level.
 RENDERER_VERSION = "1"
+
+
+def _check_group_box(scene: str, item: int, group: Group) -> None:
+    """Raise unless ``group``'s box holds every child: then the box only spares the rays that miss all of them and
+    changes no pixel, which the content hash relies on (it covers the children, not the box)."""
+    lo, hi = np.asarray(group.lo, np.float64), np.asarray(group.hi, np.float64)
+    for k, child in enumerate(group.children):
+        bounds = np.asarray(primitive_bounds(child), np.float64).reshape(2, 3)
+        if np.any(bounds[0] < lo) or np.any(bounds[1] > hi):
+            raise InvalidArgument(
+                f"GroundTruthScene {scene!r}: primitives[{item}] is a Group whose box lo={tuple(group.lo)}, "
+                f"hi={tuple(group.hi)} does not hold its child {k} ({type(child).__name__}, from "
+                f"{tuple(bounds[0].tolist())} to {tuple(bounds[1].tolist())}); expected a box around all its "
+                "children (a box that clipped them would change pixels the content hash does not cover)")
 
 
 class GroundTruthScene(Scene):
@@ -95,8 +110,9 @@ class GroundTruthScene(Scene):
         self._items = tuple(primitives)
         flat: list[Primitive] = []
         self._groups: list[tuple[np.ndarray, np.ndarray, list[int]]] = []
-        for item in primitives:
+        for index, item in enumerate(primitives):
             if isinstance(item, Group):
+                _check_group_box(name, index, item)
                 start = len(flat)
                 flat.extend(item.children)
                 self._groups.append((np.asarray(item.lo, float), np.asarray(item.hi, float),
@@ -124,7 +140,8 @@ class GroundTruthScene(Scene):
             h = hashlib.sha256(f"GroundTruthScene/{RENDERER_VERSION}/{self.name}".encode())
             for prim in self.primitives:
                 h.update(prim.describe().encode())
-            for lo, _, members in self._groups:  # grouping changes no pixel, but say so explicitly
+            # grouping changes no pixel (each group's box holds its children: _check_group_box), but say so
+            for lo, _, members in self._groups:
                 h.update(f"{members}".encode() if lo is not None else b"")
             h.update(np.asarray([*self.light, self.ambient, *self.background, self.far, self.supersample]).tobytes())
             for v in self.views:

@@ -192,13 +192,15 @@ def read_recipe_digest(path: str | os.PathLike) -> str | None:
     """The ``recipe_digest`` stored in the scene file ``path`` (``None`` when it has none); reads only
     ``scene.json``."""
     import zipfile
+    import zlib
 
+    # a file cut short or garbled: no zip, a bad entry, not JSON (ValueError), JSON but not an object (AttributeError)
     try:
         with zipfile.ZipFile(path) as archive:
             report = json.loads(archive.read("scene.json")).get("report") or {}
-    except (OSError, KeyError, zipfile.BadZipFile, json.JSONDecodeError) as exc:
+        digest = report.get("recipe_digest")
+    except (OSError, EOFError, KeyError, ValueError, AttributeError, zipfile.BadZipFile, zlib.error) as exc:
         raise SceneFileError(f"{path}: cannot read its scene.json ({exc})") from None
-    digest = report.get("recipe_digest")
     return digest if isinstance(digest, str) else None
 
 
@@ -208,36 +210,52 @@ def packaged_path(name: str) -> Path:
     return DATA_DIR / f"{name}.n2r"
 
 
+def _holds(path: Path, digest: str) -> bool:
+    """Whether the scene file ``path`` exists and holds the fit of the recipe ``digest`` (a file that cannot be
+    read, such as one cut short by a full disk or a killed copy, does not)."""
+    if not path.is_file():
+        return False
+    try:
+        return read_recipe_digest(path) == digest
+    except SceneFileError:
+        return False
+
+
 def find_fitted(name: str) -> tuple[Path | None, Path]:
     """``(found, cached)``: the file holding the current recipe's fit of demo scene ``name`` (the shipped one
-    first, then the cached one; ``None`` when neither exists) and the cache path a build on first use writes."""
+    first, then the cached one; ``None`` when neither holds it: absent, stale or unreadable) and the cache path a
+    build on first use writes."""
     digest = _recipe(name).digest
     shipped = packaged_path(name)
     cached = cache_dir() / f"{name}-{digest[:16]}.n2r"
-    if shipped.is_file() and read_recipe_digest(shipped) == digest:
+    if _holds(shipped, digest):
         return shipped, cached
-    return (cached if cached.is_file() else None), cached
+    return (cached if _holds(cached, digest) else None), cached
 
 
 def fitted_path(name: str, *, build: bool = True) -> Path:
     """The fitted scene file of demo scene ``name``: the shipped one when it matches the current recipe,
-    else the cached one, fitted on first use when ``build`` (otherwise :class:`SceneFileError` when absent)."""
+    else the cached one, fitted on first use when ``build`` (otherwise :class:`SceneFileError` when absent).
+    A cached file that cannot be read (cut short, say) is fitted again in its place, as an absent one is."""
     found, cached = find_fitted(name)
     if found is not None:
         return found
     recipe, shipped = _recipe(name), packaged_path(name)
     if not build:
+        broken = f" ({cached} is unreadable: delete it)" if cached.is_file() else ""
         raise SceneFileError(f"fitted demo scene {name!r}: neither {shipped} nor {cached} holds the current "
-                             f"recipe's fit; `n2r demo build {name}` writes it")
+                             f"recipe's fit{broken}; `n2r demo build {name}` writes it")
     import filelock
 
     cached.parent.mkdir(parents=True, exist_ok=True)
     with filelock.FileLock(str(cached) + ".lock"):
-        if not cached.is_file():  # another process may have built it while this one waited
+        if not _holds(cached, recipe.digest):  # another process may have built it while this one waited
             reason = "is stale (another recipe or pytest-n2r version)" if shipped.is_file() else "is not installed"
+            if cached.is_file():
+                reason += f", and the cached {cached.name} is unreadable (cut short?)"
             warnings.warn(f"fitted demo scene {name!r}: the shipped {shipped.name} {reason}; fitting it into "
                           f"{cached} ({recipe.max_steps} steps, minutes on a CPU; once)", stacklevel=2)
-            build_fitted(name, cached, recipe=recipe)
+            build_fitted(name, cached, recipe=recipe)  # written atomically: it replaces an unreadable file
     return cached
 
 

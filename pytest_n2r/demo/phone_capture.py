@@ -26,13 +26,14 @@ motion recovers to the truth and score a fitted field against the exact scene.
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import InvalidArgument
+from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 from .rendered_capture import check_size
 
@@ -43,6 +44,15 @@ EXIF_ORIENTATION = 0x0112
 ROTATE_90_CW = 6
 #: The photo files a phone writes, by :attr:`PhoneSettings.file_format`: suffix and Pillow's format name.
 FILE_FORMATS = {"jpeg": (".jpg", "JPEG"), "heic": (".heic", "HEIF")}
+#: The name of a photo :func:`write_phone_capture` writes, of either format (an earlier call's are replaced).
+PHOTO_NAME = re.compile(r"photo_\d{3,}(" + "|".join(re.escape(s) for s, _ in FILE_FORMATS.values()) + ")")
+#: The smallest :attr:`PhoneSettings.size` (longer side, pixels): a photo is at least 8x8 pixels (a scene whose
+#: shorter side is under this size's aspect needs more: :func:`write_phone_capture` says so before writing).
+MIN_SIZE = 8
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -62,6 +72,13 @@ class PhoneSettings:
     file_format: str = "jpeg"
 
     def __post_init__(self) -> None:
+        for name in ("size", "portrait_every"):
+            if not _is_int(getattr(self, name)):
+                raise InvalidType(f"PhoneSettings.{name}={getattr(self, name)!r}: expected an int, not "
+                                  f"{type(getattr(self, name)).__name__}")
+        if self.size < MIN_SIZE:
+            raise InvalidArgument(f"PhoneSettings.size={self.size!r}: expected the photos' longer side in pixels, "
+                                  f">= {MIN_SIZE}")
         if self.file_format not in FILE_FORMATS:
             raise InvalidArgument(
                 f"PhoneSettings.file_format={self.file_format!r}: expected one of {list(FILE_FORMATS)}")
@@ -139,15 +156,44 @@ def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float, streak:
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
+def _check_views(views: Sequence[int] | None, count: int) -> list[int]:
+    """``views`` as a list of distinct indices into a trajectory of ``count`` views (all of them for ``None``), or
+    raise naming ``views``."""
+    if views is None:
+        return list(range(count))
+    try:
+        indices = list(views)
+    except TypeError:
+        raise InvalidType(f"views={views!r}: expected a sequence of view indices, not {type(views).__name__}") from None
+    for k, index in enumerate(indices):
+        if not _is_int(index):
+            raise InvalidType(f"views[{k}]={index!r}: expected an int index, not {type(index).__name__}")
+    if not indices:
+        raise InvalidArgument("views is empty: expected at least one view index (None: every view)")
+    outside = [int(i) for i in indices if not 0 <= i < count]
+    if outside:
+        raise InvalidArgument(f"views holds {outside}: expected indices in 0..{count - 1} (the trajectory's views)")
+    repeated = sorted({int(i) for k, i in enumerate(indices) if i in indices[:k]})
+    if repeated:
+        raise InvalidArgument(f"views holds {repeated} more than once: expected distinct indices (one photo each)")
+    return [int(i) for i in indices]
+
+
 def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSettings = PhoneSettings(), *,
                         views: Sequence[int] | None = None, poses: bool = True) -> list[PhonePhoto]:
-    """Photograph the exact demo scene ``name`` at its trajectory's poses (``views``: indices, default all)
-    into ``out_dir`` as ``photo_<index>.jpg`` (or ``.heic``) files; return each photo's truth.
+    """Photograph the exact demo scene ``name`` at its trajectory's poses (``views``: distinct indices into the
+    trajectory, default all) into ``out_dir`` as ``photo_<index>.jpg`` (or ``.heic``) files; return each photo's
+    truth.
 
     With ``poses``, also write ``out_dir/transforms.json`` (nerfstudio; one camera per photo, as the photo
     is viewed upright; the demo trajectory's train / held-out split), so ``n2r fit out_dir`` fits it
     without structure from motion, in the demo scene's world frame. Without it, ``n2r fit`` runs
     structure from motion on the folder.
+
+    ``out_dir`` then holds this capture alone, as ``n2r fit`` reads the whole folder: an earlier call's photos
+    (``photo_<index>`` files of either format) that this one does not write are removed, and so is an earlier
+    ``transforms.json`` (before any photo is written; with ``poses`` a new one is written last). Other files are
+    left alone. The arguments are checked before anything is written.
     """
     from PIL import Image
 
@@ -160,17 +206,30 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
 
         pillow_heif.register_heif_opener()  # Pillow's "HEIF" format, which writes the EXIF orientation as irot
     scene = ground_truth(name)
+    indices = _check_views(views, len(scene.views))
+    cameras: dict[int, Camera] = {}
+    for index in indices:
+        try:
+            cameras[index] = check_size(settings.size, scene.views[index].camera)
+        except InvalidArgument as exc:
+            raise InvalidArgument(
+                f"PhoneSettings.size={settings.size!r} is too small for scene {name!r}: {exc}") from None
+    suffix, codec = FILE_FORMATS[settings.file_format]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    written = {f"photo_{index:03d}{suffix}" for index in indices}
+    for stale in out.iterdir():  # an earlier capture's poses and photos: ingestion would read them with these
+        if stale.is_file() and (stale.name == "transforms.json" or (PHOTO_NAME.fullmatch(stale.name)
+                                                                    and stale.name not in written)):
+            stale.unlink()
     rng = np.random.default_rng(settings.seed)
     shaking = np.random.default_rng([settings.seed, 1])  # a stream of its own: the other draws do not depend on it
-    indices = list(range(len(scene.views))) if views is None else [int(i) for i in views]
     photos: list[PhonePhoto] = []
     train: list[str] = []
     heldout: list[str] = []
     for k, index in enumerate(indices):
         view = scene.views[index]
-        camera = check_size(settings.size, view.camera)
+        camera = cameras[index]
         portrait = settings.portrait_every > 0 and k % settings.portrait_every == settings.portrait_every - 1
         exif_rotated = portrait and (k // settings.portrait_every) % 2 == 0
         c2w = view.c2w.copy()  # viewed upright, a portrait photo keeps the landscape one's pose
@@ -185,7 +244,6 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
                 shake_px, shake_deg = settings.shake_px, 180.0 * float(angle)
         streak = streak_kernel(shake_px, shake_deg) if shake_px > 0 else None
         upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma, streak)
-        suffix, codec = FILE_FORMATS[settings.file_format]
         path = out / f"photo_{index:03d}{suffix}"
         exif = Image.Exif()
         if exif_rotated:  # the phone keeps the sensor's landscape pixels and says how to turn them

@@ -19,7 +19,7 @@ import numpy as np
 
 from .materials import Material
 
-__all__ = ["Primitive", "Group", "Disc", "Box", "Cylinder", "ReliefWall", "T_MIN", "slab_hits"]
+__all__ = ["Primitive", "Group", "Disc", "Box", "Cylinder", "ReliefWall", "T_MIN", "slab_hits", "primitive_bounds"]
 
 #: Hits closer than this (scene units along the ray parameter) are ignored.
 T_MIN = 1e-6
@@ -353,3 +353,21 @@ class ReliefWall(Primitive):
             f"ReliefWall({self.y0!r}, {self.extent}, {self.depth!r}, {self.waves}, {self.newton}, "
             f"{self.steps}, {self.bisections}, {self.material.describe()})"
         )
+
+
+def primitive_bounds(prim: Primitive) -> list[float]:
+    """``[*lo, *hi]`` of an axis-aligned box that holds every hit of ``prim`` (scene units, world frame): the ray
+    caster's culling boxes and the check that a :class:`Group`'s box holds its children."""
+    if isinstance(prim, Disc):
+        (x, y), r = prim.centre, prim.radius
+        return [x - r, y - r, prim.height, x + r, y + r, prim.height]
+    if isinstance(prim, Box):
+        return [*prim.lo, *prim.hi]
+    if isinstance(prim, Cylinder):
+        half = [prim.radius] * 3
+        half["xyz".index(prim.axis)] = prim.half_length
+        return [c - h for c, h in zip(prim.centre, half)] + [c + h for c, h in zip(prim.centre, half)]
+    if isinstance(prim, ReliefWall):
+        x0, x1, z0, z1 = prim.extent
+        return [x0, prim.y0 - prim.depth, z0, x1, prim.y0, z1]
+    raise TypeError(f"primitive_bounds: {type(prim).__name__} is not a primitive of pytest_n2r.demo.primitives")

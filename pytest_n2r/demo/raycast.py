@@ -59,7 +59,7 @@ from ..render.threads import render_pool
 from .albedo_kernel import BLEND, F0, FLAT, META_COLUMNS, POSTER, RADIAL, TEXTURED, albedo_of, albedo_row
 from .mask_kernel import compile_mask, no_mask
 from .materials import Blend, Flat, Material, Poster, Radial, Textured
-from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall
+from .primitives import T_MIN, Box, Cylinder, Disc, Group, Primitive, ReliefWall, primitive_bounds
 from .relief_kernel import LANES, RELIEF_COLUMNS, STATE_ROWS, SUM_ROWS, relief_at
 from .relief_rows import RELIEF_ROWS
 from .row_cast import BOX, CYLINDER, DISC, RELIEF, cast_rays, cast_row_kernel, no_cast_row
@@ -273,21 +273,6 @@ def _third_bound(relief: ReliefWall) -> float:
     return float(relief.depth * np.sum(np.abs(w[:, 0]) * (w[:, 1] ** 2 + w[:, 3] ** 2) ** 1.5))
 
 
-def _bounds(prim: Primitive) -> list[float]:
-    """``lo, hi`` of an axis-aligned box that holds every hit of ``prim``."""
-    if isinstance(prim, Disc):
-        (x, y), r = prim.centre, prim.radius
-        return [x - r, y - r, prim.height, x + r, y + r, prim.height]
-    if isinstance(prim, Box):
-        return [*prim.lo, *prim.hi]
-    if isinstance(prim, Cylinder):
-        half = [prim.radius] * 3
-        half["xyz".index(prim.axis)] = prim.half_length
-        return [c - h for c, h in zip(prim.centre, half)] + [c + h for c, h in zip(prim.centre, half)]
-    x0, x1, z0, z1 = prim.extent  # ReliefWall
-    return [x0, prim.y0 - prim.depth, z0, x1, prim.y0, z1]
-
-
 #: Screen rectangles are widened by this many pixels (their corners' projections round, the rays' too).
 _RECT_MARGIN = 1.0
 
@@ -377,7 +362,7 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
         boxed = isinstance(item, Group)
         groups.append((first, len(kinds), int(boxed)))
         boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
-        bounds.extend(_bounds(prim) for prim in children)
+        bounds.extend(primitive_bounds(prim) for prim in children)
     tex_meta, texels = b.texture_tables()
     return CompiledScene(
         groups=np.asarray(groups, np.int64), group_box=np.asarray(boxes, np.float64),

@@ -113,7 +113,7 @@ def wall_scene() -> GroundTruthScene:
     return GroundTruthScene(
         "wall", [wall, pipe, seabed], _views(poses, camera, "wall", heldout_first=4),
         light=(0.3, -1.0, 0.9), ambient=0.35, background=(0.05, 0.22, 0.28), far=30.0,
-        reference_length=2.158607831570264,  # median_train_depth(), tests/demo/test_scenes.py
+        reference_length=2.158607831570264,  # median_train_depth(), tests/demo/test_ground_truth.py
     )
 
 
@@ -185,7 +185,7 @@ def object_scene() -> GroundTruthScene:
          Group((-4.7, -3.1, -0.01), (-3.7, -2.1, 0.7), (crates[1],))],
         _views(poses, camera, "object"),
         light=(0.5, 0.35, 1.0), ambient=0.45, background=(0.62, 0.75, 0.90), far=60.0,
-        reference_length=6.983797794055911,  # median_train_depth(), tests/demo/test_scenes.py
+        reference_length=6.983797794055911,  # median_train_depth(), tests/demo/test_ground_truth.py
     )
 
 

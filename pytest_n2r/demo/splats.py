@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from .._validation import check_positive, check_range, check_real
 from ..errors import InvalidArgument
 from ..geometry import camera_rays
 from ..splats.gaussians import Gaussians
@@ -33,6 +34,11 @@ def sample_splats(scene: GroundTruthScene, count: int, *, sh_degree: int = 0, se
         raise InvalidArgument(f"count={count!r}; expected an int >= 8")
     if sh_degree not in (0, 1, 2, 3):
         raise InvalidArgument(f"sh_degree={sh_degree!r}; expected 0, 1, 2 or 3")
+    spread = check_positive("spread", spread)
+    sh_noise = check_range("sh_noise", sh_noise, lo=0.0)
+    opacity = check_real("opacity", opacity)
+    if not 0.0 < opacity < 1.0:  # its logit is stored: finite only strictly between 0 and 1
+        raise InvalidArgument(f"opacity={opacity!r} is out of range; expected a peak opacity in (0, 1), both excluded")
     rng = np.random.default_rng(seed)
     train = [v for v in scene.views if v.split == "train"]
     per_view = math.ceil(2 * count / len(train))
@@ -91,6 +97,7 @@ def similarity_transformed(gaussians: Gaussians, rotation_wxyz: np.ndarray, tran
 
     if gaussians.sh_degree:
         raise InvalidArgument("similarity_transformed: rotating SH coefficients above degree 0 is not implemented")
+    scale = check_positive("scale", scale)
     q = np.asarray(rotation_wxyz, dtype=np.float64)
     q = q / np.linalg.norm(q)
     means = scale * gaussians.means.astype(np.float64) @ quaternion_to_rotation(q).T + np.asarray(translation)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import warnings
+import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -11,8 +14,8 @@ import pytest
 import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
 from pytest_n2r.cli.main import main
-from pytest_n2r.demo import demo_scene_names, load_demo
-from pytest_n2r.demo.fitted import RECIPES, FittedRecipe, build_fitted, fitted_path, packaged_path
+from pytest_n2r.demo import demo_scene_names, fitted, load_demo
+from pytest_n2r.demo.fitted import RECIPES, FittedRecipe, build_fitted, find_fitted, fitted_path, packaged_path
 from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.plugin.scenes import parse_scene_specs
@@ -119,6 +122,42 @@ def test_without_a_current_shipped_file_the_fit_is_cached_on_first_use(tiny_reci
     assert rgb.shape == (27, 48, 3) and abs(score - scene.report["heldout"][0]["psnr"]) < 0.01, (
         f"the cached fit renders {view.name} at {score:.2f} dB, its report says "
         f"{scene.report['heldout'][0]['psnr']:.2f} dB")
+
+
+def _cut_short(name: str) -> Path:
+    """The user cache's file of ``name``'s current recipe, written as the first 4 KiB of a real scene file (a copy
+    killed half-way, a full disk): it exists, but is no zip archive."""
+    cached = find_fitted(name)[1]
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    cached.write_bytes(packaged_path(name).read_bytes()[:4096])
+    return cached
+
+
+def test_an_unreadable_cached_fit_is_not_used(tiny_recipes):
+    cached = _cut_short("wall")
+    assert find_fitted("wall")[0] is None, f"find_fitted takes the unreadable {cached} for the current fit"
+    with pytest.raises(SceneFileError, match=r"unreadable: delete it\); `n2r demo build wall` writes it"):
+        fitted_path("wall", build=False)
+
+
+def test_an_unreadable_cached_fit_is_fitted_again_in_its_place(tiny_recipes, monkeypatch):
+    """Under the cache's lock, as a missing file is (build_fitted writes atomically, replacing it); the fit itself
+    is stubbed: a scene.json with the recipe's digest is all that find_fitted reads."""
+    cached = _cut_short("wall")
+    built = []
+
+    def fake_build(name, out_path, *, recipe):
+        built.append(name)
+        payload = json.dumps({"report": {"recipe_digest": recipe.digest}})
+        with zipfile.ZipFile(out_path, "w") as archive:
+            archive.writestr("scene.json", payload)
+        return Path(out_path), {}
+
+    monkeypatch.setattr(fitted, "build_fitted", fake_build)
+    with pytest.warns(UserWarning, match=r"the cached wall-\w+\.n2r is unreadable \(cut short\?\); fitting it into"):
+        assert fitted_path("wall") == cached
+    assert built == ["wall"], f"the unreadable {cached} was used instead of being fitted again"
+    assert find_fitted("wall")[0] == cached, "the file fitted in its place is not found as the current fit"
 
 
 def test_demo_specs_name_exact_and_fitted_scenes(tmp_path):

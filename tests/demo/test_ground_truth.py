@@ -7,7 +7,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
-from pytest_n2r.demo.primitives import Box, Cylinder, Disc, ReliefWall
+from pytest_n2r.demo.exact import GroundTruthScene
+from pytest_n2r.demo.materials import Flat
+from pytest_n2r.demo.primitives import Box, Cylinder, Disc, Group, ReliefWall
 from pytest_n2r.demo.scenes import build_scene
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import Transform, backproject, camera_rays, pixel_grid, project
@@ -185,3 +187,19 @@ def test_outputs_are_well_formed_at_any_pose(moved):
 def test_unknown_scene_is_named_in_the_error():
     with pytest.raises(InvalidArgument, match=r"'nope'.*\('wall', 'object'\)"):
         ground_truth("nope")
+
+
+def _grouped_crate(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> GroundTruthScene:
+    """A scene of one unit crate, ``(0, 0, 0)`` to ``(1, 1, 1)``, in a group with the box ``lo, hi``."""
+    crate = Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), {"*": Flat((0.5, 0.5, 0.5))})
+    return GroundTruthScene("crate", [Group(lo, hi, (crate,))], [], light=(0.0, 0.0, 1.0), ambient=0.5,
+                            background=(0.0, 0.0, 0.0), far=10.0, reference_length=1.0)
+
+
+def test_a_group_box_that_clips_its_children_is_refused():
+    """The content hash covers a group's members, not its box: a box narrower than its children would change
+    pixels under the same hash, so the scene refuses it (a box around them changes no pixel)."""
+    _grouped_crate((-0.1, -0.1, -0.1), (1.1, 1.1, 1.1))  # holds the crate: accepted
+    with pytest.raises(InvalidArgument, match=r"GroundTruthScene 'crate': primitives\[0\] is a Group whose box .*"
+                                              r"does not hold its child 0 \(Box"):
+        _grouped_crate((-0.1, -0.1, -0.1), (1.1, 1.1, 0.5))

@@ -19,7 +19,7 @@ from pytest_n2r.demo.phone_capture import (
     streak_kernel,
     write_phone_capture,
 )
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.scene.file import read_scene_file
 from pytest_n2r.study.sampling import sample_transform
@@ -110,6 +110,58 @@ def test_shaken_photos_are_smeared_along_their_streak_and_leave_the_others_as_th
 def test_bad_shake_settings_are_named(settings, message):
     with pytest.raises(InvalidArgument, match=message):
         PhoneSettings(**settings)
+
+
+@pytest.mark.parametrize("settings, error, message", [
+    ({"size": 4}, InvalidArgument, r"PhoneSettings\.size=4: expected the photos' longer side in pixels, >= 8"),
+    ({"size": 96.0}, InvalidType, r"PhoneSettings\.size=96\.0: expected an int, not float"),
+    ({"size": True}, InvalidType, r"PhoneSettings\.size=True: expected an int, not bool"),
+    ({"portrait_every": 1.5}, InvalidType, r"PhoneSettings\.portrait_every=1\.5: expected an int, not float"),
+    ({"portrait_every": -1}, InvalidArgument, r"PhoneSettings\.portrait_every=-1: expected >= 0"),
+])
+def test_bad_size_and_orientation_settings_are_named(settings, error, message):
+    with pytest.raises(error, match=message):
+        PhoneSettings(**settings)
+
+
+def test_a_size_too_small_for_the_scene_is_named_before_anything_is_written(tmp_path):
+    with pytest.raises(InvalidArgument, match=r"PhoneSettings\.size=10 is too small for scene 'wall': .*10x6"):
+        write_phone_capture("wall", tmp_path / "photos", PhoneSettings(size=10))
+    assert not (tmp_path / "photos").exists(), "a refused capture created its folder"
+
+
+@pytest.mark.parametrize("views, error, message", [
+    ([0, 48], InvalidArgument, r"views holds \[48\]: expected indices in 0\.\.47"),
+    ([-1, 3], InvalidArgument, r"views holds \[-1\]: expected indices in 0\.\.47"),
+    ([4, 8, 4], InvalidArgument, r"views holds \[4\] more than once: expected distinct indices"),
+    ([], InvalidArgument, r"views is empty"),
+    ([0, 2.5], InvalidType, r"views\[1\]=2\.5: expected an int index, not float"),
+    (5, InvalidType, r"views=5: expected a sequence of view indices"),
+])
+def test_bad_views_are_named_before_anything_is_written(tmp_path, views, error, message):
+    with pytest.raises(error, match=message):
+        write_phone_capture("wall", tmp_path / "photos", PhoneSettings(size=32), views=views)
+    assert not (tmp_path / "photos").exists(), "a refused capture created its folder"
+
+
+def test_a_second_capture_into_the_folder_replaces_the_first(tmp_path):
+    """``n2r fit`` reads the whole folder: an earlier capture's transforms.json (its poses) and photos must not
+    outlive a capture written over it without poses, or with other views, or in another format."""
+    folder = tmp_path / "photos"
+    (folder / "notes").mkdir(parents=True)
+    (folder / "notes.txt").write_text("mine")
+    write_phone_capture("wall", folder, PhoneSettings(size=32), views=range(0, 48, 8))
+    assert (folder / "transforms.json").is_file()
+    second = write_phone_capture("wall", folder, PhoneSettings(size=32, file_format="heic"), views=[0, 16],
+                                 poses=False)
+    left = sorted(path.name for path in folder.iterdir())
+    assert left == ["notes", "notes.txt", "photo_000.heic", "photo_016.heic"], (
+        f"after a capture of 2 photos without poses the folder holds {left}: the first capture's poses or photos "
+        "were left for ingestion to read (or a file of the user's was removed)")
+    assert [p.path.name for p in second] == ["photo_000.heic", "photo_016.heic"]
+    write_phone_capture("wall", folder, PhoneSettings(size=32), views=[8])
+    frames = json.loads((folder / "transforms.json").read_text())["frames"]
+    assert [frame["file_path"] for frame in frames] == ["photo_008.jpg"], frames
 
 
 @pytest.mark.slow
