@@ -43,9 +43,17 @@ def is_gs_cameras(path: str | os.PathLike) -> bool:
     return start.startswith("[")
 
 
+def _finite(value: float) -> bool:
+    """Whether ``value`` is a finite float, or an int a float holds (JSON's integers have no limit)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def _number(record: dict, key: str, where: str, positive: bool = True) -> float:
     value = record.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value) \
             or (positive and value <= 0):
         raise IngestError(f"{where}: field {key!r}={value!r}; expected a finite number{' > 0' if positive else ''}")
     return float(value)
@@ -55,13 +63,14 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
     """The cameras of a 3DGS ``cameras.json`` (see the module *Convention*), in file order, without images.
 
     Raises :class:`IngestError` naming the file, the entry and the field when a field is missing or
-    malformed or a rotation is not a rotation.
+    malformed or a rotation is not a rotation, and naming both entries when two have one ``img_name``.
     """
     path = Path(path)
     data = read_json_file(path, 'cameras')
     if not isinstance(data, list) or not data:
         raise IngestError(f"{path}: expected a non-empty JSON list of cameras (3DGS cameras.json)")
     frames = []
+    first: dict[str, int] = {}  # the entry of each name
     for i, record in enumerate(data):
         where = f"{path}: [{i}]"
         if not isinstance(record, dict):
@@ -69,6 +78,10 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
         name = record.get("img_name", f"camera_{i:05d}")
         if not isinstance(name, str) or not name:
             raise IngestError(f"{where}: field 'img_name'={name!r}; expected a non-empty string")
+        if name in first:
+            raise IngestError(f"{path}: [{first[name]}] and [{i}] both have img_name {name!r}; expected one camera a "
+                              "name (a view is looked up and reported by its name)")
+        first[name] = i
         width, height = (_number(record, k, where) for k in ("width", "height"))
         if width != int(width) or height != int(height):
             raise IngestError(f"{where}: width x height = {width} x {height}; expected whole pixels")

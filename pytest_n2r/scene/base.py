@@ -12,7 +12,7 @@ from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
 from ..render.view import OUTPUTS, RenderedView
 
-__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs"]
+__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs", "repeated_name"]
 
 #: How far from the captured cameras a render may be, in reference lengths: beyond it a float32 renderer
 #: cannot place a sample within a thousandth of a reference length, so the picture would be noise or NaN.
@@ -30,6 +30,20 @@ class SceneView:
     c2w: np.ndarray
     split: str = "train"
     image: np.ndarray | None = None
+
+
+def repeated_name(names: Iterable[str]) -> tuple[int, int, str] | None:
+    """``(first, second, name)``: the positions of the first name that ``names`` hold twice; ``None`` when all differ.
+
+    >>> repeated_name(["a.png", "b.png", "a.png"]), repeated_name(["a.png", "b.png"])
+    ((0, 2, 'a.png'), None)
+    """
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in seen:
+            return seen[name], i, name
+        seen[name] = i
+    return None
 
 
 def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:
@@ -55,8 +69,7 @@ class Scene(ABC):
 
     #: Short name used in test ids and reports.
     name: str
-    #: The captured views (held-out ones are the natural sources of metamorphic tests).
-    views: Sequence[SceneView]
+    _views: Sequence[SceneView]  # behind the property views, which refuses two views of one name
     #: Median z-depth of the surface seen from the training cameras, in scene units.
     reference_length: float
     #: Metres per scene unit when the capture's scale is known, else ``None``.
@@ -68,6 +81,21 @@ class Scene(ABC):
     #: Changes when the renderer's pixels change for the same content (keys the render cache beside
     #: :attr:`content_hash`, which also keys what was fitted to the scene's renders and stays put).
     renderer_version: str = "1"
+
+    @property
+    def views(self) -> Sequence[SceneView]:
+        """The captured views (held-out ones are the natural sources of metamorphic tests), each of its own name."""
+        return self._views
+
+    @views.setter
+    def views(self, views: Sequence[SceneView]) -> None:
+        repeat = repeated_name(v.name for v in views)
+        if repeat is not None:
+            first, second, name = repeat
+            raise InvalidArgument(f"scene {getattr(self, 'name', type(self).__name__)!r}: views [{first}] and "
+                                  f"[{second}] are both named {name!r}; expected one view a name (a view is "
+                                  "looked up and reported by its name)")
+        self._views = views
 
     @property
     @abstractmethod

@@ -27,6 +27,7 @@ import numpy as np
 from ..errors import InvalidArgument, InvalidType, SceneFileError
 from ..geometry import Camera, check_pose
 from ..render.size import MAX_SIDE
+from .base import repeated_name
 
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "SCENE_JSON", "FIELD_FILE", "REQUIRED_KEYS", "FRAME_KEYS", "SPLITS",
@@ -82,6 +83,10 @@ def _image_member(name: str, index: int, taken: set[str]) -> str:
 def frames_to_json(views: Sequence[Any], with_images: bool) -> tuple[list[dict], list[dict], list[str | None]]:
     """``cameras`` and ``frames`` of ``scene.json`` for ``views`` (objects with ``name``, ``camera``,
     ``c2w``, ``split`` and ``image``), and each frame's image member (``None``: no image stored)."""
+    repeat = repeated_name(v.name for v in views)
+    if repeat is not None:
+        raise InvalidArgument(f"views [{repeat[0]}] and [{repeat[1]}] are both named {repeat[2]!r}; a scene file "
+                              "holds one view a name")
     cameras = list(dict.fromkeys(v.camera for v in views))
     camera_index = {cam: i for i, cam in enumerate(cameras)}
     frames, members, taken = [], [], set()
@@ -136,7 +141,7 @@ def check_header(data: Any, source: str) -> None:
 
 
 def read_frames(data: dict, source: str) -> list[tuple[str, Camera, np.ndarray, str, str | None]]:
-    """``(name, camera, c2w, split, image member)`` of each frame of ``scene.json``, checked."""
+    """``(name, camera, c2w, split, image member)`` of each frame of ``scene.json``, checked (names unique)."""
     records = require(data, "cameras", SCENE_JSON, source)
     if not isinstance(records, list) or not records:
         raise SceneFileError(f"{source}: {SCENE_JSON} 'cameras' must be a non-empty list of camera objects")
@@ -174,4 +179,8 @@ def read_frames(data: dict, source: str) -> list[tuple[str, Camera, np.ndarray, 
         if image is not None and not (isinstance(image, str) and image.startswith(IMAGES_DIR)):
             raise SceneFileError(f"{source}: {where}.image={image!r}; expected null or '{IMAGES_DIR}<name>.jpg'")
         out.append((name, cameras[cam], pose, split, image))
+    repeat = repeated_name(frame[0] for frame in out)
+    if repeat is not None:
+        raise SceneFileError(f"{source}: {SCENE_JSON} frames[{repeat[0]}] and frames[{repeat[1]}] are both named "
+                             f"{repeat[2]!r}; expected one frame a name")
     return out

@@ -15,14 +15,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_unit_rgb
+from .._validation import as_unit_rgb, check_positive
 from ..data.capture import heldout_split
 from ..data.poses import PoseSet
 from ..errors import IngestError, InvalidArgument, InvalidType
 from ..geometry import Camera, Units
+from ..render.size import MAX_SIDE
 from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSettings
 from ..splats.gaussians import Gaussians
-from .base import Scene, SceneView
+from .base import Scene, SceneView, repeated_name
 
 __all__ = ["SplatScene", "load_splat_scene", "measure_reference_length", "splat_views"]
 
@@ -70,9 +71,11 @@ class SplatScene(Scene):
         bg = as_unit_rgb(background)
         if bg is None:
             raise InvalidArgument(f"background={background!r}; expected three values in [0, 1]")
+        if reference_length is not None:
+            reference_length = check_positive("reference_length", reference_length)
         self.gaussians = gaussians
-        self.views = tuple(views)
         self.name = name
+        self.views = tuple(views)  # Scene refuses two views of one name
         self.background = bg
         self.settings = settings or SplatSettings()
         self.metres_per_unit = metres_per_unit
@@ -154,7 +157,20 @@ def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneV
     """Views of a pose set, sorted by name, with ideal pinhole cameras (distortion dropped: splats are trained
     on undistorted images). Held out: the source's own split (a transforms.json's ``val_filenames``) when
     ``heldout_every`` is ``None`` and it has one, else every ``heldout_every``-th (default 8, from the first:
-    the ``--eval`` split of 3DGS and nerfstudio); 0 holds none out."""
+    the ``--eval`` split of 3DGS and nerfstudio); 0 holds none out.
+
+    Raises :class:`IngestError` naming the source and the frame for two frames of one name or a camera side
+    that is not a whole number of pixels in 1..:data:`~pytest_n2r.render.size.MAX_SIDE`."""
+    repeat = repeated_name(f.name for f in poses.frames)
+    if repeat is not None:
+        raise IngestError(f"{poses.source}: frames [{repeat[0]}] and [{repeat[1]}] are both named {repeat[2]!r}; "
+                          "expected one frame a name")
+    for i, f in enumerate(poses.frames):
+        for key in ("width", "height"):
+            side = getattr(f.camera, key)
+            if not 1 <= side <= MAX_SIDE:
+                raise IngestError(f"{poses.source}: frame [{i}] {f.name!r}: camera {key}={side!r}; expected a whole "
+                                  f"number of pixels in 1..{MAX_SIDE}")
     frames = sorted(poses.frames, key=lambda f: f.name)
     if heldout_every is None and poses.heldout is not None:
         splits = ["heldout" if f.name in poses.heldout else "train" for f in frames]

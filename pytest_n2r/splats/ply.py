@@ -86,7 +86,10 @@ def _parse_header(raw: bytes, source: str) -> tuple[str, list[tuple[str, int, li
         elif words[0] == "property":
             if not elements:
                 raise SceneFileError(f"{where}: a property before any element")
-            if words[1] == "list":
+            if len(words) >= 2 and words[1] == "list":
+                if len(words) != 5 or words[2] not in _TYPES or words[3] not in _TYPES:
+                    raise SceneFileError(f"{where}: expected 'property list COUNT_TYPE ITEM_TYPE NAME' with types "
+                                         f"from {sorted(set(_TYPES))}")
                 elements[-1][2].append((words[-1], "list"))
             elif len(words) == 3 and words[1] in _TYPES:
                 elements[-1][2].append((words[2], _TYPES[words[1]]))

@@ -48,6 +48,7 @@ def test_cameras_json_round_trips(tmp_path):
     ({"position": [0, 0]}, "'position' has shape (2,)"),
     ({"width": 10.5}, "expected whole pixels"),
     ({"position": [0, float("nan"), 0]}, "contains NaN or Inf"),
+    ({"width": 10**400}, "field 'width'=1000"),  # an int no float holds: was a bare OverflowError
 ])
 def test_a_bad_cameras_json_entry_is_named(tmp_path, change, expected):
     entry = {"id": 0, "img_name": "x", "width": 8, "height": 6, "position": [0, 0, 0],
@@ -58,6 +59,19 @@ def test_a_bad_cameras_json_entry_is_named(tmp_path, change, expected):
         read_gs_cameras(path)
     assert expected in str(info.value) and "[0]" in str(info.value), str(info.value)
 
+
+
+@pytest.mark.parametrize("names", [("x", "y", "x"), (None, "camera_00000")])
+def test_two_cameras_json_entries_of_one_name_are_refused_naming_both(tmp_path, names):
+    """Views are looked up by name: of two views of one name only the first could ever be drawn."""
+    entry = {"width": 8, "height": 6, "position": [0, 0, 0], "rotation": np.eye(3).tolist(), "fx": 5.0, "fy": 5.0}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry | ({} if name is None else {"img_name": name}) for name in names]))
+    with pytest.raises(IngestError) as info:
+        read_gs_cameras(path)
+    second = len(names) - 1
+    expected = f"{path}: [0] and [{second}] both have img_name {names[second]!r}; expected one camera a name"
+    assert expected in str(info.value), f"{info.value}; expected {expected!r}"
 
 
 @pytest.mark.parametrize("content, expected", [

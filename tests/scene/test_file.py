@@ -16,7 +16,7 @@ import torch
 from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.render.field_render import FieldRenderer
-from pytest_n2r.scene import read_scene_file, save_scene
+from pytest_n2r.scene import SceneView, read_scene_file, save_scene
 from pytest_n2r.scene.schema import FIELD_FILE, FORMAT_VERSION, SCENE_JSON
 
 from .conftest import random_field, tiny_views
@@ -109,6 +109,8 @@ def test_a_failed_save_leaves_the_old_file_and_no_temporary(tmp_path):
         ({"views": []}, r"holds no views"),
         ({"image_quality": 0}, r"image_quality=0; expected an integer in 1..100"),
         ({"bounds": np.zeros(3)}, r"bounds has shape \(3,\); expected a finite \(2, 3\) box"),
+        ({"views": [SceneView(i, "same.png", v.camera, v.c2w, v.split) for i, v in enumerate(tiny_views(3, False))]},
+         r"views \[0\] and \[1\] are both named 'same.png'; a scene file holds one view a name"),
     ],
 )
 def test_bad_save_arguments_are_named(tmp_path, kwargs, message):
@@ -198,6 +200,8 @@ BAD_FILES = {
                            r"frames\[1\] has no 'c2w' key"),
     "frame with a bad pose": (lambda good, bad: rewrite(good, bad, edit_json=_frame(2, "c2w", [[1, 0], [0, 1]])),
                               r"frames\[2\].c2w must have shape \(4 4\)"),
+    "two frames of one name": (lambda good, bad: rewrite(good, bad, edit_json=_frame(2, "name", "frame_000.png")),
+                               r"scene.json frames\[0\] and frames\[2\] are both named 'frame_000.png'"),
     "bad split": (lambda good, bad: rewrite(good, bad, edit_json=_frame(0, "split", "test")),
                   r"frames\[0\].split='test'; expected one of \('train', 'heldout'\)"),
     "bad reference length": (lambda good, bad: rewrite(good, bad, edit_json=_set("reference_length", -1)),

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import zipfile
 
@@ -11,15 +12,21 @@ import pytest
 
 from pytest_n2r import Transform
 from pytest_n2r.cli.main import main
+from pytest_n2r.data.poses import PoseSet, SourceFrame
 from pytest_n2r.demo import ground_truth
-from pytest_n2r.errors import InvalidArgument, SceneFileError
+from pytest_n2r.errors import IngestError, InvalidArgument, SceneFileError
+from pytest_n2r.geometry import Camera
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.splat_render import SplatSettings
-from pytest_n2r.scene import SplatScene, load_scene, read_splat_file
+from pytest_n2r.scene import SceneView, SplatScene, load_scene, read_splat_file
 from pytest_n2r.scene.splat_file import save_splat_scene
+from pytest_n2r.scene.splat_scene import splat_views
 from pytest_n2r.scene.splits import scene_views
+from pytest_n2r.splats.gaussians import Gaussians
 
+from ..plugin.fakescene import PlaneScene
 from ..splats.make_data import DATA, FILES, SCALE
+from .conftest import tiny_views
 
 
 def ply(name: str):
@@ -133,8 +140,6 @@ def test_n2r_import_without_cameras_says_how_to_give_them(tmp_path, capsys):
     ("nan", "Gaussians.means of Gaussian 0"),
 ])
 def test_a_damaged_splat_file_is_named(tmp_path, damage, expected):
-    import json
-
     import safetensors.numpy
 
     src = tmp_path / "ok.n2r"
@@ -162,6 +167,58 @@ def test_a_damaged_splat_file_is_named(tmp_path, damage, expected):
     with pytest.raises(SceneFileError) as info:
         read_splat_file(bad)
     assert expected in str(info.value) and str(bad) in str(info.value), str(info.value)
+
+
+def one_gaussian() -> Gaussians:
+    return Gaussians(means=[[0.0, 0.0, 3.0]], quats=[[1.0, 0.0, 0.0, 0.0]], log_scales=[[-1.0] * 3],
+                     opacity_logits=[2.0], sh=np.zeros((1, 1, 3)))
+
+
+@pytest.mark.parametrize("value, expected", [(-1.0, "reference_length=-1.0 must be > 0"),
+                                             (0, "reference_length=0.0 must be > 0"),
+                                             (float("nan"), "reference_length=nan must be finite")])
+def test_a_bad_reference_length_is_refused_when_the_scene_is_built(value, expected):
+    with pytest.raises(InvalidArgument) as info:
+        SplatScene(one_gaussian(), tiny_views(2, with_images=False), reference_length=value)
+    assert expected in str(info.value), f"{info.value}; expected {expected!r}"
+
+
+def test_a_scene_refuses_two_views_of_one_name_naming_both():
+    """Views are looked up by name: of two views of one name only the first could ever be drawn."""
+    views = tiny_views(3, with_images=False)
+    twins = [*views[:2], SceneView(2, views[0].name, views[2].camera, views[2].c2w)]
+    expected = "scene 'twins': views [0] and [2] are both named 'frame_000.png'; expected one view a name"
+    with pytest.raises(InvalidArgument) as info:
+        SplatScene(one_gaussian(), twins, name="twins", reference_length=1.0)
+    assert expected in str(info.value), f"{info.value}; expected {expected!r}"
+    plane = PlaneScene(n_views=2)
+    with pytest.raises(InvalidArgument, match=r"scene 'plane': views \[0\] and \[1\] are both named 'view0'"):
+        plane.views = [plane.views[0], plane.views[0]]
+
+
+def test_splat_views_refuse_two_frames_of_one_name_naming_the_source_and_both():
+    camera, pose = Camera(8, 6, 5.0, 5.0, 3.5, 2.5), np.eye(4)
+    poses = PoseSet([SourceFrame(name, None, camera, pose) for name in ("b.png", "a.png", "b.png")],
+                    source="run/transforms.json")
+    with pytest.raises(IngestError) as info:
+        splat_views(poses)
+    expected = "run/transforms.json: frames [0] and [2] are both named 'b.png'; expected one frame a name"
+    assert expected in str(info.value), f"{info.value}; expected {expected!r}"
+
+
+@pytest.mark.parametrize("key, side", [("width", 2**80), ("height", 1e300), ("width", 16385)])
+def test_cameras_larger_than_a_render_may_be_are_refused_on_loading(tmp_path, key, side):
+    """A 3DGS cameras.json with a side of 2**80 pixels loaded, then failed with a bare MemoryError (or `n2r
+    import` wrote a .n2r its own reader refuses)."""
+    entries = json.loads((DATA / FILES["object-sh0"][1]).read_text())
+    entries[3][key] = side
+    cameras = tmp_path / "cameras.json"
+    cameras.write_text(json.dumps(entries))
+    with pytest.raises(IngestError) as info:
+        load_scene(ply("object-sh0"), cameras=cameras)
+    expected = (f"{cameras}: frame [3] {entries[3]['img_name']!r}: camera {key}={int(side)}; expected a whole number "
+                "of pixels in 1..16384")
+    assert expected in str(info.value), f"{info.value}; expected {expected!r}"
 
 
 @pytest.mark.parametrize("key, value", [("_reference_length", float("nan")), ("_reference_length", 0.0),
