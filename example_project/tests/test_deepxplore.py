@@ -12,6 +12,15 @@ same examples replayed with both matchings moved little under these mutations: m
 worst −0.088 at most (brightness on the object, 0.241 -> 0.153). On the draws of the new metric the worst
 deviations are brightness 0.183 / 0.365, noise patch 0.720 / 0.694, black patches 0.085 / 0.090 (object / wall):
 eps unchanged, each at least 0.08 above them.
+
+Re-measured on 6 December 2026, when the mutation strategies stopped drawing a mutation that changes nothing and
+the search stopped counting an example drawn twice: over 100 draws per relation and scene (``-o n2r_examples=100``)
+the worst ORB deviations are brightness 0.221 / 0.459, noise patch 0.818 / 0.849, black patches 0.102 / 0.133
+(object / wall). Brightness (0.75) and black patches (0.5) were far looser than the rule and are now 0.55 and 0.25;
+the noise patch keeps 0.95. On the shipped draws: brightness 0.146 / 0.447, noise patch 0.826 / 0.662, black
+patches 0.072 / 0.101. MobileNetV2's top-5 invariance held on every shipped draw, but 3 of the 100 draws of black
+patches moved its top-1 class out of the follow-up's top 5 (deviation 1): the relation stands as the SUT's
+measured behaviour on these 20 examples, not a guarantee; a larger search finds that weakness.
 """
 
 from __future__ import annotations
@@ -26,7 +35,7 @@ from .conftest import load_classifier, skip_without_object
 
 
 @pytest.mark.detectors
-@metamorphic(repeatability(px=3), eps=0.75, transform=brightness(max_levels=64))
+@metamorphic(repeatability(px=3), eps=0.55, transform=brightness(max_levels=64))
 def test_orb_repeatability_m1_brightness(n2r_scene, orb):
     return orb
 
@@ -38,7 +47,7 @@ def test_orb_repeatability_m2_noise_patch(n2r_scene, orb):
 
 
 @pytest.mark.detectors
-@metamorphic(repeatability(px=3), eps=0.5, transform=black_patches(max_size=0.05, count=4))
+@metamorphic(repeatability(px=3), eps=0.25, transform=black_patches(max_size=0.05, count=4))
 def test_orb_repeatability_m3_black_patches(n2r_scene, orb):
     return orb
 

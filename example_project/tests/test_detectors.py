@@ -30,6 +30,24 @@ eps come from 140 draws per relation and scene: those two sets of 20 and 100 mor
 stays), τ5 0.396 / 0.288 (0.65 -> 0.5), τ6 0.495 / 0.305 (0.75 -> 0.6): the means fell by half, the object's
 worst draws under large motions much less. SIFT and AKAZE keep their eps (worst on the first new draws τ1 SIFT
 0.393 / 0.209, AKAZE 0.250 / 0.082; τ4 SIFT 0.537 / 0.275, AKAZE 0.714 / 0.333): the metric did not move them.
+
+Re-measured on 6 December 2026, when the pose strategies stopped drawing the identity and the search stopped
+counting an example drawn twice (pytest-n2r: a fifth of the 20 examples had been the identity, a view compared
+with itself, and 3-8 more were repeats: 12-15 real tests a relation). On the new draws SIFT τ1 on the object broke
+its eps (0.517 > 0.5), and five relations came within 0.08 of theirs; the exact scenes involve no fitted field, so
+these are the detectors' own responses to motions the identity had stood in for. Each eps was set again by the rule
+from the worst of all measurements: the 140 draws above, 100 draws per relation and scene on the new strategies
+(``-o n2r_examples=100``, 22:38 UTC: object / wall ORB repeatability τ1 0.461 / 0.290, τ2 0.431 / 0.308, τ3 0.540
+/ 0.406, τ4 0.807 / 0.569, τ5 0.539 / 0.299, τ6 0.532 / 0.334; spread τ1 0.415 / 0.286, τ2 0.627 / 0.363, τ3 0.554
+/ 0.431, τ4 0.861 / 0.628, τ5 0.477 / 0.337, τ6 0.644 / 0.372; SIFT τ1 0.485 / 0.237, τ4 0.741 / 0.301; AKAZE τ1
+0.250 / 0.152, τ4 0.667 / 0.484) and the 20-draw runs (SIFT τ1 0.517, ORB repeatability τ3 0.604). Raised: ORB
+repeatability τ1 0.5 -> 0.55, τ3 0.65 -> 0.7, τ5 0.5 -> 0.65, τ6 0.6 -> 0.65; spread τ2 0.7 -> 0.75, τ4 0.9 -> 0.95,
+τ5 0.55 -> 0.6, τ6 0.65 -> 0.75; SIFT τ1 0.5 -> 0.6. Lowered, being looser than the rule: SIFT τ4 0.9 -> 0.85
+(worst 0.741), AKAZE τ1 0.5 -> 0.35 (0.250). On the shipped draws of these eps (the committed gate baseline) the
+worst deviations (object / wall) are ORB repeatability τ1 0.353 / 0.189, τ2 0.560 / 0.310, τ3 0.481 / 0.342, τ4
+0.795 / 0.611, τ5 0.310 / 0.270, τ6 0.373 / 0.277; spread τ1 0.395 / 0.244, τ2 0.548 / 0.370, τ3 0.491 / 0.403, τ4
+0.832 / 0.573, τ5 0.411 / 0.291, τ6 0.440 / 0.342; SIFT τ1 0.401 / 0.224, τ4 0.592 / 0.261; AKAZE τ1 0.125 / 0.118,
+τ4 0.583 / 0.347.
 """
 
 from __future__ import annotations
@@ -47,7 +65,7 @@ pytestmark = pytest.mark.detectors
 
 
 # -- ORB, the detector the robot runs (PERCEPTION_ORB selects a candidate configuration) ---------------------
-@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
+@metamorphic(REPEATABILITY, eps=0.55, transform="tau1")
 def test_orb_repeatability_tau1(n2r_scene, orb):
     return orb
 
@@ -57,7 +75,7 @@ def test_orb_repeatability_tau2(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.65, transform="tau3")
+@metamorphic(REPEATABILITY, eps=0.7, transform="tau3")
 def test_orb_repeatability_tau3(n2r_scene, orb):
     return orb
 
@@ -67,12 +85,12 @@ def test_orb_repeatability_tau4(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.5, transform="tau5")
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau5")
 def test_orb_repeatability_tau5(n2r_scene, orb):
     return orb
 
 
-@metamorphic(REPEATABILITY, eps=0.6, transform="tau6")
+@metamorphic(REPEATABILITY, eps=0.65, transform="tau6")
 def test_orb_repeatability_tau6(n2r_scene, orb):
     return orb
 
@@ -82,7 +100,7 @@ def test_orb_spread_tau1(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.7, transform="tau2")
+@metamorphic(SPREAD, eps=0.75, transform="tau2")
 def test_orb_spread_tau2(n2r_scene, orb):
     return orb
 
@@ -92,33 +110,33 @@ def test_orb_spread_tau3(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.9, transform="tau4")
+@metamorphic(SPREAD, eps=0.95, transform="tau4")
 def test_orb_spread_tau4(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.55, transform="tau5")
+@metamorphic(SPREAD, eps=0.6, transform="tau5")
 def test_orb_spread_tau5(n2r_scene, orb):
     return orb
 
 
-@metamorphic(SPREAD, eps=0.65, transform="tau6")
+@metamorphic(SPREAD, eps=0.75, transform="tau6")
 def test_orb_spread_tau6(n2r_scene, orb):
     return orb
 
 
 # -- SIFT and AKAZE: the alternatives we keep an eye on (small and large motions) -------------------------------
-@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
+@metamorphic(REPEATABILITY, eps=0.6, transform="tau1")
 def test_sift_repeatability_tau1(n2r_scene):
     return detector("sift")
 
 
-@metamorphic(REPEATABILITY, eps=0.9, transform="tau4")
+@metamorphic(REPEATABILITY, eps=0.85, transform="tau4")
 def test_sift_repeatability_tau4(n2r_scene):
     return detector("sift")
 
 
-@metamorphic(REPEATABILITY, eps=0.5, transform="tau1")
+@metamorphic(REPEATABILITY, eps=0.35, transform="tau1")
 def test_akaze_repeatability_tau1(n2r_scene):
     return detector("akaze")
 

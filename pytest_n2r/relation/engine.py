@@ -7,6 +7,7 @@ compare with the metric -- each into an :class:`~pytest_n2r.relation.record.Exam
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable
@@ -97,6 +98,7 @@ class Engine:
         self.shrinking = False  # False: the survey pass; True: the shrink pass
         self.failed = False
         self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
+        self.drawn: set[tuple[str, bytes, str]] = set()  # the survey's examples so far (source view, follow-up)
         self.images_error: str | None = None
 
     # -- pieces -----------------------------------------------------------------------------------------
@@ -281,6 +283,12 @@ class Engine:
         if self.gave_up:  # reject the rest of the draws without rendering them
             assume(False)
         tau = as_follow_up(tau)
+        if not self.shrinking:  # the same example again tests nothing new: not counted, Hypothesis draws another
+            drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(), json.dumps(tau.record_fields(),
+                                                                                     sort_keys=True, default=str))
+            if drawn in self.drawn:
+                assume(False)
+            self.drawn.add(drawn)
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
         if not self.shrinking:

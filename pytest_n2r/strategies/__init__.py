@@ -8,8 +8,9 @@ Convention
   camera's frame**, ``c2w_tau = c2w @ T(tau)``, angles in **degrees**, carrying the ``units`` of its
   translation: reference lengths by default, so one bound means the same on every scene); a
   :class:`Mutation` changes the source render's pixels at the same pose.
-- Every strategy shrinks toward the identity (no motion, no change): a failing example is reported as
-  the smallest follow-up that still breaks the system under test.
+- Every strategy shrinks toward the smallest follow-up (the smallest motion: a drawn pose change is never
+  the identity; no change for a mutation): a failing example is reported as the smallest follow-up that
+  still breaks the system under test.
 
 Modules: :mod:`.follow_up` (the protocol), :mod:`.pose_change`, :mod:`.mutation` (the follow-ups),
 :mod:`.grid` (bounded numbers on a decimal grid), :mod:`.pose_strategies` (``transforms``, pose-change

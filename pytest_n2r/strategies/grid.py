@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
+from collections.abc import Mapping
 from typing import Any
 
 from hypothesis import strategies as st
@@ -16,7 +18,8 @@ from hypothesis import strategies as st
 from .._validation import check_real
 from ..errors import InvalidArgument, InvalidType
 
-__all__ = ["AXES", "ANGLES", "MAX_ANGLE", "MIN_STEPS", "Bound", "check_bound", "grid_step", "draw_axis"]
+__all__ = ["AXES", "ANGLES", "MAX_ANGLE", "MIN_STEPS", "Bound", "check_bound", "grid_step", "draw_axis", "draw_moved",
+           "draw_motion"]
 
 #: The components of a pose transform, in :class:`~pytest_n2r.geometry.Transform` order.
 AXES = ("roll", "pitch", "yaw", "x", "y", "z")
@@ -53,6 +56,9 @@ def check_bound(name: str, value: Any) -> Bound:
         lo, hi = -abs(b), abs(b)
     if name in ANGLES and max(abs(lo), abs(hi)) > MAX_ANGLE:
         raise InvalidArgument(f"{name}={value!r} is out of range; angles are degrees in [-180, 180]")
+    if not math.isfinite(hi - lo):
+        raise InvalidArgument(f"{name}={value!r} spans {hi - lo} (hi - lo overflows a float); expected a bound "
+                              f"at most {sys.float_info.max:.4g} wide")
     return lo + 0.0, hi + 0.0
 
 
@@ -101,8 +107,21 @@ def _draw_steps(draw: Any, n: int) -> int:
 
 
 def draw_axis(draw: Any, lo: float, hi: float) -> float:
-    """A value in ``[lo, hi]`` that shrinks toward the point of the interval nearest 0, step by step
-    (``draw`` is a Hypothesis composite's draw function)."""
+    """A value in ``[lo, hi]`` that shrinks toward the point of the interval nearest 0 (its origin), step by
+    step (``draw`` is a Hypothesis composite's draw function)."""
+    return _draw_axis(draw, lo, hi, None)
+
+
+def draw_moved(draw: Any, lo: float, hi: float) -> float:
+    """:func:`draw_axis`, but never the origin (the point of ``[lo, hi]`` nearest 0) while the interval holds
+    another value: shrinking ends one grid step from it."""
+    return _draw_axis(draw, lo, hi, True)
+
+
+def _draw_axis(draw: Any, lo: float, hi: float, moved: bool | None) -> float:
+    """:func:`draw_axis`; with ``moved`` True or False a second step count is drawn: ``True`` takes it when the
+    first is 0 (one step when it is 0 too), so the origin is never drawn, one step only rarely, and shrinking
+    ends at one step; ``False`` leaves it unused. Both draw the same, so the shrinker goes from one to the other."""
     if lo == hi:
         return lo
     origin = min(max(0.0, lo), hi)
@@ -115,7 +134,31 @@ def draw_axis(draw: Any, lo: float, hi: float) -> float:
             sides.append((sign, n + (abs(origin + sign * n * step - end) > 1e-12), end))
     sign, n, end = sides[draw(_integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
     k = _draw_steps(draw, n)
+    if moved is not None:
+        spare = _draw_steps(draw, n)
+        k = max(spare, 1) if moved and k == 0 else k
+    if k == 0:
+        return origin  # exactly the bound's end nearest 0 when it is off the grid (rounding would move it)
     value = origin + sign * k * step
-    if sign * (value - end) >= 0 or k == n:
+    if sign * (value - end) >= 0 or k >= n:
         return end
     return min(max(round(value, digits), lo), hi) + 0.0  # rounding may cross a bound that is off the grid
+
+
+def draw_motion(draw: Any, bounds: Mapping[str, Bound]) -> dict[str, float]:
+    """One value of each component of :data:`AXES` in its bound (:func:`draw_axis`; a component not in ``bounds``
+    is 0), never all 0 while a bound allows anything else: when every component before the last one whose bound
+    holds 0 drew 0, that one is drawn off 0. So no draw is the identity, and the smallest draw (where shrinking
+    ends when any motion fails) is one grid step along that last component."""
+    forced = None  # the component drawn off 0 when all before it are 0; none when the identity cannot be drawn
+    if all(lo <= 0.0 <= hi for lo, hi in bounds.values()):
+        forced = next((a for a in reversed(AXES) if a in bounds and bounds[a][0] < bounds[a][1]), None)
+    values: dict[str, float] = {}
+    for axis in AXES:
+        if axis not in bounds:
+            values[axis] = 0.0
+        elif axis == forced:
+            values[axis] = _draw_axis(draw, *bounds[axis], not any(values.values()))
+        else:
+            values[axis] = draw_axis(draw, *bounds[axis])
+    return values

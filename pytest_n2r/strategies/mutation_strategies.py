@@ -4,9 +4,10 @@ Public functions validate their arguments eagerly and hand them to private compo
 the public call (``brightness(max_levels=30)``). The composites' float arguments have no defaults, so the
 ``repr`` always shows them (``noise_patch(max_size=0.5, min_size=0.0)``): a relation's description, which
 keys its Hypothesis database entries and derandomized seed, must not change with how a caller spelled
-the defaults. Every draw starts from "no change", so Hypothesis shrinks
-toward the identity mutation: a failing example is reported as the smallest mutation that still breaks
-the SUT.
+the defaults. No draw is "no change" (it would compare a view with itself, a test that cannot fail):
+Hypothesis shrinks toward the smallest change, so a failing example is reported as the smallest mutation
+that still breaks the SUT. Patch sizes are drawn on a decimal grid (:func:`~.grid.draw_moved`, as pose
+changes are), so a size shrinks step by step to within one grid step of the smallest failing size.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-from .._validation import check_int, check_range
+from .._validation import check_int, check_positive, check_range
+from .grid import draw_axis, draw_moved
 from .mutation import MAX_COUNT, MAX_SEED, BlackPatches, Brightness, Mutation, NoisePatch
 
 __all__ = ["brightness", "noise_patch", "black_patches", "any_mutation"]
@@ -36,18 +38,19 @@ def _composite(name: str) -> Callable[[Callable[..., Any]], Callable[..., st.Sea
 
 @_composite("brightness")
 def _brightness(draw: st.DrawFn, max_levels: int = 128) -> Brightness:
-    return Brightness(draw(st.integers(-max_levels, max_levels)))
+    levels = draw(st.integers(1, max_levels))  # never 0: shrinks to ±1 grey level
+    return Brightness(-levels if draw(st.booleans()) else levels)
 
 
 @_composite("noise_patch")
 def _noise_patch(draw: st.DrawFn, *, max_size: float, min_size: float) -> NoisePatch:
-    size = draw(st.floats(min_size, max_size))
+    size = (draw_moved if min_size == 0 else draw_axis)(draw, min_size, max_size)  # a patch of size 0 changes nothing
     return NoisePatch(size, draw(st.floats(0.0, 1.0)), draw(st.floats(0.0, 1.0)), draw(_seeds))
 
 
 @_composite("black_patches")
 def _black_patches(draw: st.DrawFn, *, max_size: float, count: int = 6) -> BlackPatches:
-    return BlackPatches(draw(st.floats(0.0, max_size)), count, draw(_seeds))
+    return BlackPatches(draw_moved(draw, 0.0, max_size), count, draw(_seeds))
 
 
 @_composite("any_mutation")
@@ -61,31 +64,33 @@ def _any_mutation(
 
 
 def brightness(max_levels: int = 128) -> st.SearchStrategy[Brightness]:
-    """:class:`Brightness` with ``levels`` in ``[-max_levels, max_levels]``; shrinks toward ``levels=0``
+    """:class:`Brightness` with ``levels`` in ``[-max_levels, max_levels]``, never 0; shrinks toward ``levels=1``
     (integers shrink exactly: a failure is reported at the smallest offset that breaks the SUT)."""
-    return _brightness(max_levels=check_int("max_levels", max_levels, 0, 255))
+    return _brightness(max_levels=check_int("max_levels", max_levels, 1, 255))
 
 
 def noise_patch(max_size: float = 0.5, min_size: float = 0.0) -> st.SearchStrategy[NoisePatch]:
-    """:class:`NoisePatch` with ``size`` in ``[min_size, max_size]``, any position and seed; shrinks toward
-    ``size=min_size`` (no change when 0), the top-left position and seed 0."""
-    max_size = check_range("max_size", max_size, 0.0, 1.0)
+    """:class:`NoisePatch` with ``size`` in ``[min_size, max_size]`` (never 0), any position and seed; shrinks
+    toward ``size=min_size`` (one grid step above it when it is 0) on a grid of at least 2000 steps, the top-left
+    position and seed 0."""
+    max_size = check_range("max_size", check_positive("max_size", max_size), 0.0, 1.0)
     return _noise_patch(max_size=max_size, min_size=check_range("min_size", min_size, 0.0, max_size))
 
 
 def black_patches(max_size: float = 0.08, count: int = 6) -> st.SearchStrategy[BlackPatches]:
-    """:class:`BlackPatches` of ``count`` patches with ``size`` in ``[0, max_size]`` and any seed; shrinks
-    toward ``size=0`` (no change) and seed 0."""
-    return _black_patches(max_size=check_range("max_size", max_size, 0.0, 1.0),
-                          count=check_int("count", count, 0, MAX_COUNT))
+    """:class:`BlackPatches` of ``count`` patches with ``size`` in ``(0, max_size]`` and any seed; shrinks
+    toward one grid step (of at least 2000 across the bound) and seed 0."""
+    return _black_patches(max_size=check_range("max_size", check_positive("max_size", max_size), 0.0, 1.0),
+                          count=check_int("count", count, 1, MAX_COUNT))
 
 
 def any_mutation(
     max_levels: int = 128, max_noise_size: float = 0.5, max_patch_size: float = 0.08,
 ) -> st.SearchStrategy[Mutation]:
-    """One of m1, m2, m3 with the given bounds; shrinks toward ``Brightness(levels=0)`` (no change)."""
+    """One of m1, m2, m3 with the given bounds, never a mutation that changes nothing; shrinks toward
+    ``Brightness(levels=1)``."""
     return _any_mutation(
-        max_levels=check_int("max_levels", max_levels, 0, 255),
-        max_noise_size=check_range("max_noise_size", max_noise_size, 0.0, 1.0),
-        max_patch_size=check_range("max_patch_size", max_patch_size, 0.0, 1.0),
+        max_levels=check_int("max_levels", max_levels, 1, 255),
+        max_noise_size=check_range("max_noise_size", check_positive("max_noise_size", max_noise_size), 0.0, 1.0),
+        max_patch_size=check_range("max_patch_size", check_positive("max_patch_size", max_patch_size), 0.0, 1.0),
     )

@@ -62,6 +62,21 @@ class PoseChange(Transform, FollowUp):
         """The plain transform (without units)."""
         return Transform(**self.as_dict())
 
+    def then(self, other: Transform) -> PoseChange:
+        """The single change equal to this one and then ``other`` (in the moved frame), in this change's ``units``:
+        ``other`` is a change in the same units or a plain ``Transform`` (read in these units)."""
+        if not isinstance(other, Transform):
+            raise InvalidType(f"other={other!r} must be a pytest_n2r.Transform, not {type(other).__name__}")
+        units = getattr(other, "units", self.units)
+        if units is not self.units:
+            raise InvalidArgument(f"cannot combine {self!r} (translation in {self.units.value!r} units) with "
+                                  f"{other!r} (in {Units(units).value!r} units); express both in the same units")
+        return PoseChange.of(self.transform.then(other), self.units)
+
+    def inverse(self) -> PoseChange:
+        """The change that undoes this one, in the same ``units``: ``tau.then(tau.inverse())`` is the identity."""
+        return PoseChange.of(self.transform.inverse(), self.units)
+
     def check_scene(self, scene: Scene) -> None:
         """``units='metres'`` needs a scene with a known scale (else :class:`InvalidArgument`)."""
         scene.length_scale(self.units)

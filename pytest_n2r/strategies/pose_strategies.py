@@ -7,8 +7,9 @@ Convention
   T(tau)``, design.md §2), angles in **degrees**, carrying the ``units`` of its translation (reference
   lengths by default, so one bound means the same on every scene).
 - A :class:`PoseChangeFamily` (bounds, units, look-at) is the one place pose changes are drawn from:
-  :meth:`~PoseChangeFamily.strategy` for Hypothesis (shrinking toward the identity on a decimal grid,
-  :mod:`.grid`: a failing example is the smallest motion that still breaks the system under test) and
+  :meth:`~PoseChangeFamily.strategy` for Hypothesis (never the identity, shrinking toward the smallest
+  motion on a decimal grid, :mod:`.grid`: a failing example is the smallest motion that still breaks the
+  system under test) and
   :meth:`~PoseChangeFamily.sample` for uniform draws from a seeded generator (``n2r study``).
 """
 
@@ -24,7 +25,7 @@ from hypothesis import strategies as st
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform, Units
 from ..geometry.look_at import look_at_transform
-from .grid import AXES, Bound, check_bound, draw_axis
+from .grid import AXES, Bound, check_bound, draw_motion
 from .pose_change import PoseChange
 
 __all__ = ["PoseChangeFamily", "transforms"]
@@ -69,6 +70,9 @@ class PoseChangeFamily:
                 f"z={bounds['z']!r} with look_at=True moves the camera up to the look-at point one reference "
                 "length ahead; keep z below 0.9"
             )
+        if not bounds:
+            raise InvalidArgument(f"roll, pitch, yaw, x, y and z are all 0: every pose change would be the identity, "
+                                  f"which tests nothing; give at least one of {', '.join(AXES)} a bound other than 0")
         return cls(bounds, units, look_at)
 
     def build(self, values: Mapping[str, float]) -> PoseChange:
@@ -92,7 +96,7 @@ class PoseChangeFamily:
 
 
 def _transforms_impl(draw: Any, *, look_at: bool = False, units: str = "reference", **bounds: Bound) -> PoseChange:
-    values = {a: draw_axis(draw, *bounds[a]) if a in bounds else 0.0 for a in AXES}
+    values = draw_motion(draw, bounds)  # never the identity: it compares a view with itself
     return PoseChangeFamily(bounds, Units(units), look_at).build(values)
 
 
@@ -105,7 +109,7 @@ def transforms(
     x: float | Bound = 0.0, y: float | Bound = 0.0, z: float | Bound = 0.0,
     *, units: Units | str = Units.REFERENCE, look_at: bool = False,
 ) -> st.SearchStrategy[PoseChange]:
-    """Pose changes τ with each component within its bound; shrinks toward the identity.
+    """Pose changes τ with each component within its bound, never the identity; shrinks toward the smallest motion.
 
     Each bound is a number ``b`` (meaning ``-|b|..|b|``) or a pair ``(lo, hi)``. Angles are **degrees**
     (yaw about the camera's y axis, pitch about x, roll about the optical axis; +yaw turns right, +pitch
@@ -122,7 +126,9 @@ def transforms(
 
     Shrinking: each component moves toward the point of its bound nearest 0 (0 itself when the bound
     contains it) on a decimal grid, so a reported counterexample is within one grid step of the
-    smallest failing motion.
+    smallest failing motion. No draw is the identity (it would compare a view with itself): when every
+    component before it drew 0, the last bounded component (in the order roll, pitch, yaw, x, y, z) is drawn
+    off 0, so the smallest draw is one grid step along it. At least one bound must be other than 0.
 
     >>> transforms(yaw=10, x=(-0.1, 0.2))
     transforms(x=(-0.1, 0.2), yaw=(-10.0, 10.0))

@@ -69,5 +69,8 @@ def views(
     if interpolate and len(candidates) >= 2:
         return st.builds(lambda i, k: trajectory_view(candidates, i, k / _STEPS),
                          st.integers(0, len(candidates) - 2), st.integers(0, _STEPS))
-    names = [v.name for v in candidates]  # by name, so a report names the view
-    return st.sampled_from(names).map(scene.view)
+
+    def view_at(index: int) -> SceneView:  # drawn by position, not by name, which a view may share
+        return candidates[index]
+
+    return st.sampled_from(range(len(candidates))).map(view_at)

@@ -269,3 +269,19 @@ def test_replay_relation_evaluates_exactly_the_recorded_examples_without_a_searc
     # once per render: a source view, and a follow-up pose the survey drew more than once, run the SUT once
     assert len(calls) == record.sut_calls <= len(recorded) + len({e.view for e in recorded})
     assert record.sut_calls + record.sut_shared == 2 * len(recorded)
+
+
+def test_an_example_drawn_again_is_not_counted_twice():
+    """Hypothesis maps different choices to one example (a coarse bound, a view drawn again): a repeat tests nothing
+    new, so it is not recorded or counted and another is drawn. Here a million choices make three brightness
+    changes on a one-view scene; before, 10 examples were counted, most of them repeats."""
+    from pytest_n2r.strategies.mutation import Brightness
+
+    scene = PlaneScene(n_views=1)
+    coarse = st.integers(0, 10**6).map(lambda k: Brightness(1 + k % 3))
+    relation = Relation.build(AbsDifference(), 255, coarse)
+    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation,
+                            settings=RunSettings(examples=10, database=None, derandomize=True))
+    drawn = [(e.view, e.mutation["levels"]) for e in record.examples]
+    assert len(drawn) == len(set(drawn)), f"examples recorded twice: {sorted(drawn)}"
+    assert {levels for _, levels in drawn} == {1, 2, 3}, f"examples {sorted(drawn)}; expected each of 1, 2, 3 once"

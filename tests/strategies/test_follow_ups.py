@@ -60,6 +60,26 @@ def test_a_pose_change_is_a_transform_with_units():
         PoseChange(x=1, units="furlongs")
 
 
+def test_inverting_and_chaining_pose_changes_keep_their_units():
+    """PoseChange inherited Transform.inverse() and .then(), which returned a plain Transform: a change of 0.1
+    scene units came back as 0.1 reference lengths."""
+    tau = PoseChange(yaw=5.0, x=0.1, units="scene")
+    inverse = tau.inverse()
+    assert isinstance(inverse, PoseChange) and inverse.units is Units.SCENE, f"inverse {inverse!r} lost units='scene'"
+    assert inverse.transform == tau.transform.inverse(), f"{inverse!r} is not the inverse of {tau!r}"
+    both = tau.then(PoseChange(yaw=-5.0, units="scene"))
+    assert isinstance(both, PoseChange) and both.units is Units.SCENE, f"{both!r} lost units='scene'"
+    assert both.x == pytest.approx(0.1) and both.yaw == pytest.approx(0.0, abs=1e-12), f"{both!r}"
+    assert tau.then(Transform(yaw=1.0)).units is Units.SCENE, "a plain Transform is read in the change's units"
+    np.testing.assert_allclose(tau.then(inverse).matrix(), np.eye(4), atol=1e-12)
+    with pytest.raises(InvalidArgument, match=r"cannot combine PoseChange\(yaw=5.0, x=0.1, units='scene'\) "
+                                              r"\(translation in 'scene' units\) with PoseChange\(x=0.1\) "
+                                              r"\(in 'reference' units\)"):
+        tau.then(PoseChange(x=0.1))
+    with pytest.raises(InvalidType, match=r"other='yaw=1' must be a pytest_n2r.Transform, not str"):
+        tau.then("yaw=1")
+
+
 def test_plain_transforms_are_pose_changes_in_reference_lengths_and_other_values_are_named():
     assert as_follow_up(Transform(yaw=3)) == PoseChange(yaw=3)
     tau, mutation = PoseChange(x=1, units="scene"), n2r.Brightness(10)
@@ -172,3 +192,5 @@ def test_bad_family_arguments_are_named():
         PoseChangeFamily.of(x=0.1, units="scene", look_at=True)
     with pytest.raises(InvalidType, match="look_at=1 must be True or False"):
         PoseChangeFamily.of(look_at=1)
+    with pytest.raises(InvalidArgument, match="roll, pitch, yaw, x, y and z are all 0"):
+        PoseChangeFamily.of(units="scene")

@@ -78,15 +78,49 @@ def test_tiny_nonzero_sizes_still_change_a_pixel():
 
 
 @pytest.mark.parametrize("strategy", [m.brightness(), m.noise_patch(), m.black_patches(), m.any_mutation()])
-def test_strategies_shrink_toward_no_change(strategy):
+def test_no_draw_is_no_change(strategy):
+    """A mutation that changes nothing compares a view with itself: a test that cannot fail."""
+
+    @settings(database=None, max_examples=300)
+    @given(mutation=strategy)
+    def check(mutation: m.Mutation) -> None:
+        assert not mutation.is_identity, f"{mutation!r} was drawn: it changes nothing"
+
+    check()
+
+
+@pytest.mark.parametrize(("strategy", "smallest"), [
+    (m.brightness(), m.Brightness(1)), (m.any_mutation(), m.Brightness(1)),
+    (m.noise_patch(), m.NoisePatch(size=0.0001, x=0.0, y=0.0)), (m.black_patches(), m.BlackPatches(size=0.00001)),
+])
+def test_strategies_shrink_toward_the_smallest_change(strategy, smallest):
     minimal = find(strategy, lambda mutation: True, settings=settings(database=None, max_examples=5))
-    assert minimal.is_identity, minimal
+    assert minimal == smallest, f"shrunk to {minimal!r}; expected {smallest!r}"
 
 
 def test_shrinking_finds_the_smallest_breaking_brightness():
     """A 'SUT' that breaks at 20 grey levels or more: the reported example is exactly the threshold."""
     minimal = find(m.brightness(), lambda mu: abs(mu.levels) >= 20, settings=settings(database=None))
     assert abs(minimal.levels) == 20, minimal
+
+
+@pytest.mark.parametrize(("strategy", "threshold", "step"), [
+    (m.noise_patch(), 0.1234, 1e-4), (m.noise_patch(max_size=0.3, min_size=0.05), 0.2222, 1e-4),
+    (m.black_patches(), 0.0123, 1e-5), (m.black_patches(max_size=0.5, count=2), 0.3456, 1e-4),
+])
+def test_patch_sizes_shrink_to_the_smallest_breaking_size(strategy, threshold, step):
+    """docs/mutations.md: sizes shrink toward min_size; drawn as plain floats they shrank to a "simple" float
+    (0.5, 0.0625) far above the threshold."""
+    minimal = find(strategy, lambda mu: mu.size > threshold, settings=settings(database=None, max_examples=500))
+    assert threshold < minimal.size <= threshold + step * 1.000001, (
+        f"shrunk to size={minimal.size}; expected within one grid step ({step}) above {threshold}")
+
+
+@pytest.mark.parametrize("min_size", [0.1234, 0.05, 0.5])
+def test_any_noise_patch_failing_shrinks_to_min_size(min_size):
+    minimal = find(m.noise_patch(max_size=0.5, min_size=min_size), lambda mu: True,
+                   settings=settings(database=None, max_examples=50))
+    assert minimal.size == min_size, f"shrunk to size={minimal.size}; expected min_size={min_size}"
 
 
 def test_strategy_reprs_are_their_calls():
@@ -108,6 +142,11 @@ def test_strategy_reprs_are_their_calls():
         (lambda: m.BlackPatches(size=0.1, count=100), InvalidArgument, r"count=100 is out of range"),
         (lambda: m.brightness(max_levels=256), InvalidArgument, r"max_levels=256 is out of range"),
         (lambda: m.noise_patch(max_size=0.2, min_size=0.3), InvalidArgument, r"min_size=0\.3 is out of range"),
+        (lambda: m.brightness(max_levels=0), InvalidArgument, r"max_levels=0 is out of range"),
+        (lambda: m.noise_patch(max_size=0.0), InvalidArgument, r"max_size=0\.0 must be > 0"),
+        (lambda: m.black_patches(max_size=0.0), InvalidArgument, r"max_size=0\.0 must be > 0"),
+        (lambda: m.black_patches(count=0), InvalidArgument, r"count=0 is out of range"),
+        (lambda: m.any_mutation(max_patch_size=0), InvalidArgument, r"max_patch_size=0\.0 must be > 0"),
         (lambda: m.Brightness(10).apply(np.zeros((4, 4, 3), np.float32)), InvalidType, "got dtype float32"),
         (lambda: m.Brightness(10).apply(np.zeros((4, 4), np.uint8)), InvalidType, r"rgb must have shape \(H W 3\)"),
     ],

@@ -6,18 +6,20 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import find, given, settings
+from hypothesis import assume, find, given, settings
 from hypothesis import strategies as st
 
 from pytest_n2r import InvalidArgument, InvalidType, Transform
 from pytest_n2r import strategies as n2r
 from pytest_n2r.geometry import Units
+from pytest_n2r.strategies.grid import check_bound, grid_step
 
 BOUNDS = st.tuples(st.floats(-170, 170), st.floats(-170, 170)).map(sorted).map(tuple)
 
 
 @given(bound=BOUNDS, data=st.data())
 def test_drawn_values_stay_within_their_bounds(bound, data):
+    assume(bound != (0.0, 0.0))  # every bound 0 is refused (the identity only)
     tau = data.draw(n2r.transforms(yaw=bound, x=(bound[0] / 100, bound[1] / 100)))
     assert bound[0] <= tau.yaw <= bound[1], f"yaw={tau.yaw} outside {bound}"
     assert bound[0] / 100 <= tau.x <= bound[1] / 100, f"x={tau.x} outside {bound} / 100"
@@ -32,6 +34,13 @@ def test_a_bound_a_few_subnormals_wide_draws_inside_it(data):
     assert 0.0 <= tau.yaw <= 5e-324, f"yaw={tau.yaw} outside (0, 5e-324)"
 
 
+@given(data=st.data())
+def test_a_bound_near_the_largest_float_draws_inside_it(data):
+    """A bound whose span a float holds is drawn from (a wider one is refused, below)."""
+    tau = data.draw(n2r.transforms(x=(0.0, 1.7e308), y=(-8e307, 8e307)))
+    assert 0.0 <= tau.x <= 1.7e308 and -8e307 <= tau.y <= 8e307, f"{tau!r} outside its bounds"
+
+
 @pytest.mark.parametrize(
     ("kwargs", "error", "words"),
     [
@@ -44,6 +53,10 @@ def test_a_bound_a_few_subnormals_wide_draws_inside_it(data):
         ({"x": 0.1, "units": "furlongs"}, InvalidArgument, "units='furlongs' is not a unit"),
         ({"x": 0.1, "units": "scene", "look_at": True}, InvalidArgument, "look_at=True needs units='reference'"),
         ({"z": 0.95, "look_at": True}, InvalidArgument, "keep z below 0.9"),
+        ({"x": 1.7e308}, InvalidArgument, "x=1.7e+308 spans inf (hi - lo overflows a float)"),
+        ({"y": (-1e308, 1e308)}, InvalidArgument, "y=(-1e+308, 1e+308) spans inf"),
+        ({}, InvalidArgument, "roll, pitch, yaw, x, y and z are all 0: every pose change would be the identity"),
+        ({"yaw": 0, "x": (0, 0), "look_at": True}, InvalidArgument, "are all 0"),
     ],
 )
 def test_bad_bounds_are_rejected_eagerly_naming_the_argument(kwargs, error, words):
@@ -58,8 +71,60 @@ def test_repr_rebuilds_the_call():
     assert repr(n2r.transforms(x=0.5, units="scene")) == "transforms(units='scene', x=(-0.5, 0.5))"
 
 
-def test_unconstrained_search_shrinks_to_the_identity():
-    assert find(n2r.transforms(roll=5, pitch=5, yaw=30, x=0.2, y=0.2, z=0.2), lambda t: True).is_identity
+@pytest.mark.parametrize("bounds", [
+    {"roll": 5, "pitch": 5, "yaw": 30, "x": 0.2, "y": 0.2, "z": 0.2}, {"yaw": 20, "x": (-0.1, 0.3)}, {"pitch": 10},
+])
+def test_unconstrained_search_shrinks_to_one_grid_step_along_one_axis(bounds):
+    """The identity is never drawn (a view compared with itself cannot fail): any motion failing shrinks to the
+    smallest motion there is, one grid step along one component, every other component 0."""
+    tau = find(n2r.transforms(**bounds), lambda t: True, settings=settings(database=None))
+    moved = {name: value for name, value in tau.as_dict().items() if value}
+    assert len(moved) == 1, f"shrunk to {tau!r}; expected one component off 0"
+    (axis, value), = moved.items()
+    step = grid_step(*check_bound(axis, bounds[axis]))
+    assert abs(value) == step, f"shrunk to {tau!r}; expected {axis} one grid step ({step}) from 0"
+
+
+@pytest.mark.parametrize("bounds", [
+    {"yaw": 10, "x": 0.1}, {"x": 0.1}, {"roll": 5, "pitch": 5, "yaw": 30, "x": 0.2, "y": 0.2, "z": 0.2},
+    {"yaw": (0, 20), "z": (-0.2, 0.0)}, {"y": 0.05, "pitch": 3.0, "look_at": True}, {"yaw": (0.0, 5e-324)},
+])
+def test_no_draw_is_the_identity(bounds):
+    drawn = []
+
+    @settings(max_examples=500, database=None)
+    @given(n2r.transforms(**bounds))
+    def collect(tau):
+        drawn.append(tau)
+
+    collect()
+    identities = sum(tau.is_identity for tau in drawn)
+    assert identities == 0, f"{identities} of {len(drawn)} draws of transforms(**{bounds}) are the identity"
+
+
+@pytest.mark.parametrize("name", sorted(n2r.PRESETS))
+def test_the_presets_never_draw_the_identity(name):
+    @settings(max_examples=200, database=None)
+    @given(n2r.PRESETS[name])
+    def check(tau):
+        assert not tau.is_identity, f"{name} drew the identity"
+
+    check()
+
+
+def test_a_one_axis_failure_shrinks_with_the_other_axes_at_0():
+    tau = find(n2r.transforms(roll=5, yaw=20, x=0.1), lambda t: t.yaw > 5,
+               settings=settings(max_examples=500, database=None))
+    assert 5 < tau.yaw <= 5.01 and tau.roll == 0 and tau.x == 0, f"shrunk to {tau!r}; expected yaw just above 5"
+
+
+@pytest.mark.parametrize("bound, nearest", [((2.3456, 20), 2.3456), ((-20, -2.3456), -2.3456),
+                                            ((0.123456789, 0.5), 0.123456789)])
+def test_a_bound_end_off_the_grid_is_the_smallest_draw(bound, nearest):
+    """The end of a bound nearest 0 is where shrinking ends, also when it is not on the decimal grid (rounding
+    it to the grid moved it to 2.346)."""
+    tau = find(n2r.transforms(yaw=bound), lambda t: True, settings=settings(database=None))
+    assert tau.yaw == nearest, f"shrunk to yaw={tau.yaw!r}; expected the bound's end {nearest}"
 
 
 @pytest.mark.parametrize(

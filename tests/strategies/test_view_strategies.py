@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from pytest_n2r import InvalidArgument, InvalidType, Transform
 from pytest_n2r import strategies as n2r
+from pytest_n2r.scene import SceneView
 from pytest_n2r.scene.splits import scene_views
 from pytest_n2r.scene.trajectory import trajectory_view
 
@@ -90,6 +91,24 @@ def test_an_interpolated_held_out_draw_shrinks_to_a_held_out_view(scene_given):
     view = drawn if scene_given else scene.view(drawn)
     assert (view.name, view.split) == ("view1", "heldout"), (
         f"the minimal held-out draw is {view.name} of split {view.split!r}, not the first held-out view")
+
+
+def test_views_sharing_a_name_are_each_drawn():
+    """Views were drawn by name and looked up again, so of two views of one name only the first was ever drawn.
+    (A Scene now refuses two views of one name; this scene's list was changed after it was set.)"""
+    scene = PlaneScene(n_views=4)  # held out: view1, view3
+    twin = scene.views[3]
+    scene.views[3] = SceneView(twin.index, "view1", twin.camera, twin.c2w, twin.split)
+    drawn = []
+
+    @settings(max_examples=60, database=None)
+    @given(view=n2r.views(scene))
+    def collect(view):
+        drawn.append(view)
+
+    collect()
+    assert any(v is scene.views[1] for v in drawn) and any(v is scene.views[3] for v in drawn), (
+        f"drew {sorted({(v.index, v.name) for v in drawn})}; expected both views named 'view1' (indices 1 and 3)")
 
 
 def test_a_scene_with_one_view_has_no_trajectory_and_draws_its_view():
