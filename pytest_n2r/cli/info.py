@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -39,14 +40,20 @@ def run(args: argparse.Namespace) -> int:
 
     RenderSize.parse(args.size, name="--size")  # checked before the scene is read
     if is_splat_file(args.scene):  # splats packed by `n2r import`
+        if args.shift:
+            from ..errors import InvalidArgument
+
+            raise InvalidArgument(f"--shift is not supported for splat scene files: {args.scene} holds the splats and "
+                                  "their cameras but no photos (n2r import packs none), so there is nothing real to "
+                                  "compare its renders with; measure the shift on the .n2r scene file of a fit")
         info = splat_info(args.scene)
         lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
-        print(json.dumps(info, indent=2) if args.json else "\n".join(lines))
+        print(_json(info) if args.json else "\n".join(lines))
         return 0
     scene = read_scene_file(args.scene, images=args.shift)
     shift = _shift(scene, args.size) if args.shift else None
     if args.json:
-        print(json.dumps({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}, indent=2))
+        print(_json({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}))
     else:
         try:
             text = format_info(scene)
@@ -57,6 +64,21 @@ def run(args: argparse.Namespace) -> int:
                                  "n2r info --json prints it as stored") from exc
         print(text + (f"\n{shift.format()}" if shift else ""))
     return 0
+
+
+def _json(data: dict) -> str:
+    """``data`` as strict JSON (what any JSON reader reads): a number that is not finite is ``null``."""
+    return json.dumps(_finite(data), indent=2, allow_nan=False)
+
+
+def _finite(value: object) -> object:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
 
 
 def _shift(scene: SceneFile, size: str) -> FidelityReport:

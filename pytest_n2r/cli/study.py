@@ -27,6 +27,34 @@ def _wxh(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _sut_kind(text: str) -> tuple[str | None, str]:
+    """``SUT=KIND`` (one ``--sut``) or ``KIND`` (every imported ``--sut``) as ``(sut or None, kind)``."""
+    sut, _, kind = text.rpartition("=")
+    if kind not in ("detector", "classifier"):
+        raise argparse.ArgumentTypeError(f"--sut-kind {text!r}: expected detector or classifier, or SUT=detector / "
+                                         "SUT=classifier for one --sut")
+    return sut or None, kind
+
+
+def _kinds(suts: list[str], given: list[tuple[str | None, str]]) -> dict[str, str]:
+    """The kind given for each ``--sut`` (``SUT=KIND`` wins over a bare ``KIND``, which applies to the imported
+    ones: a built-in's kind is known)."""
+    from ..errors import InvalidArgument
+    from ..study.suts import BUILTIN_SUTS
+
+    kinds = {}
+    for sut, kind in given:
+        if sut is not None and sut not in suts:
+            raise InvalidArgument(f"--sut-kind {sut}={kind}: {sut!r} is not one of the --sut given "
+                                  f"({', '.join(suts)})")
+    for spec in suts:
+        named = [kind for sut, kind in given if sut == spec] or [
+            kind for sut, kind in given if sut is None and spec not in BUILTIN_SUTS]
+        if named:
+            kinds[spec] = named[-1]
+    return kinds
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "study", help="characterize SUTs on scenes as the N2R-Tester paper did (RQ1-RQ3)",
@@ -38,6 +66,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="a .n2r file, 'demo:<name>' or 'module:function' returning a Scene")
     parser.add_argument("--sut", action="append", required=True, metavar="SUT",
                         help="orb, sift, akaze, or 'module:callable' (repeatable)")
+    parser.add_argument("--sut-kind", type=_sut_kind, action="append", default=[], metavar="[SUT=]KIND",
+                        help="detector or classifier: what an imported --sut returns, where its output cannot say "
+                             "(shape (1, K): one keypoint, or a batch of one score vector); SUT=KIND for one --sut "
+                             "(repeatable), KIND for every imported one")
     parser.add_argument("-o", "--out", required=True, metavar="DIR", help="output folder (created if missing)")
     parser.add_argument("--force", action="store_true", help="write into a folder that holds other files")
     parser.add_argument("--examples", type=int, default=5, metavar="N",
@@ -72,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidArgument(f"{option} {value}: expected an integer >= 1")
     if not 16 <= args.size <= 4096:
         raise InvalidArgument(f"--size {args.size}: expected the longer side of the test renders in 16..4096 pixels")
+    kinds = _kinds(args.sut, args.sut_kind)  # checked before any work
     check_output_dir(Path(args.out), lambda folder: (folder / "study.md").is_file(), "the study's tables and plots",
                      force=args.force)
     config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
@@ -80,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     scenes = [load_scene_spec(spec, args.device) for spec in parse_scene_specs(args.scenes, Path.cwd(), "SCENE")]
     view = scenes[0].views[0]
     probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).rgb
-    suts = [resolve_sut(spec, probe) for spec in args.sut]
+    suts = [resolve_sut(spec, probe, kinds.get(spec)) for spec in args.sut]
     with tqdm(desc="n2r study", unit="step", file=sys.stderr, disable=None) as bar:
         def progress(message: str) -> None:
             bar.set_postfix_str(message)

@@ -8,10 +8,14 @@ most ``eps`` (design.md §6): repeatability 0.74 → deviation 0.26 → fails at
 from __future__ import annotations
 
 import math
+import re
 import sys
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from types import BuiltinFunctionType, FunctionType
 from typing import Any, ClassVar
+
+import numpy as np
 
 from .._validation import check_range
 from ..errors import MetricUndefined
@@ -48,7 +52,10 @@ class MetricResult:
 
 class Metric(ABC):
     """Base class of SUT metrics. Subclasses set ``name``, ``ideal`` and ``needs`` and implement
-    :meth:`compute`; ``repr`` rebuilds the constructor call."""
+    :meth:`compute`; ``repr`` rebuilds the constructor call.
+
+    A subclass without a ``__repr__`` of its own gets :meth:`__repr__` below: its class name and public
+    attributes, the same in every run (baselines compare metrics by their ``repr``)."""
 
     #: Short name used in reports (``"repeatability"``).
     name: ClassVar[str]
@@ -73,6 +80,24 @@ class Metric(ABC):
         self, out_source: Any, out_follow: Any, source: RenderedView | None, follow: RenderedView | None
     ) -> MetricResult:
         """Score the SUT outputs on the source and follow-up views."""
+
+    def __repr__(self) -> str:
+        """``MyMetric(a=1, b='x')``: the class's qualified name and its public instance attributes, sorted by name,
+        with no memory address, so an unchanged metric has the same ``repr`` in every run (a baseline compares
+        metrics by it: ``changed-metric``, and the field floor and kept results are keyed by it). A subclass whose
+        constructor parameters are stored under other names should define its own ``repr``.
+
+        >>> class Diff(Metric):
+        ...     name, ideal = "diff", 0.0
+        ...     def __init__(self, scale=1.0):
+        ...         self.scale, self._cache = scale, {}
+        ...     def compute(self, a, b, source=None, follow=None):
+        ...         return self.result(abs(a - b) * self.scale)
+        >>> Diff(2.0)
+        Diff(scale=2.0)
+        """
+        attrs = sorted((k, v) for k, v in vars(self).items() if not k.startswith("_"))
+        return f"{type(self).__qualname__}({', '.join(f'{k}={_stable_repr(v)}' for k, v in attrs)})"
 
     def deviation(self, score: float) -> float:
         """Distance of ``score`` from :attr:`ideal` (``|score - ideal|``)."""
@@ -106,6 +131,25 @@ class Metric(ABC):
                 f"{self.ideal:g}, more than eps={eps:g}" + (f" ({details})" if details else "")
             )
         return result
+
+
+#: `` at 0x7f...``: the memory address in a default ``repr``, which differs from run to run.
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def _stable_repr(value: Any) -> str:
+    """``repr(value)`` without what changes between runs: a function or class by its qualified name, an array by
+    its values (numpy's ``repr`` elides long ones), and no memory address."""
+    if isinstance(value, (type, FunctionType, BuiltinFunctionType)):
+        return f"{getattr(value, '__module__', '?')}.{value.__qualname__}"
+    if isinstance(value, np.ndarray):
+        return f"array({value.tolist()!r}, dtype={str(value.dtype)!r})"
+    if isinstance(value, (list, tuple)):
+        items = ", ".join(_stable_repr(v) for v in value)
+        return f"[{items}]" if isinstance(value, list) else f"({items}{',' if len(value) == 1 else ''})"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_stable_repr(k)}: {_stable_repr(v)}" for k, v in value.items()) + "}"
+    return _ADDRESS.sub("", repr(value))
 
 
 def _reject(message: str) -> None:

@@ -191,6 +191,22 @@ def _folder(value: str, where: Where) -> Path | None:
     return folder
 
 
+def _output_file(value: str, where: Where) -> Path:
+    """A file to write at the end of the session: not a folder, in a folder that exists or can be created and
+    is writable (checked now, so a bad path never costs the run's result)."""
+    if not str(value).strip():
+        raise InvalidArgument("the path is empty; expected the path of a file to write")
+    path = Path(value).expanduser()
+    if path.is_dir():
+        raise InvalidArgument(f"{path} is a folder; expected the path of a file to write (e.g. {path / 'n2r.json'})")
+    from ..data.atomic import unwritable_reason
+
+    reason = unwritable_reason(path.absolute().parent)
+    if reason is not None:
+        raise InvalidArgument(f"{path}: {reason}; choose a path in a writable folder")
+    return path
+
+
 def _byte_size(value: str, where: Where) -> int:
     from ..scene.render_cache import parse_size
 
@@ -304,7 +320,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("--n2r-cache-clear", None, None, "empty the render cache before the run", action="store_true"),
     Option("--n2r-save-baseline", None, "PATH",
            "write every relation's drawn examples (all a replay needs, and their deviations) to PATH",
-           part="report"),
+           parse=_output_file, part="report"),
     Option("--n2r-compare", None, "PATH",
            "replay the baseline's examples at PATH, pair them with this run's and fail on regressions",
            parse=_baseline, part="report", names_itself=True),
@@ -321,9 +337,10 @@ OPTIONS: tuple[Option, ...] = (
            "changed-eps)", default=", ".join(defaults.COMPARE_FAIL_ON), parse=_outcomes, action="append",
            part="report", names_itself=True),
     Option("--n2r-report", None, "PATH", "write a self-contained HTML report of every relation to PATH",
-           part="report"),
+           parse=_output_file, part="report"),
     Option("--n2r-json", None, "PATH",
-           "write every relation's results (examples, scores, timings) to PATH as JSON", part="report"),
+           "write every relation's results (examples, scores, timings) to PATH as JSON (NaN where a value is "
+           "undefined)", parse=_output_file, part="report"),
 )
 RUN_OPTIONS = tuple(o for o in OPTIONS if o.part == "run")
 REPORT_OPTIONS = tuple(o for o in OPTIONS if o.part == "report")

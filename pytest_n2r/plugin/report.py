@@ -9,6 +9,7 @@ by the controller process only.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -16,6 +17,11 @@ import pytest
 from .options import option, read_options
 
 _RESULT = pytest.StashKey["dict"]()
+#: The files to write at the end of the session, by option name (``save_baseline``, ``json``, ``report``).
+_OUTPUTS = pytest.StashKey["dict"]()
+#: The relation test ids this process collected, selected or deselected (for a baseline's ``not_recorded``).
+_COLLECTED = pytest.StashKey["set"]()
+_OUTPUT_OPTIONS = ("save_baseline", "json", "report")
 
 
 def _is_worker(config: pytest.Config) -> bool:
@@ -23,8 +29,18 @@ def _is_worker(config: pytest.Config) -> bool:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """Check the reporting options up front: a bad rule or a missing or malformed baseline is a usage
-    error. The baseline is loaded in pytest-xdist workers too: they replay its examples."""
+    """Check the reporting options up front: a bad rule, a missing or malformed baseline, or an output path that
+    cannot be written (a folder, a folder that is not writable) is a usage error. The baseline is loaded in
+    pytest-xdist workers too: they replay its examples."""
+    outputs = {name: path for name, path in read_options(config, tuple(option(n) for n in _OUTPUT_OPTIONS)).items()
+               if path is not None}
+    seen: dict[Path, str] = {}
+    for name, path in outputs.items():
+        other = seen.setdefault(path.absolute(), name)
+        if other != name:
+            raise pytest.UsageError(f"pytest-n2r: {option(other).flag} and {option(name).flag} are both {path}; "
+                                    "give each output its own file (one would replace the other)")
+    config.stash[_OUTPUTS] = outputs
     rules = (option("compare_confidence"), option("compare_fail"), option("compare_fail_on"))
     given = [o.flag for o in rules if o.given(config) is not None]
     if given and not config.getoption("n2r_compare"):
@@ -34,6 +50,32 @@ def pytest_configure(config: pytest.Config) -> None:
     values = read_options(config, (*rules, option("compare")))
     config.stash[_RESULT] = {"margin": values["compare_fail"], "confidence": values["compare_confidence"],
                              "fail_on": values["compare_fail_on"], "baseline": values["compare"]}
+
+
+def _relation_ids(items: list[pytest.Item]) -> set[str]:
+    from . import RELATION_MARKER
+
+    return {item.nodeid for item in items if item.get_closest_marker(RELATION_MARKER) is not None}
+
+
+def pytest_deselected(items: list[pytest.Item]) -> None:
+    """Remember the deselected relation tests (``-k``, ``-m``, ``--deselect``): a baseline saved from this session
+    lists them as not recorded, so a later comparison that runs them says ``missing``, not ``new``."""
+    if items and items[0].config.stash.get(_OUTPUTS, {}).get("save_baseline") is not None:
+        items[0].config.stash.setdefault(_COLLECTED, set()).update(_relation_ids(items))
+
+
+def pytest_collection_finish(session: pytest.Session) -> None:
+    if session.config.stash.get(_OUTPUTS, {}).get("save_baseline") is not None:
+        session.config.stash.setdefault(_COLLECTED, set()).update(_relation_ids(session.items))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node: Any, error: Any) -> None:
+    """pytest-xdist's controller collects nothing: it takes the relation tests each worker collected."""
+    collected = getattr(node, "workeroutput", {}).get("n2r_collected_relations")
+    if collected:
+        node.config.stash.setdefault(_COLLECTED, set()).update(collected)
 
 
 def baseline_examples(config: pytest.Config, nodeid: str, scene: Any, relation: Any) -> list | None:
@@ -67,13 +109,33 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
         ])
 
 
+def _stopped_early(session: pytest.Session) -> str | None:
+    """Why the session did not run every selected test (``-x``, ``--maxfail``, Ctrl-C, ``pytest.exit``), or
+    ``None``."""
+    if session.exitstatus == pytest.ExitCode.INTERRUPTED:
+        return "the session was interrupted"
+    why = session.shouldfail or session.shouldstop
+    return f"the session stopped early ({why})" if why else None
+
+
+def _why(exc: BaseException) -> str:
+    if isinstance(exc, OSError):
+        return f"{exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
+    return f"{type(exc).__name__}: {exc}"
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Judge the comparison first (its verdict is the run's, whatever happens to the files), then write each
+    output; one that cannot be written (or a baseline of a session that stopped early) is reported and fails
+    the run, without hiding the others or the verdict."""
     config = session.config
+    outputs = config.stash.get(_OUTPUTS, {})
     if _is_worker(config):
+        if outputs.get("save_baseline") is not None:
+            config.workeroutput["n2r_collected_relations"] = sorted(config.stash.get(_COLLECTED, set()))
         return
-    options = {name: config.getoption(name) for name in ("n2r_save_baseline", "n2r_compare", "n2r_report", "n2r_json")}
-    if not any(options.values()):
+    if not outputs and not config.getoption("n2r_compare"):
         return
     import json
 
@@ -83,22 +145,43 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     from . import relation_records
 
     records = relation_records(config)
-    written = []
-    if options["n2r_save_baseline"]:
-        written.append(save_baseline(options["n2r_save_baseline"], records))
-    if options["n2r_json"]:
-        payload = {"relations": [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]}
-        written.append(atomic_write_text(options["n2r_json"], json.dumps(payload, indent=1, allow_nan=True) + "\n"))
-    if options["n2r_report"]:
-        written.append(write_html(options["n2r_report"], records))
-    result = config.stash.get(_RESULT, {})
-    result["written"] = written
-    config.stash[_RESULT] = result
-    if options["n2r_compare"]:
+    result = config.stash.setdefault(_RESULT, {})
+    if config.getoption("n2r_compare"):
         result["comparisons"] = compare_paired(result["baseline"], records, margin=result["margin"],
                                                confidence=result["confidence"], fail_on=result["fail_on"])
         if any(c.fails for c in result["comparisons"]) and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
+    written, problems = [], []
+    path = outputs.get("save_baseline")
+    stopped = _stopped_early(session) if path is not None else None
+    if stopped is not None:
+        problems.append(f"did not save the baseline {path}: {stopped}, so it would lack the relations that did not "
+                        "run (a later comparison would pass them as new); save it from a session that runs to the "
+                        "end (without -x or --maxfail)")
+        path = None
+    if path is not None:
+        recorded = {r.nodeid for r in records}
+        not_recorded = sorted(config.stash.get(_COLLECTED, set()) - recorded)
+        writers = [(path, "the baseline", lambda: save_baseline(
+            path, records, meta={"not_recorded": not_recorded} if not_recorded else None))]
+    else:
+        writers = []
+    if outputs.get("json") is not None:
+        def json_text() -> str:  # NaN where a value is undefined (a rejected example's score): see docs/reporting.md
+            payload = {"relations": [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]}
+            return json.dumps(payload, indent=1, allow_nan=True) + "\n"
+
+        writers.append((outputs["json"], "the JSON results", lambda: atomic_write_text(outputs["json"], json_text())))
+    if outputs.get("report") is not None:
+        writers.append((outputs["report"], "the HTML report", lambda: write_html(outputs["report"], records)))
+    for target, what, write in writers:
+        try:
+            written.append(write())
+        except Exception as exc:  # noqa: BLE001 -- said below; the verdict and the other outputs stand
+            problems.append(f"could not write {what} {target}: {_why(exc)}")
+    result["written"], result["problems"] = written, problems
+    if problems and session.exitstatus == pytest.ExitCode.OK:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
@@ -129,3 +212,5 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
                 + ", ".join(f"{c.nodeid} ({c.outcome})" for c in failed), red=True, bold=True)
     for path in result.get("written", []):
         terminalreporter.write_line(f"pytest-n2r wrote {path}")
+    for problem in result.get("problems", []):
+        terminalreporter.write_line(f"pytest-n2r {problem}", red=True, bold=True)

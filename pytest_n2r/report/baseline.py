@@ -29,10 +29,11 @@ import numpy as np
 from .. import defaults
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
-from ..relation.record import STATUSES, ExampleRecord, RelationRecord
+from ..relation.record import ExampleRecord, RelationRecord
+from .validate import BadField, meta_from_json, relation_from_json
 
-__all__ = ["FORMAT", "VERSION", "BaselineError", "save_baseline", "load_baseline", "OUTCOMES", "DEFAULT_FAIL_ON",
-           "PairedComparison", "parse_margin", "parse_outcomes", "compare_paired", "paired_bound",
+__all__ = ["FORMAT", "VERSION", "BaselineError", "Baseline", "save_baseline", "load_baseline", "OUTCOMES",
+           "DEFAULT_FAIL_ON", "PairedComparison", "parse_margin", "parse_outcomes", "compare_paired", "paired_bound",
            "format_comparison_table", "replay_candidates"]
 
 FORMAT = "pytest-n2r-baseline"
@@ -60,6 +61,14 @@ BOOTSTRAP_RESAMPLES = 4000
 
 class BaselineError(N2RError):
     """A baseline file that cannot be used: missing, unreadable, from another version, or malformed."""
+
+
+class Baseline(dict):
+    """A loaded baseline: its relation records by test id, and :attr:`not_recorded`, the relation test ids the
+    session that saved it collected but recorded nothing for (deselected with ``-k`` / ``-m`` / ``--deselect``,
+    skipped, or not run): a comparison reports those as ``missing``, not ``new``."""
+
+    not_recorded: frozenset[str] = frozenset()
 
 
 # -- writing --------------------------------------------------------------------------------------------
@@ -94,7 +103,7 @@ def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta
 # -- reading and validating -----------------------------------------------------------------------------
 
 
-def load_baseline(path: str | os.PathLike) -> dict[str, RelationRecord]:
+def load_baseline(path: str | os.PathLike) -> Baseline:
     """Read and validate a baseline written by :func:`save_baseline`; :class:`BaselineError` names what
     is wrong (file, relation, example, field) and how to fix it."""
     path = Path(path)
@@ -118,109 +127,22 @@ def load_baseline(path: str | os.PathLike) -> dict[str, RelationRecord]:
             f"baseline {path} has no relations: it would let every relation pass as new; {regenerate} "
             "on a run that has relation tests"
         )
-    out = {}
+    out = Baseline()
     for nodeid, rel in relations.items():
         try:
-            out[nodeid] = _relation(nodeid, rel)
-        except _Bad as exc:
+            out[nodeid] = relation_from_json(nodeid, rel)
+        except BadField as exc:
             raise BaselineError(f"baseline {path}: relation {nodeid!r}: {exc}; {regenerate}") from None
+    try:
+        meta = meta_from_json(data.get("meta"))
+    except BadField as exc:
+        raise BaselineError(f"baseline {path}: {exc}; {regenerate}") from None
+    out.not_recorded = frozenset(meta.get("not_recorded", ())) - set(out)
     return out
-
-
-class _Bad(Exception):
-    """A field of a baseline that fails validation (the message names it)."""
 
 
 def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number JSON allows (pytest-n2r writes null for 'no value')")
-
-
-def _number(value: Any, where: str, *, minimum: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _Bad(f"{where}={value!r}; expected a finite number")
-    if minimum is not None and value < minimum:
-        raise _Bad(f"{where}={value!r}; expected a number >= {minimum:g}")
-    return float(value)
-
-
-def _text(value: Any, where: str) -> str:
-    if not isinstance(value, str):
-        raise _Bad(f"{where}={value!r}; expected a string")
-    return value
-
-
-def _relation(nodeid: str, rel: Any) -> RelationRecord:
-    if not isinstance(rel, dict):
-        raise _Bad(f"expected an object, got {type(rel).__name__}")
-    for key in ("metric", "eps", "scene_hash", "examples"):
-        if key not in rel:
-            raise _Bad(f"missing field {key!r}")
-    examples = rel["examples"]
-    if not isinstance(examples, list):
-        raise _Bad(f"examples={type(examples).__name__}; expected a list of example records")
-    return RelationRecord(
-        nodeid=nodeid, metric=_text(rel["metric"], "metric"), eps=_number(rel["eps"], "eps", minimum=0),
-        scene=_text(rel.get("scene", ""), "scene"), scene_hash=_text(rel["scene_hash"], "scene_hash"),
-        outcome=_text(rel.get("outcome", "passed"), "outcome"),
-        examples=[_example(e, f"examples[{i}]") for i, e in enumerate(examples)],
-    )
-
-
-_CAMERA_INTS = ("width", "height")
-_CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
-_TRANSFORM_FIELDS = ("roll", "pitch", "yaw", "x", "y", "z")
-
-
-def _example(e: Any, where: str) -> ExampleRecord:
-    if not isinstance(e, dict):
-        raise _Bad(f"{where} is {type(e).__name__}; expected an example object")
-    status = e.get("status")
-    if status not in STATUSES:
-        raise _Bad(f"{where}.status={status!r}; expected one of {STATUSES}")
-    _text(e.get("view"), f"{where}.view")
-    _text(e.get("scene_hash", ""), f"{where}.scene_hash")
-    c2w = e.get("source_c2w")
-    if not isinstance(c2w, list) or len(c2w) != 16:
-        raise _Bad(f"{where}.source_c2w must be 16 numbers (a row-major 4x4 camera-to-world pose)")
-    for k, v in enumerate(c2w):
-        _number(v, f"{where}.source_c2w[{k}]")
-    camera = e.get("camera")
-    if not isinstance(camera, dict):
-        raise _Bad(f"{where}.camera must be an object with width, height, fx, fy, cx, cy")
-    for key in _CAMERA_INTS:
-        value = camera.get(key)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise _Bad(f"{where}.camera.{key}={value!r}; expected a whole number of pixels >= 1")
-    for key in _CAMERA_FLOATS:
-        _number(camera.get(key), f"{where}.camera.{key}", minimum=1e-9 if key in ("fx", "fy") else None)
-    transform, mutation = e.get("transform"), e.get("mutation")
-    if transform is None and not isinstance(mutation, dict):
-        raise _Bad(f"{where} has neither a transform nor a mutation")
-    if transform is not None:
-        if not isinstance(transform, dict) or set(transform) - set(_TRANSFORM_FIELDS):
-            raise _Bad(f"{where}.transform={transform!r}; expected an object with fields of {_TRANSFORM_FIELDS}")
-        for key, value in transform.items():
-            _number(value, f"{where}.transform.{key}")
-    if isinstance(mutation, dict) and "name" in mutation:
-        from ..strategies.mutation import mutation_from_dict
-
-        try:
-            mutation_from_dict(mutation)
-        except N2RError as exc:
-            raise _Bad(f"{where}.mutation: {exc}") from None
-    if e.get("units", "reference") not in ("reference", "scene", "metres"):
-        raise _Bad(f"{where}.units={e.get('units')!r}; expected 'reference', 'scene' or 'metres'")
-    score, deviation = e.get("score"), e.get("deviation")
-    if status == "accepted":
-        score = _number(score, f"{where}.score")
-        deviation = _number(deviation, f"{where}.deviation (an accepted example)", minimum=0)
-        if not isinstance(e.get("passed"), bool):
-            raise _Bad(f"{where}.passed={e.get('passed')!r}; expected true or false")
-    else:
-        if score is not None or deviation is not None:
-            raise _Bad(f"{where} is {status} but has a score or deviation (expected null)")
-        score = deviation = math.nan
-    return ExampleRecord.from_dict({**e, "score": score, "deviation": deviation, "passed": bool(e.get("passed"))})
 
 
 # -- comparing ------------------------------------------------------------------------------------------
@@ -317,6 +239,13 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
     out += [PairedComparison(nodeid, "missing", message="in the baseline but not run in this session (deselected, "
                              "renamed or deleted); run it, or pass --n2r-compare-fail-on without 'missing'")
             for nodeid in sorted(set(baseline) - ran)]
+    not_recorded = getattr(baseline, "not_recorded", frozenset())
+    for c in out:
+        if c.outcome == "new" and c.nodeid in not_recorded:
+            c.outcome = "missing"
+            c.message = ("not in the baseline: the session that saved it collected this relation but did not run it "
+                         "(deselected with -k / -m / --deselect, or skipped), so nothing gates it; save the baseline "
+                         "from a session that runs it, or pass --n2r-compare-fail-on without 'missing'")
     for c in out:
         c.fails = c.outcome in fail_on
     return out

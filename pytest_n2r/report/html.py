@@ -65,15 +65,27 @@ def _image_tag(path: str, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{data}">'
 
 
+def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
+    """The example's follow-up as (kind, words): ``("mutation", "brightness(levels=30)")``, ``("transform",
+    "yaw=5.25")`` or ``("transform", "identity")`` (a pose transform whose fields are all 0)."""
+    def fields(values: dict) -> str:
+        return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items())
+
+    if ex.mutation is not None:
+        params = {k: v for k, v in ex.mutation.items() if k != "name"}
+        return "mutation", f"{ex.mutation.get('name', '?')}({fields(params)})"
+    return "transform", fields({k: v for k, v in (ex.transform or {}).items() if v}) or "identity"
+
+
 def _example_block(title: str, ex: ExampleRecord) -> str:
-    transform = ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in ex.transform.items() if v)
+    kind, follow_up = _follow_up(ex)
     figures = "".join(
         f"<figure>{_image_tag(path, name)}<figcaption>{html.escape(name)}</figcaption></figure>"
         for name, path in sorted(ex.images.items())
     )
     return (
         f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
-        f"<code>{html.escape(ex.view)}</code>, transform <code>{html.escape(transform or 'identity')}</code>: "
+        f"<code>{html.escape(ex.view)}</code>, {kind} <code>{html.escape(follow_up)}</code>: "
         f"score {ex.score:.4f}, deviation {ex.deviation:.4f}</p><div class=\"ex\">{figures}</div>"
     )
 

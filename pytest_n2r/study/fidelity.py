@@ -73,9 +73,13 @@ class FidelityReport:
         return next((f.nearby_degrees for f in self.floors.values() if f.nearby), float("nan"))
 
     def to_dict(self) -> dict:
+        """Plain JSON-ready values: strict JSON, a value that is not a finite number (no defined sample, the
+        infinite PSNR of identical images) is ``None``."""
         return {"scene": self.scene, "size": self.size, "reference": self.reference, "reason": self.reason,
-                "images": list(self.images), "psnr": self.mean("psnr"), "ssim": self.mean("ssim"),
-                "detectors": {d: {m: self.score(d, m) for m in ("repeatability", "ip_spread")}
+                "images": [{k: json_number(v) if isinstance(v, float) else v for k, v in row.items()}
+                           for row in self.images],
+                "psnr": json_number(self.mean("psnr")), "ssim": json_number(self.mean("ssim")),
+                "detectors": {d: {m: json_number(self.score(d, m)) for m in ("repeatability", "ip_spread")}
                               for d in DETECTORS},
                 "floors": [{"detector": d, "metric": m, **f.to_dict()} for (d, m), f in self.floors.items()],
                 "nearby": {d: json_number(self.nearby_score(d)) for d in DETECTORS},

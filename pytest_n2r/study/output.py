@@ -14,7 +14,10 @@ import numpy as np
 from ..data.atomic import atomic_write_bytes, atomic_write_text
 from .run import StudyResult
 
-__all__ = ["write_study", "markdown_table"]
+__all__ = ["write_study", "markdown_table", "PLOTS"]
+
+#: The plots a study may draw (one is left out when its table is empty, all when matplotlib is missing).
+PLOTS = ("rq1_realness.png", "rq2_inconsistencies.png", "rq3_fps.png")
 
 
 def _fmt(value: object) -> str:
@@ -43,6 +46,8 @@ def _csv(rows: list[dict]) -> str:
 
 
 def _mean_by(rows: list[dict], keys: tuple[str, ...], values: tuple[str, ...]) -> list[dict]:
+    """The mean of each of ``values`` per group of ``keys`` over the group's valid rows (NaN where none is):
+    ``n`` counts the group's rows, ``n_valid`` those the means cover (a row without ``valid`` is valid)."""
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
         groups[tuple(r[k] for k in keys)].append(r)
@@ -53,6 +58,7 @@ def _mean_by(rows: list[dict], keys: tuple[str, ...], values: tuple[str, ...]) -
             xs = [m[v] for m in members if m.get(v) is not None and not math.isnan(m[v]) and m.get("valid", True)]
             row[v] = float(np.mean(xs)) if xs else float("nan")
         row["n"] = len(members)
+        row["n_valid"] = sum(bool(m.get("valid", True)) for m in members)
         out.append(row)
     return out
 
@@ -108,8 +114,8 @@ def _plots(result: StudyResult, out: Path) -> list[str]:
         fig, axes = plt.subplots(1, len(metrics), figsize=(3.2 * len(metrics), 3), squeeze=False)
         for ax, metric in zip(axes[0], metrics):
             for offset, kind, colour in ((-0.2, "n2r", "#d62728"), (0.2, "mutation", "#1f77b4")):
-                counts = [sum(r[f"inc@{e:g}"] for r in incs if r["metric"] == metric and r["kind"] == kind)
-                          for e in result.eps]
+                counts = [sum(r[f"inc@{e:g}"] for r in incs if r["metric"] == metric and r["kind"] == kind
+                              and r["valid"]) for e in result.eps]  # a family with no valid example has no count
                 ax.bar(np.arange(len(result.eps)) + offset, counts, width=0.4, color=colour,
                        label="N2R τ1–τ6" if kind == "n2r" else "mutations m1–m3")
             ax.set_xticks(range(len(result.eps)), [f"ε={e:g}" for e in result.eps])
@@ -134,6 +140,9 @@ def write_study(result: StudyResult, out: str | os.PathLike) -> list[Path]:
               "inconsistencies": result.inconsistencies, "fps": result.fps}
     paths = [atomic_write_text(out / f"{name}.csv", _csv(rows)) for name, rows in tables.items()]
     notes = _plots(result, out)
+    for name in PLOTS:  # a plot this run did not draw is not left from an earlier run into the same folder
+        if name not in notes:
+            (out / name).unlink(missing_ok=True)
     if notes:
         result.notes.extend(n for n in notes if n.startswith("plots skipped"))
         paths += [out / n for n in notes if n.endswith(".png")]

@@ -7,7 +7,8 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
 - ``domain_shift``: per scene, view, SUT and metric: the metric between the SUT's output on the real
   photo and on the τ0 render (RQ1's "SUT performance under the reality-to-field shift").
 - ``examples``: per scene, view, SUT, metric and drawn transform / mutation: score and deviation.
-- ``inconsistencies``: ``examples`` counted per scene, SUT, metric and family at each eps (RQ2).
+- ``inconsistencies``: ``examples`` counted per scene, SUT, metric and family at each eps (RQ2); NaN where no
+  example of the family is valid (nothing was compared: not zero inconsistencies).
 - ``fps``: per scene and render size: frames per second of RGB renders (RQ3).
 
 "Real photo" is the view's stored image (``SceneView.image``); for an exact demo scene without stored
@@ -18,6 +19,7 @@ RQ1.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -78,7 +80,8 @@ class StudyResult:
 
     @property
     def inconsistencies(self) -> list[dict]:
-        """``examples`` counted per (scene, SUT, metric, family): valid examples and failures per eps."""
+        """``examples`` counted per (scene, SUT, metric, family): valid examples and failures per eps; NaN
+        failures (written ``—``) where no example is valid, which tested nothing rather than found nothing."""
         groups: dict[tuple, list[dict]] = {}
         for row in self.examples:
             groups.setdefault((row["scene"], row["sut"], row["metric"], row["family"]), []).append(row)
@@ -89,7 +92,7 @@ class StudyResult:
                    "kind": "n2r" if family.startswith("tau") else "mutation",
                    "drawn": len(rows), "valid": len(valid)}
             for eps in self.eps:
-                row[f"inc@{eps:g}"] = sum(r["deviation"] > eps for r in valid)
+                row[f"inc@{eps:g}"] = sum(r["deviation"] > eps for r in valid) if valid else math.nan
             out.append(row)
         return out
 

@@ -2,7 +2,9 @@
 
 A SUT maps an RGB ``uint8`` image (H×W×3) to either keypoints (an ``(N, 2)`` array of pixel coordinates,
 or a list of ``cv2.KeyPoint``) — a *detector* — or a 1-D score vector (probabilities or logits) — a
-*classifier*. The kind decides which metrics the study applies (:data:`METRICS_BY_KIND`).
+*classifier*. The kind decides which metrics the study applies (:data:`METRICS_BY_KIND`); it is read from the
+output on a probe image, or given (``--sut-kind``) where the output's shape cannot say: ``(1, K)`` is one
+keypoint or a batch of one score vector.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy as np
 from ..errors import InvalidArgument, InvalidType
 from ..metrics import Metric, class_invariance, cosine_similarity, interest_point_spread, l2_norm, repeatability
 
-__all__ = ["SUT", "BUILTIN_SUTS", "resolve_sut", "METRICS_BY_KIND"]
+__all__ = ["SUT", "BUILTIN_SUTS", "KINDS", "resolve_sut", "METRICS_BY_KIND"]
 
 Kind = Literal["detector", "classifier"]
 
@@ -70,25 +72,54 @@ class SUT:
         return METRICS_BY_KIND[self.kind]()
 
 
-def _kind_of(output: Any, name: str) -> Kind:
-    if isinstance(output, (list, tuple)) and (not output or hasattr(output[0], "pt")):
+#: The kinds of SUT (``--sut-kind``).
+KINDS: tuple[Kind, ...] = ("detector", "classifier")
+
+
+def _kind_of(output: Any, name: str, kind: Kind | None = None) -> Kind:
+    """The kind of SUT whose output on the probe image is ``output``: ``kind`` when given (checked against the
+    output), else what the output's shape says; an output of shape ``(1, K)`` is either one keypoint or a batch
+    of one score vector, and needs ``kind``."""
+    keypoint_list = isinstance(output, (list, tuple)) and (not output or hasattr(output[0], "pt"))
+    arr = np.asarray([]) if keypoint_list else np.asarray(output)
+    looks_detector = keypoint_list or (arr.ndim == 2 and arr.shape[1] >= 2)
+    looks_classifier = not keypoint_list and (arr.ndim == 1 or (arr.ndim == 2 and arr.shape[0] == 1))
+    shape = "a list of keypoints" if keypoint_list else f"shape {arr.shape}"
+    if kind is not None:
+        fits = looks_detector if kind == "detector" else looks_classifier
+        if not fits:
+            expected = ("keypoints (N, 2) or a list of cv2.KeyPoint" if kind == "detector"
+                        else "a score vector (C,) or a batch of one (1, C)")
+            raise InvalidType(f"--sut {name} is a {kind} (--sut-kind), but its output on the probe image has "
+                              f"{shape}; a {kind} returns {expected}")
+        return kind
+    if looks_detector and looks_classifier:
+        raise InvalidType(
+            f"--sut {name}: its output on the probe image has shape {arr.shape}, which is either one keypoint of a "
+            f"detector (N, {arr.shape[1]}) or a classifier's batch of one score vector (1, C); say which with "
+            f"--sut-kind {name}=detector or --sut-kind {name}=classifier (kind= of resolve_sut)"
+        )
+    if looks_detector:
         return "detector"
-    arr = np.asarray(output)
-    if arr.ndim == 2 and arr.shape[1] >= 2:
-        return "detector"
-    if arr.ndim == 1 or (arr.ndim == 2 and arr.shape[0] == 1):
+    if looks_classifier:
         return "classifier"
     raise InvalidType(
         f"--sut {name}: output of shape {arr.shape} is neither keypoints (N, 2) nor a score vector (C,)"
     )
 
 
-def resolve_sut(spec: str, probe: np.ndarray) -> SUT:
+def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None) -> SUT:
     """A SUT from a built-in name (``orb``, ``sift``, ``akaze``) or ``package.module:attribute``.
 
-    ``probe`` (an RGB image) is run once to tell detectors from classifiers for imported SUTs.
+    ``probe`` (an RGB image) is run once to tell detectors from classifiers for imported SUTs; ``kind``
+    (``"detector"`` or ``"classifier"``) says which where the output cannot (shape ``(1, K)``: one keypoint, or
+    a batch of one score vector).
     """
+    if kind is not None and kind not in KINDS:
+        raise InvalidArgument(f"--sut-kind {spec}={kind!r}; expected one of {', '.join(KINDS)}")
     if spec in BUILTIN_SUTS:
+        if kind is not None and kind != BUILTIN_SUTS[spec]:
+            raise InvalidArgument(f"--sut-kind {spec}={kind}: the built-in {spec} is a {BUILTIN_SUTS[spec]}")
         return SUT(spec, BUILTIN_SUTS[spec], _builtin(spec))
     if ":" not in spec:
         raise InvalidArgument(
@@ -101,4 +132,4 @@ def resolve_sut(spec: str, probe: np.ndarray) -> SUT:
         raise InvalidArgument(f"--sut {spec!r}: cannot import {attr!r} from {module_name!r} ({exc})") from None
     if not callable(fn):
         raise InvalidType(f"--sut {spec!r} is a {type(fn).__name__}, not a callable image -> output")
-    return SUT(attr, _kind_of(fn(probe), spec), fn)
+    return SUT(attr, _kind_of(fn(probe), spec, kind), fn)

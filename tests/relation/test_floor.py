@@ -9,6 +9,7 @@ import pytest
 
 from pytest_n2r.demo import ground_truth, load_demo
 from pytest_n2r.metrics import repeatability
+from pytest_n2r.metrics.base import Metric
 from pytest_n2r.relation.floor import FieldFloor, FloorStore, measure_floor, reference_kind
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study
@@ -154,3 +155,49 @@ def test_a_sut_cannot_draw_on_the_stored_photo():
     with pytest.raises(ValueError, match="read-only"):
         measure_floor(scene, scribbler, repeatability(px=2))
     assert np.array_equal(scene.views[1].image, photo), "the stored photo was changed"
+
+
+class _OnKeypoints(Metric):
+    """Repeatability of the keypoints a SUT returns first, beside other outputs (scores, ...)."""
+
+    name, ideal, needs = "on_keypoints", 1.0, ("depth", "opacity")
+
+    def compute(self, out_source, out_follow, source, follow):
+        return repeatability(px=2).compute(out_source[0], out_follow[0], source, follow)
+
+    def __repr__(self):
+        return "_OnKeypoints()"
+
+
+class _Opaque:
+    """An output part whose repr says nothing of its content."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __repr__(self):
+        return "_Opaque()"
+
+
+def test_an_edit_deep_in_a_structured_output_is_measured_again(tmp_path):
+    """A SUT returning keypoints and a dict of long arrays: an edit that changes one value far inside them once
+    kept the floor's key (numpy's repr elides long arrays with '...'), so the stale floor was reused."""
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    scores = np.arange(2000.0)
+    first = Counting(lambda rgb: (corners(rgb), {"scores": scores}))
+    a = measure_floor(scene, first, _OnKeypoints(), store=FloorStore(tmp_path), name="mine")
+    edited_scores = scores.copy()
+    edited_scores[1000] = -1.0
+    edited = Counting(lambda rgb: (corners(rgb), {"scores": edited_scores}))
+    b = measure_floor(scene, edited, _OnKeypoints(), store=FloorStore(tmp_path), name="mine")
+    assert edited.calls == 6 and b.key != a.key, (
+        f"the edited SUT's floor was taken from the store ({edited.calls} SUT calls): its output differs")
+
+
+def test_an_output_no_digest_names_is_never_kept_or_reused(tmp_path):
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    for value in (1, 2):  # the same repr, another output
+        sut = Counting(lambda rgb, value=value: (corners(rgb), _Opaque(value)))
+        floor = measure_floor(scene, sut, _OnKeypoints(), store=FloorStore(tmp_path), name="mine")
+        assert sut.calls == 6 and floor.available, f"the floor of output {value} was not measured ({sut.calls} calls)"
+    assert not list(tmp_path.glob("*.json")), "a floor keyed by an output no digest names exactly was stored"

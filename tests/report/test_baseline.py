@@ -119,6 +119,16 @@ _EX = "relations/a::t/examples/0"
     (f"{_EX}/units", "feet", r"units='feet'"),
     (f"{_EX}/mutation", {"name": "blur"}, r"examples\[0\].mutation: mutation=.*expected a dict with 'name'"),
     ("relations/a::t/examples/0", 3, r"examples\[0\] is int; expected an example object"),
+    # each of these once ended in a TypeError from ExampleRecord or Camera, or loaded and was silently dropped
+    (f"{_EX}/scene", _DELETE, r"relation 'a::t': examples\[0\] is missing the field 'scene'"),
+    (f"{_EX}/scene", 3, r"relation 'a::t': examples\[0\].scene=3; expected a string"),
+    (f"{_EX}/transform", _DELETE, r"examples\[0\] is missing the field 'transform' \(an object with fields"),
+    (f"{_EX}/camera/distortion", 5, r"examples\[0\].camera.distortion=5; expected a list of 0, 4, 5 or 8 numbers"),
+    (f"{_EX}/camera/distortion", [0.1, "k2", 0, 0], r"examples\[0\].camera.distortion\[1\]='k2'; expected a finite"),
+    (f"{_EX}/settings", [1, 2], r"examples\[0\].settings=\[1, 2\]; expected an object"),
+    (f"{_EX}/reason", 7, r"examples\[0\].reason=7; expected a string"),
+    (f"{_EX}/mutation", {"name": "brightness", "levels": 3}, r"examples\[0\] has both a transform and a mutation"),
+    ("meta", {"not_recorded": "a::u"}, r"meta.not_recorded='a::u'; expected a list of test ids"),
 ])
 def test_every_field_of_a_baseline_is_validated_on_load(tmp_path, path, value, expected):
     bad = tmp_path / "bad.json"
@@ -237,3 +247,52 @@ def test_replayed_examples_that_are_not_the_baselines_are_not_paired():
     cur.replayed[2].transform = {**cur.replayed[2].transform, "yaw": 33.0}
     (c,) = compare_paired({"a::t": base}, [cur])
     assert (c.outcome, c.fails) == ("no-pairs", True) and "are not the baseline's" in c.message
+
+
+def test_a_mutation_without_a_name_is_refused_not_dropped(tmp_path):
+    """An accepted example whose mutation has no ``name`` (and no transform) cannot be replayed: refused on load,
+    where it once loaded and was left out of the replay without a word."""
+    data = _valid_data(tmp_path)
+    data = _set(_set(data, f"{_EX}/transform", None), f"{_EX}/mutation", {"levels": 30})
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    with pytest.raises(BaselineError, match=r"relation 'a::t': examples\[0\].mutation=\{'levels': 30\}; expected an "
+                                            r"object with the mutation's 'name'") as info:
+        load_baseline(bad)
+    assert str(bad) in str(info.value), f"the file is not named: {info.value}"
+
+
+def test_follow_ups_with_fields_left_out_still_pair_with_their_replay(tmp_path):
+    """A transform written with some of its six fields (those that are 0 left out) and a mutation written with
+    some of its parameters (the defaults left out) pair with the replay, which records them all."""
+    base = _relation("a::t", [0.1, 0.2])
+    mutated = ExampleRecord("wall", "view0", None, 0.9, 0.1, True, scene_hash="abc", source_c2w=list(POSE),
+                            camera=dict(CAMERA), mutation={"name": "brightness", "levels": 0})
+    base.examples.append(mutated)
+    data = json.loads(save_baseline(tmp_path / "full.json", [base]).read_text())
+    for e in data["relations"]["a::t"]["examples"]:
+        if e["transform"] is not None:
+            e["transform"] = {k: v for k, v in e["transform"].items() if v}
+        else:
+            e["mutation"] = {"name": "brightness"}
+    short = tmp_path / "short.json"
+    short.write_text(json.dumps(data))
+    loaded = load_baseline(short)
+    cur = _replayed(base, [0.1, 0.2])
+    cur.replayed.append(mutated)
+    (result,) = compare_paired(loaded, [cur])
+    assert (result.outcome, result.n) == ("ok", 3), (
+        f"examples with fields left out did not pair with their replay: {result.outcome} ({result.message})")
+
+
+def test_relations_the_saving_session_did_not_run_are_missing_not_new(tmp_path):
+    """A baseline saved from a session that deselected a relation (``-k``) lists it in ``meta.not_recorded``; a
+    later run of that relation has nothing to compare with, and says so as a failing ``missing``, not ``new``."""
+    path = save_baseline(tmp_path / "b.json", [_relation("a::t", [0.1])], meta={"not_recorded": ["a::u"]})
+    loaded = load_baseline(path)
+    by_id = {c.nodeid: c for c in compare_paired(loaded, [_replayed(loaded["a::t"], [0.1]),
+                                                          _relation("a::u", [0.1]), _relation("a::v", [0.1])])}
+    assert by_id["a::u"].outcome == "missing" and by_id["a::u"].fails, (
+        f"a relation deselected when the baseline was saved passed as {by_id['a::u'].outcome}")
+    assert "deselected" in by_id["a::u"].message, by_id["a::u"].message
+    assert by_id["a::v"].outcome == "new" and not by_id["a::v"].fails, "a relation added since stays new"

@@ -50,3 +50,13 @@ def test_write_html_is_atomic(tmp_path):
     out = write_html(tmp_path / "r" / "report.html", [_failing_relation(tmp_path)])
     assert out.read_text().startswith("<!DOCTYPE html>")
     assert sorted(p.name for p in out.parent.iterdir()) == ["report.html"]
+
+
+def test_a_mutation_example_shows_its_mutation(tmp_path):
+    """A mutation relation's examples have no transform (``transform=None``): the report names the mutation."""
+    minimal = ExampleRecord("wall", "view3", None, 0.7, 0.3, False, mutation={"name": "brightness", "levels": 30})
+    rel = RelationRecord("test_x.py::test_bright[wall]", "repeatability(px=2.0)", 0.2, [minimal], outcome="failed",
+                         minimal=minimal)
+    page = render_html([rel])
+    assert "mutation <code>brightness(levels=30)</code>" in page, "the minimal example's mutation is not shown"
+    assert "transform <code>" not in page, "a mutation example was described as a pose transform"

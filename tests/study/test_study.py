@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -14,6 +15,8 @@ from pytest_n2r.demo import ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.strategies import PRESET_FAMILIES
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study, write_study
+from pytest_n2r.study.fidelity import FidelityReport
+from pytest_n2r.study.run import StudyResult
 from pytest_n2r.study.sampling import sample_mutation, sample_transform
 
 TINY = StudyConfig(examples=1, max_views=1, size=64, fps_frames=1, fps_sizes=((64, 36),))
@@ -42,6 +45,9 @@ def test_inconsistency_counts_agree_with_examples(study):
         valid = [e for e in rows if e["valid"]]
         assert row["drawn"] == len(rows) and row["valid"] == len(valid)
         for eps in TINY.eps:
+            if not valid:  # nothing compared: no count, not zero inconsistencies
+                assert math.isnan(row[f"inc@{eps:g}"]), row
+                continue
             assert row[f"inc@{eps:g}"] == sum(e["deviation"] > eps for e in valid)
             assert row[f"inc@{eps:g}"] <= row["valid"]
 
@@ -145,3 +151,82 @@ def test_follow_ups_are_judged_against_their_source_view():
     assert valid and all(valid), (
         f"τ1 follow-ups of a view that is itself 30 % empty were rejected ({valid}): the validity check must "
         "compare the follow-up's empty share with the source view's, not with a full view")
+
+
+def batch_classifier(rgb):
+    """A classifier returning a batch of one score vector, shape (1, 10), as Keras models do."""
+    scores = np.bincount((rgb[..., 0].ravel() // 26).astype(int), minlength=10)[:10].astype(np.float64)
+    return (scores / scores.sum())[None, :]
+
+
+def test_a_batch_of_one_output_needs_its_kind_said():
+    """(1, K) is one keypoint or a batch of one score vector: once taken for a detector (one keypoint, scored
+    near-perfect), it is now an error naming the SUT, the shape and the option, unless the kind is given."""
+    probe = np.random.default_rng(0).integers(0, 256, (16, 16, 3), dtype=np.uint8)
+    spec = "tests.study.test_study:batch_classifier"
+    with pytest.raises(InvalidType, match=rf"--sut {spec}: .*shape \(1, 10\).*--sut-kind {spec}=classifier"):
+        resolve_sut(spec, probe)
+    sut = resolve_sut(spec, probe, kind="classifier")
+    assert sut.kind == "classifier" and set(sut.metrics()) == {"cosine", "l2", "class_invariance"}
+    with pytest.raises(InvalidType, match=r"--sut numpy:ravel is a detector \(--sut-kind\), but its output .*shape "
+                                          r"\(768,\)"):
+        resolve_sut("numpy:ravel", probe, kind="detector")
+    with pytest.raises(InvalidArgument, match="the built-in orb is a detector"):
+        resolve_sut("orb", probe, kind="classifier")
+
+
+def test_cli_study_takes_the_kind_of_an_ambiguous_sut(tmp_path, capsys):
+    spec = "tests.study.test_study:batch_classifier"
+    args = ["study", "demo:wall", "--sut", spec, "--examples", "1", "--views", "1", "--size", "64",
+            "--fps-size", "64x36", "--fps-frames", "1"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert f"--sut {spec}: its output on the probe image has shape (1, 10)" in err and "--sut-kind" in err, err
+    assert main([*args, "-o", str(tmp_path / "b"), "--sut-kind", "nope=classifier"]) == 2
+    assert "--sut-kind nope=classifier: 'nope' is not one of the --sut given" in capsys.readouterr().err
+    assert main([*args, "-o", str(tmp_path / "c"), "--sut-kind", f"{spec}=classifier"]) == 0
+    with open(tmp_path / "c" / "examples.csv") as fh:
+        metrics = {row["metric"] for row in csv.DictReader(fh)}
+    assert metrics == {"cosine", "l2", "class_invariance"}, f"scored as {metrics}"
+
+
+def _rows(valid: bool, n: int = 2) -> list[dict]:
+    return [{"scene": "s", "view": f"v{i}", "family": "tau1", "drawn": "yaw=1", "sut": "orb", "metric": "repeatability",
+             "score": 0.5 if valid else math.nan, "deviation": 0.5 if valid else math.nan, "valid": valid}
+            for i in range(n)]
+
+
+def test_a_family_with_no_valid_example_counts_nothing_not_zero(tmp_path):
+    result = StudyResult(examples=_rows(False), eps=(0.1, 0.2))
+    (row,) = result.inconsistencies
+    assert row["valid"] == 0 and all(math.isnan(row[f"inc@{e:g}"]) for e in (0.1, 0.2)), (
+        f"a family that compared nothing was counted as {row}: zero inconsistencies would read as a pass")
+    write_study(result, tmp_path)
+    assert "| s | orb | repeatability | tau1 | n2r | 2 | 0 | — | — |" in (tmp_path / "study.md").read_text()
+
+
+def test_the_means_say_how_many_samples_they_cover(tmp_path):
+    shift = [{"scene": "s", "view": f"v{i}", "sut": "orb", "metric": "repeatability", "score": 0.8,
+              "deviation": 0.2, "valid": True} for i in range(2)]
+    shift.append({**shift[0], "view": "v2", "score": math.nan, "deviation": math.nan, "valid": False})
+    write_study(StudyResult(domain_shift=shift), tmp_path)
+    text = (tmp_path / "study.md").read_text()
+    assert "| scene | sut | metric | score | deviation | n | n_valid |" in text, text
+    assert "| s | orb | repeatability | 0.8 | 0.2 | 3 | 2 |" in text, "n counts the samples, n_valid those averaged"
+
+
+def test_plots_of_an_earlier_run_are_not_left_in_the_folder(study, tmp_path):
+    pytest.importorskip("matplotlib")
+    first = {p.name for p in write_study(study, tmp_path)}
+    assert {"rq1_realness.png", "rq3_fps.png"} <= first, first
+    write_study(StudyResult(), tmp_path)  # draws no plot: nothing to draw
+    left = sorted(p.name for p in tmp_path.glob("*.png"))
+    assert not left, f"plots of the earlier run were left beside this run's tables: {left}"
+
+
+def test_the_fidelity_report_is_strict_json():
+    """`n2r info --json --shift` once printed NaN (not JSON) for scores with no defined sample."""
+    report = FidelityReport("s", "64", "photo", "", ({"view": "v0", "psnr": math.inf, "ssim": 1.0},), {})
+    data = json.loads(json.dumps(report.to_dict(), allow_nan=False))
+    assert data["images"][0]["psnr"] is None and data["psnr"] is None, data
+    assert data["detectors"]["orb"] == {"repeatability": None, "ip_spread": None}, data["detectors"]

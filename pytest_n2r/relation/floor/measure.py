@@ -27,6 +27,7 @@ from ...render.size import RenderSize
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.render_cache import RenderCache
+from ..kept_results import output_digest
 from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
@@ -182,19 +183,15 @@ def sut_name(sut: Callable[..., Any]) -> str:
     return f"{getattr(target, '__module__', '?')}:{getattr(target, '__qualname__', type(sut).__name__)}"
 
 
-def _digest_output(output: Any) -> str:
-    """A digest of a SUT output (keypoint lists as their coordinates, arrays with shape and dtype)."""
-    h = hashlib.sha256()
+def _digest_output(output: Any) -> str | None:
+    """An exact digest of a SUT output (:func:`~pytest_n2r.relation.kept_results.output_digest`: types, dtypes,
+    shapes and every byte; a list of ``cv2.KeyPoint`` as their coordinates, a tensor as its values), or ``None``
+    when the output holds something no digest names exactly: then no floor is kept or reused for it."""
     if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
         output = np.array([k.pt for k in output], dtype=np.float64)
     if hasattr(output, "detach") and hasattr(output, "cpu"):
         output = output.detach().cpu().numpy()
-    if isinstance(output, np.ndarray):
-        h.update(f"{output.shape}/{output.dtype}".encode())
-        h.update(np.ascontiguousarray(output).tobytes())
-    else:
-        h.update(repr(output).encode())
-    return h.hexdigest()
+    return output_digest(output)
 
 
 def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, *,
@@ -207,9 +204,11 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     photo; on a fitted demo scene the relation's replay on exact renders says more, and costs no extra render).
 
     Renders go through ``cache`` (default: none); ``store`` keeps measured floors keyed by the scene's
-    content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and a digest of its output
+    content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of its output
     on the first reference image, so an edited SUT whose output changes there is measured again), the
-    metric's ``repr``, the size, the views, whether ``nearby`` and :data:`FLOOR_VERSION`.
+    metric's ``repr``, the size, the views, whether ``nearby`` and :data:`FLOOR_VERSION`. An output that no digest
+    names exactly (an object that is not numbers, strings, arrays, lists, tuples or string-keyed dicts of them) is
+    measured every time: its floor is neither kept nor reused.
     """
     name = name or sut_name(sut)
     size_text = "view size" if size is None else str(size)
@@ -239,6 +238,8 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             "probe": _digest_output(first_output), "metric": repr(metric), "size": size_text,
             "views": [v.name for v in views], "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
+    if spec["probe"] is None:  # an output no digest names exactly: an edited SUT could not be told apart
+        store, key = None, ""
     if store is not None and (known := store.get(key)) is not None:
         return known
     samples, nearby_samples, gaps = [], [], []

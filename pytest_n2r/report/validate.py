@@ -1,0 +1,161 @@
+"""Validating what a baseline file holds, field by field, before anything reads it (:func:`relation_from_json`,
+:func:`meta_from_json`).
+
+A field that fails is a :class:`BadField` naming it (``examples[3].camera.distortion=5; expected ...``);
+:func:`~pytest_n2r.report.baseline.load_baseline` adds the file and the relation and turns it into a
+:class:`~pytest_n2r.report.baseline.BaselineError`. Whatever passes builds an
+:class:`~pytest_n2r.relation.record.ExampleRecord` without a ``TypeError`` and replays (every follow-up
+rebuildable), and whatever pairs with a replay does so exactly: a transform is filled to its six fields and a
+mutation to all of its parameters, as the engine records them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ..errors import N2RError
+from ..relation.record import STATUSES, ExampleRecord, RelationRecord
+
+__all__ = ["BadField", "relation_from_json", "meta_from_json", "TRANSFORM_FIELDS"]
+
+_CAMERA_INTS = ("width", "height")
+_CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
+#: The six fields of a pose transform, as an example record holds them (degrees; translations in ``units``).
+TRANSFORM_FIELDS = ("roll", "pitch", "yaw", "x", "y", "z")
+#: How many distortion coefficients a camera may have (OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6]]).
+_DISTORTION_LENGTHS = (0, 4, 5, 8)
+
+
+class BadField(Exception):
+    """A field of a baseline that fails validation (the message names it)."""
+
+
+def _number(value: Any, where: str, *, minimum: float | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise BadField(f"{where}={value!r}; expected a finite number")
+    if minimum is not None and value < minimum:
+        raise BadField(f"{where}={value!r}; expected a number >= {minimum:g}")
+    return float(value)
+
+
+def _text(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise BadField(f"{where}={value!r}; expected a string")
+    return value
+
+
+def _present(e: dict, key: str, where: str, expected: str) -> Any:
+    if key not in e:
+        raise BadField(f"{where} is missing the field {key!r} ({expected})")
+    return e[key]
+
+
+def relation_from_json(nodeid: str, rel: Any) -> RelationRecord:
+    """The relation record of one entry of a baseline's ``relations``, every field checked."""
+    if not isinstance(rel, dict):
+        raise BadField(f"expected an object, got {type(rel).__name__}")
+    for key in ("metric", "eps", "scene_hash", "examples"):
+        if key not in rel:
+            raise BadField(f"missing field {key!r}")
+    examples = rel["examples"]
+    if not isinstance(examples, list):
+        raise BadField(f"examples={type(examples).__name__}; expected a list of example records")
+    return RelationRecord(
+        nodeid=nodeid, metric=_text(rel["metric"], "metric"), eps=_number(rel["eps"], "eps", minimum=0),
+        scene=_text(rel.get("scene", ""), "scene"), scene_hash=_text(rel["scene_hash"], "scene_hash"),
+        outcome=_text(rel.get("outcome", "passed"), "outcome"),
+        examples=[_example(e, f"examples[{i}]") for i, e in enumerate(examples)],
+    )
+
+
+def meta_from_json(meta: Any) -> dict[str, Any]:
+    """A baseline's ``meta`` object, checked: ``not_recorded`` (relation test ids the saving session collected but
+    recorded nothing for: deselected, skipped or not run) must be a list of strings."""
+    if meta is None:
+        return {}
+    if not isinstance(meta, dict):
+        raise BadField(f"meta={meta!r}; expected an object")
+    skipped = meta.get("not_recorded", [])
+    if not isinstance(skipped, list) or not all(isinstance(n, str) for n in skipped):
+        raise BadField(f"meta.not_recorded={skipped!r}; expected a list of test ids")
+    return meta
+
+
+def _camera(camera: Any, where: str) -> None:
+    if not isinstance(camera, dict):
+        raise BadField(f"{where} must be an object with width, height, fx, fy, cx, cy")
+    for key in _CAMERA_INTS:
+        value = camera.get(key)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise BadField(f"{where}.{key}={value!r}; expected a whole number of pixels >= 1")
+    for key in _CAMERA_FLOATS:
+        _number(camera.get(key), f"{where}.{key}", minimum=1e-9 if key in ("fx", "fy") else None)
+    distortion = camera.get("distortion", [])
+    if not isinstance(distortion, list) or len(distortion) not in _DISTORTION_LENGTHS:
+        raise BadField(f"{where}.distortion={distortion!r}; expected a list of 0, 4, 5 or 8 numbers (OpenCV's "
+                       "k1 k2 p1 p2 [k3 [k4 k5 k6]])")
+    for k, value in enumerate(distortion):
+        _number(value, f"{where}.distortion[{k}]")
+
+
+def _follow_up(e: dict, where: str) -> tuple[dict[str, float] | None, dict[str, Any] | None]:
+    """The example's transform, filled to its six fields, or its mutation with all of its parameters."""
+    transform = _present(e, "transform", where, "an object with fields of the pose transform, or null for a mutation")
+    mutation = e.get("mutation")
+    if mutation is not None:
+        if not isinstance(mutation, dict) or not isinstance(mutation.get("name"), str):
+            raise BadField(f"{where}.mutation={mutation!r}; expected an object with the mutation's 'name' and its "
+                           "parameters")
+        from ..strategies.mutation import mutation_from_dict
+
+        try:
+            mutation = mutation_from_dict(mutation).as_dict()  # all of its parameters, as the engine records them
+        except (N2RError, TypeError, ValueError) as exc:
+            raise BadField(f"{where}.mutation: {exc}") from None
+    if transform is not None:
+        if not isinstance(transform, dict) or set(transform) - set(TRANSFORM_FIELDS):
+            raise BadField(f"{where}.transform={transform!r}; expected an object with fields of {TRANSFORM_FIELDS}")
+        # filled to the six fields the engine records, so that the example pairs with its replay
+        transform = {key: _number(transform.get(key, 0.0), f"{where}.transform.{key}") for key in TRANSFORM_FIELDS}
+    if transform is None and mutation is None:
+        raise BadField(f"{where} has neither a transform nor a mutation")
+    if transform is not None and mutation is not None:
+        raise BadField(f"{where} has both a transform and a mutation; expected one follow-up (the other null)")
+    return transform, mutation
+
+
+def _example(e: Any, where: str) -> ExampleRecord:
+    if not isinstance(e, dict):
+        raise BadField(f"{where} is {type(e).__name__}; expected an example object")
+    status = e.get("status")
+    if status not in STATUSES:
+        raise BadField(f"{where}.status={status!r}; expected one of {STATUSES}")
+    _text(_present(e, "scene", where, "the scene's name"), f"{where}.scene")
+    _text(e.get("view"), f"{where}.view")
+    _text(e.get("scene_hash", ""), f"{where}.scene_hash")
+    _text(e.get("reason", ""), f"{where}.reason")
+    settings = e.get("settings", {})
+    if not isinstance(settings, dict):
+        raise BadField(f"{where}.settings={settings!r}; expected an object (the scene's render settings)")
+    c2w = e.get("source_c2w")
+    if not isinstance(c2w, list) or len(c2w) != 16:
+        raise BadField(f"{where}.source_c2w must be 16 numbers (a row-major 4x4 camera-to-world pose)")
+    for k, v in enumerate(c2w):
+        _number(v, f"{where}.source_c2w[{k}]")
+    _camera(e.get("camera"), f"{where}.camera")
+    transform, mutation = _follow_up(e, where)
+    if e.get("units", "reference") not in ("reference", "scene", "metres"):
+        raise BadField(f"{where}.units={e.get('units')!r}; expected 'reference', 'scene' or 'metres'")
+    score, deviation = e.get("score"), e.get("deviation")
+    if status == "accepted":
+        score = _number(score, f"{where}.score")
+        deviation = _number(deviation, f"{where}.deviation (an accepted example)", minimum=0)
+        if not isinstance(e.get("passed"), bool):
+            raise BadField(f"{where}.passed={e.get('passed')!r}; expected true or false")
+    else:
+        if score is not None or deviation is not None:
+            raise BadField(f"{where} is {status} but has a score or deviation (expected null)")
+        score = deviation = math.nan
+    return ExampleRecord.from_dict({**e, "transform": transform, "mutation": mutation, "score": score,
+                                    "deviation": deviation, "passed": bool(e.get("passed"))})

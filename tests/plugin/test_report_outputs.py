@@ -1,0 +1,159 @@
+"""The reporting outputs end to end with pytester: the gate's verdict survives whatever happens to the files,
+output paths are checked before the run, a baseline holds every relation of the session it was saved from, and
+a user's metric compares with itself."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import pytest_n2r.report.html
+
+from .test_plugin import PLANE, RAMP
+from .test_reporting import DERANDOMIZED, _row
+
+MUTATED = """
+import os
+
+from pytest_n2r.strategies import brightness
+
+
+def brighter(rgb):
+    '''The SUT: mean brightness; the "candidate" build exaggerates it, so it varies more with the mutation.'''
+    return float(rgb.mean()) * (3.0 if os.environ.get("N2R_CANDIDATE") else 1.0)
+
+
+@metamorphic(AbsDifference(), eps=float(os.environ.get("N2R_EPS", "1000")), transform=brightness(128), examples=10)
+def test_bright(n2r_scene):
+    return brighter
+"""
+
+
+def test_a_failing_mutation_relation_is_reported_and_the_gate_keeps_its_verdict(n2r_project, monkeypatch):
+    n2r_project.write(MUTATED)
+    base = str(n2r_project.pytester.path / "baseline.json")
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", base).assert_outcomes(passed=1)
+    monkeypatch.setenv("N2R_CANDIDATE", "1")
+    monkeypatch.setenv("N2R_EPS", "5")
+    result = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "--n2r-report", "r.html")
+    text = result.stdout.str() + result.stderr.str()
+    assert "INTERNALERROR" not in text, f"the report of a mutation relation crashed the session:\n{text}"
+    result.assert_outcomes(failed=1)
+    assert result.ret == pytest.ExitCode.TESTS_FAILED, text
+    assert _row(result, "test_bright[plane]")[-1].startswith("worse (fails)"), "the gate's verdict is missing"
+    page = (n2r_project.pytester.path / "r.html").read_text()
+    assert "mutation <code>brightness(levels=" in page, "the minimal example's mutation is not in the report"
+
+
+def test_an_output_that_cannot_be_written_does_not_hide_the_verdict_or_the_others(n2r_project, monkeypatch):
+    n2r_project.write(MUTATED)
+    base = str(n2r_project.pytester.path / "baseline.json")
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", base).assert_outcomes(passed=1)
+
+    def disk_full(path, *args, **kwargs):
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(pytest_n2r.report.html, "write_html", disk_full)
+    same = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "--n2r-report", "r.html", "--n2r-json", "r.json")
+    text = same.stdout.str() + same.stderr.str()
+    assert "INTERNALERROR" not in text and "Traceback" not in text, text
+    assert _row(same, "test_bright[plane]")[-1] == "ok", "the gate's verdict is missing"
+    same.stdout.fnmatch_lines(["*pytest-n2r wrote r.json*",
+                               "*pytest-n2r could not write the HTML report r.html: No space left on device*"])
+    assert same.ret == pytest.ExitCode.TESTS_FAILED, "a requested report that was not written must fail the run"
+
+
+TWO = """
+
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=30)
+def test_heading(n2r_scene):
+    return heading_class
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=4), examples=6)
+def test_mean_colour(n2r_scene):
+    return mean_colour
+"""
+
+
+@pytest.mark.parametrize("stop", [["-x"], ["--maxfail", "1"], ["interrupt"], ["-x", "-n", "2", "-p", "no:benchmark"]],
+                         ids=["-x", "--maxfail", "Ctrl-C", "xdist -x"])
+def test_a_session_that_stopped_early_saves_no_baseline(n2r_project, stop):
+    if "-n" in stop:
+        pytest.importorskip("xdist")
+    stop_test = "\n\ndef test_interrupt():\n    raise KeyboardInterrupt\n" if stop == ["interrupt"] else ""
+    n2r_project.write(TWO.replace("\n\n@metamorphic(Abs", stop_test + "\n\n@metamorphic(Abs", 1))
+    base = n2r_project.pytester.path / "baseline.json"
+    args = [] if stop == ["interrupt"] else stop
+    result = n2r_project.pytester.runpytest("-p", "no:cacheprovider", "--n2r-size", "96", "--n2r-scene", RAMP, *args,
+                                            "--n2r-save-baseline", str(base), no_reraise_ctrlc=True)
+    assert not base.exists(), f"a baseline was saved from a session stopped by {stop}: it lacks test_mean_colour"
+    assert result.ret != pytest.ExitCode.OK, result.stdout.str()
+    expected = f"*pytest-n2r did not save the baseline {base}: the session *, so it would lack the relations that did*"
+    result.stdout.fnmatch_lines([expected])
+
+
+@pytest.mark.parametrize("workers", [[], ["-n", "2", "-p", "no:benchmark"]], ids=["one process", "xdist"])
+def test_relations_deselected_when_the_baseline_was_saved_are_missing_later(n2r_project, workers):
+    if workers:
+        pytest.importorskip("xdist")
+    n2r_project.write(TWO)
+    base = n2r_project.pytester.path / "baseline.json"
+    saved = n2r_project.run("--n2r-scene", RAMP, "-k", "mean_colour", *workers, "--n2r-save-baseline", str(base))
+    saved.assert_outcomes(passed=1)
+    meta = json.loads(base.read_text())["meta"]
+    assert meta == {"not_recorded": ["test_relations.py::test_heading[ramp]"]}, f"meta {meta}"
+    full = n2r_project.run("--n2r-scene", RAMP, "--n2r-compare", str(base))
+    assert _row(full, "test_heading[ramp]")[-1] == "missing (fails)", \
+        "a relation the baseline's session deselected must not pass as new"
+    assert full.ret == pytest.ExitCode.TESTS_FAILED
+    full.stdout.fnmatch_lines(["*test_heading[[]ramp[]]: missing: not in the baseline: the session that saved it *"])
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (["--n2r-json", "{tmp}"], "--n2r-json: {tmp} is a folder; expected the path of a file to write"),
+    (["--n2r-report", "{tmp}/notes.txt/r.html"], "--n2r-report: {tmp}/notes.txt/r.html: {tmp}/notes.txt is a file"),
+    (["--n2r-save-baseline", "/proc/n2r-baseline.json"],
+     "--n2r-save-baseline: /proc/n2r-baseline.json: cannot write into /proc"),
+    (["--n2r-json", "out.json", "--n2r-report", "out.json"], "--n2r-json and --n2r-report are both out.json"),
+])
+def test_output_paths_are_checked_before_the_run(n2r_project, args, expected):
+    tmp = n2r_project.pytester.path
+    (tmp / "notes.txt").write_text("my notes\n")
+    n2r_project.write(TWO)
+    result = n2r_project.run("--n2r-scene", PLANE, *(a.format(tmp=tmp) for a in args))
+    err = " ".join(result.stderr.str().split())
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, f"exit code {result.ret}:\n{result.stdout.str()}\n{err}"
+    assert f"ERROR: pytest-n2r: {expected.format(tmp=tmp)}" in err, err
+
+
+def test_a_users_metric_without_a_repr_compares_with_itself(n2r_project):
+    """A metric subclass without ``__repr__`` of its own once read as ``<MyDiff object at 0x...>``: a new
+    address every run, so every comparison said changed-metric."""
+    n2r_project.write("""
+from pytest_n2r.metrics.base import Metric
+
+
+class MyDiff(Metric):
+    name = "my_diff"
+    ideal = 0.0
+
+    def __init__(self, scale=1.0):
+        self.scale = scale
+
+    def compute(self, out_source, out_follow, source, follow):
+        return self.result(abs(float(out_source) - float(out_follow)) * self.scale)
+
+
+@metamorphic(MyDiff(0.5), eps=1000, transform=transforms(yaw=4), examples=6)
+def test_mine(n2r_scene):
+    return mean_colour
+""")
+    base = n2r_project.pytester.path / "baseline.json"
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
+    (relation,) = json.loads(base.read_text())["relations"].values()
+    assert relation["metric"] == "MyDiff(scale=0.5)", relation["metric"]
+    again = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
+    assert _row(again, "test_mine[plane]")[-1] == "ok", "an unchanged user metric must compare as ok"
+    assert again.ret == pytest.ExitCode.OK
