@@ -255,6 +255,10 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("study --seed abc", "study {scene} --sut orb -o {tmp}/study --seed abc",
      r"argument --seed: invalid int value"),
     ("study --device tpu", "study {scene} --sut orb -o {tmp}/study --device tpu", r"invalid choice: 'tpu'"),
+    ("study --sut-kind orb=banana", "study {scene} --sut orb -o {tmp}/study --sut-kind orb=banana",
+     r"--sut-kind 'orb=banana': expected detector or classifier"),
+    ("study --sut-kind of no --sut", "study {scene} --sut orb -o {tmp}/study --sut-kind sift=detector",
+     r"--sut-kind sift=detector: 'sift' is not one of the --sut given"),
 ]
 
 
