@@ -87,6 +87,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     root = path.parent
     frames: list[SourceFrame] = []
     skipped: list[tuple[str, str]] = []
+    listed: dict[str, int] = {}  # file_path -> the first frame that lists it
     for i, raw in enumerate(raw_frames):
         where = f"{path}: frames[{i}]"
         if not isinstance(raw, dict):
@@ -94,6 +95,9 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
         name = raw.get("file_path")
         if not isinstance(name, str) or not name:
             raise IngestError(f"{where}: field 'file_path' is missing or not a string")
+        first = listed.setdefault(name, i)
+        if first != i:  # a view's name is its file_path: two views of one name cannot both be tested or saved
+            raise IngestError(f"{where}: file_path {name!r} is also frames[{first}]'s; expected each image once")
         image = _resolve_image(root, name)
         c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
         frame_model = _camera_model(raw, where, model)

@@ -156,6 +156,14 @@ def test_bad_focal_value(corner):
     assert "bad intrinsics" in _break(corner, mutate)
 
 
+def test_an_image_listed_twice_is_refused_naming_both_frames(corner):
+    """A view is named by its file_path; a second frame of one image made two views of one name, one never drawn,
+    and `n2r fit` failed only when it saved the fitted scene."""
+    msg = _break(corner, lambda m: m["frames"].append(dict(m["frames"][1])))
+    assert "is also frames[1]'s; expected each image once" in msg and "file_path" in msg, \
+        f"a frame listing an image twice was not refused naming both frames: {msg}"
+
+
 def test_missing_frames_field(corner):
     assert "'frames' is missing or empty" in _break(corner, lambda m: m.pop("frames"))
 
