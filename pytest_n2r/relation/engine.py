@@ -283,15 +283,15 @@ class Engine:
         if self.gave_up:  # reject the rest of the draws without rendering them
             assume(False)
         tau = as_follow_up(tau)
-        if not self.shrinking:  # the same example again tests nothing new: not counted, Hypothesis draws another
-            drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(), json.dumps(tau.record_fields(),
-                                                                                     sort_keys=True, default=str))
-            if drawn in self.drawn:
-                assume(False)
-            self.drawn.add(drawn)
+        drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(),
+                 json.dumps(tau.record_fields(), sort_keys=True, default=str))
+        if not self.shrinking and drawn in self.drawn:
+            assume(False)  # the same example again tests nothing new: not counted, Hypothesis draws another
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
         if not self.shrinking:
+            # kept once evaluated: an example that raised is replayed as it was (Hypothesis confirms the error)
+            self.drawn.add(drawn)
             if record.valid and not record.passed and not self.run_record.inconsistencies:
                 check_deterministic(self.run_sut, evaluation.source.rgb, evaluation.follow.rgb,
                                     *evaluation.outputs, evaluation.where)
