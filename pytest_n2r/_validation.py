@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from numbers import Real
 from typing import Any
 
@@ -11,14 +12,40 @@ import numpy as np
 from .errors import InvalidArgument, InvalidType
 
 
+def is_finite(value: Any) -> bool:
+    """Whether the real number ``value`` is finite as a float: an int too large for one (JSON's integers have no
+    limit; ``float(10**400)`` overflows) is not.
+
+    >>> is_finite(1.5), is_finite(float("nan")), is_finite(10**400)
+    (True, False, False)
+    """
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 def check_real(name: str, value: Any) -> float:
     """Return ``value`` as a finite float, or raise naming ``name``."""
     if isinstance(value, bool) or not isinstance(value, (Real, np.floating, np.integer)):
         raise InvalidType(f"{name}={value!r} must be a real number, not {type(value).__name__}")
-    value = float(value)
-    if not math.isfinite(value):
+    if not is_finite(value):
         raise InvalidArgument(f"{name}={value!r} must be finite")
-    return value
+    return float(value)
+
+
+def repeated_name(names: Iterable[str]) -> tuple[int, int, str] | None:
+    """``(first, second, name)``: the positions of the first name that ``names`` hold twice; ``None`` when all differ.
+
+    >>> repeated_name(["a.png", "b.png", "a.png"]), repeated_name(["a.png", "b.png"])
+    ((0, 2, 'a.png'), None)
+    """
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in seen:
+            return seen[name], i, name
+        seen[name] = i
+    return None
 
 
 def check_range(name: str, value: Any, lo: float | None = None, hi: float | None = None) -> float:

@@ -15,12 +15,12 @@ records no split.
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 
 import numpy as np
 
+from .._validation import is_finite, repeated_name
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, orthonormalize
 from .atomic import atomic_write_text
@@ -43,17 +43,9 @@ def is_gs_cameras(path: str | os.PathLike) -> bool:
     return start.startswith("[")
 
 
-def _finite(value: float) -> bool:
-    """Whether ``value`` is a finite float, or an int a float holds (JSON's integers have no limit)."""
-    try:
-        return math.isfinite(value)
-    except OverflowError:
-        return False
-
-
 def _number(record: dict, key: str, where: str, positive: bool = True) -> float:
     value = record.get(key)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value) \
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value) \
             or (positive and value <= 0):
         raise IngestError(f"{where}: field {key!r}={value!r}; expected a finite number{' > 0' if positive else ''}")
     return float(value)
@@ -70,7 +62,6 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
     if not isinstance(data, list) or not data:
         raise IngestError(f"{path}: expected a non-empty JSON list of cameras (3DGS cameras.json)")
     frames = []
-    first: dict[str, int] = {}  # the entry of each name
     for i, record in enumerate(data):
         where = f"{path}: [{i}]"
         if not isinstance(record, dict):
@@ -78,10 +69,6 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
         name = record.get("img_name", f"camera_{i:05d}")
         if not isinstance(name, str) or not name:
             raise IngestError(f"{where}: field 'img_name'={name!r}; expected a non-empty string")
-        if name in first:
-            raise IngestError(f"{path}: [{first[name]}] and [{i}] both have img_name {name!r}; expected one camera a "
-                              "name (a view is looked up and reported by its name)")
-        first[name] = i
         width, height = (_number(record, k, where) for k in ("width", "height"))
         if width != int(width) or height != int(height):
             raise IngestError(f"{where}: width x height = {width} x {height}; expected whole pixels")
@@ -108,6 +95,10 @@ def read_gs_cameras(path: str | os.PathLike) -> PoseSet:
         except N2RError as exc:
             raise IngestError(f"{where}: bad intrinsics: {exc}") from None
         frames.append(SourceFrame(name=name, path=None, camera=camera, c2w=c2w))
+    repeat = repeated_name(f.name for f in frames)  # every entry is a frame: positions are the file's
+    if repeat is not None:
+        raise IngestError(f"{path}: [{repeat[0]}] and [{repeat[1]}] both have img_name {repeat[2]!r}; expected one "
+                          "camera a name (a view is looked up and reported by its name)")
     return PoseSet(frames=frames, source=str(path), kind="cameras.json", report={"listed": len(data)})
 
 

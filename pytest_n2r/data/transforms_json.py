@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import repeated_name
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
@@ -87,7 +88,6 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     root = path.parent
     frames: list[SourceFrame] = []
     skipped: list[tuple[str, str]] = []
-    listed: dict[str, int] = {}  # file_path -> the first frame that lists it
     for i, raw in enumerate(raw_frames):
         where = f"{path}: frames[{i}]"
         if not isinstance(raw, dict):
@@ -95,9 +95,6 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
         name = raw.get("file_path")
         if not isinstance(name, str) or not name:
             raise IngestError(f"{where}: field 'file_path' is missing or not a string")
-        first = listed.setdefault(name, i)
-        if first != i:  # a view's name is its file_path: two views of one name cannot both be tested or saved
-            raise IngestError(f"{where}: file_path {name!r} is also frames[{first}]'s; expected each image once")
         image = _resolve_image(root, name)
         c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
         frame_model = _camera_model(raw, where, model)
@@ -112,6 +109,10 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
             continue
         camera = _read_camera(meta, raw, where, image, frame_model)
         frames.append(SourceFrame(name=name, path=image, camera=camera, c2w=c2w))
+    repeat = repeated_name(raw["file_path"] for raw in raw_frames)  # each a string: checked above
+    if repeat is not None:  # a view's name is its file_path: two views of one name cannot both be tested or saved
+        raise IngestError(f"{path}: frames[{repeat[1]}]: file_path {repeat[2]!r} is also frames[{repeat[0]}]'s; "
+                          "expected each image once")
     if not frames:
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
     heldout = _read_split(meta, path, [raw["file_path"] for raw in raw_frames])

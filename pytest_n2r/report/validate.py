@@ -14,17 +14,21 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from ..errors import N2RError
+from .._validation import is_finite
+from ..errors import InvalidArgument, InvalidType, N2RError
+from ..geometry import Camera, Transform
 from ..relation.record import STATUSES, ExampleRecord, RelationRecord
 
-__all__ = ["BadField", "relation_from_json", "meta_from_json", "TRANSFORM_FIELDS"]
+__all__ = ["BadField", "relation_from_json", "meta_from_json"]
 
 _CAMERA_INTS = ("width", "height")
 _CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
-#: The six fields of a pose transform, as an example record holds them (degrees; translations in ``units``).
-TRANSFORM_FIELDS = ("roll", "pitch", "yaw", "x", "y", "z")
-#: How many distortion coefficients a camera may have (OpenCV's k1 k2 p1 p2 [k3 [k4 k5 k6]]).
-_DISTORTION_LENGTHS = (0, 4, 5, 8)
+#: What each field of a camera record holds, for messages; the rules on the values are
+#: :class:`~pytest_n2r.geometry.Camera`'s own.
+_CAMERA_FIELDS = {"width": "a whole number of pixels", "height": "a whole number of pixels",
+                  "fx": "a focal length in pixels", "fy": "a focal length in pixels",
+                  "cx": "a principal point coordinate in pixels", "cy": "a principal point coordinate in pixels",
+                  "distortion": "OpenCV's distortion coefficients k1 k2 p1 p2 [k3 [k4 k5 k6]]"}
 
 
 class BadField(Exception):
@@ -32,7 +36,7 @@ class BadField(Exception):
 
 
 def _number(value: Any, where: str, *, minimum: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value):
         raise BadField(f"{where}={value!r}; expected a finite number")
     if minimum is not None and value < minimum:
         raise BadField(f"{where}={value!r}; expected a number >= {minimum:g}")
@@ -83,20 +87,30 @@ def meta_from_json(meta: Any) -> dict[str, Any]:
 
 
 def _camera(camera: Any, where: str) -> None:
+    """Checks the types of the camera record's fields here, then its values by building the
+    :class:`~pytest_n2r.geometry.Camera` (what a replay builds), naming the field that fails."""
     if not isinstance(camera, dict):
         raise BadField(f"{where} must be an object with width, height, fx, fy, cx, cy")
     for key in _CAMERA_INTS:
         value = camera.get(key)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise BadField(f"{where}.{key}={value!r}; expected a whole number of pixels >= 1")
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise BadField(f"{where}.{key}={value!r}; expected {_CAMERA_FIELDS[key]}")
     for key in _CAMERA_FLOATS:
-        _number(camera.get(key), f"{where}.{key}", minimum=1e-9 if key in ("fx", "fy") else None)
+        _number(camera.get(key), f"{where}.{key}")
     distortion = camera.get("distortion", [])
-    if not isinstance(distortion, list) or len(distortion) not in _DISTORTION_LENGTHS:
+    if not isinstance(distortion, list):
         raise BadField(f"{where}.distortion={distortion!r}; expected a list of 0, 4, 5 or 8 numbers (OpenCV's "
                        "k1 k2 p1 p2 [k3 [k4 k5 k6]])")
     for k, value in enumerate(distortion):
         _number(value, f"{where}.distortion[{k}]")
+    try:
+        Camera.from_dict(camera)
+    except (InvalidArgument, InvalidType) as exc:
+        # Camera's messages start with the field they name ("Camera fx=0.0 must be > 0")
+        key = next((k for k in _CAMERA_FIELDS if str(exc).startswith(f"Camera {k}")), None)
+        if key is None:
+            raise BadField(f"{where}: {exc}") from None
+        raise BadField(f"{where}.{key}={camera.get(key)!r}; expected {_CAMERA_FIELDS[key]} ({exc})") from None
 
 
 def _follow_up(e: dict, where: str) -> tuple[dict[str, float] | None, dict[str, Any] | None]:
@@ -114,10 +128,10 @@ def _follow_up(e: dict, where: str) -> tuple[dict[str, float] | None, dict[str, 
         except (N2RError, TypeError, ValueError) as exc:
             raise BadField(f"{where}.mutation: {exc}") from None
     if transform is not None:
-        if not isinstance(transform, dict) or set(transform) - set(TRANSFORM_FIELDS):
-            raise BadField(f"{where}.transform={transform!r}; expected an object with fields of {TRANSFORM_FIELDS}")
+        if not isinstance(transform, dict) or set(transform) - set(Transform.COMPONENTS):
+            raise BadField(f"{where}.transform={transform!r}; expected an object with fields of {Transform.COMPONENTS}")
         # filled to the six fields the engine records, so that the example pairs with its replay
-        transform = {key: _number(transform.get(key, 0.0), f"{where}.transform.{key}") for key in TRANSFORM_FIELDS}
+        transform = {key: _number(transform.get(key, 0.0), f"{where}.transform.{key}") for key in Transform.COMPONENTS}
     if transform is None and mutation is None:
         raise BadField(f"{where} has neither a transform nor a mutation")
     if transform is not None and mutation is not None:

@@ -8,11 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._validation import repeated_name
 from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
 from ..render.view import OUTPUTS, RenderedView
 
-__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs", "repeated_name"]
+__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs"]
 
 #: How far from the captured cameras a render may be, in reference lengths: beyond it a float32 renderer
 #: cannot place a sample within a thousandth of a reference length, so the picture would be noise or NaN.
@@ -30,20 +31,6 @@ class SceneView:
     c2w: np.ndarray
     split: str = "train"
     image: np.ndarray | None = None
-
-
-def repeated_name(names: Iterable[str]) -> tuple[int, int, str] | None:
-    """``(first, second, name)``: the positions of the first name that ``names`` hold twice; ``None`` when all differ.
-
-    >>> repeated_name(["a.png", "b.png", "a.png"]), repeated_name(["a.png", "b.png"])
-    ((0, 2, 'a.png'), None)
-    """
-    seen: dict[str, int] = {}
-    for i, name in enumerate(names):
-        if name in seen:
-            return seen[name], i, name
-        seen[name] = i
-    return None
 
 
 def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:

@@ -24,10 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import repeated_name
 from ..errors import InvalidArgument, InvalidType, SceneFileError
 from ..geometry import Camera, check_pose
 from ..render.size import MAX_SIDE
-from .base import repeated_name
 
 __all__ = [
     "FORMAT_NAME", "FORMAT_VERSION", "SCENE_JSON", "FIELD_FILE", "REQUIRED_KEYS", "FRAME_KEYS", "SPLITS",

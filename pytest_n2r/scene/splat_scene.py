@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_unit_rgb, check_positive
+from .._validation import as_unit_rgb, check_positive, repeated_name
 from ..data.capture import heldout_split
 from ..data.poses import PoseSet
 from ..errors import IngestError, InvalidArgument, InvalidType
@@ -23,7 +23,7 @@ from ..geometry import Camera, Units
 from ..render.size import MAX_SIDE
 from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSettings
 from ..splats.gaussians import Gaussians
-from .base import Scene, SceneView, repeated_name
+from .base import Scene, SceneView
 
 __all__ = ["SplatScene", "load_splat_scene", "measure_reference_length", "splat_views"]
 

@@ -103,6 +103,7 @@ _EX = "relations/a::t/examples/0"
     ("version", 1, "format version 1; this pytest-n2r reads version 2 \\(paired replay\\)"),
     ("relations/a::t/eps", -1, "relation 'a::t': eps=-1; expected a number >= 0"),
     ("relations/a::t/eps", "0.2", "eps='0.2'; expected a finite number"),
+    ("relations/a::t/eps", 10**400, r"eps=10{400}; expected a finite number"),  # float() would overflow
     ("relations/a::t/scene_hash", _DELETE, "missing field 'scene_hash'"),
     ("relations/a::t/examples", {}, "examples=dict; expected a list"),
     (f"{_EX}/deviation", None, r"examples\[0\].deviation \(an accepted example\)=None; expected a finite number"),
