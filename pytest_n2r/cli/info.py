@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -68,17 +67,9 @@ def run(args: argparse.Namespace) -> int:
 
 def _json(data: dict) -> str:
     """``data`` as strict JSON (what any JSON reader reads): a number that is not finite is ``null``."""
-    return json.dumps(_finite(data), indent=2, allow_nan=False)
+    from ..scene.schema import json_ready
 
-
-def _finite(value: object) -> object:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    return value
+    return json.dumps(json_ready(data), indent=2, allow_nan=False)
 
 
 def _shift(scene: SceneFile, size: str) -> FidelityReport:

@@ -29,10 +29,12 @@ def _wxh(text: str) -> tuple[int, int]:
 
 def _sut_kind(text: str) -> tuple[str | None, str]:
     """``SUT=KIND`` (one ``--sut``) or ``KIND`` (every imported ``--sut``) as ``(sut or None, kind)``."""
+    from ..study.suts import KINDS
+
     sut, _, kind = text.rpartition("=")
-    if kind not in ("detector", "classifier"):
-        raise argparse.ArgumentTypeError(f"--sut-kind {text!r}: expected detector or classifier, or SUT=detector / "
-                                         "SUT=classifier for one --sut")
+    if kind not in KINDS:
+        raise argparse.ArgumentTypeError(f"--sut-kind {text!r}: expected {' or '.join(KINDS)}, or "
+                                         f"{' / '.join(f'SUT={k}' for k in KINDS)} for one --sut")
     return sut or None, kind
 
 

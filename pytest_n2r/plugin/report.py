@@ -34,12 +34,15 @@ def pytest_configure(config: pytest.Config) -> None:
     pytest-xdist workers too: they replay its examples."""
     outputs = {name: path for name, path in read_options(config, tuple(option(n) for n in _OUTPUT_OPTIONS)).items()
                if path is not None}
-    seen: dict[Path, str] = {}
+    seen: dict[Path, tuple[str, Path]] = {}
     for name, path in outputs.items():
-        other = seen.setdefault(path.absolute(), name)
+        # resolved: a/../out.json and out.json (or a link to it) are one file
+        other, other_path = seen.setdefault(path.resolve(), (name, path))
         if other != name:
-            raise pytest.UsageError(f"pytest-n2r: {option(other).flag} and {option(name).flag} are both {path}; "
-                                    "give each output its own file (one would replace the other)")
+            a, b = option(other).flag, option(name).flag
+            both = (f"{a} and {b} are both {path}" if other_path == path else
+                    f"{a} {other_path} and {b} {path} are one file ({path.resolve()})")
+            raise pytest.UsageError(f"pytest-n2r: {both}; give each output its own file (one would replace the other)")
     config.stash[_OUTPUTS] = outputs
     rules = (option("compare_confidence"), option("compare_fail"), option("compare_fail_on"))
     given = [o.flag for o in rules if o.given(config) is not None]

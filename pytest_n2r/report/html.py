@@ -66,15 +66,15 @@ def _image_tag(path: str, alt: str) -> str:
 
 
 def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
-    """The example's follow-up as (kind, words): ``("mutation", "brightness(levels=30)")``, ``("transform",
-    "yaw=5.25")`` or ``("transform", "identity")`` (a pose transform whose fields are all 0)."""
-    def fields(values: dict) -> str:
-        return ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in values.items())
-
-    if ex.mutation is not None:
-        params = {k: v for k, v in ex.mutation.items() if k != "name"}
-        return "mutation", f"{ex.mutation.get('name', '?')}({fields(params)})"
-    return "transform", fields({k: v for k, v in (ex.transform or {}).items() if v}) or "identity"
+    """The example's follow-up as (kind, words), the words of failure messages
+    (:meth:`~pytest_n2r.strategies.FollowUp.describe`): ``("mutation", "brightness +30 levels (+11.8% of full
+    scale)")``, ``("transform", "yaw=+5.250°")`` or ``("transform", "identity")``. A follow-up this process
+    cannot rebuild (a mutation class it has not imported, as on a pytest-xdist controller) shows as recorded."""
+    kind = "mutation" if ex.mutation is not None else "transform"
+    try:
+        return kind, ex.follow_up().describe()
+    except (ValueError, TypeError):  # InvalidArgument / InvalidType, or a transform with unknown fields
+        return kind, repr(ex.mutation if ex.mutation is not None else ex.transform)
 
 
 def _example_block(title: str, ex: ExampleRecord) -> str:

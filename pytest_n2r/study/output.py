@@ -46,8 +46,9 @@ def _csv(rows: list[dict]) -> str:
 
 
 def _mean_by(rows: list[dict], keys: tuple[str, ...], values: tuple[str, ...]) -> list[dict]:
-    """The mean of each of ``values`` per group of ``keys`` over the group's valid rows (NaN where none is):
-    ``n`` counts the group's rows, ``n_valid`` those the means cover (a row without ``valid`` is valid)."""
+    """The mean of each of ``values`` per group of ``keys`` over the group's rows not marked invalid whose value
+    is defined (NaN where none is): ``n`` counts the group's rows, ``n_valid`` its rows not marked invalid
+    (``valid`` false; a row without ``valid``, such as a realness row, is not marked, so it counts)."""
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
         groups[tuple(r[k] for k in keys)].append(r)
@@ -87,6 +88,7 @@ def _plots(result: StudyResult, out: Path) -> list[str]:
     except ImportError:
         return ["plots skipped: matplotlib is not installed (pip install 'pytest-n2r[study]')"]
     written = []
+    realness_png, inconsistencies_png, fps_png = PLOTS
 
     def save(fig, name: str) -> None:
         buf = io.BytesIO()
@@ -107,7 +109,7 @@ def _plots(result: StudyResult, out: Path) -> list[str]:
                           color=["#d62728" if r["source"] == "tau0" else "#1f77b4" for r in realness])
             ax.bar_label(bars, ["∞" if not math.isfinite(v) else f"{v:.3g}" for v in values], fontsize=7)
             ax.set_title(f"RQ1 {key.upper()} vs real photo")
-        save(fig, "rq1_realness.png")
+        save(fig, realness_png)
     incs = result.inconsistencies
     if incs and result.eps:
         metrics = sorted({r["metric"] for r in incs})
@@ -121,14 +123,14 @@ def _plots(result: StudyResult, out: Path) -> list[str]:
             ax.set_xticks(range(len(result.eps)), [f"ε={e:g}" for e in result.eps])
             ax.set_title(metric)
         axes[0][0].legend(fontsize=7)
-        save(fig, "rq2_inconsistencies.png")
+        save(fig, inconsistencies_png)
     if result.fps:
         fig, ax = plt.subplots(figsize=(5, 3))
         labels = [f"{r['scene']}\n{r['width']}×{r['height']}" for r in result.fps]
         ax.bar(labels, [r["fps"] for r in result.fps], color="#2ca02c")
         ax.set_ylabel("frames / s")
         ax.set_title("RQ3 render speed")
-        save(fig, "rq3_fps.png")
+        save(fig, fps_png)
     return written
 
 

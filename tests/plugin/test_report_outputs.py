@@ -5,10 +5,12 @@ a user's metric compares with itself."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
 import pytest_n2r.report.html
+from pytest_n2r.strategies import Brightness
 
 from .test_plugin import PLANE, RAMP
 from .test_reporting import DERANDOMIZED, _row
@@ -43,7 +45,10 @@ def test_a_failing_mutation_relation_is_reported_and_the_gate_keeps_its_verdict(
     assert result.ret == pytest.ExitCode.TESTS_FAILED, text
     assert _row(result, "test_bright[plane]")[-1].startswith("worse (fails)"), "the gate's verdict is missing"
     page = (n2r_project.pytester.path / "r.html").read_text()
-    assert "mutation <code>brightness(levels=" in page, "the minimal example's mutation is not in the report"
+    shown = re.search(r"mutation <code>brightness ([+-]\d+) levels ", page)
+    assert shown, "the minimal example's mutation is not in the report"
+    words = Brightness(levels=int(shown.group(1))).describe()  # the words failure messages use
+    assert f"mutation <code>{words}</code>" in page, f"the minimal example's mutation is not shown as {words!r}"
 
 
 def test_an_output_that_cannot_be_written_does_not_hide_the_verdict_or_the_others(n2r_project, monkeypatch):
@@ -117,6 +122,8 @@ def test_relations_deselected_when_the_baseline_was_saved_are_missing_later(n2r_
     (["--n2r-save-baseline", "/proc/n2r-baseline.json"],
      "--n2r-save-baseline: /proc/n2r-baseline.json: cannot write into /proc"),
     (["--n2r-json", "out.json", "--n2r-report", "out.json"], "--n2r-json and --n2r-report are both out.json"),
+    (["--n2r-json", "out.json", "--n2r-report", "sub/../out.json"],
+     "--n2r-json out.json and --n2r-report sub/../out.json are one file ({tmp}/out.json)"),
 ])
 def test_output_paths_are_checked_before_the_run(n2r_project, args, expected):
     tmp = n2r_project.pytester.path

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html
 import re
 
 import cv2
@@ -38,6 +39,9 @@ def test_report_shows_counts_histogram_and_embedded_images(tmp_path):
     assert "data:image/png;base64," in page, "artifact images must be embedded, not linked"
     assert "boom &lt;b&gt;" in page, "messages must be escaped"
     assert "Minimal failing example" in page
+    words = rel.minimal.follow_up().describe()  # the words failure messages use, translation units included
+    assert words == "yaw=+5.250°"
+    assert f"transform <code>{html.escape(words)}</code>" in page, "the minimal example's transform is not shown"
 
 
 def test_missing_image_is_reported_not_fatal(tmp_path):
@@ -58,5 +62,15 @@ def test_a_mutation_example_shows_its_mutation(tmp_path):
     rel = RelationRecord("test_x.py::test_bright[wall]", "repeatability(px=2.0)", 0.2, [minimal], outcome="failed",
                          minimal=minimal)
     page = render_html([rel])
-    assert "mutation <code>brightness(levels=30)</code>" in page, "the minimal example's mutation is not shown"
+    words = minimal.follow_up().describe()  # the words failure messages use
+    assert words == "brightness +30 levels (+11.8% of full scale)"
+    assert f"mutation <code>{html.escape(words)}</code>" in page, "the minimal example's mutation is not shown"
     assert "transform <code>" not in page, "a mutation example was described as a pose transform"
+
+
+def test_a_follow_up_that_cannot_be_rebuilt_is_shown_as_recorded(tmp_path):
+    """A mutation class this process has not imported (a pytest-xdist controller) does not stop the report."""
+    minimal = ExampleRecord("wall", "view3", None, 0.7, 0.3, False, mutation={"name": "not_imported", "k": 1})
+    rel = RelationRecord("test_x.py::test_mine[wall]", "repeatability(px=2.0)", 0.2, [minimal], outcome="failed",
+                         minimal=minimal)
+    assert f"mutation <code>{html.escape(repr(minimal.mutation))}</code>" in render_html([rel])
