@@ -19,7 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from pytest_n2r.geometry import CameraStack, backproject, pixel_grid
+from pytest_n2r.geometry import CameraStack, backproject, inside_image, pixel_grid
 from pytest_n2r.metrics.image_quality import psnr, ssim
 from pytest_n2r.relation.floor.reference import shift_sample
 from pytest_n2r.render.field_render import FieldRenderer
@@ -53,7 +53,7 @@ class FittedPhotos:
         points = backproject(pixel_grid(view.camera)[solid], view.depth[solid].astype(np.float64), view.camera,
                              view.c2w)
         u, v, z = self.stack.project(points)
-        seen = self.stack.sees(points)
+        seen = (z > 0) & inside_image(u, v, self.stack.size[:, 0, None], self.stack.size[:, 1, None])
         for k, depth in enumerate(self.depths):
             at = np.flatnonzero(seen[k])
             iu = np.minimum(np.floor(u[k, at] + 0.5).astype(np.intp), depth.shape[1] - 1)

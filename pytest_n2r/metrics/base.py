@@ -147,6 +147,8 @@ def _stable_repr(value: Any) -> str:
     if isinstance(value, (list, tuple)):
         items = ", ".join(_stable_repr(v) for v in value)
         return f"[{items}]" if isinstance(value, list) else f"({items}{',' if len(value) == 1 else ''})"
+    if isinstance(value, (set, frozenset)):  # in the order of their items' words, not of their hashes
+        return "{" + ", ".join(sorted(_stable_repr(v) for v in value)) + "}"
     if isinstance(value, dict):
         return "{" + ", ".join(f"{_stable_repr(k)}: {_stable_repr(v)}" for k, v in value.items()) + "}"
     return _ADDRESS.sub("", repr(value))

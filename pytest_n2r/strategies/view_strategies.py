@@ -69,8 +69,4 @@ def views(
     if interpolate and len(candidates) >= 2:
         return st.builds(lambda i, k: trajectory_view(candidates, i, k / _STEPS),
                          st.integers(0, len(candidates) - 2), st.integers(0, _STEPS))
-
-    def view_at(index: int) -> SceneView:  # drawn by position, not by name, which a view may share
-        return candidates[index]
-
-    return st.sampled_from(range(len(candidates))).map(view_at)
+    return st.sampled_from(candidates)

@@ -4,7 +4,10 @@ field floor and kept results are keyed by it."""
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 
@@ -56,3 +59,14 @@ def test_the_built_in_metrics_keep_their_own_reprs():
     assert recorded == current, f"the example baseline's metrics {recorded} differ from today's reprs {current}"
     for name, cls in METRICS.items():
         assert cls.__repr__ is not Metric.__repr__, f"{name} lost its own repr"
+
+
+def test_a_set_attribute_reprs_in_the_same_order_in_every_process():
+    """A set of strings iterates in the order of their hashes, which PYTHONHASHSEED changes from run to run."""
+    code = ("from tests.metrics.test_metric_repr import Scaled; "
+            "print(repr(Scaled(weights={'orb', 'sift', 'akaze', 'brisk', 'kaze'})))")
+    texts = {subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, text=True, check=True,
+                            env={**os.environ, "PYTHONPATH": str(REPO_ROOT), "PYTHONHASHSEED": str(seed)}).stdout
+             for seed in range(4)}
+    assert len(texts) == 1, f"the repr changed with the hash seed: {sorted(texts)}"
+    assert "weights={'akaze', 'brisk', 'kaze', 'orb', 'sift'}" in texts.pop(), "the set's items are not sorted"
