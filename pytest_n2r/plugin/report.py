@@ -90,8 +90,15 @@ def baseline_examples(config: pytest.Config, nodeid: str, scene: Any, relation: 
     if base is None or base.scene_hash != scene.content_hash or base.metric != repr(relation.metric):
         return None
     from ..report import replay_candidates
+    from ..strategies.mutation import is_registered
 
-    return replay_candidates(base)
+    candidates = replay_candidates(base)
+    unknown = sorted({e.mutation["name"] for e in candidates if e.mutation and not is_registered(e.mutation["name"])})
+    if unknown:  # the baseline was read before the tests were imported; now every mutation class is defined
+        pytest.fail(f"the baseline's examples of {nodeid} name mutation(s) {unknown} that no imported module "
+                    f"defines (renamed or removed since the baseline was saved?); save it again with "
+                    f"--n2r-save-baseline", pytrace=False)
+    return candidates
 
 
 @pytest.hookimpl(hookwrapper=True)

@@ -15,8 +15,8 @@ Convention
   ``result_version``, the package's and numpy's versions, both render keys (scene content, renderer, camera,
   exact pose) and a digest of each SUT output; the render cache folds a digest of the package's source into every
   decision's key (:func:`~pytest_n2r.scene.render_cache.source_digest`), so an edited checkout computes again.
-  An output the digest cannot name exactly (anything but numbers, strings, numeric arrays and lists, tuples and
-  string-keyed dicts of them) is not kept.
+  An output the digest cannot name exactly (anything but numbers, strings, numeric arrays and tensors,
+  ``cv2.KeyPoint`` objects, and lists, tuples and string-keyed dicts of them) is not kept.
 - A result is kept when every detail is a plain ``bool``, ``int``, ``float``, ``str`` or ``None``, which JSON
   gives back as the same value and type (floats to the bit, NaN included).
 """
@@ -41,8 +41,9 @@ _PLAIN = (bool, int, float, str, type(None))
 
 
 def output_digest(output: Any) -> str | None:
-    """Hex SHA-256 of a SUT output's exact value (types, dtypes, shapes and bytes), or ``None`` when the output
-    holds something this digest does not name exactly (an object array, a ``cv2.KeyPoint``, a tensor).
+    """Hex SHA-256 of a SUT output's exact value (types, dtypes, shapes and bytes; a ``cv2.KeyPoint`` by all six of
+    its fields, a tensor by its dtype, shape and values wherever it lives), or ``None`` when the output holds
+    something this digest does not name exactly (an object array, a dict with other keys than strings).
 
     >>> output_digest(np.zeros((2, 2), np.float32)) == output_digest(np.zeros((2, 2), np.float32))
     True
@@ -71,10 +72,34 @@ def _feed(digest: Any, value: Any) -> bool:
     if type(value) in (list, tuple):
         digest.update(f"{type(value).__name__}{len(value)}[".encode())
         return all(_feed(digest, item) for item in value)
+    if _is_keypoint(value):
+        fields = (*value.pt, value.size, value.angle, value.response, value.octave, value.class_id)
+        digest.update(f"keypoint{fields!r};".encode())  # repr names a float exactly
+        return True
+    if _is_tensor(value):
+        try:
+            array = value.detach().cpu().numpy()
+        except (TypeError, RuntimeError):  # a dtype numpy has no name for (bfloat16): not named
+            return False
+        digest.update(f"tensor{value.dtype}".encode())
+        return _feed(digest, array)
     if type(value) is dict and all(type(k) is str for k in value):
         digest.update(f"dict{len(value)}{{".encode())
         return all(_feed(digest, k) and _feed(digest, value[k]) for k in sorted(value))
     return False
+
+
+def _is_keypoint(value: Any) -> bool:
+    """Whether ``value`` is a ``cv2.KeyPoint`` (by type name and fields: OpenCV is not imported here)."""
+    return type(value).__name__ == "KeyPoint" and all(hasattr(value, f) for f in _KEYPOINT_FIELDS)
+
+
+def _is_tensor(value: Any) -> bool:
+    """Whether ``value`` is a ``torch.Tensor`` (by its module: torch is not imported here)."""
+    return type(value).__module__.startswith("torch") and hasattr(value, "detach")
+
+
+_KEYPOINT_FIELDS = ("pt", "size", "angle", "response", "octave", "class_id")
 
 
 def kept_result(cache: RenderCache, metric: Metric, source_key: str, follow_key: str, out_source: Any,

@@ -45,6 +45,7 @@ __all__ = [
     "NoisePatch",
     "BlackPatches",
     "mutation_from_dict",
+    "is_registered",
 ]
 
 #: Largest seed of a mutation's random generator.
@@ -241,6 +242,15 @@ class BlackPatches(Mutation):
         return f"{self.count} black patches of {self.size * 100:.1f}%×{self.size * 100:.1f}%, seed {self.seed}"
 
 
+def is_registered(name: str) -> bool:
+    """Whether a mutation class named ``name`` is defined (built in, or a subclass whose module was imported).
+
+    >>> is_registered("brightness"), is_registered("no such mutation")
+    (True, False)
+    """
+    return name in _KINDS
+
+
 def mutation_from_dict(data: dict[str, Any]) -> Mutation:
     """The mutation of :meth:`Mutation.as_dict` (``{"name": "brightness", "levels": 30}``), validated; the
     name is a built-in one or that of an imported :class:`Mutation` subclass.
@@ -248,8 +258,12 @@ def mutation_from_dict(data: dict[str, Any]) -> Mutation:
     >>> mutation_from_dict({"name": "brightness", "levels": 30})
     Brightness(levels=30)
     """
-    if not isinstance(data, dict) or data.get("name") not in _KINDS:
+    if not isinstance(data, dict) or not isinstance(data.get("name"), str):
         raise InvalidArgument(f"mutation={data!r}: expected a dict with 'name' one of {sorted(_KINDS)}")
+    if data["name"] not in _KINDS:
+        raise InvalidArgument(f"mutation={data!r}: no mutation named {data['name']!r} is defined (known: "
+                              f"{sorted(_KINDS)}); a mutation of your own is known once the module that defines "
+                              "its class is imported")
     cls = _KINDS[data["name"]]
     params = {k: v for k, v in data.items() if k != "name"}
     unknown = sorted(set(params) - {f.name for f in fields(cls)})

@@ -201,3 +201,27 @@ def test_an_output_no_digest_names_is_never_kept_or_reused(tmp_path):
         floor = measure_floor(scene, sut, _OnKeypoints(), store=FloorStore(tmp_path), name="mine")
         assert sut.calls == 6 and floor.available, f"the floor of output {value} was not measured ({sut.calls} calls)"
     assert not list(tmp_path.glob("*.json")), "a floor keyed by an output no digest names exactly was stored"
+
+
+def test_a_floor_of_keypoint_objects_beside_descriptors_is_kept_and_reused(tmp_path):
+    """A ``(keypoints, descriptors)`` output as OpenCV's ``detectAndCompute`` returns it: the floor was measured
+    every time, because its digest named a list of ``cv2.KeyPoint`` only at the top level of an output."""
+    import cv2
+
+    def detect(rgb):
+        points = corners(rgb)
+        return [cv2.KeyPoint(float(u), float(v), 7.0) for u, v in points], np.zeros((len(points), 32), np.uint8)
+
+    class _OnKeypointObjects(_OnKeypoints):
+        def compute(self, out_source, out_follow, source, follow):
+            as_points = [np.array([k.pt for k in out[0]], np.float32).reshape(-1, 2)
+                         for out in (out_source, out_follow)]
+            return repeatability(px=2).compute(*as_points, source, follow)
+
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    first = Counting(detect)
+    a = measure_floor(scene, first, _OnKeypointObjects(), store=FloorStore(tmp_path), name="mine")
+    again = Counting(detect)
+    b = measure_floor(scene, again, _OnKeypointObjects(), store=FloorStore(tmp_path), name="mine")
+    assert a.available and len(list(tmp_path.glob("*.json"))) == 1, "the keypoint objects' floor was not stored"
+    assert again.calls == 1 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"

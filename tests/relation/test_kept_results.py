@@ -88,7 +88,9 @@ def test_only_the_class_that_declares_a_result_version_is_kept():
     points = np.zeros((3, 2), np.float32)
     assert result_key(repeatability(), "a", "b", points, points) is not None
     assert result_key(Mine(), "a", "b", points, points) is None
-    assert result_key(repeatability(), "a", "b", points, [cv2.KeyPoint(1, 2, 3)]) is None
+    assert result_key(repeatability(), "a", "b", points, [cv2.KeyPoint(1, 2, 3)]) is not None, (
+        "keypoint objects are named exactly: their result is kept")
+    assert result_key(repeatability(), "a", "b", points, [object()]) is None
     assert result_key(repeatability(), "a", "b", points, points) != result_key(repeatability(), "a", "c", points,
                                                                               points)
 
@@ -101,6 +103,29 @@ def test_output_digests_name_values_types_and_shapes_exactly():
     assert len({output_digest(x) for x in [a, *others]}) == 1 + len(others)
     assert output_digest({"points": a, "n": 3}) == output_digest({"n": 3, "points": a.copy()})
     assert output_digest(np.array([object()])) is None and output_digest({1: a}) is None
+
+
+def test_keypoint_objects_are_named_by_every_field_wherever_they_sit():
+    import cv2
+
+    base = cv2.KeyPoint(1.5, 2.0, 7.0, 10.0, 0.25, 1, -1)
+    fields = {"x": 1.5, "y": 2.0, "size": 7.0, "angle": 10.0, "response": 0.25, "octave": 1, "class_id": -1}
+    edits = [dict(fields, **{name: value}) for name, value in
+             [("x", 1.5000001), ("y", 3.0), ("size", 8.0), ("angle", 11.0), ("response", 0.5), ("octave", 2),
+              ("class_id", 4)]]
+    digests = {output_digest(([cv2.KeyPoint(**f)], np.zeros((1, 32), np.uint8))) for f in [fields, *edits]}
+    assert len(digests) == 1 + len(edits) and None not in digests, "a keypoint field is missing from the digest"
+    assert output_digest({"points": [base]}) == output_digest({"points": [cv2.KeyPoint(**fields)]})
+
+
+def test_tensors_are_named_by_dtype_shape_and_values():
+    import torch
+
+    t = torch.arange(6, dtype=torch.float32).reshape(3, 2)
+    assert output_digest(t) == output_digest(t.clone().requires_grad_()) == output_digest((t.T.contiguous().T,)[0])
+    others = [t.double(), t.reshape(2, 3), t + 1e-6, t.numpy(), [t]]
+    assert len({output_digest(x) for x in [t, *others]}) == 1 + len(others), "a tensor was confused with another"
+    assert output_digest(t.to(torch.bfloat16)) is None, "bfloat16 has no numpy dtype: it cannot be named exactly"
 
 
 def test_a_kept_result_reads_back_exactly():

@@ -183,17 +183,6 @@ def sut_name(sut: Callable[..., Any]) -> str:
     return f"{getattr(target, '__module__', '?')}:{getattr(target, '__qualname__', type(sut).__name__)}"
 
 
-def _digest_output(output: Any) -> str | None:
-    """An exact digest of a SUT output (:func:`~pytest_n2r.relation.kept_results.output_digest`: types, dtypes,
-    shapes and every byte; a list of ``cv2.KeyPoint`` as their coordinates, a tensor as its values), or ``None``
-    when the output holds something no digest names exactly: then no floor is kept or reused for it."""
-    if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
-        output = np.array([k.pt for k in output], dtype=np.float64)
-    if hasattr(output, "detach") and hasattr(output, "cpu"):
-        output = output.detach().cpu().numpy()
-    return output_digest(output)
-
-
 def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric, *,
                   size: RenderSize | None = None, cache: RenderCache | None = None,
                   store: FloorStore | None = None, name: str | None = None,
@@ -207,8 +196,9 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of its output
     on the first reference image, so an edited SUT whose output changes there is measured again), the
     metric's ``repr``, the size, the views, whether ``nearby`` and :data:`FLOOR_VERSION`. An output that no digest
-    names exactly (an object that is not numbers, strings, arrays, lists, tuples or string-keyed dicts of them) is
-    measured every time: its floor is neither kept nor reused.
+    names exactly (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers, strings,
+    arrays, tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them) is measured every time:
+    its floor is neither kept nor reused.
     """
     name = name or sut_name(sut)
     size_text = "view size" if size is None else str(size)
@@ -235,7 +225,7 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     twin = exact_twin(scene) if kind == "exact" else None
     spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "scene": scene.content_hash,
             "twin": twin.content_hash if twin is not None else None, "sut": name,
-            "probe": _digest_output(first_output), "metric": repr(metric), "size": size_text,
+            "probe": output_digest(first_output), "metric": repr(metric), "size": size_text,
             "views": [v.name for v in views], "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
     if spec["probe"] is None:  # an output no digest names exactly: an edited SUT could not be told apart
