@@ -12,6 +12,15 @@ import numpy as np
 from .errors import InvalidArgument, InvalidType
 
 
+def is_tensor(value: Any) -> bool:
+    """Whether ``value`` is a tensor (torch, any device and dtype; by its methods: torch is not imported here).
+
+    >>> is_tensor(np.zeros(2)), is_tensor([1.0])
+    (False, False)
+    """
+    return hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double")
+
+
 def is_finite(value: Any) -> bool:
     """Whether the real number ``value`` is finite as a float: an int too large for one (JSON's integers have no
     limit; ``float(10**400)`` overflows) is not.

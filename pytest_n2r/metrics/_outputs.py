@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import is_tensor
 from ..errors import MetricUndefined, SUTOutputError
 
 __all__ = ["as_numeric", "as_vector", "as_keypoints", "as_image", "float_eps"]
@@ -17,14 +18,9 @@ __all__ = ["as_numeric", "as_vector", "as_keypoints", "as_image", "float_eps"]
 _FLOAT64_EPS = float(np.finfo(np.float64).eps)
 
 
-def _is_tensor(value: Any) -> bool:
-    """Whether ``value`` is a tensor (torch: any device, any dtype)."""
-    return hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double")
-
-
 def _to_numpy(value: Any) -> Any:
     """Tensors (torch: any device, any float dtype incl. bfloat16) to float64 numpy; others unchanged."""
-    if _is_tensor(value):
+    if is_tensor(value):
         return value.detach().cpu().double().numpy()
     return value
 
@@ -83,7 +79,7 @@ def as_vector(value: Any, which: str) -> np.ndarray:
 def float_eps(value: Any) -> float:
     """Machine epsilon of the floating dtype a SUT output came in (bfloat16 2**-7, float16 2**-10, float32
     2**-23); that of float64 for Python floats, integers and anything else."""
-    if _is_tensor(value):
+    if is_tensor(value):
         import torch
 
         return float(torch.finfo(value.dtype).eps) if value.dtype.is_floating_point else _FLOAT64_EPS
@@ -95,13 +91,13 @@ def as_image(value: Any, which: str, expected: str) -> np.ndarray:
     """An image output as a numpy array of its own dtype (uint8 stays uint8): tensors are detached and moved
     to the CPU, bfloat16 (which numpy lacks) becomes float32. ``None``, non-numeric, complex, NaN or Inf
     outputs are a :class:`SUTOutputError` naming the output, as in :func:`as_numeric`."""
-    if _is_tensor(value):
+    if is_tensor(value):
         import torch
 
         value = value.detach().cpu()  # once: checked and returned from the host copy
         value = value.float() if value.dtype == torch.bfloat16 else value
     as_numeric(value, which, expected)
-    return value.numpy() if _is_tensor(value) else np.asarray(value)
+    return value.numpy() if is_tensor(value) else np.asarray(value)
 
 
 def as_keypoints(value: Any, which: str) -> np.ndarray:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import is_tensor
 from ..errors import N2RError
 
 __all__ = ["NotDeterministic", "SUTNotDeterministic", "check_deterministic", "same_output", "show_output"]
@@ -33,14 +34,19 @@ class NotDeterministic(BaseException):
 
 
 def _plain(output: Any) -> Any:
-    """``cv2.KeyPoint`` lists as ``(N, 2)`` arrays of their positions; anything else as it is."""
+    """``cv2.KeyPoint`` lists as ``(N, 2)`` arrays of their positions, tensors as arrays of their values (any
+    device; bfloat16 as float32, which holds each of its values); anything else as it is."""
     if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
         return np.array([k.pt for k in output], dtype=np.float64)
+    if is_tensor(output):
+        host = output.detach().cpu()
+        return (host.float() if str(host.dtype) == "torch.bfloat16" else host).numpy()
     return output
 
 
 def same_output(a: Any, b: Any) -> bool:
-    """Whether two SUT outputs are identical (arrays element for element, NaN equal to NaN)."""
+    """Whether two SUT outputs are identical (arrays and tensors element for element, NaN equal to NaN; lists,
+    tuples and dicts item for item)."""
     a, b = _plain(a), _plain(b)
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         a, b = np.asarray(a), np.asarray(b)
@@ -48,9 +54,11 @@ def same_output(a: Any, b: Any) -> bool:
             np.array_equal(a, b, equal_nan=a.dtype.kind in "fc"))
     if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
         return len(a) == len(b) and all(same_output(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same_output(a[k], b[k]) for k in a)
     try:
         return bool(a == b)
-    except (ValueError, TypeError):  # objects whose == is ambiguous: compare their text
+    except (ValueError, TypeError, RuntimeError):  # an ambiguous or failing == (a user's type): compare the text
         return repr(a) == repr(b)
 
 

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from .._validation import is_tensor
 from ..metrics.base import Metric, MetricResult
 from ..render.view import RenderedView
 from ..scene.render_cache import RenderCache
@@ -76,7 +77,7 @@ def _feed(digest: Any, value: Any) -> bool:
         fields = (*value.pt, value.size, value.angle, value.response, value.octave, value.class_id)
         digest.update(f"keypoint{fields!r};".encode())  # repr names a float exactly
         return True
-    if _is_tensor(value):
+    if is_tensor(value):
         try:
             array = value.detach().cpu().numpy()
         except (TypeError, RuntimeError):  # a dtype numpy has no name for (bfloat16): not named
@@ -92,11 +93,6 @@ def _feed(digest: Any, value: Any) -> bool:
 def _is_keypoint(value: Any) -> bool:
     """Whether ``value`` is a ``cv2.KeyPoint`` (by type name and fields: OpenCV is not imported here)."""
     return type(value).__name__ == "KeyPoint" and all(hasattr(value, f) for f in _KEYPOINT_FIELDS)
-
-
-def _is_tensor(value: Any) -> bool:
-    """Whether ``value`` is a ``torch.Tensor`` (by its module: torch is not imported here)."""
-    return type(value).__module__.startswith("torch") and hasattr(value, "detach")
 
 
 _KEYPOINT_FIELDS = ("pt", "size", "angle", "response", "octave", "class_id")

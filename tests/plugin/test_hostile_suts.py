@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import torch
 
 from pytest_n2r.relation.determinism import same_output, show_output
 
@@ -131,6 +132,29 @@ def test_a_sut_that_returns_none_once_is_named_with_its_output_not_as_a_flaky_re
                                   "under test returned None on the * view*")])
 
 
+def test_a_deterministic_sut_returning_tensors_fails_on_its_deviation_not_as_noise(n2r_project):
+    """The determinism check compared two multi-valued tensors with ``==`` (ambiguous in torch): its error ended
+    the search in Hypothesis's flaky path, and a real inconsistency was reported as a non-deterministic SUT."""
+    n2r_project.write("""
+import torch
+from pytest_n2r.metrics import l2_norm
+
+
+def embed(rgb):
+    return torch.tensor([float(rgb[..., 0].mean()), float(rgb[..., 1].mean()), 1.0])
+
+
+@metamorphic(l2_norm("raw"), eps=1e-9, transform=transforms(yaw=(5, 15)), examples=10)
+def test_embedding(n2r_scene):
+    return embed
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert "not deterministic" not in text and "Flaky" not in text, text
+    assert "metamorphic relation violated: l2_norm(inputs='raw') deviates" in text, text
+
+
 @pytest.mark.parametrize(("a", "b", "same"), [
     (np.array([[1.0, np.nan]]), np.array([[1.0, np.nan]]), True),
     (np.array([[1.0, 2.0]]), np.array([[1.0, 2.5]]), False),
@@ -138,6 +162,11 @@ def test_a_sut_that_returns_none_once_is_named_with_its_output_not_as_a_flaky_re
     (3, 3, True),
     ("cat", "dog", False),
     ([np.zeros(2), 1], [np.zeros(2), 1], True),
+    (torch.tensor([0.1, 0.9]), torch.tensor([0.1, 0.9]), True),
+    (torch.tensor([0.1, 0.9]), torch.tensor([0.1, 0.8]), False),
+    (torch.ones(2, dtype=torch.bfloat16), torch.ones(2, dtype=torch.bfloat16), True),
+    ({"boxes": torch.ones(2, 4), "n": 2}, {"boxes": torch.ones(2, 4), "n": 2}, True),
+    ({"boxes": torch.ones(2, 4), "n": 2}, {"boxes": torch.zeros(2, 4), "n": 2}, False),
 ])
 def test_same_output_compares_arrays_value_for_value(a, b, same):
     assert same_output(a, b) is same
