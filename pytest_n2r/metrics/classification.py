@@ -44,6 +44,7 @@ __all__ = [
     "class_invariance",
     "softmax",
     "is_probability_vector",
+    "in_unit_range",
     "probability_sum_tolerance",
 ]
 
@@ -81,11 +82,21 @@ def softmax(logits: np.ndarray) -> np.ndarray:
     return z / z.sum()
 
 
+def in_unit_range(v: np.ndarray, eps: float = float(np.finfo(np.float64).eps)) -> bool:
+    """True when every entry is in [0, 1] within :func:`probability_sum_tolerance` (a probability computed as
+    ``1 - sum(others)`` may round a little below 0).
+
+    >>> in_unit_range(np.array([1.0, -1e-9, 1e-9])), in_unit_range(np.array([1.2, -0.2]))
+    (True, False)
+    """
+    tolerance = probability_sum_tolerance(v.size, eps)
+    return bool(np.all(v >= -tolerance) and np.all(v <= 1.0 + tolerance))
+
+
 def is_probability_vector(v: np.ndarray, eps: float = float(np.finfo(np.float64).eps)) -> bool:
-    """True when all entries are in [0, 1] and they sum to 1 within :func:`probability_sum_tolerance` for a
-    vector of this length stored in a dtype of machine epsilon ``eps`` (float64's by default)."""
-    return bool(np.all(v >= 0) and np.all(v <= 1)
-                and abs(float(v.sum()) - 1.0) <= probability_sum_tolerance(v.size, eps))
+    """True when all entries are in [0, 1] and they sum to 1, both within :func:`probability_sum_tolerance` for
+    a vector of this length stored in a dtype of machine epsilon ``eps`` (float64's by default)."""
+    return in_unit_range(v, eps) and abs(float(v.sum()) - 1.0) <= probability_sum_tolerance(v.size, eps)
 
 
 def _describe(v: np.ndarray) -> str:
@@ -136,25 +147,27 @@ class _VectorMetric(Metric):
         """The two vectors as compared (probability vectors renormalized to sum 1, logits softmaxed, raw as
         given) and how they were read; ``eps``: machine epsilon of each output's dtype.
 
-        ``"auto"`` reads a vector with every entry in [0, 1] as probabilities if it sums to 1 within
-        :func:`probability_sum_tolerance`, and is a :class:`SUTOutputError` otherwise: its softmax would be
-        nearly uniform (its entries all lie within a factor e of each other), and two such outputs would score
-        alike whatever they said. A vector with an entry outside [0, 1] reads as logits. The two outputs must
+        ``"auto"`` reads a vector with every entry in [0, 1] (:func:`in_unit_range`: within
+        :func:`probability_sum_tolerance`) as probabilities if it sums to 1 within that tolerance, and is a
+        :class:`SUTOutputError` otherwise: its softmax would be nearly uniform (its entries all lie within a
+        factor e of each other), and two such outputs would score alike whatever they said. A vector with an
+        entry further outside [0, 1] reads as logits. Probabilities are clipped to [0, 1] before they are
+        renormalized, so a rounding error below 0 is not read as a score of its own. The two outputs must
         read alike (a classifier returns one kind of score), or it is a :class:`SUTOutputError`.
         """
         mode = self.inputs
         if mode == "auto":
             kinds = []
             for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
-                in_unit_range = bool(np.all(v >= 0) and np.all(v <= 1))
-                if in_unit_range and not is_probability_vector(v, e):
+                unit = in_unit_range(v, e)
+                if unit and not is_probability_vector(v, e):
                     raise SUTOutputError(
                         f"{which} output has every entry in [0, 1] but does not sum to 1 within "
                         f"{probability_sum_tolerance(v.size, e):.3g} ({_describe(v)}): it is no probability "
                         "vector, and a softmax would flatten it to nearly uniform; pass inputs='logits' if the "
                         "SUT returns logits, or inputs='raw' to compare the values as given (e.g. independent "
                         "sigmoid scores)")
-                kinds.append("probabilities" if in_unit_range else "logits")
+                kinds.append("probabilities" if unit else "logits")
             if kinds[0] != kinds[1]:
                 raise SUTOutputError(
                     f"source output reads as {kinds[0]} but follow-up output as {kinds[1]} (source "
@@ -162,6 +175,7 @@ class _VectorMetric(Metric):
                     "image: pass inputs='logits' or inputs='probabilities' to say which")
             mode = kinds[0]
         if mode == "probabilities":
+            a, b = (np.clip(v, 0.0, 1.0) for v in (a, b))
             a, b = a / a.sum(), b / b.sum()
         elif mode == "logits":
             a, b = softmax(a), softmax(b)
@@ -218,7 +232,8 @@ class L2Norm(_VectorMetric):
     """Euclidean distance ``|a - b|_2`` (not squared). Range [0, √2] for probability vectors (two
     different one-hot vectors), unbounded for ``"raw"`` (computed on the vectors scaled by their largest
     absolute entry, so ``[1e200, 0]`` and ``[-1e200, 0]`` are 2e200 apart, not infinitely); ideal 0,
-    deviation = score."""
+    deviation = score. Two zero vectors (only ``"raw"`` gets them here) are *undefined*, as for the cosine: the
+    SUT said nothing either time, which is not agreement."""
 
     name = "l2_norm"
     ideal = 0.0
@@ -226,7 +241,10 @@ class L2Norm(_VectorMetric):
     def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
         a, b, mode = self.read(a, b, eps)
         top = max(float(np.abs(a).max()), float(np.abs(b).max()))
-        distance = top * float(np.linalg.norm(a / top - b / top)) if top > 0.0 else 0.0
+        if top == 0.0:
+            return MetricResult.undefined(self.name, "both outputs are zero vectors (nothing to compare)",
+                                          inputs=mode, classes=int(a.size))
+        distance = top * float(np.linalg.norm(a / top - b / top))
         return self.result(distance, inputs=mode, classes=int(a.size))
 
     def __repr__(self) -> str:

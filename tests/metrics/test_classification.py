@@ -119,6 +119,21 @@ def test_zero_vectors_in_raw_mode():
     assert cosine_similarity(inputs="raw")(zero, np.ones(4)).score == 0.0
     with pytest.raises(SUTOutputError, match="source output is not a probability vector"):
         cosine_similarity(inputs="probabilities")(zero, zero)
+    l2 = l2_norm(inputs="raw")(zero, zero)  # an embedding of zeros for every image passed every L2 relation
+    assert not l2.valid and "both outputs are zero vectors" in l2.details["reason"], l2
+    assert l2_norm(inputs="raw")(zero, np.ones(4)).score == 2.0
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_probabilities_with_a_rounding_error_below_zero_are_read_as_probabilities(dtype):
+    """``[1, -1e-9, 1e-9]`` (a probability computed as ``1 - sum(others)``) read as logits: the softmax made two
+    opposite one-hot predictions score a cosine of 0.69."""
+    a, b = np.array([1.0, -1e-7, 1e-7], dtype), np.array([-1e-7, 1.0, 1e-7], dtype)
+    cos, l2 = cosine_similarity()(a, b), l2_norm()(a, b)
+    assert cos.details["inputs"] == "probabilities" and cos.score < 1e-6, cos
+    assert l2.score == pytest.approx(np.sqrt(2), abs=1e-6), l2
+    assert cosine_similarity(inputs="probabilities")(a, a).score == pytest.approx(1.0)
+    assert cosine_similarity()([1.2, -0.2], [1.2, -0.2]).details["inputs"] == "logits", "far outside [0, 1]: logits"
 
 
 def test_accepts_keras_batches_and_tensors():
@@ -313,8 +328,10 @@ def test_raw_cosine_is_scale_invariant_and_l2_scales_at_any_magnitude(pair, scal
     assert cos.valid == scaled.valid, f"scaling by {sa:g}, {sb:g} changed validity: {cos} vs {scaled}"
     if cos.valid:
         assert scaled.score == pytest.approx(cos.score, abs=1e-9), f"scaled by {sa:g}, {sb:g}: {scaled} vs {cos}"
-    l2 = l2_norm(inputs="raw")(a * sa, b * sa).score
-    assert l2 == pytest.approx(sa * l2_norm(inputs="raw")(a, b).score, rel=1e-9), f"L2 scaled by {sa:g}: {l2}"
+    l2, plain = l2_norm(inputs="raw")(a * sa, b * sa), l2_norm(inputs="raw")(a, b)
+    assert l2.valid == plain.valid == bool(np.any(a) or np.any(b)), f"only two zero vectors are undefined: {l2}"
+    if plain.valid:
+        assert l2.score == pytest.approx(sa * plain.score, rel=1e-9), f"L2 scaled by {sa:g}: {l2}"
 
 
 def test_raw_extremes():
