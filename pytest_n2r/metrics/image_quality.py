@@ -88,12 +88,16 @@ def ssim(image_true: np.ndarray, image_test: np.ndarray, *, data_range: float | 
     return _ssim(*_pair(image_true, image_test, data_range))
 
 
+def _check_ssim_size(a: np.ndarray) -> None:
+    if min(a.shape[:2]) < 11:
+        raise InvalidArgument(f"images of {a.shape[1]}x{a.shape[0]} pixels are too small for SSIM; expected >= 11x11")
+
+
 def _ssim(a: np.ndarray, b: np.ndarray, data_range: float) -> float:
     """SSIM of two float64 images of one shape (as :func:`_pair` returns them)."""
     from skimage.metrics import structural_similarity
 
-    if min(a.shape[:2]) < 11:
-        raise InvalidArgument(f"images of {a.shape[1]}x{a.shape[0]} pixels are too small for SSIM; expected >= 11x11")
+    _check_ssim_size(a)
     return float(structural_similarity(
         a, b, data_range=data_range, channel_axis=-1 if a.ndim == 3 else None,
         gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
@@ -155,6 +159,8 @@ class SSIM(Metric):
     tensors (any device, ``requires_grad`` or not; bfloat16 is read as float32). ``data_range`` is the span of
     values an output image can take: 255 for uint8 and 1 for floats unless given (float images in 0..255 need
     ``data_range=255``). Any output it cannot use is a :class:`~pytest_n2r.errors.SUTOutputError` naming it.
+    Two constant images (a blank output twice) are *undefined*: SSIM would score them 1 with no structure
+    compared, so a SUT that returns black for every image would pass every relation.
     """
 
     name = "ssim"
@@ -166,13 +172,29 @@ class SSIM(Metric):
     def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
         a, b = (as_image(out, which, _IMAGE) for which, out in (("source", out_source), ("follow-up", out_follow)))
         try:
-            score = _ssim(*_pair(a, b, self.data_range, ("source output", "follow-up output")))
+            pair = _pair(a, b, self.data_range, ("source output", "follow-up output"))
+            if _constant(a) and _constant(b):  # SSIM compares no structure then: a blank output would score 1
+                _check_ssim_size(a)
+                return MetricResult.undefined(self.name, "both outputs are constant images (every pixel "
+                                              f"{_first_pixel(a)} and {_first_pixel(b)}): nothing to compare")
+            score = _ssim(*pair)
         except (InvalidArgument, InvalidType) as exc:  # about the outputs (data_range was checked when built)
             raise SUTOutputError(str(exc)) from None
         return self.result(score)
 
     def __repr__(self) -> str:
         return "ssim_metric()" if self.data_range is None else f"ssim_metric(data_range={self.data_range!r})"
+
+
+def _constant(image: np.ndarray) -> bool:
+    """Whether every pixel of an H×W or H×W×C image is the same."""
+    pixels = image.reshape(image.shape[0] * image.shape[1], -1)
+    return bool(np.all(pixels == pixels[:1]))
+
+
+def _first_pixel(image: np.ndarray) -> str:
+    """The first pixel's value(s), as text."""
+    return np.array2string(image.reshape(image.shape[0] * image.shape[1], -1)[0], precision=4)
 
 
 def ssim_metric(data_range: float | None = None) -> SSIM:

@@ -66,6 +66,7 @@ def test_bad_images_say_what_is_wrong(a, b, error, match):
 
 def test_ssim_metric_names_bad_sut_outputs():
     a = np.zeros((16, 16, 3), np.float64)
+    a[4:8, 4:8] = 0.5
     assert iq.ssim_metric()(a, a).deviation == pytest.approx(0.0)
     b = a.copy()
     b[0, 0, 0] = np.nan
@@ -176,3 +177,18 @@ def test_ssim_metric_errors_name_the_output(a, b, match):
 def test_ssim_metric_reads_cuda_tensors_requiring_grad():
     a = torch.rand(32, 32, 3, device="cuda", requires_grad=True)
     assert iq.ssim_metric()(a, a * 1).score == pytest.approx(1.0), "a CUDA tensor requiring grad scored wrong"
+
+
+@pytest.mark.parametrize("value", [0, 128, 255])
+def test_two_constant_output_images_are_undefined_never_ideal(value):
+    """A SUT that returns one blank image for every input scored SSIM 1 on every pair and passed every relation:
+    two constant images compare no structure, so nothing to compare (never a perfect score)."""
+    blank = np.full((16, 16, 3), value, np.uint8)
+    result = iq.ssim_metric()(blank, blank.copy())
+    assert not result.valid and math.isnan(result.deviation), result
+    assert result.details["reason"].startswith("both outputs are constant images"), result.details
+    assert not iq.ssim_metric()(blank, np.zeros((16, 16, 3), np.uint8)).valid
+    structured = blank.copy()
+    structured[4:8, 4:8] = 255 - value
+    assert iq.ssim_metric()(blank, structured).valid, "one constant output against a structured one is scored"
+    assert iq.ssim(blank, blank) == pytest.approx(1.0), "the ssim function itself still compares two images"
