@@ -147,19 +147,19 @@ class _VectorMetric(Metric):
         """The two vectors as compared (probability vectors renormalized to sum 1, logits softmaxed, raw as
         given) and how they were read; ``eps``: machine epsilon of each output's dtype.
 
-        ``"auto"`` reads a vector with every entry in [0, 1] (:func:`in_unit_range`: within
-        :func:`probability_sum_tolerance`) as probabilities if it sums to 1 within that tolerance, and is a
-        :class:`SUTOutputError` otherwise: its softmax would be nearly uniform (its entries all lie within a
-        factor e of each other), and two such outputs would score alike whatever they said. A vector with an
-        entry further outside [0, 1] reads as logits. Probabilities are clipped to [0, 1] before they are
-        renormalized, so a rounding error below 0 is not read as a score of its own. The two outputs must
+        ``"auto"`` reads a vector with every entry in [0, 1] as probabilities if it sums to 1 within
+        :func:`probability_sum_tolerance`, and is a :class:`SUTOutputError` otherwise: its softmax would be
+        nearly uniform (its entries all lie within a factor e of each other), and two such outputs would score
+        alike whatever they said. A vector with an entry outside [0, 1] reads as probabilities when it is one
+        within that tolerance (:func:`is_probability_vector`: ``[1, -1e-9, 1e-9]``, from ``1 - sum(others)``),
+        else as logits. Probabilities are clipped to [0, 1] before they are renormalized. The two outputs must
         read alike (a classifier returns one kind of score), or it is a :class:`SUTOutputError`.
         """
         mode = self.inputs
         if mode == "auto":
             kinds = []
             for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
-                unit = in_unit_range(v, e)
+                unit = bool(np.all(v >= 0) and np.all(v <= 1))
                 if unit and not is_probability_vector(v, e):
                     raise SUTOutputError(
                         f"{which} output has every entry in [0, 1] but does not sum to 1 within "
@@ -167,7 +167,7 @@ class _VectorMetric(Metric):
                         "vector, and a softmax would flatten it to nearly uniform; pass inputs='logits' if the "
                         "SUT returns logits, or inputs='raw' to compare the values as given (e.g. independent "
                         "sigmoid scores)")
-                kinds.append("probabilities" if unit else "logits")
+                kinds.append("probabilities" if unit or is_probability_vector(v, e) else "logits")
             if kinds[0] != kinds[1]:
                 raise SUTOutputError(
                     f"source output reads as {kinds[0]} but follow-up output as {kinds[1]} (source "
