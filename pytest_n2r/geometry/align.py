@@ -15,6 +15,7 @@ import numpy as np
 
 from .._validation import check_array
 from ..errors import InvalidArgument
+from .pose import check_rotation
 
 __all__ = ["umeyama", "apply_similarity_to_pose", "rotation_angle_deg"]
 
@@ -62,8 +63,14 @@ def apply_similarity_to_pose(c2w: np.ndarray, s: float, R: np.ndarray, t: np.nda
 
 
 def rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    """The angle in **degrees** of the rotation taking ``R_a`` to ``R_b`` (geodesic distance, [0, 180])."""
-    M = np.asarray(R_a, dtype=np.float64).T @ np.asarray(R_b, dtype=np.float64)
+    """The angle in **degrees** of the rotation taking ``R_a`` to ``R_b`` (geodesic distance, [0, 180]); both must
+    be rotations (a reflection or a scaled matrix has no such angle: :class:`InvalidArgument`).
+
+    >>> from pytest_n2r.geometry import rotation_from_euler
+    >>> round(rotation_angle_deg(np.eye(3), rotation_from_euler(0.0, 0.0, 30.0)), 9)
+    30.0
+    """
+    M = check_rotation(R_a, "R_a").T @ check_rotation(R_b, "R_b")
     cos = (np.trace(M) - 1.0) / 2.0
     sin = np.linalg.norm([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]]) / 2.0
     return math.degrees(math.atan2(sin, cos))

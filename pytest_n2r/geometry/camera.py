@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .._validation import check_positive, check_real
+from .._validation import check_array, check_positive, check_real
 from ..errors import InvalidArgument, InvalidType
 
 __all__ = ["Camera"]
@@ -60,10 +60,21 @@ class Camera:
 
     @classmethod
     def from_K(cls, K: np.ndarray, width: int, height: int, distortion: tuple[float, ...] = ()) -> Camera:
-        """Build from a 3x3 OpenCV intrinsic matrix (pixel centres at integer coordinates)."""
-        K = np.asarray(K, dtype=np.float64)
-        if K.shape != (3, 3):
-            raise InvalidType(f"K must have shape (3, 3), got {K.shape}")
+        """Build from a 3x3 OpenCV intrinsic matrix (pixel centres at integer coordinates): ``[[fx, 0, cx],
+        [0, fy, cy], [0, 0, 1]]``. A skew, a last row other than ``[0, 0, 1]`` (a K scaled as a whole) or an
+        entry below the diagonal is refused: this camera model has none of them.
+
+        >>> Camera.from_K(2 * Camera(640, 480, 500, 500, 319.5, 239.5).K, 640, 480)
+        Traceback (most recent call last):
+        ...
+        pytest_n2r.errors.InvalidArgument: K's last row is [0.0, 0.0, 2.0]; expected [0, 0, 1]
+        """
+        K = check_array("K", K, "3 3", dtype=np.float64)
+        if K[2].tolist() != [0.0, 0.0, 1.0]:
+            raise InvalidArgument(f"K's last row is {K[2].tolist()}; expected [0, 0, 1]")
+        if K[0, 1] != 0.0 or K[1, 0] != 0.0:
+            raise InvalidArgument(f"K has skew or shear (K[0, 1]={float(K[0, 1])!r}, K[1, 0]={float(K[1, 0])!r}); "
+                                  "this camera model has none: expected 0")
         return cls(width, height, K[0, 0], K[1, 1], K[0, 2], K[1, 2], tuple(distortion))
 
     @classmethod

@@ -38,6 +38,7 @@ __all__ = [
     "compose",
     "invert_pose",
     "check_pose",
+    "check_rotation",
     "relative_pose",
 ]
 
@@ -144,17 +145,29 @@ def _det3(R: np.ndarray) -> float:
     return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
+def check_rotation(R: np.ndarray, name: str = "R", what: str = "") -> np.ndarray:
+    """Return ``R`` as a float64 3x3 rotation (orthonormal within 1e-5, determinant +1), or raise naming
+    ``name`` (``what``: how the message names the matrix, default ``name``).
+
+    >>> check_rotation(np.diag([1.0, 1.0, -1.0]))
+    Traceback (most recent call last):
+    ...
+    pytest_n2r.errors.InvalidArgument: R is not a rotation (|R^T R - I| = 0, det = -1)
+    """
+    R = check_array(name, R, "3 3", dtype=np.float64)
+    err = float(np.abs(R.T @ R - _EYE3).max())
+    if not err <= 1e-5 or _det3(R) < 0:  # not <=: NaN fails too
+        raise InvalidArgument(
+            f"{what or name} is not a rotation (|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4g})")
+    return R
+
+
 def check_pose(c2w: np.ndarray, name: str = "c2w") -> np.ndarray:
     """Return ``c2w`` as a float64 4x4 rigid transform, or raise naming ``name`` and what is wrong."""
     M = check_array(name, c2w, "4 4", dtype=np.float64)
     if not (np.abs(M[3] - _LAST_ROW) <= _LAST_ROW_TOLERANCE).all():  # False for NaN, as np.allclose
         raise InvalidArgument(f"{name} must have last row [0, 0, 0, 1], got {M[3].tolist()}")
-    R = M[:3, :3]
-    err = float(np.abs(R.T @ R - _EYE3).max())
-    if err > 1e-5 or _det3(R) < 0:
-        raise InvalidArgument(
-            f"{name} rotation block is not a rotation (|R^T R - I| = {err:.2g}, det = {np.linalg.det(R):.4g})"
-        )
+    check_rotation(M[:3, :3], name, f"{name} rotation block")
     return M
 
 

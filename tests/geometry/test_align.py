@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, umeyama
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import apply_similarity_to_pose, rotation_angle_deg, rotation_from_euler, umeyama
 
 from .strategies import poses, transforms
 
@@ -33,8 +34,6 @@ def test_aligned_pose_moves_with_the_world(c2w, tau, s):
 
 
 def test_rotation_angle_of_known_rotation():
-    from pytest_n2r.geometry import rotation_from_euler
-
     assert rotation_angle_deg(np.eye(3), rotation_from_euler(0, 0, 30)) == pytest.approx(30.0)
     assert rotation_angle_deg(np.eye(3), rotation_from_euler(0, 180, 0)) == pytest.approx(180.0)
 
@@ -47,3 +46,15 @@ def test_umeyama_rejects_degenerate_input():
     line = np.outer(np.arange(5.0), [1.0, 2.0, 3.0])
     with pytest.raises(ValueError, match="collinear"):
         umeyama(line, line)
+
+
+@pytest.mark.parametrize(("R", "which"), [
+    (np.diag([1.0, 1.0, -1.0]), "a reflection read as a 0° rotation"),
+    (1.5 * rotation_from_euler(0, 0, 30), "a scaled rotation read as 25.8°"),
+    (np.full((3, 3), np.nan), "NaN"),
+])
+def test_the_angle_between_rotations_refuses_matrices_that_are_not_rotations(R, which):
+    with pytest.raises(InvalidArgument, match=r"R_b (is not a rotation|contains 9 non-finite)"):
+        rotation_angle_deg(np.eye(3), R)
+    with pytest.raises(InvalidArgument, match=r"R_a (is not a rotation|contains 9 non-finite)"):
+        rotation_angle_deg(R, np.eye(3))

@@ -118,3 +118,18 @@ def test_distortion_is_stored_without_trailing_zero_terms():
     assert dist((0.1, 0.0, 0.0, 0.0, 0.0)) == (0.1, 0.0, 0.0, 0.0)
     assert dist((0.0, 0.0, 0.0, 0.0, 0.0)) == ()
     assert dist((0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3)) == (0.1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3)
+
+
+@pytest.mark.parametrize(("K", "match"), [
+    (2 * Camera(640, 480, 500, 500, 319.5, 239.5).K, r"K's last row is \[0.0, 0.0, 2.0\]; expected \[0, 0, 1\]"),
+    ([[500, 30, 319.5], [0, 500, 239.5], [0, 0, 1]], r"K has skew or shear \(K\[0, 1\]=30.0"),
+    ([[500, 0, 319.5], [0, 500, 239.5], [0.1, 0, 1]], r"K's last row is \[0.1, 0.0, 1.0\]"),
+    ([[500, 0, 319.5], [4, 500, 239.5], [0, 0, 1]], r"K\[1, 0\]=4.0"),
+    ([[500, 0, 319.5], [0, 500, np.nan], [0, 0, 1]], r"K contains 1 non-finite"),
+])
+def test_from_k_refuses_a_matrix_this_camera_model_cannot_hold(K, match):
+    """A scaled K was read as another camera (fx 1000, cx 639) and a skew was dropped, silently."""
+    with pytest.raises(InvalidArgument, match=match):
+        Camera.from_K(K, 640, 480)
+    assert Camera.from_K(Camera(640, 480, 500, 510, 319.5, 239.5).K, 640, 480) == Camera(640, 480, 500, 510, 319.5,
+                                                                                           239.5)
