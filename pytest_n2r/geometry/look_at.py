@@ -55,6 +55,10 @@ def look_at_transform(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0,
     >>> look_at_transform(x=0.1, yaw=2.0).yaw
     -3.710593137499643
     """
+    Transform(roll=roll, pitch=pitch, yaw=yaw, x=x, y=y, z=z)  # the arguments' own checks, naming what was passed
     comp_pitch, comp_yaw = look_at_compensation(x, y, z)
     pitch = max(-MAX_LOOK_AT_PITCH, min(MAX_LOOK_AT_PITCH, pitch + comp_pitch))
-    return Transform(roll=roll, pitch=pitch, yaw=yaw + comp_yaw, x=x, y=y, z=z)
+    yaw = yaw + comp_yaw
+    if abs(yaw) > 360.0:  # a turn more than once around: the same rotation one turn back
+        yaw -= math.copysign(360.0, yaw)
+    return Transform(roll=roll, pitch=pitch, yaw=yaw, x=x, y=y, z=z)

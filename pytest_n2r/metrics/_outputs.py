@@ -35,6 +35,9 @@ def _as_float_array(value: Any, which: str, expected: str) -> np.ndarray:
         kind = arr.dtype.kind
         if kind != "c":
             arr = arr.astype(np.float64, copy=False)
+    except OverflowError as exc:  # a Python int beyond float64's range (10**400)
+        raise SUTOutputError(f"{which} output holds a number too large for a float64 ({exc}); expected {expected}"
+                             ) from exc
     except (TypeError, ValueError) as exc:
         raise SUTOutputError(
             f"{which} output of type {type(value).__name__} is not numeric; expected {expected}"

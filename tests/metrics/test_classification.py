@@ -340,3 +340,9 @@ def test_raw_extremes():
     assert cosine_similarity(inputs="raw")(tiny, tiny * 1e200).score == pytest.approx(1.0), "[1e-200, ..] underflowed"
     assert l2_norm(inputs="raw")([1e200, 0.0], [-1e200, 0.0]).score == pytest.approx(2e200), "L2 overflowed"
     assert not cosine_similarity(inputs="raw")(np.zeros(3), np.zeros(3)).valid, "true zero vectors have no direction"
+
+
+def test_an_int_too_large_for_a_float_is_an_output_error_naming_it():
+    """``[10**400, 1]`` escaped as a bare OverflowError from numpy."""
+    with pytest.raises(SUTOutputError, match="source output holds a number too large for a float64"):
+        cosine_similarity(inputs="raw")([10**400, 1], [1, 2])

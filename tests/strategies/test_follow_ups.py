@@ -194,3 +194,12 @@ def test_bad_family_arguments_are_named():
         PoseChangeFamily.of(look_at=1)
     with pytest.raises(InvalidArgument, match="roll, pitch, yaw, x, y and z are all 0"):
         PoseChangeFamily.of(units="scene")
+
+
+def test_a_look_at_turn_past_a_full_turn_is_the_same_rotation_one_turn_back():
+    """``yaw=-359`` with the compensation for ``x=0.5`` summed to -385.6°, refused naming a value never passed."""
+    folded = look_at_transform(yaw=-359.0, x=0.5)
+    np.testing.assert_allclose(folded.rotation, look_at_transform(yaw=1.0, x=0.5).rotation, atol=1e-12)
+    assert -360.0 <= folded.yaw <= 360.0
+    with pytest.raises(InvalidArgument, match=r"yaw=-361.0 is out of range"):
+        look_at_transform(yaw=-361.0, x=0.5)
