@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step wi
         l2_norm,
         repeatability,
         resolve_metric,
+        ssim_metric,
     )
     from .plugin.marker import metamorphic
     from .relation import Relation, RelationFailure, SUTError, Validity, check_relation
@@ -70,6 +71,7 @@ _EXPORTS: dict[str, str] = {
     "class_invariance": "pytest_n2r.metrics",
     "repeatability": "pytest_n2r.metrics",
     "interest_point_spread": "pytest_n2r.metrics",
+    "ssim_metric": "pytest_n2r.metrics",
     "Mutation": "pytest_n2r.strategies",
     "Brightness": "pytest_n2r.strategies",
     "NoisePatch": "pytest_n2r.strategies",
@@ -93,7 +95,7 @@ __all__ = [
     "load_scene", "save_scene", "RenderedView", "N2RError", "InvalidArgument", "InvalidType", "SceneFileError",
     "IngestError", "ingest", "Capture", "SUTOutputError", "MetricUndefined", "Metric", "MetricResult",
     "resolve_metric", "cosine_similarity", "l2_norm", "class_invariance", "repeatability",
-    "interest_point_spread", "Mutation", "Brightness", "NoisePatch", "BlackPatches", "GroundTruthScene",
+    "interest_point_spread", "ssim_metric", "Mutation", "Brightness", "NoisePatch", "BlackPatches", "GroundTruthScene",
     "metamorphic", "transforms", "views", "Relation", "RelationFailure", "SUTError", "check_relation",
     "RenderCache", "Validity",
 ]

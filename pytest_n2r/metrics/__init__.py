@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+from .._validation import is_finite
 from ..errors import InvalidArgument, InvalidType
 from .base import Metric, MetricResult
 from .classification import (
@@ -44,6 +47,20 @@ METRICS: dict[str, type[Metric]] = {
 }
 
 
+def _check_declared(metric: Metric) -> None:
+    """A metric of one's own must say its ``name`` (a string) and ``ideal`` (a finite number), which the engine
+    reads only once it scores: refused here, naming the class, not with a bare AttributeError mid-run."""
+    cls = type(metric).__qualname__
+    name = getattr(metric, "name", None)
+    if not isinstance(name, str) or not name:
+        raise InvalidType(f"metric {cls} has name={name!r}; expected a short string used in reports, set on the "
+                          "class (name = \"my_metric\")")
+    ideal = getattr(metric, "ideal", None)
+    if isinstance(ideal, bool) or not isinstance(ideal, (int, float, np.integer, np.floating)) or not is_finite(ideal):
+        raise InvalidType(f"metric {cls} has ideal={ideal!r}; expected a finite number on the class: the score of "
+                          "two identical outputs (1.0 for a similarity, 0.0 for a distance)")
+
+
 def resolve_metric(metric: Metric | str, **params: Any) -> Metric:
     """A metric object from a metric (returned as is) or a name from :data:`METRICS` plus parameters.
 
@@ -54,6 +71,7 @@ def resolve_metric(metric: Metric | str, **params: Any) -> Metric:
         if params:
             raise InvalidArgument(f"parameters {sorted(params)} given with the metric object {metric!r}; "
                                   "pass them to its factory instead")
+        _check_declared(metric)
         return metric
     if not isinstance(metric, str):
         raise InvalidType(f"metric={metric!r} must be a Metric or a metric name (e.g. repeatability(px=2) or "

@@ -41,4 +41,36 @@ def test_resolve_errors_list_what_is_known():
 
 def test_top_level_exports():
     assert pytest_n2r.repeatability is repeatability
+    for factory in ("cosine_similarity", "l2_norm", "class_invariance", "interest_point_spread", "ssim_metric"):
+        assert getattr(pytest_n2r, factory) is getattr(pytest_n2r.metrics, factory), f"{factory} is not exported"
     assert issubclass(pytest_n2r.Metric, Metric) and pytest_n2r.Brightness(3).levels == 3
+
+
+class _NoIdeal(Metric):
+    name = "no_ideal"
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        return self.result(0.0)
+
+
+class _NoName(Metric):
+    ideal = 1.0
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        return self.result(1.0)
+
+
+class _TextIdeal(_NoIdeal):
+    ideal = "1"
+
+
+@pytest.mark.parametrize(("metric", "match"), [
+    (_NoIdeal(), r"metric _NoIdeal has ideal=None; expected a finite number on the class"),
+    (_TextIdeal(), r"metric _TextIdeal has ideal='1'; expected a finite number"),
+    (_NoName(), r"metric _NoName has name=None; expected a short string"),
+])
+def test_a_metric_of_ones_own_must_declare_its_name_and_ideal(metric, match):
+    """A Metric subclass without ``ideal`` passed @metamorphic's checks and failed mid-run with a bare
+    AttributeError from Metric.deviation."""
+    with pytest.raises(InvalidType, match=match):
+        resolve_metric(metric)
