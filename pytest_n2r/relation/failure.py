@@ -75,11 +75,14 @@ def nothing_to_test(run: RelationRecord, relation: Relation) -> str:
     """Why a relation whose draws were mostly undefined fails (more than :data:`MAX_UNDEFINED`)."""
     evaluated = len(run.valid_examples) + run.undefined
     reasons = "; ".join(f"{n}x {r}" for r, n in run.undefined_reasons.most_common(3))
+    sizes = sorted({(e.camera["width"], e.camera["height"]) for e in run.examples if e.camera})
+    at = f", rendered at {', '.join(f'{w}x{h}' for w, h in sizes)} pixels" if sizes else ""
     return (
         f"the SUT produced nothing to test: {relation.metric!r} was undefined on {run.undefined} of "
         f"{evaluated} evaluated draws ({run.undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
-        f"{run.scene!r}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
-        "never passes a relation"
+        f"{run.scene!r}{at}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
+        "never passes a relation; a detector may find nothing in images this small (ORB keeps 31 pixels from "
+        "each border): a larger size (size= or --n2r-size) gives it more"
     )
 
 
@@ -89,8 +92,11 @@ def too_many_invalid(run: RelationRecord, relation: Relation) -> str:
     share = run.rejected / drawn if drawn else 1.0
     reasons = ", ".join(f"{r}: {n}" for r, n in run.rejected_reasons.most_common()) or "no valid example"
     nothing = "" if run.valid_examples or not drawn else ": no follow-up view was valid, so nothing was compared"
+    moved = any(e.transform and any(e.transform.get(k) for k in ("x", "y", "z")) for e in run.examples)
+    look_at = " (or use look_at=True, which turns a moved camera back toward what it saw)" if moved else ""
     return (
         f"{relation.transform!r} leaves what the scene {run.scene!r} can render faithfully in {share:.0%} of "
-        f"{drawn} draws ({reasons}){nothing}; narrow the bounds (or use look_at=True) so most follow-up views "
-        "stay in the captured region"
+        f"{drawn} draws ({reasons}){nothing}; narrow the bounds{look_at} so most follow-up views stay in the "
+        "captured region. If even small motions leave it, the scene covers little beyond its own views (a short "
+        "fit, or few photos): `n2r info SCENE` shows what it holds"
     )

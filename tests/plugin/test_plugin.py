@@ -262,6 +262,8 @@ def test_far(n2r_scene):
     result.stdout.fnmatch_lines(
         ["*leaves what the scene 'plane' can render faithfully in 100% of * draws (empty view: *narrow the bounds*"])
     assert "rejected as invalid (" in n2r_project.summary(result, "test_far[plane]")
+    assert "look_at=True" not in result.stdout.str(), "look_at changes nothing for a turn without a move"
+    result.stdout.fnmatch_lines(["*If even small motions leave it, the scene covers little beyond its own views*"])
 
 
 def test_a_relation_with_no_valid_example_fails_even_when_any_share_of_rejections_is_allowed(n2r_project):

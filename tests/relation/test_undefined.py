@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pytest_n2r import transforms
+from pytest_n2r import InvalidArgument, transforms
 from pytest_n2r.metrics import MetricResult, interest_point_spread, repeatability
 from pytest_n2r.relation import MAX_UNDEFINED, Relation, RelationFailure, RunSettings, check_relation
 from tests.plugin.fakemetrics import AbsDifference
@@ -37,6 +37,9 @@ def test_an_empty_detector_fails_with_nothing_to_test(metric):
     assert record.outcome == "failed" and not record.valid_examples and record.undefined > 0
     assert "the SUT found no keypoint in either view" in str(info.value)
     assert all(e.status == "undefined" for e in record.examples) and record.examples
+    camera = record.examples[0].camera
+    assert f"rendered at {camera['width']}x{camera['height']} pixels" in str(info.value), (
+        f"the message should name the size the SUT saw (a detector finds nothing in small images):\n{info.value}")
 
 
 class _SometimesUndefined(AbsDifference):
@@ -77,3 +80,9 @@ def test_a_content_independent_detector_fails_a_relation_with_yaw_of_5_degrees_o
     with pytest.raises(RelationFailure) as info:
         check_relation(PlaneScene(), same_grid(8), relation, settings=SETTINGS)
     assert info.value.record.outcome == "failed"
+
+
+def test_a_moved_camera_that_leaves_the_captured_region_is_told_of_look_at():
+    relation = Relation.build(repeatability(px=2), eps=0.5, transform=transforms(x=(8, 9)), examples=5)
+    with pytest.raises(InvalidArgument, match=r"narrow the bounds \(or use look_at=True, which turns a moved camera "):
+        check_relation(PlaneScene(), same_grid(16), relation, settings=SETTINGS)
