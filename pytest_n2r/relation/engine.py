@@ -121,6 +121,7 @@ class Engine:
         return rendered
 
     def run_sut(self, rgb: np.ndarray, role: str, where: str) -> Any:
+        __tracebackhide__ = True  # a failure shows the SUT's own traceback and the message, not the engine's
         start = time.perf_counter()
         try:
             with time_limit(self.settings.timeout, f"the system under test on the {role} view ({where})",
@@ -144,6 +145,7 @@ class Engine:
         ``key=None``: an image that is not a render (a mutation's). ``source``: the source view's image and
         the SUT's output on it, which a follow-up with the same pixels, byte for byte, gets again (an identity
         pose change whose pose differs in its last bits, a mutation of size zero)."""
+        __tracebackhide__ = True
         if key is not None:
             output = self.sut_outputs.get(self.sut, key)
             if output is not MISSING:
@@ -228,6 +230,7 @@ class Engine:
         """Render, check validity, run the SUT and the metric on one example; never raises on a verdict.
 
         ``camera`` (a replayed example's recorded one) overrides the run's render size."""
+        __tracebackhide__ = True  # a SUT's error shows its own traceback (--full-trace shows the engine's)
         camera = camera if camera is not None else self.camera_for(view)
         tau.check_scene(self.scene)  # e.g. units='metres' on a scene without scale: said before any render
         where = f"scene {self.scene.name!r}, source view {view.name!r}, {tau.describe()}"

@@ -23,6 +23,7 @@ def check_output(output: Any, role: str, where: str, metric: Metric) -> None:
 
     An array that is *entirely* NaN goes to a metric whose ``nan_means_no_output`` is set (the vector
     metrics), which reads it as "no output" (undefined)."""
+    __tracebackhide__ = True
     expects = getattr(metric, "expects", None) or f"what {metric.name} compares"
     if output is None:
         raise SUTOutputError(

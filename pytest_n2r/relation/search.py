@@ -180,6 +180,7 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     seed = None if settings.derandomize else _seed(identity)  # both passes draw the same examples
 
     def search(db: Any) -> None:
+        __tracebackhide__ = True
         test = given(view=source_views(scene, split=relation.views, interpolate=relation.interpolate),
                      tau=relation.transform)(example)
         if seed is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -31,6 +32,11 @@ class SceneView:
     c2w: np.ndarray
     split: str = "train"
     image: np.ndarray | None = None
+
+    def _repr_pretty_(self, printer: Any, cycle: bool) -> None:
+        """Hypothesis's "Falsifying example" names the view, not its arrays (nor its camera: a relation renders
+        it at the size it asks for)."""
+        printer.text(f"SceneView(index={self.index}, name={self.name!r}, split={self.split!r})")
 
 
 def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:

@@ -57,3 +57,7 @@ class FollowUp(ABC):
     @abstractmethod
     def explain(self, scene: Scene, note: str) -> list[str]:
         """The lines a failure message gives the follow-up on ``scene``; ``note`` says how it was found."""
+
+    def _repr_pretty_(self, printer: Any, cycle: bool) -> None:
+        """Hypothesis's "Falsifying example" shows the ``repr`` (the constructor call), not every field."""
+        printer.text(repr(self))

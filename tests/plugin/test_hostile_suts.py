@@ -155,6 +155,28 @@ def test_embedding(n2r_scene):
     assert "metamorphic relation violated: l2_norm(inputs='raw') deviates" in text, text
 
 
+def test_a_raising_sut_shows_its_own_traceback_not_the_engines(n2r_project):
+    """A SUT's error walked through the engine's frames (search, evaluate, run_sut) with their source, and
+    Hypothesis's note printed every field of the view (its arrays and full-size camera) and of the pose change."""
+    n2r_project.write("""
+def raising(rgb):
+    raise ValueError("boom inside my detector")
+
+
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4), examples=5)
+def test_raises(n2r_scene):
+    return raising
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1)
+    text = result.stdout.str()
+    assert 'raise ValueError("boom inside my detector")' in text, f"the SUT's own frame is missing:\n{text}"
+    for internal in ("relation/engine.py", "def run_sut", "def search"):
+        assert internal not in text, f"the engine's frames are shown ({internal}):\n{text}"
+    assert re.search(r"view=SceneView\(index=\d+, name='[^']+', split='\w+'\)", text), text
+    assert "c2w=array" not in text and "COMPONENTS" not in text, f"the example note is not compact:\n{text}"
+
+
 @pytest.mark.parametrize(("a", "b", "same"), [
     (np.array([[1.0, np.nan]]), np.array([[1.0, np.nan]]), True),
     (np.array([[1.0, 2.0]]), np.array([[1.0, 2.5]]), False),
