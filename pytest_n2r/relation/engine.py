@@ -29,7 +29,7 @@ from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
-from .failure import MAX_UNDEFINED, RelationFailure, failure_message
+from .failure import MAX_UNDEFINED, RelationFailure, failure_message, how_to_reproduce
 from .kept_results import kept_result, repainted_key
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
@@ -324,7 +324,8 @@ class Engine:
                 self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
         run.minimal = record
         message = failure_message(self.scene, self.relation, run, view, tau, evaluation.result, record, note=note,
-                                  images_error=self.images_error)
+                                  images_error=self.images_error,
+                                  reproduce=how_to_reproduce(self.settings.derandomize, self.settings.database))
         raise RelationFailure(message, run)
 
     def replay(self, records: list[ExampleRecord]) -> list[ExampleRecord]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Any
 
 from ..metrics.base import MetricResult
 from ..scene.base import Scene, SceneView
@@ -14,7 +15,7 @@ from ..strategies.follow_up import FollowUp
 from .record import ExampleRecord, RelationRecord, plural
 from .spec import Relation
 
-__all__ = ["RelationFailure", "MAX_UNDEFINED", "failure_message", "nothing_to_test",
+__all__ = ["RelationFailure", "MAX_UNDEFINED", "failure_message", "how_to_reproduce", "nothing_to_test",
            "too_many_invalid"]
 
 #: A relation fails as "the SUT produced nothing to test" when more than this share of the draws it could
@@ -33,9 +34,10 @@ class RelationFailure(AssertionError):
 
 def failure_message(scene: Scene, relation: Relation, run: RelationRecord, view: SceneView,
                     tau: FollowUp, result: MetricResult, record: ExampleRecord, *, note: str = "",
-                    images_error: str | None = None) -> str:
+                    images_error: str | None = None, reproduce: str = "") -> str:
     """The message of a failing example of ``run``: ``record`` (with the saved ``images`` if any) of source
-    ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``."""
+    ``view`` and follow-up ``tau`` whose metric ``result`` broke ``relation`` on ``scene``; ``reproduce`` says
+    how a rerun finds it again (:func:`how_to_reproduce`)."""
     metric = relation.metric
     camera = record.camera
     lines = [
@@ -59,7 +61,24 @@ def failure_message(scene: Scene, relation: Relation, run: RelationRecord, view:
                      f"{Path(images['follow_raw']).name})")
     elif images_error:
         lines.append(f"  images:     {images_error}")
+    if reproduce:
+        lines.append(f"  reproduce:  {reproduce}")
     return "\n".join(lines)
+
+
+def how_to_reproduce(derandomize: bool, database: Any) -> str:
+    """How a rerun of a failed relation draws its failing example again, for the failure message.
+
+    >>> how_to_reproduce(True, "default")
+    'run the test again: a derandomized search draws the same examples every run'
+    """
+    if derandomize:
+        return "run the test again: a derandomized search draws the same examples every run"
+    if database is None:
+        return ("no example database is kept (database=None): run with --n2r-derandomize yes, or "
+                "--hypothesis-seed=N, to draw the same examples again")
+    return ("run the test again: Hypothesis's example database (.hypothesis/ by default) replays this example "
+            "first; --n2r-derandomize yes draws the same examples every run")
 
 
 def _shown_path(path: str | os.PathLike) -> str:

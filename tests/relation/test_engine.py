@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 import pytest
 from hypothesis import strategies as st
+from hypothesis.database import InMemoryExampleDatabase
 
 from pytest_n2r import Camera, InvalidArgument, InvalidType
 from pytest_n2r.metrics.base import MetricResult
@@ -285,3 +286,19 @@ def test_an_example_drawn_again_is_not_counted_twice():
     drawn = [(e.view, e.mutation["levels"]) for e in record.examples]
     assert len(drawn) == len(set(drawn)), f"examples recorded twice: {sorted(drawn)}"
     assert {levels for _, levels in drawn} == {1, 2, 3}, f"examples {sorted(drawn)}; expected each of 1, 2, 3 once"
+
+
+@pytest.mark.parametrize(("settings", "says"), [
+    (RunSettings(database=None, derandomize=True), "a derandomized search draws the same examples every run"),
+    (RunSettings(database=None), "no example database is kept (database=None): run with --n2r-derandomize yes"),
+    (RunSettings(database=InMemoryExampleDatabase()),
+     "Hypothesis's example database (.hypothesis/ by default) replays this example first"),
+])
+def test_a_failure_says_how_a_rerun_finds_it_again(settings, says):
+    """A failure printed no seed, no word of the example database, no way to see it again."""
+    relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=10)
+    with pytest.raises(RelationFailure) as info:
+        check_relation(PlaneScene(texture="ramp"), lambda rgb: float(decode_ramp_x(rgb)[36, 48]), relation,
+                       settings=settings)
+    assert f"  reproduce:  run the test again: {says}" in str(info.value) or f"  reproduce:  {says}" in str(
+        info.value), str(info.value)
