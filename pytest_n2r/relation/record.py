@@ -137,6 +137,8 @@ class RelationRecord:
     sut_calls: int = 0
     sut_shared: int = 0
     shrink_examples: int = 0
+    #: The examples the search was asked for (0: not known, e.g. an older record).
+    asked: int = 0
 
     @property
     def valid_examples(self) -> list[ExampleRecord]:
@@ -187,8 +189,11 @@ class RelationRecord:
         replayed = "" if self.replayed is None else f"{len(self.replayed)} baseline examples replayed, "
         render, sut, metric = (self.timings.get(k, 0.0) for k in TIMINGS)
         total = self.timings.get("total", 0.0) + self.timings.get("floor", 0.0)
+        shown = len(self.valid_examples)
+        fewer = (f" ({self.asked} asked: the search found no more distinct ones)"
+                 if self.outcome == "passed" and 0 < shown < self.asked else "")
         return (
-            f"{self.outcome.upper():6s} {self.nodeid}: {replayed}{plural(len(self.valid_examples), 'example')}, "
+            f"{self.outcome.upper():6s} {self.nodeid}: {replayed}{plural(shown, 'example')}{fewer}, "
             f"{rejected}, {undefined}, {self.inconsistencies} inconsistent, worst deviation {worst} (eps "
             f"{self.eps:g}); time render {render:.2f} s / SUT {sut:.2f} s / metric {metric:.2f} s"
             + (f" of {total:.2f} s" if total else "")
@@ -212,7 +217,7 @@ class RelationRecord:
             replayed=None if replayed is None else [ExampleRecord.from_dict(e) for e in replayed],
             floor=data.get("floor"), renders=int(data.get("renders", 0)),
             sut_calls=int(data.get("sut_calls", 0)), sut_shared=int(data.get("sut_shared", 0)),
-            shrink_examples=int(data.get("shrink_examples", 0)),
+            shrink_examples=int(data.get("shrink_examples", 0)), asked=int(data.get("asked", 0)),
         )
 
 

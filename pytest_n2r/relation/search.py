@@ -168,8 +168,9 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     # key this run's database entries and (with derandomize or --hypothesis-seed) its seed to the test, scene and
     # relation
     identity = example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
+    run.asked = relation.examples or settings.examples
     options: dict[str, Any] = {
-        "max_examples": relation.examples or settings.examples, "deadline": None,
+        "max_examples": run.asked, "deadline": None,
         "derandomize": settings.derandomize,
         "suppress_health_check": [HealthCheck.too_slow, HealthCheck.filter_too_much, HealthCheck.data_too_large],
         # no "explain" phase: it re-runs variations of the failure (renders) to annotate source lines

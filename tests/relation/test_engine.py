@@ -302,3 +302,16 @@ def test_a_failure_says_how_a_rerun_finds_it_again(settings, says):
                        settings=settings)
     assert f"  reproduce:  run the test again: {says}" in str(info.value) or f"  reproduce:  {says}" in str(
         info.value), str(info.value)
+
+
+def test_a_search_with_fewer_distinct_draws_than_asked_says_so():
+    """``transform=Transform(yaw=2), examples=20`` on a scene of a few views passed with as many examples as it has
+    views, and the summary did not say that fewer than the 20 asked were run."""
+    from pytest_n2r import Transform
+
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 255, Transform(yaw=2), examples=20)
+    record = check_relation(scene, lambda rgb: float(rgb.mean()), relation, settings=RunSettings(database=None))
+    assert record.asked == 20 and 0 < len(record.valid_examples) < 20, record.summary_line()
+    assert f"{len(record.valid_examples)} examples (20 asked: the search found no more distinct ones)" in (
+        record.summary_line()), record.summary_line()
