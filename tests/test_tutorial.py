@@ -4,8 +4,12 @@ commands run there in page order, and what each run prints is checked against th
 A block with ``title="PATH"`` is a file of the reader's project (a later block with the same title replaces
 it, as the reader edits the file); a ``bash`` block holds commands; a ``text`` block after a command is its
 output, abridged by leaving lines out (``...``) but never by changing a line; a ``yaml`` block is a CI step
-whose commands must be ones the page ran. Numbers in the shown output (timings, scores) are not compared,
-everything else is: the outcome counts, the failure report's fields, the summary lines.
+whose commands must be ones the page ran. Each shown line must match a line of the real output with its
+numbers free; then, when the reader's project derandomizes its runs (``n2r_derandomize``, which the page says
+makes the runs show its numbers), the numbers must be the ones shown too (the minimal transform, the example,
+inconsistent, rejected, shrink-step, render and SUT-call counts, the scores), except times (a number
+followed by ``s``) and the durations of pytest's summary line, which is compared by its outcome counts. A
+count the prose quotes in backticks (`0 renders`) must be in the output shown above it.
 """
 
 from __future__ import annotations
@@ -18,13 +22,16 @@ from pathlib import Path
 import pytest
 from packaging.version import Version
 
-from .conftest import REPO_ROOT, DocBlock, doc_blocks
+from .conftest import _FENCE, REPO_ROOT, DocBlock, doc_blocks
 
 PAGE = "tutorial.md"
 _NUMBER = r"[-+]?\d+(?:\.\d+)?"
 _OUTCOME = re.compile(r"(\d+) (passed|failed|errors?|skipped|xfailed|xpassed)")
+_QUOTED = re.compile(r"`(\d+ [A-Za-z][^`]*)`")  # `0 renders`: the prose quoting a run's output
 _PYTEST = ["python", "-m", "pytest"]
 _PIP_INSTALL = ["python", "-m", "pip", "install"]
+_TIME = re.compile(_NUMBER + r"(?= ?s\b)")  # "4.05 s", "in 5.63s": a time, never the same twice
+_DERANDOMIZED = re.compile(r"""^\s*n2r_derandomize\s*=\s*(?:["']?yes["']?|true|["']true["'])\s*$""", re.MULTILINE)
 
 pytestmark = pytest.mark.slow
 
@@ -38,6 +45,41 @@ def _line_pattern(line: str) -> str:
     pattern = _NUMBER.join(literal(p) for p in re.split(_NUMBER, line.rstrip()))
     pattern = re.sub(r" {2,}", r" +", re.sub(r"={3,}", r"=+", re.sub(r"_{3,}", r"_+", pattern)))
     return r"^" + pattern + r"$"
+
+
+def _figures(line: str) -> list[re.Match[str]]:
+    """The numbers of an output line that a derandomized run reproduces: all but its times."""
+    times = {m.start() for m in _TIME.finditer(line)}
+    return [m for m in re.finditer(_NUMBER, line) if m.start() not in times]
+
+
+def _in_context(line: str, match: re.Match[str]) -> str:
+    """``match`` with the words around it, to say which number of ``line`` differs."""
+    return ("..." if match.start() > 30 else "") + line[max(0, match.start() - 30):match.end() + 30].strip() + \
+        ("..." if match.end() + 30 < len(line) else "")
+
+
+def _match_in_order(patterns: list[str], lines: list[str]) -> list[int] | int:
+    """The index of the line each pattern matches, each after the previous one (lines between are skipped,
+    as ``re_match_lines(consecutive=False)`` does), or the index of the first pattern that matches none."""
+    found: list[int] = []
+    at = 0
+    for i, pattern in enumerate(patterns):
+        while at < len(lines) and not re.match(pattern, lines[at]):
+            at += 1
+        if at == len(lines):
+            return i
+        found.append(at)
+        at += 1
+    return found
+
+
+def _derandomized(project: Path, command: str) -> bool:
+    """Whether the run of ``command`` in ``project`` derandomizes (the page's claim that it shows its numbers)."""
+    pyproject = project / "pyproject.toml"
+    in_ini = pyproject.is_file() and _DERANDOMIZED.search(pyproject.read_text(encoding="utf-8")) is not None
+    flag = re.search(r"--n2r-derandomize[ =](\S+)", command)
+    return flag.group(1) in ("yes", "true") if flag else in_ini
 
 
 def _outcomes(text: str) -> dict[str, int]:
@@ -77,11 +119,22 @@ def _check_output(block: DocBlock, result: pytest.RunResult | None, command: str
         f"{where}: the page says `{command}` ends with {summary[-1]!r}, but it ended with "
         f"{result.outlines[-1] if result.outlines else '(no output)'!r}\n" + "\n".join(actual)
     )
-    try:  # in order; lines of the real output the page leaves out are skipped
-        result.stdout.re_match_lines([_line_pattern(line) for line in shown], consecutive=False)
-    except pytest.fail.Exception:
-        pytest.fail(f"{where}: the output of `{command}` shown on the page differs from the real output "
-                    "(first unmatched line above); real output:\n" + "\n".join(actual), pytrace=False)
+    matched = _match_in_order([_line_pattern(line) for line in shown], actual)
+    if isinstance(matched, int):  # in order; lines of the real output the page leaves out are skipped
+        pytest.fail(f"{where}: the output of `{command}` shown on the page differs from the real output: no line "
+                    f"after the ones before it matches {shown[matched]!r}; real output:\n" + "\n".join(actual),
+                    pytrace=False)
+    if _derandomized(project, command or ""):  # the page says these runs show its numbers: they must
+        differ = [
+            f"the page shows {on_page.group()} in {_in_context(line, on_page)!r}; the run printed "
+            f"{in_run.group()}: {_in_context(actual[index], in_run)!r}"
+            for line, index in zip(shown, matched)
+            for on_page, in_run in zip(_figures(line), _figures(actual[index]))
+            if on_page.group() != in_run.group()
+        ]
+        if differ:
+            pytest.fail(f"{where}: the derandomized run of `{command}` printed other numbers than the page "
+                        "shows:\n  " + "\n  ".join(differ) + "\nreal output:\n" + "\n".join(actual), pytrace=False)
     for picture in re.findall(r"(\S+/\S+\.png)", block.code):  # paths, not view names
         assert (project / picture).is_file(), f"{where}: the page shows {picture}, which the run did not write"
 
@@ -122,6 +175,22 @@ def test_every_block_of_the_tutorial_runs_as_shown(pytester: pytest.Pytester, mo
         else:
             pytest.fail(f"{where}: a {block.lang or 'plain'!r} block with no title: the test cannot run it")
     assert ran, f"docs/{PAGE} runs no pytest command"
+
+
+def test_the_prose_quotes_the_output_shown_before_it():
+    """A count the prose quotes (`0 renders`) is in the output block above it, which the run checks."""
+    text = (REPO_ROOT / "docs" / PAGE).read_text(encoding="utf-8")
+    shown, at = "", 0
+    for fence in [*_FENCE.finditer(text), None]:
+        prose = text[at:fence.start() if fence else len(text)]
+        for quote in _QUOTED.finditer(prose):
+            line = text.count("\n", 0, at + quote.start()) + 1
+            pattern = ".*".join(re.escape(part.strip()) for part in quote[1].split("..."))
+            assert shown and re.search(pattern, shown), (
+                f"docs/{PAGE}:{line}: the prose quotes `{quote[1]}`, which the output shown above it does not print"
+            )
+        if fence:
+            shown, at = (fence[3] if fence[1] == "text" else shown), fence.end()
 
 
 def test_the_tutorial_is_in_the_nav_and_linked_from_the_home_page():
