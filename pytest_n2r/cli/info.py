@@ -1,4 +1,5 @@
-"""``n2r info scene.n2r``: what a scene file holds (views, split, field size, fit report, file size)."""
+"""``n2r info SCENE``: what a scene file holds (views, split, field size, fit report, file size); of any other
+scene ``--n2r-scene`` takes (``demo:<name>``, ``module:function``, a 3DGS ``.ply``), its views, cameras and scale."""
 
 from __future__ import annotations
 
@@ -6,23 +7,28 @@ import argparse
 import contextlib
 import json
 from collections.abc import Iterator
-from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ._scene import SCENE_HELP
+
 if TYPE_CHECKING:
+    from ..demo.scene_specs import SceneSpec
+    from ..scene.base import Scene
     from ..scene.file import SceneFile
     from ..study.fidelity import FidelityReport
 
-__all__ = ["add_parser", "run", "format_info", "info_dict"]
+__all__ = ["add_parser", "run", "format_info", "info_dict", "format_scene_info", "scene_info_dict"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "info", help="summarize a .n2r scene file",
+        "info", help="summarize a scene (a .n2r scene file, demo:<name>, ...)",
         description="Print what a scene file holds: views and split, cameras, scale, field size, and the fit "
-                    "report (held-out PSNR/SSIM per view, training time, device, versions).",
+                    "report (held-out PSNR/SSIM per view, training time, device, versions); of a scene that is "
+                    "no scene file (an exact demo scene, module:function, a 3DGS .ply), its views and split, "
+                    "cameras and scale.",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE", help="a .n2r scene file")
+    p.add_argument("scene", metavar="SCENE", help=SCENE_HELP)
     p.add_argument("--json", action="store_true", help="print the summary as JSON instead")
     p.add_argument("--shift", action="store_true",
                    help="also measure the reality-to-field shift of ORB, SIFT and AKAZE (repeatability and spread, "
@@ -33,23 +39,31 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..errors import InvalidArgument
     from ..render.size import RenderSize
-    from ..scene.file import read_scene_file
+    from ..scene.file import SceneFile
     from ..scene.splat_file import is_splat_file, splat_info
+    from ._scene import scene_argument
 
     RenderSize.parse(args.size, name="--size")  # checked before the scene is read
-    if is_splat_file(args.scene):  # splats packed by `n2r import`
+    spec = scene_argument(args.scene)
+    if spec.kind == "file" and is_splat_file(spec.source):  # splats packed by `n2r import`
         if args.shift:
-            from ..errors import InvalidArgument
-
-            raise InvalidArgument(f"--shift is not supported for splat scene files: {args.scene} holds the splats and "
-                                  "their cameras but no photos (n2r import packs none), so there is nothing real to "
-                                  "compare its renders with; measure the shift on the .n2r scene file of a fit")
-        info = splat_info(args.scene)
+            raise InvalidArgument(f"--shift is not supported for splat scene files: {spec.source} holds the splats "
+                                  "and their cameras but no photos (n2r import packs none), so there is nothing real "
+                                  "to compare its renders with; measure the shift on the .n2r scene file of a fit")
+        info = splat_info(spec.source)
         lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
         print(_json(info) if args.json else "\n".join(lines))
         return 0
-    scene = read_scene_file(args.scene, images=args.shift)
+    scene = _open(spec, images=args.shift)
+    if not isinstance(scene, SceneFile):  # no fitted scene file behind it: an exact demo scene, a 3DGS .ply ...
+        if args.shift:
+            raise InvalidArgument(f"--shift is not supported for {spec.source}: it is no fitted scene file (a "
+                                  f"{type(scene).__name__}), so it has no photos to compare its renders with; "
+                                  "measure the shift on the .n2r scene file of a fit")
+        print(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec))
+        return 0
     shift = _shift(scene, args.size) if args.shift else None
     if args.json:
         print(_json({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}))
@@ -59,10 +73,24 @@ def run(args: argparse.Namespace) -> int:
         except ReportUnreadable as exc:  # a report edited by hand, or written by another tool
             from ..errors import SceneFileError
 
-            raise SceneFileError(f"{args.scene}: scene.json {exc.args[0]} (not as n2r fit writes it); "
+            raise SceneFileError(f"{scene.path}: scene.json {exc.args[0]} (not as n2r fit writes it); "
                                  "n2r info --json prints it as stored") from exc
         print(text + (f"\n{shift.format()}" if shift else ""))
     return 0
+
+
+def _open(spec: SceneSpec, images: bool) -> SceneFile | Scene:
+    """The fitted scene file behind ``spec`` (a .n2r file, ``demo:<name>-field``, a Python scene that is a
+    fitted field), else the scene itself (``images``: decode a file's photos)."""
+    if spec.kind == "file" and not spec.source.lower().endswith(".ply"):
+        from ..scene.file import read_scene_file
+
+        return read_scene_file(spec.source, images=images)
+    from ..demo.scene_specs import load_scene_spec
+    from ..scene.field_scene import FieldScene
+
+    scene = load_scene_spec(spec, "cpu", images=images)
+    return scene.file if isinstance(scene, FieldScene) else scene
 
 
 def _json(data: dict) -> str:
@@ -118,18 +146,55 @@ def format_info(scene: SceneFile) -> str:
         (f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
          f"{info['photos_stored']} photos stored"),
     ]
-    for cam in info["cameras"][:3]:
-        lines.append(f"  camera    {cam['width']}x{cam['height']} fx={cam['fx']:.2f} fy={cam['fy']:.2f} "
-                     f"cx={cam['cx']:.2f} cy={cam['cy']:.2f}")
+    lines += _camera_and_scale_lines(info)
+    lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
+                 f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
+                 f"stored ({byte_count(field['tensor_bytes'])}; {byte_count(field['memory_bytes'])} in memory)")
+    return "\n".join(lines + _report_lines(report))
+
+
+def scene_info_dict(scene: Scene, spec: SceneSpec) -> dict:
+    """The summary of a scene with no fitted scene file behind it (an exact demo scene, a Python scene, a 3DGS
+    ``.ply``) as plain JSON-ready values: where it comes from, its views and split, cameras and scale."""
+    splits = [v.split for v in scene.views]
+    return {
+        "scene": spec.source,
+        "name": scene.name,
+        "kind": spec.kind,
+        "type": type(scene).__name__,
+        "exact": scene.is_exact,
+        "views": len(scene.views),
+        "train_views": splits.count("train"),
+        "heldout_views": splits.count("heldout"),
+        "photos_stored": sum(v.image is not None for v in scene.views),
+        "cameras": [c.to_dict() for c in dict.fromkeys(v.camera for v in scene.views)],
+        "reference_length": scene.reference_length,
+        "metres_per_unit": scene.metres_per_unit,
+    }
+
+
+def format_scene_info(scene: Scene, spec: SceneSpec) -> str:
+    """The plain-text summary ``n2r info`` prints of a scene with no fitted scene file behind it."""
+    info = scene_info_dict(scene, spec)
+    renders = "exact renders (the ground truth at any pose)" if info["exact"] else "renders not exact"
+    views = (f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
+             f"{info['photos_stored']} photos stored")
+    if not scene.views and scene.no_views_reason:
+        views += f" ({scene.no_views_reason})"
+    return "\n".join([f"scene       {spec.source}: {info['type']} {info['name']!r}, {renders}", views,
+                      *_camera_and_scale_lines(info)])
+
+
+def _camera_and_scale_lines(info: dict) -> list[str]:
+    """The cameras (the first three) and the scale of a summary."""
+    lines = [f"  camera    {cam['width']}x{cam['height']} fx={cam['fx']:.2f} fy={cam['fy']:.2f} cx={cam['cx']:.2f} "
+             f"cy={cam['cy']:.2f}" for cam in info["cameras"][:3]]
     if len(info["cameras"]) > 3:
         lines.append(f"  ... and {len(info['cameras']) - 3} more cameras")
     mpu = info["metres_per_unit"]
     lines.append(f"scale       reference length {info['reference_length']:.4g} scene units; "
                  + (f"{mpu:.4g} m per scene unit" if mpu is not None else "metric scale unknown"))
-    lines.append(f"field       {field['resolution']}³ grid, SH degree {field['sh_degree']}, "
-                 f"{100 * field['occupied_fraction']:.1f}% of cells occupied, {field['stored_vertices']} vertices "
-                 f"stored ({byte_count(field['tensor_bytes'])}; {byte_count(field['memory_bytes'])} in memory)")
-    return "\n".join(lines + _report_lines(report))
+    return lines
 
 
 class ReportUnreadable(ValueError):

@@ -1,6 +1,6 @@
-"""``n2r render scene.n2r --view N -o out.png``: render a captured view of a scene file, optionally moved
-by a transform, as PNG images (RGB; z-depth as a colour-mapped preview plus the raw float32 ``.npy``;
-opacity as grey)."""
+"""``n2r render SCENE --view N -o out.png``: render a captured view of a scene (a scene file, ``demo:<name>``,
+``module:function``), optionally moved by a transform, as PNG images (RGB; z-depth as a colour-mapped preview
+plus the raw float32 ``.npy``; opacity as grey)."""
 
 from __future__ import annotations
 
@@ -13,20 +13,21 @@ from pathlib import Path
 import numpy as np
 
 from ._output import FORCE_HELP
+from ._scene import SCENE_HELP
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "render", help="render a view of a .n2r scene file to PNG",
+        "render", help="render a view of a scene (a .n2r scene file, demo:<name>, ...) to PNG",
         description="Render captured view N (or NAME) of SCENE, moved by --transform (in the view's own camera "
                     "frame: yaw/pitch/roll in degrees, x right, y down, z forward in --units), and write the "
                     "RGB image to OUT; --depth also writes OUT's stem + .depth.png (colour-mapped, near = "
                     "warm, black where opacity < 0.5) and .depth.npy (float32 z-depth in scene units); "
                     "--opacity writes .opacity.png (white = opaque).",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE", help="a .n2r scene file")
+    p.add_argument("scene", metavar="SCENE", help=SCENE_HELP)
     p.add_argument("--view", default=None, metavar="N|NAME",
                    help="captured view index or image name (default: the first held-out view)")
     p.add_argument("--transform", default="identity", metavar="TAU",
@@ -80,21 +81,24 @@ def _png(image: np.ndarray) -> bytes:
 
 def run(args: argparse.Namespace) -> int:
     from ..data.atomic import atomic_write_bytes
+    from ..demo.scene_specs import load_scene_spec
     from ..errors import InvalidArgument
     from ..field.device import resolve_device
     from ..geometry import Transform
     from ..render.size import RenderSize
-    from ..scene.loading import load_scene
     from ._output import NPY, PNG, check_output
+    from ._scene import scene_argument, scene_inputs
 
     tau = Transform.parse(args.transform, name="--transform")
     size = None if args.size is None else RenderSize.parse(args.size, name="--size")
     resolve_device(args.device)
-    paths = output_paths(check_output(args.output, PNG, inputs=[args.scene], force=args.force))
+    spec = scene_argument(args.scene)
+    inputs = scene_inputs(spec)
+    paths = output_paths(check_output(args.output, PNG, inputs=inputs, force=args.force))
     for key in (["depth", "depth_raw"] if args.depth else []) + (["opacity"] if args.opacity else []):
         check_output(paths[key], NPY if key == "depth_raw" else PNG, option=f"-o (its {key.replace('_raw', '')} "
-                     "file beside it)", inputs=[args.scene], force=args.force)
-    scene = load_scene(args.scene, device=args.device, images=False)
+                     "file beside it)", inputs=inputs, force=args.force)
+    scene = load_scene_spec(spec, args.device, images=False)
     if args.view is None:
         view = next((v for v in scene.views if v.split == "heldout"), scene.views[0])
     else:
@@ -118,8 +122,11 @@ def run(args: argparse.Namespace) -> int:
     if args.opacity:
         encoded["opacity"] = _png(np.rint(rendered.opacity * 255).astype(np.uint8))
     written = [atomic_write_bytes(paths[key], data) for key, data in encoded.items()]
+    device, backend = getattr(scene, "device", None), getattr(scene, "backend", None)  # a Scene need not say
+    where = f" on {device}" if device is not None else ""
+    where += f" ({backend})" if backend is not None else ""
     print(f"rendered    view {view.index} {view.name!r} ({view.split}), {tau.describe(args.units)}, "
-          f"{camera.width}x{camera.height} in {seconds:.2f} s on {scene.device} ({scene.backend})", file=sys.stderr)
+          f"{camera.width}x{camera.height} in {seconds:.2f} s{where}", file=sys.stderr)
     for path in written:
         print(f"wrote       {path}")
     return 0

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ._scene import SCENE_HELP
+
 
 def _eps_list(text: str) -> tuple[float, ...]:
     try:
@@ -65,7 +67,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "metric and eps, and render frames/s.",
     )
     parser.add_argument("scenes", nargs="+", metavar="SCENE",
-                        help="a .n2r file, 'demo:<name>' or 'module:function' returning a Scene")
+                        help=SCENE_HELP + " (globs allowed)")
     parser.add_argument("--sut", action="append", required=True, metavar="SUT",
                         help="orb, sift, akaze, or 'module:callable' (repeatable)")
     parser.add_argument("--sut-kind", type=_sut_kind, action="append", default=[], metavar="[SUT=]KIND",
@@ -96,10 +98,11 @@ def run(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
+    from ..demo.scene_specs import load_scene_spec
     from ..errors import InvalidArgument
-    from ..plugin.scenes import load_scene_spec, parse_scene_specs
     from ..study import StudyConfig, resolve_sut, run_study, write_study
     from ._output import check_output_dir
+    from ._scene import scene_arguments
 
     for option, value in (("--examples", args.examples), ("--views", args.views), ("--fps-frames", args.fps_frames)):
         if value < 1:
@@ -112,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
                          fps_frames=args.fps_frames, seed=args.seed,
                          **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))
-    scenes = [load_scene_spec(spec, args.device) for spec in parse_scene_specs(args.scenes, Path.cwd(), "SCENE")]
+    scenes = [load_scene_spec(spec, args.device) for spec in scene_arguments(args.scenes)]
     view = scenes[0].views[0]
     probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).rgb
     suts = [resolve_sut(spec, probe, kinds.get(spec)) for spec in args.sut]

@@ -128,9 +128,9 @@ def _describe(config: pytest.Config, session: Any) -> str:
     scenes = session.scenes or default_scene_specs()
     names = ", ".join(s.name for s in scenes) or "none configured"
     torch = sys.modules.get("torch")
-    threads = str(torch.get_num_threads()) if torch is not None else "torch not loaded"
+    threads = f"torch threads {torch.get_num_threads()}" if torch is not None else "torch not loaded"
     cache = session.cache_dir if session.cache_dir is not None else "memory only"
-    return f"n2r: scenes {names}; device {session.device}; torch threads {threads}; cache {cache}"
+    return f"n2r: scenes {names}; device {session.device}; {threads}; cache {cache}"
 
 
 # -- collection --------------------------------------------------------------------------------------------
