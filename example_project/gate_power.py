@@ -45,7 +45,7 @@ def main() -> None:
     cache = RenderCache(HERE / ".n2r-cache")
     scenes = [load_demo(name) for name in ("wall", "object")]
     suts = {"orb (unchanged)": detector("orb"), **REGRESSIONS}
-    print(f"margin {MARGIN}, 95% paired bootstrap bound; ORB relations of the committed baseline on "
+    print(f"margin {MARGIN}, 95% paired t bound; ORB relations of the committed baseline on "
           f"{', '.join(s.name for s in scenes)}")
     print(f"{'detector':24s} {'relations caught':>17s} {'mean change min..max':>22s} {'examples needed':>22s} "
           f"{'eps tests failed':>17s}")

@@ -7,7 +7,7 @@ so a pull request that edits it (or OpenCV, or the image pipeline) is judged her
 puts a candidate (or one of ``perception/regressions.py``) in the place of ORB.
 
 The judgement is pytest-n2r's paired comparison (the same as ``--n2r-compare``): for each relation, the
-per-example increase of the deviation over its baseline examples, and a one-sided 95 % bootstrap lower bound
+per-example increase of the deviation over its baseline examples, and a one-sided 95 % Student t lower bound
 of its mean; a relation fails when that bound exceeds ``MARGIN``, when examples stop being tests (the
 detector finds nothing), or when the baseline no longer matches the scene or the metric. An unchanged
 detector replays bit for bit (bound exactly 0). Re-record the baseline after an intended change with the

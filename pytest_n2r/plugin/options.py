@@ -246,13 +246,13 @@ def _scenes(entries: list[str], where: Where) -> list[Any]:
 
 
 def _probability(value: str, where: Where) -> float:
+    from ..report.baseline import check_confidence
+
     try:
-        number = float(value)
-    except ValueError:
-        number = math.nan
-    if not 0.5 < number < 1.0:
-        raise InvalidArgument(f"--n2r-compare-confidence={value!r} is not a probability in (0.5, 1), e.g. 0.95")
-    return number
+        return check_confidence(float(value))
+    except (ValueError, InvalidArgument):
+        raise InvalidArgument(f"--n2r-compare-confidence={value!r} is not a probability in (0.5, 1), e.g. 0.95"
+                              ) from None
 
 
 def _margin(spec: str | list[str], where: Where) -> float:

@@ -200,12 +200,12 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         return
     comparisons = result.get("comparisons")
     if comparisons is not None:
-        from ..report.baseline import format_comparison_table
+        from ..report.baseline import format_comparison_table, percent
 
         terminalreporter.section("pytest-n2r baseline comparison")
         terminalreporter.write_line(
             f"baseline {config.getoption('n2r_compare')}: the same examples replayed and paired; a relation is "
-            f"worse when the {result['confidence']:.0%} lower bound of the mean increase of the deviation exceeds "
+            f"worse when the {percent(result['confidence'])} lower bound of the mean increase of the deviation exceeds "
             f"{result['margin']:g}; failing outcomes: {', '.join(result['fail_on'])}"
         )
         if comparisons:

@@ -41,8 +41,10 @@ from .validity import Verdict
 
 __all__ = ["Engine", "Evaluation", "recorded_view", "same_pixels"]
 
-#: Give up on a relation once this many draws were invalid and they are more than ``max_rejected`` of all.
+#: Give up on a relation once this many draws were invalid and, with 99 % confidence, more than ``max_rejected``
+#: of all draws will be (see :meth:`Engine.count`).
 _MIN_REJECTED_TO_GIVE_UP = 40
+_GIVE_UP_CONFIDENCE = 0.99
 
 
 def _is_final_example() -> bool:
@@ -270,14 +272,23 @@ class Engine:
         return Evaluation(record, where, result, source, follow, (out_source, out_follow))
 
     def count(self, record: ExampleRecord) -> None:
-        """Record a survey example and stop drawing when almost every draw is invalid or undefined."""
+        """Record a survey example and stop drawing once the relation's end is known: so many undefined draws that
+        they are more than :data:`MAX_UNDEFINED` of the evaluated ones even if every example asked for is valid, or
+        at least 40 invalid ones whose share is above ``max_rejected`` with 99 % confidence (Clopper-Pearson).
+
+        Stopping on the running shares instead ended relations that would have passed: more than half undefined
+        at some draw when 40-45 % were, above 90 % invalid at some draw when 80-85 % were (7-30 % of runs).
+        """
         run = self.run_record
         run.examples.append(record)
-        accepted, rejected, undefined = len(run.valid_examples), run.rejected, run.undefined
-        if rejected >= _MIN_REJECTED_TO_GIVE_UP and rejected / len(run.examples) > self.relation.validity.max_rejected:
-            self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
-        if undefined >= min(_MIN_REJECTED_TO_GIVE_UP, self.relation.examples or self.settings.examples) \
-                and undefined / (accepted + undefined) > MAX_UNDEFINED:
+        rejected, drawn, limit = run.rejected, len(run.examples), self.relation.validity.max_rejected
+        if rejected >= _MIN_REJECTED_TO_GIVE_UP and limit < 1.0:
+            from scipy.stats import beta
+
+            if float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit:
+                self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
+        asked = self.relation.examples or self.settings.examples  # the most valid examples the search can reach
+        if run.undefined / (asked + run.undefined) > MAX_UNDEFINED:
             self.gave_up = "undefined"
 
     def example(self, view: SceneView, tau: Any) -> None:

@@ -7,6 +7,7 @@ import copy
 import json
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -299,3 +300,54 @@ def test_relations_the_saving_session_did_not_run_are_missing_not_new(tmp_path):
         f"a relation deselected when the baseline was saved passed as {by_id['a::u'].outcome}")
     assert "deselected" in by_id["a::u"].message, by_id["a::u"].message
     assert by_id["a::v"].outcome == "new" and not by_id["a::v"].fails, "a relation added since stays new"
+
+
+@pytest.mark.parametrize("changes", [[0.03, 0.05], [0.025, 0.03, 0.2], [0.1] * 10 + [0.0] * 10,
+                                     list(np.linspace(-0.1, 0.3, 40))])
+def test_the_bound_is_students_one_sided_t_bound(changes):
+    """A percentile bootstrap called 24 % of 2-pair comparisons worse at a true mean equal to the margin (5 %
+    asked): with 2 pairs its 5 % quantile is the smaller change."""
+    from scipy import stats
+
+    x = np.asarray(changes)
+    expected = x.mean() - stats.t.ppf(0.95, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size)
+    assert paired_bound(changes) == pytest.approx(expected, rel=1e-12, abs=1e-15)
+    assert paired_bound(changes, 0.99) < paired_bound(changes), "a higher confidence gives a lower bound"
+    assert paired_bound([0.4]) == -math.inf, "one pair bounds nothing: it can never be worse"
+    assert paired_bound([0.07] * 5) == 0.07, "identical changes: the bound is the change"
+
+
+def test_the_bound_keeps_its_false_alarm_rate_with_few_pairs():
+    """At a true mean change equal to the margin, a 95 % bound exceeds it in about 5 % of comparisons."""
+    rng = np.random.default_rng(7)
+    for n in (2, 3, 5, 20):
+        alarms = sum(paired_bound(list(rng.normal(0.02, 0.05, n))) > 0.02 for _ in range(2000))
+        assert 0.03 < alarms / 2000 < 0.07, f"{n} pairs: {alarms / 2000:.3f} false 'worse' verdicts, 0.05 asked"
+
+
+def test_a_relation_both_lost_and_worse_fails_if_either_is_a_failing_outcome():
+    """'lost' was decided first and alone: with --n2r-compare-fail-on worse,changed-scene a relation that lost 3
+    of 20 examples and got +0.5 worse on the other 17 passed the gate."""
+    base = _relation("a::t", [0.1] * 20)
+    current = _replayed(base, [0.6] * 20, statuses=["undefined"] * 3 + ["accepted"] * 17)
+    (c,) = compare_paired({"a::t": base}, [current], fail_on=("worse", "changed-scene"))
+    assert (c.outcome, c.also, c.fails) == ("lost", ("worse",), True), c
+    assert "also worse: the deviation grew by +0.5000" in c.message, c.message
+
+
+def test_a_few_lost_examples_are_noted_beside_an_ok_verdict():
+    """Up to 10 % of pairs may drop out, and they may be exactly the candidate's worst: the verdict says so."""
+    base = _relation("a::t", [0.1] * 18 + [0.4, 0.45])
+    current = _replayed(base, [0.1] * 18 + [0.9, 0.9], statuses=["accepted"] * 18 + ["undefined", "rejected"])
+    (c,) = compare_paired({"a::t": base}, [current])
+    assert (c.outcome, c.lost, c.fails) == ("ok", 2, False)
+    assert c.notes == ["2 of 20 lost: undefined or rejected now, left out of the mean"], c.notes
+    assert "2 of 20 lost" in format_comparison_table([c])
+
+
+def test_the_confidence_is_checked_and_shown_to_its_last_digit():
+    base = _relation("a::t", [0.1] * 5)
+    for bad in (1.5, 0.3, 1.0):
+        with pytest.raises(InvalidArgument, match=f"confidence={bad!r} is not a probability in"):
+            compare_paired({"a::t": base}, [_replayed(base, [0.1] * 5)], confidence=bad)
+    assert "97.5% lower bound" in format_comparison_table([], confidence=0.975)
