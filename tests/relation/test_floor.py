@@ -11,6 +11,7 @@ from pytest_n2r.demo import ground_truth, load_demo
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.base import Metric
 from pytest_n2r.relation.floor import FieldFloor, FloorStore, measure_floor, reference_kind
+from pytest_n2r.relation.floor.reference import ShiftSample
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study
 from tests.plugin.fakefield import BlurredPlane, corners
@@ -225,3 +226,31 @@ def test_a_floor_of_keypoint_objects_beside_descriptors_is_kept_and_reused(tmp_p
     b = measure_floor(scene, again, _OnKeypointObjects(), store=FloorStore(tmp_path), name="mine")
     assert a.available and len(list(tmp_path.glob("*.json"))) == 1, "the keypoint objects' floor was not stored"
     assert again.calls == 1 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"
+
+
+def _floor(deviations: list[float]) -> FieldFloor:
+    samples = tuple(ShiftSample(f"v{i}", 1 - d, d, True) for i, d in enumerate(deviations))
+    return FieldFloor("s", "sut", "m", "view size", "photo", samples=samples)
+
+
+def test_eps_below_the_floor_of_some_views_is_noted_though_above_the_mean():
+    """The warning compares eps with the mean floor, but a relation fails on its worst example: floors of
+    0.1, 0.1, 0.1 and 0.9 with eps 0.5 said nothing."""
+    text = _floor([0.1, 0.1, 0.1, 0.9]).describe(0.5)
+    assert "WARNING" not in text and "note: eps 0.5 is below the floor on 1 of 4 held-out views (max 0.9)" in text
+    assert "note" not in _floor([0.1, 0.2]).describe(0.5)
+
+
+def test_a_metric_returning_a_nan_deviation_is_no_floor_sample():
+    """One NaN sample made the floor NaN and silently turned its warning off."""
+    from pytest_n2r.metrics.base import MetricResult
+    from pytest_n2r.relation.floor.reference import shift_sample
+
+    class _Broken(Metric):
+        name, ideal = "broken", 1.0
+
+        def compute(self, a, b, source=None, follow=None):
+            return MetricResult(self.name, math.nan, math.nan, {})
+
+    sample = shift_sample(_Broken(), 1, 2, None, None, "v0")
+    assert not sample.valid and "returned a valid result with deviation nan" in sample.reason, sample

@@ -121,6 +121,10 @@ class FieldFloor:
         if eps is not None and self.above(eps):
             text += (f"; WARNING: eps {eps:g} is below the field floor: this relation tests the scene field, "
                      "not the SUT")
+        elif eps is not None and (over := sum(d > eps for d in self.deviations)):
+            # a relation fails on its worst example: a view whose floor alone exceeds eps may decide it
+            text += (f"; note: eps {eps:g} is below the floor on {over} of {self.n} held-out views (max "
+                     f"{self.max:.3g}): there the field alone exceeds it")
         return text
 
     def to_dict(self) -> dict[str, Any]:

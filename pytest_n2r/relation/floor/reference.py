@@ -51,6 +51,9 @@ def shift_sample(metric: Metric, out_reference: Any, out_render: Any, reference:
         return ShiftSample(view, math.nan, math.nan, False, str(exc))
     if not result.valid:
         return ShiftSample(view, math.nan, math.nan, False, str(result.details.get("reason", "undefined")))
+    if not math.isfinite(result.deviation):  # a metric's bug, as the engine calls it: never a floor of NaN
+        return ShiftSample(view, math.nan, math.nan, False,
+                           f"{metric!r} returned a valid result with deviation {result.deviation!r}")
     return ShiftSample(view, float(result.score), float(result.deviation), True)
 
 
