@@ -116,10 +116,14 @@ def _plots(result: StudyResult, out: Path) -> list[str]:
         fig, axes = plt.subplots(1, len(metrics), figsize=(3.2 * len(metrics), 3), squeeze=False)
         for ax, metric in zip(axes[0], metrics):
             for offset, kind, colour in ((-0.2, "n2r", "#d62728"), (0.2, "mutation", "#1f77b4")):
-                counts = [sum(r[f"inc@{e:g}"] for r in incs if r["metric"] == metric and r["kind"] == kind
-                              and r["valid"]) for e in result.eps]  # a family with no valid example has no count
-                ax.bar(np.arange(len(result.eps)) + offset, counts, width=0.4, color=colour,
-                       label="N2R τ1–τ6" if kind == "n2r" else "mutations m1–m3")
+                rows = [r for r in incs if r["metric"] == metric and r["kind"] == kind and r["valid"]]
+                counts = [sum(r[f"inc@{e:g}"] for r in rows) for e in result.eps]  # no valid example: no count
+                valid = sum(r["valid"] for r in rows)
+                bars = ax.bar(np.arange(len(result.eps)) + offset, counts, width=0.4, color=colour,
+                              label="N2R τ1–τ6" if kind == "n2r" else "mutations m1–m3")
+                # six pose families against three mutation families, fewer valid pose draws: the bars' counts
+                # are of different totals, so each says of how many valid examples it is
+                ax.bar_label(bars, [f"{c}/{valid}" for c in counts], fontsize=6)
             ax.set_xticks(range(len(result.eps)), [f"ε={e:g}" for e in result.eps])
             ax.set_title(metric)
         axes[0][0].legend(fontsize=7)
