@@ -402,8 +402,8 @@ def test_p_no_n2r_disables_the_plugin(n2r_project):
     assert result.ret == pytest.ExitCode.USAGE_ERROR and "unrecognized arguments: --n2r-scene" in result.stderr.str()
 
 
-def test_a_mutation_strategy_as_transform(n2r_project):
-    n2r_project.write("""
+#: A mutation of a test module's own, for inner test files (a relation's transform draws it).
+DARKEN = """
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -425,7 +425,11 @@ class Darken(Mutation):
 
     def describe(self):
         return f"darken(amount={self.amount})"
+"""
 
+
+def test_a_mutation_strategy_as_transform(n2r_project):
+    n2r_project.write(DARKEN + """
 
 @metamorphic(AbsDifference(), eps=20, transform=st.integers(0, 100).map(lambda k: Darken(k / 100)), examples=30)
 def test_darkening(n2r_scene):

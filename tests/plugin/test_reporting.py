@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from .test_plugin import PLANE
+from .test_plugin import DARKEN, PLANE
 
 GATED = """
 import os
@@ -202,29 +202,7 @@ def test_heading(n2r_scene):
     assert props[("test_heading[ramp]", "n2r_inconsistencies")] != "0"
 
 
-DARKEN = """
-from dataclasses import dataclass
-from typing import ClassVar
-
-from hypothesis import strategies as st
-from pytest_n2r.strategies import Mutation
-
-
-@dataclass(frozen=True, repr=False)
-class Darken(Mutation):
-    amount: float = 0.0
-    name: ClassVar[str] = "darken"
-
-    @property
-    def is_identity(self):
-        return self.amount == 0
-
-    def _apply(self, rgb):
-        return (rgb * (1 - self.amount)).astype(np.uint8)
-
-    def describe(self):
-        return f"darken(amount={self.amount})"
-
+DARKENING = DARKEN + """
 
 @metamorphic(AbsDifference(), eps=1000, transform=st.integers(1, 50).map(lambda k: Darken(k / 100)), examples=6)
 def test_darkening(n2r_scene):
@@ -237,7 +215,7 @@ def test_a_baseline_replays_a_mutation_class_defined_in_the_test_module(n2r_proj
     test module is not registered yet then, and the baseline was refused as naming an unknown mutation."""
     from pytest_n2r.strategies import mutation
 
-    n2r_project.write(DARKEN)
+    n2r_project.write(DARKENING)
     base = n2r_project.pytester.path / "baseline.json"
     n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
     monkeypatch.delitem(mutation._KINDS, "darken")  # as in a new process: the test module not imported yet
@@ -250,11 +228,11 @@ def test_a_baseline_replays_a_mutation_class_defined_in_the_test_module(n2r_proj
 def test_a_baseline_mutation_no_module_defines_is_an_error_naming_it(n2r_project, monkeypatch):
     from pytest_n2r.strategies import mutation
 
-    n2r_project.write(DARKEN)
+    n2r_project.write(DARKENING)
     base = n2r_project.pytester.path / "baseline.json"
     n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
     monkeypatch.delitem(mutation._KINDS, "darken")
-    n2r_project.write(DARKEN.replace('"darken"', '"darker"'))  # the class was renamed since the baseline
+    n2r_project.write(DARKENING.replace('"darken"', '"darker"'))  # the class was renamed since the baseline
     renamed = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
     assert renamed.ret != 0
     renamed.stdout.fnmatch_lines(["*test_darkening*name mutation(s) [[]'darken'[]] that no imported module defines*"])
