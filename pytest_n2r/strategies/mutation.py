@@ -122,7 +122,7 @@ class Mutation(FollowUp):
         return {"transform": None, "mutation": self.as_dict()}
 
     def explain(self, scene: Scene, note: str) -> list[str]:
-        return [f"  follow-up:  the source render mutated by {self.describe()}"]
+        return [f"  follow-up:  the source render mutated by {self.describe()}  ({note or 'minimal after shrinking'})"]
 
     @abstractmethod
     def _apply(self, rgb: np.ndarray) -> np.ndarray:
