@@ -8,6 +8,7 @@ import math
 
 import cv2
 import numpy as np
+from hypothesis import strategies as st
 
 from pytest_n2r.demo import load_demo
 from pytest_n2r.metrics import repeatability
@@ -149,3 +150,20 @@ def test_the_exact_replay_of_a_fitted_demo_scene_takes_the_kept_results(tmp_path
     computed = _counting(monkeypatch)
     again = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
     assert computed == [] and again == first
+
+
+def test_a_mutation_relation_is_replayed_on_the_exact_twin_too(tmp_path, monkeypatch):
+    """Mutations were skipped as 'not replayable' (the line read 'exact vs fitted: no example replayed, not
+    replayable 2'), though the exact source render mutated the same way is exactly their replay."""
+    from pytest_n2r.strategies import Brightness
+
+    scene, camera_of = load_demo("wall-field", "cpu"), lambda v: RenderSize.parse(160).apply(v.camera)
+    orb = resolve_sut("orb", None).fn
+    relation = Relation.build(repeatability(px=2), 0.9, st.integers(20, 60).map(Brightness), examples=3, size="160")
+    records = check_relation(scene, orb, relation, settings=SETTINGS).examples
+    first = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
+    assert first is not None and first.n == len([r for r in records if r.valid]) and first.skipped == 0, first
+    assert "same poses on exact renders" in first.describe(), first.describe()
+    computed = _counting(monkeypatch)
+    again = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
+    assert computed == [] and again == first, "the mutated exact renders' results were not kept"

@@ -15,6 +15,7 @@ from ...metrics.base import Metric
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.render_cache import RenderCache
+from ..kept_results import repainted_key
 from ..record import ExampleRecord
 from .measure import json_number
 from .reference import exact_twin, shift_sample
@@ -28,10 +29,10 @@ EXACT_REPLAY_EXAMPLES = 10
 
 @dataclass(frozen=True)
 class ExactComparison:
-    """A relation's examples on a fitted demo scene replayed at the same poses on its exact twin:
-    ``pairs`` of ``(fitted deviation, exact deviation)`` where both are defined; ``undefined`` examples
-    whose metric was undefined on the exact renders; ``skipped`` ones that cannot be replayed (mutations,
-    interpolated source views)."""
+    """A relation's examples on a fitted demo scene replayed at the same poses on its exact twin (a mutation's
+    on the exact source render, mutated): ``pairs`` of ``(fitted deviation, exact deviation)`` where both are
+    defined; ``undefined`` examples whose metric was undefined on the exact renders; ``skipped`` ones that cannot
+    be replayed (interpolated source views, which the twin has no view of)."""
 
     pairs: tuple[tuple[float, float], ...]
     undefined: int = 0
@@ -50,7 +51,8 @@ class ExactComparison:
 
     def describe(self) -> str:
         extra = "".join(f", {k} {n}" for k, n in (("undefined on exact renders", self.undefined),
-                                                    ("not replayable", self.skipped)) if n)
+                                                    ("not replayable (interpolated source views)",
+                                                     self.skipped)) if n)
         if not self.pairs:
             return f"exact vs fitted: no example replayed{extra}"
         fitted, exact = self.means()
@@ -82,8 +84,7 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     accepted = [r for r in records if r.valid]  # the draws that were tests
     for record in accepted[:limit]:
         view = by_name.get(record.view)
-        transform = record.transform
-        if view is None or transform is None or record.mutation is not None:
+        if view is None or not record.replayable:
             skipped += 1
             continue
         if view.name not in sources:
@@ -91,10 +92,14 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             sources[view.name] = (rendered, key, sut(rendered.rgb))
         source, source_key, out_source = sources[view.name]
         tau = record.follow_up()
-        follow_c2w = tau.apply(view.c2w, scene.length_scale(tau.units))
-        follow, follow_key = render_cache.render_keyed(twin, follow_c2w, camera_of(view), outputs)
-        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name,
-                              kept=(render_cache, source_key, follow_key))
+        if tau.moves_camera:
+            follow_c2w = tau.apply(view.c2w, scene.length_scale(tau.units))
+            follow, follow_key = render_cache.render_keyed(twin, follow_c2w, camera_of(view), outputs)
+        else:  # a mutation: the exact source render, mutated as the fitted one was
+            follow = tau.apply_to_view(source)
+            follow_key = repainted_key(source, source_key, follow)
+        kept = (render_cache, source_key, follow_key) if follow_key is not None else None
+        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name, kept=kept)
         if sample.valid:
             pairs.append((float(record.deviation), sample.deviation))
         else:
