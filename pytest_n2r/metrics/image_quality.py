@@ -89,6 +89,7 @@ def ssim(image_true: np.ndarray, image_test: np.ndarray, *, data_range: float | 
 
 
 def _check_ssim_size(a: np.ndarray) -> None:
+    """SSIM's 11×11 window needs images of at least 11 pixels a side."""
     if min(a.shape[:2]) < 11:
         raise InvalidArgument(f"images of {a.shape[1]}x{a.shape[0]} pixels are too small for SSIM; expected >= 11x11")
 
@@ -159,8 +160,9 @@ class SSIM(Metric):
     tensors (any device, ``requires_grad`` or not; bfloat16 is read as float32). ``data_range`` is the span of
     values an output image can take: 255 for uint8 and 1 for floats unless given (float images in 0..255 need
     ``data_range=255``). Any output it cannot use is a :class:`~pytest_n2r.errors.SUTOutputError` naming it.
-    Two constant images (a blank output twice) are *undefined*: SSIM would score them 1 with no structure
-    compared, so a SUT that returns black for every image would pass every relation.
+    The same constant image twice (a blank output) is *undefined*: SSIM would score it 1 with no structure
+    compared, so a SUT that returns black for every image would pass every relation. Two different constant
+    images are scored (their luminance differs: black against white is a change).
     """
 
     name = "ssim"
@@ -173,10 +175,10 @@ class SSIM(Metric):
         a, b = (as_image(out, which, _IMAGE) for which, out in (("source", out_source), ("follow-up", out_follow)))
         try:
             pair = _pair(a, b, self.data_range, ("source output", "follow-up output"))
-            if _constant(a) and _constant(b):  # SSIM compares no structure then: a blank output would score 1
+            if _constant(a) and np.array_equal(a, b):  # no structure compared: a blank output would score 1
                 _check_ssim_size(a)
-                return MetricResult.undefined(self.name, "both outputs are constant images (every pixel "
-                                              f"{_first_pixel(a)} and {_first_pixel(b)}): nothing to compare")
+                return MetricResult.undefined(self.name, "both outputs are the same constant image (every pixel "
+                                              f"{_first_pixel(a)}): nothing to compare")
             score = _ssim(*pair)
         except (InvalidArgument, InvalidType) as exc:  # about the outputs (data_range was checked when built)
             raise SUTOutputError(str(exc)) from None

@@ -186,8 +186,9 @@ def test_two_constant_output_images_are_undefined_never_ideal(value):
     blank = np.full((16, 16, 3), value, np.uint8)
     result = iq.ssim_metric()(blank, blank.copy())
     assert not result.valid and math.isnan(result.deviation), result
-    assert result.details["reason"].startswith("both outputs are constant images"), result.details
-    assert not iq.ssim_metric()(blank, np.zeros((16, 16, 3), np.uint8)).valid
+    assert result.details["reason"].startswith("both outputs are the same constant image"), result.details
+    flipped = iq.ssim_metric()(blank, np.full((16, 16, 3), 255 if value < 128 else 0, np.uint8))
+    assert flipped.valid and flipped.deviation > 0.5, f"black against white is a change, not nothing: {flipped}"
     structured = blank.copy()
     structured[4:8, 4:8] = 255 - value
     assert iq.ssim_metric()(blank, structured).valid, "one constant output against a structured one is scored"

@@ -116,8 +116,8 @@ def test_failure_lines_say_the_follow_up_in_scene_units_and_metres():
     assert PoseChange(y=-0.3, units="scene").explain(scene, "as drawn")[1] == \
         "              = y=-0.3 scene units = y=-0.15 m"
     assert n2r.Brightness(30).explain(scene, "") == [
-        "  follow-up:  the source render mutated by brightness +30 levels (+11.8% of full scale)  (minimal after "
-        "shrinking)"], "a mutation is shrunk as a pose change is, and its line says so as a pose change's does"
+        ("  follow-up:  the source render mutated by brightness +30 levels (+11.8% of full scale)  (minimal after "
+        "shrinking)")], "a mutation is shrunk as a pose change is, and its line says so as a pose change's does"
     assert n2r.Brightness(30).explain(scene, "as drawn")[0].endswith("(as drawn)")
 
 
