@@ -219,7 +219,7 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         if failed:
             terminalreporter.write_line(
                 f"{len(failed)} relation(s) fail the baseline comparison: "
-                + ", ".join(f"{c.nodeid} ({c.outcome})" for c in failed), red=True, bold=True)
+                + ", ".join(f"{c.nodeid} ({c.verdict})" for c in failed), red=True, bold=True)
     for path in result.get("written", []):
         terminalreporter.write_line(f"pytest-n2r wrote {path}")
     for problem in result.get("problems", []):

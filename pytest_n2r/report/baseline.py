@@ -157,9 +157,9 @@ def paired_bound(changes: list[float], confidence: float = defaults.COMPARE_CONF
     s / sqrt(n)`` (``s`` the sample standard deviation). NaN for no changes (or a non-finite one); ``-inf`` for a
     single change, which bounds nothing; the mean itself when every change is the same (``s = 0``).
 
-    A percentile bootstrap gave bounds too high with few pairs: at a true mean equal to the margin it called
-    24 % of 2-pair and 10 % of 5-pair comparisons worse, where 5 % were asked for (7 December 2026, 800 draws
-    of normal changes); the t bound keeps 3.6-5.4 % at 2 to 40 pairs.
+    A percentile bootstrap gave bounds too high with few pairs (with 2 pairs, the smaller change: at a true mean
+    equal to the margin it called a quarter of comparisons worse, where 5 % were asked for); the t bound keeps
+    3-7 % at 2 to 20 pairs (``tests/report/test_baseline.py``, 2 000 draws of normal changes each).
 
     >>> paired_bound([0.0] * 20)
     0.0
@@ -191,7 +191,8 @@ def check_confidence(confidence: float) -> float:
     ...
     pytest_n2r.errors.InvalidArgument: confidence=1.5 is not a probability in (0.5, 1), e.g. 0.95
     """
-    if isinstance(confidence, bool) or not isinstance(confidence, (int, float)) or not 0.5 < confidence < 1:
+    number = isinstance(confidence, (int, float, np.floating)) and not isinstance(confidence, bool)
+    if not number or not 0.5 < confidence < 1:
         raise InvalidArgument(f"confidence={confidence!r} is not a probability in (0.5, 1), e.g. 0.95")
     return float(confidence)
 
@@ -199,10 +200,10 @@ def check_confidence(confidence: float) -> float:
 def percent(confidence: float) -> str:
     """A confidence as a percentage, to its last digit (``0.975`` is ``97.5%``, not ``98%``).
 
-    >>> percent(0.95), percent(0.975), percent(0.999)
-    ('95%', '97.5%', '99.9%')
+    >>> percent(0.95), percent(0.975), percent(0.99999999)
+    ('95%', '97.5%', '99.999999%')
     """
-    return f"{round(confidence * 100, 10):g}%"
+    return f"{round(confidence * 100, 10):.12g}%"
 
 
 @dataclass
@@ -223,6 +224,11 @@ class PairedComparison:
     notes: list[str] = field(default_factory=list)
     #: Other outcomes that apply too (a relation both ``lost`` and ``worse``): it fails when any is a failing one.
     also: tuple[str, ...] = ()
+
+    @property
+    def verdict(self) -> str:
+        """Every outcome that applies, the first one first (``"lost+worse"``)."""
+        return "+".join((self.outcome, *self.also))
 
 
 _MARGIN = re.compile(r"^\s*mean\s*:\s*(?P<value>[0-9]*\.?[0-9]+(?:e-?[0-9]+)?)\s*$")
@@ -344,6 +350,8 @@ def _compare_one(
         result.message += "".join(f"; also {o}: {m}" for o, m in rest if o != "changed-eps")
     if 0 < lost and result.outcome != "lost":  # a few lost examples: the mean is over the rest, which may flatter it
         result.notes.append(f"{lost} of {len(base_examples)} lost: undefined or rejected now, left out of the mean")
+    if n == 1:
+        result.notes.append("1 pair: no confidence bound, so it cannot be judged worse")
     return result
 
 
@@ -353,7 +361,7 @@ def format_comparison_table(comparisons: list[PairedComparison],
     header = ["relation", "n", "mean change", f"{percent(confidence)} lower bound", "verdict"]
     rows = [header]
     for c in comparisons:
-        verdict = c.outcome + (" (fails)" if c.fails else "") + (f" [{'; '.join(c.notes)}]" if c.notes else "")
+        verdict = c.verdict + (" (fails)" if c.fails else "") + (f" [{'; '.join(c.notes)}]" if c.notes else "")
         rows.append([c.nodeid, str(c.n) if c.n or c.outcome in ("ok", "worse", "lost") else "—",
                      "—" if math.isnan(c.mean_change) else f"{c.mean_change:+.4f}",
                      "—" if math.isnan(c.bound) else f"{c.bound:+.4f}", verdict])

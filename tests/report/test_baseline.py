@@ -333,6 +333,13 @@ def test_a_relation_both_lost_and_worse_fails_if_either_is_a_failing_outcome():
     (c,) = compare_paired({"a::t": base}, [current], fail_on=("worse", "changed-scene"))
     assert (c.outcome, c.also, c.fails) == ("lost", ("worse",), True), c
     assert "also worse: the deviation grew by +0.5000" in c.message, c.message
+    assert "lost+worse (fails)" in format_comparison_table([c]), "the table names every outcome that applies"
+
+
+def test_a_single_pair_says_it_cannot_be_judged():
+    base = _relation("a::t", [0.1])
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [0.9])])
+    assert c.outcome == "ok" and "1 pair: no confidence bound, so it cannot be judged worse" in c.notes, c
 
 
 def test_a_few_lost_examples_are_noted_beside_an_ok_verdict():
@@ -351,3 +358,4 @@ def test_the_confidence_is_checked_and_shown_to_its_last_digit():
         with pytest.raises(InvalidArgument, match=f"confidence={bad!r} is not a probability in"):
             compare_paired({"a::t": base}, [_replayed(base, [0.1] * 5)], confidence=bad)
     assert "97.5% lower bound" in format_comparison_table([], confidence=0.975)
+    assert compare_paired({"a::t": base}, [_replayed(base, [0.1] * 5)], confidence=np.float32(0.9))[0].outcome == "ok"
