@@ -21,6 +21,19 @@ def is_tensor(value: Any) -> bool:
     return hasattr(value, "detach") and hasattr(value, "cpu") and hasattr(value, "double")
 
 
+def tensor_values(tensor: Any) -> np.ndarray:
+    """A tensor's values as a numpy array on the host: detached, conjugate and negated views resolved, and a dtype
+    numpy has no name for (bfloat16, the float8 types, complex32) as float32 (complex64), which holds each of its
+    values exactly."""
+    import torch
+
+    host = tensor.detach().cpu().resolve_conj().resolve_neg()
+    try:
+        return host.numpy()
+    except (TypeError, RuntimeError):
+        return host.to(torch.complex64 if host.is_complex() else torch.float32).numpy()
+
+
 def is_finite(value: Any) -> bool:
     """Whether the real number ``value`` is finite as a float: an int too large for one (JSON's integers have no
     limit; ``float(10**400)`` overflows) is not.

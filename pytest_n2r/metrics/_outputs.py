@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import is_tensor
+from .._validation import is_tensor, tensor_values
 from ..errors import MetricUndefined, SUTOutputError
 
 __all__ = ["as_numeric", "as_vector", "as_keypoints", "as_image", "float_eps"]
@@ -21,7 +21,7 @@ _FLOAT64_EPS = float(np.finfo(np.float64).eps)
 def _to_numpy(value: Any) -> Any:
     """Tensors (torch: any device, any float dtype incl. bfloat16) to float64 numpy; others unchanged."""
     if is_tensor(value):
-        return value.detach().cpu().double().numpy()
+        return tensor_values(value)
     return value
 
 
@@ -95,12 +95,9 @@ def as_image(value: Any, which: str, expected: str) -> np.ndarray:
     to the CPU, bfloat16 (which numpy lacks) becomes float32. ``None``, non-numeric, complex, NaN or Inf
     outputs are a :class:`SUTOutputError` naming the output, as in :func:`as_numeric`."""
     if is_tensor(value):
-        import torch
-
-        value = value.detach().cpu()  # once: checked and returned from the host copy
-        value = value.float() if value.dtype == torch.bfloat16 else value
+        value = tensor_values(value)  # once: checked and returned from the host copy
     as_numeric(value, which, expected)
-    return value.numpy() if is_tensor(value) else np.asarray(value)
+    return np.asarray(value)
 
 
 def as_keypoints(value: Any, which: str) -> np.ndarray:

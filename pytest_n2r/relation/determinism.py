@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import is_tensor
+from .._validation import is_tensor, tensor_values
 from ..errors import N2RError
 
 __all__ = ["NotDeterministic", "SUTNotDeterministic", "check_deterministic", "same_output", "show_output"]
@@ -34,13 +34,12 @@ class NotDeterministic(BaseException):
 
 
 def _plain(output: Any) -> Any:
-    """``cv2.KeyPoint`` lists as ``(N, 2)`` arrays of their positions, tensors as arrays of their values (any
-    device; bfloat16 as float32, which holds each of its values); anything else as it is."""
+    """``cv2.KeyPoint`` lists as ``(N, 2)`` arrays of their positions, tensors as arrays of their values
+    (:func:`~pytest_n2r._validation.tensor_values`); anything else as it is."""
     if isinstance(output, (list, tuple)) and output and all(hasattr(k, "pt") for k in output):
         return np.array([k.pt for k in output], dtype=np.float64)
     if is_tensor(output):
-        host = output.detach().cpu()
-        return (host.float() if str(host.dtype) == "torch.bfloat16" else host).numpy()
+        return tensor_values(output)
     return output
 
 

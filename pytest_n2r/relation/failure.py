@@ -112,7 +112,9 @@ def too_many_invalid(run: RelationRecord, relation: Relation) -> str:
     reasons = ", ".join(f"{r}: {n}" for r, n in run.rejected_reasons.most_common()) or "no valid example"
     nothing = "" if run.valid_examples or not drawn else ": no follow-up view was valid, so nothing was compared"
     moved = any(e.transform and any(e.transform.get(k) for k in ("x", "y", "z")) for e in run.examples)
-    look_at = " (or use look_at=True, which turns a moved camera back toward what it saw)" if moved else ""
+    turned_back = "look_at=True" in repr(relation.transform)  # the repr is the transforms(...) call
+    look_at = (" (or use look_at=True, which turns a moved camera back toward what it saw)"
+               if moved and not turned_back else "")
     return (
         f"{relation.transform!r} leaves what the scene {run.scene!r} can render faithfully in {share:.0%} of "
         f"{drawn} draws ({reasons}){nothing}; narrow the bounds{look_at} so most follow-up views stay in the "

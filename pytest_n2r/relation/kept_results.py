@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from .._validation import is_tensor
+from .._validation import is_tensor, tensor_values
 from ..metrics.base import Metric, MetricResult
 from ..render.view import RenderedView
 from ..scene.render_cache import RenderCache
@@ -44,7 +44,8 @@ _PLAIN = (bool, int, float, str, type(None))
 def output_digest(output: Any) -> str | None:
     """Hex SHA-256 of a SUT output's exact value (types, dtypes, shapes and bytes; a ``cv2.KeyPoint`` by all six of
     its fields, a tensor by its dtype, shape and values wherever it lives), or ``None`` when the output holds
-    something this digest does not name exactly (an object array, a dict with other keys than strings).
+    something this digest does not name exactly (an object array, a dict with other keys than strings, an object
+    of one's own).
 
     >>> output_digest(np.zeros((2, 2), np.float32)) == output_digest(np.zeros((2, 2), np.float32))
     True
@@ -77,13 +78,9 @@ def _feed(digest: Any, value: Any) -> bool:
         fields = (*value.pt, value.size, value.angle, value.response, value.octave, value.class_id)
         digest.update(f"keypoint{fields!r};".encode())  # repr names a float exactly
         return True
-    if is_tensor(value):
-        try:
-            array = value.detach().cpu().numpy()
-        except (TypeError, RuntimeError):  # a dtype numpy has no name for (bfloat16): not named
-            return False
+    if is_tensor(value):  # its values (bfloat16 as float32, exactly), tagged with its own dtype
         digest.update(f"tensor{value.dtype}".encode())
-        return _feed(digest, array)
+        return _feed(digest, tensor_values(value))
     if type(value) is dict and all(type(k) is str for k in value):
         digest.update(f"dict{len(value)}{{".encode())
         return all(_feed(digest, k) and _feed(digest, value[k]) for k in sorted(value))
@@ -91,11 +88,10 @@ def _feed(digest: Any, value: Any) -> bool:
 
 
 def _is_keypoint(value: Any) -> bool:
-    """Whether ``value`` is a ``cv2.KeyPoint`` (by type name and fields: OpenCV is not imported here)."""
-    return type(value).__name__ == "KeyPoint" and all(hasattr(value, f) for f in _KEYPOINT_FIELDS)
+    """Whether ``value`` is a ``cv2.KeyPoint`` (by its type's module and name: OpenCV is not imported here; a class
+    of one's own named so may hold more than the six fields the digest names)."""
+    return type(value).__module__ == "cv2" and type(value).__name__ == "KeyPoint"
 
-
-_KEYPOINT_FIELDS = ("pt", "size", "angle", "response", "octave", "class_id")
 
 
 def kept_result(cache: RenderCache, metric: Metric, source_key: str, follow_key: str, out_source: Any,

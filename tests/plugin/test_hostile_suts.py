@@ -187,6 +187,8 @@ def test_raises(n2r_scene):
     (torch.tensor([0.1, 0.9]), torch.tensor([0.1, 0.9]), True),
     (torch.tensor([0.1, 0.9]), torch.tensor([0.1, 0.8]), False),
     (torch.ones(2, dtype=torch.bfloat16), torch.ones(2, dtype=torch.bfloat16), True),
+    (torch.ones(2, dtype=torch.float8_e4m3fn), torch.ones(2, dtype=torch.float8_e4m3fn), True),
+    (torch.tensor([1 + 2j]).conj(), torch.tensor([1 - 2j]), True),
     ({"boxes": torch.ones(2, 4), "n": 2}, {"boxes": torch.ones(2, 4), "n": 2}, True),
     ({"boxes": torch.ones(2, 4), "n": 2}, {"boxes": torch.zeros(2, 4), "n": 2}, False),
 ])

@@ -126,7 +126,27 @@ def test_tensors_are_named_by_dtype_shape_and_values():
     assert output_digest(t) == output_digest(t.clone().requires_grad_()) == output_digest((t.T.contiguous().T,)[0])
     others = [t.double(), t.reshape(2, 3), t + 1e-6, t.numpy(), [t]]
     assert len({output_digest(x) for x in [t, *others]}) == 1 + len(others), "a tensor was confused with another"
-    assert output_digest(t.to(torch.bfloat16)) is None, "bfloat16 has no numpy dtype: it cannot be named exactly"
+    half = t.to(torch.bfloat16)
+    assert output_digest(half) not in (None, output_digest(t)), "bfloat16: named by its values and its own dtype"
+    assert output_digest(half) == output_digest(half.clone())
+
+
+def test_a_class_of_ones_own_named_keypoint_is_not_named_by_six_fields():
+    """Any class named KeyPoint with cv2's six fields was digested by those alone: a field of its own (here a
+    descriptor) could differ under one digest, and a floor or kept result be reused for another output."""
+    from dataclasses import dataclass
+
+    @dataclass
+    class KeyPoint:
+        pt: tuple
+        size: float = 1.0
+        angle: float = 0.0
+        response: float = 0.0
+        octave: int = 0
+        class_id: int = -1
+        descriptor: bytes = b""
+
+    assert output_digest([KeyPoint((1.0, 2.0), descriptor=b"a")]) is None
 
 
 def test_a_kept_result_reads_back_exactly():

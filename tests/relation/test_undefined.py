@@ -86,6 +86,10 @@ def test_a_moved_camera_that_leaves_the_captured_region_is_told_of_look_at():
     relation = Relation.build(repeatability(px=2), eps=0.5, transform=transforms(x=(8, 9)), examples=5)
     with pytest.raises(InvalidArgument, match=r"narrow the bounds \(or use look_at=True, which turns a moved camera "):
         check_relation(PlaneScene(), same_grid(16), relation, settings=SETTINGS)
+    already = Relation.build(repeatability(px=2), eps=0.5, transform=transforms(x=(8, 9), look_at=True), examples=5)
+    with pytest.raises(InvalidArgument) as info:
+        check_relation(PlaneScene(), same_grid(16), already, settings=SETTINGS)
+    assert "narrow the bounds so" in str(info.value) and "use look_at=True" not in str(info.value), str(info.value)
 
 
 class _UndefinedFirst(AbsDifference):
