@@ -38,9 +38,10 @@ def scene_inputs(spec: SceneSpec) -> list[Path]:
 
 
 def _importable(specs: list[SceneSpec]) -> list[SceneSpec]:
-    """``specs``, with the working folder on the module path when one is ``module:function`` (as ``python -m``
-    puts it there; pytest puts the test folders there for the plugin)."""
+    """``specs``, with the working folder on the module path when one is ``module:function`` (pytest puts the test
+    folders there for the plugin). Appended, not put first as ``python -m`` does: a folder holding ``scipy/`` or
+    ``cv2.py`` must not shadow the packages the command imports later."""
     cwd = os.getcwd()
     if any(spec.kind == "python" for spec in specs) and cwd not in sys.path and "" not in sys.path:
-        sys.path.insert(0, cwd)
+        sys.path.append(cwd)
     return specs

@@ -83,19 +83,21 @@ def softmax(logits: np.ndarray) -> np.ndarray:
 
 
 def in_unit_range(v: np.ndarray, eps: float = float(np.finfo(np.float64).eps)) -> bool:
-    """True when every entry is in [0, 1] within :func:`probability_sum_tolerance` (a probability computed as
-    ``1 - sum(others)`` may round a little below 0).
+    """True when every entry is in [0, 1] within the rounding of a sum of ``v.size`` entries stored in a dtype of
+    machine epsilon ``eps`` (``v.size * eps``: a probability computed as ``1 - sum(others)`` may round a little
+    below 0). Anything further out is a score of its own, such as a logit.
 
-    >>> in_unit_range(np.array([1.0, -1e-9, 1e-9])), in_unit_range(np.array([1.2, -0.2]))
+    >>> in_unit_range(np.array([1.0, -2e-16, 2e-16])), in_unit_range(np.array([1.0, -1e-9, 1e-9]))
     (True, False)
     """
-    tolerance = probability_sum_tolerance(v.size, eps)
+    tolerance = v.size * eps
     return bool(np.all(v >= -tolerance) and np.all(v <= 1.0 + tolerance))
 
 
 def is_probability_vector(v: np.ndarray, eps: float = float(np.finfo(np.float64).eps)) -> bool:
-    """True when all entries are in [0, 1] and they sum to 1, both within :func:`probability_sum_tolerance` for
-    a vector of this length stored in a dtype of machine epsilon ``eps`` (float64's by default)."""
+    """True when all entries are in [0, 1] (within rounding: :func:`in_unit_range`) and they sum to 1 within
+    :func:`probability_sum_tolerance` for a vector of this length stored in a dtype of machine epsilon ``eps``
+    (float64's by default)."""
     return in_unit_range(v, eps) and abs(float(v.sum()) - 1.0) <= probability_sum_tolerance(v.size, eps)
 
 
@@ -131,7 +133,8 @@ class _VectorMetric(Metric):
                 if not is_probability_vector(v, e):
                     raise SUTOutputError(
                         f"{which} output is not a probability vector ({_describe(v)}; expected entries in [0, 1] "
-                        f"summing to 1 within {probability_sum_tolerance(v.size, e):.3g}); pass "
+                        f"(within {v.size * e:.3g}) summing to 1 within {probability_sum_tolerance(v.size, e):.3g}); "
+                        "pass "
                         "inputs='logits' (or 'auto') if the SUT returns logits"
                     )
         if self.inputs != "raw":
@@ -150,8 +153,8 @@ class _VectorMetric(Metric):
         ``"auto"`` reads a vector with every entry in [0, 1] as probabilities if it sums to 1 within
         :func:`probability_sum_tolerance`, and is a :class:`SUTOutputError` otherwise: its softmax would be
         nearly uniform (its entries all lie within a factor e of each other), and two such outputs would score
-        alike whatever they said. A vector with an entry outside [0, 1] reads as probabilities when it is one
-        within that tolerance (:func:`is_probability_vector`: ``[1, -1e-9, 1e-9]``, from ``1 - sum(others)``),
+        alike whatever they said. A vector with an entry outside [0, 1] reads as probabilities when that is
+        rounding (:func:`is_probability_vector`: ``[1, -2e-16, 2e-16]`` in float64, from ``1 - sum(others)``),
         else as logits. Probabilities are clipped to [0, 1] before they are renormalized. The two outputs must
         read alike (a classifier returns one kind of score), or it is a :class:`SUTOutputError`.
         """

@@ -287,8 +287,7 @@ class Engine:
 
             if float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit:
                 self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
-        asked = self.relation.examples or self.settings.examples  # the most valid examples the search can reach
-        if run.undefined / (asked + run.undefined) > MAX_UNDEFINED:
+        if run.undefined / (run.asked + run.undefined) > MAX_UNDEFINED:  # asked: the most valid examples there can be
             self.gave_up = "undefined"
 
     def example(self, view: SceneView, tau: Any) -> None:

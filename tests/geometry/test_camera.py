@@ -133,3 +133,5 @@ def test_from_k_refuses_a_matrix_this_camera_model_cannot_hold(K, match):
         Camera.from_K(K, 640, 480)
     assert Camera.from_K(Camera(640, 480, 500, 510, 319.5, 239.5).K, 640, 480) == Camera(640, 480, 500, 510, 319.5,
                                                                                            239.5)
+    rounded = Camera(640, 480, 500, 510, 319.5, 239.5).K + [[0, 1e-12, 0], [1e-13, 0, 0], [0, 0, 2e-16]]
+    assert Camera.from_K(rounded, 640, 480).fx == 500, "a K decomposed from a projection matrix has rounding"

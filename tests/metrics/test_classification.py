@@ -80,7 +80,8 @@ def test_logits_are_read_through_a_softmax(pair, shift):
     assert shifted.score < 1e-9, f"logits shifted by {shift} read as another prediction: {shifted}"
     assert l2_norm(inputs="logits")(a, b).score == pytest.approx(np.linalg.norm(softmax(a) - softmax(b)), abs=1e-12), (
         "logits were not compared through their softmax")
-    if np.any((a < 0) | (a > 1)) and np.any((b < 0) | (b > 1)):  # both read as logits by "auto" too
+    rounding = a.size * np.finfo(np.float64).eps  # entries outside [0, 1] by rounding alone read as probabilities
+    if np.any((a < -rounding) | (a > 1 + rounding)) and np.any((b < -rounding) | (b > 1 + rounding)):  # logits
         result = l2_norm()(a, b)
         assert result.details["inputs"] == "logits", f"auto read logits {a}, {b} as {result.details['inputs']}"
         assert result.score == l2_norm(inputs="logits")(a, b).score, "auto's logits reading differs from 'logits'"
@@ -126,9 +127,10 @@ def test_zero_vectors_in_raw_mode():
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_probabilities_with_a_rounding_error_below_zero_are_read_as_probabilities(dtype):
-    """``[1, -1e-9, 1e-9]`` (a probability computed as ``1 - sum(others)``) read as logits: the softmax made two
+    """``[1, -eps, eps]`` (a probability computed as ``1 - sum(others)``) read as logits: the softmax made two
     opposite one-hot predictions score a cosine of 0.69."""
-    a, b = np.array([1.0, -1e-7, 1e-7], dtype), np.array([-1e-7, 1.0, 1e-7], dtype)
+    e = np.finfo(dtype).eps
+    a, b = np.array([1.0, -e, e], dtype), np.array([-e, 1.0, e], dtype)
     cos, l2 = cosine_similarity()(a, b), l2_norm()(a, b)
     assert cos.details["inputs"] == "probabilities" and cos.score < 1e-6, cos
     assert l2.score == pytest.approx(np.sqrt(2), abs=1e-6), l2
