@@ -289,7 +289,9 @@ OPTIONS: tuple[Option, ...] = (
            parse=_scenes, action="append", names_itself=True),
     Option("--n2r-examples", "n2r_examples", "N", "Hypothesis examples per relation (default: {default})",
            default=str(defaults.EXAMPLES), parse=_whole_number),
-    Option("--n2r-size", "n2r_size", "WxH", "render size: 'WxH' or the longer side in pixels (default: {default})",
+    Option("--n2r-size", "n2r_size", "WxH",
+           "render size: 'WxH' (a box the view fits in, its aspect kept) or the longer side in pixels "
+           "(default: {default})",
            default="480", parse=_render_size),
     Option("--n2r-render-scale", "n2r_render_scale", "S",
            "render scene fields at this fraction of the render size and upsample to it: 0.5 is about 4x faster "

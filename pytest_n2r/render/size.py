@@ -1,4 +1,5 @@
-"""The size a relation renders at: ``"480x270"`` (exact width x height) or ``"480"`` (longer side)."""
+"""The size a relation renders at: ``"480x270"`` (a box: the view's aspect ratio is kept) or ``"480"`` (longer
+side)."""
 
 from __future__ import annotations
 
@@ -16,8 +17,11 @@ MAX_SIDE = 16384
 
 @dataclass(frozen=True)
 class RenderSize:
-    """A render size: ``width`` and ``height`` in pixels, or only ``longer`` (the longer side; the
-    camera's aspect ratio is kept). Intrinsics are rescaled with the pixel-centre rule of design.md §3."""
+    """A render size: ``width`` and ``height`` in pixels, or only ``longer`` (the longer side). The camera's aspect
+    ratio is always kept: ``width`` x ``height`` is exact for a view of that aspect (to a pixel), and a view of
+    another (a portrait photo at ``320x180``, a 4:3 one) renders at the largest size of its own aspect that fits
+    in the box: stretching it would hand the SUT a picture no camera took. Intrinsics are rescaled with the
+    pixel-centre rule of design.md §3."""
 
     width: int | None = None
     height: int | None = None
@@ -51,10 +55,21 @@ class RenderSize:
         return cls(width, height, longer)
 
     def apply(self, camera: Camera) -> Camera:
-        """``camera`` resized to this size."""
+        """``camera`` resized to this size, its aspect ratio kept (see the class).
+
+        >>> RenderSize.parse("320x180").apply(Camera(1920, 1080, 1500.0, 1500.0, 959.5, 539.5)).size
+        (320, 180)
+        >>> RenderSize.parse("320x180").apply(Camera(1080, 1920, 1500.0, 1500.0, 539.5, 959.5)).size
+        (101, 180)
+        """
         if self.longer is not None:
             return camera.scaled(self.longer / max(camera.width, camera.height))
-        return camera.resized(self.width, self.height)
+        sx, sy = self.width / camera.width, self.height / camera.height
+        if abs(sx - sy) * max(camera.width, camera.height) <= 1.0:  # the same aspect, to a pixel: exactly the box
+            return camera.resized(self.width, self.height)
+        scale = min(sx, sy)
+        return camera.resized(max(1, min(self.width, round(camera.width * scale))),
+                              max(1, min(self.height, round(camera.height * scale))))
 
     def __str__(self) -> str:
         return f"{self.width}x{self.height}" if self.longer is None else f"{self.longer}"

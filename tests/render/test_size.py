@@ -3,13 +3,32 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from pytest_n2r.geometry import Camera
 from pytest_n2r.render.size import RenderSize
 from tests.plugin.fakescene import PlaneScene
 
 
-@pytest.mark.parametrize(("text", "size"), [("480x270", (480, 270)), ("96", (96, 72)), ((40, 30), (40, 30))])
+@pytest.mark.parametrize(("text", "size"), [("480x270", (360, 270)), ("96", (96, 72)), ((40, 30), (40, 30)),
+                                           ("480x360", (480, 360)), ("100x300", (100, 75))])
 def test_render_size(text, size):
+    """The 4:3 plane at '480x270' was stretched to 480x270 (fx 5, fy 3.75 times the original): a picture no
+    camera took. A box keeps the view's aspect."""
     camera = PlaneScene().views[0].camera
     resized = RenderSize.parse(text).apply(camera)
     assert (resized.width, resized.height) == size
+
+
+@settings(max_examples=200)
+@given(width=st.integers(8, 4000), height=st.integers(8, 4000), box_w=st.integers(1, 2000), box_h=st.integers(1, 2000))
+def test_a_box_never_stretches_a_view_and_fits_it(width, height, box_w, box_h):
+    camera = Camera(width, height, 1.2 * width, 1.2 * width, (width - 1) / 2, (height - 1) / 2)
+    resized = RenderSize(box_w, box_h).apply(camera)
+    assert resized.width <= box_w and resized.height <= box_h, f"{resized.size} outside the box {box_w}x{box_h}"
+    sx, sy = resized.width / width, resized.height / height
+    # rounding to whole pixels moves each side by at most half a pixel, plus the one-pixel tolerance of a match
+    assert abs(sx - sy) <= 1.5 / min(resized.width, resized.height) + 1.0 / max(width, height), (
+        f"{width}x{height} in {box_w}x{box_h} became {resized.size}: stretched")
+    assert min(box_w - resized.width, box_h - resized.height) <= 1, f"{resized.size} does not fill {box_w}x{box_h}"
