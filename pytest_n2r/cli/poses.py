@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -15,9 +16,9 @@ if TYPE_CHECKING:
 
     from ..data.poses import PoseSet
 
-__all__ = ["add_parser", "run", "format_summary", "format_skipped", "format_upright", "ANY_ROLL_HELP"]
+__all__ = ["add_parser", "run", "format_summary", "format_skipped", "format_upright", "format_frames",
+           "format_warnings", "skipped_records", "add_frames_dir_argument", "check_frames_dir", "ANY_ROLL_HELP"]
 
-_MAX_SKIPPED_SHOWN = 10
 #: ``--any-roll``, shared by ``n2r poses`` and ``n2r fit``.
 ANY_ROLL_HELP = ("the photos were not all taken upright (looking straight down, or a camera that rolls, on a robot "
                  "arm or a drone): keep the photos structure from motion registers upside down against the others, "
@@ -46,15 +47,29 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "'auto', sequential for ordered video frames (default: auto)")
     p.add_argument("--max-frames", metavar="N", type=int, default=120,
                    help="for a video: keep the sharpest frame of each of N equal windows (default: 120)")
-    p.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
-                   help="for a video: where to write its frames (default: <video stem>_frames beside it); a new or "
-                        "empty folder, or one frames were extracted into before (--force: any)")
+    add_frames_dir_argument(p)
     p.add_argument("--any-roll", action="store_true", help=ANY_ROLL_HELP)
     p.add_argument("--compare", metavar="OTHER", default=None,
                    help="also load OTHER (any SOURCE kind) and print the pose errors of SOURCE against it, "
                         "image by image after a similarity alignment")
     p.add_argument("--force", action="store_true", help=FORCE_HELP)
     p.set_defaults(func=run)
+
+
+def add_frames_dir_argument(parser: argparse.ArgumentParser) -> None:
+    """``--frames-dir``, shared by ``n2r poses`` and ``n2r fit`` (checked by :func:`check_frames_dir`)."""
+    parser.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
+                        help="for a video: where to write its frames (default: <video stem>_frames beside it); a new "
+                             "or empty folder, or one frames were extracted into before (--force: any)")
+
+
+def check_frames_dir(frames_dir: Path | None, force: bool) -> None:
+    """``--frames-dir``, checked before any work: a folder the video's frames may be written into."""
+    from ..data.video import is_frames_dir
+    from ._output import check_output_dir
+
+    if frames_dir is not None:
+        check_output_dir(frames_dir, is_frames_dir, "the video's frames", option="--frames-dir", force=force)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -72,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
     print(format_summary(poses, bounds, ref, total))
+    for line in format_warnings(poses.report, "poses"):
+        print(line, file=sys.stderr)
     if args.compare is not None:
         from ..data.compare import compare_poses
 
@@ -81,8 +98,12 @@ def run(args: argparse.Namespace) -> int:
                                max_frames=args.max_frames, upright=not args.any_roll)
         print(f"compare     against {other.source} ({other.kind}): {compare_poses(poses, other).summary()}")
     if args.output is not None:
+        # the photos not used ride in the n2r block, which nerfstudio and instant-ngp do not read (they read the keys
+        # they know), so the file stays a plain transforms.json and the list cannot be separated from its poses
         extra = {"n2r": {"source": str(args.source), "reference_length": ref, "bounds": bounds.tolist(),
-                         "note": "camera-to-world in OpenGL axes like every transforms.json"}}
+                         "note": "camera-to-world in OpenGL axes like every transforms.json",
+                         "images": _listed(poses), "skipped": skipped_records(poses.skipped),
+                         "warnings": list(poses.report.get("warnings", []))}}
         path = write_transforms_json(args.output, poses, extra=extra)
         print(f"wrote       {path} ({len(poses.frames)} frames)")
     return 0
@@ -90,9 +111,8 @@ def run(args: argparse.Namespace) -> int:
 
 def check_arguments(args: argparse.Namespace) -> None:
     """The sources, numbers and output paths, checked before any structure from motion runs."""
-    from ..data.video import is_frames_dir
     from ..errors import InvalidArgument
-    from ._output import POSES_JSON, check_output, check_output_dir
+    from ._output import POSES_JSON, check_output
 
     for option, source in (("SOURCE", args.source), ("--compare", args.compare)):
         if source is not None and not Path(source).exists():
@@ -108,17 +128,38 @@ def check_arguments(args: argparse.Namespace) -> None:
     sources += [p / "transforms.json" for p in sources if p.is_dir()]
     if args.output is not None:
         check_output(args.output, POSES_JSON, inputs=sources, force=args.force)
-    if args.frames_dir is not None:
-        check_output_dir(args.frames_dir, is_frames_dir, "the video's frames", option="--frames-dir",
-                         force=args.force)
+    check_frames_dir(args.frames_dir, args.force)
 
 
 def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:
-    """Summary lines for the input images that were not used, ``(file, reason)`` each (the first ten)."""
-    lines = [f"  skipped   {name}: {reason}" for name, reason in skipped[:_MAX_SKIPPED_SHOWN]]
-    if len(skipped) > _MAX_SKIPPED_SHOWN:
-        lines.append(f"  skipped   ... and {len(skipped) - _MAX_SKIPPED_SHOWN} more")
-    return lines
+    """Summary lines for the input images that were not used, ``(file, reason)`` each: every one of them (an
+    unrelated photo among them is what the list is read for)."""
+    return [f"  skipped   {name}: {reason}" for name, reason in skipped]
+
+
+def skipped_records(skipped: list[tuple[str, str]]) -> list[dict[str, str]]:
+    """The photos not used as JSON-ready records, ``{"file": ..., "reason": ...}`` each (what ``n2r poses -o`` and
+    ``n2r fit``'s report keep)."""
+    return [{"file": name, "reason": reason} for name, reason in skipped]
+
+
+def format_frames(report: dict) -> list[str]:
+    """The line saying where a video's frames were written (none for other sources)."""
+    if "frames_dir" not in report:
+        return []
+    count, video = report.get("video_frames", "?"), report.get("video", "the video")
+    return [f"frames      {count} frames of {video} extracted to {report['frames_dir']}"]
+
+
+def format_warnings(report: dict, command: str) -> list[str]:
+    """``n2r COMMAND: warning: ...`` for each warning of the ingestion (``report["warnings"]``: structure from motion
+    keeping only part of the photos, photos in subfolders not read)."""
+    return [f"n2r {command}: warning: {text}" for text in report.get("warnings", [])]
+
+
+def _listed(poses: PoseSet) -> int:
+    """How many images the source listed or its folder held."""
+    return poses.report.get("listed", poses.report.get("images", len(poses.frames) + len(poses.skipped)))
 
 
 def format_upright(report: dict) -> list[str]:
@@ -132,10 +173,10 @@ def format_upright(report: dict) -> list[str]:
 def format_summary(poses: PoseSet, bounds: np.ndarray, ref: float, total_s: float) -> str:
     """The plain-text summary ``n2r poses`` prints (``bounds`` and ``ref`` in scene units, time in seconds)."""
     frames = poses.frames
-    listed = poses.report.get("listed", poses.report.get("images", len(frames) + len(poses.skipped)))
     lines = [
         f"source      {poses.source} ({poses.kind})",
-        f"images      {listed} found, {len(frames)} registered, {len(poses.skipped)} skipped",
+        *format_frames(poses.report),
+        f"images      {_listed(poses)} found, {len(frames)} registered, {len(poses.skipped)} skipped",
     ]
     lines += format_skipped(poses.skipped) + format_upright(poses.report)
     cameras = list(dict.fromkeys(f.camera for f in frames))

@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import IngestError
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
-           "iter_readable"]
+           "iter_readable", "images_in_subfolders", "subfolder_hint"]
 
 #: File suffixes of HEIF photos (``.hif``: some cameras' name for the same format), decoded by pillow-heif.
 HEIF_SUFFIXES: tuple[str, ...] = (".heic", ".heif", ".hif")
@@ -44,22 +44,76 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
     """The image files directly inside ``folder``, sorted by name (hidden files ignored).
 
     Raises :class:`IngestError` naming the folder when it does not exist, is not a folder, or holds
-    no file with an image suffix (:data:`IMAGE_SUFFIXES`).
+    no file with an image suffix (:data:`IMAGE_SUFFIXES`); then also the subfolders that do hold some
+    (:func:`subfolder_hint`), as a phone's ``DCIM/100APPLE`` does.
     """
     folder = Path(folder)
     if not folder.exists():
         raise IngestError(f"images folder {str(folder)!r} does not exist")
     if not folder.is_dir():
         raise IngestError(f"{str(folder)!r} is not a folder; expected a folder of images")
-    files = sorted(
+    files = _images_in(folder)
+    if not files:
+        hint = subfolder_hint(folder)
+        expected = f" itself; {hint}" if hint else f"; expected files ending in {', '.join(IMAGE_SUFFIXES)}"
+        raise IngestError(f"images folder {str(folder)!r} holds no images{expected}")
+    return files
+
+
+def _images_in(folder: Path) -> list[Path]:
+    """The image files directly inside ``folder`` (by suffix, hidden files ignored), sorted by name."""
+    return sorted(
         p for p in folder.iterdir()
         if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
     )
-    if not files:
-        raise IngestError(
-            f"images folder {str(folder)!r} holds no images; expected files ending in {', '.join(IMAGE_SUFFIXES)}"
-        )
-    return files
+
+
+#: How deep :func:`images_in_subfolders` looks below a folder (``DCIM/100APPLE`` is 2), and at most how many
+#: folders it opens, so that a home folder given by mistake costs a moment, not a walk of the whole disk.
+SUBFOLDER_DEPTH = 3
+SUBFOLDER_LIMIT = 1000
+
+
+def images_in_subfolders(folder: str | os.PathLike) -> list[tuple[str, int]]:
+    """``(subfolder, image count)`` for every subfolder of ``folder`` (down to :data:`SUBFOLDER_DEPTH` levels, hidden
+    ones skipped, at most :data:`SUBFOLDER_LIMIT` opened) holding images directly; the path relative to ``folder``
+    in ``/`` form, sorted by path. ``folder`` itself is not counted."""
+    folder = Path(folder)
+    found: list[tuple[str, int]] = []
+    queue, opened = [(folder, 0)], 0
+    while queue and opened < SUBFOLDER_LIMIT:
+        current, depth = queue.pop(0)
+        opened += 1
+        try:
+            entries = sorted(current.iterdir())
+            count = len(_images_in(current)) if current != folder else 0
+        except OSError:  # no permission, gone meanwhile
+            continue
+        if count:
+            found.append((current.relative_to(folder).as_posix(), count))
+        if depth < SUBFOLDER_DEPTH:
+            queue += [(p, depth + 1) for p in entries if not p.name.startswith(".") and p.is_dir()]
+    return sorted(found)
+
+
+def subfolder_hint(folder: str | os.PathLike, own: int = 0) -> str:
+    """What to say of the images in ``folder``'s subfolders (:func:`images_in_subfolders`), which structure from
+    motion does not read, when ``folder`` itself holds ``own`` images: ``""`` when there are none."""
+    below = images_in_subfolders(folder)
+    if not below:
+        return ""
+    if len(below) == 1:
+        (name, count), = below
+        listing = f"its subfolder {name} holds {count} image{'s' * (count != 1)}"
+        advice = "pass that folder"
+    else:
+        listing = "its subfolders hold images: " + ", ".join(f"{name} ({count})" for name, count in below[:5])
+        listing += f" and {len(below) - 5} more folders" if len(below) > 5 else ""
+        advice = "pass the folder of one capture"
+    if own:
+        return (f"{listing}, not read (only the photos directly in the folder are): put the capture's photos in one "
+                "folder")
+    return f"{listing}: {advice}"
 
 
 def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
@@ -113,9 +167,14 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
     # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation (unless told
     # to ignore it, which OpenCV's TIFF decoder does not heed: there the tag is undone below).
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | (0 if oriented else cv2.IMREAD_IGNORE_ORIENTATION)
-    img = cv2.imdecode(data, flags) if data.size else None
+    if not data.size:
+        raise IngestError(f"image file {str(path)!r} is empty (0 bytes: a copy that did not finish, or a cloud photo "
+                          "not downloaded to this device)")
+    img = cv2.imdecode(data, flags)
     if img is None:
-        raise IngestError(f"image file {str(path)!r} cannot be decoded as an image (corrupt or not an image)")
+        cut = head[:2] == b"\xff\xd8" and b"\xff\xd9" not in data[-1024:].tobytes()  # a JPEG without its end marker
+        why = "a JPEG cut short: an interrupted copy?" if cut else "corrupt or not an image"
+        raise IngestError(f"image file {str(path)!r} cannot be decoded as an image ({why})")
     if not oriented and _is_tiff(head):
         img = _UNDO_ORIENTATION[_orientation(path)](img)
     return to_rgb8(img)

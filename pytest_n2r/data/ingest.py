@@ -97,6 +97,8 @@ def load_poses(
                         upright=upright, files=frames)
         poses.kind = "video"
         poses.report["video"] = str(path)
+        poses.report["frames_dir"] = str(frames[0].parent)
+        poses.report["video_frames"] = len(frames)
         poses.report["time_s"] = {"frames": extracted, **poses.report["time_s"]}
     else:
         from .sfm import run_sfm
@@ -111,7 +113,7 @@ def ingest(
     source: str | os.PathLike, *, downscale: float = 1.0, max_size: int | None = None,
     load_images: bool = True, heldout_every: int | None = None, sfm_max_size: int = 960,
     matcher: str = "auto", max_frames: int = 120, frames_dir: str | os.PathLike | None = None,
-    upright: bool = True,
+    upright: bool = True, force_frames_dir: bool = False,
 ) -> Capture:
     """Turn a capture into undistorted images, cameras, poses, split, bounds and reference length.
 
@@ -131,7 +133,7 @@ def ingest(
         Every ``heldout_every``-th view (0, n, 2n, ...) is held out (:func:`heldout_split`); 0 holds none.
         ``None``: the source's own split where it has one (a transforms.json's ``val_filenames``, else its
         ``test_filenames``), else 8.
-    sfm_max_size, matcher, max_frames, frames_dir, upright:
+    sfm_max_size, matcher, max_frames, frames_dir, upright, force_frames_dir:
         Structure from motion and video settings for images folders and videos (see :func:`load_poses`).
 
     Returns
@@ -156,7 +158,7 @@ def ingest(
         raise InvalidArgument(f"heldout_every={heldout_every!r} must be an int >= 0 or None")
 
     poses = load_poses(source, sfm_max_size=sfm_max_size, matcher=matcher, max_frames=max_frames,
-                       frames_dir=frames_dir, upright=upright)
+                       frames_dir=frames_dir, upright=upright, force_frames_dir=force_frames_dir)
     images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
     frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
@@ -248,8 +250,8 @@ def _load_pixels(
     poses.frames = kept
     if len(kept) < 3:
         raise IngestError(
-            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed "
-            f"(first failure: {poses.skipped[-1][1]})"
+            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed. Not used: "
+            + "; ".join(f"{name}: {reason}" for name, reason in poses.skipped)
         )
     times = poses.report.setdefault("time_s", {})
     if out_camera is not None or need_points:

@@ -2,8 +2,9 @@
 
 Pipeline
 --------
-1. Read every image (EXIF orientation applied, so a phone's portrait photo is portrait; unreadable files
-   skipped with a warning; fewer than 3 readable images is an error).
+1. Read every image directly in the folder (EXIF orientation applied, so a phone's portrait photo is portrait;
+   unreadable files skipped with a warning; fewer than 3 readable images is an error naming each unreadable file
+   with its reason, and the subfolders that hold images, which are not read).
 2. Write upright copies downscaled to at most ``max_size`` pixels into a temporary folder, one subfolder
    per upright image size: a phone capture mixing portrait and landscape photos (or two cameras) gets one
    camera per size and orientation.
@@ -19,6 +20,8 @@ Pipeline
    ``upright=False`` (photos not all taken upright: looking straight down, or a camera on a robot arm or a drone
    that rolls) keeps every registered photo and only reports. The sparse points kept are those at least two of the
    kept photos see.
+7. Fewer than :data:`MIN_KEPT_SHARE` of the readable photos kept, or images in subfolders of the folder (not read),
+   is warned of (:func:`warnings.warn`, and ``report["warnings"]``, which ``n2r poses`` and ``n2r fit`` print).
 
 Each camera is scaled back to its full-resolution images with :meth:`Camera.resized` (radial distortion
 coefficients act on normalized coordinates, so they do not change). ``report["cameras"]`` lists the
@@ -30,6 +33,7 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -39,12 +43,21 @@ import numpy as np
 from ..errors import IngestError, InvalidType
 from ..geometry import invert_pose, orthonormalize
 from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
-from .images import iter_readable, list_images, resize_image
+from .images import iter_readable, list_images, resize_image, subfolder_hint
 from .poses import PoseSet, SourceFrame
 from .upright import check_upright
 
-__all__ = ["run_sfm", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS"]
+__all__ = ["run_sfm", "partial_registration", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS", "MIN_KEPT_SHARE"]
 
+#: Fewer of the readable photos registered and kept than this share is warned of (not refused): the reconstruction
+#: may be folded or split. Measured (docs/ingestion.md, docs/scene-field-log.md, and a review's phone-style capture of
+#: the demo object): right reconstructions keep all or nearly all their photos (the fox 50 of 50, the demo wall 48 of
+#: 48 or 46 once 2 upside-down photos are dropped, the object at 960 px 48 of 48, the textured corner of the tests 10 of
+#: 10, the review's 120-frame video 115); the poor ones keep fewer (the object at 320 px, focal length 23 % off: 31, 33,
+#: 34 and 41 of 48, 65-85 %; the review's photos, folded, rotations 60-104° off the truth: 31 of 48). 90 % lies between
+#: the two. A count cannot see every wrong reconstruction: the object at 480 px kept 44 of 48 (92 %) with about half of
+#: them half a turn wrong.
+MIN_KEPT_SHARE = 0.9
 #: ``matcher="auto"`` matches exhaustively up to this many images, sequentially beyond.
 EXHAUSTIVE_MAX_IMAGES = 100
 MATCHERS = ("auto", "exhaustive", "sequential")
@@ -72,7 +85,8 @@ def run_sfm(
     if not isinstance(upright, bool):
         raise InvalidType(f"upright={upright!r} must be True (photos taken upright) or False (a camera that rolls)")
     images_dir = Path(images_dir)
-    files = list_images(images_dir) if files is None else [Path(f) for f in files]
+    given = files
+    files = list_images(images_dir) if given is None else [Path(f) for f in given]
     times: dict[str, float] = {}
     skipped: list[tuple[str, str]] = []
 
@@ -95,10 +109,7 @@ def run_sfm(
             names[work_name] = file
             full_size[work_name] = (w, h)
         if len(names) < 3:
-            raise IngestError(
-                f"images folder {str(images_dir)!r}: only {len(names)} of {len(files)} images are readable; "
-                "structure from motion needs at least 3"
-            )
+            raise IngestError(_too_few(images_dir, files, skipped, listed=given is None))
         times["read"] = time.perf_counter() - start
 
         db = work / "database.db"
@@ -183,16 +194,46 @@ def run_sfm(
     kept = {image_id for image_id, image in rec.images.items() if names[image.name].name not in turned}
     points = np.array([p.xyz for _, p in sorted(rec.points3D.items())
                        if sum(el.image_id in kept for el in p.track.elements) >= 2], dtype=np.float64).reshape(-1, 3)
+    notes = [note for note in (partial_registration(len(frames), len(names)),
+                               subfolder_hint(images_dir, len(files)) if given is None else "") if note]
+    for note in notes:
+        warnings.warn(f"structure from motion on {str(images_dir)!r}: {note}", stacklevel=2)
     registered_sizes = [(f.camera.width, f.camera.height) for f in frames]
     cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
                for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
     report = {
         "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
         "time_s": times, "points_method": "structure from motion",
-        "upright": {**up_record, "dropped": bool(turned)},
+        "upright": {**up_record, "dropped": bool(turned)}, "warnings": notes,
     }
     return PoseSet(frames=frames, points=points, source=str(images_dir), kind="images", skipped=skipped,
                    report=report)
+
+
+def partial_registration(kept: int, readable: int) -> str:
+    """The warning for a reconstruction that keeps ``kept`` of the ``readable`` photos, when that is fewer than
+    :data:`MIN_KEPT_SHARE` of them (``""`` otherwise)."""
+    if readable <= 0 or kept >= MIN_KEPT_SHARE * readable:
+        return ""
+    return (f"only {kept} of the {readable} readable photos registered and were kept ({100 * kept / readable:.0f} %, "
+            f"under {100 * MIN_KEPT_SHARE:.0f} %): a reconstruction of part of a capture is often folded or put "
+            "together wrong. Check the poses before trusting a fit: n2r poses SOURCE --compare OTHER against poses "
+            "from elsewhere, or render a training view of the fitted scene (n2r render SCENE --view NAME) and set it "
+            "beside its photo")
+
+
+def _too_few(images_dir: Path, files: list[Path], skipped: list[tuple[str, str]], listed: bool) -> str:
+    """Why fewer than 3 of ``files`` could be read: each unreadable file with its reason, and the images in
+    subfolders (when the folder was ``listed``, not given as ``files``)."""
+    readable = len(files) - len(skipped)
+    if skipped:
+        text = (f"images folder {str(images_dir)!r}: only {readable} of {len(files)} images are readable; structure "
+                "from motion needs at least 3. Unreadable: " + "; ".join(reason for _, reason in skipped))
+    else:
+        text = (f"images folder {str(images_dir)!r} holds only {readable} image{'s' * (readable != 1)} "
+                f"({', '.join(f.name for f in files)}); structure from motion needs at least 3")
+    hint = subfolder_hint(images_dir, len(files)) if listed else ""
+    return f"{text}; {hint}" if hint else text
 
 
 @contextmanager

@@ -129,7 +129,8 @@ def extract_frames(
         raise IngestError(
             f"frames folder {str(out)!r} holds other files and no {_MANIFEST} of an earlier extraction, so the "
             "video's frames would be written among them; expected a new or empty folder (or one frames were "
-            "extracted into before): choose another (frames_dir, n2r poses --frames-dir)")
+            "extracted into before): choose another with --frames-dir DIR (n2r poses, n2r fit; frames_dir= in "
+            "Python), or write among them with --force (force_frames_dir=True)")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".n2r-write-test"

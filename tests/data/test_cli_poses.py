@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 
 import numpy as np
@@ -72,3 +73,104 @@ def test_fit_keeps_a_camera_that_rolls_with_any_roll(tmp_path, capsys):
     text = capsys.readouterr().err
     assert "8 training views, 2 held out" in text, f"the turned photo was not kept:\n{text}"
     assert "upright     1 of 10 photos upside down against the others" in text and "skipped" not in text, text
+
+
+def _with_missing_photos(corner, count: int = 12):
+    """The corner's transforms.json listing ``count`` more frames whose photos are missing (as the fox's lists 17)."""
+    src = write_transforms(corner)
+    meta = json.loads(src.read_text())
+    pose = meta["frames"][0]["transform_matrix"]
+    meta["frames"] += [{"file_path": f"images/gone_{k:02d}.png", "transform_matrix": pose} for k in range(count)]
+    src.write_text(json.dumps(meta))
+    return src, [f"images/gone_{k:02d}.png" for k in range(count)]
+
+
+def test_poses_lists_every_skipped_photo_and_keeps_them_in_its_output(corner, tmp_path, capsys):
+    """The summary showed the first ten and "... and 9 more" (an unrelated photo among those hidden), and the list was
+    kept nowhere: every one is printed now, and written in the output's n2r block."""
+    src, missing = _with_missing_photos(corner)
+    out = tmp_path / "poses.json"
+    assert main(["poses", str(src), "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "18 found, 6 registered, 12 skipped" in text, text
+    for name in missing:
+        assert f"  skipped   {name}: image file " in text, f"{name} is not in the summary:\n{text}"
+    assert "more" not in text, text
+    block = json.loads(out.read_text())["n2r"]
+    assert block["images"] == 18 and [r["file"] for r in block["skipped"]] == missing, block
+    assert all("does not exist" in r["reason"] for r in block["skipped"]) and block["warnings"] == [], block
+    assert len(read_transforms_json(out).frames) == 6, "the n2r block changed what a transforms.json reader sees"
+
+
+def test_poses_prints_and_keeps_the_warnings_of_ingestion_and_where_a_videos_frames_went(corner, tmp_path, capsys,
+                                                                                        monkeypatch):
+    """A reconstruction of part of the photos exited 0 without a word: its warning goes to stderr and into the
+    output; a video's frames folder is named on a line of its own."""
+    ingestion = importlib.import_module("pytest_n2r.data.ingest")  # the module: the package's `ingest` is its function
+
+    real = ingestion.load_poses
+    note = "only 31 of the 48 readable photos registered and were kept"
+
+    def partial(*args, **kwargs):
+        poses = real(*args, **kwargs)
+        poses.report.update(warnings=[note],
+                            video="walk.mp4", frames_dir="walk_frames", video_frames=120)
+        return poses
+
+    monkeypatch.setattr(ingestion, "load_poses", partial)
+    out = tmp_path / "poses.json"
+    assert main(["poses", str(write_transforms(corner)), "-o", str(out)]) == 0
+    captured = capsys.readouterr()
+    assert f"n2r poses: warning: {note}" in captured.err, captured
+    assert "frames      120 frames of walk.mp4 extracted to walk_frames" in captured.out, captured.out
+    assert json.loads(out.read_text())["n2r"]["warnings"] == [note]
+
+
+def test_fit_shares_the_frames_dir_option_of_poses_and_hands_it_to_ingestion(tmp_path, monkeypatch, capsys):
+    """The video's frames-folder error told n2r fit users to pass --frames-dir, which n2r fit did not have."""
+    import pytest_n2r.data
+    from pytest_n2r.cli.main import build_parser
+    from pytest_n2r.errors import IngestError
+
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    helps = {name: next(a.help for a in sub.choices[name]._actions if "--frames-dir" in a.option_strings)
+             for name in ("poses", "fit")}
+    assert helps["poses"] == helps["fit"], helps
+    seen = {}
+
+    def stop(source, **kwargs):
+        seen.update(kwargs)
+        raise IngestError("stopped here")
+
+    monkeypatch.setattr(pytest_n2r.data, "ingest", stop)
+    video = tmp_path / "walk.mp4"
+    video.write_bytes(b"not read")
+    frames = tmp_path / "frames"
+    assert main(["fit", str(video), "-o", str(tmp_path / "walk.n2r"), "--frames-dir", str(frames), "--force"]) == 2
+    assert "stopped here" in capsys.readouterr().err
+    assert (seen["frames_dir"], seen["force_frames_dir"]) == (frames, True), seen
+
+
+@pytest.mark.slow
+def test_fit_keeps_every_skipped_photo_and_warning_in_its_report(corner, tmp_path, capsys, monkeypatch):
+    ingestion = importlib.import_module("pytest_n2r.data.ingest")  # the module: the package's `ingest` is its function
+    from pytest_n2r.scene import read_scene_file
+
+    real = ingestion.load_poses
+
+    def partial(*args, **kwargs):
+        poses = real(*args, **kwargs)
+        poses.report["warnings"] = ["only 6 of the 18 photos"]
+        return poses
+
+    monkeypatch.setattr(ingestion, "load_poses", partial)
+    src, missing = _with_missing_photos(corner)
+    out = tmp_path / "corner.n2r"
+    assert main(["fit", str(src), "-o", str(out), "--downscale", "1", "--max-steps", "2", "--config",
+                 "resolutions=16,24", "--config", "stage_fractions=0.5", "--appearance", "off", "--no-images"]) == 0
+    err = capsys.readouterr().err
+    assert all(f"  skipped   {name}: image file " in err for name in missing) and "more" not in err, err
+    assert "n2r fit: warning: only 6 of the 18 photos" in err, err
+    report = read_scene_file(out, images=False).report
+    assert [r["file"] for r in report["skipped"]] == missing and "does not exist" in report["skipped"][0]["reason"]
+    assert report["warnings"] == ["only 6 of the 18 photos"], report["warnings"]

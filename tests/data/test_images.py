@@ -8,7 +8,15 @@ import pillow_heif
 import pytest
 from PIL import Image, ImageOps
 
-from pytest_n2r.data.images import iter_readable, list_images, read_image, read_image_size, to_rgb8
+from pytest_n2r.data.images import (
+    images_in_subfolders,
+    iter_readable,
+    list_images,
+    read_image,
+    read_image_size,
+    subfolder_hint,
+    to_rgb8,
+)
 from pytest_n2r.errors import IngestError
 
 
@@ -214,6 +222,39 @@ def test_list_images_errors(tmp_path):
     (tmp_path / "f.png").write_bytes(b"x")
     with pytest.raises(IngestError, match="is not a folder"):
         list_images(tmp_path / "f.png")
+
+
+def test_an_empty_or_cut_short_photo_says_which(tmp_path):
+    """A phone capture copied off the device: a cloud photo not downloaded is 0 bytes, an interrupted copy a JPEG
+    cut short; each is named with what it looks like, not only "corrupt"."""
+    (tmp_path / "IMG_0001.JPG").write_bytes(b"")
+    with pytest.raises(IngestError, match=r"IMG_0001\.JPG' is empty \(0 bytes: a copy that did not finish, or a cloud"):
+        read_image(tmp_path / "IMG_0001.JPG")
+    cv2.imwrite(str(tmp_path / "whole.jpg"), np.random.default_rng(0).integers(0, 256, (64, 64, 3), np.uint8))
+    data = (tmp_path / "whole.jpg").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[:len(data) // 8])
+    with pytest.raises(IngestError, match=r"cut\.jpg' cannot be decoded as an image \(a JPEG cut short: an interr"):
+        read_image(tmp_path / "cut.jpg")
+
+
+def test_a_folder_whose_photos_are_in_subfolders_names_them(tmp_path):
+    """An iPhone's photos copied as they are stored: ``DCIM/100APPLE/``; the folder above holds none itself."""
+    camera = tmp_path / "phone"
+    (camera / "DCIM" / "100APPLE").mkdir(parents=True)
+    (camera / "DCIM" / ".thumbs").mkdir()
+    for k in range(3):
+        (camera / "DCIM" / "100APPLE" / f"IMG_{k:04d}.JPG").write_bytes(b"x")
+        (camera / "DCIM" / ".thumbs" / f"IMG_{k:04d}.JPG").write_bytes(b"x")
+    (camera / "notes.txt").write_text("not a photo")
+    with pytest.raises(IngestError, match=r"images folder '.*phone' holds no images itself; its subfolder "
+                                          r"DCIM/100APPLE holds 3 images: pass that folder$"):
+        list_images(camera)
+    (camera / "DCIM" / "101APPLE").mkdir()
+    (camera / "DCIM" / "101APPLE" / "IMG_0100.HEIC").write_bytes(b"x")
+    assert images_in_subfolders(camera) == [("DCIM/100APPLE", 3), ("DCIM/101APPLE", 1)]
+    assert subfolder_hint(camera) == ("its subfolders hold images: DCIM/100APPLE (3), DCIM/101APPLE (1): pass the "
+                                      "folder of one capture")
+    assert subfolder_hint(camera / "DCIM" / "101APPLE") == ""
 
 
 def test_unreadable_files_are_skipped_with_a_warning_naming_them(tmp_path):

@@ -208,8 +208,10 @@ def test_undecodable_image_is_skipped_with_a_warning(corner, capture_json):
 def test_too_few_decodable_images(corner, capture_json):
     for name in corner.names[:4]:
         (corner.images_dir / name).write_bytes(b"")
-    with pytest.warns(UserWarning), pytest.raises(IngestError, match="only 2 images could be read; at least 3"):
+    with pytest.warns(UserWarning), pytest.raises(IngestError, match="only 2 images could be read; at least 3") as e:
         ingest(capture_json)
+    for name in corner.names[:4]:  # every one of them, not the first failure only
+        assert f"images/{name}: image file '{corner.images_dir / name}' is empty" in str(e.value), e.value
 
 
 def _tag_orientation(path, orientation: int) -> None:

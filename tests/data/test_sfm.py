@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import time
 
 import cv2
@@ -10,7 +11,7 @@ import pytest
 from PIL import Image
 
 from pytest_n2r.data import ingest
-from pytest_n2r.data.sfm import run_sfm
+from pytest_n2r.data.sfm import MIN_KEPT_SHARE, partial_registration, run_sfm
 from pytest_n2r.errors import IngestError, InvalidType
 from pytest_n2r.geometry import Camera, apply_similarity_to_pose, rotation_angle_deg, umeyama
 
@@ -41,6 +42,7 @@ def test_sfm_recovers_the_rendered_poses(tmp_path, matcher):
     assert [v.name for v in result.views] == cap.names, f"registered: {[v.name for v in result.views]}"
     reason = "not registered by structure from motion (too few features matched with the other photos)"
     assert result.skipped == [("zz_noise.png", reason)]
+    assert result.report["warnings"] == [], "10 of 11 photos kept (91 %) is no partial reconstruction"
     assert result.report["matcher"] == matcher and result.views[0].image.shape == (120, 160, 3)
     rot, centre = _errors(result.views, dict(zip(cap.names, cap.c2ws)))
     assert rot < 0.5 and centre < 0.01, f"after similarity alignment: rotation {rot:.3f} deg, centre {centre:.2%}"
@@ -129,11 +131,58 @@ def test_more_than_a_quarter_upside_down_refuses_the_reconstruction(tmp_path):
 
 
 def test_too_few_readable_images(tmp_path):
+    """The error names every unreadable file with its reason (the command line switches the warnings off)."""
     folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
     (folder / "2.png").write_bytes(b"broken")
-    with pytest.warns(UserWarning, match=r"2\.png"), \
-            pytest.raises(IngestError, match="only 2 of 3 images are readable"):
+    (folder / "3.png").write_bytes(b"")
+    with pytest.warns(UserWarning), pytest.raises(IngestError) as error:
         run_sfm(folder)
+    assert re.fullmatch(r"images folder '.*imgs': only 2 of 4 images are readable; structure from motion needs at "
+                        r"least 3\. Unreadable: image file '.*2\.png' cannot be decoded as an image \(corrupt or not "
+                        r"an image\); image file '.*3\.png' is empty \(0 bytes: .*\)", str(error.value)), error.value
+
+
+def test_too_few_images_all_readable_says_so_and_names_the_subfolder_that_holds_more(tmp_path):
+    """Two photos and ten more in a subfolder: "only 2 of 2 images are readable" blamed the photos, and the subfolder
+    (not read) went unmentioned."""
+    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
+    _folder_of(folder / "more", [(64, 48)] * 10)
+    with pytest.raises(IngestError) as error:
+        run_sfm(folder)
+    message = str(error.value)
+    assert "readable" not in message, message
+    assert re.fullmatch(r"images folder '.*imgs' holds only 2 images \(0\.png, 1\.png\); structure from motion needs "
+                        r"at least 3; its subfolder more holds 10 images, not read \(only the photos directly in the "
+                        r"folder are\): put the capture's photos in one folder", message), message
+
+
+def test_a_reconstruction_of_part_of_the_photos_is_warned_of():
+    """The share is of the readable photos kept; below 90 % the warning names both counts and how to check."""
+    text = partial_registration(31, 48)
+    for expected in ("only 31 of the 48 readable photos registered and were kept (65 %, under 90 %)",
+                     "n2r poses SOURCE --compare OTHER", "n2r render SCENE --view NAME"):
+        assert expected in text, text
+    assert partial_registration(48, 48) == partial_registration(44, 48) == partial_registration(0, 0) == ""
+    assert MIN_KEPT_SHARE == 0.9
+
+
+@pytest.mark.slow
+def test_structure_from_motion_warns_when_it_keeps_part_of_the_photos_and_of_photos_in_subfolders(tmp_path):
+    cap = make_capture(tmp_path, n=10, camera=Camera(320, 240, 280.0, 280.0, 159.5, 119.5))
+    rng = np.random.default_rng(0)
+    for k in range(3):  # photos of something else: they cannot register
+        cv2.imwrite(str(cap.images_dir / f"zz_noise_{k}.png"), rng.integers(0, 256, (240, 320, 3), dtype=np.uint8))
+    _folder_of(cap.images_dir / "older", [(64, 48)] * 2)
+    with pytest.warns(UserWarning) as warned:
+        poses = run_sfm(cap.images_dir, matcher="exhaustive", max_size=320)
+    kept = len(poses.frames)
+    assert kept == 10, poses.skipped
+    notes = poses.report["warnings"]
+    assert len(notes) == 2 and notes[0].startswith("only 10 of the 13 readable photos registered and were kept "
+                                                   "(77 %, under 90 %)"), notes
+    assert notes[1] == ("its subfolder older holds 2 images, not read (only the photos directly in the folder are): "
+                        "put the capture's photos in one folder"), notes
+    assert [str(w.message).split(": ", 1)[1] for w in warned if "structure from motion on" in str(w.message)] == notes
 
 
 def test_given_files_are_the_only_photos_read(tmp_path):

@@ -94,8 +94,10 @@ def test_a_folder_of_other_files_is_refused_and_left_as_it_was(tmp_path, corner_
     for name in ("frame_00001.png", "frame_01.png", "notes.txt"):
         (mine / name).write_bytes(name.encode())
     before = _snapshot(mine)
-    with pytest.raises(IngestError, match=r"frames folder '.*photos' holds other files and no frames\.json"):
+    with pytest.raises(IngestError, match=r"frames folder '.*photos' holds other files and no frames\.json") as error:
         extract_frames(video, mine, max_frames=4)
+    # n2r fit has no option the message names but n2r poses has (it told n2r fit users to pass --frames-dir)
+    assert "--frames-dir DIR (n2r poses, n2r fit; frames_dir= in Python)" in str(error.value), error.value
     assert _snapshot(mine) == before, "the user's files were changed"
 
 
@@ -149,5 +151,6 @@ def test_sfm_on_a_video(tmp_path):
     video = _write_video(tmp_path / "orbit.avi", frames)
     cap = ingest(video, max_frames=12, frames_dir=tmp_path / "frames", downscale=0.5)
     assert cap.report["kind"] == "video" and cap.report["matcher"] == "sequential"
+    assert (cap.report["frames_dir"], cap.report["video_frames"]) == (str(tmp_path / "frames"), 12), cap.report
     assert len(cap.views) >= 10, f"only {len(cap.views)} of 12 video frames registered: {cap.skipped}"
     assert cap.views[0].image.shape == (120, 160, 3)

@@ -15,6 +15,7 @@ import tracemalloc
 import zipfile
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -51,6 +52,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"notes\.txt is a file, not a folder"),
     ("fit into a read-only folder", "fit {capture} -o /proc/x.n2r", r"cannot write into /proc"),
     ("fit without -o", "fit {capture}", r"the following arguments are required: -o/--output"),
+    ("fit --frames-dir is a file", "fit {capture} -o {new_n2r} --frames-dir {notes_txt}",
+     r"--frames-dir .*notes\.txt: is a file; expected a folder for the video's frames"),
     # -- n2r fit: every number before any work
     ("fit --metres-per-unit -1", "fit {capture} -o {new_n2r} --metres-per-unit -1",
      r"--metres-per-unit -1\.0: expected the finite number of metres per scene unit, > 0"),
@@ -213,6 +216,12 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("poses of a fisheye transforms.json", "poses {fisheye_json}",
      r"fisheye\.json: field 'camera_model'='FISHEYE624' is not supported; expected one of OPENCV, PINHOLE"),
     ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
+    ("poses of a folder whose photos are in DCIM/100APPLE", "poses {dcim}",
+     r"images folder '.*dcim' holds no images itself; its subfolder DCIM/100APPLE holds 3 images: pass that folder$"),
+    ("poses of two photos, an empty one and one cut short", "poses {two}",
+     (r"images folder '.*two': only 2 of 4 images are readable; structure from motion needs at least 3\. Unreadable: "
+      r"image file '.*IMG_0001\.JPG' is empty \(0 bytes: .*\); image file '.*photo_047\.jpg' cannot be decoded as an "
+      r"image \(a JPEG cut short: an interrupted copy\?\)$")),
     # -- n2r import
     ("import a missing ply", "import {tmp}/nowhere.ply -o {new_n2r}", r"PLY .*nowhere\.ply: does not exist"),
     ("import with missing cameras", "import {notes_txt} --cameras {tmp}/nowhere.json -o {new_n2r}",
@@ -300,6 +309,16 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     (tmp / "fisheye.json").write_text(json.dumps({"camera_model": "FISHEYE624", "frames": [
         {"file_path": "x.png", "transform_matrix": np.eye(4).tolist()}]}))
     corner = write_transforms(make_capture(tmp / "corner", n=4))
+    (tmp / "dcim" / "DCIM" / "100APPLE").mkdir(parents=True)  # a phone's folders copied as they are
+    for k in range(3):
+        shutil.copy(tmp / "corner" / "images" / f"view_{k:03d}.png", tmp / "dcim" / "DCIM" / "100APPLE" / f"{k}.png")
+    two = tmp / "two"
+    two.mkdir()
+    for k in range(2):
+        shutil.copy(tmp / "corner" / "images" / f"view_{k:03d}.png", two / f"photo_{k:03d}.png")
+    (two / "IMG_0001.JPG").write_bytes(b"")  # a cloud photo not downloaded
+    _, jpeg = cv2.imencode(".jpg", np.random.default_rng(0).integers(0, 256, (48, 64, 3), np.uint8))
+    (two / "photo_047.jpg").write_bytes(jpeg.tobytes()[:len(jpeg) // 2])  # an interrupted copy
     (tmp / "empty.n2r").write_bytes(b"")
     with zipfile.ZipFile(tmp / "plain.n2r", "w") as archive:
         archive.writestr("readme.txt", "no scene here")
@@ -313,7 +332,8 @@ def workspace(tmp_path_factory) -> dict[str, str]:
             "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r"),
             "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r"),
             "odd_exposure": str(tmp / "odd_exposure.n2r"), "deep_json": str(tmp / "deep.json"),
-            "fisheye_json": str(tmp / "fisheye.json"), "corner": str(corner)}
+            "fisheye_json": str(tmp / "fisheye.json"), "corner": str(corner), "dcim": str(tmp / "dcim"),
+            "two": str(two)}
 
 
 def _argv(template: str, workspace: dict[str, str]) -> list[str]:
