@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ._output import FORCE_HELP
-from .poses import ANY_ROLL_HELP
+from .poses import ANY_ROLL_HELP, add_frames_dir_argument
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -98,7 +98,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Ingest SOURCE (a transforms.json, a COLMAP model folder, a folder of photos or a video), fit "
                     "a scene field within the time budget, and write the scene file: field, cameras, poses, "
                     "split, optional JPEG copies of the photos and the fit report (held-out PSNR/SSIM per "
-                    "view, time, device, versions), which is also printed. A checkpoint is written to the "
+                    "view and how far each is from a fitted view, training views' scores, the photos skipped and "
+                    "why, time, device, versions), which is also printed. A checkpoint is written to the "
                     "output about every minute, so a crash leaves the last good scene; Ctrl-C ends the fit "
                     "after its step and saves the field trained so far (before the first checkpoint it "
                     "writes nothing; a second Ctrl-C quits at once, keeping the last checkpoint), exit "
@@ -126,6 +127,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         "how much neighbouring photos' colours differ where they see the same points and fits the "
                         "gains above 5 %%; on always fits them, off never (see docs/scene-field.md)")
     p.add_argument("--any-roll", action="store_true", help=ANY_ROLL_HELP)
+    add_frames_dir_argument(p)
     p.add_argument("--no-images", dest="images", action="store_false",
                    help="do not store JPEG copies of the photos in the scene file")
     p.add_argument("--metres-per-unit", type=float, default=None, metavar="M",
@@ -197,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
     from ._interrupt import first_ctrl_c_deferred, interrupted
     from ._output import SCENE, check_output
     from .info import format_exposure, format_info
-    from .poses import format_skipped, format_upright
+    from .poses import format_frames, format_skipped, format_upright, format_warnings, skipped_records
 
     check_arguments(args)
     time_budget = args.time_budget
@@ -209,14 +211,16 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below
-        capture = ingest(args.source, downscale=1.0 / args.downscale, upright=not args.any_roll)
+        capture = ingest(args.source, downscale=1.0 / args.downscale, upright=not args.any_roll,
+                         frames_dir=args.frames_dir, force_frames_dir=args.force)
     check_view_sizes(capture.views, args.downscale)
     ingest_s = time.perf_counter() - start
     sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)
     shown = ", ".join(f"{size} ({n} views)" for size, n in sizes.most_common()) if len(sizes) > 1 else next(iter(sizes))
     lines = [(f"ingested    {args.source}: {len(capture.train_views)} training views, {len(capture.heldout_views)} "
               f"held out, {shown} ({ingest_s:.1f} s)"),
-             *format_skipped(capture.skipped), *format_upright(capture.report)]
+             *format_frames(capture.report), *format_skipped(capture.skipped), *format_upright(capture.report),
+             *format_warnings(capture.report, "fit")]
     if config.sh_degree != given.sh_degree:
         lines.append(f"colour      SH degree {config.sh_degree}: it fits better than {given.sh_degree} from a "
                      f"{LONG_BUDGET_S / 60:.0f}-minute budget on (docs/scene-field.md); "
@@ -237,6 +241,7 @@ def run(args: argparse.Namespace) -> int:
         lines.append(format_exposure(exposure))
     print("\n".join(lines), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2),
+               "skipped": skipped_records(capture.skipped), "warnings": list(capture.report.get("warnings", [])),
                **({} if exposure is None else {"exposure": exposure})}
     last: dict = {}
 
@@ -296,6 +301,7 @@ def check_arguments(args: argparse.Namespace) -> None:
     """Every number and the device, checked before the capture is read (so a typo costs no fit)."""
     from ..errors import InvalidArgument
     from ..field.device import resolve_device
+    from .poses import check_frames_dir
 
     if not (math.isfinite(args.downscale) and args.downscale >= 1):
         raise InvalidArgument(f"--downscale {args.downscale}: expected a finite factor >= 1 (4: a quarter of "
@@ -311,6 +317,7 @@ def check_arguments(args: argparse.Namespace) -> None:
     if not Path(args.source).exists():
         raise InvalidArgument(f"SOURCE {args.source}: does not exist; expected a transforms.json, a COLMAP "
                               "model folder, a folder of photos or a video")
+    check_frames_dir(args.frames_dir, args.force)
     resolve_device(args.device)
 
 

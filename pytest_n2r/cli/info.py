@@ -24,7 +24,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "info", help="summarize a scene (a .n2r scene file, demo:<name>, ...)",
         description="Print what a scene file holds: views and split, cameras, scale, field size, and the fit "
-                    "report (held-out PSNR/SSIM per view, training time, device, versions); of a scene that is "
+                    "report (held-out PSNR/SSIM per view with how far each is from its nearest fitted view, the "
+                    "training views' PSNR/SSIM, training time, device, versions); of a scene that is "
                     "no scene file (an exact demo scene, module:function, a 3DGS .ply), its views and split, "
                     "cameras and scale.",
     )
@@ -247,16 +248,11 @@ def _report_lines(report: dict) -> list[str]:
     with _reading("'source' or 'downscale'"):
         if "source" in report:
             lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
-    with _reading("'heldout', 'psnr' or 'ssim'"):
-        rows = report.get("heldout") or []
-        if report.get("psnr") is not None:
-            lines.append(f"held out    PSNR {report['psnr']:.2f} dB, SSIM {report['ssim']:.4f} (mean of {len(rows)} "
-                         "views)")
-            width = max(len(r["view"]) for r in rows)
-            lines.append(f"  {'view':<{width}}  PSNR dB    SSIM")
-            lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}" for r in rows]
-        elif report.get("complete", True):
-            lines.append("held out    no held-out view with a photo (nothing to score)")
+    with _reading("'skipped' or 'warnings'"):  # the photos of the capture the fit did not use, and why
+        lines += [f"  skipped   {r['file']}: {r['reason']}" for r in report.get("skipped") or []]
+        lines += [f"  warning   {w}" for w in report.get("warnings") or []]
+    with _reading("'heldout', 'psnr', 'ssim', 'nearest_fitted', 'train_psnr', 'train_ssim' or 'train_scored'"):
+        lines += _score_lines(report)
     with _reading("'exposure'"):
         exposure = report.get("exposure")
         if exposure:
@@ -276,6 +272,30 @@ def _report_lines(report: dict) -> list[str]:
         versions = report.get("versions")
         if versions:
             lines.append("versions    " + ", ".join(f"{k} {v}" for k, v in versions.items()))
+    return lines
+
+
+def _score_lines(report: dict) -> list[str]:
+    """The held-out views' scores (PSNR in dB), how far they are from the fitted views (``nearest_fitted``: degrees
+    between optical axes, distance between centres in reference lengths) and the training views' scores
+    (``train_psnr``); older reports hold neither of the last two, and their lines are left out."""
+    lines, rows, near = [], report.get("heldout") or [], report.get("nearest_fitted")
+    if report.get("psnr") is not None:
+        lines.append(f"held out    PSNR {report['psnr']:.2f} dB, SSIM {report['ssim']:.4f} (mean of {len(rows)} views)")
+        if near:
+            deg, dist = near["degrees"], near["distance"]
+            lines.append(f"  nearest   fitted view {deg['median']:.1f}° and {dist['median']:.3f} reference lengths "
+                         f"away (median; least {deg['min']:.1f}° and {dist['min']:.3f}): how new the poses are")
+        width = max(len(r["view"]) for r in rows)
+        lines.append(f"  {'view':<{width}}  PSNR dB    SSIM" + ("  nearest fitted view" if near else ""))
+        lines += [f"  {r['view']:<{width}}  {_num(r['psnr'], 7, 2)}  {_num(r['ssim'], 6, 4)}"
+                  + (f"  {r['nearest_degrees']:5.1f}°  {r['nearest_distance']:.3f} ref. lengths  {r['nearest']}"
+                     if near else "") for r in rows]
+    elif report.get("complete", True):
+        lines.append("held out    no held-out view with a photo (nothing to score)")
+    if report.get("train_psnr") is not None:
+        lines.append(f"training    PSNR {report['train_psnr']:.2f} dB, SSIM {report['train_ssim']:.4f} (mean of "
+                     f"{len(report['train_scored'])} training views along the capture, scored as the held-out ones)")
     return lines
 
 

@@ -35,7 +35,7 @@ from ..field.space import SceneSpace
 from .appearance import Appearance, decide_appearance
 from .compile_clock import CompileClock
 from .detail import capture_detail, detailed_config
-from .evaluate import FIT_RENDER, evaluate_views, mean_scores
+from .evaluate import FIT_RENDER, evaluate_views, final_scores, mean_scores
 from .free_memory import free_bytes
 from .memory import GridMemoryLimit, choose_grid
 from .optim import RowAdam
@@ -284,7 +284,8 @@ def fit(
     second; ``checkpoint`` receives a :class:`FitResult` every ``checkpoint_every_s`` seconds (quantized, as
     a scene file stores it); ``eval_at_s`` lists training times at which held-out PSNR/SSIM are recorded
     in ``report["history"]``. Neither evaluation nor compiling the training kernels (a fresh installation's first
-    fit, ``report["compile_seconds"]``) counts as training time.
+    fit, ``report["compile_seconds"]``) counts as training time. The report's scores of held-out and a few training
+    views, and how far each held-out view is from the fitted ones: :func:`~pytest_n2r.fit.evaluate.final_scores`.
 
     ``appearance=True`` fits a colour gain per training photo and channel alongside the field, for captures whose
     exposure and white balance change from photo to photo; the field keeps their average and renders no gain at any
@@ -369,7 +370,7 @@ def fit(
     trainer.adam = None  # its moments (two floats a value) are not needed from here on
     final = trainer.field.quantized()
     e0 = time.perf_counter()
-    rows = evaluate_views(final, heldout)
+    scores = final_scores(final, heldout, train, capture.reference_length)
     eval_s += time.perf_counter() - e0
     report = {
         "steps": trainer.steps,
@@ -388,8 +389,7 @@ def fit(
                                                 "grid_added": final.resolution if final.resolution
                                                 > given.resolutions[-1] else None},
         "grid_limits": trainer.limits,
-        "heldout": rows,
-        **mean_scores(rows),
+        **scores,
         "history": history,
         "versions": _versions(),
     }

@@ -47,3 +47,41 @@ def test_shift_on_a_splat_scene_file_is_an_error_not_ignored(splat_file, capsys)
     assert not out, f"printed the summary as if --shift had been measured:\n{out}"
     assert main(["info", str(splat_file), "--json"]) == 0
     assert _strict(capsys.readouterr().out)["representation"] == "splats"
+
+
+def test_the_report_lines_say_how_far_the_heldout_views_are_and_what_the_training_views_score():
+    """A video's held-out frames between fitted ones: each row says its nearest fitted view, the summary the median
+    and the least, and the training views' scores follow, so the held-out score can be read against them."""
+    rows = [{"view": "f000", "psnr": 29.5, "ssim": 0.9, "nearest": "f001", "nearest_degrees": 1.4,
+             "nearest_distance": 0.021},
+            {"view": "f008", "psnr": 30.2, "ssim": 0.91, "nearest": "f007", "nearest_degrees": 4.6,
+             "nearest_distance": 0.07}]
+    report = {"heldout": rows, "psnr": 29.85, "ssim": 0.905, "train_psnr": 31.25, "train_ssim": 0.93,
+              "nearest_fitted": {"degrees": {"median": 3.0, "min": 1.4}, "distance": {"median": 0.0456, "min": 0.021}},
+              "train_scored": [{"view": f"f{i:03d}", "psnr": 31.25, "ssim": 0.93} for i in range(1, 9)]}
+    lines = pytest_n2r.cli.info._report_lines(report)
+    assert "held out    PSNR 29.85 dB, SSIM 0.9050 (mean of 2 views)" in lines, lines
+    assert ("  nearest   fitted view 3.0° and 0.046 reference lengths away (median; least 1.4° and 0.021): how new "
+            "the poses are") in lines, lines
+    assert "  f000    29.50  0.9000    1.4°  0.021 ref. lengths  f001" in lines, lines
+    assert ("training    PSNR 31.25 dB, SSIM 0.9300 (mean of 8 training views along the capture, scored as the "
+            "held-out ones)") in lines, lines
+    assert all(len(line) <= 120 for line in lines), lines
+
+
+def test_a_report_from_before_the_gaps_and_training_scores_prints_as_before(capsys):
+    """The shipped demo files' reports hold no ``nearest_fitted`` or ``train_psnr``: no line for them, no error."""
+    assert main(["info", str(packaged_path("wall"))]) == 0
+    text = capsys.readouterr().out
+    assert "held out    PSNR" in text and "  view" in text, text
+    assert "nearest" not in text and "training    " not in text, text
+
+
+def test_the_report_lines_list_every_photo_the_fit_skipped_and_its_warnings():
+    """The photos that did not register were printed once, ten of them, and kept nowhere."""
+    skipped = [{"file": f"IMG_{i:04d}.JPG", "reason": "not registered by structure from motion"} for i in range(12)]
+    report = {"skipped": skipped, "warnings": ["only 31 of the 48 readable photos registered and were kept"]}
+    lines = pytest_n2r.cli.info._report_lines(report)
+    assert [line for line in lines if line.startswith("  skipped")] == [
+        f"  skipped   IMG_{i:04d}.JPG: not registered by structure from motion" for i in range(12)], lines
+    assert "  warning   only 31 of the 48 readable photos registered and were kept" in lines, lines

@@ -59,6 +59,11 @@ def test_fit_writes_a_complete_scene_and_prints_its_report(fitted, exported):
     assert len(scene.views) == 48 and sum(v.split == "heldout" for v in scene.views) == 6
     assert all(v.image is not None for v in scene.views), "the photos were not stored"
     assert f"held out    PSNR {report['psnr']:.2f} dB" in printed, printed
+    near = report["nearest_fitted"]
+    assert (f"  nearest   fitted view {near['degrees']['median']:.1f}° and {near['distance']['median']:.3f} reference "
+            f"lengths away (median; least {near['degrees']['min']:.1f}° and {near['distance']['min']:.3f})") in printed
+    assert (f"training    PSNR {report['train_psnr']:.2f} dB, SSIM {report['train_ssim']:.4f} (mean of 8 training "
+            "views") in printed, printed
     assert "complete: 30 steps" in printed and "images/object_008.png" in printed, printed
     [entry] = report["history"]
     # 0.001 s: any 30-step fit trains longer than that, however fast the machine (0.5 s was not always reached)
@@ -283,17 +288,17 @@ def test_a_second_real_ctrl_c_quits_at_once_keeping_the_last_checkpoint(exported
 @pytest.mark.usefixtures("interactive_ctrl_c")
 def test_a_second_ctrl_c_while_the_stopped_field_is_evaluated_keeps_the_checkpoint(exported, tmp_path, monkeypatch,
                                                                                    capsys):
-    from pytest_n2r.fit import field_fit
+    from pytest_n2r.fit import evaluate as evaluation
 
     seen = pressing_ctrl_c(monkeypatch, presses=1, after_checkpoints=1)
-    real_evaluate = field_fit.evaluate_views
+    real_evaluate = evaluation.evaluate_views
 
     def evaluate(*args, **kwargs):
-        if seen["at"] is not None:  # the final evaluation of the stopped fit
+        if seen["at"] is not None:  # the final evaluation of the stopped fit (evaluate.final_scores)
             press_ctrl_c()
         return real_evaluate(*args, **kwargs)
 
-    monkeypatch.setattr(field_fit, "evaluate_views", evaluate)
+    monkeypatch.setattr(evaluation, "evaluate_views", evaluate)
     out = tmp_path / "object.n2r"
     err = fit_pressed(exported, out, seen, capsys)
     assert f"interrupted; the last checkpoint (step {seen['written'][-1]}," in err, err

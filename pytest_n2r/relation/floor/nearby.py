@@ -4,8 +4,9 @@ beside each relation's floor and by ``n2r info --shift``).
 
 Convention
 ----------
-- "Nearest" is by camera distance in reference lengths plus the angle between the optical axes in radians,
-  among the scene's fitted (training) views; a view at the very same pose is never its own neighbour.
+- "Nearest" is by camera distance in reference lengths plus the angle between the optical axes in radians
+  (:mod:`pytest_n2r.geometry.view_gap`, which a fit's report also measures its held-out views with), among the
+  scene's fitted (training) views; a view at the very same pose is never its own neighbour.
 - "Brought to the pose": every pixel centre of the view is mapped into the neighbour through the rendered
   z-depth of both, by the same :class:`~pytest_n2r.metrics.correspondence.DepthMapping` the keypoint metrics map
   points with (a point needs a surface under it in both views, opacity ≥ 0.5, and depths that agree within 5 %);
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry import Camera, pixel_grid
+from ...geometry.view_gap import nearest_pose
 from ...metrics.correspondence import DepthMapping
 from ...render.size import RenderSize
 from ...render.view import RenderedView
@@ -46,17 +48,11 @@ def nearest_fitted_view(scene: Scene, c2w: np.ndarray,
     ('-0.2', 0.0, 0.1)
     """
     c2w = np.asarray(c2w, dtype=np.float64)
-
-    def gap(view: SceneView) -> tuple[float, float]:
-        other = np.asarray(view.c2w, dtype=np.float64)
-        degrees = float(np.degrees(np.arccos(np.clip(other[:3, 2] @ c2w[:3, 2], -1.0, 1.0))))
-        return degrees, float(np.linalg.norm(other[:3, 3] - c2w[:3, 3])) / float(scene.reference_length)
-
-    candidates = [(v, *gap(v)) for v in scene.views
-                  if v.split == "train" and usable(v) and not np.array_equal(v.c2w, c2w)]
+    candidates = [v for v in scene.views if v.split == "train" and usable(v) and not np.array_equal(v.c2w, c2w)]
     if not candidates:
         raise ValueError(f"scene {getattr(scene, 'name', '?')!r} has no other fitted view to bring to this pose")
-    return min(candidates, key=lambda found: np.radians(found[1]) + found[2])
+    index, degrees, distance = nearest_pose(c2w, [v.c2w for v in candidates], scene.reference_length)
+    return candidates[index], degrees, distance
 
 
 def brought_to_view(view: RenderedView, image: np.ndarray, image_view: RenderedView) -> tuple[np.ndarray, float]:
