@@ -17,6 +17,7 @@ __all__ = [
     "FitError",
     "SUTOutputError",
     "MetricUndefined",
+    "UnfinishedScene",
 ]
 
 
@@ -51,3 +52,8 @@ class SUTOutputError(InvalidType):
 class MetricUndefined(N2RError):
     """A metric has no value for this pair of outputs, so the pair tests nothing (e.g. no keypoint lies in
     the region both views see). Inside a Hypothesis test the example is rejected instead of raised."""
+
+
+class UnfinishedScene(UserWarning):
+    """A scene file whose fit did not finish (a checkpoint of a crashed or interrupted fit) is being tested on:
+    its verdicts measure a field still being fitted."""

@@ -103,6 +103,7 @@ class N2RSession:
 
                 if isinstance(scene, FieldScene):
                     scene = scene.with_settings(scene.settings.replace(scale=self.render_scale))
+            _warn_if_unfinished(scene)
             self._loaded[spec.source] = scene
         return scene
 
@@ -113,3 +114,18 @@ class N2RSession:
         __tracebackhide__ = True
         return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
                               replay=replay, on_start=self.records.append, sut_outputs=self.sut_outputs)
+
+
+def _warn_if_unfinished(scene: Scene) -> None:
+    """Warn (:class:`~pytest_n2r.errors.UnfinishedScene`) when ``scene`` is a checkpoint of a fit that did not
+    finish: ``n2r info`` says so, and a test run must too."""
+    report = getattr(scene, "report", None)
+    if isinstance(report, dict) and report.get("complete", True) is False:
+        import warnings
+
+        from ..errors import UnfinishedScene
+
+        warnings.warn(UnfinishedScene(
+            f"scene {scene.name!r} is a checkpoint: its fit did not finish ({report.get('steps', '?')} steps), so "
+            "these relations test a field still being fitted; fit it to the end (n2r fit) before trusting verdicts "
+            "on it"), stacklevel=2)

@@ -10,21 +10,24 @@ import pytest_n2r.metrics
 import pytest_n2r.plugin.marker
 import pytest_n2r.strategies  # noqa: F401
 
-INNER = """
-import numpy as np
-from pytest_n2r import FieldScene, Validity, l2_norm, metamorphic, transforms
-
-
-def test_the_fixture_is_the_fitted_scene(n2r_scene):
-    assert isinstance(n2r_scene, FieldScene), type(n2r_scene)
-    assert n2r_scene.name == "object" and len(n2r_scene.views) == 48, n2r_scene
-    assert n2r_scene.report["steps"] == {steps}
+MEAN_COLOUR = """
+from pytest_n2r import Validity, l2_norm, metamorphic, transforms
 
 
 # A 30-step fit is a blur with unreliable depth: the coverage check would reject every view.
 @metamorphic(l2_norm(inputs="raw"), eps=1.0, transform=transforms(yaw=2), examples=3, validity=Validity(min_coverage=0))
 def test_mean_colour(n2r_scene):
     return lambda rgb: [float(rgb.mean()) / 255.0]
+"""
+
+INNER = MEAN_COLOUR + """
+from pytest_n2r import FieldScene
+
+
+def test_the_fixture_is_the_fitted_scene(n2r_scene):
+    assert isinstance(n2r_scene, FieldScene), type(n2r_scene)
+    assert n2r_scene.name == "object" and len(n2r_scene.views) == 48, n2r_scene
+    assert n2r_scene.report["steps"] == {steps}
 """
 
 
@@ -60,3 +63,21 @@ def test_full_size_images_reach_the_sut(n2r_scene):
     result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(tiny_scene_file), "--n2r-size", "48",
                                 "--n2r-device", "cpu", "--n2r-render-scale", "0.5")
     result.assert_outcomes(passed=2)
+
+
+def test_a_checkpoint_scene_is_warned_of(pytester: pytest.Pytester, tiny_capture, tiny_fit, tmp_path, monkeypatch):
+    """A scene file whose fit did not finish passed its tests with no word: n2r info called it a checkpoint,
+    the test run said nothing."""
+    from pytest_n2r.scene import save_scene
+
+    from .conftest import TINY_STEPS
+
+    checkpoint = save_scene(tmp_path / "object.n2r", tiny_fit.field, tiny_fit.config, tiny_capture,
+                            {**tiny_fit.report, "complete": False}, metres_per_unit=1.0)
+    monkeypatch.delenv("CI", raising=False)
+    pytester.makepyfile(test_inner=MEAN_COLOUR)
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(checkpoint), "--n2r-size", "48",
+                                "--n2r-device", "cpu")
+    result.assert_outcomes(passed=1)
+    result.stdout.fnmatch_lines([(f"*UnfinishedScene: scene 'object' is a checkpoint: its fit did not finish "
+                                 f"({TINY_STEPS} steps)*")])
