@@ -169,7 +169,7 @@ def scene_info_dict(scene: Scene, spec: SceneSpec) -> dict:
         "heldout_views": splits.count("heldout"),
         "photos_stored": sum(v.image is not None for v in scene.views),
         "cameras": [c.to_dict() for c in dict.fromkeys(v.camera for v in scene.views)],
-        "reference_length": scene.reference_length,
+        "reference_length": scene.reference_length if scene.views else None,  # it is measured on the cameras
         "metres_per_unit": scene.metres_per_unit,
     }
 
@@ -192,8 +192,9 @@ def _camera_and_scale_lines(info: dict) -> list[str]:
              f"cy={cam['cy']:.2f}" for cam in info["cameras"][:3]]
     if len(info["cameras"]) > 3:
         lines.append(f"  ... and {len(info['cameras']) - 3} more cameras")
-    mpu = info["metres_per_unit"]
-    lines.append(f"scale       reference length {info['reference_length']:.4g} scene units; "
+    mpu, length = info["metres_per_unit"], info["reference_length"]
+    lines.append("scale       " + (f"reference length {length:.4g} scene units; " if length is not None else
+                                   "no reference length (no cameras); ")
                  + (f"{mpu:.4g} m per scene unit" if mpu is not None else "metric scale unknown"))
     return lines
 

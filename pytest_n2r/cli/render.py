@@ -99,6 +99,10 @@ def run(args: argparse.Namespace) -> int:
         check_output(paths[key], NPY if key == "depth_raw" else PNG, option=f"-o (its {key.replace('_raw', '')} "
                      "file beside it)", inputs=inputs, force=args.force)
     scene = load_scene_spec(spec, args.device, images=False)
+    if not scene.views:
+        raise InvalidArgument(f"SCENE {args.scene!r} has no views to render"
+                              + (f" ({scene.no_views_reason})" if getattr(scene, "no_views_reason", "") else "")
+                              + "; render its splats at poses of your own with load_scene(...).render(c2w, camera)")
     if args.view is None:
         view = next((v for v in scene.views if v.split == "heldout"), scene.views[0])
     else:

@@ -115,3 +115,17 @@ def test_the_command_line_imports_no_pytest_for_a_demo_scene(tmp_path):
             "assert not bad, bad\n")
     result = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
+
+
+def test_a_ply_without_cameras_is_summarized_and_refused_by_render_naming_why(tmp_path, capsys):
+    """n2r info raised the relations' 'no reference length' advice before printing anything, and n2r render an
+    IndexError from scene.views[0]."""
+    lone = tmp_path / "lone" / "lone.ply"
+    lone.parent.mkdir()
+    lone.write_bytes(Path(SPLAT_PLY).read_bytes())  # no cameras.json or transforms.json beside it
+    assert main(["info", str(lone)]) == 0
+    out = capsys.readouterr().out
+    assert "views       0: 0 train, 0 held out" in out and "no reference length (no cameras)" in out, out
+    assert main(["render", str(lone), "-o", str(tmp_path / "x.png")]) != 0
+    err = capsys.readouterr().err
+    assert "has no views to render (no cameras were given" in err and not (tmp_path / "x.png").exists(), err
