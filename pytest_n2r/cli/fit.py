@@ -199,7 +199,14 @@ def run(args: argparse.Namespace) -> int:
     from ._interrupt import first_ctrl_c_deferred, interrupted
     from ._output import SCENE, check_output
     from .info import format_exposure, format_info
-    from .poses import format_frames, format_skipped, format_upright, format_warnings, skipped_records
+    from .poses import (
+        forces_frames_dir,
+        format_frames,
+        format_skipped,
+        format_upright,
+        format_warnings,
+        skipped_records,
+    )
 
     check_arguments(args)
     time_budget = args.time_budget
@@ -212,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed below
         capture = ingest(args.source, downscale=1.0 / args.downscale, upright=not args.any_roll,
-                         frames_dir=args.frames_dir, force_frames_dir=args.force)
+                         frames_dir=args.frames_dir, force_frames_dir=forces_frames_dir(args))
     check_view_sizes(capture.views, args.downscale)
     ingest_s = time.perf_counter() - start
     sizes = Counter(f"{v.camera.width}x{v.camera.height}" for v in capture.views)

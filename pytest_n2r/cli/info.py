@@ -221,6 +221,7 @@ def _report_lines(report: dict) -> list[str]:
     """The fit report's lines of :func:`format_info` (:class:`ReportUnreadable` where a value is not as ``n2r fit``
     writes it)."""
     from ..fit.memory import GridChoice
+    from .poses import format_skipped
 
     lines = []
     with _reading("'detail'"):
@@ -250,7 +251,7 @@ def _report_lines(report: dict) -> list[str]:
         if "source" in report:
             lines.append(f"  source    {report['source']} (downscale {report.get('downscale', 1):g})")
     with _reading("'skipped' or 'warnings'"):  # the photos of the capture the fit did not use, and why
-        lines += [f"  skipped   {r['file']}: {r['reason']}" for r in report.get("skipped") or []]
+        lines += format_skipped([(r["file"], r["reason"]) for r in report.get("skipped") or []])
         lines += [f"  warning   {w}" for w in report.get("warnings") or []]
     with _reading("'heldout', 'psnr', 'ssim', 'nearest_fitted', 'train_psnr', 'train_ssim' or 'train_scored'"):
         lines += _score_lines(report)

@@ -60,7 +60,15 @@ def add_frames_dir_argument(parser: argparse.ArgumentParser) -> None:
     """``--frames-dir``, shared by ``n2r poses`` and ``n2r fit`` (checked by :func:`check_frames_dir`)."""
     parser.add_argument("--frames-dir", metavar="DIR", type=Path, default=None,
                         help="for a video: where to write its frames (default: <video stem>_frames beside it); a new "
-                             "or empty folder, or one frames were extracted into before (--force: any)")
+                             "or empty folder, or one frames were extracted into before (with --force: any folder "
+                             "named here)")
+
+
+def forces_frames_dir(args: argparse.Namespace) -> bool:
+    """Whether ``--force`` lets the video's frames be written among other files: only into a folder the user named
+    with ``--frames-dir`` (``--force`` given to replace an output must not also write over files in the default
+    ``<video stem>_frames`` folder)."""
+    return bool(args.force and args.frames_dir is not None)
 
 
 def check_frames_dir(frames_dir: Path | None, force: bool) -> None:
@@ -82,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
         poses = load_poses(args.source, sfm_max_size=args.max_size, matcher=args.matcher,
                            max_frames=args.max_frames, frames_dir=args.frames_dir, upright=not args.any_roll,
-                           force_frames_dir=args.force)
+                           force_frames_dir=forces_frames_dir(args))
         complete_points(poses)
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
@@ -134,13 +142,23 @@ def check_arguments(args: argparse.Namespace) -> None:
 def format_skipped(skipped: list[tuple[str, str]]) -> list[str]:
     """Summary lines for the input images that were not used, ``(file, reason)`` each: every one of them (an
     unrelated photo among them is what the list is read for)."""
-    return [f"  skipped   {name}: {reason}" for name, reason in skipped]
+    return [f"  skipped   {r['file']}: {r['reason']}" for r in skipped_records(skipped)]
 
 
 def skipped_records(skipped: list[tuple[str, str]]) -> list[dict[str, str]]:
     """The photos not used as JSON-ready records, ``{"file": ..., "reason": ...}`` each (what ``n2r poses -o`` and
-    ``n2r fit``'s report keep)."""
-    return [{"file": name, "reason": reason} for name, reason in skipped]
+    ``n2r fit``'s report keep). A file name that is not text (bytes no encoding decodes, which Python keeps as lone
+    surrogates) is written with those bytes escaped (``\\xff``), so any terminal can print it back."""
+    return [{"file": _printable(name), "reason": _printable(reason)} for name, reason in skipped]
+
+
+def _printable(text: str) -> str:
+    """``text`` with lone surrogates (undecodable bytes of a file name) as backslash escapes.
+
+    >>> _printable("IMG_" + chr(0xDCFF) + ".JPG")
+    'IMG_\\\\udcff.JPG'
+    """
+    return text.encode("utf-8", "backslashreplace").decode("utf-8")
 
 
 def format_frames(report: dict) -> list[str]:

@@ -35,7 +35,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--units", choices=("reference", "scene", "metres"), default="reference",
                    help="units of the transform's x, y, z (default: reference lengths)")
     p.add_argument("--size", default=None, metavar="WxH",
-                   help="render size, WIDTHxHEIGHT or the longer side (default: the view's own size)")
+                   help="render size: WxH, a box the view fits in with its aspect kept, or the longer side (default: "
+                        "the view's own size)")
     p.add_argument("--depth", action="store_true", help="also write the z-depth (.depth.png and .depth.npy)")
     p.add_argument("--opacity", action="store_true", help="also write the opacity (.opacity.png)")
     p.add_argument("--device", default="auto", metavar="DEVICE", help="auto, cpu or cuda[:N] (default: auto)")

@@ -76,8 +76,9 @@ SUBFOLDER_LIMIT = 1000
 
 def images_in_subfolders(folder: str | os.PathLike) -> list[tuple[str, int]]:
     """``(subfolder, image count)`` for every subfolder of ``folder`` (down to :data:`SUBFOLDER_DEPTH` levels, hidden
-    ones skipped, at most :data:`SUBFOLDER_LIMIT` opened) holding images directly; the path relative to ``folder``
-    in ``/`` form, sorted by path. ``folder`` itself is not counted."""
+    ones and links skipped: a link back to ``folder`` would count its photos again, at most :data:`SUBFOLDER_LIMIT`
+    opened) holding images directly; the path relative to ``folder`` in ``/`` form, sorted by path. ``folder``
+    itself is not counted."""
     folder = Path(folder)
     found: list[tuple[str, int]] = []
     queue, opened = [(folder, 0)], 0
@@ -92,7 +93,8 @@ def images_in_subfolders(folder: str | os.PathLike) -> list[tuple[str, int]]:
         if count:
             found.append((current.relative_to(folder).as_posix(), count))
         if depth < SUBFOLDER_DEPTH:
-            queue += [(p, depth + 1) for p in entries if not p.name.startswith(".") and p.is_dir()]
+            queue += [(p, depth + 1) for p in entries
+                      if not p.name.startswith(".") and not p.is_symlink() and p.is_dir()]
     return sorted(found)
 
 

@@ -226,6 +226,7 @@ def _load_pixels(
     small: list[np.ndarray] = []
     small_cameras: list[Camera] = []
     start = time.perf_counter()
+    earlier = len(poses.skipped)  # skipped before this pass (not registered, missing files, ...)
     for frame in poses.frames:
         if out_camera is None and not need_points:
             kept.append(frame)
@@ -249,9 +250,11 @@ def _load_pixels(
             small_cameras.append(cam)
     poses.frames = kept
     if len(kept) < 3:
+        unreadable = poses.skipped[earlier:]
         raise IngestError(
-            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed. Not used: "
-            + "; ".join(f"{name}: {reason}" for name, reason in poses.skipped)
+            f"{poses.source}: only {len(kept)} images could be read; at least 3 are needed. Unreadable: "
+            + "; ".join(f"{name}: {reason}" for name, reason in unreadable)
+            + (f" (and {earlier} frames not used before they were read: not registered or missing)" if earlier else "")
         )
     times = poses.report.setdefault("time_s", {})
     if out_camera is not None or need_points:

@@ -130,7 +130,8 @@ def extract_frames(
             f"frames folder {str(out)!r} holds other files and no {_MANIFEST} of an earlier extraction, so the "
             "video's frames would be written among them; expected a new or empty folder (or one frames were "
             "extracted into before): choose another with --frames-dir DIR (n2r poses, n2r fit; frames_dir= in "
-            "Python), or write among them with --force (force_frames_dir=True)")
+            "Python), or write among them by naming this folder with --frames-dir and adding --force "
+            "(force_frames_dir=True)")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".n2r-write-test"

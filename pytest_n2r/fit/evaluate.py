@@ -31,8 +31,9 @@ __all__ = ["FIT_RENDER", "TRAIN_SCORED", "evaluate_views", "final_scores", "mean
 
 #: Render settings used for held-out evaluation during and after a fit.
 FIT_RENDER = RenderSettings()
-#: How many training views a fit scores at its end (spread along the capture; all where there are fewer). Measured:
-#: 8 views of the portrait video (45×80 px) take 0.07 s after a 2-minute fit; see ``docs/scene-field.md``.
+#: How many training views a fit scores at its end (spread along the capture; all where there are fewer). Measured
+#: on the 2-core host under load: 0.67 s after the fox's 10-minute fit (270×480), 0.43 s after a portrait video's
+#: 2-minute fit; see ``docs/scene-field.md`` ("Reading a fit's scores").
 TRAIN_SCORED = 8
 
 

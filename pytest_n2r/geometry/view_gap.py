@@ -35,8 +35,8 @@ def pose_gap(c2w: np.ndarray, other: np.ndarray, reference_length: float) -> tup
 
 
 def nearest_pose(c2w: np.ndarray, others: Sequence[np.ndarray], reference_length: float) -> tuple[int, float, float]:
-    """``(index, degrees, distance)``: which of ``others`` is nearest to pose ``c2w`` (see the Convention) and its
-    :func:`pose_gap`; a ``ValueError`` when ``others`` is empty.
+    """``(index, degrees, distance)``: which of ``others`` is nearest to pose ``c2w`` (see the Convention; a pose whose
+    gap is not finite only when all are) and its :func:`pose_gap`; a ``ValueError`` when ``others`` is empty.
 
     >>> at = lambda x: np.array([[1, 0, 0, x], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
     >>> nearest_pose(at(0.0), [at(0.5), at(-0.2)], 2.0)
@@ -45,5 +45,10 @@ def nearest_pose(c2w: np.ndarray, others: Sequence[np.ndarray], reference_length
     if not len(others):
         raise ValueError("no pose to be nearest to")
     gaps = [pose_gap(c2w, other, reference_length) for other in others]
-    index = min(range(len(gaps)), key=lambda i: np.radians(gaps[i][0]) + gaps[i][1])
+
+    def rank(i: int) -> float:  # a pose with a non-finite gap (a NaN entry) is never the nearest
+        value = float(np.radians(gaps[i][0]) + gaps[i][1])
+        return value if np.isfinite(value) else np.inf
+
+    index = min(range(len(gaps)), key=rank)
     return index, *gaps[index]

@@ -128,4 +128,4 @@ def _warn_if_unfinished(scene: Scene) -> None:
         warnings.warn(UnfinishedScene(
             f"scene {scene.name!r} is a checkpoint: its fit did not finish ({report.get('steps', '?')} steps), so "
             "these relations test a field still being fitted; fit it to the end (n2r fit) before trusting verdicts "
-            "on it"), stacklevel=2)
+            "on it"), stacklevel=1)

@@ -64,12 +64,10 @@ class RenderSize:
         """
         if self.longer is not None:
             return camera.scaled(self.longer / max(camera.width, camera.height))
-        sx, sy = self.width / camera.width, self.height / camera.height
-        if abs(sx - sy) * max(camera.width, camera.height) <= 1.0:  # the same aspect, to a pixel: exactly the box
-            return camera.resized(self.width, self.height)
-        scale = min(sx, sy)
-        return camera.resized(max(1, min(self.width, round(camera.width * scale))),
-                              max(1, min(self.height, round(camera.height * scale))))
+        fitted = camera.scaled(min(self.width / camera.width, self.height / camera.height))
+        if abs(fitted.width - self.width) <= 1 and abs(fitted.height - self.height) <= 1:
+            return camera.resized(self.width, self.height)  # the same aspect, to a pixel: exactly the box
+        return fitted
 
     def __str__(self) -> str:
         return f"{self.width}x{self.height}" if self.longer is None else f"{self.longer}"

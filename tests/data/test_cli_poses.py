@@ -149,6 +149,9 @@ def test_fit_shares_the_frames_dir_option_of_poses_and_hands_it_to_ingestion(tmp
     assert main(["fit", str(video), "-o", str(tmp_path / "walk.n2r"), "--frames-dir", str(frames), "--force"]) == 2
     assert "stopped here" in capsys.readouterr().err
     assert (seen["frames_dir"], seen["force_frames_dir"]) == (frames, True), seen
+    # --force given to replace the output alone must not write frames over files in the default frames folder
+    assert main(["fit", str(video), "-o", str(tmp_path / "walk.n2r"), "--force"]) == 2
+    assert (seen["frames_dir"], seen["force_frames_dir"]) == (None, False), seen
 
 
 @pytest.mark.slow

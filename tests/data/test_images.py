@@ -257,6 +257,15 @@ def test_a_folder_whose_photos_are_in_subfolders_names_them(tmp_path):
     assert subfolder_hint(camera / "DCIM" / "101APPLE") == ""
 
 
+def test_a_link_back_to_the_folder_is_not_a_subfolder_of_photos(tmp_path):
+    """``alias -> .`` made the scan count the folder's own photos as 'alias', 'alias/alias', ... (a false warning
+    stored in the fit report after a run that read them all)."""
+    for k in range(3):
+        (tmp_path / f"IMG_{k:04d}.JPG").write_bytes(b"x")
+    (tmp_path / "alias").symlink_to(tmp_path, target_is_directory=True)
+    assert images_in_subfolders(tmp_path) == [] and subfolder_hint(tmp_path, 3) == ""
+
+
 def test_unreadable_files_are_skipped_with_a_warning_naming_them(tmp_path):
     Image.fromarray(_pattern()).save(tmp_path / "a.png")
     (tmp_path / "b.png").write_bytes(b"garbage")

@@ -58,3 +58,10 @@ def test_the_angle_between_rotations_refuses_matrices_that_are_not_rotations(R, 
         rotation_angle_deg(np.eye(3), R)
     with pytest.raises(InvalidArgument, match=r"R_a (is not a rotation|contains 9 non-finite)"):
         rotation_angle_deg(R, np.eye(3))
+
+
+def test_a_pose_with_a_nan_gap_is_never_the_nearest():
+    from pytest_n2r.geometry.view_gap import nearest_pose
+
+    nan_pose = np.full((4, 4), np.nan)
+    assert nearest_pose(np.eye(4), [nan_pose, np.eye(4)], 1.0) == (1, 0.0, 0.0), "min() kept the NaN first"

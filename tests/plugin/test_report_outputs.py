@@ -43,7 +43,8 @@ def test_a_failing_mutation_relation_is_reported_and_the_gate_keeps_its_verdict(
     assert "INTERNALERROR" not in text, f"the report of a mutation relation crashed the session:\n{text}"
     result.assert_outcomes(failed=1)
     assert result.ret == pytest.ExitCode.TESTS_FAILED, text
-    assert _row(result, "test_bright[plane]")[-1].startswith("worse (fails)"), "the gate's verdict is missing"
+    verdict = _row(result, "test_bright[plane]")[-1]  # worse, and its eps changed too (the note says from what)
+    assert verdict.startswith("worse+changed-eps (fails)"), f"the gate's verdict is missing: {verdict}"
     page = (n2r_project.pytester.path / "r.html").read_text()
     shown = re.search(r"mutation <code>brightness ([+-]\d+) levels ", page)
     assert shown, "the minimal example's mutation is not in the report"

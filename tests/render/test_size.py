@@ -27,8 +27,8 @@ def test_a_box_never_stretches_a_view_and_fits_it(width, height, box_w, box_h):
     camera = Camera(width, height, 1.2 * width, 1.2 * width, (width - 1) / 2, (height - 1) / 2)
     resized = RenderSize(box_w, box_h).apply(camera)
     assert resized.width <= box_w and resized.height <= box_h, f"{resized.size} outside the box {box_w}x{box_h}"
-    sx, sy = resized.width / width, resized.height / height
-    # rounding to whole pixels moves each side by at most half a pixel, plus the one-pixel tolerance of a match
-    assert abs(sx - sy) <= 1.5 / min(resized.width, resized.height) + 1.0 / max(width, height), (
-        f"{width}x{height} in {box_w}x{box_h} became {resized.size}: stretched")
-    assert min(box_w - resized.width, box_h - resized.height) <= 1, f"{resized.size} does not fill {box_w}x{box_h}"
+    scale = min(box_w / width, box_h / height)  # the largest scale that fits the view in the box
+    # each side is the view's side at that scale, to the rounding of a pixel and the one-pixel tolerance of a box
+    # of the view's own aspect: never stretched by more than that
+    assert abs(resized.width - width * scale) <= 1.5 and abs(resized.height - height * scale) <= 1.5, (
+        f"{width}x{height} in {box_w}x{box_h} became {resized.size}: stretched, or not the largest fit")

@@ -34,8 +34,9 @@ from .reference import ShiftSample, exact_twin, floor_views, reference_image, re
 __all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_floor", "sut_name"]
 
 #: Bumped when the measurement changes, so cached floors of an older measurement are not reused
-#: (2: the nearest other photo's samples beside the render's; 3: a non-finite deviation is no sample).
-FLOOR_VERSION = 3
+#: (2: the nearest other photo's samples beside the render's; 3: a non-finite deviation is no sample; 4: a 'WxH'
+#: size keeps each view's aspect, where it stretched views of another).
+FLOOR_VERSION = 4
 
 
 @dataclass(frozen=True)
