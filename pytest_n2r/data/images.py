@@ -38,6 +38,8 @@ HEIF_SUFFIXES: tuple[str, ...] = (".heic", ".heif", ".hif")
 IMAGE_SUFFIXES: tuple[str, ...] = (
     ".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm", *HEIF_SUFFIXES,
 )
+#: The largest image side (pixels) read: :data:`pytest_n2r.render.size.MAX_SIDE` (``data`` sits below ``render``).
+MAX_IMAGE_SIDE = 16384
 
 
 def list_images(folder: str | os.PathLike) -> list[Path]:
@@ -161,7 +163,9 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
         raise IngestError(f"image file {str(path)!r} does not exist")
     head = _head(path)
     if _is_iso_media(head):
+        _check_sides(path, *_heif_size(path))
         return to_rgb8(_decode_heif(path, oriented), bgr=False)
+    _stored_size(path)  # refuses a header claiming more than MAX_IMAGE_SIDE a side before any decoding
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as exc:  # no permission, a device gone
@@ -190,16 +194,52 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
     path = Path(path)
     head = _head(path)
     if _is_iso_media(head):
-        return _heif_size(path)
+        return _check_sides(path, *_heif_size(path))
     try:
-        with Image.open(path) as im:
+        with _bomb_errors(path), Image.open(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
             width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
             orientation = im.getexif().get(0x0112, 1)
     except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]
         return width, height
+    _check_sides(path, width, height)
     return (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+
+
+@contextmanager
+def _bomb_errors(path: Path) -> Iterator[None]:
+    """Turn Pillow's refusal of a header claiming too many pixels into an :class:`IngestError` naming the file."""
+    from PIL import Image
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            yield
+    except Image.DecompressionBombError as exc:
+        raise IngestError(f"image file {str(path)!r} is too large to read ({exc}); expected at most "
+                          f"{MAX_IMAGE_SIDE} pixels a side") from None
+
+
+def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
+    """``(width, height)``, or an :class:`IngestError` naming the file when a side exceeds :data:`MAX_IMAGE_SIDE`."""
+    if max(width, height) > MAX_IMAGE_SIDE:
+        raise IngestError(f"image file {str(path)!r} is {width}x{height} pixels; expected at most {MAX_IMAGE_SIDE} "
+                          "pixels a side")
+    return width, height
+
+
+def _stored_size(path: Path) -> tuple[int, int] | None:
+    """The stored ``(width, height)`` its header claims (``None`` when Pillow cannot tell: the decoder names the
+    file), refusing more than :data:`MAX_IMAGE_SIDE` pixels a side."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with _bomb_errors(path), Image.open(path) as im:
+            size = im.size
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError):
+        return None
+    return _check_sides(path, *size)
 
 
 def _orientation(path: Path) -> int:

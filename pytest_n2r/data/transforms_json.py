@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import repeated_name
+from .._validation import is_finite, repeated_name
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
@@ -174,6 +174,9 @@ def _read_matrix(raw: dict, where: str) -> np.ndarray:
         raise IngestError(f"{where}: field 'transform_matrix' is missing")
     try:
         M = np.asarray(raw["transform_matrix"], dtype=np.float64)
+    except OverflowError:  # a JSON integer beyond a float's range (10**400)
+        raise IngestError(f"{where}: field 'transform_matrix' holds a number too large for a float; expected a "
+                          "finite camera-to-world matrix") from None
     except (TypeError, ValueError):
         raise IngestError(f"{where}: field 'transform_matrix' is not a numeric matrix") from None
     if M.shape == (3, 4):
@@ -199,8 +202,9 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     value = raw.get(key, meta.get(key))
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise IngestError(f"{where}: field {key!r}={value!r} must be a finite number")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value):
+        shown = f"an integer of {len(str(abs(value)))} digits" if isinstance(value, int) else repr(value)
+        raise IngestError(f"{where}: field {key!r}={shown} must be a finite number")
     return float(value)
 
 

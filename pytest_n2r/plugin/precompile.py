@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 from typing import IO, Any
 
-from ..scene.first_render import claim_kind, collector_paused, kernel_locks, renderer_kind
+from ..scene.first_render import claim_kind, collector_paused, kernel_locks, open_own, renderer_kind
 from .scenes import SceneSpec
 from .session import N2RSession
 
@@ -86,14 +86,17 @@ def open_log(cache_dir: str | Path) -> IO[str]:
     starts a helper, and the one that finds another at work says so below that one's lines instead of erasing them."""
     log_dir = Path(cache_dir) / "kernel-locks"
     log_dir.mkdir(parents=True, exist_ok=True)
-    return open(log_dir / LOG_NAME, "a")
+    return os.fdopen(open_own(log_dir / LOG_NAME, os.O_WRONLY | os.O_APPEND), "a")  # a planted link is replaced
 
 
 def _restart_log(cache_dir: str | Path) -> None:
     """Empty the log for the helper that holds the lock (it keeps one session's lines, not every session's)."""
-    try:
-        with open(Path(cache_dir) / "kernel-locks" / LOG_NAME, "r+") as log:
-            log.truncate(0)
+    try:  # never through a link planted in its place
+        fd = os.open(Path(cache_dir) / "kernel-locks" / LOG_NAME, os.O_WRONLY | getattr(os, "O_NOFOLLOW", 0))
+        try:
+            os.ftruncate(fd, 0)
+        finally:
+            os.close(fd)
     except OSError:  # no log (the helper was started by hand) or none writable: nothing to empty
         pass
 

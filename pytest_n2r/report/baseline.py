@@ -113,6 +113,9 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
         data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant)
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
         raise BaselineError(f"baseline {path} is not readable JSON: {exc}; {regenerate}") from None
+    except RecursionError:
+        raise BaselineError(f"baseline {path} is not readable JSON: nested too deeply for the JSON parser; "
+                            f"{regenerate}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise BaselineError(f"baseline {path} is not a pytest-n2r baseline (missing \"format\": \"{FORMAT}\")")
     if data.get("version") != VERSION:

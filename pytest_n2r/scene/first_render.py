@@ -35,7 +35,8 @@ except ImportError:  # pragma: no cover - Windows: no lock, each process compile
 
 from .base import Scene
 
-__all__ = ["WAIT_S", "claim_kind", "claim_piece", "collector_paused", "first_render", "kernel_locks", "renderer_kind"]
+__all__ = ["WAIT_S", "claim_kind", "claim_piece", "collector_paused", "first_render", "kernel_locks", "open_own",
+           "renderer_kind"]
 
 #: The longest a process waits for another's first render of a kind (s) before rendering without the lock.
 WAIT_S = 600.0
@@ -64,6 +65,22 @@ def rendered(kind: str) -> bool:
     return kind in _RENDERED
 
 
+def open_own(path: Path, flags: int) -> int:
+    """``os.open(path, flags | O_CREAT, 0o644)`` without following a symbolic link at ``path``: a link planted in
+    place of a lock or log file of the cache directory is removed (never what it points to) and a file made in its
+    place, so nothing is created, truncated or written through it."""
+    nofollow = getattr(os, "O_NOFOLLOW", 0)
+    if not nofollow and path.is_symlink():  # pragma: no cover - no O_NOFOLLOW (Windows)
+        path.unlink(missing_ok=True)
+    try:
+        return os.open(path, flags | os.O_CREAT | nofollow, 0o644)
+    except OSError:
+        if not path.is_symlink():
+            raise
+    path.unlink(missing_ok=True)  # the link itself
+    return os.open(path, flags | os.O_CREAT | nofollow, 0o644)
+
+
 def _lock_path(directory: Path, kind: str) -> Path:
     return directory / _SUBDIR / (re.sub(r"[^\w.-]", "_", kind) + ".lock")
 
@@ -83,7 +100,7 @@ def claim_kind(directory: str | os.PathLike | None, kind: str, wait: bool = True
     path = _lock_path(Path(directory), kind)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = open_own(path, os.O_RDWR)
     except OSError:  # a read-only cache directory: no lock, the render still happens
         yield False
         return

@@ -19,6 +19,7 @@ import functools
 import hashlib
 import io
 import json
+import math
 import os
 import re
 import shutil
@@ -112,14 +113,34 @@ def _read_npy(path: Path) -> np.ndarray:
     if match is None:
         if not data.startswith(b"\x93NUMPY"):  # empty, or anything np.load would read another way (a zip)
             raise ValueError(f"{str(path)!r} is not a .npy file")
-        try:
+        stream = io.BytesIO(data)
+        try:  # size the array from its header against the file's length before np.load allocates it
+            version = np.lib.format.read_magic(stream)
+            npy = np.lib.format
+            shape, _, dtype = (npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0)(stream)
+            if dtype.hasobject or math.prod(shape) * dtype.itemsize > len(data) - stream.tell():
+                raise ValueError(f"{str(path)!r}: its header declares more data than the file holds")
             value = np.load(io.BytesIO(data), allow_pickle=False)
-        except EOFError as exc:
-            raise ValueError(f"{str(path)!r} is cut short: {exc}") from None
+        except (EOFError, MemoryError) as exc:
+            raise ValueError(f"{str(path)!r} is cut short or malformed: {exc!r}") from None
         value.setflags(write=False)
         return value
     shape = tuple(int(n) for n in match.group(2).split(b", "))
     return np.frombuffer(data, dtype=match.group(1).decode(), offset=10 + size).reshape(shape)
+
+
+def _as_requested(value: np.ndarray, name: str, camera: Camera) -> np.ndarray | None:
+    """A render read back as ``scene.render`` gives output ``name`` at ``camera`` (``rgb`` H x W x 3 ``uint8``,
+    ``depth`` and ``opacity`` H x W finite ``float32``; the other byte order is converted), or ``None`` when it is
+    not that: an entry damaged or planted in the cache directory is not handed to a check."""
+    want = np.dtype(np.uint8 if name == "rgb" else np.float32)
+    shape = (camera.height, camera.width, 3) if name == "rgb" else (camera.height, camera.width)
+    if value.dtype.newbyteorder("=") != want or value.shape != shape:
+        return None
+    if value.dtype != want:
+        value = value.astype(want)
+        value.setflags(write=False)
+    return value if name == "rgb" or np.isfinite(value).all() else None
 
 
 @dataclass
@@ -183,7 +204,7 @@ class RenderCache:
             if value is not None:
                 self.stats.memory_hits += 1
             else:
-                value = self._disk_get(key, name)
+                value = self._disk_get(key, name, camera)
                 if value is not None:
                     self.stats.disk_hits += 1
                     self._memory_put(key, name, value)
@@ -215,7 +236,7 @@ class RenderCache:
             value = json.loads(path.read_bytes())
         except FileNotFoundError:
             return None
-        except (OSError, ValueError):  # torn by a crash or disk trouble: decided again
+        except (OSError, ValueError, RecursionError):  # torn by a crash, disk trouble, nested too deep: decided again
             path.unlink(missing_ok=True)
             return None
         return value if isinstance(value, dict) else None
@@ -271,7 +292,7 @@ class RenderCache:
         key = hashlib.sha256(f"{source_digest()}/{key}".encode()).hexdigest()
         return self.directory / _DECISIONS / key[:2] / f"{key}.json"
 
-    def _disk_get(self, key: str, name: str) -> np.ndarray | None:
+    def _disk_get(self, key: str, name: str, camera: Camera) -> np.ndarray | None:
         if self.directory is None:
             return None
         path = self._path(key, name)
@@ -280,6 +301,10 @@ class RenderCache:
         except FileNotFoundError:
             return None
         except (OSError, ValueError):  # unreadable (disk trouble, another version's format): re-render
+            path.unlink(missing_ok=True)
+            return None
+        value = _as_requested(value, name, camera)
+        if value is None:  # not what was asked for (damaged or planted): re-render
             path.unlink(missing_ok=True)
             return None
         try:
@@ -325,6 +350,8 @@ class RenderCache:
         found = []
         for path in (self.directory / _SUBDIR).glob("*/*.npy"):
             try:
+                if path.parent.is_symlink() or path.is_symlink():  # never evict (delete) through a link
+                    continue
                 st = path.stat()
             except FileNotFoundError:  # evicted by another worker meanwhile
                 continue
@@ -350,6 +377,8 @@ class RenderCache:
         assert self.directory is not None
         for path in (self.directory / _DECISIONS).glob("*/*.json"):
             try:
+                if path.parent.is_symlink() or path.is_symlink():  # never delete through a link
+                    continue
                 if path.stat().st_mtime <= evicted_until:
                     path.unlink(missing_ok=True)
             except FileNotFoundError:  # removed by another worker meanwhile

@@ -43,6 +43,7 @@ _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None
 _REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
              "rot_0", "rot_1", "rot_2", "rot_3")
 _MAX_HEADER = 1 << 16
+_MAX_COUNT_DIGITS = 15  # a larger element count cannot fit any file
 
 
 def ply_properties(sh_degree: int) -> list[str]:
@@ -82,6 +83,9 @@ def _parse_header(raw: bytes, source: str) -> tuple[str, list[tuple[str, int, li
         elif words[0] == "element":
             if len(words) != 3 or not words[2].isdigit():
                 raise SceneFileError(f"{where}: expected 'element NAME COUNT'")
+            if len(words[2]) > _MAX_COUNT_DIGITS:
+                raise SceneFileError(f"{where}: the element count has {len(words[2])} digits; expected a count of "
+                                     f"at most {_MAX_COUNT_DIGITS} digits")
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property":
             if not elements:
@@ -90,11 +94,15 @@ def _parse_header(raw: bytes, source: str) -> tuple[str, list[tuple[str, int, li
                 if len(words) != 5 or words[2] not in _TYPES or words[3] not in _TYPES:
                     raise SceneFileError(f"{where}: expected 'property list COUNT_TYPE ITEM_TYPE NAME' with types "
                                          f"from {sorted(set(_TYPES))}")
-                elements[-1][2].append((words[-1], "list"))
+                kind = "list"
             elif len(words) == 3 and words[1] in _TYPES:
-                elements[-1][2].append((words[2], _TYPES[words[1]]))
+                kind = _TYPES[words[1]]
             else:
                 raise SceneFileError(f"{where}: expected 'property TYPE NAME' with TYPE one of {sorted(set(_TYPES))}")
+            if words[-1] in (name for name, _ in elements[-1][2]):
+                raise SceneFileError(f"{where}: property {words[-1]!r} of element {elements[-1][0]!r} "
+                                     "is declared twice; expected unique property names")
+            elements[-1][2].append((words[-1], kind))
         else:
             raise SceneFileError(f"{where}: unknown header keyword {words[0]!r}")
     if fmt is None:
@@ -131,9 +139,6 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
     if "list" in kinds.values():
         bad = [name for name, kind in props if kind == "list"]
         raise SceneFileError(f"{source}: vertex property {bad[0]!r} is a list; 3DGS vertex properties are scalars")
-    if len(kinds) != len(props):
-        dup = next(name for name in kinds if [p for p, _ in props].count(name) > 1)
-        raise SceneFileError(f"{source}: vertex property {dup!r} is declared twice")
     missing = [name for name in _REQUIRED if name not in kinds]
     if missing:
         hint = (" (this looks like a point cloud, not Gaussian splats)"

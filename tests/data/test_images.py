@@ -275,3 +275,38 @@ def test_unreadable_files_are_skipped_with_a_warning_naming_them(tmp_path):
         read = list(iter_readable(list_images(tmp_path), skipped))
     assert [p.name for p, _ in read] == ["a.png", "c.png"]
     assert skipped[0][0] == "b.png" and "cannot be decoded" in skipped[0][1]
+
+
+def _png_header_only(path, width: int, height: int) -> None:
+    """A PNG whose header claims ``width x height`` RGB pixels but whose data is one row (a decompression bomb's
+    header: reading its size must not decode it)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    raw = zlib.compress(b"\0" + bytes(width * 3), 9)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
+                     + chunk(b"IDAT", raw) + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("width, height, expected", [
+    (20000, 20000, "too large to read"),  # Pillow's decompression-bomb limit
+    (20000, 1, "is 20000x1 pixels; expected at most 16384 pixels a side"),
+    (1, 16385, "is 1x16385 pixels; expected at most 16384 pixels a side"),
+])
+@pytest.mark.parametrize("read", [read_image_size, read_image])
+def test_an_image_claiming_too_many_pixels_is_refused_naming_it(tmp_path, width, height, expected, read):
+    path = tmp_path / "big.png"
+    _png_header_only(path, width, height)
+    with pytest.raises(IngestError) as info:
+        read(path)
+    assert expected in str(info.value) and str(path) in str(info.value)
+
+
+def test_the_image_side_cap_is_the_render_cap():
+    from pytest_n2r.data.images import MAX_IMAGE_SIDE
+    from pytest_n2r.render.size import MAX_SIDE
+
+    assert MAX_IMAGE_SIDE == MAX_SIDE

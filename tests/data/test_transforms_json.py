@@ -121,6 +121,21 @@ def test_non_finite_matrix_names_frame(corner):
     assert "frames[4]" in msg and "non-finite" in msg
 
 
+@pytest.mark.parametrize("key", ["fl_x", "cx", "w"])
+def test_an_integer_too_large_for_a_float_names_the_field(corner, key):
+    def mutate(m):
+        m[key] = 10**400
+    msg = _break(corner, mutate)
+    assert f"field {key!r}=an integer of 401 digits must be a finite number" in msg
+
+
+def test_a_matrix_entry_too_large_for_a_float_names_the_frame(corner):
+    def mutate(m):
+        m["frames"][2]["transform_matrix"][0][3] = 10**400
+    msg = _break(corner, mutate)
+    assert "frames[2]" in msg and "'transform_matrix' holds a number too large for a float" in msg
+
+
 def test_non_rigid_matrix_is_refused(corner):
     def mutate(m):
         m["frames"][1]["transform_matrix"] = (np.eye(4) * 2).tolist()

@@ -100,3 +100,22 @@ def test_the_helper_holding_the_lock_starts_the_log_afresh_and_one_without_it_le
     assert run_job(_job(tmp_path)) == []
     assert path.read_text() == "", "the helper holding the lock kept the previous session's lines"
     assert "started at" in capsys.readouterr().out
+
+
+def test_the_log_is_never_written_or_emptied_through_a_link(tmp_path):
+    from pytest_n2r.plugin.precompile import _restart_log
+
+    victim = tmp_path / "notes.txt"
+    victim.write_text("important notes\n")
+    cache = tmp_path / "cache"
+    (cache / "kernel-locks").mkdir(parents=True)
+    link = cache / "kernel-locks" / LOG_NAME
+    link.symlink_to(victim)
+    _restart_log(cache)  # a link in place of the log: left as it is, its target untouched
+    assert victim.read_text() == "important notes\n"
+    with open_log(cache) as log:  # the link is replaced by the log itself
+        log.write("helper line\n")
+    assert victim.read_text() == "important notes\n"
+    assert not link.is_symlink() and link.read_text() == "helper line\n"
+    _restart_log(cache)
+    assert link.read_text() == "" and victim.read_text() == "important notes\n"

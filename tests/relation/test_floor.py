@@ -254,3 +254,10 @@ def test_a_metric_returning_a_nan_deviation_is_no_floor_sample():
 
     sample = shift_sample(_Broken(), 1, 2, None, None, "v0")
     assert not sample.valid and "returned a valid result with deviation nan" in sample.reason, sample
+
+
+@pytest.mark.parametrize("content", ["[" * 100000 + "]" * 100000, '"a floor"', '{"scene": 1, "samples": [[1]]}',
+                                     "{torn"])
+def test_a_stored_floor_that_cannot_be_read_is_measured_again(tmp_path, content):
+    (tmp_path / "k.json").write_text(content)
+    assert FloorStore(tmp_path).get("k") is None

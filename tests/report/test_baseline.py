@@ -149,13 +149,16 @@ def test_every_field_of_a_baseline_is_validated_on_load(tmp_path, path, value, e
      "NaN is not a number JSON allows"),
     ('{"format": "other"}', "is not a pytest-n2r baseline"),
     ("[1, 2]", "is not a pytest-n2r baseline"),
+    ('{"format": "pytest-n2r-baseline", "version": 2, "relations": ' + "[" * 100000 + "]" * 100000 + "}",
+     "not readable JSON: nested too deeply for the JSON parser; regenerate it"),
 ])
 def test_unreadable_baseline_files_say_what_is_wrong(tmp_path, content, expected):
     path = tmp_path / "base.json"
     if content is not None:
         path.write_text(content)
-    with pytest.raises(BaselineError, match=expected):
+    with pytest.raises(BaselineError, match=expected) as info:
         load_baseline(path)
+    assert str(path) in str(info.value)
 
 
 def test_identical_replays_are_ok_with_a_bound_of_exactly_zero():

@@ -198,3 +198,16 @@ def test_a_first_render_that_must_wait_works_meanwhile_once_and_one_that_need_no
     fr._RENDERED.clear()
     _wait_while_held(tmp_path, scene, kind, 0.5, meanwhile=lambda: calls.append(fr._DIRECTORY.get()))
     assert calls == [tmp_path], f"meanwhile ran {len(calls)} times, or without the pieces' lock directory: {calls}"
+
+
+def test_a_lock_file_is_never_created_through_a_link(tmp_path):
+    locks = tmp_path / "kernel-locks"
+    locks.mkdir()
+    target = tmp_path / "elsewhere" / "made-by-the-lock"
+    target.parent.mkdir()
+    link = fr._lock_path(tmp_path, "k")
+    link.symlink_to(target)
+    with fr.claim_kind(tmp_path, "k", wait=False) as held:
+        assert held
+    assert not target.exists(), "the lock was created through a link planted in its place"
+    assert link.is_file() and not link.is_symlink()

@@ -102,18 +102,86 @@ def test_an_entry_cut_short_in_its_pixels_is_rendered_again(tmp_path):
     assert scene.calls == 2 and view.depth.shape == (72, 96)
 
 
-@pytest.mark.parametrize("dtype", [">f4", "<i4"])
-def test_an_entry_with_another_header_is_read_as_numpy_reads_it(tmp_path, dtype):
+def test_an_entry_with_another_header_is_read_as_numpy_reads_it(tmp_path):
     """Entries are read without numpy's header parser when their header is a render's; any other valid
-    ``.npy`` file (here big-endian floats, or integers) is read by ``np.load``."""
+    ``.npy`` file (here big-endian floats) is read by ``np.load``, and given in the render's dtype."""
     scene = PlaneScene()
     camera = scene.views[0].camera
     depth = RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth").depth
     (entry,) = (tmp_path / "renders").glob("*/*.depth.npy")
-    np.save(entry, depth.astype(dtype))
+    np.save(entry, depth.astype(">f4"))
     cached = RenderCache(tmp_path).render(scene, _pose(scene), camera, "depth").depth
-    assert scene.calls == 1 and cached.dtype == np.dtype(dtype) and not cached.flags.writeable
-    np.testing.assert_array_equal(cached, depth.astype(dtype))
+    assert scene.calls == 1 and cached.dtype == np.float32 and not cached.flags.writeable
+    np.testing.assert_array_equal(cached, depth)
+
+
+def _nan_like(value):
+    out = value.astype(np.float32)
+    out[3, 4] = np.nan
+    return out
+
+
+@pytest.mark.parametrize("output, plant", [
+    ("rgb", lambda value: np.full((3, 3), np.nan)),  # another shape and dtype
+    ("rgb", lambda value: value[:, :-1]),  # another width
+    ("rgb", lambda value: value.astype(np.float32)),  # the pixels as floats
+    ("depth", lambda value: value.astype(np.int32)),
+    ("depth", lambda value: value.T.copy()),  # H and W swapped
+    ("depth", _nan_like),
+    ("opacity", lambda value: np.full(value.shape, np.inf, np.float32)),
+    ("opacity", lambda value: value[..., None].copy()),
+])
+def test_an_entry_that_is_not_the_render_asked_for_is_rendered_again(tmp_path, output, plant):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    value = getattr(RenderCache(tmp_path).render(scene, _pose(scene), camera, output), output)
+    (entry,) = (tmp_path / "renders").glob(f"*/*.{output}.npy")
+    np.save(entry, plant(value))
+    again = getattr(RenderCache(tmp_path).render(scene, _pose(scene), camera, output), output)
+    assert scene.calls == 2, "a planted entry was handed out as the render"
+    np.testing.assert_array_equal(again, value)
+    RenderCache(tmp_path).render(scene, _pose(scene), camera, output)
+    assert scene.calls == 2, "the entry rendered again was not stored in place of the planted one"
+
+
+@pytest.mark.parametrize("header", [
+    "{'descr': '<f4', 'fortran_order': True, 'shape': (100000000000,), }",
+    "{'descr': '<i8', 'fortran_order': False, 'shape': (100000000000, 3), }",
+])
+def test_an_entry_whose_header_claims_more_than_the_file_holds_is_rendered_again(tmp_path, header):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    (entry,) = (tmp_path / "renders").glob("*/*.rgb.npy")
+    header += " " * (-(10 + len(header) + 1) % 64) + "\n"
+    entry.write_bytes(b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode() + bytes(16))
+    view = RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    assert scene.calls == 2 and view.rgb.shape == (72, 96, 3)
+    assert entry.read_bytes()[:6] == b"\x93NUMPY" and len(entry.read_bytes()) > 72 * 96 * 3, "not replaced"
+
+
+def test_trimming_never_deletes_through_a_link(tmp_path):
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    victim = tmp_path / "elsewhere"
+    victim.mkdir()
+    np.save(victim / "precious.npy", np.zeros(1000))
+    (victim / "notes.json").write_text("{}")
+    for name in ("precious.npy", "notes.json"):
+        os.utime(victim / name, (1, 1))
+    cache_dir = tmp_path / "cache"
+    cache = RenderCache(cache_dir)
+    cache.render(scene, _pose(scene), camera, "rgb")
+    (cache_dir / "decisions").mkdir()
+    (cache_dir / "renders" / "zz").symlink_to(victim)
+    (cache_dir / "decisions" / "zz").symlink_to(victim)
+    (cache_dir / "renders" / "ab").mkdir()
+    (cache_dir / "renders" / "ab" / "ab.rgb.npy").symlink_to(victim / "precious.npy")
+    cache.disk_bytes = 100
+    assert cache.trim() > 0
+    assert sorted(p.name for p in victim.iterdir()) == ["notes.json", "precious.npy"]
+    own = [p for p in (cache_dir / "renders").glob("*/*.npy") if not (p.is_symlink() or p.parent.is_symlink())]
+    assert own == [], "the cache's own entry was not evicted"
 
 
 def test_disk_cap_evicts_least_recently_used(tmp_path):
@@ -196,6 +264,8 @@ def test_a_decision_is_kept_on_disk_beside_the_renders(tmp_path):
     path = RenderCache(tmp_path)._decision_path(key)
     assert path.is_file() and path.parent.parent == tmp_path / "decisions"
     path.write_text('{"valid": tr')  # torn: decided again, and the file goes
+    assert RenderCache(tmp_path).decision(key) is None and not path.exists()
+    path.write_text("[" * 100000 + "]" * 100000)  # nested too deep for the JSON parser: the same
     assert RenderCache(tmp_path).decision(key) is None and not path.exists()
     cache = RenderCache(tmp_path)
     cache.put_decision(key, {"valid": True})

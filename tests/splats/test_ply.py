@@ -173,6 +173,13 @@ def test_a_truncated_binary_file_says_how_many_bytes_are_missing(tmp_path):
      "PLY header line 4 'property list uchar': expected 'property list COUNT_TYPE ITEM_TYPE NAME'"),
     (b"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar half vertex_indices\nend_header\n",
      "expected 'property list COUNT_TYPE ITEM_TYPE NAME' with types from"),
+    (b"ply\nformat ascii 1.0\nelement vertex " + b"9" * 5000 + b"\nproperty float x\nend_header\n",
+     "PLY header line 3 'element vertex 999"),
+    (b"ply\nformat binary_little_endian 1.0\nelement face 1\nproperty float a\nproperty float a\n"
+     b"element vertex 1\nproperty float x\nend_header\n" + bytes(12),
+     "PLY header line 5 'property float a': property 'a' of element 'face' is declared twice"),
+    (b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty uchar x\nend_header\n1 2\n",
+     "PLY header line 5 'property uchar x': property 'x' of element 'vertex' is declared twice"),
 ])
 def test_broken_headers_get_an_error(tmp_path, content, expected):
     path = tmp_path / "bad.ply"

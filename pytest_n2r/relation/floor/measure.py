@@ -171,7 +171,8 @@ class FloorStore:
             path = self.directory / f"{key}.json"
             try:
                 floor = FieldFloor.from_dict(json.loads(path.read_text()))
-            except (OSError, ValueError, KeyError, TypeError):  # absent, or torn by a crash: measure again
+            # absent, torn by a crash, or not a floor (nested too deep, another shape): measure again
+            except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
                 return None
             self._memory[key] = floor
         return floor
