@@ -43,7 +43,7 @@ def _is_scene_zip(path: Path) -> bool:
     try:
         with zipfile.ZipFile(path) as archive:
             return "scene.json" in archive.namelist()
-    except (zipfile.BadZipFile, OSError):
+    except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError):  # "zip file version 9.1": not ours
         return False
 
 

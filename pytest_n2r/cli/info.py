@@ -213,7 +213,7 @@ class ReportUnreadable(ValueError):
 def _reading(keys: str) -> Iterator[None]:
     try:
         yield
-    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:  # OverflowError: 10**400
         raise ReportUnreadable(keys, exc) from exc
 
 

@@ -327,8 +327,11 @@ def check_field_metadata(metadata: dict, source: str) -> tuple[SceneSpace, int, 
     try:
         space = SceneSpace.from_dict(metadata["space"])
         res, sh_degree, shift = metadata["resolution"], metadata["sh_degree"], metadata["density_shift"]
-        background = as_unit_rgb(metadata["background"])
-    except (KeyError, TypeError, ValueError, InvalidArgument) as exc:
+        try:
+            background = as_unit_rgb(metadata["background"])
+        except OverflowError:  # an integer such as 10**400: named below
+            background = None
+    except (KeyError, TypeError, ValueError, InvalidArgument, OverflowError) as exc:
         raise SceneFileError(f"{source}: field metadata is incomplete or invalid ({exc})") from None
     if isinstance(res, bool) or not isinstance(res, int) or not 4 <= res <= 2048:
         raise SceneFileError(f"{source}: field.resolution={res!r}; expected an integer in 4..2048 (grid vertices "

@@ -59,6 +59,9 @@ def read_member(archive: zipfile.ZipFile, name: str, source: str, limit: int, wh
     try:
         with archive.open(info) as fh:
             data = fh.read(limit + 1)
+    except NotImplementedError as exc:  # a compression method zipfile has no codec for (bzip2, lzma, ...)
+        raise SceneFileError(f"{source}: {name!r} is stored in a way this reader cannot open ({exc}); expected a "
+                             "member stored or deflated, as n2r fit and n2r import write them") from None
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError) as exc:
         raise SceneFileError(f"{source}: {name!r} is corrupt or truncated ({exc})") from None
     if len(data) > limit:  # pragma: no cover - zipfile stops at the declared size

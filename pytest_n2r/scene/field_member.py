@@ -1,5 +1,6 @@
 """The field member of a scene file (``field.safetensors``): its size, refused by its header before it is
-inflated, and the checked :class:`~pytest_n2r.field.grid.SceneField` decoded from it."""
+inflated, and the checked :class:`~pytest_n2r.field.grid.SceneField` decoded from it; :func:`check_memory`, the
+guard every reader of a scene file applies before decoding what a few bytes of JSON may declare to be gigabytes."""
 
 from __future__ import annotations
 
@@ -9,13 +10,34 @@ import zlib
 
 from ..errors import SceneFileError
 from ..field.grid import SceneField, n_sh_coefficients
+from ..fit.free_memory import free_bytes
 from . import schema
 from .archive import StoredMember
 
-__all__ = ["decode_field", "field_limit"]
+__all__ = ["check_memory", "decode_field", "field_bytes", "field_limit"]
 
 #: The most bytes a safetensors header may take (three tensors take under 300 bytes).
 _MAX_TENSOR_HEADER_BYTES = 2**20
+
+
+def check_memory(needed: int, source: str, what: str) -> None:
+    """Refuse, with a :class:`SceneFileError` naming ``source`` and ``what`` (the field of ``scene.json`` that
+    declares the size), to decode what would take ``needed`` bytes when the memory free is less: a small file
+    may declare a huge grid, splat count or photo, and torch's or NumPy's allocator failure names nothing."""
+    import torch
+
+    free = free_bytes(torch.device("cpu"))
+    if free is not None and needed > free:
+        raise SceneFileError(f"{source}: {what} would take about {needed / 2**30:.2f} GiB to decode, more than the "
+                             f"{free / 2**30:.2f} GiB of memory free; the file is corrupt, or needs a larger machine")
+
+
+def field_bytes(resolution: int, data_bytes: int) -> int:
+    """The peak bytes decoding a field takes (:meth:`~pytest_n2r.field.grid.SceneField.from_tensors`): per vertex
+    of the ``resolution``³ grid, the occupancy, its bool copy and the used-vertex mask (a byte each) and the
+    int32 row map; and four times the tensors' ``data_bytes`` (the inflated member, the loaded tensors, the
+    float32 copy of the float16 values and the checks' temporaries)."""
+    return 7 * resolution ** 3 + 4 * data_bytes
 
 
 def field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
@@ -52,6 +74,7 @@ def field_limit(archive: zipfile.ZipFile, field_meta: dict, source: str) -> int:
     if end > (res - 1) ** 3 + res ** 3 * (8 + 2 * width):  # names, shapes, dtypes: checked once loaded
         raise SceneFileError(f"{where}: its tensors claim {end:,} bytes, more than the declared {res}³ grid of "
                              f"SH degree {sh_degree} can hold; the file is corrupt or not written by `n2r fit`")
+    check_memory(field_bytes(res, total), where, f"the {res}³ grid of {schema.SCENE_JSON} field.resolution")
     return total
 
 
@@ -62,6 +85,10 @@ def decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneFi
 
     try:
         tensors = safetensors.torch.load(stored.inflate())
+        return SceneField.from_tensors(field_meta, tensors, f"{source}: {schema.FIELD_FILE}")
     except safetensors.SafetensorError as exc:
         raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
-    return SceneField.from_tensors(field_meta, tensors, f"{source}: {schema.FIELD_FILE}")
+    except (MemoryError, RuntimeError) as exc:  # torch's allocator: "DefaultCPUAllocator: can't allocate memory"
+        raise SceneFileError(f"{source}: {schema.FIELD_FILE} could not be decoded ({type(exc).__name__}: "
+                             f"{str(exc)[:200]}); the field declared in {schema.SCENE_JSON} does not fit in the "
+                             "memory free") from None

@@ -32,7 +32,7 @@ from ..field.grid import SceneField, check_field_metadata
 from . import schema
 from .archive import StoredMember, read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
-from .field_member import decode_field, field_limit
+from .field_member import check_memory, decode_field, field_limit
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 
@@ -215,6 +215,34 @@ def _decode_jpeg(payload: bytes, member: str, name: str, source: str, width: int
     return np.ascontiguousarray(image[:, :, ::-1])  # BGR → RGB
 
 
+def _read_photos(archive: zipfile.ZipFile, frames: list, source: str) -> dict[str, np.ndarray]:
+    """The photos of ``frames`` by member name, each member decoded once (frames naming the same one share its
+    array), once their decoded size (3 bytes a pixel, over the distinct members) is known to fit in memory."""
+    sizes = {}
+    for _, camera, _, _, member in frames:
+        if member is not None:
+            sizes.setdefault(member, 3 * camera.width * camera.height)
+    check_memory(sum(sizes.values()), f"{source}: {schema.SCENE_JSON}",
+                 f"the {len(sizes)} photos its frames name (width x height of their cameras)")
+    photos: dict[str, np.ndarray] = {}
+    try:
+        for name, camera, _, _, member in frames:
+            if member is None:
+                continue
+            if member not in photos:
+                limit = 6 * camera.width * camera.height + 2**20  # a JPEG is smaller than twice its pixels
+                payload = read_member(archive, member, source, limit, f"a {camera.width}x{camera.height} photo")
+                photos[member] = _decode_jpeg(payload, member, name, source, camera.width, camera.height)
+            elif photos[member].shape[:2] != (camera.height, camera.width):
+                shape = photos[member].shape
+                raise SceneFileError(f"{source}: {member} is {shape[1]}x{shape[0]} pixels; frame {name!r} has a "
+                                     f"{camera.width}x{camera.height} camera")
+    except MemoryError:
+        raise SceneFileError(f"{source}: its photos do not fit in the memory free (decoding {len(photos) + 1} of "
+                             f"{len(sizes)}); read it with images=False") from None
+    return photos
+
+
 #: How far the field's normalization may stray from the scene's own scale, in reference lengths: a fit
 #: sets its radius to half the captured region (cameras included), a few reference lengths.
 _MAX_NORMALIZATION_RATIO = 1e4
@@ -235,7 +263,7 @@ def _check_normalization(space: Any, reference_length: float, bounds: np.ndarray
                              f"reference length {reference_length:.4g} (scene units)")
     try:
         offset = np.abs(np.asarray(center, dtype=np.float64) - bounds.mean(axis=0))
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         offset = np.full(3, np.nan)
     if offset.shape != (3,) or not offset.max() <= reference_length * limit:
         raise SceneFileError(f"{where}.center={center!r}; expected three numbers within {limit:g} reference "
@@ -251,7 +279,7 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
     metres_per_unit = schema.read_number(data, "metres_per_unit", source, optional=True)
     try:
         bounds = np.asarray(data["bounds"], dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an integer such as 10**400
         bounds = np.zeros(0)
     if bounds.shape != (2, 3) or not np.isfinite(bounds).all() or not (bounds[0] <= bounds[1]).all():
         raise SceneFileError(f"{source}: {schema.SCENE_JSON} bounds={data['bounds']!r}; expected [[min x, y, z], "
@@ -295,6 +323,9 @@ def _open(path: Path) -> zipfile.ZipFile:
     except (zipfile.BadZipFile, OSError) as exc:
         raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc}); a .n2r scene file is the zip "
                              "archive `n2r fit` writes") from None
+    except (NotImplementedError, RuntimeError) as exc:  # e.g. "zip file version 9.1" in the central directory
+        raise SceneFileError(f"{source}: not a zip archive this reader can open ({exc}); a .n2r scene file is the "
+                             "zip archive `n2r fit` writes") from None
 
 
 def check_scene_file(path: str | os.PathLike) -> None:
@@ -332,15 +363,9 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
         limit = field_limit(archive, field_meta, source)
         stored = StoredMember.read(archive, path, schema.FIELD_FILE, source, limit, "its safetensors header")
         background = as_unit_rgb(field_meta["background"])  # checked by _check_json
-        views = []
-        for index, (name, camera, c2w, split, member) in enumerate(frames):
-            image = None
-            if images and member is not None:
-                limit = 6 * camera.width * camera.height + 2**20  # a JPEG is smaller than twice its pixels
-                payload_jpeg = read_member(archive, member, source, limit,
-                                       f"a {camera.width}x{camera.height} photo")
-                image = _decode_jpeg(payload_jpeg, member, name, source, camera.width, camera.height)
-            views.append(SceneView(index, name, camera, c2w, split, image))
+        photos = _read_photos(archive, frames, source) if images else {}
+        views = [SceneView(index, name, camera, c2w, split, photos.get(member))
+                 for index, (name, camera, c2w, split, member) in enumerate(frames)]
     scene = SceneFile(
         path=path, version=schema.FORMAT_VERSION, views=tuple(views), config=config, report=data["report"],
         reference_length=reference_length, metres_per_unit=metres_per_unit, bounds=bounds,

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import repeated_name
+from .._validation import is_finite, repeated_name
 from ..errors import InvalidArgument, InvalidType, SceneFileError
 from ..geometry import Camera, check_pose
 from ..render.size import MAX_SIDE
@@ -114,7 +114,7 @@ def read_number(data: dict, key: str, source: str, *, positive: bool = True, opt
     value = require(data, key, SCENE_JSON, source)
     if value is None and optional:
         return None
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value) \
             or (positive and value <= 0):
         kind = "a finite number > 0" + (" or null" if optional else "")
         raise SceneFileError(f"{source}: {SCENE_JSON} {key}={value!r}; expected {kind}")
@@ -172,6 +172,9 @@ def read_frames(data: dict, source: str) -> list[tuple[str, Camera, np.ndarray, 
                                  f"{len(cameras)} cameras")
         try:
             pose = check_pose(np.asarray(c2w, dtype=np.float64), f"{where}.c2w")
+        except OverflowError:  # a JSON integer beyond float's range, such as 10**400
+            raise SceneFileError(f"{source}: {SCENE_JSON} {where}.c2w holds a number beyond float's range (expected a "
+                                 "rigid 4x4 camera-to-world matrix)") from None
         except (InvalidArgument, InvalidType, TypeError, ValueError) as exc:
             raise SceneFileError(f"{source}: {exc} (expected a rigid 4x4 camera-to-world matrix)") from None
         if split not in SPLITS:

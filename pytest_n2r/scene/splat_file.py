@@ -26,6 +26,7 @@ from ..splats.gaussians import TENSORS, Gaussians
 from . import schema
 from .archive import read_member, read_scene_json, zip_bytes
 from .base import SceneView
+from .field_member import check_memory
 from .splat_scene import SplatScene
 
 __all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene",
@@ -48,8 +49,8 @@ def is_splat_file(path: str | os.PathLike) -> bool:
             if archive.getinfo(schema.SCENE_JSON).file_size > MAX_JSON_BYTES:
                 return False  # the field reader names the oversized member
             data = json.loads(archive.read(schema.SCENE_JSON))
-    except (OSError, KeyError, zipfile.BadZipFile, ValueError, RecursionError):
-        return False
+    except (OSError, KeyError, zipfile.BadZipFile, ValueError, RecursionError, NotImplementedError, RuntimeError):
+        return False  # NotImplementedError: "zip file version 9.1"; the field reader names what is wrong
     return isinstance(data, dict) and data.get("representation") == REPRESENTATION
 
 
@@ -104,6 +105,8 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
         archive = zipfile.ZipFile(path)
     except (zipfile.BadZipFile, OSError) as exc:
         raise SceneFileError(f"{source}: not a zip archive, or truncated ({exc})") from None
+    except (NotImplementedError, RuntimeError) as exc:  # e.g. "zip file version 9.1" in the central directory
+        raise SceneFileError(f"{source}: not a zip archive this reader can open ({exc})") from None
     with archive:
         data = read_scene_json(archive, source)
         if not isinstance(data, dict) or data.get("format") != schema.FORMAT_NAME:
@@ -118,7 +121,10 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
         reference_length = schema.read_number(data, "reference_length", source)
         metres_per_unit = schema.read_number(data, "metres_per_unit", source, optional=True)
         meta = data["splats"]
-        background = as_unit_rgb(meta.get("background")) if isinstance(meta, dict) else None
+        try:
+            background = as_unit_rgb(meta.get("background")) if isinstance(meta, dict) else None
+        except OverflowError:  # a JSON integer such as 10**400
+            background = None
         if background is None:
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats.background={meta!r}; expected three values "
                                  "in [0, 1]")
@@ -127,18 +133,24 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
             raise SceneFileError(f"{source}: {schema.SCENE_JSON} splats count={count!r}, sh_degree={degree!r}; "
                                  "expected a count >= 0 and a degree in 0..3")
         values = 11 + 3 * (degree + 1) ** 2  # means, quats, log_scales, opacity and SH per Gaussian
+        # the member as read, the arrays loaded from it and the Gaussians' own: three float32 copies
+        check_memory(3 * 4 * values * count, f"{source}: {schema.SCENE_JSON}",
+                     f"splats.count={count:,} Gaussians of SH degree {degree}")
         payload = read_member(archive, SPLATS_FILE, source, 2**20 + 4 * values * count,
                           f"{count} float32 Gaussians of SH degree {degree}")
     try:
         tensors = safetensors.numpy.load(payload)
+        if set(tensors) != set(TENSORS):
+            raise SceneFileError(f"{source}: {SPLATS_FILE} holds the tensors {sorted(tensors)}; expected "
+                                 f"{sorted(TENSORS)}")
+        gaussians = Gaussians(**tensors)
     except safetensors.SafetensorError as exc:
         raise SceneFileError(f"{source}: {SPLATS_FILE} is not a valid safetensors file ({exc})") from None
-    if set(tensors) != set(TENSORS):
-        raise SceneFileError(f"{source}: {SPLATS_FILE} holds the tensors {sorted(tensors)}; expected {sorted(TENSORS)}")
-    try:
-        gaussians = Gaussians(**tensors)
     except (ValueError, TypeError) as exc:
         raise SceneFileError(f"{source}: {SPLATS_FILE}: {exc}") from None
+    except (MemoryError, RuntimeError) as exc:  # the allocator, on a machine with less memory than estimated
+        raise SceneFileError(f"{source}: {SPLATS_FILE} could not be decoded ({type(exc).__name__}: "
+                             f"{str(exc)[:200]}); the {count:,} Gaussians do not fit in the memory free") from None
     if len(gaussians) != count or gaussians.sh_degree != degree:
         raise SceneFileError(f"{source}: {SPLATS_FILE} holds {len(gaussians)} Gaussians of SH degree "
                              f"{gaussians.sh_degree}; {schema.SCENE_JSON} says {count!r} of degree {degree!r}")

@@ -44,6 +44,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("fit over a .n2r that is no scene", "fit {capture} -o {fake_n2r}",
      (r"fake\.n2r: exists and is not a \.n2r scene file, so writing would destroy it; choose another nam"
       r"e, or pass --force")),
+    ("fit over a zip needing version 9.1", "fit {capture} -o {zip91_n2r}",
+     r"zip91\.n2r: exists and is not a \.n2r scene file, so writing would destroy it"),
     ("fit over its own input scene", "fit {scene} -o {scene}",
      r"is this command's input .*; writing there would destroy it"),
     ("fit into a folder", "fit {capture} -o {capture}",
@@ -193,6 +195,10 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"odd_detail\.n2r: scene\.json report 'detail': ValueError: Unknown format code 'f'"),
     ("info on a report whose exposure holds text", "info {odd_exposure}",
      r"odd_exposure\.n2r: scene\.json report 'exposure': TypeError"),
+    ("info on a report whose downscale is 10**400", "info {huge_downscale}",
+     r"huge_downscale\.n2r: scene\.json report 'source' or 'downscale': OverflowError"),
+    ("info on a zip needing version 9.1", "info {zip91_n2r}",
+     r"zip91\.n2r: not a zip archive this reader can open \(zip file version 9\.1\)"),
     # -- n2r poses
     ("poses of a missing source", "poses {tmp}/nowhere", r"SOURCE .*nowhere: does not exist"),
     ("poses over the capture's transforms.json", "poses {capture} -o {capture}/transforms.json",
@@ -326,14 +332,30 @@ def workspace(tmp_path_factory) -> dict[str, str]:
                          ("odd_detail", {"detail": {"pixels_per_voxel": "fine", "matching_resolution": 1}}),
                          ("odd_exposure", {"exposure": "varied"})):
         save_scene(tmp / f"{name}.n2r", random_field(), FieldConfig(), tiny_views(), report, reference_length=3.0)
+    save_scene(tmp / "huge_downscale.n2r", random_field(), FieldConfig(), tiny_views(),  # not odd_*: a glob case
+               {"source": "x", "downscale": 10**400}, reference_length=3.0)
+    _needing_zip_version(shutil.copy(scene, tmp / "zip91.n2r"), 91)
     return {"tmp": str(tmp), "scene": str(scene), "capture": str(capture), "notes_txt": str(tmp / "notes.txt"),
             "fake_n2r": str(tmp / "fake.n2r"), "fake_png": str(tmp / "fake.png"), "new_n2r": str(tmp / "new.n2r"),
             "new_png": str(tmp / "new.png"), "other_json": str(tmp / "other.json"),
             "empty_n2r": str(tmp / "empty.n2r"), "plain_zip": str(tmp / "plain.n2r"),
             "odd_limits": str(tmp / "odd_limits.n2r"), "odd_detail": str(tmp / "odd_detail.n2r"),
-            "odd_exposure": str(tmp / "odd_exposure.n2r"), "deep_json": str(tmp / "deep.json"),
+            "odd_exposure": str(tmp / "odd_exposure.n2r"), "huge_downscale": str(tmp / "huge_downscale.n2r"),
+            "zip91_n2r": str(tmp / "zip91.n2r"), "deep_json": str(tmp / "deep.json"),
             "fisheye_json": str(tmp / "fisheye.json"), "corner": str(corner), "dcim": str(tmp / "dcim"),
             "two": str(two)}
+
+
+def _needing_zip_version(path: str | Path, version: int) -> Path:
+    """Patch the zip ``path`` in place so that its central directory says every member needs zip ``version``
+    (91: "9.1") to extract: Python's zipfile raises NotImplementedError on opening it."""
+    data = bytearray(Path(path).read_bytes())
+    at = data.find(b"PK\x01\x02")
+    while at >= 0:
+        data[at + 6:at + 8] = version.to_bytes(2, "little")
+        at = data.find(b"PK\x01\x02", at + 4)
+    Path(path).write_bytes(bytes(data))
+    return Path(path)
 
 
 def _argv(template: str, workspace: dict[str, str]) -> list[str]:
@@ -478,6 +500,18 @@ SCENE_FILE_CASES = [
     ("grid resolution 5000", {"edit": _set("field.resolution", 5000)},
      r"field\.resolution=5000; expected an integer in 4\.\.2048"),
     ("SH degree 3", {"edit": _set("field.sh_degree", 3)}, r"field\.sh_degree=3; expected 0, 1 or 2"),
+    ("reference_length 10**400", {"edit": _set("reference_length", 10**400)},
+     r"scene\.json reference_length=10{400}; expected a finite number > 0"),
+    ("metres_per_unit 10**400", {"edit": _set("metres_per_unit", 10**400)},
+     r"scene\.json metres_per_unit=10{400}; expected a finite number > 0 or null"),
+    ("a pose holding 10**400", {"edit": _set("frames.0.c2w.0.3", 10**400)},
+     r"scene\.json frames\[0\]\.c2w holds a number beyond float's range"),
+    ("normalization centre 10**400", {"edit": _set("normalization.center", [10**400, 0, 0])},
+     r"normalization\.center=\[10{400}, 0, 0\]; expected three numbers"),
+    ("bounds holding 10**400", {"edit": _set("bounds", [[-1, -1, -1], [10**400, 1, 1]])},
+     r"scene\.json bounds=\[\[-1, -1, -1\], \[10{400}, 1, 1\]\]; expected \[\[min x, y, z\]"),
+    ("background 10**400", {"edit": _set("field.background", [10**400, 0, 0])},
+     r"field\.background=\[10{400}, 0, 0\]; expected three values in \[0, 1\]"),
     ("a config with seed 'x'", {"edit": _set("config.seed", "x")},
      r"'config' is not a valid FieldConfig \(FieldConfig\.seed='x'"),
     ("scene.json nested 100 000 deep", {"replace": {SCENE_JSON: b"[" * 100_000 + b"]" * 100_000}},
@@ -493,6 +527,16 @@ SCENE_FILE_CASES = [
      r"tensor 'vertex_values' holds NaN or Inf"),
     ("a photo claiming 60000x60000 pixels", {"replace": {"images/frame_000.jpg": "huge jpeg"}},
      r"images/frame_000\.jpg is 60000x60000 pixels; frame 'frame_000\.png' has a 20x16 camera"),
+    # an empty field declaring a 1024³ grid (a 1 MB file) took torch's allocator down with a bare RuntimeError:
+    # the free memory is read as 256 MiB here rather than gigabytes allocated
+    ("a 1024³ grid with 256 MiB free", {"edit": _set("field.resolution", 1024), "free": 2**28},
+     (r"field\.safetensors: the 1024³ grid of scene\.json field\.resolution would take about 7\.\d+ GiB to "
+      r"decode, more than the 0\.25 GiB of memory free")),
+    ("4096² photos with 64 MiB free", {"edit": _set("cameras.0", {**tiny_views()[0].camera.to_dict(),
+                                                                 "width": 4096, "height": 4096}), "free": 2**26},
+     r"scene\.json: the 4 photos its frames name \(width x height of their cameras\) would take about 0\.19 GiB"),
+    ("a zip needing version 9.1", {"zip_version": 91},
+     r"not a zip archive this reader can open \(zip file version 9\.1\)"),
 ]
 
 
@@ -503,20 +547,29 @@ def good_scene(tmp_path_factory) -> Path:
 
 
 @pytest.mark.parametrize(("how", "expected"), [c[1:] for c in SCENE_FILE_CASES], ids=[c[0] for c in SCENE_FILE_CASES])
-def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected, good_scene, tmp_path):
+def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected, good_scene, tmp_path, monkeypatch):
     built = {"huge jpeg": lambda: _huge_jpeg(good_scene), "inf values": lambda: _field_values(float("inf"))}
     how = {**how, "replace": {k: built[v]() if isinstance(v, str) else v for k, v in how.get("replace", {}).items()}}
     bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=how.get("edit"), replace=how["replace"])
+    if "zip_version" in how:
+        _needing_zip_version(bad, how["zip_version"])
+    if "free" in how:
+        monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: how["free"])
     _refused_in_bounded_memory(read_scene_file, bad, expected)
 
 
-JSON_CASES = [c for c in SCENE_FILE_CASES if set(c[1]) == {"edit"}]
+#: the cases of ``scene.json`` alone (with the memory free, where a case sets it), which check_scene_file refuses too
+JSON_CASES = [c for c in SCENE_FILE_CASES if "edit" in c[1] and set(c[1]) <= {"edit", "free"}
+              and "photos" not in c[2]]
 
 
 @pytest.mark.parametrize("edit, expected", [c[1:] for c in JSON_CASES], ids=[c[0] for c in JSON_CASES])
-def test_check_scene_file_refuses_what_the_reader_refuses_in_scene_json(edit, expected, good_scene, tmp_path):
+def test_check_scene_file_refuses_what_the_reader_refuses_in_scene_json(edit, expected, good_scene, tmp_path,
+                                                                       monkeypatch):
     """The plugin checks every scene file at start-up with :func:`check_scene_file` (no inflating): a fault
     of ``scene.json`` must stop it there, not at the first render."""
+    if "free" in edit:
+        monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: edit["free"])
     bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=edit["edit"])
     with pytest.raises(SceneFileError) as info:
         check_scene_file(bad)
@@ -582,3 +635,18 @@ def test_a_splat_scene_file_whose_tensors_inflate_to_a_gigabyte_is_refused_befor
     bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": 2**30})
     _refused_in_bounded_memory(load_scene, bad, r"'splats\.safetensors' inflates to 1,073,741,824 bytes, more than "
                                                 r"the 1,048,744 bytes 3 float32 Gaussians of SH degree 0 allows")
+
+
+def test_a_splat_scene_file_declaring_more_gaussians_than_memory_holds_is_refused(good_scene, tmp_path, monkeypatch):
+    """``splats.count`` sizes the read: 10⁹ Gaussians of SH degree 3 (708 GB of float32) are refused from the
+    count alone, before the member is read (the free memory is read as 1 GiB here)."""
+    from pytest_n2r.scene import load_scene
+
+    def as_splats(data):
+        data["representation"] = "splats"
+        data["splats"] = {"count": 10**9, "sh_degree": 3, "background": [0, 0, 0]}
+
+    monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: 2**30)
+    bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": b"x"})
+    _refused_in_bounded_memory(load_scene, bad, r"scene\.json: splats\.count=1,000,000,000 Gaussians of SH degree 3 "
+                                                r"would take about 659\.\d+ GiB to decode, more than the 1\.00 GiB")

@@ -308,3 +308,72 @@ def test_photos_in_subfolders_with_the_same_name_keep_their_own_copy(tmp_path):
     for saved, loaded in zip(views, read_scene_file(path).views):
         assert loaded.name == saved.name and np.abs(saved.image.astype(int) - loaded.image).mean() < 2.0, \
             f"frame {saved.name!r} got another frame's photo"
+
+
+def test_frames_naming_one_photo_share_it_decoded_once(tmp_path, monkeypatch):
+    """Many frames may name the same ``images/`` member (40 frames of one 4096² JPEG took 2.27 GB): it is decoded
+    once, its array shared, and the memory check counts it once."""
+    import pytest_n2r.scene.file as scene_file
+
+    def same_photo(data):
+        for frame in data["frames"]:
+            frame["image"] = data["frames"][0]["image"]
+
+    bad = rewrite(write(tmp_path / "good.n2r"), tmp_path / "same.n2r", edit_json=same_photo)
+    decoded = []
+    decode = scene_file._decode_jpeg
+    monkeypatch.setattr(scene_file, "_decode_jpeg", lambda *a: decoded.append(a[1]) or decode(*a))
+    checked = []
+    monkeypatch.setattr(scene_file, "check_memory", lambda needed, source, what: checked.append(needed))
+    scene = read_scene_file(bad)
+    assert decoded == ["images/frame_000.jpg"]
+    assert checked == [20 * 16 * 3], "the photos' memory check counts a photo once, however many frames name it"
+    assert all(v.image is scene.views[0].image for v in scene.views)
+    assert read_scene_file(bad, images=False).views[0].image is None
+
+
+def test_an_allocator_failure_while_decoding_the_field_names_the_file(tmp_path, monkeypatch):
+    from pytest_n2r.field.grid import SceneField
+
+    def fail(*args):
+        raise RuntimeError("[enforce fail at alloc_cpu.cpp:127] DefaultCPUAllocator: can't allocate memory")
+
+    path = write(tmp_path / "scene.n2r")
+    monkeypatch.setattr(SceneField, "from_tensors", fail)
+    with pytest.raises(SceneFileError, match=r"scene\.n2r: field\.safetensors could not be decoded \(RuntimeError: "
+                                             r".*can't allocate memory\); the field declared in scene\.json does not"):
+        read_scene_file(path)
+
+
+def test_a_splat_zip_needing_version_9_1_is_a_scene_file_error(tmp_path):
+    from pytest_n2r.scene.splat_file import is_splat_file, read_splat_file
+
+    path = write(tmp_path / "scene.n2r")
+    data = bytearray(path.read_bytes())
+    at = data.index(b"PK\x01\x02")
+    data[at + 6:at + 8] = (91).to_bytes(2, "little")
+    path.write_bytes(bytes(data))
+    assert not is_splat_file(path)
+    with pytest.raises(SceneFileError, match=r"scene\.n2r: not a zip archive this reader can open \(zip file "
+                                             r"version 9\.1\)"):
+        read_splat_file(path)
+
+
+def test_a_member_compressed_by_a_method_zipfile_lacks_is_a_scene_file_error(tmp_path):
+    """zipfile raises a bare NotImplementedError for a compression method it has no codec for."""
+    import zipfile
+
+    from pytest_n2r.errors import SceneFileError
+    from pytest_n2r.scene.archive import read_member
+
+    path = tmp_path / "method99.n2r"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("scene.json", "{}")
+    data = bytearray(path.read_bytes())
+    for signature, offset in ((b"PK\x01\x02", 10), (b"PK\x03\x04", 8)):  # central and local headers' method
+        at = data.find(signature)
+        data[at + offset:at + offset + 2] = (99).to_bytes(2, "little")
+    path.write_bytes(bytes(data))
+    with zipfile.ZipFile(path) as archive, pytest.raises(SceneFileError, match="'scene.json' is stored in a way this "
+                                                                               "reader cannot open"):
+        read_member(archive, "scene.json", str(path), 1000, "a test")
