@@ -39,7 +39,7 @@ from .sut_outputs import MISSING, SUTOutputs
 from .timeout import time_limit
 from .validity import Verdict
 
-__all__ = ["Engine", "Evaluation", "recorded_view", "same_pixels"]
+__all__ = ["Engine", "Evaluation", "recorded_view", "same_pixels", "too_many_invalid_so_far"]
 
 #: Give up on a relation once this many draws were invalid and, with 99 % confidence, more than ``max_rejected``
 #: of all draws will be (see :meth:`Engine.count`).
@@ -277,16 +277,13 @@ class Engine:
         at least 40 invalid ones whose share is above ``max_rejected`` with 99 % confidence (Clopper-Pearson).
 
         Stopping on the running shares instead ended relations that would have passed: more than half undefined
-        at some draw when 40-45 % were, above 90 % invalid at some draw when 80-85 % were (7-30 % of runs).
+        at some draw when 40-45 % were, above 90 % invalid at some draw when 80-85 % were
+        (``tests/relation/test_engine.py -k gives_up`` measures both rules).
         """
         run = self.run_record
         run.examples.append(record)
-        rejected, drawn, limit = run.rejected, len(run.examples), self.relation.validity.max_rejected
-        if rejected >= _MIN_REJECTED_TO_GIVE_UP and limit < 1.0:
-            from scipy.stats import beta
-
-            if float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit:
-                self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
+        if too_many_invalid_so_far(run.rejected, len(run.examples), self.relation.validity.max_rejected):
+            self.gave_up = "invalid"  # check_relation raises once Hypothesis stops
         if run.undefined / (run.asked + run.undefined) > MAX_UNDEFINED:  # asked: the most valid examples there can be
             self.gave_up = "undefined"
 
@@ -345,6 +342,20 @@ class Engine:
             view = recorded_view(rec, "replayed")
             out.append(self.evaluate(view, rec.follow_up(), camera=view.camera).record)
         return out
+
+
+def too_many_invalid_so_far(rejected: int, drawn: int, limit: float) -> bool:
+    """Whether ``rejected`` invalid draws of ``drawn`` show, with 99 % confidence (a one-sided Clopper-Pearson
+    bound), that more than ``limit`` of all draws will be invalid; never before 40 rejections.
+
+    >>> too_many_invalid_so_far(44, 44, 0.9), too_many_invalid_so_far(43, 44, 0.9)
+    (True, False)
+    """
+    if rejected < _MIN_REJECTED_TO_GIVE_UP or limit >= 1.0:
+        return False
+    from scipy.stats import beta
+
+    return float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit
 
 
 def same_pixels(image: np.ndarray, other: np.ndarray) -> bool:

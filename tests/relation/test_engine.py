@@ -315,3 +315,35 @@ def test_a_search_with_fewer_distinct_draws_than_asked_says_so():
     assert record.asked == 20 and 0 < len(record.valid_examples) < 20, record.summary_line()
     assert f"{len(record.valid_examples)} examples (20 asked: the search found no more distinct ones)" in (
         record.summary_line()), record.summary_line()
+
+
+def _gives_up(share: float, rule, rng: np.random.Generator, asked: int = 20) -> bool:
+    """One survey drawing until ``asked`` valid examples, each draw invalid with probability ``share``: whether
+    ``rule(rejected, drawn)`` stopped it first."""
+    valid = rejected = 0
+    while valid < asked:
+        if rng.random() < share:
+            rejected += 1
+        else:
+            valid += 1
+        if rule(rejected, valid + rejected):
+            return True
+    return False
+
+
+@pytest.mark.parametrize("share", [0.8, 0.85])
+def test_the_search_gives_up_on_invalid_draws_only_when_the_end_is_known(share):
+    """The running share passing 90 % after 40 rejections ended 7 % of the relations with 80 % invalid draws and
+    30 % of those with 85 %, which pass at their end (max_rejected 0.9); the Clopper-Pearson rule ends under 1 %."""
+    from pytest_n2r.relation.engine import too_many_invalid_so_far
+
+    def running_share(rejected, drawn):
+        return rejected >= 40 and rejected / drawn > 0.9
+
+    rng = np.random.default_rng(11)
+    old = sum(_gives_up(share, running_share, rng) for _ in range(400)) / 400
+    new = sum(_gives_up(share, lambda r, d: too_many_invalid_so_far(r, d, 0.9), rng) for _ in range(400)) / 400
+    print(f"{share:.0%} invalid: the running share gave up on {old:.1%}, the bound on {new:.1%}")
+    assert old > 0.04 and new < 0.01, (old, new)
+    assert not too_many_invalid_so_far(43, 44, 0.9) and too_many_invalid_so_far(44, 44, 0.9), (
+        "every draw invalid: the search stops after 44")
