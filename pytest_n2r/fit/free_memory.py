@@ -3,88 +3,29 @@ says is free (:func:`free_bytes`), read before each move to a finer grid (:mod:`
 
 Convention
 ----------
-Bytes. On the CPU, ``MemAvailable`` from ``/proc/meminfo`` (what can be allocated without swapping, page cache
-included), or less where this process's cgroup limit leaves less: v2 ``memory.max`` − ``memory.current``, v1
-``memory.limit_in_bytes`` − ``memory.usage_in_bytes``, the tightest over the cgroup and its ancestors, usage
-counted without the inactive file cache the kernel reclaims first (as ``docker stats`` does).
+Bytes. On the CPU, :func:`pytest_n2r.host_memory.cpu_free_bytes` (``MemAvailable``, or a container's cgroup
+headroom where that is less); on CUDA, the device's free memory plus what torch's cache holds unused.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import TYPE_CHECKING
 
-import torch
+from ..host_memory import cpu_free_bytes
+
+if TYPE_CHECKING:
+    import torch
 
 __all__ = ["free_bytes"]
-
-#: Where the kernel lists this process's cgroups, and where their files are (module constants for the tests).
-_PROC_CGROUP = Path("/proc/self/cgroup")
-_CGROUP_ROOT = Path("/sys/fs/cgroup")
 
 
 def free_bytes(device: torch.device) -> int | None:
     """The bytes a fit on ``device`` may still allocate: on CUDA the device's free memory plus what torch's
-    cache holds unused; on the CPU the kernel's ``MemAvailable``, or less where this process's cgroup (v1 or
-    v2, a container's limit) leaves less. ``None`` where the system does not say (no guard is then applied)."""
+    cache holds unused; on the CPU :func:`~pytest_n2r.host_memory.cpu_free_bytes`. ``None`` where the system does
+    not say (no guard is then applied)."""
     if device.type == "cuda":
+        import torch
+
         free, _ = torch.cuda.mem_get_info(device)
         return int(free + torch.cuda.memory_reserved(device) - torch.cuda.memory_allocated(device))
-    known = [b for b in (_meminfo_available(), _cgroup_free()) if b is not None]
-    return min(known) if known else None
-
-
-def _meminfo_available() -> int | None:
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
-def _cgroup_free() -> int | None:
-    """The least headroom under this process's cgroup memory limits and their ancestors' (usage counted
-    without the inactive file cache the kernel reclaims first, as ``docker stats`` does)."""
-    try:
-        lines = _PROC_CGROUP.read_text().splitlines()
-    except OSError:
-        return None
-    free = []
-    for line in lines:
-        parts = line.split(":", 2)
-        if len(parts) != 3:
-            continue
-        _, controllers, path = parts
-        if controllers == "":
-            base, limit_file, usage_file, cache_key = _CGROUP_ROOT, "memory.max", "memory.current", "inactive_file"
-        elif "memory" in controllers.split(","):
-            base, limit_file, usage_file, cache_key = (_CGROUP_ROOT / "memory", "memory.limit_in_bytes",
-                                                       "memory.usage_in_bytes", "total_inactive_file")
-        else:
-            continue
-        folder = base / path.lstrip("/")
-        while folder != base.parent:
-            limit, usage = _read_int(folder / limit_file), _read_int(folder / usage_file)
-            if limit is not None and usage is not None:
-                free.append(limit - usage + _stat_value(folder / "memory.stat", cache_key))
-            folder = folder.parent
-    return min(free) if free else None
-
-
-def _read_int(path: Path) -> int | None:
-    try:
-        return int(path.read_text().strip())
-    except (OSError, ValueError):
-        return None  # absent, or "max": no limit
-
-
-def _stat_value(path: Path, key: str) -> int:
-    try:
-        for line in path.read_text().splitlines():
-            name, _, value = line.partition(" ")
-            if name == key:
-                return int(value)
-    except (OSError, ValueError):
-        pass
-    return 0
+    return cpu_free_bytes()

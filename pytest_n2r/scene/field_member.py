@@ -1,6 +1,6 @@
 """The field member of a scene file (``field.safetensors``): its size, refused by its header before it is
-inflated, and the checked :class:`~pytest_n2r.field.grid.SceneField` decoded from it; :func:`check_memory`, the
-guard every reader of a scene file applies before decoding what a few bytes of JSON may declare to be gigabytes."""
+inflated (and sized against the memory free: :mod:`.memory_guard`), and the checked
+:class:`~pytest_n2r.field.grid.SceneField` decoded from it."""
 
 from __future__ import annotations
 
@@ -10,26 +10,14 @@ import zlib
 
 from ..errors import SceneFileError
 from ..field.grid import SceneField, n_sh_coefficients
-from ..fit.free_memory import free_bytes
 from . import schema
 from .archive import StoredMember
+from .memory_guard import check_memory
 
-__all__ = ["check_memory", "decode_field", "field_bytes", "field_limit"]
+__all__ = ["decode_field", "field_bytes", "field_limit"]
 
 #: The most bytes a safetensors header may take (three tensors take under 300 bytes).
 _MAX_TENSOR_HEADER_BYTES = 2**20
-
-
-def check_memory(needed: int, source: str, what: str) -> None:
-    """Refuse, with a :class:`SceneFileError` naming ``source`` and ``what`` (the field of ``scene.json`` that
-    declares the size), to decode what would take ``needed`` bytes when the memory free is less: a small file
-    may declare a huge grid, splat count or photo, and torch's or NumPy's allocator failure names nothing."""
-    import torch
-
-    free = free_bytes(torch.device("cpu"))
-    if free is not None and needed > free:
-        raise SceneFileError(f"{source}: {what} would take about {needed / 2**30:.2f} GiB to decode, more than the "
-                             f"{free / 2**30:.2f} GiB of memory free; the file is corrupt, or needs a larger machine")
 
 
 def field_bytes(resolution: int, data_bytes: int) -> int:
@@ -89,6 +77,8 @@ def decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneFi
     except safetensors.SafetensorError as exc:
         raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
     except (MemoryError, RuntimeError) as exc:  # torch's allocator: "DefaultCPUAllocator: can't allocate memory"
+        out_of_memory = isinstance(exc, MemoryError) or "alloc" in str(exc).lower()
         raise SceneFileError(f"{source}: {schema.FIELD_FILE} could not be decoded ({type(exc).__name__}: "
-                             f"{str(exc)[:200]}); the field declared in {schema.SCENE_JSON} does not fit in the "
-                             "memory free") from None
+                             f"{str(exc)[:200]}); " + (f"the field declared in {schema.SCENE_JSON} does not fit in "
+                                                       "the memory free" if out_of_memory else
+                                                       "the file is corrupt or not written by `n2r fit`")) from None

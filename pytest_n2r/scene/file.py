@@ -32,7 +32,8 @@ from ..field.grid import SceneField, check_field_metadata
 from . import schema
 from .archive import StoredMember, read_member, read_scene_json, zip_bytes
 from .base import MAX_CAMERA_DISTANCE, SceneView
-from .field_member import check_memory, decode_field, field_limit
+from .field_member import decode_field, field_limit
+from .memory_guard import check_memory
 
 __all__ = ["save_scene", "read_scene_file", "check_scene_file", "SceneFile"]
 

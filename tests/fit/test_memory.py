@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import torch
 
+from pytest_n2r import host_memory as free_memory  # where the CPU reading lives (fit.free_memory asks it)
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.field.space import SceneSpace
-from pytest_n2r.fit import free_memory
 from pytest_n2r.fit.free_memory import free_bytes
 from pytest_n2r.fit.memory import (
     HEADROOM,

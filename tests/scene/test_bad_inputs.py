@@ -554,7 +554,7 @@ def test_a_bad_scene_file_is_a_scene_file_error_in_bounded_memory(how, expected,
     if "zip_version" in how:
         _needing_zip_version(bad, how["zip_version"])
     if "free" in how:
-        monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: how["free"])
+        monkeypatch.setattr("pytest_n2r.scene.memory_guard.cpu_free_bytes", lambda: how["free"])
     _refused_in_bounded_memory(read_scene_file, bad, expected)
 
 
@@ -569,7 +569,7 @@ def test_check_scene_file_refuses_what_the_reader_refuses_in_scene_json(edit, ex
     """The plugin checks every scene file at start-up with :func:`check_scene_file` (no inflating): a fault
     of ``scene.json`` must stop it there, not at the first render."""
     if "free" in edit:
-        monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: edit["free"])
+        monkeypatch.setattr("pytest_n2r.scene.memory_guard.cpu_free_bytes", lambda: edit["free"])
     bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=edit["edit"])
     with pytest.raises(SceneFileError) as info:
         check_scene_file(bad)
@@ -646,7 +646,7 @@ def test_a_splat_scene_file_declaring_more_gaussians_than_memory_holds_is_refuse
         data["representation"] = "splats"
         data["splats"] = {"count": 10**9, "sh_degree": 3, "background": [0, 0, 0]}
 
-    monkeypatch.setattr("pytest_n2r.scene.field_member.free_bytes", lambda device: 2**30)
+    monkeypatch.setattr("pytest_n2r.scene.memory_guard.cpu_free_bytes", lambda: 2**30)
     bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": b"x"})
     _refused_in_bounded_memory(load_scene, bad, r"scene\.json: splats\.count=1,000,000,000 Gaussians of SH degree 3 "
                                                 r"would take about 659\.\d+ GiB to decode, more than the 1\.00 GiB")
