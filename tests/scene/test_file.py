@@ -377,3 +377,15 @@ def test_a_member_compressed_by_a_method_zipfile_lacks_is_a_scene_file_error(tmp
     with zipfile.ZipFile(path) as archive, pytest.raises(SceneFileError, match="'scene.json' is stored in a way this "
                                                                                "reader cannot open"):
         read_member(archive, "scene.json", str(path), 1000, "a test")
+
+
+def test_reading_a_splat_scene_file_imports_no_torch():
+    """The memory guard once imported pytest_n2r.fit for the free memory, and with it torch: 1.1 s more to load a
+    splat scene, in every process and xdist worker."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import pytest_n2r.scene.loading, pytest_n2r.scene.splat_file, pytest_n2r.scene.splat_scene, "
+            "pytest_n2r.scene.memory_guard; print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "False", "reading a splat scene file imported torch"
