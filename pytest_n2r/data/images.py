@@ -63,11 +63,13 @@ def list_images(folder: str | os.PathLike) -> list[Path]:
 
 
 def _images_in(folder: Path) -> list[Path]:
-    """The image files directly inside ``folder`` (by suffix, hidden files ignored), sorted by name."""
-    return sorted(
-        p for p in folder.iterdir()
-        if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
-    )
+    """The image files directly inside ``folder`` (:func:`_is_image`), sorted by name."""
+    return sorted(p for p in folder.iterdir() if _is_image(p))
+
+
+def _is_image(path: Path) -> bool:
+    """Whether ``path`` is an image file by its suffix (hidden files are not)."""
+    return path.is_file() and not path.name.startswith(".") and path.suffix.lower() in IMAGE_SUFFIXES
 
 
 #: How deep :func:`images_in_subfolders` looks below a folder (``DCIM/100APPLE`` is 2), and at most how many
@@ -88,8 +90,8 @@ def images_in_subfolders(folder: str | os.PathLike) -> list[tuple[str, int]]:
         current, depth = queue.pop(0)
         opened += 1
         try:
-            entries = sorted(current.iterdir())
-            count = len(_images_in(current)) if current != folder else 0
+            entries = sorted(current.iterdir())  # listed once: its images counted, its subfolders queued
+            count = sum(_is_image(p) for p in entries) if current != folder else 0
         except OSError:  # no permission, gone meanwhile
             continue
         if count:

@@ -12,7 +12,7 @@ from ..errors import SceneFileError
 from ..field.grid import SceneField, n_sh_coefficients
 from . import schema
 from .archive import StoredMember
-from .memory_guard import check_memory
+from .memory_guard import check_memory, decode_failure
 
 __all__ = ["decode_field", "field_bytes", "field_limit"]
 
@@ -77,8 +77,6 @@ def decode_field(stored: StoredMember, field_meta: dict, source: str) -> SceneFi
     except safetensors.SafetensorError as exc:
         raise SceneFileError(f"{source}: {schema.FIELD_FILE} is not a valid safetensors file ({exc})") from None
     except (MemoryError, RuntimeError) as exc:  # torch's allocator: "DefaultCPUAllocator: can't allocate memory"
-        out_of_memory = isinstance(exc, MemoryError) or "alloc" in str(exc).lower()
-        raise SceneFileError(f"{source}: {schema.FIELD_FILE} could not be decoded ({type(exc).__name__}: "
-                             f"{str(exc)[:200]}); " + (f"the field declared in {schema.SCENE_JSON} does not fit in "
-                                                       "the memory free" if out_of_memory else
-                                                       "the file is corrupt or not written by `n2r fit`")) from None
+        raise decode_failure(exc, f"{source}: {schema.FIELD_FILE}",
+                             f"the field declared in {schema.SCENE_JSON} does not fit in the memory free",
+                             "the file is corrupt or not written by `n2r fit`") from None

@@ -13,7 +13,7 @@ from __future__ import annotations
 from ..errors import SceneFileError
 from ..host_memory import cpu_free_bytes
 
-__all__ = ["check_memory"]
+__all__ = ["check_memory", "decode_failure"]
 
 
 def check_memory(needed: int, source: str, what: str) -> None:
@@ -24,3 +24,12 @@ def check_memory(needed: int, source: str, what: str) -> None:
     if free is not None and needed > free:
         raise SceneFileError(f"{source}: {what} would take about {needed / 2**30:.2f} GiB to decode, more than the "
                              f"{free / 2**30:.2f} GiB of memory free; the file is corrupt, or needs a larger machine")
+
+
+def decode_failure(exc: MemoryError | RuntimeError, member: str, too_big: str, corrupt: str) -> SceneFileError:
+    """The error of a member that raised ``exc`` while it was decoded (``member``: the file and member named):
+    ``too_big`` says what did not fit where the allocator failed (a machine with less memory than estimated),
+    ``corrupt`` what is wrong otherwise (torch's shape or dtype errors are RuntimeErrors too)."""
+    out_of_memory = isinstance(exc, MemoryError) or "alloc" in str(exc).lower()
+    return SceneFileError(f"{member} could not be decoded ({type(exc).__name__}: {str(exc)[:200]}); "
+                          + (too_big if out_of_memory else corrupt))

@@ -26,7 +26,7 @@ from ..splats.gaussians import TENSORS, Gaussians
 from . import schema
 from .archive import read_member, read_scene_json, zip_bytes
 from .base import SceneView
-from .memory_guard import check_memory
+from .memory_guard import check_memory, decode_failure
 from .splat_scene import SplatScene
 
 __all__ = ["REPRESENTATION", "SPLATS_FILE", "is_splat_file", "read_splat_file", "save_splat_scene",
@@ -149,10 +149,8 @@ def read_splat_file(path: str | os.PathLike, *, settings: SplatSettings | None =
     except (ValueError, TypeError) as exc:
         raise SceneFileError(f"{source}: {SPLATS_FILE}: {exc}") from None
     except (MemoryError, RuntimeError) as exc:  # the allocator, on a machine with less memory than estimated
-        out_of_memory = isinstance(exc, MemoryError) or "alloc" in str(exc).lower()
-        raise SceneFileError(f"{source}: {SPLATS_FILE} could not be decoded ({type(exc).__name__}: "
-                             f"{str(exc)[:200]}); " + (f"the {count:,} Gaussians do not fit in the memory free"
-                                                       if out_of_memory else "the file is corrupt")) from None
+        raise decode_failure(exc, f"{source}: {SPLATS_FILE}", f"the {count:,} Gaussians do not fit in the memory free",
+                             "the file is corrupt") from None
     if len(gaussians) != count or gaussians.sh_degree != degree:
         raise SceneFileError(f"{source}: {SPLATS_FILE} holds {len(gaussians)} Gaussians of SH degree "
                              f"{gaussians.sh_degree}; {schema.SCENE_JSON} says {count!r} of degree {degree!r}")
