@@ -19,7 +19,8 @@ _FLOAT64_EPS = float(np.finfo(np.float64).eps)
 
 
 def _to_numpy(value: Any) -> Any:
-    """Tensors (torch: any device, any float dtype incl. bfloat16) to float64 numpy; others unchanged."""
+    """Tensors (torch: any device and dtype) as numpy arrays of their values
+    (:func:`~pytest_n2r._validation.tensor_values`: bfloat16 as float32); others unchanged."""
     if is_tensor(value):
         return tensor_values(value)
     return value
