@@ -20,14 +20,19 @@ reads through OpenImageIO with ``oiio:reorient=0``, which has libheif ignore the
 from __future__ import annotations
 
 import os
+import threading
 import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import IngestError
+
+if TYPE_CHECKING:
+    import PIL.Image
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
            "iter_readable", "images_in_subfolders", "subfolder_hint"]
@@ -191,14 +196,14 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
 def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
     """``(width, height)`` of the upright image, as :func:`read_image` decodes it, without decoding its pixels when
     possible."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
     path = Path(path)
     head = _head(path)
     if _is_iso_media(head):
         return _check_sides(path, *_heif_size(path))
     try:
-        with _bomb_errors(path), Image.open(path) as im:
+        with _header(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
             width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
             orientation = im.getexif().get(0x0112, 1)
@@ -210,17 +215,36 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
 
 
 @contextmanager
-def _bomb_errors(path: Path) -> Iterator[None]:
-    """Turn Pillow's refusal of a header claiming too many pixels into an :class:`IngestError` naming the file."""
+def _header(path: Path) -> Iterator[PIL.Image.Image]:
+    """Pillow's reading of the file at ``path``, its pixels not decoded.
+
+    Pillow refuses headers past about 179 MP (twice its ``MAX_IMAGE_PIXELS``), a guard against decoding bombs; a
+    200 MP phone photo (16 320 x 12 240) is past it yet within :data:`MAX_IMAGE_SIDE` a side, which
+    :func:`_check_sides` holds. So a refused header is read again with the limit at ``MAX_IMAGE_SIDE ** 2`` (set
+    under a lock and put back), and only a header beyond that is an :class:`IngestError` naming the file.
+    """
     from PIL import Image
 
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            yield
-    except Image.DecompressionBombError as exc:
-        raise IngestError(f"image file {str(path)!r} is too large to read ({exc}); expected at most "
-                          f"{MAX_IMAGE_SIDE} pixels a side") from None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+        try:
+            im = Image.open(path)
+        except Image.DecompressionBombError:
+            with _PILLOW_LIMIT:
+                limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE ** 2
+                try:
+                    im = Image.open(path)
+                except Image.DecompressionBombError as exc:
+                    raise IngestError(f"image file {str(path)!r} is too large to read ({exc}); expected at most "
+                                      f"{MAX_IMAGE_SIDE} pixels a side") from None
+                finally:
+                    Image.MAX_IMAGE_PIXELS = limit
+    with im:
+        yield im
+
+
+#: Held while Pillow's process-wide pixel limit is lifted (:func:`_header`).
+_PILLOW_LIMIT = threading.Lock()
 
 
 def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
@@ -234,10 +258,10 @@ def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
 def _stored_size(path: Path) -> tuple[int, int] | None:
     """The stored ``(width, height)`` its header claims (``None`` when Pillow cannot tell: the decoder names the
     file), refusing more than :data:`MAX_IMAGE_SIDE` pixels a side."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
     try:
-        with _bomb_errors(path), Image.open(path) as im:
+        with _header(path) as im:
             size = im.size
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError):
         return None
@@ -246,10 +270,10 @@ def _stored_size(path: Path) -> tuple[int, int] | None:
 
 def _orientation(path: Path) -> int:
     """The EXIF orientation tag of the photo at ``path`` (1 when it has none or it cannot be read)."""
-    from PIL import Image, UnidentifiedImageError
+    from PIL import UnidentifiedImageError
 
     try:
-        with Image.open(path) as im:
+        with _header(path) as im:
             orientation = im.getexif().get(0x0112, 1)
     except (OSError, UnidentifiedImageError):
         return 1

@@ -292,7 +292,8 @@ def _png_header_only(path, width: int, height: int) -> None:
 
 
 @pytest.mark.parametrize("width, height, expected", [
-    (20000, 20000, "too large to read"),  # Pillow's decompression-bomb limit
+    (20000, 20000, "is 20000x20000 pixels; expected at most 16384 pixels a side"),  # past Pillow's 179 MP
+    (30000, 30000, "too large to read"),  # past even the lifted limit: Pillow refuses the header
     (20000, 1, "is 20000x1 pixels; expected at most 16384 pixels a side"),
     (1, 16385, "is 1x16385 pixels; expected at most 16384 pixels a side"),
 ])
@@ -303,6 +304,19 @@ def test_an_image_claiming_too_many_pixels_is_refused_naming_it(tmp_path, width,
     with pytest.raises(IngestError) as info:
         read(path)
     assert expected in str(info.value) and str(path) in str(info.value)
+
+
+@pytest.mark.parametrize("width, height", [(16320, 12240), (12240, 16320), (16384, 16384)])
+def test_a_200_megapixel_photo_within_the_side_cap_is_read(tmp_path, width, height):
+    """Pillow's own limit (about 179 MP) refused a 200 MP phone photo's header, though its sides are within the cap;
+    the process-wide limit is put back afterwards."""
+    from PIL import Image
+
+    path = tmp_path / "big.png"
+    _png_header_only(path, width, height)
+    limit = Image.MAX_IMAGE_PIXELS
+    assert read_image_size(path) == (width, height), f"{width}x{height} header read as {read_image_size(path)}"
+    assert Image.MAX_IMAGE_PIXELS == limit, f"Pillow's limit left at {Image.MAX_IMAGE_PIXELS}, was {limit}"
 
 
 def test_the_image_side_cap_is_the_render_cap():
