@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     cameras = args.cameras if args.cameras is not None else find_cameras(args.ply)
     if cameras is None:
         raise InvalidArgument(f"{args.ply}: no cameras found beside it (a cameras.json, transforms.json or COLMAP "
-                              "model in its folder or up to three folders above); pass --cameras PATH")
+                              "model in its folder or up to two folders above); pass --cameras PATH")
     scene = load_splat_scene(args.ply, cameras=cameras, heldout_every=args.heldout_every,
                              background=args.background or (0.0, 0.0, 0.0), name=args.output.stem)
     report = {"source": str(args.ply), "source_sha256": hashlib.sha256(args.ply.read_bytes()).hexdigest(),

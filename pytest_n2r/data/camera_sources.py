@@ -43,7 +43,7 @@ def read_cameras(source: str | os.PathLike) -> PoseSet:
 
 def find_cameras(ply: str | os.PathLike) -> Path | None:
     """The cameras of a trained ``.ply`` when they lie where the training tools put them: a ``cameras.json``,
-    a ``transforms.json`` or a COLMAP model in the ply's folder or up to three folders above it (3DGS writes
+    a ``transforms.json`` or a COLMAP model in the ply's folder or up to two folders above it (3DGS writes
     ``<run>/point_cloud/iteration_N/point_cloud.ply`` and ``<run>/cameras.json``); ``None`` when there is
     none."""
     ply = Path(ply).resolve()

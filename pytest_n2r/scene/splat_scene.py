@@ -200,7 +200,7 @@ def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | No
     reason = None
     if found is None:
         reason = (f"no cameras were given and none were found beside {path} (a cameras.json, transforms.json or "
-                  "COLMAP model in its folder or up to three folders above), so it has no captured views, no "
+                  "COLMAP model in its folder or up to two folders above), so it has no captured views, no "
                   "train / held-out split, no reference length and no validity checks; it renders at the poses "
                   "you give. Pass cameras=... to load_scene (or `n2r import --cameras`) to have them.")
     else:

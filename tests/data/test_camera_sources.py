@@ -139,6 +139,8 @@ def test_cameras_are_found_where_the_trainers_put_them(tmp_path):
     ply.parent.mkdir(parents=True)
     ply.write_bytes(b"ply\n")
     assert find_cameras(ply) is None
+    (run.parent / "cameras.json").write_text("[]")  # three folders above the ply's: another run's, not looked at
+    assert find_cameras(ply) is None, "a cameras.json three folders above the ply's folder was taken"
     (run / "cameras.json").write_text("[]")
     assert find_cameras(ply) == (run / "cameras.json").resolve()
     beside = tmp_path / "flat" / "scene.ply"
