@@ -40,7 +40,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..errors import InvalidArgument
     from ..render.size import RenderSize
     from ..scene.file import SceneFile
     from ..scene.splat_file import is_splat_file, splat_info
@@ -50,9 +49,8 @@ def run(args: argparse.Namespace) -> int:
     spec = scene_argument(args.scene)
     if spec.kind == "file" and is_splat_file(spec.source):  # splats packed by `n2r import`
         if args.shift:
-            raise InvalidArgument(f"--shift is not supported for splat scene files: {spec.source} holds the splats "
-                                  "and their cameras but no photos (n2r import packs none), so there is nothing real "
-                                  "to compare its renders with; measure the shift on the .n2r scene file of a fit")
+            raise _no_photos(spec.source, "a splat scene file (n2r import packs the splats and their cameras, no "
+                                          "photos)")
         info = splat_info(spec.source)
         lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
         print(_json(info) if args.json else "\n".join(lines))
@@ -60,9 +58,7 @@ def run(args: argparse.Namespace) -> int:
     scene = _open(spec, images=args.shift)
     if not isinstance(scene, SceneFile):  # no fitted scene file behind it: an exact demo scene, a 3DGS .ply ...
         if args.shift:
-            raise InvalidArgument(f"--shift is not supported for {spec.source}: it is no fitted scene file (a "
-                                  f"{type(scene).__name__}), so it has no photos to compare its renders with; "
-                                  "measure the shift on the .n2r scene file of a fit")
+            raise _no_photos(spec.source, f"no fitted scene file (a {type(scene).__name__})")
         print(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec))
         return 0
     shift = _shift(scene, args.size) if args.shift else None
@@ -99,6 +95,14 @@ def _json(data: dict) -> str:
     from ..scene.schema import json_ready
 
     return json.dumps(json_ready(data), indent=2, allow_nan=False)
+
+
+def _no_photos(source: str, what: str) -> Exception:
+    """The refusal of ``--shift`` for a scene ``source`` that is ``what`` and holds no photos."""
+    from ..errors import InvalidArgument
+
+    return InvalidArgument(f"--shift is not supported for {source}: it is {what}, so it has no photos to compare its "
+                           "renders with; measure the shift on the .n2r scene file of a fit")
 
 
 def _shift(scene: SceneFile, size: str) -> FidelityReport:

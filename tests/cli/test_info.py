@@ -43,7 +43,8 @@ def test_shift_on_a_splat_scene_file_is_an_error_not_ignored(splat_file, capsys)
     capsys.readouterr()
     assert main(["info", str(splat_file), "--shift"]) == 2, "--shift on a splat scene file was ignored"
     out, err = capsys.readouterr()
-    assert f"n2r info: error: --shift is not supported for splat scene files: {splat_file} holds the splats" in err
+    assert (f"n2r info: error: --shift is not supported for {splat_file}: it is a splat scene file (n2r import packs "
+            "the splats and their cameras, no photos), so it has no photos") in err
     assert not out, f"printed the summary as if --shift had been measured:\n{out}"
     assert main(["info", str(splat_file), "--json"]) == 0
     assert _strict(capsys.readouterr().out)["representation"] == "splats"
