@@ -47,6 +47,13 @@ _MIN_REJECTED_TO_GIVE_UP = 40
 _GIVE_UP_CONFIDENCE = 0.99
 
 
+def forced_seed() -> object:
+    """pytest's ``--hypothesis-seed`` (``None`` without it): Hypothesis keeps no example database under it."""
+    from hypothesis import core
+
+    return getattr(core, "global_force_seed", None)
+
+
 def _is_final_example() -> bool:
     """True while Hypothesis replays the minimal failing example for the last time."""
     from hypothesis.errors import InvalidArgument
@@ -97,10 +104,11 @@ class Engine:
         render_settings = getattr(scene, "settings", None)
         self.render_settings = render_settings.to_dict() if callable(getattr(render_settings, "to_dict", None)) \
             else {}
-        self.shrinking = False  # False: the survey pass; True: the shrink pass
+        self.shrinking = False  # False: the survey pass; True: the shrink pass (start_shrink_pass)
         self.failed = False
         self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
-        self.drawn: set[tuple[str, bytes, str]] = set()  # the survey's examples so far (source view, follow-up)
+        self.drawn: set[tuple[str, bytes, str]] = set()  # this pass's examples so far (source view, follow-up)
+        self.failing: set[tuple[str, bytes, str]] = set()  # the examples found inconsistent, in either pass
         self.images_error: str | None = None
 
     # -- pieces -----------------------------------------------------------------------------------------
@@ -287,6 +295,10 @@ class Engine:
         if run.undefined / (run.asked + run.undefined) > MAX_UNDEFINED:  # asked: the most valid examples there can be
             self.gave_up = "undefined"
 
+    def start_shrink_pass(self) -> None:
+        """Evaluate the next examples as the shrink pass: a failure raises (Hypothesis shrinks it)."""
+        self.shrinking, self.drawn = True, set()
+
     def example(self, view: SceneView, tau: Any) -> None:
         """The body of one Hypothesis example (survey or shrink pass)."""
         __tracebackhide__ = True
@@ -295,13 +307,17 @@ class Engine:
         tau = as_follow_up(tau)
         drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(),
                  json.dumps(tau.record_fields(), sort_keys=True, default=str))
-        if not self.shrinking and drawn in self.drawn:
-            assume(False)  # the same example again tests nothing new: not counted, Hypothesis draws another
+        if drawn in self.drawn and not (self.shrinking and drawn in self.failing):
+            # the same example again tests nothing new: not counted, Hypothesis draws another. The shrink pass
+            # rejects repeats as the survey did, so that with the survey's seed it draws the survey's examples up
+            # to the first failure (Hypothesis's draws follow what each example did)
+            assume(False)
         evaluation = self.evaluate(view, tau)
         record = evaluation.record
+        self.drawn.add(drawn)  # kept once evaluated: an example that raised is replayed as it was
+        if record.valid and not record.passed:
+            self.failing.add(drawn)
         if not self.shrinking:
-            # kept once evaluated: an example that raised is replayed as it was (Hypothesis confirms the error)
-            self.drawn.add(drawn)
             if record.valid and not record.passed and not self.run_record.inconsistencies:
                 check_deterministic(self.run_sut, evaluation.source.rgb, evaluation.follow.rgb,
                                     *evaluation.outputs, evaluation.where)
@@ -332,7 +348,8 @@ class Engine:
         run.minimal = record
         message = failure_message(self.scene, self.relation, run, view, tau, evaluation.result, record, note=note,
                                   images_error=self.images_error,
-                                  reproduce=how_to_reproduce(self.settings.derandomize, self.settings.database))
+                                  reproduce=how_to_reproduce(self.settings.derandomize, self.settings.database,
+                                                            forced_seed()))
         raise RelationFailure(message, run)
 
     def replay(self, records: list[ExampleRecord]) -> list[ExampleRecord]:

@@ -66,14 +66,20 @@ def failure_message(scene: Scene, relation: Relation, run: RelationRecord, view:
     return "\n".join(lines)
 
 
-def how_to_reproduce(derandomize: bool, database: Any) -> str:
-    """How a rerun of a failed relation draws its failing example again, for the failure message.
+def how_to_reproduce(derandomize: bool, database: Any, forced_seed: object = None) -> str:
+    """How a rerun of a failed relation draws its failing example again, for the failure message. ``forced_seed``:
+    pytest's ``--hypothesis-seed``, under which Hypothesis keeps no example database.
 
     >>> how_to_reproduce(True, "default")
     'run the test again: a derandomized search draws the same examples every run'
+    >>> how_to_reproduce(False, "default", forced_seed=7)
+    'run the test again with --hypothesis-seed=7: the seed draws the same examples (and no database is kept)'
     """
     if derandomize:
         return "run the test again: a derandomized search draws the same examples every run"
+    if forced_seed is not None:
+        return (f"run the test again with --hypothesis-seed={forced_seed}: the seed draws the same examples (and no "
+                "database is kept)")
     if database is None:
         return ("no example database is kept (database=None): run with --n2r-derandomize yes, or "
                 "--hypothesis-seed=N, to draw the same examples again")

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 from hypothesis import HealthCheck, Phase, given
-from hypothesis import core as hypothesis_core
 from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
 from hypothesis.database import ReadOnlyDatabase
@@ -35,7 +34,7 @@ from ..scene.base import Scene, SceneView
 from ..scene.render_cache import RenderCache
 from ..strategies.view_strategies import views as source_views
 from .determinism import NotDeterministic, SUTNotDeterministic
-from .engine import Engine, recorded_view
+from .engine import Engine, forced_seed, recorded_view
 from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
 from .outputs import SUTError
 from .record import MORE_TIMINGS, TIMINGS, ExampleRecord, RelationRecord
@@ -201,7 +200,7 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
         raise InvalidArgument(too_many_invalid(run, relation))
     if not run.inconsistencies:
         return
-    engine.shrinking = True
+    engine.start_shrink_pass()
     try:
         with _without_local_constants():
             search(database)
@@ -219,7 +218,7 @@ def _seed(identity: bytes) -> int:
     """The seed of a search that is not derandomized: drawn at random, or with pytest's ``--hypothesis-seed``
     (Hypothesis's ``global_force_seed``) derived from it and the run's ``identity``, so that the same seed draws
     the same examples again and each relation draws its own."""
-    forced = getattr(hypothesis_core, "global_force_seed", None)
+    forced = forced_seed()
     if forced is None:
         return random.getrandbits(64)
     return int.from_bytes(hashlib.sha256(f"{forced!r}|".encode() + identity).digest()[:8], "big")
