@@ -23,6 +23,7 @@ import pytest
 
 from .. import defaults
 from ..errors import InvalidArgument, N2RError
+from .path_options import cache_folder, folder, output_file
 
 __all__ = ["Option", "Where", "OPTIONS", "RUN_OPTIONS", "REPORT_OPTIONS", "option", "read_options", "is_used"]
 
@@ -47,7 +48,9 @@ class Option:
     what the session uses and raises :class:`~pytest_n2r.errors.N2RError` with what was expected;
     ``help`` may show the default as ``{default}``. The parser's message is prefixed with the flag and ini
     key, unless ``names_itself`` (its messages already name the option and the entry). ``part`` says which
-    half of the plugin reads it: ``"run"`` (the session) or ``"report"`` (baselines and reports).
+    half of the plugin reads it: ``"run"`` (the session) or ``"report"`` (baselines and reports). ``typed_bool``:
+    a TOML ``true`` / ``false`` reaches ``parse`` as a bool (a folder option's ``false`` is ``none``), not as
+    ``yes`` / ``no``.
     """
 
     flag: str
@@ -59,6 +62,7 @@ class Option:
     action: Literal["store", "append", "store_true"] = "store"
     part: Literal["run", "report"] = "run"
     names_itself: bool = False
+    typed_bool: bool = False
 
     @property
     def dest(self) -> str:
@@ -86,15 +90,22 @@ class Option:
                 value = config.getini(self.ini)
             except TypeError:  # pytest 9's TOML table ([pytest], [tool.pytest]) holds a number, a bool, ...
                 value = self._typed_ini(config)
+            else:  # [tool.pytest.ini_options] hands a TOML bool over as "True" / "False"
+                if self.typed_bool and value in ("True", "False") and f"{config.inipath}".endswith(".toml"):
+                    typed = self._typed_ini(config)
+                    value = typed if isinstance(typed, bool) else value
+            if isinstance(value, list) and self.action != "append":
+                raise self._usage_error(f"{value!r} is a list; expected one value, not a list")
             if value not in (None, "", []):
                 base = Path(config.inipath).parent if config.inipath else root
                 return value, Where(f"ini {self.ini}", base, root)
         return None
 
-    def _typed_ini(self, config: pytest.Config) -> str | list[str] | None:
+    def _typed_ini(self, config: pytest.Config) -> str | bool | list[str] | None:
         """The ini value as a TOML configuration file types it (``n2r_examples = 7``, ``n2r_derandomize = true``),
         which pytest 9 refuses for an option registered as text, written as text for :attr:`parse` (a bool as
-        ``yes`` / ``no``; a list option's string split at whitespace, as in an ini file)."""
+        ``yes`` / ``no``, or kept a bool where :attr:`typed_bool`; a list option's string split at whitespace, as
+        in an ini file)."""
         try:
             import tomllib
         except ImportError:  # Python 3.10: pytest's own TOML reader
@@ -103,12 +114,19 @@ class Option:
         path = Path(config.inipath)
         data = tomllib.loads(path.read_text(encoding="utf-8"))
         table = data.get("tool", {}).get("pytest", {}) if path.name == "pyproject.toml" else data.get("pytest", {})
-        value = table.get(self.ini)
+        value = table.get("ini_options", table).get(self.ini)
         if isinstance(value, list):
             return [_ini_text(v) for v in value]
         if self.action == "append" and isinstance(value, str):
             return value.split()
+        if isinstance(value, bool) and self.typed_bool:
+            return value
         return None if value is None else _ini_text(value)
+
+    def _usage_error(self, message: str) -> pytest.UsageError:
+        """``message`` as a usage error, prefixed with the flag and the ini key unless :attr:`names_itself`."""
+        where = "" if self.names_itself else f"{self.flag}{f' / ini {self.ini}' if self.ini else ''}: "
+        return pytest.UsageError(f"pytest-n2r: {where}{message}")
 
     def value(self, config: pytest.Config) -> Any:
         """The parsed value: given (command line, ini file) or the default; a bad one is a usage error."""
@@ -122,8 +140,7 @@ class Option:
         try:
             return self.parse(*given)
         except N2RError as exc:
-            where = "" if self.names_itself else f"{self.flag}{f' / ini {self.ini}' if self.ini else ''}: "
-            raise pytest.UsageError(f"pytest-n2r: {where}{exc}") from None
+            raise self._usage_error(f"{exc}") from None
 
 
 def _ini_text(value: Any) -> str:
@@ -175,36 +192,6 @@ def _device(value: str, where: Where) -> str:
         if not torch.cuda.is_available():
             raise InvalidArgument(f"{device!r}: CUDA is not available on this machine; use auto or cpu")
     return device
-
-
-def _folder(value: str, where: Where) -> Path | None:
-    """A writable folder, relative to the rootdir; ``none``: ``None`` (nothing written)."""
-    if value.strip().lower() == "none":
-        return None
-    from ..data.atomic import unwritable_reason
-
-    path = Path(value).expanduser()
-    folder = path if path.is_absolute() else where.root / path
-    reason = unwritable_reason(folder)
-    if reason is not None:
-        raise InvalidArgument(f"{folder}: {reason}; choose a writable folder, or 'none'")
-    return folder
-
-
-def _output_file(value: str, where: Where) -> Path:
-    """A file to write at the end of the session: not a folder, in a folder that exists or can be created and
-    is writable (checked now, so a bad path never costs the run's result)."""
-    if not str(value).strip():
-        raise InvalidArgument("the path is empty; expected the path of a file to write")
-    path = Path(value).expanduser()
-    if path.is_dir():
-        raise InvalidArgument(f"{path} is a folder; expected the path of a file to write (e.g. {path / 'n2r.json'})")
-    from ..data.atomic import unwritable_reason
-
-    reason = unwritable_reason(path.absolute().parent)
-    if reason is not None:
-        raise InvalidArgument(f"{path}: {reason}; choose a path in a writable folder")
-    return path
 
 
 def _byte_size(value: str, where: Where) -> int:
@@ -302,12 +289,13 @@ OPTIONS: tuple[Option, ...] = (
            default=defaults.DEVICE, parse=_device),
     Option("--n2r-cache-dir", "n2r_cache_dir", "DIR",
            "render cache directory, relative to the rootdir; 'none' keeps renders in memory only "
-           "(default: {default})", default=".n2r-cache", parse=_folder),
+           "(default: {default})", default=".n2r-cache", parse=cache_folder,
+           typed_bool=True),
     Option("--n2r-cache-size", "n2r_cache_size", "SIZE", "disk cap of the render cache, e.g. 2GiB (default: {default})",
            default=defaults.CACHE_SIZE, parse=_byte_size),
     Option("--n2r-artifacts", "n2r_artifacts", "DIR",
            "where failure pictures go, relative to the rootdir; 'none' saves none (default: {default})",
-           default="n2r-artifacts", parse=_folder),
+           default="n2r-artifacts", parse=folder, typed_bool=True),
     Option("--n2r-timeout", "n2r_timeout", "SECONDS",
            f"time limit of one render or one SUT call, at most {MAX_TIMEOUT_S:g} (a day); 0 disables "
            "(default: {default})", default=_text(defaults.TIMEOUT_S),
@@ -322,7 +310,7 @@ OPTIONS: tuple[Option, ...] = (
     Option("--n2r-cache-clear", None, None, "empty the render cache before the run", action="store_true"),
     Option("--n2r-save-baseline", None, "PATH",
            "write every relation's drawn examples (all a replay needs, and their deviations) to PATH",
-           parse=_output_file, part="report"),
+           parse=output_file, part="report"),
     Option("--n2r-compare", None, "PATH",
            "replay the baseline's examples at PATH, pair them with this run's and fail on regressions",
            parse=_baseline, part="report", names_itself=True),
@@ -339,10 +327,10 @@ OPTIONS: tuple[Option, ...] = (
            "changed-eps)", default=", ".join(defaults.COMPARE_FAIL_ON), parse=_outcomes, action="append",
            part="report", names_itself=True),
     Option("--n2r-report", None, "PATH", "write a self-contained HTML report of every relation to PATH",
-           parse=_output_file, part="report"),
+           parse=output_file, part="report"),
     Option("--n2r-json", None, "PATH",
            "write every relation's results (examples, scores, timings) to PATH as JSON (NaN where a value is "
-           "undefined)", parse=_output_file, part="report"),
+           "undefined)", parse=output_file, part="report"),
 )
 RUN_OPTIONS = tuple(o for o in OPTIONS if o.part == "run")
 REPORT_OPTIONS = tuple(o for o in OPTIONS if o.part == "report")

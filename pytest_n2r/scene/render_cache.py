@@ -33,11 +33,11 @@ from typing import BinaryIO
 import numpy as np
 
 from .. import __version__, defaults
-from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
+from .cache_folder import claim, foreign_entries, is_ours
 from .first_render import first_render
 from .keep_threads import threads_kept
 
@@ -162,7 +162,9 @@ class RenderCache:
     levels; the disk level evicts the least recently used renders (by modification time, which a hit
     refreshes) down to 80 % of its cap. A process's first render of each renderer kind holds a lock file in
     ``directory`` (:mod:`~pytest_n2r.scene.first_render`): processes sharing the directory compile a kernel
-    once.
+    once. Entries are deleted (evicted, cleared) only in a directory that carries pytest-n2r's ``CACHEDIR.TAG``,
+    written on the first store into a directory that is new, empty or holds only pytest-n2r's files: a folder
+    of the user's is never tagged (:func:`foreign_entries`), and its ``.gitignore`` never replaced.
     """
 
     def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,
@@ -249,9 +251,16 @@ class RenderCache:
         self._replace(self._decision_path(key), lambda f: f.write(json.dumps(value, sort_keys=True).encode()))
 
     def clear(self) -> None:
-        """Forget everything, in memory and on disk."""
+        """Forget everything, in memory and on disk; :class:`InvalidArgument`, with nothing deleted on disk, when
+        the directory is not a pytest-n2r cache (no ``CACHEDIR.TAG`` of pytest-n2r's, and other files in it)."""
         self._memory.clear()
         self._memory_used = 0
+        foreign = [] if self.directory is None else foreign_entries(self.directory)
+        if foreign:
+            shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+            raise InvalidArgument(f"{self.directory} is not a pytest-n2r render cache: it has no CACHEDIR.TAG written "
+                                  f"by pytest-n2r and holds {shown}; nothing was deleted (choose a new or empty "
+                                  "folder for the cache)")
         for sub in (_SUBDIR, _DECISIONS):
             if self.directory is not None and (self.directory / sub).exists():
                 shutil.rmtree(self.directory / sub, ignore_errors=True)
@@ -336,12 +345,10 @@ class RenderCache:
             raise
 
     def _prepare_directory(self, leaf: Path) -> None:
+        """Make ``leaf``; tag the directory first where it is new or holds only pytest-n2r's files (a folder of the
+        user's is not tagged, so nothing in it is ever deleted), and ignore it in Git unless a .gitignore is there."""
         assert self.directory is not None
-        if not (self.directory / "CACHEDIR.TAG").exists():
-            self.directory.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(self.directory / "CACHEDIR.TAG",
-                              "Signature: 8a477f597d28d172789f06886806bc55\n# pytest-n2r render cache\n")
-            atomic_write_text(self.directory / ".gitignore", "# created by pytest-n2r\n*\n")
+        claim(self.directory)
         leaf.mkdir(parents=True, exist_ok=True)
 
     def _disk_files(self) -> list[tuple[float, Path, int]]:
@@ -361,7 +368,9 @@ class RenderCache:
     def trim(self) -> int:
         """Evict least recently used renders until the disk store is at most 80 % of its cap, and the decisions
         written before the last render it evicted; returns the number of render bytes freed. Safe to run from
-        several workers at once."""
+        several workers at once. Nothing in a directory without pytest-n2r's ``CACHEDIR.TAG``."""
+        if self.directory is None or not is_ours(self.directory):
+            return 0
         files = self._disk_files()
         total = sum(size for _, _, size in files)
         if total <= self.disk_bytes:
@@ -374,7 +383,6 @@ class RenderCache:
             path.unlink(missing_ok=True)
             freed += size
             evicted_until = mtime
-        assert self.directory is not None
         for path in (self.directory / _DECISIONS).glob("*/*.json"):
             try:
                 if path.parent.is_symlink() or path.is_symlink():  # never delete through a link

@@ -37,6 +37,15 @@ OPTION_CASES: list[tuple[str, list[str], str]] = [
      r"--n2r-artifacts .*notes\.n2r is a file, not a folder"),
     ("cache in a read-only place", ["--n2r-scene", PLANE, "--n2r-cache-dir", "/proc/n2r-cache"],
      r"--n2r-cache-dir / ini n2r_cache_dir: /proc/n2r-cache: cannot write into /proc"),
+    ("cache dir empty ($VAR unset)", ["--n2r-scene", PLANE, "--n2r-cache-dir="],
+     r"--n2r-cache-dir / ini n2r_cache_dir: '' is empty; expected a folder path, or 'none'"),
+    ("artifacts empty", ["--n2r-scene", PLANE, "--n2r-artifacts", ""],
+     r"--n2r-artifacts / ini n2r_artifacts: '' is empty; expected a folder path, or 'none'"),
+    ("artifacts blank", ["--n2r-scene", PLANE, "--n2r-artifacts", " "], r"--n2r-artifacts .*' ' is empty"),
+    ("cache in a folder of the user's", ["--n2r-scene", PLANE, "--n2r-cache-dir", "{tmp}"],
+     (r"--n2r-cache-dir / ini n2r_cache_dir: .* is not a pytest-n2r render cache \(no CACHEDIR\.TAG written by "
+      r"pytest-n2r\) and holds bad-scale\.n2r, bomb\.n2r, good\.n2r and 2 more; choose a new or empty folder, "
+      r"or 'none'")),
     ("cache size lots", ["--n2r-scene", PLANE, "--n2r-cache-size", "lots"], r"--n2r-cache-size / ini n2r_cache_size"),
     ("timeout abc", ["--n2r-scene", PLANE, "--n2r-timeout", "abc"], r"'abc' is not a number of seconds >= 0"),
     ("timeout -1", ["--n2r-scene", PLANE, "--n2r-timeout", "-1"], r"'-1' is not a number of seconds >= 0"),
@@ -94,6 +103,22 @@ def test_a_bad_ini_value_names_the_ini_key(decoys, pytester):
     result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", PLANE)
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--n2r-timeout / ini n2r_timeout: 'soon' is not a number of seconds >= 0" in result.stderr.str()
+
+
+@pytest.mark.parametrize("args", [["--n2r-cache-dir="], ["--n2r-cache-dir=", "--n2r-cache-clear"],
+                                  ["--n2r-cache-dir=data", "--n2r-cache-clear"], ["--n2r-artifacts="]])
+def test_a_cache_dir_that_is_the_project_or_a_folder_of_the_users_is_refused_and_left_alone(args, decoys, pytester):
+    tmp = pytester.path
+    (tmp / ".gitignore").write_text("build/\n")
+    for folder in (tmp / "renders" / "ab", tmp / "decisions", tmp / "data" / "renders" / "cd"):
+        folder.mkdir(parents=True)
+        (folder / "mine.npy").write_bytes(b"the user's own")
+    before = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*"))
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", PLANE, *args)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, f"{args}: exit code {result.ret}\n{result.stdout.str()}"
+    assert "Traceback" not in result.stderr.str(), result.stderr.str()
+    assert (tmp / ".gitignore").read_text() == "build/\n", f"{args}: the project's .gitignore was overwritten"
+    assert sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*")) == before, f"{args}: files changed"
 
 
 def test_a_scene_whose_field_does_not_load_fails_with_its_message_not_a_traceback(decoys, pytester):

@@ -136,3 +136,41 @@ def test_a(n2r_scene):
     assert "INTERNALERROR" not in result.stdout.str() + result.stderr.str(), result.stderr.str()
     result.assert_outcomes(passed=1)
     assert "7 examples" in n2r_project.summary(result, "test_a[plane]"), "n2r_examples = 7 was not applied"
+
+
+@pytest.mark.parametrize("key", ["n2r_examples", "n2r_render_scale", "n2r_timeout", "n2r_cache_dir", "n2r_artifacts"])
+@pytest.mark.parametrize(("name", "table"), [("pytest.toml", "[pytest]"), ("pyproject.toml", "[tool.pytest]"),
+                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+def test_a_list_for_a_one_value_option_in_a_toml_file_is_a_usage_error_naming_the_key(pytester, name, table, key):
+    pytester.makefile(".toml", **{name.removesuffix(".toml"): f'{table}\n{key} = ["1"]\n'})
+    pytester.makepyfile(test_inner="def test_nothing():\n    pass\n")
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    err = result.stderr.str()
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, f"{name} {table} {key}: exit {result.ret}\n{result.stdout.str()}"
+    assert "INTERNALERROR" not in err + result.stdout.str() and "Traceback" not in err, err
+    flag = "--" + key.replace("_", "-")
+    assert f"pytest-n2r: {flag} / ini {key}: ['1'] is a list; expected one value, not a list" in err, err
+
+
+@pytest.mark.parametrize(("name", "table"), [("pytest.toml", "[pytest]"),
+                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+def test_toml_false_for_a_folder_option_means_none_and_true_is_a_usage_error(pytester, name, table):
+    stem = name.removesuffix(".toml")
+    pytester.makefile(".toml", **{stem: f"{table}\nn2r_cache_dir = false\nn2r_artifacts = false\n"})
+    config = pytester.parseconfig()
+    assert option("cache_dir").value(config) is None and option("artifacts").value(config) is None
+    assert not [p.name for p in pytester.path.iterdir() if p.name in ("no", "False")], "a folder named 'no' was made"
+    pytester.makefile(".toml", **{stem: f"{table}\nn2r_artifacts = true\n"})
+    with pytest.raises(pytest.UsageError, match=r"--n2r-artifacts / ini n2r_artifacts: true is not a folder; "
+                                                r"expected a folder path, or 'none' \(or false\)"):
+        option("artifacts").value(pytester.parseconfig())
+
+
+def test_an_empty_ini_folder_is_the_default_and_a_blank_one_a_usage_error(pytester):
+    pytester.makefile(".toml", pytest='[pytest]\nn2r_cache_dir = ""\nn2r_artifacts = " "\n')
+    config = pytester.parseconfig()
+    assert option("cache_dir").value(config) == pytester.path / ".n2r-cache", "an empty value is not the default"
+    with pytest.raises(pytest.UsageError, match=r"--n2r-artifacts / ini n2r_artifacts: ' ' is empty; expected a "
+                                                r"folder path, or 'none'"):
+        option("artifacts").value(config)
+    assert not (pytester.path / " ").exists()

@@ -383,10 +383,11 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    # the plugin, its option registry, the two leaf modules that registry reads and the plugin's two hook modules
-    # (its reports; the test order under xdist): nothing of the engine
+    # the plugin, its option registry and its path parsers, the two leaf modules that registry reads and the plugin's
+    # two hook modules (its reports; the test order under xdist): nothing of the engine
     assert loaded == ["pytest_n2r.defaults", "pytest_n2r.errors", "pytest_n2r.plugin", "pytest_n2r.plugin.options",
-                      "pytest_n2r.plugin.report", "pytest_n2r.plugin.schedule"], loaded
+                      "pytest_n2r.plugin.path_options", "pytest_n2r.plugin.report",
+                      "pytest_n2r.plugin.schedule"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)

@@ -301,3 +301,55 @@ def test_trimming_evicts_the_decisions_older_than_the_renders_it_evicts(tmp_path
     cache.disk_bytes = 2 * one
     assert cache.trim() > 0
     assert cache.decision(old) is None and cache.decision(new) == {"valid": True}
+
+
+def _users_folder(folder):
+    """A folder of the user's that happens to hold ``renders/`` and ``decisions/``, and a .gitignore of its own."""
+    for sub, name in (("renders/ab", "mine.npy"), ("decisions/cd", "mine.json")):
+        (folder / sub).mkdir(parents=True)
+        (folder / sub / name).write_bytes(b"\x93NUMPY the user's own" * 100)
+        os.utime(folder / sub / name, (1, 1))  # older than any render: the first an LRU trim would delete
+    (folder / ".gitignore").write_text("build/\n")
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def test_a_folder_of_the_users_is_never_tagged_trimmed_nor_cleared(tmp_path):
+    scene = PlaneScene()
+    before = _users_folder(tmp_path)
+    cache = RenderCache(tmp_path, disk_bytes=100)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    cache.disk_bytes = 1
+    assert cache.trim() == 0, "trimmed in a folder pytest-n2r did not make"
+    with pytest.raises(InvalidArgument, match=rf"{tmp_path} is not a pytest-n2r render cache: it has no CACHEDIR\.TAG "
+                                              r"written by pytest-n2r and holds \.gitignore, decisions, renders; "
+                                              r"nothing was deleted"):
+        cache.clear()
+    assert (tmp_path / ".gitignore").read_text() == "build/\n", "the folder's own .gitignore was overwritten"
+    assert not (tmp_path / "CACHEDIR.TAG").exists(), "a folder of the user's was tagged: backup tools skip it"
+    after = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert set(before) <= set(after), f"deleted: {set(before) - set(after)}"
+
+
+def test_a_cache_made_by_pytest_n2r_keeps_a_gitignore_found_there(tmp_path):
+    (tmp_path / "cache" / "kernel-locks").mkdir(parents=True)  # a first render's lock comes before the first store
+    cache = RenderCache(tmp_path / "cache")
+    scene = PlaneScene()
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    assert (tmp_path / "cache" / "CACHEDIR.TAG").read_text() == ("Signature: 8a477f597d28d172789f06886806bc55\n"
+                                                                "# pytest-n2r render cache\n")
+    (tmp_path / "cache" / ".gitignore").write_text("# mine\n*\n!README\n")
+    cache.put_decision("ab" + "0" * 62, {"valid": True})
+    assert (tmp_path / "cache" / ".gitignore").read_text() == "# mine\n*\n!README\n", "a .gitignore was replaced"
+    cache.clear()
+    assert not (tmp_path / "cache" / "renders").exists() and not (tmp_path / "cache" / "decisions").exists()
+
+
+def test_clear_and_trim_of_a_directory_another_tool_tagged_delete_nothing(tmp_path):
+    (tmp_path / "CACHEDIR.TAG").write_text("Signature: 8a477f597d28d172789f06886806bc55\n# made by another tool\n")
+    (tmp_path / "renders" / "ab").mkdir(parents=True)
+    np.save(tmp_path / "renders" / "ab" / "theirs.npy", np.zeros(1000))
+    cache = RenderCache(tmp_path, disk_bytes=1)
+    assert cache.trim() == 0
+    with pytest.raises(InvalidArgument, match=r"holds CACHEDIR\.TAG, renders; nothing was deleted"):
+        cache.clear()
+    assert (tmp_path / "renders" / "ab" / "theirs.npy").exists()
