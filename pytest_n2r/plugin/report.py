@@ -43,6 +43,7 @@ def pytest_configure(config: pytest.Config) -> None:
             both = (f"{a} and {b} are both {path}" if other_path == path else
                     f"{a} {other_path} and {b} {path} are one file ({path.resolve()})")
             raise pytest.UsageError(f"pytest-n2r: {both}; give each output its own file (one would replace the other)")
+    _check_compare_is_no_report(config, outputs)
     config.stash[_OUTPUTS] = outputs
     rules = (option("compare_confidence"), option("compare_fail"), option("compare_fail_on"))
     given = [o.flag for o in rules if o.given(config) is not None]
@@ -53,6 +54,24 @@ def pytest_configure(config: pytest.Config) -> None:
     values = read_options(config, (*rules, option("compare")))
     config.stash[_RESULT] = {"margin": values["compare_fail"], "confidence": values["compare_confidence"],
                              "fail_on": values["compare_fail_on"], "baseline": values["compare"]}
+
+
+def _check_compare_is_no_report(config: pytest.Config, outputs: dict[str, Path]) -> None:
+    """A report written over the baseline this run compares with would replace it (the next comparison fails
+    reading a report); ``--n2r-save-baseline`` on it refreshes it in place and is allowed (not after a failing
+    gate: see :func:`pytest_sessionfinish`)."""
+    given = config.getoption("n2r_compare")
+    if not given:
+        return
+    compare = Path(given)
+    for name in ("json", "report"):
+        path = outputs.get(name)
+        if path is not None and path.resolve() == compare.resolve():
+            flag = option(name).flag
+            both = (f"--n2r-compare and {flag} are both {path}" if Path(path) == compare else
+                    f"--n2r-compare {compare} and {flag} {path} are one file ({path.resolve()})")
+            raise pytest.UsageError(f"pytest-n2r: {both}; give the report its own file (it would replace the "
+                                    "baseline this run compares with)")
 
 
 def _relation_ids(items: list[pytest.Item]) -> set[str]:
@@ -128,6 +147,48 @@ def _stopped_early(session: pytest.Session) -> str | None:
     return f"the session stopped early ({why})" if why else None
 
 
+def _incomplete(session: pytest.Session) -> str | None:
+    """Why this session's records do not cover every selected relation test (a partial report), or ``None``."""
+    if session.config.option.collectonly:
+        return "--collect-only ran no test"
+    return _stopped_early(session)
+
+
+def _baseline_refused(session: pytest.Session, records: list, path: Path) -> str | None:
+    """Why the baseline must not be saved from this session (the previous file is then kept), or ``None``."""
+    if session.config.option.collectonly:
+        return ("--collect-only ran no test, so it would hold no relation (a later --n2r-compare refuses such a "
+                "baseline); save it from a session that runs the relation tests")
+    stopped = _stopped_early(session)
+    if stopped is not None:
+        return (f"{stopped}, so it would lack the relations that did not run (a later comparison would pass them as "
+                "new); save it from a session that runs to the end (without -x or --maxfail)")
+    if not records:
+        return ("no relation test ran in this session (none was collected, or every one was deselected with -k / "
+                "-m / --deselect or skipped), so it would hold no relation (a later --n2r-compare refuses such a "
+                "baseline); save it from a session that runs the relation tests")
+    compared = session.config.getoption("n2r_compare")
+    failed = [c for c in session.config.stash.get(_RESULT, {}).get("comparisons") or () if c.fails]
+    if failed and compared and Path(compared).resolve() == path.resolve():
+        return (f"it is the baseline this run compared with (--n2r-compare), and {len(failed)} relation(s) failed the "
+                "comparison: saving would replace it with the regressed run, and the next comparison would pass; "
+                "fix the regression, or save the baseline to another file")
+    return None
+
+
+def _comparison_json(config: pytest.Config, result: dict) -> dict[str, Any]:
+    """The gate's verdict for the JSON report: its rule, whether the run passed it, and every relation's outcome."""
+    comparisons = result["comparisons"]
+    return {
+        "baseline": str(config.getoption("n2r_compare")), "margin": result["margin"],
+        "confidence": result["confidence"], "fail_on": list(result["fail_on"]),
+        "passed": not any(c.fails for c in comparisons), "failed": [c.nodeid for c in comparisons if c.fails],
+        "relations": [{"nodeid": c.nodeid, "outcome": c.outcome, "also": list(c.also), "verdict": c.verdict,
+                       "fails": c.fails, "n": c.n, "mean_change": c.mean_change, "bound": c.bound, "lost": c.lost,
+                       "message": c.message, "notes": list(c.notes)} for c in comparisons],
+    }
+
+
 def _why(exc: BaseException) -> str:
     if isinstance(exc, OSError):
         return f"{exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
@@ -137,8 +198,9 @@ def _why(exc: BaseException) -> str:
 @pytest.hookimpl(trylast=True)
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     """Judge the comparison first (its verdict is the run's, whatever happens to the files), then write each
-    output; one that cannot be written (or a baseline of a session that stopped early) is reported and fails
-    the run, without hiding the others or the verdict."""
+    output; one that cannot be written (or a baseline :func:`_baseline_refused` refuses: the previous file is
+    kept) is reported and fails the run, without hiding the others or the verdict. The reports of a session that
+    did not run every selected test are written, marked partial."""
     config = session.config
     outputs = config.stash.get(_OUTPUTS, {})
     if _is_worker(config):
@@ -163,11 +225,10 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
     written, problems = [], []
     path = outputs.get("save_baseline")
-    stopped = _stopped_early(session) if path is not None else None
-    if stopped is not None:
-        problems.append(f"did not save the baseline {path}: {stopped}, so it would lack the relations that did not "
-                        "run (a later comparison would pass them as new); save it from a session that runs to the "
-                        "end (without -x or --maxfail)")
+    refused = _baseline_refused(session, records, path) if path is not None else None
+    if refused is not None:
+        kept = "; the previous file is left as it was" if path.exists() else ""
+        problems.append(f"did not save the baseline {path}: {refused}{kept}")
         path = None
     if path is not None:
         recorded = {r.nodeid for r in records}
@@ -176,17 +237,25 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             path, records, meta={"not_recorded": not_recorded} if not_recorded else None))]
     else:
         writers = []
+    partial = _incomplete(session)
     if outputs.get("json") is not None:
         def json_text() -> str:  # NaN where a value is undefined (a rejected example's score): see docs/reporting.md
-            payload = {"relations": [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]}
+            payload: dict[str, Any] = {"complete": partial is None}
+            if partial is not None:
+                payload["incomplete"] = partial
+            payload["relations"] = [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]
+            if result.get("comparisons") is not None:
+                payload["comparison"] = _comparison_json(config, result)
             return json.dumps(payload, indent=1, allow_nan=True) + "\n"
 
         writers.append((outputs["json"], "the JSON results", lambda: atomic_write_text(outputs["json"], json_text())))
     if outputs.get("report") is not None:
-        writers.append((outputs["report"], "the HTML report", lambda: write_html(outputs["report"], records)))
+        writers.append((outputs["report"], "the HTML report",
+                        lambda: write_html(outputs["report"], records, partial=partial)))
     for target, what, write in writers:
         try:
-            written.append(write())
+            done = write()
+            written.append(done if partial is None or what == "the baseline" else f"{done} (partial: {partial})")
         except Exception as exc:  # noqa: BLE001 -- said below; the verdict and the other outputs stand
             problems.append(f"could not write {what} {target}: {_why(exc)}")
     result["written"], result["problems"] = written, problems

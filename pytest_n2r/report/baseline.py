@@ -30,7 +30,7 @@ from .. import defaults
 from ..data.atomic import atomic_write_text
 from ..errors import InvalidArgument, N2RError
 from ..relation.record import ExampleRecord, RelationRecord
-from .validate import BadField, meta_from_json, relation_from_json
+from .validate import BadField, DuplicateKey, check_version, meta_from_json, relation_from_json, unique_keys
 
 __all__ = ["FORMAT", "VERSION", "BaselineError", "Baseline", "save_baseline", "load_baseline", "OUTCOMES",
            "DEFAULT_FAIL_ON", "PairedComparison", "parse_margin", "parse_outcomes", "compare_paired", "paired_bound",
@@ -110,7 +110,10 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
     if not path.is_file():
         raise BaselineError(f"baseline {path} does not exist; create it with --n2r-save-baseline {path}")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant)
+        data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant,
+                          object_pairs_hook=unique_keys)
+    except DuplicateKey as exc:
+        raise BaselineError(f"baseline {path}: {exc}, or {regenerate}") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
         raise BaselineError(f"baseline {path} is not readable JSON: {exc}; {regenerate}") from None
     except RecursionError:
@@ -118,11 +121,10 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
                             f"{regenerate}") from None
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise BaselineError(f"baseline {path} is not a pytest-n2r baseline (missing \"format\": \"{FORMAT}\")")
-    if data.get("version") != VERSION:
-        raise BaselineError(
-            f"baseline {path} has format version {data.get('version')!r}; this pytest-n2r reads version "
-            f"{VERSION} (paired replay); {regenerate}"
-        )
+    wrong_version = check_version(data, VERSION)
+    if wrong_version is not None:
+        newer = isinstance(data.get("version"), int) and data["version"] > VERSION
+        raise BaselineError(f"baseline {path} {wrong_version}" + ("" if newer else f"; {regenerate}"))
     relations = data.get("relations")
     if not isinstance(relations, dict) or not relations:
         raise BaselineError(

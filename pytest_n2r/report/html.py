@@ -18,6 +18,7 @@ from ..relation.record import ExampleRecord, RelationRecord
 __all__ = ["render_html", "write_html"]
 
 _CSS = """
+.partial{background:#fff8c5;border:1px solid #d4a72c;padding:.5rem}
 body{font-family:system-ui,sans-serif;margin:2rem;color:#222;max-width:1200px}
 h1{font-size:1.6rem}h2{font-size:1.15rem;margin-top:2rem;border-bottom:1px solid #ddd;padding-bottom:.3rem}
 table{border-collapse:collapse;margin:.5rem 0}td,th{border:1px solid #ddd;padding:.25rem .6rem;text-align:right}
@@ -97,8 +98,11 @@ def _floor(rel: RelationRecord) -> str:
     return html.escape(line) if line else "—"
 
 
-def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report") -> str:
-    """The report as one HTML string."""
+def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None) -> str:
+    """The report as one HTML string; ``partial``: why the session did not run every selected relation, shown in
+    the title and a banner under it."""
+    if partial is not None:
+        title = f"{title} (partial)"
     summary_rows = []
     sections = []
     for i, rel in enumerate(sorted(relations, key=lambda r: r.nodeid)):
@@ -131,6 +135,8 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
     return (
         f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
         f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
+        + ("" if partial is None else f'<p class="partial"><strong>Partial report:</strong> {html.escape(partial)}; '
+           "the relations that did not run are not in it.</p>") +
         "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
         "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr></thead>"
         "<tbody>"
@@ -138,6 +144,7 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
     )
 
 
-def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report") -> Path:
+def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
+               partial: str | None = None) -> Path:
     """Write :func:`render_html` to ``path`` atomically."""
-    return atomic_write_text(path, render_html(relations, title))
+    return atomic_write_text(path, render_html(relations, title, partial))

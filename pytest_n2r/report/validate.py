@@ -19,7 +19,7 @@ from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform
 from ..relation.record import STATUSES, ExampleRecord, RelationRecord
 
-__all__ = ["BadField", "relation_from_json", "meta_from_json"]
+__all__ = ["BadField", "DuplicateKey", "unique_keys", "check_version", "relation_from_json", "meta_from_json"]
 
 _CAMERA_INTS = ("width", "height")
 _CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
@@ -33,6 +33,40 @@ _CAMERA_FIELDS = {"width": "a whole number of pixels", "height": "a whole number
 
 class BadField(Exception):
     """A field of a baseline that fails validation (the message names it)."""
+
+
+class DuplicateKey(ValueError):
+    """A JSON object that gives one key twice (a JSON reader keeps the last and silently drops the other)."""
+
+
+def unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``json.loads``' ``object_pairs_hook``: the object as a dict, or :class:`DuplicateKey` naming the key."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKey(f"the key {key!r} appears twice in one object (a JSON reader keeps only the last and "
+                               "drops the other without a word: a hand edit or a merge?); keep one of them")
+        out[key] = value
+    return out
+
+
+def check_version(data: dict, version: int) -> str | None:
+    """Why the baseline's ``"version"`` is not ``version`` (``None`` when it is), and what to do: an older one is
+    saved again, a newer one needs a newer pytest-n2r (saving it again with this one, on the branch under review,
+    would compare the candidate with itself), and a version that is not an integer is malformed."""
+    found = data.get("version")
+    if found == version and type(found) is int:
+        return None
+    if "version" not in data:
+        return f"has no \"version\"; expected the integer {version} (the format version this pytest-n2r reads)"
+    if type(found) is not int:
+        return (f"has \"version\": {found!r} ({type(found).__name__}); expected an integer, the format version "
+                f"(this pytest-n2r reads {version})")
+    if found > version:
+        return (f"has format version {found}; this pytest-n2r reads version {version}: it was written by a newer "
+                "pytest-n2r; upgrade pytest-n2r to read it (do not save it again with this one: on a pull request "
+                "that would compare the candidate with itself)")
+    return f"has format version {found}; this pytest-n2r reads version {version} (paired replay)"
 
 
 def _number(value: Any, where: str, *, minimum: float | None = None) -> float:
@@ -55,10 +89,24 @@ def _present(e: dict, key: str, where: str, expected: str) -> Any:
     return e[key]
 
 
+#: The fields of a baseline's relation entry and of its example records (what :func:`save_baseline` writes; an
+#: example's ``images`` and ``valid`` are :class:`ExampleRecord` data too): any other is refused, naming it.
+_RELATION_FIELDS = ("metric", "eps", "scene", "scene_hash", "outcome", "examples")
+_EXAMPLE_FIELDS = tuple(sorted({*ExampleRecord.__dataclass_fields__, "valid"}))
+
+
+def _known_fields(record: dict, known: tuple[str, ...], where: str) -> None:
+    unknown = sorted(set(record) - set(known))
+    if unknown:
+        raise BadField(f"{where}: " * bool(where) + f"unknown field(s) {unknown} (misspelt?); expected fields of "
+                       f"{list(known)}")
+
+
 def relation_from_json(nodeid: str, rel: Any) -> RelationRecord:
     """The relation record of one entry of a baseline's ``relations``, every field checked."""
     if not isinstance(rel, dict):
         raise BadField(f"expected an object, got {type(rel).__name__}")
+    _known_fields(rel, _RELATION_FIELDS, "")
     for key in ("metric", "eps", "scene_hash", "examples"):
         if key not in rel:
             raise BadField(f"missing field {key!r}")
@@ -145,6 +193,7 @@ def _follow_up(e: dict, where: str) -> tuple[dict[str, float] | None, dict[str, 
 def _example(e: Any, where: str) -> ExampleRecord:
     if not isinstance(e, dict):
         raise BadField(f"{where} is {type(e).__name__}; expected an example object")
+    _known_fields(e, _EXAMPLE_FIELDS, where)
     status = e.get("status")
     if status not in STATUSES:
         raise BadField(f"{where}.status={status!r}; expected one of {STATUSES}")

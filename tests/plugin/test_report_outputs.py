@@ -93,11 +93,36 @@ def test_a_session_that_stopped_early_saves_no_baseline(n2r_project, stop):
     base = n2r_project.pytester.path / "baseline.json"
     args = [] if stop == ["interrupt"] else stop
     result = n2r_project.pytester.runpytest("-p", "no:cacheprovider", "--n2r-size", "96", "--n2r-scene", RAMP, *args,
-                                            "--n2r-save-baseline", str(base), no_reraise_ctrlc=True)
+                                            "--n2r-save-baseline", str(base), "--n2r-json", "r.json",
+                                            "--n2r-report", "r.html", no_reraise_ctrlc=True)
     assert not base.exists(), f"a baseline was saved from a session stopped by {stop}: it lacks test_mean_colour"
     assert result.ret != pytest.ExitCode.OK, result.stdout.str()
     expected = f"*pytest-n2r did not save the baseline {base}: the session *, so it would lack the relations that did*"
     result.stdout.fnmatch_lines([expected])
+    # the reports are still written (what ran is worth seeing), but say they are partial
+    report = json.loads((n2r_project.pytester.path / "r.json").read_text())
+    assert report["complete"] is False and report["incomplete"].startswith("the session "), report.get("incomplete")
+    page = (n2r_project.pytester.path / "r.html").read_text()
+    assert "<strong>Partial report:</strong> the session " in page, "the HTML report of a stopped session is unmarked"
+    result.stdout.fnmatch_lines(["*pytest-n2r wrote r.json (partial: the session *"])
+
+
+@pytest.mark.parametrize("args", [["--collect-only"], ["-k", "no_such_test"]], ids=["--collect-only", "-k nothing"])
+def test_a_session_that_records_no_relation_keeps_the_baseline(n2r_project, args):
+    """Such a session once replaced a good baseline with one of no relations, which the next comparison refused."""
+    n2r_project.write(TWO)
+    base = n2r_project.pytester.path / "baseline.json"
+    base.write_text("the previous baseline\n")
+    result = n2r_project.run("--n2r-scene", RAMP, *args, "--n2r-save-baseline", str(base), "--n2r-json", "r.json")
+    assert base.read_text() == "the previous baseline\n", "the baseline was replaced by one of no relations"
+    why = ("--collect-only ran no test" if "--collect-only" in args else
+           "no relation test ran in this session (none was collected, or every one was deselected with -k *")
+    said = (f"*pytest-n2r did not save the baseline {base}: {why}, so it would hold no relation (a later "
+            "--n2r-compare refuses such a baseline)*; the previous file is left as it was")
+    result.stdout.fnmatch_lines([said])
+    assert result.ret != pytest.ExitCode.OK
+    report = json.loads((n2r_project.pytester.path / "r.json").read_text())
+    assert report["complete"] is ("--collect-only" not in args), report
 
 
 @pytest.mark.parametrize("workers", [[], ["-n", "2", "-p", "no:benchmark"]], ids=["one process", "xdist"])
@@ -125,6 +150,12 @@ def test_relations_deselected_when_the_baseline_was_saved_are_missing_later(n2r_
     (["--n2r-json", "out.json", "--n2r-report", "out.json"], "--n2r-json and --n2r-report are both out.json"),
     (["--n2r-json", "out.json", "--n2r-report", "sub/../out.json"],
      "--n2r-json out.json and --n2r-report sub/../out.json are one file ({tmp}/out.json)"),
+    # a report over the baseline being compared with once replaced it: the next comparison failed reading a report
+    (["--n2r-compare", "base.json", "--n2r-json", "base.json"],
+     ("--n2r-compare and --n2r-json are both base.json; give the report its own file (it would replace the "
+      "baseline this run compares with)")),
+    (["--n2r-compare", "base.json", "--n2r-report", "sub/../base.json"],
+     "--n2r-compare base.json and --n2r-report sub/../base.json are one file ({tmp}/base.json); give the report"),
 ])
 def test_output_paths_are_checked_before_the_run(n2r_project, args, expected):
     tmp = n2r_project.pytester.path

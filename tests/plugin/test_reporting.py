@@ -50,18 +50,33 @@ def test_baseline_then_paired_replay_passes_unchanged_and_fails_a_regression(n2r
 
     same = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base), "--n2r-json", "same.json")
     assert same.ret == 0, same.stdout.str()
+    gate = json.loads((n2r_project.pytester.path / "same.json").read_text())["comparison"]
+    assert gate["passed"] is True and gate["failed"] == [] and gate["baseline"] == str(base), gate
+    (outcome,) = gate["relations"]
+    assert (outcome["nodeid"], outcome["verdict"], outcome["n"], outcome["bound"]) == \
+        ("test_relations.py::test_brightness[plane]", "ok", 12, 0.0), outcome
     assert _row(same, "test_brightness[plane]")[1:] == ["12", "+0.0000", "+0.0000", "ok"]
     replayed = _json(n2r_project, "same.json")["test_brightness[plane]"]["replayed"]
     assert [(e["view"], e["transform"], e["deviation"]) for e in replayed] == \
         [(e["view"], e["transform"], e["deviation"]) for e in accepted], "exactly the baseline's examples, bit for bit"
 
     monkeypatch.setenv("N2R_CANDIDATE", "1")
-    worse = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base), "--n2r-compare-fail", "mean:0.02")
+    before = base.read_text()
+    worse = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base), "--n2r-compare-fail", "mean:0.02",
+                            "--n2r-save-baseline", str(base), "--n2r-json", "worse.json")
     worse.assert_outcomes(passed=1)  # the relation itself holds (eps is huge) ...
     assert worse.ret == pytest.ExitCode.TESTS_FAILED, "... but the gate must fail the run"
     row = _row(worse, "test_brightness[plane]")
     assert row[1] == "12" and float(row[3]) > 0.02 and row[4] == "worse (fails)", row
     worse.stdout.fnmatch_lines(["*1 relation(s) fail the baseline comparison: *test_brightness[[]plane[]] (worse)*"])
+    # refreshing the baseline in place must not replace it with the regressed run (the next comparison would pass)
+    assert base.read_text() == before, "the baseline compared with was overwritten by a run that failed the gate"
+    kept = (f"*pytest-n2r did not save the baseline {base}: it is the baseline this run compared with "
+            "(--n2r-compare), and 1 relation(s) failed the comparison*")
+    worse.stdout.fnmatch_lines([kept])
+    gate = json.loads((n2r_project.pytester.path / "worse.json").read_text())["comparison"]
+    assert gate["passed"] is False and gate["failed"] == ["test_relations.py::test_brightness[plane]"], gate
+    assert gate["relations"][0]["verdict"] == "worse" and gate["relations"][0]["fails"] is True, gate
 
 
 def test_the_replay_does_not_depend_on_the_search(n2r_project):

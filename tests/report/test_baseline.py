@@ -133,6 +133,15 @@ _EX = "relations/a::t/examples/0"
     (f"{_EX}/reason", 7, r"examples\[0\].reason=7; expected a string"),
     (f"{_EX}/mutation", {"name": "brightness", "levels": 3}, r"examples\[0\] has both a transform and a mutation"),
     ("meta", {"not_recorded": "a::u"}, r"meta.not_recorded='a::u'; expected a list of test ids"),
+    # a version that is not an integer once read "has format version '2'; this pytest-n2r reads version 2"
+    ("version", "2", (r"has \"version\": '2' \(str\); expected an integer, the format version \(this "
+                      r"pytest-n2r reads 2\)")),
+    ("version", _DELETE, r"has no \"version\"; expected the integer 2"),
+    # a misspelt field once passed silently (the record took its default)
+    (f"{_EX}/devation", 0.1, (r"relation 'a::t': examples\[0\]: unknown field\(s\) \['devation'\] \(misspelt\?\); "
+                              r"expected fields of \[.*'deviation'")),
+    ("relations/a::t/espilon", 0.1, (r"relation 'a::t': unknown field\(s\) \['espilon'\] \(misspelt\?\); "
+                                     r"expected fields of \['metric', 'eps'")),
 ])
 def test_every_field_of_a_baseline_is_validated_on_load(tmp_path, path, value, expected):
     bad = tmp_path / "bad.json"
@@ -140,6 +149,38 @@ def test_every_field_of_a_baseline_is_validated_on_load(tmp_path, path, value, e
     with pytest.raises(BaselineError, match=expected) as info:
         load_baseline(bad)
     assert str(bad) in str(info.value) and f"regenerate it with --n2r-save-baseline {bad}" in str(info.value)
+
+
+@pytest.mark.parametrize("version", [3, 10])
+def test_a_baseline_of_a_newer_format_says_to_upgrade_not_to_regenerate(tmp_path, version):
+    """Saving the baseline again on a pull request would compare the candidate with itself."""
+    newer = tmp_path / "newer.json"
+    newer.write_text(json.dumps(_set(_valid_data(tmp_path), "version", version)))
+    with pytest.raises(BaselineError) as info:
+        load_baseline(newer)
+    assert str(info.value) == (
+        f"baseline {newer} has format version {version}; this pytest-n2r reads version 2: it was written by a newer "
+        "pytest-n2r; upgrade pytest-n2r to read it (do not save it again with this one: on a pull request that "
+        "would compare the candidate with itself)")
+
+
+@pytest.mark.parametrize("twice", ["a::t", "eps", "deviation"])
+def test_a_key_given_twice_is_refused_naming_it(tmp_path, twice):
+    """JSON readers keep the last of two equal keys: a hand-merged baseline silently lost a relation (or a value)."""
+    data = _valid_data(tmp_path)
+    text = json.dumps(data)
+    if twice == "a::t":  # a second entry of the relation, before the first
+        again = '"relations": {"a::t": ' + json.dumps(data["relations"]["a::t"]) + ", "
+        text = text.replace('"relations": {', again, 1)
+    else:
+        text = text.replace(f'"{twice}": ', f'"{twice}": 0.5, "{twice}": ', 1)
+    json.loads(text)  # still JSON a reader takes, keeping the last
+    dup = tmp_path / "dup.json"
+    dup.write_text(text)
+    with pytest.raises(BaselineError) as info:
+        load_baseline(dup)
+    assert str(info.value).startswith(f"baseline {dup}: the key {twice!r} appears twice in one object (a JSON reader "
+                                      "keeps only the last"), str(info.value)
 
 
 @pytest.mark.parametrize(("content", "expected"), [
