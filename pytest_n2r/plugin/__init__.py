@@ -40,6 +40,8 @@ _SESSION = pytest.StashKey["Any"]()
 _RECORD = pytest.StashKey["dict"]()
 #: ids of the scenes after whose first setup the heap was frozen (see :func:`pytest_runtest_setup`).
 _FROZEN_SCENES = pytest.StashKey[set]()
+#: True once the session froze the heap (:func:`pytest_runtest_setup`); :func:`pytest_unconfigure` unfreezes it.
+_FROZEN = pytest.StashKey[bool]()
 #: True while the cyclic garbage collector is off for the session's start-up (see :func:`_pause_collector`).
 _GC_PAUSED = pytest.StashKey[bool]()
 
@@ -90,6 +92,21 @@ def pytest_configure(config: pytest.Config) -> None:
             raise
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
             session.cache.clear()  # the controller clears before xdist workers start
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """A usage error when a path option's value, written apart (``--n2r-compare PATH``), moved pytest's rootdir and
+    config file (:mod:`pytest_n2r.plugin.rootdir`); not with ``--rootdir`` or ``-c``, which fix them."""
+    if not is_used(config) or config.option.rootdir or config.option.inifilename:
+        return
+    from .rootdir import check_rootdir
+
+    params = config.invocation_params
+    test_args = config.args if config.args_source == pytest.Config.ArgsSource.ARGS else []
+    error = check_rootdir(params.args, test_args, params.dir, config.rootpath, config.inipath)
+    if error is not None:
+        raise pytest.UsageError(error)
 
 
 def _pause_collector(config: pytest.Config) -> None:
@@ -176,6 +193,8 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 def pytest_unconfigure(config: pytest.Config) -> None:
     _resume_collector(config)
+    if config.stash.get(_FROZEN, False):
+        gc.unfreeze()  # what the session froze (its config, scenes, a caller's objects) can be freed again
     session = config.stash.get(_SESSION, None)
     if session is not None:
         session.close()
@@ -194,7 +213,8 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
     try:
         return _session(request.config).load(spec)
     except N2RError as exc:  # the scene's own message, not a traceback through the loader
-        pytest.fail(f"pytest-n2r: scene {spec.source}: {exc}", pytrace=False)
+        message = f"pytest-n2r: scene {spec.source}: {exc}"
+    pytest.fail(message, pytrace=False)  # outside the except block, so the report shows the message once
 
 
 @pytest.fixture(scope="session")
@@ -231,6 +251,7 @@ def pytest_runtest_setup(item: pytest.Item) -> Any:
     if new_scene or paused:
         gc.collect()
         gc.freeze()
+        item.config.stash[_FROZEN] = True
     _resume_collector(item.config)
 
 
@@ -241,6 +262,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     if relation is None:
         return None
     __tracebackhide__ = True
+    from ..errors import SUTOutputError
     from ..relation import RelationFailure
     from ..relation.determinism import SUTNotDeterministic
     from ..relation.timeout import CallTimeout
@@ -264,6 +286,9 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
         failure, verdict = str(exc), True
     except (CallTimeout, SUTNotDeterministic) as exc:
         failure = str(exc)
+    except SUTOutputError as exc:  # the SUT's output breaks the metric's contract: the message and the example
+        notes = [note for note in getattr(exc, "__notes__", ()) if "@reproduce_failure" not in note]  # not ours
+        failure = "\n".join((f"{type(exc).__name__}: {exc}", *notes))
     finally:
         record = session.records[-1] if session.records else None
         if record is not None and record.nodeid == pyfuncitem.nodeid:  # kept whatever happened

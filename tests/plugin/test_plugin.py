@@ -619,6 +619,45 @@ def test_setup_froze_the_heap_and_no_garbage(n2r_scene):
     result.assert_outcomes(passed=1)
 
 
+def test_a_sut_output_the_metric_cannot_use_is_a_short_failure_naming_the_example(n2r_project):
+    """An output of the wrong type failed with a 40-line traceback through pytest-n2r's engine."""
+    n2r_project.write("""
+from pytest_n2r import metamorphic, transforms
+from pytest_n2r.metrics import class_invariance
+
+
+@metamorphic(class_invariance(), eps=0.5, transform=transforms(yaw=5), examples=3)
+def test_label(n2r_scene):
+    return lambda rgb: int(rgb.mean() > 100)
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    out = result.stdout.str()
+    result.assert_outcomes(failed=1)
+    assert "source output has shape (); expected a 1-D vector of class scores" in out, out
+    assert "Falsifying example" in out and "pytest_n2r/relation" not in out, out
+
+
+def test_a_scene_that_cannot_be_loaded_is_named_once(n2r_project):
+    """``pytest.fail`` inside the ``except`` block printed the loader's error, "During handling of the above exception,
+    another exception occurred:", then the message again."""
+    n2r_project.write("def test_scene(n2r_scene):\n    pass\n")
+    result = n2r_project.run("--n2r-scene=nosuchmodule:scene")
+    out = result.stdout.str()
+    assert "During handling" not in out, out
+    assert out.count("cannot import it (No module named 'nosuchmodule')") == 1, out
+
+
+def test_the_session_unfreezes_what_it_froze_at_its_end(n2r_project):
+    """The freeze was never undone: a process running pytest again (``pytest.main``, pytester, a notebook) kept every
+    earlier session's objects, its config among them, out of the collector's reach for good."""
+    import gc
+
+    n2r_project.write("def test_scene(n2r_scene):\n    pass\n")
+    gc.unfreeze()
+    n2r_project.pytester.inline_run("-p", "no:cacheprovider", "--n2r-scene", PLANE).assertoutcome(passed=1)
+    assert gc.get_freeze_count() == 0, f"{gc.get_freeze_count()} objects still frozen after the session"
+
+
 def test_the_collector_paused_for_the_start_up_resumes_after_the_freeze(n2r_project):
     """The start-up runs with the collector off; the first setup collects and freezes before turning it back on,
     so no young collection walks everything the start-up made just before the full one."""

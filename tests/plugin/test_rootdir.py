@@ -1,0 +1,41 @@
+"""A path option written apart from its value (``--n2r-compare PATH``) that moved pytest's rootdir and config file."""
+
+from __future__ import annotations
+
+import pytest
+
+
+@pytest.fixture
+def repository(pytester: pytest.Pytester) -> pytest.Pytester:
+    """A repository whose root and whose project folder each hold a pytest config: the project's is the one its
+    tests expect (a 32-pixel render size, the demo wall)."""
+    pytester.makepyprojecttoml('[tool.pytest.ini_options]\nn2r_size = "64"\n')
+    project = pytester.mkdir("project")
+    (project / "pyproject.toml").write_text('[tool.pytest.ini_options]\nn2r_size = "32"\nn2r_scenes = ["demo:wall"]\n')
+    (project / "test_inner.py").write_text("def test_scene(n2r_scene):\n    pass\n")
+    (pytester.path / "report.json").write_text("{}")
+    return pytester
+
+
+def test_a_path_written_apart_that_moves_the_rootdir_is_a_usage_error(repository):
+    """Run from the repository's root, ``project --n2r-json report.json`` (the file existing) had pytest choose the
+    root's config: a gate then compared other test ids and sizes ("missing" everywhere) or recorded a baseline
+    under the wrong config, silently."""
+    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", "report.json")
+    err = " ".join(result.stderr.str().split())
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, f"exit code {result.ret}:\n{result.stdout.str()}\n{err}"
+    assert ("ERROR: pytest-n2r: --n2r-json report.json: pytest took the value for a test path when it chose its "
+            f"rootdir ({repository.path})") in err, err
+    assert "write --n2r-json=report.json (or give --rootdir)" in err, err
+
+
+@pytest.mark.parametrize("args", [
+    ["project", "--n2r-json=report.json"],  # the value is part of the option: pytest does not read it
+    ["project", "--n2r-json", "new.json"],  # no such path: pytest skips it
+    ["--n2r-json", "report.json"],  # no test path: the file's folder is where pytest looks anyway
+    ["project", "--n2r-json", "report.json", "--rootdir", "project"],  # the rootdir given
+])
+def test_a_path_that_moves_nothing_is_taken(repository, args):
+    result = repository.runpytest("-p", "no:cacheprovider", *args)
+    assert result.ret in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED), (
+        f"exit code {result.ret} for {args}:\n{result.stdout.str()}\n{result.stderr.str()}")
