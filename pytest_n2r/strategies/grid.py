@@ -95,15 +95,19 @@ def _draw_steps(draw: Any, n: int) -> int:
     """An integer in ``[0, n]``, spread over the whole range, that shrinks to the smallest failing value.
 
     Hypothesis draws a wide integer range with a strong bias toward small values (the median draw of
-    ``integers(0, 8000)`` is about 800), so a wide range first draws a bucket start (a near-uniform small
-    range), then the smaller of two values between that start and ``n`` (which offsets the upward skew
-    of starting inside a bucket). Shrinking lowers the bucket to 0 while the values stay valid in the
-    widened range, then binary-searches the smaller value: the result is the smallest failing integer.
+    ``integers(0, 8000)`` is about 800), so a wide range first draws a bucket (a near-uniform small range), then a
+    value between the bucket's start and ``n``. Starting inside the range skews values upward, so the starts crowd
+    toward 0 (the bucket's share of ``n`` grows as ``b (b + B) / 2 B²``): about half of the draws of a ±80° bound lie
+    beyond 40°. Shrinking lowers the bucket to 0 (the value stays valid in the widened range), then binary-searches
+    the value: the result is the smallest failing integer. Every choice is used: with two values of which only
+    the smaller counted, the shrinker traded between the unused one and the next unused draw, each trade a
+    "successful" shrink, and stopped at its cap of 500 short of the smallest failing value.
     """
     if n <= _BUCKET:
         return draw(_integers(0, n))
-    start = draw(_integers(0, _BUCKETS - 1)) * n // _BUCKETS
-    return min(draw(_integers(start, n)), draw(_integers(start, n)))
+    bucket = draw(_integers(0, _BUCKETS - 1))
+    start = bucket * (bucket + _BUCKETS) * n // (2 * _BUCKETS**2)
+    return draw(_integers(start, n))
 
 
 def draw_axis(draw: Any, lo: float, hi: float) -> float:
@@ -119,9 +123,10 @@ def draw_moved(draw: Any, lo: float, hi: float) -> float:
 
 
 def _draw_axis(draw: Any, lo: float, hi: float, moved: bool | None) -> float:
-    """:func:`draw_axis`; with ``moved`` True or False a second step count is drawn: ``True`` takes it when the
-    first is 0 (one step when it is 0 too), so the origin is never drawn, one step only rarely, and shrinking
-    ends at one step; ``False`` leaves it unused. Both draw the same, so the shrinker goes from one to the other."""
+    """:func:`draw_axis`; with ``moved`` True or False a second step count is drawn (one choice, which the shrinker
+    takes to 0 at once when unused): ``True`` takes it when the first is 0 (one step when it is 0 too), so the
+    origin is never drawn, one step only rarely, and shrinking ends at one step; ``False`` leaves it unused. Both
+    draw the same, so the shrinker goes from one to the other."""
     if lo == hi:
         return lo
     origin = min(max(0.0, lo), hi)
@@ -135,7 +140,7 @@ def _draw_axis(draw: Any, lo: float, hi: float, moved: bool | None) -> float:
     sign, n, end = sides[draw(_integers(0, len(sides) - 1))] if len(sides) > 1 else sides[0]
     k = _draw_steps(draw, n)
     if moved is not None:
-        spare = _draw_steps(draw, n)
+        spare = draw(_integers(0, n))
         k = max(spare, 1) if moved and k == 0 else k
     if k == 0:
         return origin  # exactly the bound's end nearest 0 when it is off the grid (rounding would move it)

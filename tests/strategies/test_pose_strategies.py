@@ -179,14 +179,14 @@ def test_presets_are_look_at_transforms_in_reference_units(name):
 def test_draws_spread_over_the_whole_bound():
     drawn = []
 
-    @settings(max_examples=300, database=None)
+    @settings(max_examples=300, database=None, derandomize=True)
     @given(n2r.transforms(yaw=80))
     def collect(tau):
         drawn.append(abs(tau.yaw))
 
     collect()
     far = np.mean(np.asarray(drawn) > 40)
-    assert far > 0.3, f"only {far:.0%} of draws had |yaw| > 40 for a bound of 80: draws crowd near 0"
+    assert 0.4 < far < 0.65, f"{far:.0%} of draws had |yaw| > 40 for a bound of 80; expected about half"
 
 
 def test_the_grid_draws_what_hypothesis_integers_draw():
