@@ -19,8 +19,16 @@ the worst ORB deviations are brightness 0.221 / 0.459, noise patch 0.818 / 0.849
 (object / wall). Brightness (0.75) and black patches (0.5) were far looser than the rule and are now 0.55 and 0.25;
 the noise patch keeps 0.95. On the shipped draws: brightness 0.146 / 0.447, noise patch 0.826 / 0.662, black
 patches 0.072 / 0.101. MobileNetV2's top-5 invariance held on every shipped draw, but 3 of the 100 draws of black
-patches moved its top-1 class out of the follow-up's top 5 (deviation 1): the relation stands as the SUT's
+patches moved its top-1 class out of the follow-up's top 5 (deviation 1): the relation stood as the SUT's
 measured behaviour on these 20 examples, not a guarantee; a larger search finds that weakness.
+
+On 7 December 2026 the grid's draws changed (every drawn choice used, so shrinking reaches the smallest failing
+motion; the spread of the draws kept): the shipped 20 draws of black patches now include 3 that move MobileNetV2's
+top-1 class out of its top 5 (2 of 100 draws with ``-o n2r_examples=100``), the weakness measured above. The
+relation is kept, marked as an expected failure (``xfail``, strict: a run in which it held would fail and ask
+for a look), not loosened: no eps below 1 passes a lost class, and narrowing the patches would hide what the
+SUT does. The ORB relations' worst deviations on the new shipped draws (object / wall): brightness 0.146 / 0.447,
+noise patch 0.703 / 0.794, black patches 0.078 / 0.073 (0.120 / 0.108 over 100 draws): eps unchanged.
 """
 
 from __future__ import annotations
@@ -61,6 +69,10 @@ def test_mobilenet_class_invariance_m1_brightness(n2r_scene):
 
 @pytest.mark.classifiers
 @metamorphic(class_invariance(top_k=5), eps=0.0, transform=black_patches(max_size=0.05, count=4))
-def test_mobilenet_class_invariance_m3_black_patches(n2r_scene):
+def test_mobilenet_class_invariance_m3_black_patches(n2r_scene, request):
     skip_without_object(n2r_scene)
+    if n2r_scene.name == "object":  # the exact demo scene: its draws are the measured ones (module docstring)
+        request.applymarker(pytest.mark.xfail(
+            strict=True, reason="MobileNetV2's top-1 class leaves its top 5 under four black patches of up to 5 % "
+            "(3 of the 20 shipped draws, 2 of 100; module docstring): the weakness of the SUT found here"))
     return load_classifier("mobilenet_v2")

@@ -337,6 +337,7 @@ class _Summary:
         self.records: list[Any] = []
         self.first_report: float | None = None  # when the first test report arrived, less its duration
         self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
+        self.expected: set[int] = set()  # indices of the records of tests marked xfail (their failure expected)
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if self.first_report is None:
@@ -350,6 +351,8 @@ class _Summary:
             from ..relation.record import RelationRecord
 
             self.records.append(RelationRecord.from_dict(record))
+            if hasattr(report, "wasxfail"):
+                self.expected.add(len(self.records) - 1)
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         records = self.records
@@ -359,8 +362,9 @@ class _Summary:
         from ..relation.floor import annotation_lines
         from ..relation.record import plural
 
-        for record in records:
-            terminalreporter.write_line(record.summary_line())
+        for i, record in enumerate(records):
+            line = record.summary_line()
+            terminalreporter.write_line(f"XFAIL  {line.split(' ', 1)[1]}" if i in self.expected else line)
             for line, warn in annotation_lines(record.floor):
                 terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
         examples = sum(len(r.valid_examples) for r in records)

@@ -637,6 +637,25 @@ def test_label(n2r_scene):
     assert "Falsifying example" in out and "pytest_n2r/relation" not in out, out
 
 
+def test_a_relation_marked_xfail_is_summarized_as_expected_not_as_a_failure(n2r_project):
+    """The summary said FAILED for a relation pytest reported XFAIL, in a green run."""
+    n2r_project.write("""
+import pytest
+from pytest_n2r import metamorphic, transforms
+from tests.plugin.fakemetrics import AbsDifference
+
+
+@pytest.mark.xfail(strict=True, reason="a known weakness")
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+def test_weak(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "-n", "2")
+    result.assert_outcomes(xfailed=1)
+    lines = [line for line in result.stdout.lines if "test_weak" in line and "examples" in line]
+    assert lines and lines[0].startswith("XFAIL  "), result.stdout.str()
+
+
 def test_a_scene_that_cannot_be_loaded_is_named_once(n2r_project):
     """``pytest.fail`` inside the ``except`` block printed the loader's error, "During handling of the above exception,
     another exception occurred:", then the message again."""
