@@ -20,6 +20,7 @@ from typing import Any
 import pytest
 
 from .options import add_options, is_used, read_options
+from .summary import Summary
 
 #: When pytest loaded the plugin (early in its start-up: before conftest files and test modules are imported).
 _LOADED = time.perf_counter()
@@ -82,7 +83,7 @@ def pytest_configure(config: pytest.Config) -> None:
         "or a .n2r path, 'demo:<name>' or 'module:function')",
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
-    config.pluginmanager.register(_Summary(config), "n2r-summary")
+    config.pluginmanager.register(Summary(config, _LOADED, lambda: _describe(config, _session(config))), "n2r-summary")
     if is_used(config):
         _pause_collector(config)  # before the engine's imports
         try:
@@ -319,6 +320,23 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo) -> Any:
         record = item.stash.get(_RECORD, None)
         if record is not None:  # the RelationRecord as a plain dict: pytest-xdist ships it to the controller
             outcome.get_result().n2r_record = record
+            _locate_at_the_test(item, outcome.get_result())
+
+
+def _locate_at_the_test(item: pytest.Item, report: pytest.TestReport) -> None:
+    """A relation's failure, raised from this plugin's hook (every frame hidden), located at the test function
+    (``--tb=line``, IDEs and CI annotations read it) rather than in pluggy, without pytest's note that every
+    traceback entry is hidden: the message is the whole failure."""
+    crash = getattr(report.longrepr, "reprcrash", None)
+    if not report.failed or crash is None or not hasattr(report.longrepr, "reprtraceback"):
+        return
+    path, line, _ = item.reportinfo()
+    at_test = report.longrepr.reprcrash = type(crash)(str(path), (line or 0) + 1, crash.message)
+    chain = getattr(report.longrepr, "chain", [])
+    chain[-1:] = [(traceback, at_test, descr) for traceback, _, descr in chain[-1:]]  # what pytest-xdist ships
+    for traceback in [report.longrepr.reprtraceback, *(entry[0] for entry in chain)]:
+        if traceback.style == "value":
+            traceback.extraline = None
 
 
 def relation_records(config: pytest.Config) -> list[Any]:
@@ -326,75 +344,3 @@ def relation_records(config: pytest.Config) -> list[Any]:
     (including those of pytest-xdist workers), for reports and baselines."""
     summary = config.pluginmanager.get_plugin("n2r-summary")
     return list(summary.records) if summary else []
-
-
-class _Summary:
-    """Collects the relation record of every test report (from xdist workers too) for the summary, and where
-    the session's time went: start-up and collection, fixtures' setup, relations, other tests."""
-
-    def __init__(self, config: pytest.Config):
-        self.config = config
-        self.records: list[Any] = []
-        self.first_report: float | None = None  # when the first test report arrived, less its duration
-        self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
-        self.expected: set[int] = set()  # indices of the records of tests marked xfail (their failure expected)
-
-    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
-        if self.first_report is None:
-            self.first_report = time.perf_counter() - report.duration
-        record = getattr(report, "n2r_record", None)
-        if report.when == "call":
-            self.phases["relations" if record is not None else "other tests"] += report.duration
-        else:
-            self.phases["setup"] += report.duration  # setup and teardown: the fixtures' time
-        if record is not None and report.when == "call":
-            from ..relation.record import RelationRecord
-
-            self.records.append(RelationRecord.from_dict(record))
-            if hasattr(report, "wasxfail"):
-                self.expected.add(len(self.records) - 1)
-
-    def pytest_terminal_summary(self, terminalreporter: Any) -> None:
-        records = self.records
-        if not records:
-            return
-        terminalreporter.section("pytest-n2r")
-        from ..relation.floor import annotation_lines
-        from ..relation.record import plural
-
-        for i, record in enumerate(records):
-            line = record.summary_line()
-            terminalreporter.write_line(f"XFAIL  {line.split(' ', 1)[1]}" if i in self.expected else line)
-            for line, warn in annotation_lines(record.floor):
-                terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
-        examples = sum(len(r.valid_examples) for r in records)
-        calls, shared = sum(r.sut_calls for r in records), sum(r.sut_shared for r in records)
-        terminalreporter.write_line(
-            f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
-            f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
-            f"{sum(r.inconsistencies for r in records)} inconsistent; {sum(r.renders for r in records)} renders "
-            f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs reused: the same SUT on the "
-            "same render)"
-        )
-        terminalreporter.write_line(self.time_line())
-        terminalreporter.write_line(_describe(self.config, _session(self.config)))
-
-    def time_line(self) -> str:
-        """Where the session's time went: start-up and collection, fixtures, the relations' split, the rest."""
-        now = time.perf_counter()
-        total = now - _LOADED
-        startup = (self.first_report if self.first_report is not None else now) - _LOADED
-        from ..relation.record import MORE_TIMINGS, TIMINGS
-
-        parts = (*TIMINGS, *(k for k in MORE_TIMINGS if k != "total"))  # the parts a relation's time splits into
-        t = {k: sum(r.timings.get(k, 0.0) for r in self.records) for k in parts}
-        other = max(0.0, self.phases["relations"] - sum(t.values()))
-        workers = getattr(self.config.option, "numprocesses", None) if hasattr(self.config.option, "dist") else None
-        summed = f" (test times summed over the {workers} workers)" if isinstance(workers, int) and workers > 1 else ""
-        return (
-            f"time {total:.1f} s since pytest loaded pytest-n2r{summed}: start-up and collection {startup:.1f} s; "
-            f"fixtures {self.phases['setup']:.1f} s; relations {self.phases['relations']:.1f} s = render "
-            f"{t['render']:.2f} s / SUT {t['sut']:.2f} s / metric {t['metric']:.2f} s / validity "
-            f"{t['validity']:.2f} s / field floors {t['floor']:.2f} s / search and other {other:.2f} s; other tests "
-            f"{self.phases['other tests']:.1f} s"
-        )

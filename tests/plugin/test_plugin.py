@@ -383,11 +383,11 @@ import sys
 
 def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
-    # the plugin, its option registry and its path parsers, the two leaf modules that registry reads and the plugin's
-    # two hook modules (its reports; the test order under xdist): nothing of the engine
+    # the plugin, its option registry and its path parsers, the two leaf modules that registry reads, the plugin's
+    # two hook modules (its reports; the test order under xdist) and its terminal summary: nothing of the engine
     assert loaded == ["pytest_n2r.defaults", "pytest_n2r.errors", "pytest_n2r.plugin", "pytest_n2r.plugin.options",
                       "pytest_n2r.plugin.path_options", "pytest_n2r.plugin.report",
-                      "pytest_n2r.plugin.schedule"], loaded
+                      "pytest_n2r.plugin.schedule", "pytest_n2r.plugin.summary"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
@@ -654,6 +654,26 @@ def test_weak(n2r_scene):
     result.assert_outcomes(xfailed=1)
     lines = [line for line in result.stdout.lines if "test_weak" in line and "examples" in line]
     assert lines and lines[0].startswith("XFAIL  "), result.stdout.str()
+
+
+@pytest.mark.parametrize("workers", [[], ["-n", "2"]], ids=["serial", "xdist"])
+def test_a_relation_failure_is_located_at_its_test_not_in_pluggy(n2r_project, workers):
+    """The failure was raised from the plugin's hook, every frame hidden: ``--tb=line`` (what IDEs and CI
+    annotations read) pointed into pluggy, and every failure ended in "All traceback entries are hidden"."""
+    n2r_project.write("""
+from pytest_n2r import metamorphic, transforms
+from tests.plugin.fakemetrics import AbsDifference
+
+
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+def test_changes(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--tb=line", *workers)
+    result.assert_outcomes(failed=1)
+    out = result.stdout.str()
+    assert "pluggy/" not in out and "All traceback entries are hidden" not in out, out
+    assert re.search(r"test_\w+\.py:\d+: Failed: metamorphic relation violated", out), out
 
 
 def test_a_scene_that_cannot_be_loaded_is_named_once(n2r_project):

@@ -1,0 +1,84 @@
+"""The plugin's terminal summary: every relation's line, the totals, and where the session's time went."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import pytest
+
+__all__ = ["Summary"]
+
+
+class Summary:
+    """Collects the relation record of every test report (from xdist workers too) for the summary, and where
+    the session's time went: start-up and collection, fixtures' setup, relations, other tests. ``loaded``: when
+    pytest loaded the plugin (``time.perf_counter``); ``describe``: the session's settings line."""
+
+    def __init__(self, config: pytest.Config, loaded: float, describe: Callable[[], str]):
+        self.config, self.loaded, self.describe = config, loaded, describe
+        self.records: list[Any] = []
+        self.first_report: float | None = None  # when the first test report arrived, less its duration
+        self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
+        self.expected: set[int] = set()  # indices of the records of tests marked xfail (their failure expected)
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if self.first_report is None:
+            self.first_report = time.perf_counter() - report.duration
+        record = getattr(report, "n2r_record", None)
+        if report.when == "call":
+            self.phases["relations" if record is not None else "other tests"] += report.duration
+        else:
+            self.phases["setup"] += report.duration  # setup and teardown: the fixtures' time
+        if record is not None and report.when == "call":
+            from ..relation.record import RelationRecord
+
+            self.records.append(RelationRecord.from_dict(record))
+            if hasattr(report, "wasxfail"):
+                self.expected.add(len(self.records) - 1)
+
+    def pytest_terminal_summary(self, terminalreporter: Any) -> None:
+        records = self.records
+        if not records:
+            return
+        terminalreporter.section("pytest-n2r")
+        from ..relation.floor import annotation_lines
+        from ..relation.record import plural
+
+        for i, record in enumerate(records):
+            line = record.summary_line()
+            terminalreporter.write_line(f"XFAIL  {line.split(' ', 1)[1]}" if i in self.expected else line)
+            for line, warn in annotation_lines(record.floor):
+                terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
+        examples = sum(len(r.valid_examples) for r in records)
+        calls, shared = sum(r.sut_calls for r in records), sum(r.sut_shared for r in records)
+        terminalreporter.write_line(
+            f"{plural(len(records), 'relation')}: {plural(examples, 'example')}, "
+            f"{sum(r.rejected for r in records)} rejected as invalid, {sum(r.undefined for r in records)} undefined, "
+            f"{sum(r.inconsistencies for r in records)} inconsistent; {sum(r.renders for r in records)} renders "
+            f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs reused: the same SUT on the "
+            "same render)"
+        )
+        terminalreporter.write_line(self.time_line())
+        terminalreporter.write_line(self.describe())
+
+    def time_line(self) -> str:
+        """Where the session's time went: start-up and collection, fixtures, the relations' split, the rest."""
+        now = time.perf_counter()
+        total = now - self.loaded
+        startup = (self.first_report if self.first_report is not None else now) - self.loaded
+        from ..relation.record import MORE_TIMINGS, TIMINGS
+
+        parts = (*TIMINGS, *(k for k in MORE_TIMINGS if k != "total"))  # the parts a relation's time splits into
+        t = {k: sum(r.timings.get(k, 0.0) for r in self.records) for k in parts}
+        other = max(0.0, self.phases["relations"] - sum(t.values()))
+        workers = getattr(self.config.option, "numprocesses", None) if hasattr(self.config.option, "dist") else None
+        summed = f" (test times summed over the {workers} workers)" if isinstance(workers, int) and workers > 1 else ""
+        return (
+            f"time {total:.1f} s since pytest loaded pytest-n2r{summed}: start-up and collection {startup:.1f} s; "
+            f"fixtures {self.phases['setup']:.1f} s; relations {self.phases['relations']:.1f} s = render "
+            f"{t['render']:.2f} s / SUT {t['sut']:.2f} s / metric {t['metric']:.2f} s / validity "
+            f"{t['validity']:.2f} s / field floors {t['floor']:.2f} s / search and other {other:.2f} s; other tests "
+            f"{self.phases['other tests']:.1f} s"
+        )
