@@ -168,6 +168,12 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
         return
     from ..errors import N2RError
 
+    for mark in metafunc.definition.iter_markers("parametrize"):
+        names = mark.args[0] if mark.args else mark.kwargs.get("argnames", "")
+        if "n2r_scene" in ([n.strip() for n in names.split(",")] if isinstance(names, str) else list(names)):
+            raise pytest.Collector.CollectError(
+                f"{metafunc.definition.nodeid}: n2r_scene is parametrized by pytest-n2r over the configured scenes; "
+                f"choose this test's scenes with @pytest.mark.{SCENE_MARKER}(...), not @pytest.mark.parametrize")
     session = _session(metafunc.config)
     pins = [str(a) for m in metafunc.definition.iter_markers(SCENE_MARKER) for a in m.args]
     try:

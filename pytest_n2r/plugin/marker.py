@@ -57,8 +57,15 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
         relation, error = None, f"@metamorphic(...): {exc}"
 
     def decorate(test: F) -> F:
+        import inspect
+
         import pytest
 
+        if error is None and (inspect.iscoroutinefunction(test) or inspect.isasyncgenfunction(test)):
+            name = getattr(test, "__name__", repr(test))
+            setattr(test, ERROR_ATTR, f"@metamorphic(...): {name} is async; a @metamorphic test returns the system "
+                                      "under test at once, so it must be a plain def")
+            return test
         if error is not None:
             setattr(test, ERROR_ATTR, error)
             return test

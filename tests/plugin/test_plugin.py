@@ -84,6 +84,34 @@ def test_bad(n2r_scene):
     result.stdout.fnmatch_lines([f"*test_relations.py::test_bad: @metamorphic(...): *{message}*"])
 
 
+def test_an_async_relation_test_is_a_collection_error(n2r_project):
+    """An ``async def`` test returned a coroutine: the run failed with "it returned <coroutine ...>" and Python
+    warned that it was never awaited."""
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5))
+async def test_bad(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["*test_relations.py::test_bad: @metamorphic(...): test_bad is async; *plain def*"])
+
+
+def test_parametrizing_n2r_scene_by_hand_says_to_pin_scenes_with_the_marker(n2r_project):
+    """pytest said only "duplicate parametrization of 'n2r_scene'"."""
+    n2r_project.write("""
+import pytest
+
+
+@pytest.mark.parametrize("n2r_scene", ["plane"], indirect=True)
+def test_scene(n2r_scene):
+    pass
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["*n2r_scene is parametrized by pytest-n2r*@pytest.mark.n2r_scene(...)*"])
+
+
 def test_bad_bounds_fail_collection_with_the_bound_named(n2r_project):
     n2r_project.write("""
 @metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=(10, -10)))
