@@ -1,4 +1,5 @@
-"""The plugin's terminal summary: every relation's line, the totals, and where the session's time went."""
+"""The plugin's terminal summary: every relation's line, the totals, and where the session's time went (at
+``-qq``: only the relations that did not pass, and the totals)."""
 
 from __future__ import annotations
 
@@ -35,21 +36,30 @@ class Summary:
             from ..relation.record import RelationRecord
 
             self.records.append(RelationRecord.from_dict(record))
-            if hasattr(report, "wasxfail"):
+            if hasattr(report, "wasxfail") and report.skipped:  # xfailed (an xpass passed)
                 self.expected.add(len(self.records) - 1)
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
+        """The ``pytest-n2r`` section: each relation's line (with its field-floor lines), the totals line, the
+        time line and the settings line. At ``-qq`` (verbosity -2 or less: a CI log of many relations) only the
+        lines of the relations that did not pass (failed, xfailed, error), with just their field-floor warnings
+        (eps below the floor), and the totals line; ``-q`` changes nothing."""
         records = self.records
         if not records:
             return
+        terse = self.config.get_verbosity() <= -2
         terminalreporter.section("pytest-n2r")
         from ..relation.floor import annotation_lines
         from ..relation.record import plural
 
         for i, record in enumerate(records):
+            if terse and record.outcome == "passed":
+                continue
             line = record.summary_line()
             terminalreporter.write_line(f"XFAIL  {line.split(' ', 1)[1]}" if i in self.expected else line)
             for line, warn in annotation_lines(record.floor):
+                if terse and not warn:
+                    continue
                 terminalreporter.write_line(f"       {line}", yellow=warn, bold=warn)
         examples = sum(len(r.valid_examples) for r in records)
         calls, shared = sum(r.sut_calls for r in records), sum(r.sut_shared for r in records)
@@ -60,6 +70,8 @@ class Summary:
             f"(the rest from the cache); {plural(calls, 'SUT call')} ({shared} outputs reused: the same SUT on the "
             "same render)"
         )
+        if terse:
+            return
         terminalreporter.write_line(self.time_line())
         terminalreporter.write_line(self.describe())
 

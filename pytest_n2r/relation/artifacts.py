@@ -3,12 +3,16 @@
 What is drawn depends on the output: keypoints (an ``(N, 2+)`` array or ``cv2.KeyPoint`` list) as
 circles, a class (an int, a string, or a 1-D score vector whose argmax is the top-1 class) as text.
 Anything else is saved undecorated. Files are written atomically (temporary name, then rename).
+
+A run of a test id that ends without failure pictures (it passed, or failed without saving any) removes
+those an earlier run left for that id (:func:`remove_pictures`), so the folder shows only current failures.
 """
 
 from __future__ import annotations
 
 import hashlib
 import re
+from contextlib import suppress
 from pathlib import Path
 from typing import Any
 
@@ -16,9 +20,13 @@ import numpy as np
 
 from ..data.atomic import atomic_write_bytes
 
-__all__ = ["draw_output", "save_png", "save_pair", "artifact_dir"]
+__all__ = ["draw_output", "save_png", "save_pair", "artifact_dir", "remove_pictures", "PICTURE_NAMES"]
 
 _GREEN, _RED = (40, 220, 40), (235, 50, 50)  # RGB
+
+#: The files :func:`save_pair` writes in a test's folder, by role.
+PICTURE_NAMES = {"source": "source.png", "follow": "follow.png", "source_raw": "source-raw.png",
+                 "follow_raw": "follow-raw.png"}
 
 
 def artifact_dir(root: str | Path, test_id: str) -> Path:
@@ -84,10 +92,34 @@ def save_png(path: str | Path, rgb: np.ndarray) -> Path:
 def save_pair(directory: str | Path, source_rgb: np.ndarray, follow_rgb: np.ndarray,
               out_source: Any, out_follow: Any) -> dict[str, str]:
     """Save the renders the SUT saw and the same with its outputs drawn; returns ``{role: path}``."""
-    directory = Path(directory)
+    directory, names = Path(directory), PICTURE_NAMES
     return {
-        "source": str(save_png(directory / "source.png", draw_output(source_rgb, out_source, _GREEN))),
-        "follow": str(save_png(directory / "follow.png", draw_output(follow_rgb, out_follow, _RED))),
-        "source_raw": str(save_png(directory / "source-raw.png", source_rgb)),
-        "follow_raw": str(save_png(directory / "follow-raw.png", follow_rgb)),
+        "source": str(save_png(directory / names["source"], draw_output(source_rgb, out_source, _GREEN))),
+        "follow": str(save_png(directory / names["follow"], draw_output(follow_rgb, out_follow, _RED))),
+        "source_raw": str(save_png(directory / names["source_raw"], source_rgb)),
+        "follow_raw": str(save_png(directory / names["follow_raw"], follow_rgb)),
     }
+
+
+def remove_pictures(root: str | Path, test_id: str) -> list[Path]:
+    """Remove the failure pictures an earlier run left for ``test_id`` in the artifacts folder ``root``;
+    returns the files removed.
+
+    Only what :func:`save_pair` writes goes: the regular files named in :data:`PICTURE_NAMES` in
+    :func:`artifact_dir` of ``test_id``, then that folder itself if it is empty. Any other
+    file (the user's notes, a symbolic link), a folder that is a symbolic link (it may lead out of
+    ``root``), and ``root`` itself stay. Best effort: a file that cannot be removed (a read-only folder)
+    stays without an error, since a passing test must not fail over a stale picture.
+    """
+    folder = artifact_dir(root, test_id)
+    removed: list[Path] = []
+    with suppress(OSError):  # is_dir and is_file raise on a folder the user may not read
+        if folder.is_symlink() or not folder.is_dir():
+            return removed
+        for path in (folder / name for name in PICTURE_NAMES.values()):
+            if path.is_file() and not path.is_symlink():
+                with suppress(OSError):
+                    path.unlink()
+                    removed.append(path)
+        folder.rmdir()  # only when empty: else an OSError, and the folder stays
+    return removed

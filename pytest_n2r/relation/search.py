@@ -33,6 +33,7 @@ from ..errors import InvalidArgument, InvalidType, SUTOutputError
 from ..scene.base import Scene, SceneView
 from ..scene.render_cache import RenderCache
 from ..strategies.view_strategies import views as source_views
+from .artifacts import remove_pictures
 from .determinism import NotDeterministic, SUTNotDeterministic
 from .engine import Engine, forced_seed, recorded_view
 from .failure import MAX_UNDEFINED, RelationFailure, nothing_to_test, too_many_invalid
@@ -64,6 +65,8 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     entries and seed; ``on_start`` receives the (still empty) record before anything runs, so a caller keeps
     it even when the run raises. ``sut_outputs``: the SUT's outputs on renders kept across relations (a
     session's :class:`~pytest_n2r.relation.sut_outputs.SUTOutputs`); without it, the run keeps its own.
+    A run that ends without failure pictures removes those an earlier run left for ``test_id`` in
+    ``settings.artifacts`` (:func:`~pytest_n2r.relation.artifacts.remove_pictures`).
     """
     __tracebackhide__ = True
     if not isinstance(scene, Scene):
@@ -80,6 +83,7 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
     if on_start is not None:
         on_start(record)
     engine = Engine(scene, sut, relation, settings, cache, record, sut_outputs)
+    interrupted = False  # by a KeyboardInterrupt, pytest.exit, ...: not a finished run
     try:
         if replay is not None:
             record.replayed = engine.replay(replay)
@@ -105,9 +109,13 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         raise SUTNotDeterministic(record.message) from None
     except BaseException as exc:
         record.outcome, record.message = "error", f"{type(exc).__name__}: {exc}"
+        interrupted = not isinstance(exc, Exception)
         raise
     finally:
         record.timings["total"] = time.perf_counter() - started
+        # a run that ended (not interrupted) without failure pictures: an earlier run's are stale
+        if settings.artifacts is not None and not interrupted and not (record.minimal and record.minimal.images):
+            remove_pictures(settings.artifacts, test_id)
     return record
 
 

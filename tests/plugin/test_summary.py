@@ -1,0 +1,64 @@
+"""The pytest-n2r terminal section at each verbosity: ``-qq`` keeps a CI log of many relations short."""
+
+from __future__ import annotations
+
+import re
+
+PLANE = "tests.plugin.fakescene:plane"
+
+RELATIONS = """
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=5), examples=3)
+def test_holds(n2r_scene):
+    return mean_colour
+
+
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+def test_breaks(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+
+
+@pytest.mark.xfail(strict=True, reason="a known weakness")
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+def test_known_weakness(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+
+
+def crash(rgb):
+    raise RuntimeError("the SUT crashed")
+
+
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=5), examples=3)
+def test_crashes(n2r_scene):
+    return crash
+"""
+
+
+def _section(result) -> list[str]:
+    lines = result.outlines
+    start = next(i for i, line in enumerate(lines) if re.match(r"=+ pytest-n2r =+$", line))
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("=")), len(lines))
+    return lines[start + 1:end]
+
+
+def test_at_qq_only_the_relations_that_did_not_pass_and_the_totals_are_shown(n2r_project):
+    """With ``-qq`` the section still printed one line per relation and three summary lines."""
+    n2r_project.write(RELATIONS)
+    result = n2r_project.run("--n2r-scene", PLANE, "-qq")
+    assert result.ret == 1, result.stdout.str()  # -qq prints no line of outcomes for assert_outcomes to read
+    section = _section(result)
+    shown = [line.split(" ", 1)[0] + " " + re.search(r"::(test_\w+)", line).group(1)
+             for line in section if "::test_" in line]
+    assert sorted(shown) == ["ERROR test_crashes", "FAILED test_breaks", "XFAIL test_known_weakness"], section
+    assert len(section) == 4 and section[-1].startswith("4 relations: "), (
+        "the relations that did not pass, then the totals line, nothing else:\n" + "\n".join(section))
+
+
+def test_at_q_every_relation_and_the_time_are_shown(n2r_project):
+    n2r_project.write(RELATIONS)
+    result = n2r_project.run("--n2r-scene", PLANE, "-q")
+    result.assert_outcomes(passed=1, failed=2, xfailed=1)
+    section = _section(result)
+    assert any(line.startswith("PASSED ") and "test_holds" in line for line in section), section
+    assert sum("::test_" in line for line in section) == 4, section
+    assert any(line.startswith("4 relations: ") for line in section), section
+    assert any(line.startswith("time ") and "since pytest loaded pytest-n2r" in line for line in section), section
