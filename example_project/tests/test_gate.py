@@ -37,7 +37,7 @@ from pytest_n2r.report import (
     load_baseline,
     replay_candidates,
 )
-from pytest_n2r.report.baseline import format_comparison_table
+from pytest_n2r.report.compare import format_comparison_table
 
 from .test_detectors import REPEATABILITY, SPREAD  # the metrics the baseline's relations used
 

@@ -233,7 +233,7 @@ def _scenes(entries: list[str], where: Where) -> list[Any]:
 
 
 def _probability(value: str, where: Where) -> float:
-    from ..report.baseline import check_confidence
+    from ..report.compare import check_confidence
 
     try:
         return check_confidence(float(value))

@@ -19,13 +19,32 @@ from .options import option, read_options
 _RESULT = pytest.StashKey["dict"]()
 #: The files to write at the end of the session, by option name (``save_baseline``, ``json``, ``report``).
 _OUTPUTS = pytest.StashKey["dict"]()
-#: The relation test ids this process collected, selected or deselected (for a baseline's ``not_recorded``).
+#: The relation test ids this process collected, selected or deselected (for a baseline's ``not_recorded``, and to
+#: tell a comparison's deselected relation from a renamed or deleted one).
 _COLLECTED = pytest.StashKey["set"]()
 _OUTPUT_OPTIONS = ("save_baseline", "json", "report")
 
 
 def _is_worker(config: pytest.Config) -> bool:
     return hasattr(config, "workerinput")
+
+
+def _tracks_collected(config: pytest.Config) -> bool:
+    """Whether this session keeps the relation test ids it collects (:data:`_COLLECTED`)."""
+    return config.stash.get(_OUTPUTS, {}).get("save_baseline") is not None or bool(config.getoption("n2r_compare"))
+
+
+def run_settings(config: pytest.Config) -> dict[str, Any]:
+    """What a baseline records of the session that saves it (and a comparison checks against it): pytest's rootdir
+    and config file, the render size, examples per relation, derandomize and the scenes' names."""
+    from . import _session
+    from .scenes import default_scene_specs
+
+    session = _session(config)
+    settings = session.settings
+    return {"rootdir": str(config.rootpath), "config_file": str(config.inipath) if config.inipath else None,
+            "size": str(settings.size), "examples": settings.examples, "derandomize": bool(settings.derandomize),
+            "scenes": sorted(s.name for s in session.scenes or default_scene_specs())}
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -83,12 +102,12 @@ def _relation_ids(items: list[pytest.Item]) -> set[str]:
 def pytest_deselected(items: list[pytest.Item]) -> None:
     """Remember the deselected relation tests (``-k``, ``-m``, ``--deselect``): a baseline saved from this session
     lists them as not recorded, so a later comparison that runs them says ``missing``, not ``new``."""
-    if items and items[0].config.stash.get(_OUTPUTS, {}).get("save_baseline") is not None:
+    if items and _tracks_collected(items[0].config):
         items[0].config.stash.setdefault(_COLLECTED, set()).update(_relation_ids(items))
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
-    if session.config.stash.get(_OUTPUTS, {}).get("save_baseline") is not None:
+    if _tracks_collected(session.config):
         session.config.stash.setdefault(_COLLECTED, set()).update(_relation_ids(session.items))
 
 
@@ -177,11 +196,16 @@ def _baseline_refused(session: pytest.Session, records: list, path: Path) -> str
 
 
 def _comparison_json(config: pytest.Config, result: dict) -> dict[str, Any]:
-    """The gate's verdict for the JSON report: its rule, whether the run passed it, and every relation's outcome."""
+    """The gate's verdict for the JSON report: its rule, the baseline's ``meta`` (where it came from) and the run's
+    settings that differ from it, whether the run passed it, and every relation's outcome."""
+    from ..report.baseline import setting_differences
+
     comparisons = result["comparisons"]
     return {
         "baseline": str(config.getoption("n2r_compare")), "margin": result["margin"],
         "confidence": result["confidence"], "fail_on": list(result["fail_on"]),
+        "baseline_meta": result["baseline"].meta,
+        "settings_differ": setting_differences(result["baseline"].meta, result.get("settings", {})),
         "passed": not any(c.fails for c in comparisons), "failed": [c.nodeid for c in comparisons if c.fails],
         "relations": [{"nodeid": c.nodeid, "outcome": c.outcome, "also": list(c.also), "verdict": c.verdict,
                        "fails": c.fails, "n": c.n, "mean_change": c.mean_change, "bound": c.bound, "lost": c.lost,
@@ -204,7 +228,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     config = session.config
     outputs = config.stash.get(_OUTPUTS, {})
     if _is_worker(config):
-        if outputs.get("save_baseline") is not None:
+        if _tracks_collected(config):
             config.workeroutput["n2r_collected_relations"] = sorted(config.stash.get(_COLLECTED, set()))
         return
     if not outputs and not config.getoption("n2r_compare"):
@@ -218,9 +242,14 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 
     records = relation_records(config)
     result = config.stash.setdefault(_RESULT, {})
+    settings = run_settings(config) if outputs.get("save_baseline") is not None or config.getoption("n2r_compare") \
+        else {}
     if config.getoption("n2r_compare"):
+        result["settings"] = settings
         result["comparisons"] = compare_paired(result["baseline"], records, margin=result["margin"],
-                                               confidence=result["confidence"], fail_on=result["fail_on"])
+                                               confidence=result["confidence"], fail_on=result["fail_on"],
+                                               collected=config.stash.get(_COLLECTED, set()),
+                                               scenes=settings["scenes"])
         if any(c.fails for c in result["comparisons"]) and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
     written, problems = [], []
@@ -233,8 +262,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if path is not None:
         recorded = {r.nodeid for r in records}
         not_recorded = sorted(config.stash.get(_COLLECTED, set()) - recorded)
-        writers = [(path, "the baseline", lambda: save_baseline(
-            path, records, meta={"not_recorded": not_recorded} if not_recorded else None))]
+        meta = {**settings, **({"not_recorded": not_recorded} if not_recorded else {})}
+        writers = [(path, "the baseline", lambda: save_baseline(path, records, meta=meta))]
     else:
         writers = []
     partial = _incomplete(session)
@@ -269,14 +298,25 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
         return
     comparisons = result.get("comparisons")
     if comparisons is not None:
-        from ..report.baseline import format_comparison_table, percent
+        from ..report.compare import format_comparison_table, percent
 
         terminalreporter.section("pytest-n2r baseline comparison")
+        from ..report.baseline import describe_baseline, setting_differences
+
+        baseline = result["baseline"]
         terminalreporter.write_line(
             f"baseline {config.getoption('n2r_compare')}: the same examples replayed and paired; a relation is "
             f"worse when the {percent(result['confidence'])} lower bound of the mean increase of the deviation exceeds "
             f"{result['margin']:g}; failing outcomes: {', '.join(result['fail_on'])}"
         )
+        terminalreporter.write_line(describe_baseline(baseline.meta))
+        differences = setting_differences(baseline.meta, result.get("settings", {}))
+        if differences:
+            terminalreporter.write_line(
+                f"note: this run's settings differ from the baseline's: {'; '.join(differences)}. The replay uses "
+                "the baseline's recorded cameras, poses and follow-ups, so each paired example is the baseline's "
+                "own; this run's settings apply to its search only (relations of scenes only one side has are "
+                "new or missing)", yellow=True)
         if comparisons:
             terminalreporter.write_line(format_comparison_table(comparisons, result["confidence"]))
         else:

@@ -6,16 +6,8 @@ importable from here), which the plugin gathers and hands over.
 """
 
 from ..relation.record import ExampleRecord, RelationRecord
-from .baseline import (
-    BaselineError,
-    PairedComparison,
-    compare_paired,
-    load_baseline,
-    parse_margin,
-    parse_outcomes,
-    replay_candidates,
-    save_baseline,
-)
+from .baseline import BaselineError, load_baseline, save_baseline
+from .compare import PairedComparison, compare_paired, parse_margin, parse_outcomes, replay_candidates
 
 __all__ = [
     "ExampleRecord", "RelationRecord", "save_baseline", "load_baseline", "BaselineError", "PairedComparison",

@@ -123,7 +123,9 @@ def relation_from_json(nodeid: str, rel: Any) -> RelationRecord:
 
 def meta_from_json(meta: Any) -> dict[str, Any]:
     """A baseline's ``meta`` object, checked: ``not_recorded`` (relation test ids the saving session collected but
-    recorded nothing for: deselected, skipped or not run) must be a list of strings."""
+    recorded nothing for: deselected, skipped or not run) must be a list of strings, and where it came from
+    (version, date, rootdir, settings: :data:`~pytest_n2r.report.baseline.META_FIELDS`) of the right types where
+    given; a field it does not know is kept (a newer pytest-n2r's)."""
     if meta is None:
         return {}
     if not isinstance(meta, dict):
@@ -131,7 +133,22 @@ def meta_from_json(meta: Any) -> dict[str, Any]:
     skipped = meta.get("not_recorded", [])
     if not isinstance(skipped, list) or not all(isinstance(n, str) for n in skipped):
         raise BadField(f"meta.not_recorded={skipped!r}; expected a list of test ids")
+    for key, (kinds, expected) in _META_TYPES.items():  # where the baseline came from: optional (older files)
+        value = meta.get(key)
+        if key in meta and (not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds
+                            or key == "scenes" and not all(isinstance(n, str) for n in value)):
+            raise BadField(f"meta.{key}={value!r}; expected {expected}")
     return meta
+
+
+#: The types of a baseline's ``meta`` fields on where it came from, and what each is, for the messages.
+_META_TYPES: dict[str, tuple[tuple[type, ...], str]] = {
+    "pytest_n2r": ((str,), "the pytest-n2r version, a string"), "saved": ((str,), "a UTC date, a string"),
+    "rootdir": ((str,), "a path, a string"), "config_file": ((str, type(None)), "a path, a string, or null"),
+    "size": ((str,), "a render size, a string such as '480' or '320x180'"),
+    "examples": ((int,), "a whole number"), "derandomize": ((bool,), "true or false"),
+    "scenes": ((list,), "a list of scene names"),
+}
 
 
 def _camera(camera: Any, where: str) -> None:

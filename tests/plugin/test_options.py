@@ -34,7 +34,7 @@ def test_every_option_is_declared_once_with_its_help():
 def test_the_plugin_defaults_are_the_library_defaults():
     from pytest_n2r.plugin.session import N2RSession
     from pytest_n2r.relation import RunSettings
-    from pytest_n2r.report.baseline import DEFAULT_FAIL_ON, compare_paired, parse_margin
+    from pytest_n2r.report.compare import DEFAULT_FAIL_ON, compare_paired, parse_margin
     from pytest_n2r.scene.render_cache import RenderCache
 
     settings, session = RunSettings(), N2RSession()
@@ -57,7 +57,7 @@ def test_every_default_parses(o, tmp_path):
 def _table_row(flag: str) -> str:
     for page in ("plugin.md", "reporting.md"):
         for line in (DOCS / page).read_text(encoding="utf-8").splitlines():
-            if re.match(r"\|\s*`" + re.escape(flag) + r"[ `]", line):
+            if re.match(r"\|\s*`" + re.escape(flag) + r"[ `=]", line):
                 return line
     raise AssertionError(f"{flag} has no row in the option tables of docs/plugin.md or docs/reporting.md")
 

@@ -134,7 +134,12 @@ def test_relations_deselected_when_the_baseline_was_saved_are_missing_later(n2r_
     saved = n2r_project.run("--n2r-scene", RAMP, "-k", "mean_colour", *workers, "--n2r-save-baseline", str(base))
     saved.assert_outcomes(passed=1)
     meta = json.loads(base.read_text())["meta"]
-    assert meta == {"not_recorded": ["test_relations.py::test_heading[ramp]"]}, f"meta {meta}"
+    assert meta["not_recorded"] == ["test_relations.py::test_heading[ramp]"], f"meta {meta}"
+    # where the baseline came from (it recorded nothing before: "meta": {})
+    assert set(meta) == {"not_recorded", "pytest_n2r", "saved", "rootdir", "config_file", "size", "examples",
+                         "derandomize", "scenes"}, meta
+    assert (meta["rootdir"], meta["scenes"], meta["derandomize"]) == \
+        (str(n2r_project.pytester.path), ["ramp"], False), meta
     full = n2r_project.run("--n2r-scene", RAMP, "--n2r-compare", str(base))
     assert _row(full, "test_heading[ramp]")[-1] == "missing (fails)", \
         "a relation the baseline's session deselected must not pass as new"

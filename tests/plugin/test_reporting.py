@@ -89,6 +89,13 @@ def test_the_replay_does_not_depend_on_the_search(n2r_project):
                             "--n2r-compare", str(base))
     assert other.ret == 0, other.stdout.str()
     assert _row(other, "test_brightness[plane]")[1:] == ["12", "+0.0000", "+0.0000", "ok"]
+    other.stdout.fnmatch_lines([
+        f"baseline {base}: the same examples replayed and paired; *",
+        ("baseline saved 20??-??-??T??:??:??Z by pytest-n2r * (rootdir *, config file *); render size *, "
+        "examples per relation *, derandomize yes, scenes plane"),
+        ("note: this run's settings differ from the baseline's: render size 64 (baseline: *); derandomize no "
+        "(baseline: yes). The replay uses the baseline's recorded cameras, poses and follow-ups, so each paired "
+        "example is the baseline's own; this run's settings apply to its search only*")])
 
 
 EMPTY = """
@@ -123,7 +130,9 @@ def grid(rgb):
 
     missing = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "-k", "brightness")
     assert missing.ret == pytest.ExitCode.TESTS_FAILED
-    missing.stdout.fnmatch_lines(["*test_keypoints[[]plane[]]: missing: in the baseline but not run*"])
+    missing.stdout.fnmatch_lines([("*test_keypoints[[]plane[]]: missing: in the baseline but not run in this session: "
+                                  "collected, then deselected (-k / -m / --deselect) or skipped; run it, or pass "
+                                  "--n2r-compare-fail-on without 'missing'")])
     allowed = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base, "-k", "brightness",
                               "--n2r-compare-fail-on", "worse,changed-scene")
     assert allowed.ret == 0, allowed.stdout.str()
@@ -131,8 +140,26 @@ def grid(rgb):
     other_scene = n2r_project.run("--n2r-scene", "tests.plugin.fakescene:ramp", "--n2r-derandomize", "yes",
                                   "--n2r-compare", base)
     assert other_scene.ret == pytest.ExitCode.TESTS_FAILED
-    other_scene.stdout.fnmatch_lines(["*test_brightness[[]ramp[]] *new*",
-                                      "*test_brightness[[]plane[]] *missing (fails)*"])
+    other_scene.stdout.fnmatch_lines([
+        ("note: this run's settings differ from the baseline's: scenes ramp (baseline: plane). The replay uses the "
+        "baseline's recorded cameras*"),
+        "*test_brightness[[]ramp[]] *new*", "*test_brightness[[]plane[]] *missing (fails)*",
+        ("*test_brightness[[]ramp[]]: new: not in the baseline: it runs on scene 'ramp', which the baseline's scenes "
+        "(plane) lack: the scene set differs from the baseline's*"),
+        ("*test_brightness[[]plane[]]: missing: in the baseline but not run: it was recorded on scene 'plane', which "
+        "is not among this run's scenes (ramp): the scene set differs from the baseline's*")])
+
+    n2r_project.write(GATED.replace("def test_brightness", "def test_lightness") + EMPTY + """
+
+def grid(rgb):
+    h, w = rgb.shape[:2]
+    u, v = np.meshgrid(np.arange(6, w, 16.0), np.arange(6, h, 16.0))
+    return np.stack([u.ravel(), v.ravel()], axis=1)
+""")
+    renamed = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base)
+    assert renamed.ret == pytest.ExitCode.TESTS_FAILED
+    renamed.stdout.fnmatch_lines([("*test_brightness[[]plane[]]: missing: in the baseline but no test of this id was "
+                                  "collected in this session: the relation was renamed or deleted*")])
 
     n2r_project.write((GATED + EMPTY).replace("eps=1000", "eps=900") + """
 
@@ -142,7 +169,10 @@ def grid(rgb):
     return np.stack([u.ravel(), v.ravel()], axis=1)
 """)
     eps = n2r_project.run(*DERANDOMIZED, "--n2r-compare", base)
-    assert eps.ret == 0 and _row(eps, "test_brightness[plane]")[-1].startswith("changed-eps [eps changed 1000 -> 900]")
+    assert eps.ret == 0 and _row(eps, "test_brightness[plane]")[-1] == "changed-eps", "said once, on its own line"
+    assert eps.stdout.str().count("eps changed") == 1, eps.stdout.str()
+    eps.stdout.fnmatch_lines([("*test_brightness[[]plane[]]: changed-eps: eps changed from 1000 to 900 (within the "
+                              "margin)")])
 
 
 @pytest.mark.parametrize(("edit", "message"), [
@@ -179,6 +209,16 @@ def test_missing_baseline_and_bad_rules_are_usage_errors(n2r_project):
     missing = n2r_project.run("--n2r-scene", PLANE, "--n2r-compare", "nope.json")
     assert missing.ret == pytest.ExitCode.USAGE_ERROR
     missing.stderr.fnmatch_lines(["*baseline nope.json does not exist; create it with --n2r-save-baseline*"])
+    (n2r_project.pytester.path / "sub").mkdir()
+    folder = n2r_project.run("--n2r-scene", PLANE, "--n2r-compare=sub")
+    assert folder.ret == pytest.ExitCode.USAGE_ERROR
+    folder.stderr.fnmatch_lines([("*pytest-n2r: baseline sub is a folder; expected a baseline file (the JSON file that "
+                                 "--n2r-save-baseline PATH writes, e.g. sub/n2r-baseline.json)")])
+    (n2r_project.pytester.path / "base.json").write_text("{}")
+    empty = n2r_project.run("--n2r-scene", PLANE, "--n2r-compare", "base.json", "--n2r-compare-fail-on=")
+    assert empty.ret == pytest.ExitCode.USAGE_ERROR
+    empty.stderr.fnmatch_lines([("*pytest-n2r: --n2r-compare-fail-on='' names no outcome; give one or more of worse, "
+                                "lost, *, comma-separated (default: worse, *)")])
     for flag, value in (("--n2r-compare-fail", "mean:0.1"), ("--n2r-compare-confidence", "0.9"),
                         ("--n2r-compare-fail-on", "new")):
         alone = n2r_project.run("--n2r-scene", PLANE, flag, value)

@@ -6,12 +6,14 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+import pytest_n2r
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.report import (
     BaselineError,
@@ -24,7 +26,8 @@ from pytest_n2r.report import (
     replay_candidates,
     save_baseline,
 )
-from pytest_n2r.report.baseline import DEFAULT_FAIL_ON, format_comparison_table, paired_bound
+from pytest_n2r.report.baseline import describe_baseline, setting_differences
+from pytest_n2r.report.compare import DEFAULT_FAIL_ON, format_comparison_table, paired_bound
 
 CAMERA = {"width": 320, "height": 180, "fx": 250.0, "fy": 250.0, "cx": 159.5, "cy": 89.5, "distortion": []}
 POSE = [1.0, 0, 0, 0.5, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
@@ -70,8 +73,9 @@ def test_round_trip_keeps_every_example_and_its_replay_data(tmp_path):
 
 def test_baseline_file_is_stable_and_sorted(tmp_path):
     rels = [_relation("b::t", [0.1]), _relation("a::t", [0.2])]
-    first = save_baseline(tmp_path / "1.json", rels).read_text()
-    second = save_baseline(tmp_path / "2.json", list(reversed(rels))).read_text()
+    meta = {"saved": "2024-12-07T03:20:11Z"}  # else a second may pass between the two
+    first = save_baseline(tmp_path / "1.json", rels, meta=meta).read_text()
+    second = save_baseline(tmp_path / "2.json", list(reversed(rels)), meta=meta).read_text()
     assert first == second, "the baseline must not depend on the order relations ran in"
     assert list(json.loads(first)["relations"]) == ["a::t", "b::t"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["1.json", "2.json"], "no temporary file left behind"
@@ -403,3 +407,94 @@ def test_the_confidence_is_checked_and_shown_to_its_last_digit():
             compare_paired({"a::t": base}, [_replayed(base, [0.1] * 5)], confidence=bad)
     assert "97.5% lower bound" in format_comparison_table([], confidence=0.975)
     assert compare_paired({"a::t": base}, [_replayed(base, [0.1] * 5)], confidence=np.float32(0.9))[0].outcome == "ok"
+
+
+def test_empty_fail_on_is_an_error_not_the_default():
+    """``--n2r-compare-fail-on=`` silently meant the default set: it names no outcome, so it is refused."""
+    for spec in ("", [""], " , ", ["", ","]):
+        with pytest.raises(InvalidArgument) as info:
+            parse_outcomes(spec)
+        assert str(info.value).startswith("--n2r-compare-fail-on=") and "names no outcome; give one or more of " \
+            "worse, lost, no-pairs, changed-scene, changed-metric, changed-eps, missing, new, comma-separated " \
+            "(default: worse, lost, no-pairs, changed-scene, changed-metric, missing)" in str(info.value), info.value
+
+
+def test_a_changed_eps_is_said_once():
+    """The eps change was said twice: as a note in the verdict column and on the message line."""
+    base = _relation("a::t", [0.1] * 10)
+    (within,) = compare_paired({"a::t": base}, [_replayed(base, [0.1] * 10, eps=0.3)])
+    assert within.notes == [] and within.message == "eps changed from 0.2 to 0.3 (within the margin)", within
+    (worse,) = compare_paired({"a::t": base}, [_replayed(base, [0.5] * 10, eps=0.3)])
+    assert worse.verdict == "worse+changed-eps" and worse.notes == [], worse
+    assert worse.message.endswith("; also changed-eps: eps changed from 0.2 to 0.3"), worse.message
+    assert "eps changed" not in format_comparison_table([within, worse])
+
+
+def _on(scene: str, nodeid: str) -> RelationRecord:
+    rel = _relation(nodeid, [0.1] * 3)
+    rel.scene = scene
+    return rel
+
+
+def test_a_missing_relation_says_why_when_the_session_can_tell():
+    base = {"m.py::test_a[wall]": _on("wall", "m.py::test_a[wall]"),
+            "m.py::test_old[wall]": _on("wall", "m.py::test_old[wall]")}
+    run = {"collected": {"m.py::test_a[wall]"}, "scenes": ["wall"]}
+    by_id = {c.nodeid: c for c in compare_paired(base, [_on("wall", "m.py::test_new[wall]")], **run)}
+    deselected, renamed = by_id["m.py::test_a[wall]"], by_id["m.py::test_old[wall]"]
+    assert deselected.message == ("in the baseline but not run in this session: collected, then deselected (-k / -m / "
+                                  "--deselect) or skipped; run it, or pass --n2r-compare-fail-on without 'missing'")
+    assert renamed.message == (
+        "in the baseline but no test of this id was collected in this session: the relation was renamed or deleted "
+        "(or its file was not among the paths given to pytest); on a pull request that renames or removes a "
+        "relation, refresh the baseline when it merges, or pass --n2r-compare-fail-on without 'missing' for that "
+        "pull request (docs/reporting.md)")
+    assert (deselected.outcome, renamed.outcome, by_id["m.py::test_new[wall]"].outcome) == ("missing", "missing", "new")
+
+    by_id = {c.nodeid: c for c in compare_paired({"m.py::test_a[wall]": base["m.py::test_a[wall]"]},
+                                                 [_on("ramp", "m.py::test_a[ramp]")],
+                                                 collected={"m.py::test_a[ramp]"}, scenes=["ramp"])}
+    assert by_id["m.py::test_a[wall]"].message == (
+        "in the baseline but not run: it was recorded on scene 'wall', which is not among this run's scenes (ramp): "
+        "the scene set differs from the baseline's; run with the baseline's scenes, save a new baseline on this "
+        "scene set, or pass --n2r-compare-fail-on without 'missing'")
+    assert by_id["m.py::test_a[ramp]"].message == (
+        "not in the baseline: it runs on scene 'ramp', which the baseline's scenes (wall) lack: the scene set differs "
+        "from the baseline's, so nothing to compare with (save a new baseline on this scene set to include it)")
+    (unknown,) = compare_paired({"m.py::test_a[wall]": base["m.py::test_a[wall]"]}, [])
+    assert "(deselected, renamed or deleted)" in unknown.message, "without the session's collection, all cases"
+
+
+def test_a_baseline_records_where_it_came_from_and_old_ones_still_load(tmp_path):
+    settings = {"rootdir": "/repo", "config_file": "/repo/pyproject.toml", "size": "96", "examples": 12,
+                "derandomize": True, "scenes": ["plane"]}
+    path = save_baseline(tmp_path / "b.json", [_relation("a::t", [0.1])], meta=settings)
+    data = json.loads(path.read_text())
+    assert data["version"] == 2 and data["meta"]["pytest_n2r"] == pytest_n2r.__version__
+    assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", data["meta"]["saved"]), data["meta"]
+    loaded = load_baseline(path)
+    assert loaded.meta == {**settings, "pytest_n2r": pytest_n2r.__version__, "saved": data["meta"]["saved"]}
+    assert describe_baseline(loaded.meta) == (
+        f"baseline saved {data['meta']['saved']} by pytest-n2r {pytest_n2r.__version__} (rootdir /repo, "
+        "config file /repo/pyproject.toml); render size 96, examples per relation 12, derandomize yes, scenes plane")
+    assert setting_differences(loaded.meta, {**settings, "size": "64", "scenes": ["plane", "wall"]}) == \
+        ["render size 64 (baseline: 96)", "scenes plane, wall (baseline: plane)"]
+    assert setting_differences(loaded.meta, {**settings, "scenes": ["plane"]}) == []
+
+    data["meta"] = {}  # a baseline saved before pytest-n2r recorded where it came from
+    path.write_text(json.dumps(data))
+    old = load_baseline(path)
+    assert old.meta == {} and setting_differences(old.meta, settings) == []
+    assert describe_baseline(old.meta) == (
+        "baseline saved by an older pytest-n2r, which did not record its version, date or settings")
+    data["meta"] = {"examples": "12"}
+    path.write_text(json.dumps(data))
+    with pytest.raises(BaselineError, match=r"meta.examples='12'; expected a whole number; regenerate it"):
+        load_baseline(path)
+
+
+def test_a_folder_is_not_a_baseline(tmp_path):
+    with pytest.raises(BaselineError) as info:
+        load_baseline(tmp_path)
+    assert str(info.value) == (f"baseline {tmp_path} is a folder; expected a baseline file (the JSON file that "
+                               f"--n2r-save-baseline PATH writes, e.g. {tmp_path / 'n2r-baseline.json'})")
