@@ -66,13 +66,35 @@ def misread_paths(invocation_args: Sequence[str], test_args: Sequence[str],
 
 def check_rootdir(invocation_args: Sequence[str], test_args: Sequence[str], invocation_dir: Path,
                   rootdir: Path, inifile: Path | None) -> str | None:
-    """The usage error for :func:`misread_paths`, naming the options, the rootdir and the config file pytest took
-    and how to write them; ``None`` when there is none."""
+    """The usage error for a path option written apart from its value when that moved pytest's rootdir or config
+    file (``rootdir`` and ``inifile`` are what pytest chose; ``test_args`` its test paths): naming the options,
+    what pytest chose and would have chosen, and how to write them; ``None`` when nothing moved."""
     misread = misread_paths(invocation_args, test_args, invocation_dir)
     if not misread:
         return None
+    expected = _setup_without(test_args, invocation_dir)
+    if expected is not None and expected == (rootdir, inifile):
+        return None  # the value moved where pytest looked, not what it found
     written = ", ".join(f"{option} {value}" for option, value in misread)
     fixed = " ".join(f"{option}={value}" for option, value in misread)
+    instead = "" if expected is None else f" instead of {expected[0]} and {expected[1] or 'none'}"
     return (f"pytest-n2r: {written}: pytest took the value for a test path when it chose its rootdir ({rootdir}) "
-            f"and config file ({inifile or 'none'}), before it reads pytest-n2r's options, so this run may not use "
-            f"the config its tests expect; write {fixed} (or give --rootdir)")
+            f"and config file ({inifile or 'none'}){instead}, before it reads pytest-n2r's options, so this run "
+            f"may not use the config its tests expect; write {fixed} (or give --rootdir)")
+
+
+def _setup_without(test_args: Sequence[str], invocation_dir: Path) -> tuple[Path, Path | None] | None:
+    """The rootdir and config file pytest chooses for ``test_args`` alone (its own ``determine_setup``), or ``None``
+    where this pytest's function takes other arguments."""
+    import inspect
+
+    try:
+        from _pytest.config.findpaths import determine_setup
+
+        known = {"inifile": None, "override_ini": None, "args": list(test_args), "rootdir_cmd_arg": None,
+                 "invocation_dir": invocation_dir}
+        accepted = inspect.signature(determine_setup).parameters
+        root, ini, *_ = determine_setup(**{k: v for k, v in known.items() if k in accepted})
+    except Exception:  # noqa: BLE001 -- pytest's internals moved: the ancestors alone decide
+        return None
+    return Path(root), None if ini is None else Path(ini)

@@ -36,7 +36,7 @@ def test_the_plugin_loads_a_scene_file(pytester: pytest.Pytester, tiny_scene_fil
 
     monkeypatch.delenv("CI", raising=False)
     pytester.makepyfile(test_inner=INNER.format(steps=TINY_STEPS))
-    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(tiny_scene_file), "--n2r-size", "48",
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(tiny_scene_file), "--n2r-size", "48",
                                 "--n2r-device", "cpu")
     result.assert_outcomes(passed=2)
     result.stdout.fnmatch_lines(["*test_mean_colour[[]object[]]*3 examples*"])
@@ -60,7 +60,7 @@ def test_full_size_images_reach_the_sut(n2r_scene):
         return [float(rgb.mean()) / 255.0]
     return sut
 """)
-    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(tiny_scene_file), "--n2r-size", "48",
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(tiny_scene_file), "--n2r-size", "48",
                                 "--n2r-device", "cpu", "--n2r-render-scale", "0.5")
     result.assert_outcomes(passed=2)
 
@@ -76,7 +76,7 @@ def test_a_checkpoint_scene_is_warned_of(pytester: pytest.Pytester, tiny_capture
                             {**tiny_fit.report, "complete": False}, metres_per_unit=1.0)
     monkeypatch.delenv("CI", raising=False)
     pytester.makepyfile(test_inner=MEAN_COLOUR)
-    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(checkpoint), "--n2r-size", "48",
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(checkpoint), "--n2r-size", "48",
                                 "--n2r-device", "cpu")
     result.assert_outcomes(passed=1)
     result.stdout.fnmatch_lines([(f"*UnfinishedScene: scene 'object' is a checkpoint: its fit did not finish "

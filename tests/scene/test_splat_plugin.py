@@ -51,18 +51,18 @@ def test_metamorphic_tests_and_reports_run_on_a_ply(pytester: pytest.Pytester, m
     ply = DATA / FILES["object-sh0"][0]
     report = pytester.path / "n2r.json"
     # derandomized: the same examples every run (ORB on a few-thousand-Gaussian scene is no steady SUT)
-    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(ply), "--n2r-size", "240",
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(ply), "--n2r-size", "240",
                                 "--n2r-derandomize", "yes",
-                                "--n2r-json", str(report), "--n2r-save-baseline", str(pytester.path / "base.json"),
+                                "--n2r-json", str(report), "--n2r-save-baseline=" + str(pytester.path / "base.json"),
                                 "--n2r-report", str(pytester.path / "report.html"))
     result.assert_outcomes(passed=3)
     result.stdout.fnmatch_lines(["*test_mean_colour[[]point_cloud[]]*4 examples*"])
     records = json.loads(report.read_text())
     assert "point_cloud" in json.dumps(records), "the JSON report names the splat scene"
     assert "point_cloud" in (pytester.path / "report.html").read_text(), "the HTML report names the splat scene"
-    gate = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(ply), "--n2r-size", "240",
+    gate = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(ply), "--n2r-size", "240",
                               "--n2r-derandomize", "yes",
-                              "--n2r-compare", str(pytester.path / "base.json"))
+                              "--n2r-compare=" + str(pytester.path / "base.json"))
     gate.assert_outcomes(passed=3)
 
 
@@ -80,7 +80,7 @@ from pytest_n2r import l2_norm, metamorphic, transforms
 def test_mean_colour(n2r_scene):
     return lambda rgb: [float(rgb.mean())]
 """)
-    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", str(lone), "--n2r-size", "64")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene=" + str(lone), "--n2r-size", "64")
     result.assert_outcomes(failed=1)
     result.stdout.fnmatch_lines([("*scene 'lone' has no views to use as sources: no cameras were given and none were "
                                   "found beside*")])
@@ -124,19 +124,19 @@ def test_the_gate_on_a_ply_passes_the_same_sut_and_fails_a_worse_one_or_a_retrai
     common = ("-p", "no:cacheprovider", "--n2r-size", "96", "--n2r-derandomize", "yes")
     base, junit = pytester.path / "base.json", pytester.path / "junit.xml"
     monkeypatch.setenv("N2R_TEST_GAIN", "1")
-    saved = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-save-baseline", str(base),
+    saved = pytester.runpytest(*common, "--n2r-scene=" + str(ply), "--n2r-save-baseline=" + str(base),
                                "--junitxml", str(junit))
     saved.assert_outcomes(passed=1)
     properties = {p.get("name"): p.get("value") for p in ET.parse(junit).iter("property")}
     assert properties.get("n2r_scene") == "point_cloud" and properties.get("n2r_examples") == "8", properties
     assert {"n2r_metric", "n2r_eps", "n2r_worst_deviation"} <= set(properties), properties
 
-    same = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-compare", str(base))
+    same = pytester.runpytest(*common, "--n2r-scene=" + str(ply), "--n2r-compare=" + str(base))
     same.assert_outcomes(passed=1)
     assert same.ret == 0, same.stdout.str()
 
     monkeypatch.setenv("N2R_TEST_GAIN", "2000")
-    worse = pytester.runpytest(*common, "--n2r-scene", str(ply), "--n2r-compare", str(base))
+    worse = pytester.runpytest(*common, "--n2r-scene=" + str(ply), "--n2r-compare=" + str(base))
     worse.assert_outcomes(passed=1)
     assert worse.ret == 1, f"the gate let a worse SUT through:\n{worse.stdout.str()}"
     worse.stdout.fnmatch_lines(["*worse*"])
@@ -148,7 +148,7 @@ def test_the_gate_on_a_ply_passes_the_same_sut_and_fails_a_worse_one_or_a_retrai
     tensors = g.tensors()
     tensors["opacity_logits"] = tensors["opacity_logits"] - 0.5
     write_ply(retrained / ply.relative_to(DATA / "object-sh0"), type(g)(**tensors))
-    changed = pytester.runpytest(*common, "--n2r-scene", str(retrained / ply.relative_to(DATA / "object-sh0")),
-                                 "--n2r-compare", str(base))
+    changed = pytester.runpytest(*common, "--n2r-scene=" + str(retrained / ply.relative_to(DATA / "object-sh0")),
+                                 "--n2r-compare=" + str(base))
     assert changed.ret == 1, f"a retrained scene passed the gate:\n{changed.stdout.str()}"
     changed.stdout.fnmatch_lines(["*changed-scene*"])
