@@ -39,3 +39,13 @@ def test_a_path_that_moves_nothing_is_taken(repository, args):
     result = repository.runpytest("-p", "no:cacheprovider", *args)
     assert result.ret in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED), (
         f"exit code {result.ret} for {args}:\n{result.stdout.str()}\n{result.stderr.str()}")
+
+
+def test_a_path_elsewhere_that_moves_where_pytest_looks_but_not_what_it_finds_is_taken(repository, tmp_path_factory):
+    """A report file outside the repository moves the folder pytest starts its search from, yet pytest still finds
+    ``project``'s config through the test path: nothing moved, nothing to refuse."""
+    elsewhere = tmp_path_factory.mktemp("elsewhere") / "report.json"
+    elsewhere.write_text("{}")
+    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", str(elsewhere))
+    assert result.ret == pytest.ExitCode.OK, f"exit code {result.ret}:\n{result.stdout.str()}\n{result.stderr.str()}"
+
