@@ -221,7 +221,9 @@ def _header(path: Path) -> Iterator[PIL.Image.Image]:
     Pillow refuses headers past about 179 MP (twice its ``MAX_IMAGE_PIXELS``), a guard against decoding bombs; a
     200 MP phone photo (16 320 x 12 240) is past it yet within :data:`MAX_IMAGE_SIDE` a side, which
     :func:`_check_sides` holds. So a refused header is read again with the limit at ``MAX_IMAGE_SIDE ** 2`` (set
-    under a lock and put back), and only a header beyond that is an :class:`IngestError` naming the file.
+    under a lock and put back on every path), and only a header beyond that is an :class:`IngestError` naming the
+    file. The limit is Pillow's, process-wide: the lock keeps two readers here from restoring each other's value,
+    but while it is raised (the reading of one header) another thread decoding with Pillow has the raised guard.
     """
     from PIL import Image
 

@@ -97,15 +97,14 @@ def pytest_configure(config: pytest.Config) -> None:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_cmdline_main(config: pytest.Config) -> None:
-    """A usage error when a path option's value, written apart (``--n2r-compare PATH``), moved pytest's rootdir and
-    config file (:mod:`pytest_n2r.plugin.rootdir`); not with ``--rootdir`` or ``-c``, which fix them."""
-    if not is_used(config) or config.option.rootdir or config.option.inifilename:
+    """A usage error when a path option's value, written apart (``--n2r-compare PATH``), changed pytest's rootdir
+    or config file (:mod:`pytest_n2r.plugin.rootdir`)."""
+    if not is_used(config):
         return
     from .rootdir import check_rootdir
 
     params = config.invocation_params
-    test_args = config.args if config.args_source == pytest.Config.ArgsSource.ARGS else []
-    error = check_rootdir(params.args, test_args, params.dir, config.rootpath, config.inipath)
+    error = check_rootdir(params.args, params.dir, config.rootpath, config.inipath)
     if error is not None:
         raise pytest.UsageError(error)
 

@@ -39,13 +39,11 @@ def cache_folder(value: str | bool, where: Where) -> Path | None:
     """:func:`folder`, refused where it holds files of its own and no pytest-n2r ``CACHEDIR.TAG``: the cache
     would write into it and never trim it, nor clear it (``--n2r-cache-clear``)."""
     path = folder(value, where)
-    from ..scene.cache_folder import foreign_entries
+    from ..scene.cache_folder import foreign_entries, not_a_cache
 
     foreign = [] if path is None else foreign_entries(path)
     if foreign:
-        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-        raise InvalidArgument(f"{path} is not a pytest-n2r render cache (no CACHEDIR.TAG written by pytest-n2r) "
-                              f"and holds {shown}; choose a new or empty folder, or 'none'")
+        raise InvalidArgument(f"{not_a_cache(path, foreign)}; choose a new or empty folder, or 'none'")
     return path
 
 

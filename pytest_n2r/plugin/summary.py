@@ -22,7 +22,9 @@ class Summary:
         self.records: list[Any] = []
         self.first_report: float | None = None  # when the first test report arrived, less its duration
         self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
-        self.expected: set[int] = set()  # indices of the records of tests marked xfail (their failure expected)
+        #: pytest's word for a record whose test was marked xfail (XFAIL, XPASS), by the record's index
+        self.labels: dict[int, str] = {}
+        self.plain_passes: set[int] = set()  # indices of the records whose test passed, not marked xfail
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if self.first_report is None:
@@ -36,14 +38,19 @@ class Summary:
             from ..relation.record import RelationRecord
 
             self.records.append(RelationRecord.from_dict(record))
-            if hasattr(report, "wasxfail") and report.skipped:  # xfailed (an xpass passed)
-                self.expected.add(len(self.records) - 1)
+            index = len(self.records) - 1
+            if hasattr(report, "wasxfail"):  # xfailed (skipped), or a non-strict xpass (passed)
+                self.labels[index] = "XFAIL" if report.skipped else "XPASS"
+            elif report.failed and str(report.longrepr).startswith("[XPASS(strict)]"):  # pytest's own marking
+                self.labels[index] = "XPASS"
+            elif report.passed:
+                self.plain_passes.add(index)
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         """The ``pytest-n2r`` section: each relation's line (with its field-floor lines), the totals line, the
         time line and the settings line. At ``-qq`` (verbosity -2 or less: a CI log of many relations) only the
-        lines of the relations that did not pass (failed, xfailed, error), with just their field-floor warnings
-        (eps below the floor), and the totals line; ``-q`` changes nothing."""
+        lines of the relations that did not plainly pass (failed, xfailed, xpassed, error), with just their
+        field-floor warnings (eps below the floor), and the totals line; ``-q`` changes nothing."""
         records = self.records
         if not records:
             return
@@ -53,10 +60,11 @@ class Summary:
         from ..relation.record import plural
 
         for i, record in enumerate(records):
-            if terse and record.outcome == "passed":
+            if terse and i in self.plain_passes:
                 continue
             line = record.summary_line()
-            terminalreporter.write_line(f"XFAIL  {line.split(' ', 1)[1]}" if i in self.expected else line)
+            label = self.labels.get(i)
+            terminalreporter.write_line(f"{label:6s} {line.split(' ', 1)[1].lstrip()}" if label else line)
             for line, warn in annotation_lines(record.floor):
                 if terse and not warn:
                     continue

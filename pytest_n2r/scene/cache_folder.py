@@ -16,14 +16,15 @@ from pathlib import Path
 
 from ..data.atomic import atomic_write_text
 
-__all__ = ["claim", "foreign_entries", "is_ours"]
+__all__ = ["claim", "foreign_entries", "is_ours", "not_a_cache"]
 
 #: The ``CACHEDIR.TAG`` pytest-n2r writes (bford.info/cachedir): a directory holding exactly this file is one
 #: pytest-n2r made, the only kind in which :meth:`RenderCache.clear` and :meth:`RenderCache.trim` delete.
 _TAG = "Signature: 8a477f597d28d172789f06886806bc55\n# pytest-n2r render cache\n"
 #: What a cache directory may hold before its tag: kernel locks and floors (written before the first render is
-#: stored), the tag (or the .gitignore) under its temporary name, the options' writability probe.
-_BEFORE_TAG = re.compile(r"kernel-locks|floors|\.(CACHEDIR\.TAG|gitignore)\..*\.tmp|\.n2r-write-check\..*")
+#: stored), the tag (or the .gitignore) under its temporary name, the options' writability probe, and a
+#: ``.gitignore`` (a folder the user made for the cache and told Git about: it is kept).
+_BEFORE_TAG = re.compile(r"kernel-locks|floors|\.gitignore|\.(CACHEDIR\.TAG|gitignore)\..*\.tmp|\.n2r-write-check\..*")
 
 
 def is_ours(directory: Path) -> bool:
@@ -57,3 +58,9 @@ def claim(directory: Path) -> None:
     atomic_write_text(directory / "CACHEDIR.TAG", _TAG)
     if not (directory / ".gitignore").exists():
         atomic_write_text(directory / ".gitignore", "# created by pytest-n2r\n*\n")
+
+
+def not_a_cache(directory: Path, foreign: list[str]) -> str:
+    """Why ``directory``, holding the :func:`foreign_entries` ``foreign``, is refused as a render cache."""
+    shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+    return f"{directory} is not a pytest-n2r render cache (no CACHEDIR.TAG written by pytest-n2r) and holds {shown}"

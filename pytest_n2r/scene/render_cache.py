@@ -37,7 +37,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
-from .cache_folder import claim, foreign_entries, is_ours
+from .cache_folder import claim, foreign_entries, is_ours, not_a_cache
 from .first_render import first_render
 from .keep_threads import threads_kept
 
@@ -257,9 +257,7 @@ class RenderCache:
         self._memory_used = 0
         foreign = [] if self.directory is None else foreign_entries(self.directory)
         if foreign:
-            shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
-            raise InvalidArgument(f"{self.directory} is not a pytest-n2r render cache: it has no CACHEDIR.TAG written "
-                                  f"by pytest-n2r and holds {shown}; nothing was deleted (choose a new or empty "
+            raise InvalidArgument(f"{not_a_cache(self.directory, foreign)}; nothing was deleted (choose a new or empty "
                                   "folder for the cache)")
         for sub in (_SUBDIR, _DECISIONS):
             if self.directory is not None and (self.directory / sub).exists():

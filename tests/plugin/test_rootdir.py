@@ -1,4 +1,4 @@
-"""A path option written apart from its value (``--n2r-compare PATH``) that moved pytest's rootdir and config file."""
+"""A path option written apart from its value (``--n2r-compare PATH``) that changed pytest's rootdir or config file."""
 
 from __future__ import annotations
 
@@ -17,23 +17,27 @@ def repository(pytester: pytest.Pytester) -> pytest.Pytester:
     return pytester
 
 
-def test_a_path_written_apart_that_moves_the_rootdir_is_a_usage_error(repository):
+@pytest.mark.parametrize("rootdir", [[], ["--rootdir", "project"]], ids=["", "--rootdir"])
+def test_a_path_written_apart_that_moves_the_config_is_a_usage_error(repository, rootdir):
     """Run from the repository's root, ``project --n2r-json report.json`` (the file existing) had pytest choose the
     root's config: a gate then compared other test ids and sizes ("missing" everywhere) or recorded a baseline
-    under the wrong config, silently."""
-    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", "report.json")
+    under the wrong config, silently. ``--rootdir`` moves the rootdir back but not the config file."""
+    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", "report.json", *rootdir)
     err = " ".join(result.stderr.str().split())
     assert result.ret == pytest.ExitCode.USAGE_ERROR, f"exit code {result.ret}:\n{result.stdout.str()}\n{err}"
+    project = repository.path / "project"
     assert ("ERROR: pytest-n2r: --n2r-json report.json: pytest took the value for a test path when it chose its "
-            f"rootdir ({repository.path})") in err, err
-    assert "write --n2r-json=report.json (or give --rootdir)" in err, err
+            "rootdir") in err, err
+    assert f"config file ({repository.path / 'pyproject.toml'})" in err, err
+    assert f"without it they are {project} and {project / 'pyproject.toml'}" in err, err
+    assert "write --n2r-json=report.json (or give the config file with -c)" in err, err
 
 
 @pytest.mark.parametrize("args", [
     ["project", "--n2r-json=report.json"],  # the value is part of the option: pytest does not read it
     ["project", "--n2r-json", "new.json"],  # no such path: pytest skips it
     ["--n2r-json", "report.json"],  # no test path: the file's folder is where pytest looks anyway
-    ["project", "--n2r-json", "report.json", "--rootdir", "project"],  # the rootdir given
+    ["project", "--n2r-json", "report.json", "-c", "project/pyproject.toml"],  # the config file given
 ])
 def test_a_path_that_moves_nothing_is_taken(repository, args):
     result = repository.runpytest("-p", "no:cacheprovider", *args)

@@ -320,8 +320,8 @@ def test_a_folder_of_the_users_is_never_tagged_trimmed_nor_cleared(tmp_path):
     cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
     cache.disk_bytes = 1
     assert cache.trim() == 0, "trimmed in a folder pytest-n2r did not make"
-    with pytest.raises(InvalidArgument, match=rf"{tmp_path} is not a pytest-n2r render cache: it has no CACHEDIR\.TAG "
-                                              r"written by pytest-n2r and holds \.gitignore, decisions, renders; "
+    with pytest.raises(InvalidArgument, match=rf"{tmp_path} is not a pytest-n2r render cache \(no CACHEDIR\.TAG "
+                                              r"written by pytest-n2r\) and holds decisions, renders; "
                                               r"nothing was deleted"):
         cache.clear()
     assert (tmp_path / ".gitignore").read_text() == "build/\n", "the folder's own .gitignore was overwritten"
@@ -330,14 +330,16 @@ def test_a_folder_of_the_users_is_never_tagged_trimmed_nor_cleared(tmp_path):
     assert set(before) <= set(after), f"deleted: {set(before) - set(after)}"
 
 
-def test_a_cache_made_by_pytest_n2r_keeps_a_gitignore_found_there(tmp_path):
+def test_a_cache_folder_the_user_made_with_a_gitignore_is_tagged_and_keeps_it(tmp_path):
+    """A folder holding only a ``.gitignore`` (made for the cache) was refused as the user's, or, before the folder
+    test, had its ``.gitignore`` replaced by pytest-n2r's."""
     (tmp_path / "cache" / "kernel-locks").mkdir(parents=True)  # a first render's lock comes before the first store
+    (tmp_path / "cache" / ".gitignore").write_text("# mine\n*\n!README\n")
     cache = RenderCache(tmp_path / "cache")
     scene = PlaneScene()
     cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
     assert (tmp_path / "cache" / "CACHEDIR.TAG").read_text() == ("Signature: 8a477f597d28d172789f06886806bc55\n"
-                                                                "# pytest-n2r render cache\n")
-    (tmp_path / "cache" / ".gitignore").write_text("# mine\n*\n!README\n")
+                                                                "# pytest-n2r render cache\n"), "not tagged"
     cache.put_decision("ab" + "0" * 62, {"valid": True})
     assert (tmp_path / "cache" / ".gitignore").read_text() == "# mine\n*\n!README\n", "a .gitignore was replaced"
     cache.clear()
