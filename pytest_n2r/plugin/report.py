@@ -36,7 +36,8 @@ def _tracks_collected(config: pytest.Config) -> bool:
 
 def run_settings(config: pytest.Config) -> dict[str, Any]:
     """What a baseline records of the session that saves it (and a comparison checks against it): pytest's rootdir
-    and config file, the render size, examples per relation, derandomize and the scenes' names."""
+    and config file, the render size, the ``--n2r-examples`` default, derandomize and the configured scenes' names
+    (those the test ids carry: a ``module:function`` scene's function name, not its loaded scene's name)."""
     from . import _session
     from .scenes import default_scene_specs
 
@@ -82,7 +83,7 @@ def _check_compare_is_no_report(config: pytest.Config, outputs: dict[str, Path])
     given = config.getoption("n2r_compare")
     if not given:
         return
-    compare = Path(given)
+    compare = Path(given).expanduser()  # as the baseline is read: `--n2r-compare=~/b.json` (no shell expands it)
     for name in ("json", "report"):
         path = outputs.get(name)
         if path is not None and path.resolve() == compare.resolve():
@@ -188,7 +189,7 @@ def _baseline_refused(session: pytest.Session, records: list, path: Path) -> str
                 "baseline); save it from a session that runs the relation tests")
     compared = session.config.getoption("n2r_compare")
     failed = [c for c in session.config.stash.get(_RESULT, {}).get("comparisons") or () if c.fails]
-    if failed and compared and Path(compared).resolve() == path.resolve():
+    if failed and compared and Path(compared).expanduser().resolve() == path.resolve():
         return (f"it is the baseline this run compared with (--n2r-compare), and {len(failed)} relation(s) failed the "
                 "comparison: saving would replace it with the regressed run, and the next comparison would pass; "
                 "fix the regression, or save the baseline to another file")
@@ -244,12 +245,15 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     result = config.stash.setdefault(_RESULT, {})
     settings = run_settings(config) if outputs.get("save_baseline") is not None or config.getoption("n2r_compare") \
         else {}
-    if config.getoption("n2r_compare"):
+    if config.getoption("n2r_compare") and config.option.collectonly:
+        result["skipped"] = "--collect-only ran no test, so nothing was compared with the baseline"
+    elif config.getoption("n2r_compare"):
         result["settings"] = settings
+        # the scene names relation records carry, as the baseline's relations do (not the configured names)
+        scenes = {r.scene for r in records if r.scene} or None
         result["comparisons"] = compare_paired(result["baseline"], records, margin=result["margin"],
                                                confidence=result["confidence"], fail_on=result["fail_on"],
-                                               collected=config.stash.get(_COLLECTED, set()),
-                                               scenes=settings["scenes"])
+                                               collected=config.stash.get(_COLLECTED, set()), scenes=scenes)
         if any(c.fails for c in result["comparisons"]) and session.exitstatus == pytest.ExitCode.OK:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
     written, problems = [], []
@@ -296,6 +300,8 @@ def pytest_terminal_summary(terminalreporter: Any, exitstatus: int, config: pyte
     result = config.stash.get(_RESULT, None)
     if not result or _is_worker(config):
         return
+    if result.get("skipped"):
+        terminalreporter.write_line(f"pytest-n2r baseline {config.getoption('n2r_compare')}: {result['skipped']}")
     comparisons = result.get("comparisons")
     if comparisons is not None:
         from ..report.compare import format_comparison_table, percent

@@ -48,19 +48,9 @@ class Baseline(dict):
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        #: Where the baseline came from (:data:`META_FIELDS`), as far as the file records it (older files: nothing).
+        #: Where the baseline came from (:data:`~pytest_n2r.report.validate.META_FIELDS`), as far as the file
+        #: records it (older files: nothing).
         self.meta: dict[str, Any] = {}
-
-
-#: What a baseline's ``meta`` records about the session that saved it (all optional: older files lack them).
-META_FIELDS = {
-    "pytest_n2r": "the pytest-n2r version that saved it",
-    "saved": "when, in UTC (ISO 8601, to the second)",
-    "rootdir": "pytest's rootdir", "config_file": "pytest's config file (null: none)",
-    "size": "the render size (--n2r-size)", "examples": "examples per relation (--n2r-examples)",
-    "derandomize": "whether the examples were derandomized", "scenes": "the names of the session's scenes",
-    "not_recorded": "relation test ids collected but not run (deselected or skipped)",
-}
 
 
 # -- writing --------------------------------------------------------------------------------------------
@@ -74,7 +64,8 @@ def _plain_number(value: float) -> float | None:
 def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta: dict | None = None) -> Path:
     """Write every relation's drawn examples (all statuses, replay data included) to ``path`` atomically:
     strict JSON, relations sorted by test id, one line per example (so a review diff shows which changed).
-    ``meta`` (:data:`META_FIELDS`) gets the pytest-n2r version and the time of saving unless it gives them."""
+    ``meta`` (:data:`~pytest_n2r.report.validate.META_FIELDS`) gets the pytest-n2r version and the time of saving
+    unless it gives them."""
     def line(value: Any) -> str:
         return json.dumps(value, sort_keys=True, allow_nan=False)
 
@@ -104,18 +95,19 @@ def save_baseline(path: str | os.PathLike, relations: list[RelationRecord], meta
 def load_baseline(path: str | os.PathLike) -> Baseline:
     """Read and validate a baseline written by :func:`save_baseline`; :class:`BaselineError` names what
     is wrong (file, relation, example, field) and how to fix it."""
-    path = Path(path)
+    path = Path(path).expanduser()  # `--n2r-compare=~/b.json`: no shell expands a ~ after '='
     regenerate = f"regenerate it with --n2r-save-baseline {path}"
     if path.is_dir():
         raise BaselineError(f"baseline {path} is a folder; expected a baseline file (the JSON file that "
                             f"--n2r-save-baseline PATH writes, e.g. {path / 'n2r-baseline.json'})")
     if not path.is_file():
         raise BaselineError(f"baseline {path} does not exist; create it with --n2r-save-baseline {path}")
+    text = ""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_reject_constant,
-                          object_pairs_hook=unique_keys)
+        text = path.read_text(encoding="utf-8")
+        data = json.loads(text, parse_constant=_reject_constant, object_pairs_hook=unique_keys)
     except DuplicateKey as exc:
-        raise BaselineError(f"baseline {path}: {exc}, or {regenerate}") from None
+        raise BaselineError(f"baseline {path}: {exc.where(text)}, or {regenerate}") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
         raise BaselineError(f"baseline {path} is not readable JSON: {exc}; {regenerate}") from None
     except RecursionError:
@@ -164,7 +156,9 @@ def _setting(key: str, value: Any) -> str:
     return f"{value}"
 
 
-_SETTINGS = {"size": "render size", "examples": "examples per relation", "derandomize": "derandomize",
+#: The settings a baseline records, as the comparison's header names them. ``examples`` is the session's
+#: ``--n2r-examples`` default: a relation's own ``examples=`` overrides it, and the baseline's examples are its own.
+_SETTINGS = {"size": "render size", "examples": "--n2r-examples default", "derandomize": "derandomize",
              "scenes": "scenes"}
 
 
@@ -174,7 +168,7 @@ def describe_baseline(meta: dict[str, Any]) -> str:
 
     >>> describe_baseline({"pytest_n2r": "0.1.0", "saved": "2024-12-07T03:20:11Z", "size": "480", "examples": 20,
     ...                    "derandomize": True, "scenes": ["wall"]})
-    'baseline saved 2024-12-07T03:20:11Z by pytest-n2r 0.1.0; render size 480, examples per relation 20, derandomize yes, scenes wall'
+    'baseline saved 2024-12-07T03:20:11Z by pytest-n2r 0.1.0; render size 480, --n2r-examples default 20, derandomize yes, scenes wall'
     >>> describe_baseline({})
     'baseline saved by an older pytest-n2r, which did not record its version, date or settings'
     """  # noqa: E501
@@ -190,7 +184,7 @@ def describe_baseline(meta: dict[str, Any]) -> str:
 
 
 def setting_differences(meta: dict[str, Any], current: dict[str, Any]) -> list[str]:
-    """The settings (render size, examples per relation, derandomize, scenes) of this run that differ from those the
+    """The settings (render size, --n2r-examples default, derandomize, scenes) of this run that differ from those the
     baseline recorded, each as ``"render size 64 (baseline: 480)"``; none where the baseline did not record them.
 
     >>> setting_differences({"size": "480", "scenes": ["wall"]}, {"size": "64", "scenes": ["wall"]})

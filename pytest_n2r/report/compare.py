@@ -180,8 +180,9 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
                    scenes: Collection[str] | None = None) -> list[PairedComparison]:
     """Compare every current relation with the same test id's baseline on the replayed examples, in pairs;
     baseline relations that did not run are ``missing``. ``collected`` (the relation test ids this session
-    collected) and ``scenes`` (this run's scene names), where given, tell why one is missing or new: deselected,
-    a scene set that differs from the baseline's, or renamed or deleted."""
+    collected) and ``scenes`` (this run's scene names as its relation records carry them, :attr:`RelationRecord.scene`),
+    where given, tell why one is missing or new: deselected, a scene set that differs from the baseline's (the scenes
+    its relations were recorded on), or renamed or deleted."""
     check_confidence(confidence)
     out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence)
            for rel in sorted(current, key=lambda r: r.nodeid)]
@@ -189,7 +190,9 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
     out += [PairedComparison(nodeid, "missing", message=_why_missing(baseline[nodeid], collected, scenes))
             for nodeid in sorted(set(baseline) - ran)]
     not_recorded = getattr(baseline, "not_recorded", frozenset())
-    base_scenes = set(getattr(baseline, "meta", {}).get("scenes") or {r.scene for r in baseline.values()})
+    # like with like: the scene names relation records carry (a loaded scene's name), never ``meta.scenes`` (the
+    # configured names the test ids carry: 'make' for the scene ``myscenes:make`` named 'plane')
+    base_scenes = {r.scene for r in baseline.values() if r.scene}
     scene_of = {rel.nodeid: rel.scene for rel in current}
     for c in out:
         if c.outcome == "new" and c.nodeid in not_recorded:
@@ -197,7 +200,7 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
             c.message = ("not in the baseline: the session that saved it collected this relation but did not run it "
                          "(deselected with -k / -m / --deselect, or skipped), so nothing gates it; save the baseline "
                          "from a session that runs it, or pass --n2r-compare-fail-on without 'missing'")
-        elif c.outcome == "new" and scene_of.get(c.nodeid) and scene_of[c.nodeid] not in base_scenes:
+        elif c.outcome == "new" and base_scenes and scene_of.get(c.nodeid) and scene_of[c.nodeid] not in base_scenes:
             c.message = (f"not in the baseline: it runs on scene {scene_of[c.nodeid]!r}, which the baseline's scenes "
                          f"({', '.join(sorted(base_scenes))}) lack: the scene set differs from the baseline's, so "
                          "nothing to compare with (save a new baseline on this scene set to include it)")

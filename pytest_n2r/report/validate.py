@@ -11,6 +11,7 @@ mutation to all of its parameters, as the engine records them.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -19,7 +20,8 @@ from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform
 from ..relation.record import STATUSES, ExampleRecord, RelationRecord
 
-__all__ = ["BadField", "DuplicateKey", "unique_keys", "check_version", "relation_from_json", "meta_from_json"]
+__all__ = ["META_FIELDS", "BadField", "DuplicateKey", "unique_keys", "check_version",
+           "relation_from_json", "meta_from_json"]
 
 _CAMERA_INTS = ("width", "height")
 _CAMERA_FLOATS = ("fx", "fy", "cx", "cy")
@@ -36,7 +38,22 @@ class BadField(Exception):
 
 
 class DuplicateKey(ValueError):
-    """A JSON object that gives one key twice (a JSON reader keeps the last and silently drops the other)."""
+    """A JSON object that gives one key twice (a JSON reader keeps the last and silently drops the other); its
+    message names the key, and :meth:`where` the object it sits in."""
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+        super().__init__(self._message("one object"))
+
+    def _message(self, where: str) -> str:
+        return (f"the key {self.key!r} appears twice in {where} (a JSON reader keeps only the last and drops the "
+                "other without a word: a hand edit or a merge?); keep one of them")
+
+    def where(self, text: str) -> str:
+        """The message, naming the object of the JSON ``text`` that gives the key twice (``in relations``, ``in
+        relations['a.py::test_a[wall]'].examples[3]``) where the text can be read again; as before where not."""
+        place = _where_duplicate(text)
+        return self._message(place) if place else str(self)
 
 
 def unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
@@ -44,10 +61,39 @@ def unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in pairs:
         if key in out:
-            raise DuplicateKey(f"the key {key!r} appears twice in one object (a JSON reader keeps only the last and "
-                               "drops the other without a word: a hand edit or a merge?); keep one of them")
+            raise DuplicateKey(key)
         out[key] = value
     return out
+
+
+def _where_duplicate(text: str) -> str:
+    """Where the object sits that :func:`unique_keys` refuses first (the first one JSON completes with a key twice):
+    ``the top-level object``, ``relations``, ``relations['a::t'].examples[3]``; ``""`` where it cannot tell."""
+    twice: list[dict] = []
+
+    def keep(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+        out = dict(pairs)
+        if len(out) < len(pairs) and not twice:
+            twice.append(out)
+        return out
+
+    def path(node: Any, where: str) -> str | None:
+        if node is twice[0]:
+            return where
+        items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+        for key, value in items:
+            inner = (f"{where}[{key}]" if isinstance(key, int) else key if not where
+                     else f"{where}.{key}" if key.isidentifier() else f"{where}[{key!r}]")
+            found = path(value, inner)
+            if found is not None:
+                return found
+        return None
+
+    try:
+        data = json.loads(text, object_pairs_hook=keep)
+        return (path(data, "") or "the top-level object") if twice else ""
+    except (ValueError, RecursionError):
+        return ""
 
 
 def check_version(data: dict, version: int) -> str | None:
@@ -124,30 +170,32 @@ def relation_from_json(nodeid: str, rel: Any) -> RelationRecord:
 def meta_from_json(meta: Any) -> dict[str, Any]:
     """A baseline's ``meta`` object, checked: ``not_recorded`` (relation test ids the saving session collected but
     recorded nothing for: deselected, skipped or not run) must be a list of strings, and where it came from
-    (version, date, rootdir, settings: :data:`~pytest_n2r.report.baseline.META_FIELDS`) of the right types where
-    given; a field it does not know is kept (a newer pytest-n2r's)."""
+    (version, date, rootdir, settings: :data:`META_FIELDS`) of the right types where given; a field it does not
+    know is kept (a newer pytest-n2r's)."""
     if meta is None:
         return {}
     if not isinstance(meta, dict):
         raise BadField(f"meta={meta!r}; expected an object")
-    skipped = meta.get("not_recorded", [])
-    if not isinstance(skipped, list) or not all(isinstance(n, str) for n in skipped):
-        raise BadField(f"meta.not_recorded={skipped!r}; expected a list of test ids")
-    for key, (kinds, expected) in _META_TYPES.items():  # where the baseline came from: optional (older files)
+    for key, (kinds, _, expected) in META_FIELDS.items():  # all optional: older files lack them
         value = meta.get(key)
         if key in meta and (not isinstance(value, kinds) or isinstance(value, bool) and bool not in kinds
-                            or key == "scenes" and not all(isinstance(n, str) for n in value)):
+                            or list in kinds and not all(isinstance(n, str) for n in value)):
             raise BadField(f"meta.{key}={value!r}; expected {expected}")
     return meta
 
 
-#: The types of a baseline's ``meta`` fields on where it came from, and what each is, for the messages.
-_META_TYPES: dict[str, tuple[tuple[type, ...], str]] = {
-    "pytest_n2r": ((str,), "the pytest-n2r version, a string"), "saved": ((str,), "a UTC date, a string"),
-    "rootdir": ((str,), "a path, a string"), "config_file": ((str, type(None)), "a path, a string, or null"),
-    "size": ((str,), "a render size, a string such as '480' or '320x180'"),
-    "examples": ((int,), "a whole number"), "derandomize": ((bool,), "true or false"),
-    "scenes": ((list,), "a list of scene names"),
+#: What a baseline's ``meta`` records about the session that saved it, each field's types and what it is (for the
+#: docs and the messages). All are optional (older files lack them); a field not here is kept (a newer pytest-n2r's).
+META_FIELDS: dict[str, tuple[tuple[type, ...], str, str]] = {
+    "not_recorded": ((list,), "relation test ids collected but not run (deselected or skipped)", "a list of test ids"),
+    "pytest_n2r": ((str,), "the pytest-n2r version that saved it", "the pytest-n2r version, a string"),
+    "saved": ((str,), "when, in UTC (ISO 8601, to the second)", "a UTC date, a string"),
+    "rootdir": ((str,), "pytest's rootdir", "a path, a string"),
+    "config_file": ((str, type(None)), "pytest's config file (null: none)", "a path, a string, or null"),
+    "size": ((str,), "the render size (--n2r-size)", "a render size, a string such as '480' or '320x180'"),
+    "examples": ((int,), "the --n2r-examples default (a relation's own examples= overrides it)", "a whole number"),
+    "derandomize": ((bool,), "whether the examples were derandomized", "true or false"),
+    "scenes": ((list,), "the configured scenes' names, as test ids carry them (--n2r-scene)", "a list of scene names"),
 }
 
 

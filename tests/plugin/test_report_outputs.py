@@ -172,6 +172,74 @@ def test_output_paths_are_checked_before_the_run(n2r_project, args, expected):
     assert f"ERROR: pytest-n2r: {expected.format(tmp=tmp)}" in err, err
 
 
+def test_a_tilde_in_a_baseline_path_given_with_equals_is_the_home_folder(n2r_project, monkeypatch):
+    """No shell expands a ~ after '=': the baseline was saved in the home folder, then not found to compare with,
+    nor seen to be the file a report or a regressed run would replace."""
+    home = n2r_project.pytester.path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    n2r_project.write(MUTATED)
+    derandomized = ("--n2r-scene", PLANE, "--n2r-derandomize", "yes")
+    n2r_project.run(*derandomized, "--n2r-save-baseline=~/b.json").assert_outcomes(passed=1)
+    assert (home / "b.json").is_file()
+    same = n2r_project.run(*derandomized, "--n2r-compare=~/b.json")
+    assert same.ret == pytest.ExitCode.OK, same.stdout.str() + same.stderr.str()
+    assert _row(same, "test_bright[plane]")[-1] == "ok"
+    clash = n2r_project.run(*derandomized, "--n2r-compare=~/b.json", "--n2r-json=home/b.json")
+    assert clash.ret == pytest.ExitCode.USAGE_ERROR
+    assert (f"--n2r-compare {home / 'b.json'} and --n2r-json home/b.json are one file ({home / 'b.json'}); give the "
+            "report its own file") in " ".join(clash.stderr.str().split()), clash.stderr.str()
+    monkeypatch.setenv("N2R_CANDIDATE", "1")
+    before = (home / "b.json").read_text()
+    worse = n2r_project.run(*derandomized, "--n2r-compare=~/b.json", "--n2r-save-baseline=~/b.json")
+    assert worse.ret == pytest.ExitCode.TESTS_FAILED and (home / "b.json").read_text() == before, \
+        "a regressed run replaced the baseline it failed against"
+    worse.stdout.fnmatch_lines([(f"*did not save the baseline {home / 'b.json'}: it is the baseline this run compared "
+                                "with (--n2r-compare), and 1 relation(s) failed the comparison*")])
+
+
+def test_collect_only_does_not_compare(n2r_project):
+    """Nothing ran, so every relation was 'missing: collected, then deselected' and the run failed."""
+    n2r_project.write(TWO)
+    base = n2r_project.pytester.path / "baseline.json"
+    n2r_project.run("--n2r-scene", RAMP, "-k", "mean_colour", f"--n2r-save-baseline={base}").assert_outcomes(passed=1)
+    listed = n2r_project.run("--n2r-scene", RAMP, "--collect-only", "-k", "mean_colour", f"--n2r-compare={base}")
+    assert listed.ret == pytest.ExitCode.OK, listed.stdout.str()
+    listed.stdout.fnmatch_lines([(f"pytest-n2r baseline {base}: --collect-only ran no test, so nothing was compared "
+                                 "with the baseline")])
+    assert "missing" not in listed.stdout.str() and "baseline comparison" not in listed.stdout.str()
+
+
+SCENE_MODULE = """
+from tests.plugin.fakescene import PlaneScene
+
+
+def make():
+    return PlaneScene()
+"""
+
+
+def test_a_module_function_scene_is_compared_by_the_name_its_relations_carry(n2r_project):
+    """``myscenes:make`` is configured as 'make' (the test ids, ``meta.scenes``) and loads a scene named 'plane'
+    (the relation records): a relation added on it was told "the scene set differs" though nothing differed."""
+    n2r_project.pytester.makepyfile(myscenes=SCENE_MODULE)
+    n2r_project.write(TWO)
+    base = n2r_project.pytester.path / "baseline.json"
+    scene = ("--n2r-scene", "myscenes:make")
+    n2r_project.run(*scene, "-k", "mean_colour", f"--n2r-save-baseline={base}").assert_outcomes(passed=1)
+    saved = json.loads(base.read_text())
+    assert saved["meta"]["scenes"] == ["make"], saved["meta"]
+    assert [r["scene"] for r in saved["relations"].values()] == ["plane"], saved["relations"]
+    data = json.loads(base.read_text())
+    data["meta"].pop("not_recorded")  # the relation is new, not one the baseline's session deselected
+    base.write_text(json.dumps(data))
+    both = n2r_project.run(*scene, f"--n2r-compare={base}")  # test_heading fails on the plane: not the gate's verdict
+    assert _row(both, "test_heading[make]")[-1] == "new"
+    both.stdout.fnmatch_lines([("*test_heading[[]make[]]: new: not in the baseline: nothing to compare with (save a "
+                               "new baseline to include it)")])
+    assert "scene set differs" not in both.stdout.str()
+
+
 def test_a_users_metric_without_a_repr_compares_with_itself(n2r_project):
     """A metric subclass without ``__repr__`` of its own once read as ``<MyDiff object at 0x...>``: a new
     address every run, so every comparison said changed-metric."""

@@ -92,7 +92,7 @@ def test_the_replay_does_not_depend_on_the_search(n2r_project):
     other.stdout.fnmatch_lines([
         f"baseline {base}: the same examples replayed and paired; *",
         ("baseline saved 20??-??-??T??:??:??Z by pytest-n2r * (rootdir *, config file *); render size *, "
-        "examples per relation *, derandomize yes, scenes plane"),
+        "--n2r-examples default *, derandomize yes, scenes plane"),
         ("note: this run's settings differ from the baseline's: render size 64 (baseline: *); derandomize no "
         "(baseline: yes). The replay uses the baseline's recorded cameras, poses and follow-ups, so each paired "
         "example is the baseline's own; this run's settings apply to its search only*")])

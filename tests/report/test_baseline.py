@@ -10,7 +10,7 @@ import re
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import pytest_n2r
@@ -26,7 +26,7 @@ from pytest_n2r.report import (
     replay_candidates,
     save_baseline,
 )
-from pytest_n2r.report.baseline import describe_baseline, setting_differences
+from pytest_n2r.report.baseline import Baseline, describe_baseline, setting_differences
 from pytest_n2r.report.compare import DEFAULT_FAIL_ON, format_comparison_table, paired_bound
 
 CAMERA = {"width": 320, "height": 180, "fx": 250.0, "fy": 250.0, "cx": 159.5, "cy": 89.5, "distortion": []}
@@ -168,8 +168,10 @@ def test_a_baseline_of_a_newer_format_says_to_upgrade_not_to_regenerate(tmp_path
         "would compare the candidate with itself)")
 
 
-@pytest.mark.parametrize("twice", ["a::t", "eps", "deviation"])
-def test_a_key_given_twice_is_refused_naming_it(tmp_path, twice):
+@pytest.mark.parametrize(("twice", "where"), [("a::t", "relations"), ("eps", "relations['a::t']"),
+                                              ("deviation", "relations['a::t'].examples[0]"),
+                                              ("version", "the top-level object")])
+def test_a_key_given_twice_is_refused_naming_it_and_where(tmp_path, twice, where):
     """JSON readers keep the last of two equal keys: a hand-merged baseline silently lost a relation (or a value)."""
     data = _valid_data(tmp_path)
     text = json.dumps(data)
@@ -183,8 +185,10 @@ def test_a_key_given_twice_is_refused_naming_it(tmp_path, twice):
     dup.write_text(text)
     with pytest.raises(BaselineError) as info:
         load_baseline(dup)
-    assert str(info.value).startswith(f"baseline {dup}: the key {twice!r} appears twice in one object (a JSON reader "
-                                      "keeps only the last"), str(info.value)
+    # where it sits too: "one object" did not say which of a baseline's hundreds
+    assert str(info.value) == (f"baseline {dup}: the key {twice!r} appears twice in {where} (a JSON reader keeps only "
+                               "the last and drops the other without a word: a hand edit or a merge?); keep one of "
+                               f"them, or regenerate it with --n2r-save-baseline {dup}")
 
 
 @pytest.mark.parametrize(("content", "expected"), [
@@ -283,6 +287,7 @@ def test_margin_default_and_value():
     assert parse_margin(None) == 0.02 and parse_margin(["mean:0.05"]) == 0.05
 
 
+@settings(deadline=None)  # the first example imports scipy.stats (0.3-0.5 s) when this file runs alone
 @given(st.lists(st.floats(-1, 1), min_size=2, max_size=60))
 def test_the_bound_is_below_the_mean_and_deterministic(changes):
     bound = paired_bound(changes)
@@ -476,7 +481,7 @@ def test_a_baseline_records_where_it_came_from_and_old_ones_still_load(tmp_path)
     assert loaded.meta == {**settings, "pytest_n2r": pytest_n2r.__version__, "saved": data["meta"]["saved"]}
     assert describe_baseline(loaded.meta) == (
         f"baseline saved {data['meta']['saved']} by pytest-n2r {pytest_n2r.__version__} (rootdir /repo, "
-        "config file /repo/pyproject.toml); render size 96, examples per relation 12, derandomize yes, scenes plane")
+        "config file /repo/pyproject.toml); render size 96, --n2r-examples default 12, derandomize yes, scenes plane")
     assert setting_differences(loaded.meta, {**settings, "size": "64", "scenes": ["plane", "wall"]}) == \
         ["render size 64 (baseline: 96)", "scenes plane, wall (baseline: plane)"]
     assert setting_differences(loaded.meta, {**settings, "scenes": ["plane"]}) == []
@@ -491,6 +496,40 @@ def test_a_baseline_records_where_it_came_from_and_old_ones_still_load(tmp_path)
     path.write_text(json.dumps(data))
     with pytest.raises(BaselineError, match=r"meta.examples='12'; expected a whole number; regenerate it"):
         load_baseline(path)
+
+
+def test_meta_fields_are_defined_once():
+    """Their names, types and meanings were written twice (baseline.py's META_FIELDS, validate.py's types)."""
+    from pytest_n2r.report import baseline, validate
+
+    assert not hasattr(baseline, "META_FIELDS"), "a second definition of the meta fields"
+    assert set(validate.META_FIELDS) == {"not_recorded", "pytest_n2r", "saved", "rootdir", "config_file", "size",
+                                         "examples", "derandomize", "scenes"}
+    assert all(isinstance(what, str) and what for _, what, _ in validate.META_FIELDS.values())
+
+
+def test_a_tilde_in_the_baseline_path_is_the_home_folder(tmp_path, monkeypatch):
+    """``--n2r-compare=~/b.json``: no shell expands a ~ after '=', and the baseline was saved where ~ is."""
+    monkeypatch.setenv("HOME", str(tmp_path))
+    save_baseline(tmp_path / "b.json", [_relation("a::t", [0.1])])
+    assert set(load_baseline("~/b.json")) == {"a::t"}
+    with pytest.raises(BaselineError) as info:
+        load_baseline("~/none.json")
+    assert str(info.value).startswith(f"baseline {tmp_path / 'none.json'} does not exist"), info.value
+
+
+def test_the_scene_set_compares_the_names_relations_carry_not_the_configured_ones():
+    """A ``module:function`` scene (``myscenes:make``) is configured as 'make' (``meta.scenes``, the test ids) and
+    loads a scene named 'plane' (the relation records): a relation added on it was told the scene set differs."""
+    base = Baseline({"m.py::test_a[make]": _on("plane", "m.py::test_a[make]")})
+    base.meta = {"scenes": ["make"]}
+    (_, added) = compare_paired(base, [_replayed(base["m.py::test_a[make]"], [0.1] * 3),
+                                       _on("plane", "m.py::test_b[make]")],
+                                collected={"m.py::test_a[make]", "m.py::test_b[make]"}, scenes={"plane"})
+    assert (added.outcome, added.message) == ("new", ("not in the baseline: nothing to compare with (save a new "
+                                              "baseline to include it)"))
+    (missing,) = compare_paired(base, [], collected=set(), scenes={"plane"})
+    assert missing.message.startswith("in the baseline but no test of this id was collected"), missing.message
 
 
 def test_a_folder_is_not_a_baseline(tmp_path):
