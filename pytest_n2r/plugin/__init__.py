@@ -69,7 +69,7 @@ def _build_session(config: pytest.Config) -> Any:
     return session
 
 
-def _session(config: pytest.Config) -> Any:
+def session_of(config: pytest.Config) -> Any:
     """The session object, built on first use (so an unused plugin imports nothing heavy)."""
     session = config.stash.get(_SESSION, None)
     if session is None:
@@ -83,11 +83,12 @@ def pytest_configure(config: pytest.Config) -> None:
         "or a .n2r path, 'demo:<name>' or 'module:function')",
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
-    config.pluginmanager.register(Summary(config, _LOADED, lambda: _describe(config, _session(config))), "n2r-summary")
+    summary = Summary(config, _LOADED, lambda: _describe(config, session_of(config)))
+    config.pluginmanager.register(summary, "n2r-summary")
     if is_used(config):
         _pause_collector(config)  # before the engine's imports
         try:
-            session = _session(config)  # bad options fail now, before collection
+            session = session_of(config)  # bad options fail now, before collection
         except BaseException:
             _resume_collector(config)
             raise
@@ -134,7 +135,7 @@ def _resume_collector(config: pytest.Config) -> bool:
 def pytest_report_header(config: pytest.Config) -> list[str] | None:
     if not is_used(config):
         return None
-    return [_describe(config, _session(config))]
+    return [_describe(config, session_of(config))]
 
 
 def _describe(config: pytest.Config, session: Any) -> str:
@@ -173,7 +174,7 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
             raise pytest.Collector.CollectError(
                 f"{metafunc.definition.nodeid}: n2r_scene is parametrized by pytest-n2r over the configured scenes; "
                 f"choose this test's scenes with @pytest.mark.{SCENE_MARKER}(...), not @pytest.mark.parametrize")
-    session = _session(metafunc.config)
+    session = session_of(metafunc.config)
     pins = [str(a) for m in metafunc.definition.iter_markers(SCENE_MARKER) for a in m.args]
     try:
         specs = session.scene_specs(pins, base=Path(metafunc.definition.path).parent)
@@ -194,7 +195,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         if spec is not None and spec not in planned:
             planned.append(spec)
     if planned:  # else an unused plugin stays unbuilt
-        _session(session.config).planned = planned
+        session_of(session.config).planned = planned
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
@@ -217,7 +218,7 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
     if spec is None:
         pytest.skip(NO_SCENE_MESSAGE)
     try:
-        return _session(request.config).load(spec)
+        return session_of(request.config).load(spec)
     except N2RError as exc:  # the scene's own message, not a traceback through the loader
         message = f"pytest-n2r: scene {spec.source}: {exc}"
     pytest.fail(message, pytrace=False)  # outside the except block, so the report shows the message once
@@ -229,7 +230,7 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
     themselves (a regression gate replaying a baseline): its ``cache`` is the render cache the relations use
     (renders they read are in memory), its ``sut_outputs`` the outputs of SUT objects on renders, shared
     with them (``replay_relation(..., sut_outputs=...)``)."""
-    return _session(request.config)
+    return session_of(request.config)
 
 
 # -- running -----------------------------------------------------------------------------------------------
@@ -280,7 +281,7 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
             f"{pyfuncitem.nodeid}: a @metamorphic test must return the system under test, a callable taking "
             f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
         )
-    session = _session(pyfuncitem.config)
+    session = session_of(pyfuncitem.config)
     from .report import baseline_examples
 
     replay = baseline_examples(pyfuncitem.config, pyfuncitem.nodeid, funcargs["n2r_scene"], relation)

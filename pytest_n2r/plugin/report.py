@@ -38,10 +38,10 @@ def run_settings(config: pytest.Config) -> dict[str, Any]:
     """What a baseline records of the session that saves it (and a comparison checks against it): pytest's rootdir
     and config file, the render size, the ``--n2r-examples`` default, derandomize and the configured scenes' names
     (those the test ids carry: a ``module:function`` scene's function name, not its loaded scene's name)."""
-    from . import _session
+    from . import session_of
     from .scenes import default_scene_specs
 
-    session = _session(config)
+    session = session_of(config)
     settings = session.settings
     return {"rootdir": str(config.rootpath), "config_file": str(config.inipath) if config.inipath else None,
             "size": str(settings.size), "examples": settings.examples, "derandomize": bool(settings.derandomize),
