@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from .options import add_options, is_used, read_options
+from .options import OPTIONS, add_options, is_used, read_options
 from .summary import Summary
 
 #: When pytest loaded the plugin (early in its start-up: before conftest files and test modules are imported).
@@ -99,8 +99,8 @@ def pytest_configure(config: pytest.Config) -> None:
 @pytest.hookimpl(tryfirst=True)
 def pytest_cmdline_main(config: pytest.Config) -> None:
     """A usage error when a path option's value, written apart (``--n2r-compare PATH``), changed pytest's rootdir
-    or config file (:mod:`pytest_n2r.plugin.rootdir`)."""
-    if not is_used(config):
+    or config file (:mod:`pytest_n2r.plugin.rootdir`): with any pytest-n2r option given, a report option alone too."""
+    if not is_used(config, OPTIONS):
         return
     from .rootdir import check_rootdir
 

@@ -8,8 +8,9 @@ import pytest
 @pytest.fixture
 def repository(pytester: pytest.Pytester) -> pytest.Pytester:
     """A repository whose root and whose project folder each hold a pytest config: the project's is the one its
-    tests expect (a 32-pixel render size, the demo wall)."""
-    pytester.makepyprojecttoml('[tool.pytest.ini_options]\nn2r_size = "64"\n')
+    tests expect (a 32-pixel render size, the demo wall); the root's has no pytest-n2r key, so a report option is
+    the only pytest-n2r option of a run that takes it (the check was skipped then)."""
+    pytester.makepyprojecttoml('[tool.pytest.ini_options]\naddopts = "-ra"\n')  # no n2r_* key: only report options
     project = pytester.mkdir("project")
     (project / "pyproject.toml").write_text('[tool.pytest.ini_options]\nn2r_size = "32"\nn2r_scenes = ["demo:wall"]\n')
     (project / "test_inner.py").write_text("def test_scene(n2r_scene):\n    pass\n")
