@@ -287,6 +287,9 @@ def _compare_one(
         result.notes.append(f"{lost} of {len(base_examples)} lost: undefined or rejected now, left out of the mean")
     if n == 1:
         result.notes.append("1 pair: no confidence bound, so it cannot be judged worse")
+    elif result.outcome == "ok" and -paired_bound([-c for c in changes], confidence) < -margin:
+        result.notes.append(f"better: the deviation fell by more than the margin ({percent(confidence)} upper "
+                            "bound); save a new baseline once this change is merged, to gate against it")
     return result
 
 

@@ -395,6 +395,16 @@ def test_a_single_pair_says_it_cannot_be_judged():
     assert c.outcome == "ok" and "1 pair: no confidence bound, so it cannot be judged worse" in c.notes, c
 
 
+def test_a_clearly_better_candidate_is_told_to_refresh_the_baseline():
+    """A candidate far better than the baseline showed only "ok": the baseline then gates against the old, worse
+    detector until someone thinks of saving a new one."""
+    base = _relation("a::t", [0.5 + 0.01 * (i % 3) for i in range(20)])
+    (better,) = compare_paired({"a::t": base}, [_replayed(base, [0.2 + 0.01 * (i % 2) for i in range(20)])])
+    assert better.outcome == "ok" and any(n.startswith("better: the deviation fell") for n in better.notes), better
+    (same,) = compare_paired({"a::t": base}, [_replayed(base, [0.5 + 0.01 * (i % 3) for i in range(20)])])
+    assert not any(n.startswith("better") for n in same.notes), same
+
+
 def test_a_few_lost_examples_are_noted_beside_an_ok_verdict():
     """Up to 10 % of pairs may drop out, and they may be exactly the candidate's worst: the verdict says so."""
     base = _relation("a::t", [0.1] * 18 + [0.4, 0.45])
