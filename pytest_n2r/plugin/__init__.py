@@ -161,6 +161,16 @@ def pytest_pycollect_makeitem(collector: pytest.Collector, name: str, obj: Any) 
         error = obj.__dict__.get(ERROR_ATTR)
         if error:
             raise collector.CollectError(f"{collector.nodeid}::{name}: {error}")
+        hypothesis = [f"@{deco}" for deco, attr in (("settings", "_hypothesis_internal_settings_applied"),
+                                                     ("example", "hypothesis_explicit_examples"),
+                                                     ("seed", "_hypothesis_internal_use_seed"))
+                      if obj.__dict__.get(attr) is not None]
+        if hypothesis and RELATION_ATTR in obj.__dict__:  # Hypothesis would say only that they are "pointless"
+            raise collector.CollectError(
+                f"{collector.nodeid}::{name}: {' and '.join(hypothesis)} "
+                f"{'does' if len(hypothesis) == 1 else 'do'} not apply to a @metamorphic test (the "
+                "plugin runs its search): give @metamorphic(examples=...) or --n2r-examples, --n2r-derandomize or "
+                "--hypothesis-seed, and replay recorded examples through a baseline")
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:

@@ -97,6 +97,27 @@ async def test_bad(n2r_scene):
     result.stdout.fnmatch_lines(["*test_relations.py::test_bad: @metamorphic(...): test_bad is async; *plain def*"])
 
 
+@pytest.mark.parametrize("decorator", ["@settings(max_examples=3)", "@example(view=None, tau=None)"])
+@pytest.mark.parametrize("above", [True, False], ids=["above", "below"])
+def test_hypothesis_decorators_on_a_relation_test_say_what_to_use_instead(n2r_project, decorator, above):
+    """Hypothesis said only "Using `@settings` on a test without `@given` is completely pointless"."""
+    relation = "@metamorphic(AbsDifference(), eps=0.1, transform=transforms(yaw=5))"
+    stack = "\n".join([decorator, relation] if above else [relation, decorator])
+    n2r_project.write(f"""
+from hypothesis import example, settings
+
+
+{stack}
+def test_bad(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    expected = (f"*test_bad: {decorator.split('(')[0]} does not apply to a @metamorphic test*"
+                "@metamorphic(examples=...) or --n2r-examples*")
+    result.stdout.fnmatch_lines([expected])
+
+
 def test_parametrizing_n2r_scene_by_hand_says_to_pin_scenes_with_the_marker(n2r_project):
     """pytest said only "duplicate parametrization of 'n2r_scene'"."""
     n2r_project.write("""
