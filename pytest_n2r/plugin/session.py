@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import subprocess
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -108,11 +108,12 @@ class N2RSession:
         return scene
 
     def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
-            replay: list[Any] | None = None) -> RelationRecord:
-        """Check ``relation`` for ``sut`` on ``scene`` (replaying ``replay``, a baseline's examples, first);
-        its record is kept in :attr:`records` whatever the outcome."""
+            replay: list[Any] | None = None, shrink: bool = True) -> RelationRecord:
+        """Check ``relation`` for ``sut`` on ``scene`` (replaying ``replay``, a baseline's examples, first; a
+        failure shrunk unless ``shrink`` is false); its record is kept in :attr:`records` whatever the outcome."""
         __tracebackhide__ = True
-        return check_relation(scene, sut, relation, settings=self.settings, cache=self.cache, test_id=test_id,
+        settings = self.settings if shrink else replace(self.settings, shrink=False)
+        return check_relation(scene, sut, relation, settings=settings, cache=self.cache, test_id=test_id,
                               replay=replay, on_start=self.records.append, sut_outputs=self.sut_outputs)
 
 

@@ -208,18 +208,24 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
         raise InvalidArgument(too_many_invalid(run, relation))
     if not run.inconsistencies:
         return
+    if not settings.shrink:
+        _report_as_drawn(engine, "not shrunk: shrinking is off (the test is expected to fail)")
     engine.start_shrink_pass()
     try:
         with _without_local_constants():
             search(database)
     except Unsatisfiable:
         pass
-    # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic): report the
-    # survey's worst failing example as it was drawn
-    worst = run.worst
+    # the shrink pass did not reproduce the survey's failure (a SUT that is not deterministic)
+    _report_as_drawn(engine, "not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
+
+
+def _report_as_drawn(engine: Engine, note: str) -> None:
+    """Raise the failure of the survey's worst failing example as it was drawn, with ``note`` on why."""
+    __tracebackhide__ = True
+    worst = engine.run_record.worst
     view, tau = recorded_view(worst, "drawn"), worst.follow_up()
-    engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera),
-                note="not shrunk: the shrink pass did not reproduce it; is the SUT deterministic?")
+    engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera), note=note)
 
 
 def _seed(identity: bytes) -> int:

@@ -16,8 +16,10 @@ __all__ = ["RunSettings"]
 class RunSettings:
     """How to run relations: defaults for ``examples`` and ``size`` (a relation's own values win),
     ``derandomize`` (same examples every run: for CI), ``timeout`` seconds per render / SUT call
-    (``None``: no limit), where failure pictures go (``artifacts``; ``None``: nowhere) and the Hypothesis
-    example ``database`` (``"default"``: Hypothesis's own setting)."""
+    (``None``: no limit), where failure pictures go (``artifacts``; ``None``: nowhere), the Hypothesis
+    example ``database`` (``"default"``: Hypothesis's own setting) and whether a failure is shrunk to its smallest
+    transform (``shrink``; ``False``: the worst failing example of the search is reported as drawn, as for a test
+    expected to fail, where the shrink would only cost time)."""
 
     examples: int = defaults.EXAMPLES
     size: RenderSize | None = None
@@ -25,3 +27,4 @@ class RunSettings:
     timeout: float | None = defaults.TIMEOUT_S
     artifacts: Path | None = None
     database: Any = "default"
+    shrink: bool = True
