@@ -59,9 +59,7 @@ def pytest_configure(config: pytest.Config) -> None:
         # resolved: a/../out.json and out.json (or a link to it) are one file
         other, other_path = seen.setdefault(path.resolve(), (name, path))
         if other != name:
-            a, b = option(other).flag, option(name).flag
-            both = (f"{a} and {b} are both {path}" if other_path == path else
-                    f"{a} {other_path} and {b} {path} are one file ({path.resolve()})")
+            both = _one_file(option(other).flag, other_path, option(name).flag, path)
             raise pytest.UsageError(f"pytest-n2r: {both}; give each output its own file (one would replace the other)")
     _check_compare_is_no_report(config, outputs)
     config.stash[_OUTPUTS] = outputs
@@ -80,18 +78,28 @@ def _check_compare_is_no_report(config: pytest.Config, outputs: dict[str, Path])
     """A report written over the baseline this run compares with would replace it (the next comparison fails
     reading a report); ``--n2r-save-baseline`` on it refreshes it in place and is allowed (not after a failing
     gate: see :func:`pytest_sessionfinish`)."""
-    given = config.getoption("n2r_compare")
-    if not given:
+    compare = _compare_path(config)
+    if compare is None:
         return
-    compare = Path(given).expanduser()  # as the baseline is read: `--n2r-compare=~/b.json` (no shell expands it)
     for name in ("json", "report"):
         path = outputs.get(name)
         if path is not None and path.resolve() == compare.resolve():
-            flag = option(name).flag
-            both = (f"--n2r-compare and {flag} are both {path}" if Path(path) == compare else
-                    f"--n2r-compare {compare} and {flag} {path} are one file ({path.resolve()})")
+            both = _one_file("--n2r-compare", compare, option(name).flag, path)
             raise pytest.UsageError(f"pytest-n2r: {both}; give the report its own file (it would replace the "
                                     "baseline this run compares with)")
+
+
+def _compare_path(config: pytest.Config) -> Path | None:
+    """The ``--n2r-compare`` file as the baseline is read (``~`` expanded: after ``=`` no shell expands it)."""
+    given = config.getoption("n2r_compare")
+    return Path(given).expanduser() if given else None
+
+
+def _one_file(flag_a: str, path_a: Path, flag_b: str, path_b: Path) -> str:
+    """Two options naming one file, in words: the same path, or two paths that resolve to one file."""
+    if path_a == path_b:
+        return f"{flag_a} and {flag_b} are both {path_b}"
+    return f"{flag_a} {path_a} and {flag_b} {path_b} are one file ({path_b.resolve()})"
 
 
 def _relation_ids(items: list[pytest.Item]) -> set[str]:
@@ -187,9 +195,9 @@ def _baseline_refused(session: pytest.Session, records: list, path: Path) -> str
         return ("no relation test ran in this session (none was collected, or every one was deselected with -k / "
                 "-m / --deselect or skipped), so it would hold no relation (a later --n2r-compare refuses such a "
                 "baseline); save it from a session that runs the relation tests")
-    compared = session.config.getoption("n2r_compare")
+    compared = _compare_path(session.config)
     failed = [c for c in session.config.stash.get(_RESULT, {}).get("comparisons") or () if c.fails]
-    if failed and compared and Path(compared).expanduser().resolve() == path.resolve():
+    if failed and compared is not None and compared.resolve() == path.resolve():
         return (f"it is the baseline this run compared with (--n2r-compare), and {len(failed)} relation(s) failed the "
                 "comparison: saving would replace it with the regressed run, and the next comparison would pass; "
                 "fix the regression, or save the baseline to another file")

@@ -175,6 +175,7 @@ class RenderCache:
         self.stats = CacheStats()
         self._memory: OrderedDict[tuple[str, str], np.ndarray] = OrderedDict()
         self._memory_used = 0
+        self._claimed = False  # the directory is pytest-n2r's tagged cache (see _prepare_directory)
         self._written_since_trim = 0
         #: Called with the scene just before this cache's first render (a session starts its kernel helper).
         self.on_first_render: Callable[[Scene], None] | None = None
@@ -346,7 +347,9 @@ class RenderCache:
         """Make ``leaf``; tag the directory first where it is new or holds only pytest-n2r's files (a folder of the
         user's is not tagged, so nothing in it is ever deleted), and ignore it in Git unless a .gitignore is there."""
         assert self.directory is not None
-        claim(self.directory)
+        if not self._claimed:  # once a session: the tag's check reads a file, and a store is on the render path
+            claim(self.directory)
+            self._claimed = is_ours(self.directory)
         leaf.mkdir(parents=True, exist_ok=True)
 
     def _disk_files(self) -> list[tuple[float, Path, int]]:
