@@ -9,10 +9,13 @@ from dataclasses import dataclass
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 
-__all__ = ["MAX_SIDE", "RenderSize"]
+__all__ = ["MAX_SIDE", "MIN_SIDE", "RenderSize"]
 
 #: The largest image side (pixels) a render is asked for, and a scene file's camera may have.
 MAX_SIDE = 16384
+#: The smallest side (pixels) a render size may give: below it no SUT sees anything (OpenCV's ORB, SIFT and AKAZE
+#: fail inside OpenCV on a 2 x 1 render, reported as the SUT's error), and such a number is a slip (``2`` for ``2x``).
+MIN_SIDE = 16
 
 
 @dataclass(frozen=True)
@@ -50,8 +53,8 @@ class RenderSize:
                 "or an int for the longer side"
             )
         for label, v in (("width", width), ("height", height), ("longer side", longer)):
-            if v is not None and not 1 <= v <= MAX_SIDE:
-                raise InvalidArgument(f"{name}={value!r}: {label} {v} must be in [1, {MAX_SIDE}] pixels")
+            if v is not None and not MIN_SIDE <= v <= MAX_SIDE:
+                raise InvalidArgument(f"{name}={value!r}: {label} {v} must be in [{MIN_SIDE}, {MAX_SIDE}] pixels")
         return cls(width, height, longer)
 
     def apply(self, camera: Camera) -> Camera:
