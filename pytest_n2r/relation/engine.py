@@ -29,7 +29,7 @@ from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic
-from .failure import MAX_UNDEFINED, RelationFailure, failure_message, how_to_reproduce
+from .failure import MAX_UNDEFINED, SAME_PIXELS, RelationFailure, failure_message, how_to_reproduce
 from .kept_results import kept_result, repainted_key
 from .outputs import SUTError, check_output
 from .record import ExampleRecord, RelationRecord
@@ -109,6 +109,7 @@ class Engine:
         self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
         self.drawn: set[tuple[str, bytes, str]] = set()  # this pass's examples so far (source view, follow-up)
         self.failing: set[tuple[str, bytes, str]] = set()  # the examples found inconsistent, in either pass
+        self.raised: set[tuple[str, bytes, str]] = set()  # the examples on which the SUT raised, in either pass
         self.images_error: str | None = None
 
     # -- pieces -----------------------------------------------------------------------------------------
@@ -148,13 +149,10 @@ class Engine:
         check_output(output, role, where, self.metric)
         return output
 
-    def sut_on_render(self, rendered: RenderedView, key: str | None, role: str, where: str,
-                      source: tuple[np.ndarray, Any] | None = None) -> Any:
+    def sut_on_render(self, rendered: RenderedView, key: str | None, role: str, where: str) -> Any:
         """The SUT's output on a render: kept from an earlier call on the render ``key`` (by this relation or,
         with a session's :class:`SUTOutputs`, another one running the same SUT object), else a new call.
-        ``key=None``: an image that is not a render (a mutation's). ``source``: the source view's image and
-        the SUT's output on it, which a follow-up with the same pixels, byte for byte, gets again (an identity
-        pose change whose pose differs in its last bits, a mutation of size zero)."""
+        ``key=None``: an image that is not a render (a mutation's)."""
         __tracebackhide__ = True
         if key is not None:
             output = self.sut_outputs.get(self.sut, key)
@@ -162,12 +160,7 @@ class Engine:
                 self.run_record.sut_shared += 1
                 check_output(output, role, where, self.metric)
                 return output
-        if source is not None and same_pixels(rendered.rgb, source[0]):
-            output = source[1]
-            self.run_record.sut_shared += 1
-            check_output(output, role, where, self.metric)
-        else:
-            output = self.run_sut(rendered.rgb, role, where)
+        output = self.run_sut(rendered.rgb, role, where)
         if key is not None:
             self.sut_outputs.put(self.sut, key, output)
         return output
@@ -260,6 +253,9 @@ class Engine:
         follow = tau.follow_view(source, self.scene, render_follow)
         # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
         follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
+        if same_pixels(follow.rgb, source.rgb):  # a deterministic SUT cannot fail on it: not a test
+            record.status, record.reason = "undefined", SAME_PIXELS
+            return Evaluation(record, where)
         if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
             start = time.perf_counter()
             verdict = self.validity(follow, source, source_key, follow_key)
@@ -268,7 +264,7 @@ class Engine:
                 record.status, record.reason = "rejected", verdict.reason
                 return Evaluation(record, where)
         out_source = self.sut_on_render(source, source_key, "source", where)
-        out_follow = self.sut_on_render(follow, follow_key, "follow-up", where, source=(source.rgb, out_source))
+        out_follow = self.sut_on_render(follow, follow_key, "follow-up", where)
         # a mutation's follow-up is its source render with other pixels: its metric result is kept under both
         result = self.compute_on_renders(out_source, out_follow, source, follow, source_key,
                                          follow_key or repainted_key(source, source_key, follow), where)
@@ -307,14 +303,20 @@ class Engine:
         tau = as_follow_up(tau)
         drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(),
                  json.dumps(tau.record_fields(), sort_keys=True, default=str))
-        if drawn in self.drawn and not (self.shrinking and drawn in self.failing):
+        if drawn in self.drawn and drawn not in self.raised and not (self.shrinking and drawn in self.failing):
             # the same example again tests nothing new: not counted, Hypothesis draws another. The shrink pass
             # rejects repeats as the survey did, so that with the survey's seed it draws the survey's examples up
-            # to the first failure (Hypothesis's draws follow what each example did)
+            # to the first failure (Hypothesis's draws follow what each example did). An example the SUT raised on
+            # is evaluated again whenever it comes back: Hypothesis replays its error last, and a repeat that
+            # passed in between (an intermittent SUT) must not turn that replay into an "unreliable assumption"
             assume(False)
-        evaluation = self.evaluate(view, tau)
+        try:
+            evaluation = self.evaluate(view, tau)
+        except Exception:
+            self.raised.add(drawn)
+            raise
         record = evaluation.record
-        self.drawn.add(drawn)  # kept once evaluated: an example that raised is replayed as it was
+        self.drawn.add(drawn)
         if record.valid and not record.passed:
             self.failing.add(drawn)
         if not self.shrinking:

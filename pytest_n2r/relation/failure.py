@@ -15,12 +15,18 @@ from ..strategies.follow_up import FollowUp
 from .record import ExampleRecord, RelationRecord, plural
 from .spec import Relation
 
-__all__ = ["RelationFailure", "MAX_UNDEFINED", "failure_message", "how_to_reproduce", "nothing_to_test",
+__all__ = ["RelationFailure", "MAX_UNDEFINED", "SAME_PIXELS", "failure_message", "how_to_reproduce", "nothing_to_test",
            "too_many_invalid"]
 
 #: A relation fails as "the SUT produced nothing to test" when more than this share of the draws it could
 #: evaluate (valid follow-up views) had an undefined metric (no keypoints, empty or all-NaN outputs, ...).
 MAX_UNDEFINED = 0.5
+
+#: Why a follow-up whose pixels equal its source's, byte for byte, is undefined rather than passed: a pose change
+#: that moves the picture by less than its last bits (a sky, a blank wall), a mutation that lands on pixels it
+#: leaves as they were (black patches on black). The SUT sees one image twice, so the pair tests nothing.
+SAME_PIXELS = ("the follow-up's pixels equal the source's, byte for byte: the change altered nothing in the picture, "
+               "so the pair tests nothing")
 
 
 class RelationFailure(AssertionError):
@@ -102,13 +108,20 @@ def nothing_to_test(run: RelationRecord, relation: Relation) -> str:
     reasons = "; ".join(f"{n}x {r}" for r, n in run.undefined_reasons.most_common(3))
     sizes = sorted({(e.camera["width"], e.camera["height"]) for e in run.examples if e.camera})
     at = f", rendered at {', '.join(f'{w}x{h}' for w, h in sizes)} pixels" if sizes else ""
+    unchanged = run.undefined_reasons.most_common(1)[0][0] == SAME_PIXELS
     return (
-        f"the SUT produced nothing to test: {relation.metric!r} was undefined on {run.undefined} of "
-        f"{evaluated} evaluated draws ({run.undefined / evaluated:.0%} > {MAX_UNDEFINED:.0%}) on scene "
-        f"{run.scene!r}{at}: {reasons}. A SUT that returns nothing (no keypoints, an empty or all-NaN output) "
-        "never passes a relation; a detector may find nothing in images this small (ORB keeps 31 pixels from "
-        "each border): a larger size (size= or --n2r-size) gives it more"
+        f"{'nothing was tested' if unchanged else 'the SUT produced nothing to test'}: {relation.metric!r} was "
+        f"undefined on {run.undefined} of {evaluated} evaluated draws ({run.undefined / evaluated:.0%} > "
+        f"{MAX_UNDEFINED:.0%}) on scene {run.scene!r}{at}: {reasons}. {_UNCHANGED_HINT if unchanged else _EMPTY_HINT}"
     )
+
+
+_EMPTY_HINT = ("A SUT that returns nothing (no keypoints, an empty or all-NaN output) never passes a relation; a "
+               "detector may find nothing in images this small (ORB keeps 31 pixels from each border): a larger size "
+               "(size= or --n2r-size) gives it more")
+_UNCHANGED_HINT = ("The changes drawn left the pictures as they were: the views show nothing a small change moves (a "
+                   "blank or black region), or the bounds are too small to move a pixel at this size; widen the "
+                   "bounds or choose views that show the scene")
 
 
 def too_many_invalid(run: RelationRecord, relation: Relation) -> str:

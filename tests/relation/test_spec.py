@@ -6,7 +6,7 @@ import pytest
 from hypothesis import find
 
 from pytest_n2r import InvalidArgument, InvalidType, Transform
-from pytest_n2r.relation import Relation, RunSettings, check_relation
+from pytest_n2r.relation import Relation, RelationFailure, RunSettings, check_relation
 from pytest_n2r.strategies import transforms
 from tests.plugin.fakemetrics import AbsDifference, SameLabel
 from tests.plugin.fakescene import PlaneScene
@@ -26,6 +26,15 @@ def test_relation_build_names_bad_arguments():
     with pytest.raises(InvalidType, match="transform=5 must be a strategy"):
         Relation.build(AbsDifference(), 0.1, 5)
     assert find(Relation.build(AbsDifference(), 0, Transform(yaw=2)).transform, lambda t: True) == Transform(yaw=2)
+
+
+@pytest.mark.parametrize("still", [Transform(), Transform(yaw=360), Transform(roll=180, pitch=180, yaw=180)],
+                         ids=repr)
+def test_a_fixed_transform_that_does_not_move_the_camera_tests_nothing(still):
+    # R_y(180) R_x(180) R_z(180) is the identity too: every follow-up is its source view, a pair of one image
+    relation = Relation.build(SameLabel(), 0.5, still, examples=3)
+    with pytest.raises(RelationFailure, match=r"nothing was tested: .* the follow-up's pixels equal the source's"):
+        check_relation(PlaneScene(), lambda rgb: 0, relation, settings=FAST)
 
 
 def test_a_fixed_transform_and_a_preset_are_accepted():

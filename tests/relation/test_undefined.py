@@ -57,7 +57,8 @@ class _SometimesUndefined(AbsDifference):
 
 @pytest.mark.parametrize("every, fails", [(7, False), (1, True)])
 def test_undefined_draws_are_counted_and_a_mostly_undefined_relation_fails(every, fails):
-    relation = Relation.build(_SometimesUndefined(every), eps=255, transform=transforms(yaw=3))
+    # yaw of 0.5° or more: smaller turns (the pose grid's ±0.001°) leave a 96x72 render's pixels as they were
+    relation = Relation.build(_SometimesUndefined(every), eps=255, transform=transforms(yaw=(0.5, 3)))
     if fails:
         with pytest.raises(RelationFailure, match=r"nothing to test: .* undefined on \d+ of \d+ evaluated draws"):
             check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
@@ -108,7 +109,30 @@ class _UndefinedFirst(AbsDifference):
 def test_a_relation_half_undefined_is_not_given_up_on_a_passing_majority():
     """The search stopped as soon as the running share of undefined draws passed one half (12 of 23 here), and
     the relation failed 'nothing to test' although its end share was one half, which passes."""
-    relation = Relation.build(_UndefinedFirst(), eps=255, transform=transforms(yaw=3))
+    relation = Relation.build(_UndefinedFirst(), eps=255, transform=transforms(yaw=(0.5, 3)))
     record = check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
     assert record.outcome == "passed" and len(record.valid_examples) == 12 and record.undefined == 12, (
         record.summary_line())
+
+
+def test_a_follow_up_with_the_source_pixels_is_undefined_not_a_pass():
+    """Black patches on a black view leave its pixels as they were: a SUT that flips its class on any pixel change
+    passed every such pair before (20 of 20 "valid" examples, the SUT seeing one image)."""
+    import hashlib
+
+    from pytest_n2r.metrics import class_invariance
+    from pytest_n2r.strategies import black_patches
+
+    def fragile(rgb: np.ndarray) -> np.ndarray:  # the class is a hash of the pixels
+        scores = np.full(10, 0.05)
+        scores[int(hashlib.sha256(rgb.tobytes()).hexdigest(), 16) % 10] = 0.55
+        return scores
+
+    relation = Relation.build(class_invariance(), 0.0, black_patches(max_size=0.08))
+    with pytest.raises(RelationFailure, match="nothing was tested") as info:
+        check_relation(PlaneScene(half_width=1e-6), fragile, relation, settings=SETTINGS)  # every render black
+    record = info.value.record
+    assert not record.valid_examples, f"pairs of one image counted as tests: {record.valid_examples}"
+    assert record.undefined_reasons, record
+    assert "the follow-up's pixels equal the source's, byte for byte" in str(info.value)
+    assert "the changes drawn left the pictures as they were" in str(info.value).lower(), str(info.value)
