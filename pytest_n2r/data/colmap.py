@@ -14,6 +14,7 @@ Convention
 from __future__ import annotations
 
 import os
+import struct
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -34,6 +35,63 @@ PYCOLMAP_ERRORS: tuple[type[Exception], ...] = (RuntimeError, ValueError, Lookup
 __all__ = ["find_colmap_model", "read_colmap_model", "write_colmap_text", "camera_from_colmap", "colmap_camera_params"]
 
 _MODEL_FILES = ("cameras", "images", "points3D")
+
+
+#: COLMAP's camera model ids → their number of params (``colmap/sensor/models.h``; pycolmap 4.2 knows these 18)
+_PARAM_COUNTS = (3, 4, 4, 5, 8, 8, 12, 5, 4, 5, 12, 16, 4, 5, 3, 4, 6, 2)
+
+
+def _cut(file: Path, what: str, need: int, left: int) -> IngestError:
+    return IngestError(f"{file}: {what} needs {need} bytes, but only {left} are left in the file (a copy cut short, "
+                       "or not a COLMAP model); expected a binary model whose counts match its bytes")
+
+
+def _check_bin(file: Path) -> None:
+    """Walk the records of one binary model file (``cameras.bin``, ``images.bin``, ``points3D.bin``), checking
+    every count against the bytes left, so that pycolmap never allocates for a count the file cannot hold."""
+    try:
+        data = file.read_bytes()
+    except OSError as exc:
+        raise IngestError(f"{file}: cannot be read: {exc.strerror or exc}") from None
+    end, kind, u64 = len(data), file.name[:-4], struct.Struct("<Q").unpack_from
+    if end < 8:
+        raise _cut(file, "the count of records", 8, end)
+    count = u64(data)[0]
+    least = {"cameras": 24 + 8 * min(_PARAM_COUNTS), "images": 73, "points3D": 51}[kind]
+    if count * least > end - 8:
+        raise IngestError(f"{file}: the header claims {count} records, but its {end - 8} bytes after the count hold "
+                          f"at most {(end - 8) // least} (a copy cut short, or not a COLMAP model); expected a binary "
+                          "model whose counts match its bytes")
+    at = 8
+    for index in range(count):  # the fixed part of each record fits: count * least was checked
+        start = at
+        if kind == "points3D":  # id, xyz, rgb, error, track length; then (image id, point2D index) pairs
+            n, item, at = u64(data, at + 43)[0], 8, at + 51
+        elif kind == "cameras":  # id, model id, width, height; then the model's params
+            model = struct.unpack_from("<i", data, at + 4)[0]
+            if not 0 <= model < len(_PARAM_COUNTS):
+                raise IngestError(f"{file}: camera record {index + 1} of {count} (at byte {start}) has model id "
+                                  f"{model}; expected a COLMAP camera model id 0..{len(_PARAM_COUNTS) - 1}")
+            n, item, at = _PARAM_COUNTS[model], 8, at + 24
+        else:  # id, qvec, tvec, camera id, NUL-terminated name, 2-D point count; then (x, y, point3D id) triples
+            name_end = data.find(b"\0", at + 64)
+            if name_end < 0 or name_end + 9 > end:
+                raise _cut(file, f"image record {index + 1} of {count} (at byte {start}), its name and 2-D point "
+                           "count,", (end if name_end < 0 else name_end) + 9 - start, end - start)
+            n, item, at = u64(data, name_end + 1)[0], 24, name_end + 9
+        if n * item > end - at:
+            what = {"points3D": "track entries", "cameras": "params", "images": "2-D points"}[kind]
+            name = f" {data[start + 64:at - 9].decode('utf-8', 'replace')!r}" if kind == "images" else ""
+            raise _cut(file, f"{kind[:-1] if kind != 'points3D' else 'point'} record {index + 1} of {count}{name} "
+                       f"(at byte {start}) claims {n} {what} ({item} bytes each), which", n * item, end - at)
+        at += n * item
+
+
+def _check_binary_counts(model: Path) -> None:
+    """:func:`_check_bin` on each binary file of ``model``: pycolmap trusts their counts."""
+    for name in _MODEL_FILES:
+        if (model / f"{name}.bin").is_file():
+            _check_bin(model / f"{name}.bin")
 
 
 def _is_model(folder: Path) -> bool:
@@ -116,6 +174,7 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
             f"{str(model)!r} is not a COLMAP model folder; expected cameras.bin|txt and images.bin|txt in it"
         )
     try:
+        _check_binary_counts(found)
         rec = pycolmap.Reconstruction(str(found))
     except PYCOLMAP_ERRORS as exc:  # plain RuntimeError/ValueError carrying C++ messages
         raise IngestError(f"COLMAP model {str(found)!r} cannot be read: {exc}") from None
@@ -131,8 +190,13 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
     for image in sorted(rec.images.values(), key=lambda im: im.name):
         if not image.has_pose:
             continue
+        cam_from_world = image.cam_from_world()
+        if not np.any(np.asarray(cam_from_world.rotation.quat, dtype=np.float64)):  # pycolmap keeps it as read
+            images_file = found / ("images.bin" if (found / "images.bin").is_file() else "images.txt")
+            raise IngestError(f"{images_file}: image {image.name!r} has the quaternion (0, 0, 0, 0); a rotation needs "
+                              "a non-zero quaternion (QW, QX, QY, QZ)")
         w2c = np.eye(4)
-        w2c[:3] = np.asarray(image.cam_from_world().matrix(), dtype=np.float64)
+        w2c[:3] = np.asarray(cam_from_world.matrix(), dtype=np.float64)
         if not np.all(np.isfinite(w2c)):
             raise IngestError(f"{found}: image {image.name!r} has a non-finite pose")
         w2c[:3, :3] = orthonormalize(w2c[:3, :3])

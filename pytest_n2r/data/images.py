@@ -4,7 +4,8 @@ Convention
 ----------
 Every image leaves this module as an ``H x W x 3`` ``uint8`` array in **RGB** order (OpenCV reads BGR;
 the conversion happens here and nowhere else). The photo's orientation is applied, so the array is upright
-as a person would view the photo: a JPEG's EXIF orientation tag (as OpenCV's decoder applies it); for a HEIF photo
+as a person would view the photo: a JPEG's EXIF orientation tag (the one Pillow reads, applied here to the pixels
+OpenCV decodes as stored, so that :func:`read_image_size` agrees with them); for a HEIF photo
 (``.heic``, what iPhones store by default), the container's own rotation and mirror (``irot``, ``imir``), as the
 HEIF standard and libheif do, since there an EXIF tag only describes them. A file is read as HEIF by its
 content (an ISO media ``ftyp`` box), not by its name. Grayscale is repeated to three channels, an alpha channel is
@@ -172,14 +173,15 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
     if _is_iso_media(head):
         _check_sides(path, *_heif_size(path))
         return to_rgb8(_decode_heif(path, oriented), bgr=False)
-    _stored_size(path)  # refuses a header claiming more than MAX_IMAGE_SIDE a side before any decoding
+    orientation = _stored_orientation(path)  # refuses a header claiming more than MAX_IMAGE_SIDE a side first
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as exc:  # no permission, a device gone
         raise IngestError(f"image file {str(path)!r} cannot be read: {exc.strerror or exc}") from exc
-    # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; unlike IMREAD_UNCHANGED it applies EXIF orientation (unless told
-    # to ignore it, which OpenCV's TIFF decoder does not heed: there the tag is undone below).
-    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | (0 if oriented else cv2.IMREAD_IGNORE_ORIENTATION)
+    # ANYDEPTH|ANYCOLOR keeps 16-bit and gray data; the orientation applied is the tag read_image_size reads (OpenCV
+    # may read another: a JPEG with two EXIF segments), so OpenCV is told to ignore it, which its TIFF decoder does not
+    # heed: there it is the TIFF's own tag, and undone below when not oriented.
+    flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
     if not data.size:
         raise IngestError(f"image file {str(path)!r} is empty (0 bytes: a copy that did not finish, or a cloud photo "
                           "not downloaded to this device)")
@@ -188,8 +190,8 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
         cut = head[:2] == b"\xff\xd8" and b"\xff\xd9" not in data[-1024:].tobytes()  # a JPEG without its end marker
         why = "a JPEG cut short: an interrupted copy?" if cut else "corrupt or not an image"
         raise IngestError(f"image file {str(path)!r} cannot be decoded as an image ({why})")
-    if not oriented and _is_tiff(head):
-        img = _UNDO_ORIENTATION[_orientation(path)](img)
+    if _is_tiff(head) != oriented:  # applying a tag undoes its inverse: 6 and 8 swap, the others undo themselves
+        img = _UNDO_ORIENTATION[orientation if _is_tiff(head) else {6: 8, 8: 6}.get(orientation, orientation)](img)
     return to_rgb8(img)
 
 
@@ -206,7 +208,7 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         with _header(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
             width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
-            orientation = im.getexif().get(0x0112, 1)
+            orientation = _exif_orientation(im)
     except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]
         return width, height
@@ -257,28 +259,24 @@ def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
     return width, height
 
 
-def _stored_size(path: Path) -> tuple[int, int] | None:
-    """The stored ``(width, height)`` its header claims (``None`` when Pillow cannot tell: the decoder names the
-    file), refusing more than :data:`MAX_IMAGE_SIDE` pixels a side."""
+def _stored_orientation(path: Path) -> int:
+    """The orientation :func:`_exif_orientation` reads from the header (1 when Pillow cannot read it: the decoder
+    names the file), refusing a stored size of more than :data:`MAX_IMAGE_SIDE` pixels a side."""
     from PIL import UnidentifiedImageError
 
     try:
         with _header(path) as im:
-            size = im.size
-    except (OSError, UnidentifiedImageError, ValueError, SyntaxError):
-        return None
-    return _check_sides(path, *size)
-
-
-def _orientation(path: Path) -> int:
-    """The EXIF orientation tag of the photo at ``path`` (1 when it has none or it cannot be read)."""
-    from PIL import UnidentifiedImageError
-
-    try:
-        with _header(path) as im:
-            orientation = im.getexif().get(0x0112, 1)
-    except (OSError, UnidentifiedImageError):
+            size, orientation = im.size, _exif_orientation(im)
+    except (OSError, UnidentifiedImageError, ValueError, SyntaxError, KeyError):
         return 1
+    _check_sides(path, *size)
+    return orientation
+
+
+def _exif_orientation(im: PIL.Image.Image) -> int:
+    """The EXIF orientation tag Pillow reads (the first EXIF segment's; 1 when none or not one of the eight): the one
+    place both :func:`read_image` and :func:`read_image_size` take it from, so that they agree."""
+    orientation = im.getexif().get(0x0112, 1)
     return orientation if orientation in _UNDO_ORIENTATION else 1
 
 

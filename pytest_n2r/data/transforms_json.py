@@ -203,7 +203,8 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not is_finite(value):
-        shown = f"an integer of {len(str(abs(value)))} digits" if isinstance(value, int) else repr(value)
+        big = isinstance(value, int) and not isinstance(value, bool)  # only a huge integer fails is_finite
+        shown = f"an integer of {len(str(abs(value)))} digits" if big else repr(value)
         raise IngestError(f"{where}: field {key!r}={shown} must be a finite number")
     return float(value)
 

@@ -62,7 +62,7 @@ def _parse_header(raw: bytes, source: str) -> tuple[str, list[tuple[str, int, li
     """``(format, elements, body offset)``; each element is ``(name, count, [(property, dtype code)])``."""
     if not raw.startswith(b"ply"):
         raise SceneFileError(f"{source}: not a PLY file; a 3DGS .ply starts with the line 'ply'")
-    end = re.search(rb"end_header\r?\n", raw[:_MAX_HEADER])
+    end = re.search(rb"(?m)^end_header[ \t]*\r?\n", raw[:_MAX_HEADER])  # the whole line: a comment may name it
     if end is None:
         raise SceneFileError(f"{source}: the PLY header has no 'end_header' line in its first {_MAX_HEADER} bytes")
     try:

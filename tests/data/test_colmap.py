@@ -119,3 +119,71 @@ def test_write_colmap_text_round_trips_transforms_json(corner, tmp_path):
         assert f.camera == g.camera and g.path == f.path
         np.testing.assert_allclose(f.c2w, g.c2w, atol=1e-12)
     np.testing.assert_allclose(again.points, poses.points)
+
+
+def _binary_model(folder, *, cameras=1, images=None, points=None):
+    """A binary model written by hand: one PINHOLE camera; ``images`` and ``points`` as ``(count, records)``."""
+    import struct
+
+    folder.mkdir(parents=True, exist_ok=True)
+    camera = struct.pack("<IiQQ4d", 1, 1, 64, 48, 50, 50, 32, 24)
+    (folder / "cameras.bin").write_bytes(struct.pack("<Q", cameras) + camera)
+    image = struct.pack("<I4d3dI", 1, 1, 0, 0, 0, 0, 0, 0, 1) + b"a.png\0" + struct.pack("<Q", 1)
+    image += struct.pack("<2dQ", 3.0, 4.0, 1)
+    count, records = images or (1, image)
+    (folder / "images.bin").write_bytes(struct.pack("<Q", count) + records)
+    tracked = struct.pack("<Q3d3BdQ", 1, 0.1, 0.2, 10.0, 1, 2, 3, 0.5, 1) + struct.pack("<II", 1, 0)
+    rest = b"".join(struct.pack("<Q3d3BdQ", i, 0.1 * i, 0.2, 10.0, 1, 2, 3, 0.5, 0) for i in range(2, 11))
+    count, records = points or (10, tracked + rest)
+    (folder / "points3D.bin").write_bytes(struct.pack("<Q", count) + records)
+    return folder
+
+
+def test_a_binary_model_written_by_hand_reads(tmp_path):
+    poses = read_colmap_model(_binary_model(tmp_path / "m"))
+    assert [f.name for f in poses.frames] == ["a.png"] and len(poses.points) == 10
+
+
+def test_binary_counts_beyond_the_file_are_refused_before_pycolmap_allocates(tmp_path):
+    """An interrupted copy keeps the counts of the whole file: pycolmap allocated for them (GBs, or a hang), or
+    read an image claiming 20 000 000 2-D points and holding none as fine."""
+    import struct
+
+    point = struct.pack("<Q3d3BdQ", 1, 0.1, 0.2, 10.0, 1, 2, 3, 0.5, 0)  # 51 bytes
+    image = struct.pack("<I4d3dI", 1, 1, 0, 0, 0, 0, 0, 0, 1) + b"a.png\0"
+    cases = {
+        "points3D.bin: the header claims 1000 records, but its 510 bytes": {"points": (1000, point * 10)},
+        "points3D.bin: point record 2 of 2 (at byte 59) claims 5000 track entries (8 bytes each), which needs "
+        "40000 bytes, but only 0 are left": {"points": (2, point + point[:-8] + struct.pack("<Q", 5000))},
+        "images.bin: image record 1 of 1 'a.png' (at byte 8) claims 20000000 2-D points (24 bytes each), which needs "
+        "480000000 bytes, but only 0 are left": {"images": (1, image + struct.pack("<Q", 20_000_000))},
+        "images.bin: the header claims 3 records, but its 78 bytes": {"images": (3, image + struct.pack("<Q", 0))},
+        "images.bin: image record 1 of 1 (at byte 8), its name and 2-D point count, needs": {
+            "images": (1, image[:-1] + b"abcdefghij")},
+        "cameras.bin: the header claims 2 records": {"cameras": 2},
+    }
+    for expected, damage in cases.items():
+        folder = _binary_model(tmp_path / str(len(expected)), **damage)
+        with pytest.raises(IngestError) as exc:
+            read_colmap_model(folder)
+        assert f"{folder}/{expected}" in str(exc.value), f"not refused naming the file, record and count: {exc.value}"
+
+
+def test_the_camera_param_counts_are_pycolmaps(tmp_path):
+    pycolmap = pytest.importorskip("pycolmap")
+    from pytest_n2r.data.colmap import _PARAM_COUNTS
+
+    for model in pycolmap.CameraModelId.__members__.values():
+        if int(model) >= 0:
+            camera = pycolmap.Camera.create_from_model_id(1, model, 1.0, 10, 10)
+            assert _PARAM_COUNTS[int(model)] == len(camera.params), f"{model.name}: not pycolmap's param count"
+
+
+def test_a_zero_quaternion_is_refused_naming_the_file_and_image(model):
+    images = model / "sparse" / "0" / "images.txt"
+    images.write_text(_IMAGES.replace("1 1 0 0 0 0 0 0 1 a.jpg", "1 0 0 0 0 0 0 0 1 a.jpg"))
+    with pytest.raises(IngestError) as exc:
+        poses = read_colmap_model(model / "sparse" / "0")
+        pytest.fail(f"a zero quaternion was read as the rotation {poses.frames[0].c2w[:3, :3].tolist()}")
+    assert f"{images}: image 'a.jpg' has the quaternion (0, 0, 0, 0)" in str(exc.value)
+    assert "non-zero quaternion" in str(exc.value)

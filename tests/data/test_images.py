@@ -324,3 +324,27 @@ def test_the_image_side_cap_is_the_render_cap():
     from pytest_n2r.render.size import MAX_SIDE
 
     assert MAX_IMAGE_SIDE == MAX_SIDE
+
+
+def test_two_exif_segments_give_one_orientation_to_the_size_and_the_pixels(tmp_path):
+    """Pillow reads the first EXIF segment, OpenCV's decoder another: orientation 6 then 1 gave the size 48x64 while
+    read_image decoded 64x48 (docs/ingestion.md promises they agree)."""
+    import struct
+
+    encoded = cv2.imencode(".jpg", np.zeros((48, 64, 3), np.uint8))[1].tobytes()
+
+    def app1(orientation: int) -> bytes:
+        exif = Image.Exif()
+        exif[0x0112] = orientation
+        payload = b"Exif\0\0" + exif.tobytes()
+        return b"\xff\xe1" + struct.pack(">H", len(payload) + 2) + payload
+
+    for first, second in ((6, 1), (1, 6)):
+        path = tmp_path / f"two_{first}{second}.jpg"
+        path.write_bytes(encoded[:2] + app1(first) + app1(second) + encoded[2:])
+        image = read_image(path)
+        assert read_image_size(path) == (image.shape[1], image.shape[0]), \
+            f"EXIF orientations {first}, {second}: read_image_size says {read_image_size(path)}, read_image " \
+            f"decodes {image.shape[1]}x{image.shape[0]}"
+        assert image.shape[:2] == ((64, 48) if first == 6 else (48, 64)), "not the first segment's orientation"
+        assert read_image(path, oriented=False).shape[:2] == (48, 64), "the stored pixels are turned"

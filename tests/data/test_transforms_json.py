@@ -165,6 +165,13 @@ def test_non_numeric_intrinsic(corner):
     assert "'cx'='middle' must be a finite number" in _break(corner, mutate)
 
 
+def test_a_boolean_intrinsic_is_shown_as_the_boolean(corner):
+    def mutate(m):
+        m["k1"] = True
+    msg = _break(corner, mutate)
+    assert "'k1'=True must be a finite number" in msg, f"a boolean shown as something else: {msg}"
+
+
 def test_bad_focal_value(corner):
     def mutate(m):
         m["fl_x"] = -5.0

@@ -245,3 +245,16 @@ def test_the_shipped_files_are_what_make_data_builds(tmp_path):
 def test_the_shipped_files_read(name, count, degree):
     g = read_ply(DATA / FILES[name][0])
     assert (len(g), g.sh_degree) == (count, degree), f"{name}: {len(g)} Gaussians of SH degree {g.sh_degree}"
+
+
+def test_end_header_in_a_comment_does_not_end_the_header(tmp_path):
+    """A comment naming end_header ended the header there: the body was read from inside the header (garbage)."""
+    gaussians = read_ply(DATA / FILES["wall-sh3"][0])
+    path = tmp_path / "commented.ply"
+    write_ply(path, gaussians)
+    header, body = path.read_bytes().split(b"end_header\n", 1)
+    commented = header.replace(b"element vertex", b"comment exported by tool X; see end_header\nelement vertex", 1)
+    path.write_bytes(commented + b"end_header\n" + body)
+    again = read_ply(path)
+    assert len(again) == len(gaussians) and np.array_equal(again.means, gaussians.means), \
+        f"a comment containing 'end_header' shifted the body: means {again.means[:2].tolist()}"
