@@ -16,6 +16,7 @@ __all__ = [
     "SceneFileError",
     "FitError",
     "SUTOutputError",
+    "MetricArgumentError",
     "MetricUndefined",
     "UnfinishedScene",
 ]
@@ -47,6 +48,12 @@ class FitError(N2RError):
 
 class SUTOutputError(InvalidType):
     """The system under test returned something a metric cannot use (None, NaN, wrong shape)."""
+
+
+class MetricArgumentError(InvalidArgument):
+    """A metric's own argument does not fit the views or outputs it is given (a plane through a camera's centre,
+    a homography without a plane under a camera translation, ``top_k`` not below the number of classes): the
+    test's mistake, not the SUT's."""
 
 
 class MetricUndefined(N2RError):

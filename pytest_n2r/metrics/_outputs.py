@@ -62,16 +62,16 @@ def as_numeric(value: Any, which: str, expected: str) -> np.ndarray:
 def as_vector(value: Any, which: str) -> np.ndarray:
     """A classifier output as a 1-D float64 vector; a batch of one (``(1, C)``, Keras style) is accepted.
 
-    An empty or all-NaN output (array, tensor or list alike) is the SUT saying nothing:
-    :class:`MetricUndefined` (the pair tests nothing), not an error; a vector with *some* NaN values is a
-    :class:`SUTOutputError`.
+    An empty or all-NaN output (array, tensor or list alike) is the SUT saying nothing: :class:`MetricUndefined`
+    naming the output (the vector metrics score it against the other output's answer), not an error; a vector with
+    *some* NaN values is a :class:`SUTOutputError`.
     """
     expected = "a 1-D vector of class scores of shape (C,) or a batch of one (1, C)"
     arr = _as_float_array(value, which, expected)
     if arr.size == 0:
-        raise MetricUndefined(f"the {which} output is empty (nothing to compare)")
+        raise MetricUndefined(f"the {which} output is empty")
     if np.isnan(arr).all():
-        raise MetricUndefined(f"the {which} output is all NaN (nothing to compare)")
+        raise MetricUndefined(f"the {which} output is all NaN")
     arr = as_numeric(arr, which, expected)
     if arr.ndim == 2 and arr.shape[0] == 1:
         arr = arr[0]

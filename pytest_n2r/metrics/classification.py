@@ -22,6 +22,11 @@ Except with ``"raw"``, a constant output (all zeros, all equal logits, a uniform
 one class) favours no class: the pair is *undefined* (nothing to compare), never a perfect score. Class
 invariance only looks at the ranking of the given scores, which no reading changes, and is undefined where
 that ranking ties at the decisive place.
+
+An empty or all-NaN output is no answer. No answer on both views is *undefined*; an answer on one view only
+scores the worst end of the range (cosine 0, or -1 with ``"raw"``; L2 √2; class invariance 0), as a keypoint
+metric scores 0 when only one view has points. ``l2_norm(inputs="raw")`` has no worst end: a
+:class:`~pytest_n2r.errors.SUTOutputError`.
 """
 
 from __future__ import annotations
@@ -31,7 +36,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
+from ..errors import InvalidArgument, InvalidType, MetricArgumentError, MetricUndefined, SUTOutputError
 from ._outputs import as_vector, float_eps
 from .base import Metric, MetricResult
 
@@ -112,21 +117,44 @@ class _VectorMetric(Metric):
     allowed_inputs: tuple[str, ...] = _INPUTS
     nan_means_no_output = True
 
+    def check_classes(self, n_classes: int) -> None:
+        """Raise if the metric's arguments do not suit a classifier of ``n_classes`` classes (known at call time)."""
+
+    @property
+    def worst(self) -> float:
+        """The score of an answer on one view against none (empty or all NaN) on the other: the worst end of the
+        range."""
+        return 0.0
+
     def __init__(self, inputs: Inputs = "auto") -> None:
         if inputs not in self.allowed_inputs:
             raise InvalidArgument(f"inputs={inputs!r}; expected one of {self.allowed_inputs}")
         self.inputs = inputs
 
     def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        try:
-            a, b = as_vector(out_source, "source"), as_vector(out_follow, "follow-up")
-        except MetricUndefined as exc:
-            return MetricResult.undefined(self.name, str(exc))
+        vectors, silent = [], []
+        for value, which in ((out_source, "source"), (out_follow, "follow-up")):
+            try:
+                vectors.append(as_vector(value, which))
+            except MetricUndefined as exc:  # the SUT gave no answer on this view
+                vectors.append(None)
+                silent.append(str(exc))
+        if len(silent) == 2:
+            return MetricResult.undefined(self.name, f"{' and '.join(silent)} (nothing to compare)")
+        a, b = vectors
+        if a is None or b is None:  # an answer on one view only: a failure, as for keypoints on one side
+            self.check_classes(int((b if a is None else a).size))
+            answered = "follow-up" if a is None else "source"
+            score = self.worst
+            return MetricResult(self.name, score, self.deviation(score), {
+                "reason": f"{silent[0]} but the {answered} output is not: the SUT answered on one view only",
+                "classes": int((b if a is None else a).size)})
         if a.shape != b.shape:
             raise SUTOutputError(
                 f"source output has {a.size} classes but follow-up output has {b.size}; "
                 "a classifier must return the same number of class scores for every image"
             )
+        self.check_classes(int(a.size))
         eps = (float_eps(out_source), float_eps(out_follow))
         if self.inputs == "probabilities":
             for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
@@ -200,19 +228,24 @@ def _unit_max(v: np.ndarray) -> np.ndarray:
 
 
 class CosineSimilarity(_VectorMetric):
-    """``a·b / (|a| |b|)``. Range [-1, 1] ([0, 1] for probabilities), ideal 1, deviation ``1 - score``.
+    """``a·b / (|a| |b|)``. Range [-1, 1] ([0, 1] for probabilities), ideal 1, deviation ``1 - score``, computed
+    as ``|â - b̂|² / 2`` on the unit vectors: exactly 0 for identical outputs, without cancellation near 0.
 
     A zero vector has no direction: two zero vectors are *undefined* (the SUT said nothing either time,
     which is not agreement), a zero vector against a non-zero one scores 0 (they share nothing). Only
     ``inputs="raw"`` can get zero vectors to this point: in the other readings a constant output (all zeros
-    included) favours no class and is undefined. Empty or all-NaN outputs are undefined for every vector
-    metric (see :func:`~pytest_n2r.metrics._outputs.as_vector`). Each vector is scaled by its largest
-    absolute entry first (the cosine does not change), so ``[1e200, 1e200]`` or ``[1e-200, 2e-200]`` score
-    like ``[1, 1]`` and ``[1, 2]``.
+    included) favours no class and is undefined. Empty or all-NaN outputs: see the module notes. Each vector is
+    scaled by its largest absolute entry first (the cosine does not change), so ``[1e200, 1e200]`` or
+    ``[1e-200, 2e-200]`` score like ``[1, 1]`` and ``[1, 2]``.
     """
 
     name = "cosine_similarity"
     ideal = 1.0
+
+    @property
+    def worst(self) -> float:
+        """-1 with ``inputs="raw"`` (opposite vectors), else 0 (the range of non-negative vectors is [0, 1])."""
+        return -1.0 if self.inputs == "raw" else 0.0
 
     def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
         a, b, mode = self.read(a, b, eps)
@@ -222,10 +255,11 @@ class CosineSimilarity(_VectorMetric):
             return MetricResult.undefined(self.name, "both outputs are zero vectors (nothing to compare)",
                                           inputs=mode, classes=int(a.size))
         if na == 0.0 or nb == 0.0:
-            score = 0.0
-        else:
-            score = float(np.clip(np.dot(a / na, b / nb), -1.0, 1.0))
-        return self.result(score, inputs=mode, classes=int(a.size))
+            return self.result(0.0, inputs=mode, classes=int(a.size))
+        # 1 - cos = |â - b̂|² / 2 on unit vectors: exactly 0 for identical outputs, and no cancellation near 0
+        deviation = float(np.clip(0.5 * np.sum((a / na - b / nb) ** 2), 0.0, 2.0))
+        score = float(np.clip(1.0 - deviation, -1.0, 1.0))
+        return MetricResult(self.name, score, deviation, {"inputs": mode, "classes": int(a.size)})
 
     def __repr__(self) -> str:
         return f"cosine_similarity({self._repr_inputs()})"
@@ -241,6 +275,14 @@ class L2Norm(_VectorMetric):
     name = "l2_norm"
     ideal = 0.0
 
+    @property
+    def worst(self) -> float:
+        """√2 (two different one-hot vectors); ``inputs="raw"`` has no worst end: an error (see ``compute``)."""
+        if self.inputs == "raw":
+            raise SUTOutputError("one output is empty or all NaN and the other is not; l2_norm(inputs='raw') is "
+                                 "unbounded, so an answer on one view only has no score")
+        return float(np.sqrt(2.0))
+
     def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
         a, b, mode = self.read(a, b, eps)
         top = max(float(np.abs(a).max()), float(np.abs(b).max()))
@@ -255,7 +297,8 @@ class L2Norm(_VectorMetric):
 
 
 class ClassInvariance(_VectorMetric):
-    """1 when the source's top-1 class is among the follow-up's ``top_k`` classes, else 0.
+    """1 when the source's top-1 class is among the follow-up's ``top_k`` classes, else 0. ``top_k`` must be less
+    than the number of classes, if two or more (an :class:`~pytest_n2r.errors.InvalidArgument` at call time).
 
     With ``top_k=1`` this is "the predicted class did not change". Only the ranking of the given scores counts
     (a softmax or a renormalization does not change it), so ``inputs`` only decides whether outputs that are
@@ -277,9 +320,12 @@ class ClassInvariance(_VectorMetric):
         self.top_k = int(top_k)
         super().__init__(inputs)
 
+    def check_classes(self, n_classes: int) -> None:
+        if 1 < n_classes <= self.top_k:  # every class among the top k: 1 whatever (one class is constant: undefined)
+            raise MetricArgumentError(f"top_k={self.top_k} must be less than the number of classes the classifier "
+                                      f"returns ({n_classes}): with top_k >= {n_classes} every class is in the top-k")
+
     def _score(self, a: np.ndarray, b: np.ndarray, eps: tuple[float, float]) -> MetricResult:
-        if self.top_k > b.size:
-            raise InvalidArgument(f"top_k={self.top_k} exceeds the {b.size} classes the classifier returns")
         top = np.flatnonzero(a == a.max())
         if len(top) > 1:
             return MetricResult.undefined(

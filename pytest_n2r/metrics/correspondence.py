@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import check_array, check_range, check_real
-from ..errors import InvalidArgument, InvalidType
+from ..errors import InvalidArgument, InvalidType, MetricArgumentError
 from ..geometry import (
     Camera,
     apply_homography,
@@ -250,6 +250,26 @@ class DepthMapping(PointMapping):
         return f"DepthMapping(min_opacity={self.min_opacity!r}, depth_tolerance={self.depth_tolerance!r})"
 
 
+#: Relative tolerance of the camera-centre checks of :meth:`HomographyMapping.from_views` (a pure rotation moves
+#: the centre by round-off only).
+_CENTRE_TOLERANCE = 1e-9
+
+
+def _check_pure_rotation(source: RenderedView, centre_a: np.ndarray, centre_b: np.ndarray) -> None:
+    """Raise :class:`MetricArgumentError` when the camera centres differ by more than :data:`_CENTRE_TOLERANCE` of the
+    scene scale (the larger of the centres' distances from the origin and the source's median depth, if rendered):
+    the homography of the plane at infinity is exact only for a pure rotation."""
+    depth = source.depth[np.isfinite(source.depth) & (source.depth > 0)] if source.depth is not None else ()
+    scale = max(float(np.linalg.norm(centre_a)), float(np.linalg.norm(centre_b)),
+                float(np.median(depth)) if len(depth) else 0.0)
+    baseline = float(np.linalg.norm(centre_b - centre_a))
+    if baseline > _CENTRE_TOLERANCE * scale:
+        raise MetricArgumentError(
+            f"mapping='homography' without plane= is exact only for a pure camera rotation, but the camera centres "
+            f"are {baseline:.3g} scene units apart (more than {_CENTRE_TOLERANCE:g} of the scene scale "
+            f"{scale:.3g}); use mapping='depth', or give plane=(n, d), the world plane n·X + d = 0 the scene lies on")
+
+
 class HomographyMapping(PointMapping):
     """Map pixels through a 3x3 homography ``H`` (source → follow-up pixels, OpenCV pixel centres).
 
@@ -289,9 +309,19 @@ class HomographyMapping(PointMapping):
         source = _check_view("source", source, ())
         follow = _check_view("follow", follow, ())
         plane = check_plane(plane)
+        centres = [np.asarray(view.c2w, dtype=np.float64)[:3, 3] for view in (source, follow)]
         if plane is None:
+            _check_pure_rotation(source, *centres)
             H = rotation_homography(source.camera, source.c2w, follow.camera, follow.c2w)
         else:
+            n, d = plane
+            for name, centre in zip(("source", "follow-up"), centres):
+                if abs(float(n @ centre) + d) <= _CENTRE_TOLERANCE * float(np.linalg.norm(n)) * max(
+                        1.0, float(np.linalg.norm(centre))):
+                    raise MetricArgumentError(
+                        f"plane=({n.tolist()!r}, {d!r}) passes through the {name} camera's centre "
+                        f"{np.round(centre, 6).tolist()}, so its homography is undefined; expected the world plane "
+                        "n·X + d = 0 the scene lies on (check the sign of d), or use mapping='depth'")
             H = plane_homography(source.camera, source.c2w, follow.camera, follow.c2w, *plane)
         mapping = cls(H, source.camera, follow.camera)
         mapping._views = (source, follow)

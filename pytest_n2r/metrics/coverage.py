@@ -6,6 +6,8 @@ Convention
 - Points are ``(N, 2)`` ``(u, v)`` pixels of a camera's image (OpenCV pixel centres at integer coordinates);
   a pixel centre is covered when it lies within ``radius`` pixels of a point (inclusive, plus
   :data:`DISC_SLACK`); discs are clipped to the image.
+- A radius beyond the image's diagonal acts as the diagonal (a disc of it around any point of the image covers
+  the whole image), so the work stays bounded by the image's size: ``radius=1e300`` costs what the diagonal does.
 """
 
 from __future__ import annotations
@@ -15,13 +17,18 @@ import numpy as np
 from .._validation import check_positive
 from ..geometry import Camera
 
-__all__ = ["DISC_SLACK", "coverage_mask", "coverage_bound"]
+__all__ = ["DISC_SLACK", "capped_radius", "coverage_mask", "coverage_bound"]
 
 #: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
 #: flip a pixel centre lying exactly on the circle.
 DISC_SLACK = 1e-6
 #: Side (pixels) of the cells :func:`coverage_bound` counts.
 _CELL = 4
+
+
+def capped_radius(radius: float, camera: Camera) -> float:
+    """``radius`` (pixels, checked finite and > 0) capped at the diagonal of ``camera``'s image."""
+    return min(check_positive("radius", radius), float(np.hypot(camera.width, camera.height)))
 
 
 def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarray:
@@ -35,7 +42,7 @@ def coverage_mask(points: np.ndarray, camera: Camera, radius: float) -> np.ndarr
     paints about 400 masks at 320x180, and freeing and faulting in 8-byte difference arrays cost more than
     the arithmetic: 0.66-0.68 -> 0.39-0.41 ms a mask, docs/performance-log.md).
     """
-    radius = check_positive("radius", radius) + DISC_SLACK
+    radius = capped_radius(radius, camera) + DISC_SLACK
     h, w = camera.height, camera.width
     # discs that miss the image go before the integer casts below (a point at 1e19 px or inf would not fit)
     points = points[np.all((points + radius >= 0) & (points - radius <= [w - 1, h - 1]), axis=1)]
@@ -69,7 +76,7 @@ def coverage_bound(points: np.ndarray, camera: Camera, radius: float) -> float:
     of the image's pixels in the cells of ``_CELL`` × ``_CELL`` pixels that the bounding box of some disc's
     pixel centres (clipped to the image) touches. On the 757 point sets whose discs a warm main job painted
     (320×180, radius 3 and 8 px): shares 0.12–0.35, bounds 0.17–0.46."""
-    radius = check_positive("radius", radius) + DISC_SLACK
+    radius = capped_radius(radius, camera) + DISC_SLACK
     h, w = camera.height, camera.width
     lo, hi = np.ceil(points - radius), np.floor(points + radius)  # (N, 2): the box of each disc's pixel centres
     limit = np.array([w - 1, h - 1])

@@ -50,7 +50,7 @@ from .correspondence import (
     PointMapping,
     check_plane,
 )
-from .coverage import DISC_SLACK, coverage_bound, coverage_mask
+from .coverage import DISC_SLACK, capped_radius, coverage_bound, coverage_mask
 
 __all__ = [
     "Repeatability", "InterestPointSpread", "KeypointCorrespondences", "repeatability", "interest_point_spread",
@@ -301,7 +301,7 @@ def _may_cover(n_points: int, camera: Camera, radius: float) -> bool:
     """Whether ``n_points`` discs of ``radius`` pixels could cover :data:`MAX_COVERAGE` of the image: a disc
     holds at most ``(floor(2 r) + 1)²`` pixel centres (at most that many columns and rows fit in its width),
     so fewer discs than the share needs cannot reach it, wherever they lie."""
-    per_disc = (int(np.floor(2 * (radius + DISC_SLACK))) + 1) ** 2
+    per_disc = (int(np.floor(2 * (capped_radius(radius, camera) + DISC_SLACK))) + 1) ** 2
     return n_points * per_disc >= MAX_COVERAGE * camera.width * camera.height
 
 
@@ -354,7 +354,9 @@ def repeatability(
 
     ``mapping="depth"`` maps points with the rendered z-depth and poses (needs ``depth`` and ``opacity``;
     ``min_opacity`` in [0, 1], ``depth_tolerance`` relative); ``mapping="homography"`` uses the homography
-    of the world plane ``plane = (n, d)`` (``n·X + d = 0``), or of a pure rotation when ``plane`` is None.
+    of the world plane ``plane = (n, d)`` (``n·X + d = 0``), or of a pure rotation when ``plane`` is None (camera
+    centres apart are then an :class:`~pytest_n2r.errors.InvalidArgument`). ``px`` beyond the image diagonal acts
+    as the diagonal.
 
     >>> repeatability(px=2)
     repeatability(px=2.0, matching='maximum', mapping='depth')

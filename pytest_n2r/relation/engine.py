@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from hypothesis import assume, target
 
-from ..errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
+from ..errors import InvalidArgument, InvalidType, MetricArgumentError, MetricUndefined, SUTOutputError
 from ..geometry import Camera
 from ..metrics.base import MetricResult
 from ..render.view import RenderedView
@@ -172,6 +172,8 @@ class Engine:
             result = self.metric.compute(out_source, out_follow, source, follow)
         except MetricUndefined as exc:  # the pair tests nothing (e.g. no keypoint in the common region)
             return MetricResult.undefined(self.metric.name, str(exc))
+        except MetricArgumentError as exc:  # the test's mistake: said as such, not blamed on the SUT
+            raise MetricArgumentError(f"{self.metric!r} ({where}): {exc}") from None
         except (InvalidType, InvalidArgument) as exc:
             if isinstance(exc, SUTOutputError):
                 raise
@@ -298,11 +300,11 @@ class Engine:
     def example(self, view: SceneView, tau: Any) -> None:
         """The body of one Hypothesis example (survey or shrink pass)."""
         __tracebackhide__ = True
-        if self.gave_up:  # reject the rest of the draws without rendering them
-            assume(False)
         tau = as_follow_up(tau)
         drawn = (view.name, np.asarray(view.c2w, np.float64).tobytes(),
                  json.dumps(tau.record_fields(), sort_keys=True, default=str))
+        if self.gave_up and drawn not in self.raised:  # reject the rest of the draws without rendering them
+            assume(False)
         if drawn in self.drawn and drawn not in self.raised and not (self.shrinking and drawn in self.failing):
             # the same example again tests nothing new: not counted, Hypothesis draws another. The shrink pass
             # rejects repeats as the survey did, so that with the survey's seed it draws the survey's examples up

@@ -11,7 +11,7 @@ import torch
 from hypothesis import assume, given, settings
 from hypothesis.extra.numpy import arrays
 
-from pytest_n2r.errors import InvalidArgument, InvalidType, SUTOutputError
+from pytest_n2r.errors import InvalidArgument, InvalidType, MetricArgumentError, SUTOutputError
 from pytest_n2r.metrics.classification import (
     class_invariance,
     cosine_similarity,
@@ -42,6 +42,8 @@ def undefined_for_want_of_a_class(result, v) -> bool:
 def test_identical_outputs_score_the_ideal_unless_they_favour_no_class(v, as_probabilities):
     v = softmax(v) if as_probabilities else v
     for metric in ALL if as_probabilities else LOGITS:
+        if getattr(metric, "top_k", 0) >= v.size:  # every class in the top-k: refused (test_top_k_must_be_...)
+            continue
         result = metric(v, v.copy())
         if not result.valid:
             assert undefined_for_want_of_a_class(result, v), f"{metric!r} undefined for {v} without cause: {result}"
@@ -103,14 +105,56 @@ def test_known_values():
                          ids=["list", "array", "all-nan", "all-nan-batch", "all-nan-list", "all-nan-batch-list",
                               "all-nan-tensor"])
 @pytest.mark.parametrize("metric", ALL, ids=repr)
-def test_empty_or_all_nan_outputs_are_undefined_never_ideal(metric, empty):
-    """Nothing to compare is never a perfect score: the pair is undefined, with the reason."""
-    for a, b, which in ((empty, [0.3, 0.7], "source"), ([0.3, 0.7], empty, "follow-up")):
+def test_empty_or_all_nan_outputs_are_undefined_on_both_views_and_fail_on_one(metric, empty):
+    """No answer on both views is undefined; an answer on one view only scores the worst end (as keypoints do)."""
+    both = metric(empty, np.full(4, np.nan))
+    assert not both.valid and math.isnan(both.deviation), f"no answer on either view was not undefined: {both}"
+    assert both.details["reason"].startswith("the source output is "), both.details
+    worst = {"cosine_similarity": 0.0, "l2_norm": math.sqrt(2), "class_invariance": 0.0}[metric.name]
+    for a, b, which in ((empty, [0.2, 0.3, 0.5], "source"), ([0.2, 0.3, 0.5], empty, "follow-up")):
         result = metric(a, b)
-        assert not result.valid and math.isnan(result.deviation), (metric, a, b, result)
+        assert result.valid and result.score == worst and result.deviation == abs(worst - metric.ideal), (
+            f"an answer on one view against no answer ({which}) did not score the worst end {worst}: {result}")
         assert result.details["reason"].startswith(f"the {which} output is "), result.details
+        assert "answered on one view only" in result.details["reason"], result.details
     with pytest.raises(SUTOutputError, match="contains 1 NaN"):  # a partly NaN vector is a bug, not silence
         metric([np.nan, 0.5], [0.5, 0.5])
+
+
+def test_an_answer_on_one_view_only_fails_raw_metrics_too():
+    nan = np.full(4, np.nan)
+    raw = cosine_similarity(inputs="raw")([1.0, -2.0, 0.5, 3.0], nan)
+    assert (raw.valid, raw.score, raw.deviation) == (True, -1.0, 2.0), f"raw cosine not at its worst end -1: {raw}"
+    with pytest.raises(SUTOutputError, match=r"l2_norm\(inputs='raw'\) is unbounded"):
+        l2_norm(inputs="raw")(nan, [1.0, -2.0, 0.5, 3.0])
+    with pytest.raises(AssertionError, match="deviates 1.0000"):  # a SUT broken on the follow-up fails at any eps < 1
+        class_invariance().assert_within([0.1, 0.2, 0.7], nan[:3], eps=0.5)
+
+
+def test_cosine_of_identical_outputs_deviates_exactly_zero():
+    """1 - cos computed as |â - b̂|² / 2: identical outputs deviate 0, near-identical ones without cancellation."""
+    rng = np.random.default_rng(0)
+    for v in [np.array([0.1, 0.2, 0.7]), *(rng.standard_normal(1000) * 3 for _ in range(20))]:
+        result = cosine_similarity()(v, v.copy())
+        assert (result.score, result.deviation) == (1.0, 0.0), f"identical outputs deviate from the ideal: {result}"
+    for _ in range(20):
+        v = rng.standard_normal(512)
+        raw = cosine_similarity(inputs="raw")(v, v.copy())
+        assert (raw.score, raw.deviation) == (1.0, 0.0), f"identical raw embeddings deviate from the ideal: {raw}"
+    cosine_similarity().assert_within(np.array([0.1, 0.2, 0.7]), np.array([0.1, 0.2, 0.7]), eps=0)
+    a, b = np.array([1.0, 0.0]), np.array([1.0, 1e-9])  # 1 - cos = 5e-19, lost to cancellation in 1 - a·b
+    near = cosine_similarity(inputs="raw")(a, b)
+    assert near.deviation == pytest.approx(5e-19, rel=1e-6), f"a deviation of 5e-19 was lost to cancellation: {near}"
+
+
+def test_top_k_must_be_less_than_the_number_of_classes():
+    """With top_k = C every class is in the follow-up's top k: class invariance would score 1 whatever happened."""
+    with pytest.raises(MetricArgumentError, match=r"top_k=3 must be less than the number of classes .* \(3\)"):
+        class_invariance(top_k=3)([0.2, 0.7, 0.1], [0.9, 0.05, 0.05])
+    for follow in ([0.5, 0.5], [np.nan, np.nan]):  # refused before a constant or missing output decides the pair
+        with pytest.raises(InvalidArgument, match=r"top_k=2 must be less than the number of classes .* \(2\)"):
+            class_invariance(top_k=2)([0.2, 0.8], follow)
+    assert class_invariance(top_k=2)([0.2, 0.7, 0.1], [0.9, 0.01, 0.09]).score == 0.0, "top_k=2 of 3 not scored"
 
 
 def test_zero_vectors_in_raw_mode():
@@ -175,7 +219,7 @@ def test_bad_arguments():
         class_invariance(top_k=0)
     with pytest.raises(InvalidType, match="top_k=1.5 must be an int"):
         class_invariance(top_k=1.5)
-    with pytest.raises(InvalidArgument, match="top_k=5 exceeds the 3 classes"):
+    with pytest.raises(InvalidArgument, match=r"top_k=5 must be less than the number of classes .* \(3\)"):
         class_invariance(top_k=5)([0.2, 0.3, 0.5], [0.2, 0.3, 0.5])
 
 

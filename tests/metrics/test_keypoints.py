@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis.errors import Unsatisfiable
 
-from pytest_n2r.errors import InvalidArgument, InvalidType, MetricUndefined, SUTOutputError
+from pytest_n2r.errors import InvalidArgument, InvalidType, MetricArgumentError, MetricUndefined, SUTOutputError
 from pytest_n2r.geometry import Transform
 from pytest_n2r.metrics._matching import mutual_nearest
 from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping
@@ -471,3 +471,58 @@ def test_keypoint_metrics_ignore_points_far_outside_the_image_without_warning(me
         warnings.simplefilter("error")
         result = metric(src, src[:30], view, same)
     assert result.valid and result.score == 1.0, f"points far outside the image changed the score: {result}"
+
+
+@pytest.mark.parametrize("tau", [Transform(x=0.2), Transform(z=0.5), Transform(yaw=5, y=1e-3)], ids=repr)
+def test_homography_without_a_plane_refuses_a_camera_translation(tau):
+    """The homography of the plane at infinity is exact only for a pure rotation: it scored a perfect detector
+    0.18 under x=0.2 and 0.05 under z=0.5."""
+    source, follow = pair(tau)
+    p = pixels_of(world_points_on_wall(np.random.default_rng(0), 60), source)
+    with pytest.raises(MetricArgumentError, match=r"mapping='homography' without plane= is exact only for a pure "
+                                                  r"camera rotation.*use mapping='depth', or give plane="):
+        repeatability(mapping="homography")(p, p, source, follow)
+    assert repeatability(mapping="homography", plane=WALL_PLANE)(p, p, source, follow).valid, "plane= was refused"
+
+
+def test_homography_without_a_plane_still_maps_pure_rotations():
+    source, follow = pair(Transform(yaw=5, roll=-3))
+    W = world_points_on_wall(np.random.default_rng(0), 60)
+    p, q = pixels_of(W, source), pixels_of(W, follow)
+    q = q[np.all(np.isfinite(q), axis=1)]
+    result = repeatability(mapping="homography")(p, q, source, follow)
+    assert result.score == 1.0, f"a perfect detector under a pure rotation did not score 1: {result}"
+
+
+@pytest.mark.parametrize("which", ["source", "follow-up"])
+def test_a_plane_through_a_camera_centre_is_an_argument_error_naming_plane(which):
+    source, follow = pair(Transform(x=0.05))
+    centre = (source if which == "source" else follow).c2w[:3, 3]
+    plane = (np.array([1.0, 0.0, 0.0]), -float(centre[0]))  # the plane x = centre's x holds that centre
+    with pytest.raises(MetricArgumentError, match=rf"plane=\(\[1.0, 0.0, 0.0\], .*\) passes through the {which} "
+                                                  "camera's centre.*expected the world plane n·X \\+ d = 0"):
+        repeatability(mapping="homography", plane=plane)(grid_points(), grid_points(), source, follow)
+
+
+@pytest.mark.parametrize("metric", [repeatability(px=1e300), interest_point_spread(radius=1e300),
+                                    interest_point_spread(radius=1e7), repeatability(px=1e7, mapping="homography")],
+                         ids=repr)
+def test_tolerances_beyond_the_image_diagonal_act_as_the_diagonal(metric):
+    """px=1e300 failed deep in numpy ("Maximum allowed size exceeded"), radius=1e7 took seconds."""
+    view, same = pair(Transform())
+    pts = np.array([[40.0, 30.0], [80.0, 60.0]])
+    result = metric(pts, pts, view, same)
+    assert not result.valid and "cover 100% of the image" in result.details["reason"], (
+        f"discs larger than the image did not cover it: {result}")
+    diagonal = math.hypot(CAMERA.width, CAMERA.height)
+    np.testing.assert_array_equal(coverage_mask(pts, CAMERA, 1e300), coverage_mask(pts, CAMERA, diagonal),
+                                  err_msg="a radius beyond the diagonal covered other pixels than the diagonal")
+    assert coverage_bound(pts, CAMERA, 1e300) == 1.0 and _may_cover(1, CAMERA, 1e300)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, math.inf, math.nan])
+def test_tolerances_must_be_finite_and_positive(bad):
+    with pytest.raises(InvalidArgument, match=r"px=.* must be|px=.* finite"):
+        repeatability(px=bad)
+    with pytest.raises(InvalidArgument, match=r"radius=.* must be|radius=.* finite"):
+        interest_point_spread(radius=bad)

@@ -448,3 +448,18 @@ def test_a_sut_that_raised_once_is_said_to_fail_intermittently(failing_call):
                            settings=RunSettings(examples=20, database=None, derandomize=True))
         assert "RuntimeError: hiccup" in str(info.value) and "fails intermittently" in str(info.value), (
             f"test id t{test_id}: the SUT's error should be named as intermittent, got {info.value!r}")
+
+
+def test_a_metric_argument_that_does_not_fit_the_views_is_the_tests_mistake_not_the_suts():
+    """A plane through the camera (a sign slip: the scene's plane is z = +2) was reported as "cannot use the SUT's
+    output", a SUTOutputError, though the SUT's output was fine."""
+    from pytest_n2r.errors import MetricArgumentError, SUTOutputError
+    from pytest_n2r.metrics import repeatability
+
+    relation = Relation.build(repeatability(mapping="homography", plane=(np.array([0.0, 0.0, 1.0]), 0.0)), 0.3,
+                              transforms(x=0.05))
+    with pytest.raises(MetricArgumentError) as info:
+        check_relation(PlaneScene(), lambda rgb: np.array([[10.0, 10.0], [40.0, 30.0]]), relation, settings=FAST)
+    message = str(info.value)
+    assert not isinstance(info.value, SUTOutputError) and "the SUT's output" not in message, message
+    assert "passes through the source camera's centre" in message and "source view" in message, message
