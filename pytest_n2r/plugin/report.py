@@ -246,6 +246,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
 
     from ..data.atomic import atomic_write_text
     from ..report import compare_paired, save_baseline
+    from ..report.baseline import portable_places
     from ..report.html import write_html
     from . import relation_records
 
@@ -256,7 +257,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if config.getoption("n2r_compare") and config.option.collectonly:
         result["skipped"] = "--collect-only ran no test, so nothing was compared with the baseline"
     elif config.getoption("n2r_compare"):
-        result["settings"] = settings
+        # in the form a baseline records them: the rootdir from the baseline's folder, the config file from the rootdir
+        result["settings"] = portable_places(settings, config.getoption("n2r_compare"))
         # the scene names relation records carry, as the baseline's relations do (not the configured names)
         scenes = {r.scene for r in records if r.scene} or None
         result["comparisons"] = compare_paired(result["baseline"], records, margin=result["margin"],
@@ -274,7 +276,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if path is not None:
         recorded = {r.nodeid for r in records}
         not_recorded = sorted(config.stash.get(_COLLECTED, set()) - recorded)
-        meta = {**settings, **({"not_recorded": not_recorded} if not_recorded else {})}
+        meta = {**portable_places(settings, path), **({"not_recorded": not_recorded} if not_recorded else {})}
         writers = [(path, "the baseline", lambda: save_baseline(path, records, meta=meta))]
     else:
         writers = []

@@ -29,7 +29,7 @@ from ..relation.record import RelationRecord
 from .validate import BadField, DuplicateKey, check_version, meta_from_json, relation_from_json, unique_keys
 
 __all__ = ["FORMAT", "VERSION", "BaselineError", "Baseline", "save_baseline", "load_baseline", "describe_baseline",
-           "setting_differences"]
+           "portable_places", "setting_differences"]
 
 FORMAT = "pytest-n2r-baseline"
 VERSION = 2
@@ -153,13 +153,42 @@ def _setting(key: str, value: Any) -> str:
         return "yes" if value else "no"
     if key == "scenes":
         return ", ".join(value) or "none"
-    return f"{value}"
+    return "none" if value is None else f"{value}"
 
 
 #: The settings a baseline records, as the comparison's header names them. ``examples`` is the session's
 #: ``--n2r-examples`` default: a relation's own ``examples=`` overrides it, and the baseline's examples are its own.
 _SETTINGS = {"size": "render size", "examples": "--n2r-examples default", "derandomize": "derandomize",
              "scenes": "scenes"}
+
+
+#: Where a baseline was saved from, as it records it: pytest's rootdir from the baseline's folder and the config file
+#: from the rootdir (:func:`portable_places`). A path that is absolute (an older baseline's) is not compared.
+_PLACES = {"rootdir": "rootdir (from the baseline's folder)", "config_file": "config file (from the rootdir)"}
+
+
+def portable_places(settings: dict[str, Any], baseline: str | os.PathLike) -> dict[str, Any]:
+    """``settings`` with its absolute ``rootdir`` made relative to the folder of the ``baseline`` file and its
+    ``config_file`` relative to the rootdir, ``/``-separated: a baseline committed to a repository names nobody's
+    home folder, reads the same on every clone and CI machine, and a run from another rootdir is told apart (its
+    test ids differ). A path on another drive (Windows) stays absolute.
+
+    >>> portable_places({"rootdir": "/src/proj", "config_file": "/src/proj/pyproject.toml", "size": "480"},
+    ...                 "/src/proj/tests/gate.json")
+    {'rootdir': '..', 'config_file': 'pyproject.toml', 'size': '480'}
+    """
+    def relative(path: str, start: str | os.PathLike) -> str:
+        try:
+            return Path(os.path.relpath(path, start)).as_posix()
+        except ValueError:  # another drive
+            return path
+
+    out = dict(settings)
+    if settings.get("rootdir"):
+        out["rootdir"] = relative(settings["rootdir"], Path(baseline).expanduser().resolve().parent)
+        if settings.get("config_file"):
+            out["config_file"] = relative(settings["config_file"], settings["rootdir"])
+    return out
 
 
 def describe_baseline(meta: dict[str, Any]) -> str:
@@ -175,24 +204,33 @@ def describe_baseline(meta: dict[str, Any]) -> str:
     if not any(k in meta for k in ("pytest_n2r", "saved", *_SETTINGS)):
         return "baseline saved by an older pytest-n2r, which did not record its version, date or settings"
     by = f" by pytest-n2r {meta['pytest_n2r']}" if "pytest_n2r" in meta else ""
-    where = [f"rootdir {meta['rootdir']}"] if "rootdir" in meta else []
-    if "config_file" in meta:
-        where.append(f"config file {meta['config_file'] or 'none'}")
+    where = [f"{_PLACES[k] if _relative(meta[k]) else k.replace('_', ' ')} {meta[k] or 'none'}"
+             for k in _PLACES if k in meta]
     settings = [f"{name} {_setting(k, meta[k])}" for k, name in _SETTINGS.items() if k in meta]
     return (f"baseline saved {meta.get('saved', '(date not recorded)')}{by}"
             + (f" ({', '.join(where)})" if where else "") + (f"; {', '.join(settings)}" if settings else ""))
 
 
 def setting_differences(meta: dict[str, Any], current: dict[str, Any]) -> list[str]:
-    """The settings (render size, --n2r-examples default, derandomize, scenes) of this run that differ from those the
-    baseline recorded, each as ``"render size 64 (baseline: 480)"``; none where the baseline did not record them.
+    """The settings (render size, --n2r-examples default, derandomize, scenes; the rootdir and config file where the
+    baseline records them relative, see :func:`portable_places`, as ``current`` must too) of this run that differ
+    from those the baseline recorded, each as ``"render size 64 (baseline: 480)"``; none where the baseline did not
+    record them.
 
     >>> setting_differences({"size": "480", "scenes": ["wall"]}, {"size": "64", "scenes": ["wall"]})
     ['render size 64 (baseline: 480)']
+    >>> setting_differences({"rootdir": ".."}, {"rootdir": "../.."})
+    ["rootdir (from the baseline's folder) ../.. (baseline: ..)"]
     """
     def same(key: str) -> bool:
         a, b = meta[key], current[key]
         return sorted(a) == sorted(b) if key == "scenes" else a == b
 
-    return [f"{name} {_setting(k, current[k])} (baseline: {_setting(k, meta[k])})" for k, name in _SETTINGS.items()
+    names = {**_SETTINGS, **{k: name for k, name in _PLACES.items() if k in meta and _relative(meta[k])}}
+    return [f"{name} {_setting(k, current[k])} (baseline: {_setting(k, meta[k])})" for k, name in names.items()
             if k in meta and k in current and not same(k)]
+
+
+def _relative(path: str | None) -> bool:
+    """Whether a recorded place is relative (a baseline's since :func:`portable_places`), not an older absolute one."""
+    return path is not None and not Path(path).is_absolute() and not path.startswith(("/", "\\"))

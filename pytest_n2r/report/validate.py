@@ -190,8 +190,10 @@ META_FIELDS: dict[str, tuple[tuple[type, ...], str, str]] = {
     "not_recorded": ((list,), "relation test ids collected but not run (deselected or skipped)", "a list of test ids"),
     "pytest_n2r": ((str,), "the pytest-n2r version that saved it", "the pytest-n2r version, a string"),
     "saved": ((str,), "when, in UTC (ISO 8601, to the second)", "a UTC date, a string"),
-    "rootdir": ((str,), "pytest's rootdir", "a path, a string"),
-    "config_file": ((str, type(None)), "pytest's config file (null: none)", "a path, a string, or null"),
+    "rootdir": ((str,), "pytest's rootdir, from the baseline's folder ('..'; absolute in older files)",
+                "a path, a string"),
+    "config_file": ((str, type(None)), ("pytest's config file, from the rootdir ('pyproject.toml'; absolute in "
+                                        "older files; null: none)"), "a path, a string, or null"),
     "size": ((str,), "the render size (--n2r-size)", "a render size, a string such as '480' or '320x180'"),
     "examples": ((int,), "the --n2r-examples default (a relation's own examples= overrides it)", "a whole number"),
     "derandomize": ((bool,), "whether the examples were derandomized", "true or false"),

@@ -177,8 +177,8 @@ def grid(rgb):
 
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda d: d.update(relations={}), "has no relations: it would let every relation pass as new"),
-    (lambda d: next(iter(d["relations"].values()))["examples"][0].update(deviation=None),
-     "examples[[]0[]].deviation (an accepted example)=None; expected a finite number"),
+    (lambda d: next(e for e in next(iter(d["relations"].values()))["examples"] if e["status"] == "accepted").update(
+        deviation=None), "examples[[]*[]].deviation (an accepted example)=None; expected a finite number"),
     (lambda d: next(iter(d["relations"].values())).pop("examples"), "missing field 'examples'"),
     (lambda d: d.update(version=1), "format version 1"),
 ])
@@ -291,3 +291,20 @@ def test_a_baseline_mutation_no_module_defines_is_an_error_naming_it(n2r_project
     renamed = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
     assert renamed.ret != 0
     renamed.stdout.fnmatch_lines(["*test_darkening*name mutation(s) [[]'darken'[]] that no imported module defines*"])
+
+
+def test_a_comparison_from_another_rootdir_says_so(n2r_project):
+    """A baseline records pytest's rootdir from its own folder: the same on every clone, and a run whose rootdir
+    differs (its test ids differ: every relation "missing") is told which rootdir the baseline was saved with."""
+    n2r_project.write(GATED)
+    (n2r_project.pytester.path / "gate").mkdir()
+    base = n2r_project.pytester.path / "gate" / "baseline.json"
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline", str(base)).assert_outcomes(passed=1)
+    meta = json.loads(base.read_text())["meta"]
+    assert (meta["rootdir"], meta["config_file"]) == ("..", None), meta
+    same = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
+    assert same.ret == 0 and "rootdir (from the baseline's folder)" in same.stdout.str(), same.stdout.str()
+    assert "settings differ" not in same.stdout.str(), same.stdout.str()
+    moved = n2r_project.run(*DERANDOMIZED, f"--rootdir={base.parent}", "--n2r-compare", str(base))
+    moved.stdout.fnmatch_lines([("note: this run's settings differ from the baseline's: rootdir (from the "
+                                 "baseline's folder) . (baseline: ..)*")])
