@@ -316,7 +316,13 @@ class Transform:
         return f"Transform({', '.join(parts)})"
 
     def describe(self, units: str = "ref") -> str:
-        """Human-readable form for failure messages, e.g. ``yaw=+5.12°, x=+0.100 ref``."""
-        parts = [f"{n}={getattr(self, n):+.3f}°" for n in ("roll", "pitch", "yaw") if getattr(self, n)]
+        """Human-readable form for failure messages, e.g. ``yaw=+5.120°, x=+0.1 ref``; an angle under 0.01° shows
+        3 significant digits, one under 1e-12° (float noise) is left out.
+
+        >>> Transform(yaw=5.12, pitch=0.0001, roll=1e-15, x=0.1).describe()
+        'pitch=+0.0001°, yaw=+5.120°, x=+0.1 ref'
+        """
+        parts = [f"{n}={v:+.3f}°" if abs(v) >= 0.01 else f"{n}={v:+.3g}°"
+                 for n, v in ((n, getattr(self, n)) for n in ("roll", "pitch", "yaw")) if abs(v) >= 1e-12]
         parts += [f"{n}={getattr(self, n):+.4g} {units}" for n in ("x", "y", "z") if getattr(self, n)]
         return ", ".join(parts) or "identity"

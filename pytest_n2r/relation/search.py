@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import random
+import re
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -174,7 +175,7 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
 
     # key this run's database entries and (with derandomize or --hypothesis-seed) its seed to the test, scene and
     # relation
-    identity = example._hypothesis_internal_add_digest = f"{test_id}|{scene.name}|{relation.describe()}".encode()
+    identity = example._hypothesis_internal_add_digest = run_identity(test_id, scene, relation)
     run.asked = relation.examples or settings.examples
     options: dict[str, Any] = {
         "max_examples": run.asked, "deadline": None,
@@ -226,6 +227,16 @@ def _report_as_drawn(engine: Engine, note: str) -> None:
     worst = engine.run_record.worst
     view, tau = recorded_view(worst, "drawn"), worst.follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera), note=note)
+
+
+#: A memory address in a repr (``<Obj object at 0x7f3a...>``): it differs between processes.
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def run_identity(test_id: str, scene: Scene, relation: Relation) -> bytes:
+    """The run's identity (test, scene, relation), which keys its database entries and seeds its draws; memory
+    addresses are left out of it, so a rerun in another process draws and replays the same examples."""
+    return _ADDRESS.sub("", f"{test_id}|{scene.name}|{relation.describe()}").encode()
 
 
 def _seed(identity: bytes) -> int:

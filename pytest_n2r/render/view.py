@@ -20,8 +20,10 @@ class RenderedView:
 
     - ``rgb``: H×W×3 ``uint8``, **RGB** order (convert before handing to OpenCV functions that expect BGR).
     - ``depth``: H×W ``float32`` **z-depth** (along the optical axis) in scene units: of a field, the depth
-      of the ray's compositing weight (its weighted mean). Where ``opacity`` is ~0 the field has nothing and
-      depth is not to be trusted; where it is 0 depth is the far bound of the ray.
+      of the ray's compositing weight (its weighted mean). Where ``opacity`` is ~0 the scene has nothing and
+      depth is not to be trusted: read it only with ``opacity``. Where ``opacity`` is 0 depth is a placeholder
+      that differs by kind of scene: a field's ray's far bound, an exact demo scene's ``far`` (30 or 60, nearer
+      than its surfaces to a camera further away), a splat scene's 0.
     - ``opacity``: H×W ``float32`` in [0, 1], the accumulated weight along the ray.
     - ``camera`` and ``c2w`` (camera-to-world 4x4, OpenCV axes): the view's geometry, so metrics can
       map pixels between two views.

@@ -66,6 +66,26 @@ def _patch_pixels(size: float, extent: int) -> int:
     return 0 if size == 0 else min(extent, max(1, round(size * extent)))
 
 
+def _is_abstract(cls: type) -> bool:
+    """Whether ``cls`` leaves an abstract method unimplemented (``__abstractmethods__`` is not set yet while the
+    class is being made)."""
+    return any(getattr(getattr(cls, n, None), "__isabstractmethod__", False) for n in dir(cls))
+
+
+def _plain(owner: str, field: str, value: Any) -> Any:
+    """``value`` as plain JSON data (numpy scalars as Python numbers); other values are refused."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (list, tuple)):
+        return type(value)(_plain(owner, field, v) for v in value)
+    if isinstance(value, dict) and all(isinstance(k, str) for k in value):
+        return {k: _plain(owner, field, v) for k, v in value.items()}
+    raise InvalidType(f"{owner}.{field}={value!r} cannot be written to a record: a mutation's fields must be "
+                      "numbers, strings, booleans, None, or lists and str-keyed dicts of them")
+
+
 #: Mutation classes by ``name``, for :func:`mutation_from_dict` (every subclass with a name registers).
 _KINDS: dict[str, type[Mutation]] = {}
 
@@ -88,12 +108,21 @@ class Mutation(FollowUp):
         super().__init_subclass__(**kwargs)
         name = cls.__dict__.get("name")
         if name is None:
+            if getattr(cls, "name", None) is None and not _is_abstract(cls):
+                raise InvalidArgument(f"{cls.__qualname__} has no name: a Mutation subclass needs a short name for "
+                                      f"reports and records, e.g. name: ClassVar[str] = {cls.__name__.lower()!r}")
             return
+        if not isinstance(name, str) or not name:
+            raise InvalidType(f"{cls.__qualname__}.name={name!r} must be a non-empty str")
         taken = _KINDS.get(name)
-        if taken is not None and taken.__module__ == __name__ and cls.__module__ != __name__:
-            raise InvalidArgument(f"{cls.__qualname__}.name={name!r} is the built-in {taken.__name__}'s; "
-                                  "give the mutation another name")
-        _KINDS[name] = cls
+        if taken is not None and (taken.__module__, taken.__qualname__) != (cls.__module__, cls.__qualname__):
+            if taken.__module__ == __name__:
+                raise InvalidArgument(f"{cls.__qualname__}.name={name!r} is the built-in {taken.__name__}'s; "
+                                      "give the mutation another name")
+            raise InvalidArgument(f"{cls.__module__}.{cls.__qualname__}.name={name!r} is already the name of "
+                                  f"{taken.__module__}.{taken.__qualname__}; a record rebuilds its mutation by "
+                                  "name, so give one of the two classes another name")
+        _KINDS[name] = cls  # the same module and class again: a reload
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         return self.apply(rgb)
@@ -138,8 +167,9 @@ class Mutation(FollowUp):
         """Words for reports: ``"brightness +30 levels (+11.8% of full scale)"``."""
 
     def as_dict(self) -> dict[str, Any]:
-        """Plain JSON-ready parameters, with the mutation's ``name``."""
-        return {"name": self.name, **{f.name: getattr(self, f.name) for f in fields(self)}}  # type: ignore[arg-type]
+        """Plain JSON-ready parameters, with the mutation's ``name`` (numpy scalars become Python numbers)."""
+        return {"name": self.name, **{f.name: _plain(type(self).__name__, f.name, getattr(self, f.name))
+                                      for f in fields(self)}}  # type: ignore[arg-type]
 
     def __repr__(self) -> str:
         args = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in fields(self))  # type: ignore[arg-type]

@@ -209,3 +209,17 @@ def test_parse_errors_name_the_option_and_the_bad_part(text, message):
 def test_parse_rejects_a_non_string():
     with pytest.raises(InvalidType, match=r"transform=10 must be a string"):
         Transform.parse(10)
+
+
+@pytest.mark.parametrize(("tau", "expected"), [
+    (Transform(yaw=0.898), "yaw=+0.898°"),  # as the docs and the tutorial show it
+    (Transform(yaw=-12.5, x=0.1), "yaw=-12.500°, x=+0.1 ref"),
+    (Transform(yaw=0.0001), "yaw=+0.0001°"),
+    (Transform(pitch=-0.0049), "pitch=-0.0049°"),
+    (Transform(roll=2.3e-05), "roll=+2.3e-05°"),
+    (Transform(yaw=3.0, roll=1e-15), "yaw=+3.000°"),
+    (Transform(pitch=-1e-13), "identity"),
+])
+def test_describe_shows_small_angles_and_leaves_out_float_noise(tau, expected):
+    assert tau.describe() == expected, (f"{tau!r}.describe() is {tau.describe()!r}, expected {expected!r}: a small "
+                                        "non-zero angle must not read +0.000° and float noise is left out")

@@ -5,6 +5,7 @@ Hypothesis and for the study alike."""
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -205,3 +206,58 @@ def test_a_look_at_turn_past_a_full_turn_is_the_same_rotation_one_turn_back():
     assert -360.0 <= folded.yaw <= 360.0
     with pytest.raises(InvalidArgument, match=r"yaw=-361.0 is out of range"):
         look_at_transform(yaw=-361.0, x=0.5)
+
+
+def _user_mutation(name: str | None, module: str, qualname: str = "Shade", **fields_: object) -> type[Mutation]:
+    """A concrete mutation class of a user's own, made as if ``module`` defined it."""
+    body: dict[str, object] = {"__module__": module, "__qualname__": qualname, "__annotations__": {"level": int},
+                               "level": 0, "is_identity": property(lambda self: False),
+                               "_apply": lambda self, rgb: rgb, "describe": lambda self: "shade", **fields_}
+    if name is not None:
+        body["name"] = name
+    return dataclass(frozen=True, repr=False)(type(qualname, (Mutation,), body))
+
+
+def _refused(make, error: type[Exception], pattern: str, wrong: str) -> None:
+    """``make()`` raises ``error`` with a message matching ``pattern``; else the test fails saying ``wrong``."""
+    try:
+        make()
+    except error as exc:
+        assert re.search(pattern, str(exc)), f"the message does not match {pattern!r}: {exc}"
+        return
+    pytest.fail(wrong)
+
+
+def test_a_taken_mutation_name_is_refused_unless_the_same_class_is_defined_again():
+    first = _user_mutation("test_shade", "tests.a.test_x")
+    _refused(lambda: _user_mutation("test_shade", "tests.b.test_y"), InvalidArgument,
+             r"tests\.b\.test_y\.Shade\.name='test_shade' is already the name of tests\.a\.test_x\.Shade",
+             "a second class named like another user's mutation was accepted")
+    assert n2r.mutation_from_dict({"name": "test_shade", "level": 1}) == first(1), \
+        "a second class with a taken name replaced the first in the registry"
+    again = _user_mutation("test_shade", "tests.a.test_x")  # its module reloaded: the new class takes the name
+    assert type(n2r.mutation_from_dict({"name": "test_shade", "level": 1})) is again
+
+
+def test_a_concrete_mutation_without_a_name_is_refused_where_it_is_defined():
+    _refused(lambda: _user_mutation(None, "tests.a.test_x", "Nameless"), InvalidArgument,
+             r"Nameless has no name: a Mutation subclass needs a short name", "a concrete mutation without a name "
+             "was accepted (it fails later, with a bare AttributeError, when drawn)")
+
+    class Abstract(Mutation):  # an abstract base of the user's own needs no name
+        pass
+
+    assert Abstract.__abstractmethods__, "the test needs an abstract class"
+
+
+def test_numpy_scalars_in_a_mutation_are_written_as_plain_numbers():
+    import json
+
+    cls = _user_mutation("test_numpy_fields", "tests.a.test_x", "NumpyFields", gain=0.0,
+                         __annotations__={"level": int, "gain": float, "extra": object}, extra=None)
+    plain = cls(np.int64(3), np.float32(0.5), (np.uint8(7), [np.bool_(True)])).as_dict()
+    assert type(plain["level"]) is int and type(plain["gain"]) is float, f"numpy scalars were not made plain: {plain}"
+    assert json.loads(json.dumps(plain)) == {"name": "test_numpy_fields", "level": 3, "gain": 0.5,
+                                             "extra": [7, [True]]}, f"numpy scalars were not made plain: {plain!r}"
+    with pytest.raises(InvalidType, match=r"NumpyFields\.extra=array\(\[1, 2\]\) cannot be written to a record"):
+        cls(1, 0.5, np.array([1, 2])).as_dict()
