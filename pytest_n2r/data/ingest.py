@@ -300,4 +300,8 @@ def _undistorted_image(frame: SourceFrame, as_stored: bool) -> np.ndarray:
                "cameras of their stored size; was it made from turned copies? give it those)"
                if as_stored else "after EXIF orientation)")
         )
-    return cam.undistort_image(image)
+    try:
+        return cam.undistort_image(image)
+    except InvalidArgument as exc:  # a lens model that folds over within the photo (Camera.check_lens)
+        raise IngestError(f"image {str(frame.path)!r} ({frame.name!r}): its camera ({cam.width}x{cam.height}, "
+                          f"fx={cam.fx:g}, fy={cam.fy:g}) cannot undistort it: {exc}") from None

@@ -10,10 +10,18 @@ Convention
 - ``distortion`` holds OpenCV coefficients ``(k1, k2, p1, p2[, k3[, k4, k5, k6]])``, stored without
   trailing zero terms (8 → 5 → 4 → none), so equal lenses compare equal; rendered views are always
   ideal pinhole images, so a camera used for rendering has ``distortion == ()``.
+- A lens model is used only while it does not fold over: with ``r`` the normalized undistorted radius
+  (``sqrt(x² + y²)``, ``x = (u - cx) / fx``) and ``r_d = r·(1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)``,
+  ``r_d`` must increase (``d r_d / d r > 0``, the denominator ``> 0``) from 0 out to the radius of the image's
+  farthest corner, and the corner's distorted pixel offset must fit a float32. Tangential ``p1 p2`` are left out of
+  the check (they shift a point sideways, they do not fold the radial map). :meth:`Camera.undistort_image` refuses
+  a lens that fails it (:meth:`Camera.check_lens`); building a ``Camera`` does not, as a camera kept for its
+  numbers (a scene file, a pose set written back) undistorts nothing.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
@@ -23,6 +31,11 @@ from .._validation import check_array, check_positive, check_real
 from ..errors import InvalidArgument, InvalidType
 
 __all__ = ["Camera"]
+
+#: Radii sampled from 0 to the corner radius by :meth:`Camera.check_lens` (the slope of a polynomial of degree 7
+#: over 7 of degree 6: far more samples than it has sign changes).
+_FOLD_SAMPLES = 4097
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 @dataclass(frozen=True)
@@ -149,8 +162,58 @@ class Camera:
             raise InvalidArgument(
                 f"image of shape {image.shape[:2]} does not match the camera's {self.height}x{self.width}"
             )
+        self.check_lens()
         map1, map2 = _undistort_maps(self)
         return cv2.remap(image, map1, map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+    def corner_radius(self) -> float:
+        """The normalized radius ``sqrt(((u - cx) / fx)² + ((v - cy) / fy)²)`` of the image's farthest corner (the
+        corners of the outer pixels' edges, ``u`` in ``{-0.5, width - 0.5}``, ``v`` in ``{-0.5, height - 0.5}``)."""
+        dx = max(abs(-0.5 - self.cx), abs(self.width - 0.5 - self.cx)) / self.fx
+        dy = max(abs(-0.5 - self.cy), abs(self.height - 0.5 - self.cy)) / self.fy
+        return math.hypot(dx, dy)
+
+    def check_lens(self) -> Camera:
+        """This camera if its distortion does not fold over within the image (see the module's *Convention*), else
+        an :class:`InvalidArgument` naming the coefficients, the radius where it folds and the corner radius.
+
+        >>> Camera(400, 300, 180.0, 180.0, 199.5, 149.5, (-0.25, 0.0, 0.0, 0.0)).check_lens()
+        Traceback (most recent call last):
+        ...
+        pytest_n2r.errors.InvalidArgument: Camera distortion (k1, k2, p1, p2)=(-0.25, 0.0, 0.0, 0.0) folds over at \
+normalized radius 1.155 (the distorted radius stops increasing there), inside the radius 1.389 of the image's \
+corners: undistorting would mirror the image beyond it; expected a lens model whose distorted radius increases \
+out to the corners (recalibrate the camera, or crop the photo)
+        """
+        if not self.distortion:
+            return self
+        k = (*self.distortion, 0.0, 0.0, 0.0, 0.0)[:8]
+        names = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")[: len(self.distortion)]
+        lens = f"Camera distortion ({', '.join(names)})={self.distortion!r}"
+        corner = self.corner_radius()
+        r = np.linspace(0.0, corner, _FOLD_SAMPLES)
+        r2 = r * r
+        with np.errstate(all="ignore"):
+            num = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]))
+            den = 1.0 + r2 * (k[5] + r2 * (k[6] + r2 * k[7]))
+            dnum = r * (2 * k[0] + r2 * (4 * k[1] + r2 * 6 * k[4]))  # d num / d r
+            dden = r * (2 * k[5] + r2 * (4 * k[6] + r2 * 6 * k[7]))
+            slope = (num + r * dnum) * den - r * num * dden  # d r_d / d r times den², whose sign it has where den > 0
+            offset = r[-1] * num[-1] / den[-1] * max(self.fx, self.fy)  # the corner's distorted offset, pixels
+        bad = ~((den > 0) & (slope > 0) & np.isfinite(slope))
+        if bad.any():
+            where = float(r[int(np.argmax(bad))])
+            why = "its rational denominator reaches 0" if not den[int(np.argmax(bad))] > 0 else \
+                "the distorted radius stops increasing"
+            raise InvalidArgument(
+                f"{lens} folds over at normalized radius {where:.4g} ({why} there), inside the radius {corner:.4g} of "
+                "the image's corners: undistorting would mirror the image beyond it; expected a lens model whose "
+                "distorted radius increases out to the corners (recalibrate the camera, or crop the photo)")
+        if not abs(offset) < _FLOAT32_MAX:
+            raise InvalidArgument(
+                f"{lens} moves the image's corner (normalized radius {corner:.4g}) {abs(offset):.4g} pixels from the "
+                "principal point, beyond a float32 remap table; expected coefficients of a real lens")
+        return self
 
     def to_dict(self) -> dict:
         """Plain JSON-ready form (OpenCV pixel convention)."""

@@ -3,6 +3,7 @@ side)."""
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -64,13 +65,42 @@ class RenderSize:
         (320, 180)
         >>> RenderSize.parse("320x180").apply(Camera(1080, 1920, 1500.0, 1500.0, 539.5, 959.5)).size
         (101, 180)
+
+        A view so elongated that its shorter side would fall below :data:`MIN_SIDE` at this size is refused:
+
+        >>> RenderSize.parse("16").apply(Camera(4000, 300, 3000.0, 3000.0, 1999.5, 149.5))
+        Traceback (most recent call last):
+        ...
+        pytest_n2r.errors.InvalidArgument: a 4000x300 view at render size 16 is 16x1 pixels; a side below 16 \
+pixels is no picture (OpenCV's detectors fail inside OpenCV on it); expected a larger render size (at least 207 \
+for this view)
         """
         if self.longer is not None:
-            return camera.scaled(self.longer / max(camera.width, camera.height))
-        fitted = camera.scaled(min(self.width / camera.width, self.height / camera.height))
-        if abs(fitted.width - self.width) <= 1 and abs(fitted.height - self.height) <= 1:
-            return camera.resized(self.width, self.height)  # the same aspect, to a pixel: exactly the box
+            fitted = camera.scaled(self.longer / max(camera.width, camera.height))
+        else:
+            fitted = camera.scaled(min(self.width / camera.width, self.height / camera.height))
+            if abs(fitted.width - self.width) <= 1 and abs(fitted.height - self.height) <= 1:
+                fitted = camera.resized(self.width, self.height)  # the same aspect, to a pixel: exactly the box
+        if min(fitted.width, fitted.height) < MIN_SIDE:
+            raise InvalidArgument(
+                f"a {camera.width}x{camera.height} view at render size {self} is {fitted.width}x{fitted.height} "
+                f"pixels; a side below {MIN_SIDE} pixels is no picture (OpenCV's detectors fail inside OpenCV on it); "
+                f"expected a larger render size ({self._larger_for(camera)} for this view)")
         return fitted
+
+    def _larger_for(self, camera: Camera) -> str:
+        """A size of this form whose render of ``camera`` has no side below :data:`MIN_SIDE`, as text: the smallest
+        longer side, or a box of this one's aspect grown until its fit reaches :data:`MIN_SIDE`."""
+        need = MIN_SIDE / min(camera.width, camera.height)  # the scale that gives the shorter side MIN_SIDE
+        if self.longer is not None:
+            longer = max(camera.width, camera.height)
+            side = max(1, math.floor((MIN_SIDE - 0.5) / min(camera.width, camera.height) * longer) - 1)
+            while side < MAX_SIDE and min(camera.scaled(side / longer).size) < MIN_SIDE:  # Camera.scaled rounds
+                side += 1
+            return f"at least {side}"
+        # the box scales the view by min(W / width, H / height): both ratios must reach ``need``
+        grow = max(need * camera.width / self.width, need * camera.height / self.height, 1.0)
+        return f"e.g. {math.ceil(self.width * grow)}x{math.ceil(self.height * grow)}"
 
     def __str__(self) -> str:
         return f"{self.width}x{self.height}" if self.longer is None else f"{self.longer}"

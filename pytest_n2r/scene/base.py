@@ -12,13 +12,22 @@ import numpy as np
 from .._validation import repeated_name
 from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
+from ..render.size import MAX_SIDE
 from ..render.view import OUTPUTS, RenderedView
 
-__all__ = ["MAX_CAMERA_DISTANCE", "Scene", "SceneView", "normalize_outputs"]
+__all__ = ["MAX_CAMERA_DISTANCE", "MAX_FOCAL", "MIN_FOCAL", "PRINCIPAL_POINT_REACH", "Scene", "SceneView",
+           "check_render_camera", "normalize_outputs"]
 
 #: How far from the captured cameras a render may be, in reference lengths: beyond it a float32 renderer
 #: cannot place a sample within a thousandth of a reference length, so the picture would be noise or NaN.
 MAX_CAMERA_DISTANCE = 1e4
+#: The focal lengths ``fx``, ``fy`` a render camera may have, in pixels: with :data:`PRINCIPAL_POINT_REACH` and
+#: :data:`~pytest_n2r.render.size.MAX_SIDE` they keep every ray direction ``((u - cx) / fx, (v - cy) / fy, 1)`` and its
+#: squared length within float32 (below 1e27, a pixel step above 1e-10), where the renderers' kernels work.
+MIN_FOCAL, MAX_FOCAL = 1e-6, 1e9
+#: How far the principal point may lie from the image's centre, in image sizes: ``|cx - (width - 1) / 2|`` at most
+#: this many widths, ``|cy - (height - 1) / 2|`` this many heights (an off-axis crop of a far larger picture).
+PRINCIPAL_POINT_REACH = 1000
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +60,39 @@ def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:
     if unknown or not asked:
         raise InvalidArgument(f"outputs={tuple(outputs)!r}: expected one or more of {OUTPUTS}")
     return tuple(o for o in OUTPUTS if o in asked)
+
+
+def check_render_camera(camera: Camera) -> Camera:
+    """``camera`` if a renderer can draw it; else an :class:`InvalidArgument` naming the field out of bounds: a side
+    above :data:`~pytest_n2r.render.size.MAX_SIDE` pixels, a focal length outside [:data:`MIN_FOCAL`,
+    :data:`MAX_FOCAL`] pixels, a principal point more than :data:`PRINCIPAL_POINT_REACH` image sizes from the image's
+    centre (beyond them ray directions overflow or underflow float32, or the image does not fit in memory).
+
+    >>> check_render_camera(Camera(64, 48, 1e-38, 1e-38, 31.5, 23.5))
+    Traceback (most recent call last):
+    ...
+    pytest_n2r.errors.InvalidArgument: camera fx=1e-38 pixels is out of bounds; expected a focal length in [1e-06, \
+1e+09] pixels (beyond it ray directions overflow or underflow float32)
+    """
+    for name in ("width", "height"):
+        side = getattr(camera, name)
+        if side > MAX_SIDE:
+            raise InvalidArgument(f"camera {name}={side} pixels is too large; expected at most {MAX_SIDE} pixels "
+                                  "(the largest side a render is asked for)")
+    for name in ("fx", "fy"):
+        focal = getattr(camera, name)
+        if not MIN_FOCAL <= focal <= MAX_FOCAL:
+            raise InvalidArgument(f"camera {name}={focal!r} pixels is out of bounds; expected a focal length in "
+                                  f"[{MIN_FOCAL:g}, {MAX_FOCAL:g}] pixels (beyond it ray directions overflow or "
+                                  "underflow float32)")
+    for name, side in (("cx", camera.width), ("cy", camera.height)):
+        offset = abs(getattr(camera, name) - (side - 1) / 2)
+        if not offset <= PRINCIPAL_POINT_REACH * side:
+            raise InvalidArgument(f"camera {name}={getattr(camera, name)!r} pixels is {offset:.4g} pixels from the "
+                                  f"image's centre; expected at most {PRINCIPAL_POINT_REACH} image sizes "
+                                  f"({PRINCIPAL_POINT_REACH * side} pixels) from it (beyond it ray directions "
+                                  "overflow or underflow float32)")
+    return camera
 
 
 class Scene(ABC):
@@ -116,6 +158,7 @@ class Scene(ABC):
             raise InvalidType(f"camera must be a pytest_n2r.geometry.Camera, got {type(camera).__name__}")
         if camera.distortion:
             raise InvalidArgument("camera has lens distortion; scenes render ideal pinhole views only")
+        check_render_camera(camera)
         outputs = normalize_outputs(outputs)
         rendered = self._render(c2w, camera, outputs)
         for name in ("depth", "opacity"):

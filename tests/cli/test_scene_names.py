@@ -109,7 +109,7 @@ def test_a_name_that_is_no_scene_lists_what_a_scene_may_be(command, tmp_path, ca
 
 def test_the_command_line_imports_no_pytest_for_a_demo_scene(tmp_path):
     code = ("import sys\nfrom pytest_n2r.cli.main import main\n"
-            f"assert main(['render', 'demo:object', '--size', '16', '-o', {str(tmp_path / 'o.png')!r}]) == 0\n"
+            f"assert main(['render', 'demo:object', '--size', '28', '-o', {str(tmp_path / 'o.png')!r}]) == 0\n"
             "assert main(['info', 'demo:object']) == 0\n"
             "bad = sorted(m for m in sys.modules if m.split('.')[0] in ('pytest', '_pytest'))\n"
             "assert not bad, bad\n")

@@ -6,8 +6,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import Camera
-from pytest_n2r.render.size import RenderSize
+from pytest_n2r.render.size import MIN_SIDE, RenderSize
 from tests.plugin.fakescene import PlaneScene
 
 
@@ -25,10 +26,33 @@ def test_render_size(text, size):
 @given(width=st.integers(8, 4000), height=st.integers(8, 4000), box_w=st.integers(1, 2000), box_h=st.integers(1, 2000))
 def test_a_box_never_stretches_a_view_and_fits_it(width, height, box_w, box_h):
     camera = Camera(width, height, 1.2 * width, 1.2 * width, (width - 1) / 2, (height - 1) / 2)
-    resized = RenderSize(box_w, box_h).apply(camera)
+    try:
+        resized = RenderSize(box_w, box_h).apply(camera)
+    except InvalidArgument:  # refused: its fit has a side below MIN_SIDE (tested below); the box is then too small
+        fit = camera.scaled(min(box_w / width, box_h / height))
+        assert min(fit.size) < MIN_SIDE + 1, f"{width}x{height} in {box_w}x{box_h} refused, yet fits as {fit.size}"
+        return
+    assert min(resized.size) >= MIN_SIDE, f"{width}x{height} in {box_w}x{box_h} became {resized.size}"
     assert resized.width <= box_w and resized.height <= box_h, f"{resized.size} outside the box {box_w}x{box_h}"
     scale = min(box_w / width, box_h / height)  # the largest scale that fits the view in the box
     # each side is the view's side at that scale, to the rounding of a pixel and the one-pixel tolerance of a box
     # of the view's own aspect: never stretched by more than that
     assert abs(resized.width - width * scale) <= 1.5 and abs(resized.height - height * scale) <= 1.5, (
         f"{width}x{height} in {box_w}x{box_h} became {resized.size}: stretched, or not the largest fit")
+
+
+@pytest.mark.parametrize(("size", "larger"), [("16", "at least 207"), ("20", "at least 207"), ("206", "at least 207"),
+                                              ("16x16", "e.g. 214x214"), ("160x16", "e.g. 214x22")])
+def test_a_render_size_that_leaves_a_side_below_min_side_is_refused(size, larger):
+    """A 4000x300 view at '16' rendered 16x1: ORB then failed inside OpenCV, reported as the SUT's error."""
+    camera = Camera(4000, 300, 3000.0, 3000.0, 1999.5, 149.5)
+    try:
+        fitted = RenderSize.parse(size).apply(camera)
+    except InvalidArgument as exc:
+        message = str(exc)
+    else:
+        pytest.fail(f"the 4000x300 view at render size {size!r} became {fitted.size}: a side below {MIN_SIDE}")
+    assert message.startswith(f"a 4000x300 view at render size {size} is ") and f"below {MIN_SIDE} pixels" in message \
+        and f"expected a larger render size ({larger} for this view)" in message, f"the refusal misleads: {message}"
+    suggested = RenderSize.parse(larger.split()[-1]).apply(camera)
+    assert min(suggested.size) >= MIN_SIDE, f"the suggested size {larger} still renders {suggested.size}"

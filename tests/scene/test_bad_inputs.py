@@ -405,14 +405,14 @@ def test_the_catalogue_covers_every_command_and_option():
 def test_force_replaces_a_file_that_is_not_its_kind_and_the_result_is_its_kind(workspace, tmp_path, capsys):
     target = tmp_path / "view.png"
     target.write_text("an old note\n")
-    assert main(["render", workspace["scene"], "--size", "16", "-o", str(target), "--force"]) == 0, \
+    assert main(["render", workspace["scene"], "--size", "20", "-o", str(target), "--force"]) == 0, \
         capsys.readouterr().err
     assert target.read_bytes().startswith(b"\x89PNG")
 
 
 def test_render_depth_beside_a_depth_named_image_keeps_both(workspace, tmp_path, capsys):
     out = tmp_path / "view.depth.png"
-    assert main(["render", workspace["scene"], "--size", "16", "--depth", "-o", str(out)]) == 0, \
+    assert main(["render", workspace["scene"], "--size", "20", "--depth", "-o", str(out)]) == 0, \
         capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["view.depth.depth.npy", "view.depth.depth.png",
                                                           "view.depth.png"]

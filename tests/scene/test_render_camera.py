@@ -1,0 +1,62 @@
+"""Scene.render bounds the camera: a size, focal length or principal point no renderer can draw is refused by name
+(before: a 10**10-pixel camera failed in numpy after seconds, fx <= 1e-38 or cx = 1e300 divided by zero inside a
+compiled kernel of a fitted field)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.geometry import Camera
+from pytest_n2r.render.size import MAX_SIDE
+from pytest_n2r.scene.base import MAX_FOCAL, MIN_FOCAL, PRINCIPAL_POINT_REACH
+from tests.plugin.fakescene import PlaneScene
+
+
+def _camera(**change) -> Camera:
+    return Camera(**{"width": 32, "height": 24, "fx": 25.6, "fy": 25.6, "cx": 15.5, "cy": 11.5, **change})
+
+
+@pytest.mark.parametrize(("camera", "expected"), [
+    (_camera(width=MAX_SIDE + 1, cx=MAX_SIDE / 2), (f"camera width={MAX_SIDE + 1} pixels is too large; expected at "
+                                                   f"most {MAX_SIDE} pixels")),
+    (_camera(height=10**10), f"camera height=10000000000 pixels is too large; expected at most {MAX_SIDE} pixels"),
+    (_camera(fx=1e-38), "camera fx=1e-38 pixels is out of bounds; expected a focal length in [1e-06, 1e+09] pixels"),
+    (_camera(fy=1e-7), "camera fy=1e-07 pixels is out of bounds; expected a focal length in [1e-06, 1e+09] pixels"),
+    (_camera(fx=1e300, fy=1e300), "camera fx=1e+300 pixels is out of bounds"),
+    (_camera(cx=1e300), ("camera cx=1e+300 pixels is 1e+300 pixels from the image's centre; expected at most 1000 "
+                        "image sizes (32000 pixels) from it")),
+    (_camera(cy=-24012.0), ("camera cy=-24012.0 pixels is 2.402e+04 pixels from the image's centre; expected at most "
+                           "1000 image sizes (24000 pixels) from it")),
+])
+def test_a_camera_no_renderer_can_draw_is_refused_naming_its_field(camera, expected):
+    scene = PlaneScene()
+    try:
+        rendered = scene.render(scene.views[0].c2w, camera, ("rgb", "depth"))
+    except InvalidArgument as exc:
+        assert expected in str(exc), f"the refusal does not name the camera's field and its bound: {exc}"
+    else:
+        pytest.fail(f"{camera} was rendered ({rendered.rgb.shape}, depth finite: "
+                    f"{bool(np.isfinite(rendered.depth).all())}) instead of refused")
+
+
+@pytest.mark.parametrize("camera", [
+    _camera(fx=MIN_FOCAL, fy=MAX_FOCAL),
+    _camera(fx=0.5, fy=0.5),  # a 176-degree view
+    _camera(width=16, height=16, cx=7.5 + PRINCIPAL_POINT_REACH * 16, cy=7.5 - PRINCIPAL_POINT_REACH * 16),
+    _camera(width=MAX_SIDE, height=16, fx=8000.0, fy=8000.0, cx=MAX_SIDE / 2, cy=7.5),
+])
+def test_a_camera_within_the_bounds_renders(camera):
+    scene = PlaneScene()
+    rendered = scene.render(scene.views[0].c2w, camera, ("rgb",))
+    assert rendered.rgb.shape == (camera.height, camera.width, 3), f"{camera} rendered {rendered.rgb.shape}"
+
+
+def test_every_view_of_the_demo_scenes_is_within_the_bounds():
+    from pytest_n2r.demo import load_demo
+    from pytest_n2r.scene.base import check_render_camera
+
+    for name in ("wall", "object"):
+        for view in load_demo(name).views:
+            assert check_render_camera(view.camera) is view.camera
