@@ -102,6 +102,12 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         if sut_error is not None:  # the SUT raised (or returned garbage) once, then not on the same example
             record.message = _intermittent(sut_error)
             raise type(sut_error)(record.message) from sut_error
+        other = _other_error(exc)
+        if other is not None:  # e.g. an OSError of the disk or the render cache's folder: said as itself
+            record.message = f"{type(other).__name__}: {other}"
+            other.add_note("pytest-n2r: raised on an example and not when Hypothesis replayed it, so neither the SUT "
+                           "nor the relation's verdict; its traceback is the first run's")
+            raise other from None
         # a failure that passed on replay without the SUT changing its outputs: the scene's render
         record.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
                          "is not deterministic. The system under test gave the same outputs twice on the first "
@@ -145,6 +151,20 @@ def _sut_error(exc: BaseException) -> SUTError | SUTOutputError | None:
     for inner in getattr(exc, "exceptions", ()):
         found = inner if isinstance(inner, (SUTError, SUTOutputError)) else _sut_error(inner)
         if found is not None:
+            return found
+    return None
+
+
+def _other_error(exc: BaseException) -> Exception | None:
+    """An error inside Hypothesis's ``FlakyFailure`` that is neither a verdict (:class:`RelationFailure`) nor the
+    engine's rejection of a draw (Hypothesis's ``UnsatisfiedAssumption``), if any."""
+    from hypothesis.errors import UnsatisfiedAssumption
+
+    for inner in getattr(exc, "exceptions", ()):
+        if isinstance(inner, (RelationFailure, UnsatisfiedAssumption)):
+            continue
+        found = _other_error(inner) if hasattr(inner, "exceptions") else inner
+        if isinstance(found, Exception):
             return found
     return None
 

@@ -463,3 +463,29 @@ def test_a_metric_argument_that_does_not_fit_the_views_is_the_tests_mistake_not_
     message = str(info.value)
     assert not isinstance(info.value, SUTOutputError) and "the SUT's output" not in message, message
     assert "passes through the source camera's centre" in message and "source view" in message, message
+
+
+class _DiskHiccup(PlaneScene):
+    """Its ``fail_on``-th render raises an OSError (a render cache's folder removed under a store, a disk gone)."""
+
+    def __init__(self, fail_on: int):
+        super().__init__()
+        self.fail_on, self.renders = fail_on, 0
+
+    def _render(self, c2w, camera, outputs):
+        self.renders += 1
+        if self.renders == self.fail_on:
+            raise OSError(2, "No such file or directory", "cache/renders/ab")
+        return super()._render(c2w, camera, outputs)
+
+
+@pytest.mark.parametrize("fail_on", [3, 6, 9])
+def test_an_error_that_did_not_happen_again_is_said_as_itself_not_as_nondeterminism(fail_on):
+    """An OSError raised once (a concurrent --n2r-cache-clear removed the cache's folder under a store) was reported as
+    "the relation failed on an example and passed when Hypothesis replayed it: something is not deterministic"."""
+    relation = Relation.build(AbsDifference(), 255, transforms(yaw=3))
+    with pytest.raises(OSError) as info:
+        check_relation(_DiskHiccup(fail_on), lambda rgb: float(rgb.mean()), relation, settings=FAST)
+    text = f"{info.value}\n{getattr(info.value, '__notes__', [])}"
+    assert "No such file or directory" in text and "not when Hypothesis replayed it" in text, text
+    assert "not deterministic" not in text, text
