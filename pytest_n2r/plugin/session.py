@@ -52,9 +52,11 @@ class N2RSession:
 
     @property
     def cache(self) -> RenderCache:
-        """The render cache (created on first use, so an unused session touches no file)."""
+        """The render cache (created on first use, so an unused session touches no file), trimmed to its cap as it
+        opens: a session that stores less than the cache's trimming interval would otherwise never trim it."""
         if self._cache is None:
             self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes)
+            self._cache.trim()  # a directory scan (some 15 ms per 1 000 entries)
             self._cache.on_first_render = self.on_first_render
             self._cache.while_waiting = self.while_waiting
         return self._cache

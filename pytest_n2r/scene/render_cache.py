@@ -7,9 +7,9 @@ only the missing ones. Beside the renders the disk store keeps *decisions*: smal
 computed from renders alone (a follow-up's validity verdict, a keypoint metric's result), under a key that names
 those renders, folded with a digest of the package's source, so a checkout whose code was edited (its version
 unchanged) decides again rather than reading what the old code decided; renders, which the renderer's version names
-and which cost far more, are not. Files are
-written under a temporary name and renamed into place, so concurrent pytest-xdist workers sharing one directory
-never see a torn file: at worst two workers render the same view and the second rename wins with identical bytes
+and which cost far more, are not. Files are written under a temporary name and renamed into place
+(:mod:`~.cache_files`, which also trims the store), so concurrent pytest-xdist workers sharing one directory never
+see a torn file: at worst two workers render the same view and the second rename wins with identical bytes
 (rendering is deterministic).
 """
 
@@ -23,7 +23,7 @@ import math
 import os
 import re
 import shutil
-import tempfile
+import warnings
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -37,18 +37,20 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
+from .cache_files import CacheNotStored, cache_entries, trim_entries, write_entry
 from .cache_folder import claim, foreign_entries, is_ours, not_a_cache
 from .first_render import first_render
 from .keep_threads import threads_kept
 
-__all__ = ["RenderCache", "CacheStats", "render_key", "source_digest", "parse_size", "DEFAULT_DISK_BYTES",
-           "DEFAULT_MEMORY_BYTES"]
+__all__ = ["RenderCache", "CacheStats", "CacheNotStored", "render_key", "source_digest", "parse_size",
+           "DEFAULT_DISK_BYTES", "DEFAULT_MEMORY_BYTES"]
 
 DEFAULT_MEMORY_BYTES = 512 * 2**20
 #: Check the disk size cap after this many bytes were written (a directory scan is not free).
 _TRIM_EVERY_BYTES = 64 * 2**20
 _SUBDIR = "renders"
 _DECISIONS = "decisions"
+_FLOORS = "floors"  # field floors (pytest_n2r.relation.floor), counted in the cap and cleared with the rest
 
 _UNITS = {"": 1, "b": 1, "k": 2**10, "kb": 2**10, "kib": 2**10, "m": 2**20, "mb": 2**20, "mib": 2**20,
           "g": 2**30, "gb": 2**30, "gib": 2**30}
@@ -159,12 +161,13 @@ class RenderCache:
     """Renders through ``scene.render`` only what neither the memory LRU nor the disk store holds.
 
     ``directory=None`` keeps the cache in memory only. ``memory_bytes`` and ``disk_bytes`` cap the two
-    levels; the disk level evicts the least recently used renders (by modification time, which a hit
-    refreshes) down to 80 % of its cap. A process's first render of each renderer kind holds a lock file in
-    ``directory`` (:mod:`~pytest_n2r.scene.first_render`): processes sharing the directory compile a kernel
-    once. Entries are deleted (evicted, cleared) only in a directory that carries pytest-n2r's ``CACHEDIR.TAG``,
-    written on the first store into a directory that is new, empty or holds only pytest-n2r's files: a folder
-    of the user's is never tagged (:func:`foreign_entries`), and its ``.gitignore`` never replaced.
+    levels; the disk level (renders, decisions and the field floors in ``floors/``) evicts the least recently used
+    entries (by modification time, which a hit refreshes) down to 80 % of its cap (:meth:`trim`). A process's first
+    render of each renderer kind holds a lock file in ``directory`` (:mod:`~pytest_n2r.scene.first_render`):
+    processes sharing the directory compile a kernel once. Entries are deleted (evicted, cleared) only in a
+    directory that carries pytest-n2r's ``CACHEDIR.TAG``, written on the first store into a directory that is new,
+    empty or holds only pytest-n2r's files: a folder of the user's is never tagged (:func:`foreign_entries`), and
+    its ``.gitignore`` never replaced.
     """
 
     def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,
@@ -177,6 +180,8 @@ class RenderCache:
         self._memory_used = 0
         self._claimed = False  # the directory is pytest-n2r's tagged cache (see _prepare_directory)
         self._written_since_trim = 0
+        self._store_error: OSError | None = None  # set when storing stopped (see _replace)
+        self._skipped = 0  # stores skipped in a row because a folder was removed or made under them
         #: Called with the scene just before this cache's first render (a session starts its kernel helper).
         self.on_first_render: Callable[[Scene], None] | None = None
         #: Called with the scene when its first render waits for another process compiling its kind's kernels
@@ -242,14 +247,20 @@ class RenderCache:
         except (OSError, ValueError, RecursionError):  # torn by a crash, disk trouble, nested too deep: decided again
             path.unlink(missing_ok=True)
             return None
+        try:
+            os.utime(path)  # mark as recently used for eviction
+        except OSError:
+            pass
         return value if isinstance(value, dict) else None
 
     def put_decision(self, key: str, value: dict) -> None:
-        """Store the JSON object ``value`` under ``key`` on disk (nothing for a memory-only cache); decisions
-        older than the renders :meth:`trim` evicts go with them."""
+        """Store the JSON object ``value`` under ``key`` on disk (nothing for a memory-only cache); counted in the
+        cap and evicted by :meth:`trim` with the renders, least recently used first."""
         if self.directory is None:
             return
-        self._replace(self._decision_path(key), lambda f: f.write(json.dumps(value, sort_keys=True).encode()))
+        data = json.dumps(value, sort_keys=True).encode()
+        self._replace(self._decision_path(key), lambda f: f.write(data))
+        self._wrote(len(data))
 
     def clear(self) -> None:
         """Forget everything, in memory and on disk; :class:`InvalidArgument`, with nothing deleted on disk, when
@@ -260,13 +271,14 @@ class RenderCache:
         if foreign:
             raise InvalidArgument(f"{not_a_cache(self.directory, foreign)}; nothing was deleted (choose a new or empty "
                                   "folder for the cache)")
-        for sub in (_SUBDIR, _DECISIONS):
+        for sub in (_SUBDIR, _DECISIONS, _FLOORS):
             if self.directory is not None and (self.directory / sub).exists():
                 shutil.rmtree(self.directory / sub, ignore_errors=True)
 
     def disk_usage(self) -> int:
-        """Bytes the disk store holds now."""
-        return sum(size for _, _, size in self._disk_files())
+        """Bytes the disk store takes now (allocated blocks, as ``du`` counts them): renders, decisions, floors and
+        their writers' temporary files."""
+        return 0 if self.directory is None else sum(size for _, _, size, _ in cache_entries(self.directory))
 
     # -- memory level ---------------------------------------------------------------------------------
 
@@ -325,23 +337,43 @@ class RenderCache:
         if self.directory is None or value.nbytes > self.disk_bytes:
             return
         self._replace(self._path(key, name), lambda f: np.save(f, np.ascontiguousarray(value), allow_pickle=False))
-        self._written_since_trim += value.nbytes
+        self._wrote(value.nbytes)
+
+    def _wrote(self, nbytes: int) -> None:
+        """Count ``nbytes`` stored; trim after a tenth of the cap (at most 64 MiB) since the last trim."""
+        self._written_since_trim += nbytes
         if self._written_since_trim >= min(_TRIM_EVERY_BYTES, self.disk_bytes // 10 + 1):
             self._written_since_trim = 0
             self.trim()
 
     def _replace(self, path: Path, write: Callable[[BinaryIO], object]) -> None:
-        """Write a cache file under a temporary name in its folder, then rename it into place (no fsync, unlike
-        :func:`~pytest_n2r.data.atomic.atomic_write_bytes`: an entry lost in a power cut is just computed again)."""
-        self._prepare_directory(path.parent)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                write(f)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        """:func:`~.cache_files.write_entry`. A store only saves later work, so it never fails the caller: a folder
+        removed or made under it (a concurrent ``--n2r-cache-clear``) is made again once, then the store is skipped;
+        any other :class:`OSError` (a full disk, no permission), or 8 stores in a row skipped so, is warned of once
+        (:class:`CacheNotStored`) and this cache stores nothing more."""
+        if self._store_error is not None:
+            return
+        for again in (True, False):
+            try:
+                self._prepare_directory(path.parent)
+                write_entry(path, write)
+            except (FileNotFoundError, FileExistsError, NotADirectoryError) as exc:  # a folder gone or made meanwhile
+                if again:
+                    continue
+                self._skipped += 1
+                if self._skipped >= 8:
+                    self._stop_storing(exc)
+                return
+            except OSError as exc:
+                self._stop_storing(exc)
+                return
+            self._skipped = 0
+            return
+
+    def _stop_storing(self, exc: OSError) -> None:
+        self._store_error = exc
+        warnings.warn(CacheNotStored(f"the render cache {str(self.directory)!r} stores nothing more this session: "
+                                     f"{type(exc).__name__}: {exc}"), stacklevel=2)
 
     def _prepare_directory(self, leaf: Path) -> None:
         """Make ``leaf``; tag the directory first where it is new or holds only pytest-n2r's files (a folder of the
@@ -352,45 +384,11 @@ class RenderCache:
             self._claimed = is_ours(self.directory)
         leaf.mkdir(parents=True, exist_ok=True)
 
-    def _disk_files(self) -> list[tuple[float, Path, int]]:
-        if self.directory is None or not (self.directory / _SUBDIR).exists():
-            return []
-        found = []
-        for path in (self.directory / _SUBDIR).glob("*/*.npy"):
-            try:
-                if path.parent.is_symlink() or path.is_symlink():  # never evict (delete) through a link
-                    continue
-                st = path.stat()
-            except FileNotFoundError:  # evicted by another worker meanwhile
-                continue
-            found.append((st.st_mtime, path, st.st_size))
-        return found
-
     def trim(self) -> int:
-        """Evict least recently used renders until the disk store is at most 80 % of its cap, and the decisions
-        written before the last render it evicted; returns the number of render bytes freed. Safe to run from
-        several workers at once. Nothing in a directory without pytest-n2r's ``CACHEDIR.TAG``."""
+        """Delete the temporary files a killed writer left (older than :data:`~.cache_files.STALE_TMP_SECONDS`) and,
+        while renders, decisions and floors together exceed the cap, the least recently used of them down to 80 %
+        of it; returns the bytes freed. Safe to run from several workers at once and beside a clear (a directory
+        scan: some 15 ms per 1 000 entries). Nothing in a directory without pytest-n2r's ``CACHEDIR.TAG``."""
         if self.directory is None or not is_ours(self.directory):
             return 0
-        files = self._disk_files()
-        total = sum(size for _, _, size in files)
-        if total <= self.disk_bytes:
-            return 0
-        freed, evicted_until = 0, 0.0
-        target = 0.8 * self.disk_bytes
-        for mtime, path, size in sorted(files):
-            if total - freed <= target:
-                break
-            path.unlink(missing_ok=True)
-            freed += size
-            evicted_until = mtime
-        for path in (self.directory / _DECISIONS).glob("*/*.json"):
-            try:
-                if path.parent.is_symlink() or path.is_symlink():  # never delete through a link
-                    continue
-                if path.stat().st_mtime <= evicted_until:
-                    path.unlink(missing_ok=True)
-            except FileNotFoundError:  # removed by another worker meanwhile
-                continue
-        return freed
-
+        return trim_entries(self.directory, self.disk_bytes)

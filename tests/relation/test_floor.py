@@ -11,7 +11,7 @@ from pytest_n2r.demo import ground_truth, load_demo
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.base import Metric
 from pytest_n2r.relation.floor import FieldFloor, FloorStore, measure_floor, reference_kind
-from pytest_n2r.relation.floor.reference import ShiftSample
+from pytest_n2r.relation.floor.reference import ShiftSample, floor_views
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study
 from tests.plugin.fakefield import BlurredPlane, corners
@@ -75,7 +75,7 @@ def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
     assert first.calls == 6, "photo, render and the nearest other photo brought there, for each of the 2 held-out views"
     again = Counting(corners)
     b = measure_floor(scene, again, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
-    assert again.calls == 1 and b == a, "a new store on the same folder reads the floor back (1 probe call)"
+    assert again.calls == 2 and b == a, "a new store on the same folder reads the floor back (1 call per photo)"
     assert len(list(tmp_path.glob("*.json"))) == 1
 
     edited = Counting(lambda rgb: corners(rgb)[::2])  # same name, other output: measured again
@@ -84,6 +84,30 @@ def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
     other_size = measure_floor(scene, corners, repeatability(px=2), size=RenderSize.parse(80),
                                store=FloorStore(tmp_path), name="corners")
     assert other_size.key not in (a.key, c.key) and other_size.size == "80"
+
+
+def test_an_edit_that_keeps_the_output_on_the_first_photo_is_measured_again(tmp_path):
+    """Floors were keyed by the SUT's output on the first reference image alone: an edit that kept that one output
+    reused the old SUT's floor (a real failure then warned "eps below the field floor" from a stale floor)."""
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    first_photo = floor_views(scene)[0].image
+    a = measure_floor(scene, corners, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    edited = Counting(lambda rgb: corners(rgb) if np.array_equal(rgb, first_photo) else corners(rgb)[::2])
+    b = measure_floor(scene, edited, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert edited.calls == 6 and b.key != a.key, (
+        f"the edited SUT's floor was taken from the store ({edited.calls} SUT calls): its output on the second "
+        "photo differs")
+
+
+def test_a_floor_measured_by_other_code_is_measured_again(tmp_path, monkeypatch):
+    """The key names the package's source, as a kept decision's does: an edited checkout (same version) measures
+    again rather than reading a floor the old code measured."""
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    a = measure_floor(scene, corners, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    monkeypatch.setattr("pytest_n2r.relation.floor.measure.source_digest", lambda: "edited checkout", raising=False)
+    again = Counting(corners)
+    b = measure_floor(scene, again, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert again.calls == 6 and b.key != a.key, f"a floor of other code was reused ({again.calls} SUT calls)"
 
 
 def test_the_nearest_photo_brought_to_each_pose_says_what_the_capture_itself_gives():
@@ -225,7 +249,7 @@ def test_a_floor_of_keypoint_objects_beside_descriptors_is_kept_and_reused(tmp_p
     again = Counting(detect)
     b = measure_floor(scene, again, _OnKeypointObjects(), store=FloorStore(tmp_path), name="mine")
     assert a.available and len(list(tmp_path.glob("*.json"))) == 1, "the keypoint objects' floor was not stored"
-    assert again.calls == 1 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"
+    assert again.calls == 2 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"
 
 
 def _floor(deviations: list[float]) -> FieldFloor:

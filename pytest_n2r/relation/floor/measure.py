@@ -13,7 +13,6 @@ import math
 import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
-from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +25,7 @@ from ...metrics.base import Metric
 from ...render.size import RenderSize
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
-from ...scene.render_cache import RenderCache
+from ...scene.render_cache import RenderCache, source_digest
 from ..kept_results import output_digest
 from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
@@ -35,8 +34,9 @@ __all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_
 
 #: Bumped when the measurement changes, so cached floors of an older measurement are not reused
 #: (2: the nearest other photo's samples beside the render's; 3: a non-finite deviation is no sample; 4: a 'WxH'
-#: size keeps each view's aspect, where it stretched views of another).
-FLOOR_VERSION = 4
+#: size keeps each view's aspect, where it stretched views of another; 5: keyed by the SUT's outputs on every
+#: reference image and by the package's source, not by its output on the first image alone).
+FLOOR_VERSION = 5
 
 
 @dataclass(frozen=True)
@@ -159,7 +159,8 @@ def _num(x: float | None) -> float:
 
 
 class FloorStore:
-    """Measured floors, in memory and (with a ``directory``) on disk as JSON, one file per key."""
+    """Measured floors, in memory and (with a ``directory``) on disk as JSON, one file per key (a render cache's
+    ``floors/``: trimmed with its renders, least recently used first, which a read refreshes)."""
 
     def __init__(self, directory: str | os.PathLike | None = None):
         self.directory = Path(directory) if directory is not None else None
@@ -174,13 +175,20 @@ class FloorStore:
             # absent, torn by a crash, or not a floor (nested too deep, another shape): measure again
             except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
                 return None
+            try:
+                os.utime(path)  # recently used: trimmed last
+            except OSError:
+                pass
             self._memory[key] = floor
         return floor
 
     def put(self, floor: FieldFloor) -> None:
         self._memory[floor.key] = floor
         if self.directory is not None:
-            atomic_write_text(self.directory / f"{floor.key}.json", json.dumps(floor.to_dict(), indent=1) + "\n")
+            try:  # kept only to save a later session the measurement: a clear or a full disk loses just that
+                atomic_write_text(self.directory / f"{floor.key}.json", json.dumps(floor.to_dict(), indent=1) + "\n")
+            except OSError:
+                pass
 
 
 def sut_name(sut: Callable[..., Any]) -> str:
@@ -200,11 +208,14 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
 
     Renders go through ``cache`` (default: none); ``store`` keeps measured floors keyed by the scene's
     content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of its output
-    on the first reference image, so an edited SUT whose output changes there is measured again), the
-    metric's ``repr``, the size, the views, whether ``nearby`` and :data:`FLOOR_VERSION`. An output that no digest
-    names exactly (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers, strings,
-    arrays, tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them) is measured every time:
-    its floor is neither kept nor reused.
+    on every reference image, so an edited SUT whose output changes on any of them is measured again), the
+    metric's ``repr``, the size, the views, whether ``nearby``, :data:`FLOOR_VERSION`, the package's version and
+    source (:func:`~pytest_n2r.scene.render_cache.source_digest`) and numpy's version. Taking a kept floor
+    therefore costs one SUT call per reference image (at most ``max_views``; on a fitted demo scene each reference
+    is the exact twin's render, from ``cache`` when it holds it), which measuring it makes anyway. An output that no
+    digest names exactly (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers,
+    strings, arrays, tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them) is measured
+    every time: its floor is neither kept nor reused.
     """
     name = name or sut_name(sut)
     size_text = "view size" if size is None else str(size)
@@ -225,24 +236,22 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         # with nearby, depth and opacity too: the nearest other photo is brought to the pose through them
         return render_cache.render(s, c2w, camera, outputs if s is scene else ("rgb",))
 
-    references = (reference_image(scene, v, camera_of(v), kind, render) for v in views)
-    first = next(references)
-    first_output = sut(first)
+    references = [reference_image(scene, v, camera_of(v), kind, render) for v in views]
+    outs_real = [sut(image) for image in references]
     twin = exact_twin(scene) if kind == "exact" else None
-    spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "scene": scene.content_hash,
-            "twin": twin.content_hash if twin is not None else None, "sut": name,
-            "probe": output_digest(first_output), "metric": repr(metric), "size": size_text,
+    spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "source": source_digest(), "numpy": np.__version__,
+            "scene": scene.content_hash, "twin": twin.content_hash if twin is not None else None, "sut": name,
+            "outputs": [output_digest(out) for out in outs_real], "metric": repr(metric), "size": size_text,
             "views": [v.name for v in views], "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-    if spec["probe"] is None:  # an output no digest names exactly: an edited SUT could not be told apart
+    if None in spec["outputs"]:  # an output no digest names exactly: an edited SUT could not be told apart
         store, key = None, ""
     if store is not None and (known := store.get(key)) is not None:
         return known
     samples, nearby_samples, gaps = [], [], []
-    for view, image in zip(views, chain([first], references)):
+    for view, image, out_real in zip(views, references, outs_real):
         rendered = render(scene, view.c2w, camera_of(view))
         real = RenderedView(rendered.camera, rendered.c2w, rgb=image, depth=rendered.depth, opacity=rendered.opacity)
-        out_real = first_output if image is first else sut(image)
         samples.append(shift_sample(metric, out_real, sut(rendered.rgb), real, rendered, view.name))
         near = nearby_image(scene, view, rendered, size, kind, render) if nearby else None
         if near is not None:

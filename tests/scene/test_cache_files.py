@@ -1,0 +1,172 @@
+"""The render cache's files: stores that a concurrent clear or a broken disk cannot fail, and trimming that counts
+decisions, floors and temporary files against the cap, runs as a session opens the cache and removes what a killed
+writer left."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import tempfile
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+from pytest_n2r import Transform
+from pytest_n2r.plugin.session import N2RSession
+from pytest_n2r.scene.render_cache import RenderCache
+
+from ..plugin.fakescene import PlaneScene
+
+
+def _pose(scene, yaw=0.0):
+    return Transform(yaw=yaw).apply(scene.views[0].c2w)
+
+
+def _du(folder):
+    """Bytes of every file under ``folder``, as ``du`` would count them (not the cache's own accounting)."""
+    return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file()) if folder.exists() else 0
+
+
+def _held(folder):
+    """Bytes of the cache's entries in ``folder``: renders, decisions and floors."""
+    return sum(_du(folder / sub) for sub in ("renders", "decisions", "floors"))
+
+
+def test_a_clear_under_a_store_does_not_fail_the_render(tmp_path, monkeypatch):
+    """A concurrent ``--n2r-cache-clear`` removed ``renders/`` while an entry was written: the FileNotFoundError of
+    the rename reached the relation, which reported the SUT as not deterministic."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")  # the directory tagged, renders/ made
+    save, cleared = np.save, []
+
+    def save_then_clear(f, arr, **kwargs):
+        save(f, arr, **kwargs)
+        if not cleared:
+            cleared.append(RenderCache(tmp_path).clear())  # another process clears mid-write
+
+    monkeypatch.setattr(np, "save", save_then_clear)
+    view = cache.render(scene, _pose(scene, 1.0), scene.views[0].camera, "rgb")
+    assert view.rgb is not None and cleared, "the render was not returned"
+    assert len(list((tmp_path / "renders").glob("*/*.npy"))) == 1, "the store was not made again after the clear"
+
+
+@pytest.mark.parametrize(("error", "stores"), [(OSError(errno.ENOSPC, "No space left on device"), 1),
+                                               (PermissionError(errno.EACCES, "Permission denied"), 1),
+                                               (FileNotFoundError(errno.ENOENT, "No such file or directory"), 16)])
+def test_a_disk_that_cannot_store_is_said_once_and_storing_stops(tmp_path, monkeypatch, error, stores):
+    """A full disk, no permission, or a folder that never stays: every store raised into its relation. Now the
+    renders are returned, one warning names the folder and the error, and the cache stores nothing more."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    tries = []
+
+    def broken(*args, **kwargs):
+        tries.append(1)
+        raise error
+
+    monkeypatch.setattr(tempfile, "mkstemp", broken)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for yaw in range(1, 13):
+            assert cache.render(scene, _pose(scene, yaw), scene.views[0].camera, "rgb").rgb is not None
+    said = [str(w.message) for w in caught]
+    name = type(error).__name__
+    assert said == [f"the render cache {str(tmp_path)!r} stores nothing more this session: {name}: {error}"], said
+    assert len(tries) == stores, f"{len(tries)} tries to store after the cache stopped storing"
+
+
+def test_a_scan_beside_a_clear_does_not_fail(tmp_path, monkeypatch):
+    """``renders/`` removed while the cap's scan walked it: the scan's FileNotFoundError reached the relation."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    cache.disk_bytes = 1
+    real = os.scandir  # the listing is taken, then the folder removed before the scan reads its entries
+
+    def scandir_then_clear(path):
+        found = list(real(path))
+        if str(path).endswith("renders"):
+            RenderCache(tmp_path).clear()
+        return _Listing(found)
+
+    monkeypatch.setattr(os, "scandir", scandir_then_clear)
+    assert cache.trim() == 0 and cache.disk_usage() == 0
+
+
+class _Listing(list):
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def test_a_session_trims_the_cache_as_it_opens_it(tmp_path):
+    """Trimming ran only after one process wrote a tenth of the cap: 22 small sessions left 72 MiB under a 40 MiB
+    cap. The session now trims as it opens the cache."""
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    filler = RenderCache(tmp_path, disk_bytes=100 * one)
+    for yaw in range(10):
+        filler.render(scene, _pose(scene, yaw), camera, "rgb")
+    assert _du(tmp_path / "renders") == 10 * one
+    assert N2RSession(cache_dir=tmp_path, cache_bytes=5 * one).cache.disk_bytes == 5 * one
+    assert _du(tmp_path / "renders") <= 4 * one, f"the session opened a cache of {_du(tmp_path)} bytes, cap {5 * one}"
+
+
+def test_decisions_and_floors_count_in_the_cap_and_go_oldest_first(tmp_path):
+    """3 000 kept results left 13 MB under a 1 MiB cap: decisions (and floors) were neither counted nor trimmed
+    while the renders were under the cap (and a 90-byte decision takes a 4 KiB block)."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path, disk_bytes=10**9)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    keys = [f"{i:064x}" for i in range(300)]
+    for age, key in enumerate(keys):
+        cache.put_decision(key, {"detail": "x" * 200})
+        os.utime(cache._decision_path(key), (1000.0 + age, 1000.0 + age))
+    (tmp_path / "floors").mkdir()
+    for i in range(50):
+        (tmp_path / "floors" / f"{i:032x}.json").write_text(json.dumps({"pad": "y" * 200}))
+        os.utime(tmp_path / "floors" / f"{i:032x}.json", (500.0 + i, 500.0 + i))
+    assert cache.decision(keys[0]) is not None  # a hit: recently used, kept by the trim
+    renders, before = _du(tmp_path / "renders"), cache.disk_usage()
+    cache.disk_bytes = before // 2
+    cache.trim()
+    assert cache.disk_usage() <= 0.8 * cache.disk_bytes and _held(tmp_path) <= cache.disk_bytes, (
+        f"{cache.disk_usage()} bytes ({_held(tmp_path)} in files) left under a cap of {cache.disk_bytes}")
+    assert not list((tmp_path / "floors").glob("*.json")), "the oldest entries, the floors, were not trimmed first"
+    assert cache.decision(keys[0]) is not None and cache.decision(keys[-1]) is not None
+    assert cache.decision(keys[1]) is None, "an old decision was kept while newer ones went"
+    assert _du(tmp_path / "renders") == renders, "a render, newer than every decision but one, was evicted"
+
+
+def test_clear_empties_the_floors_too(tmp_path):
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    (tmp_path / "floors").mkdir()
+    (tmp_path / "floors" / "f.json").write_text("{}")
+    cache.clear()
+    assert not (tmp_path / "floors").exists(), "--n2r-cache-clear left the kept field floors"
+
+
+def test_trimming_deletes_what_a_killed_writer_left_but_not_a_writers_fresh_file(tmp_path):
+    """``.{name}.XXXX.tmp`` files of a killed writer were neither counted nor ever deleted."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    folder = next((tmp_path / "renders").iterdir())
+    stale, fresh = folder / ".a.rgb.npy.k1ll.tmp", folder / ".b.rgb.npy.w1p.tmp"
+    for path in (stale, fresh):
+        path.write_bytes(b"\0" * 5000)
+    old = time.time() - 3600
+    os.utime(stale, (old, old))
+    assert cache.disk_usage() >= 10_000, f"temporary files not counted: {cache.disk_usage()} bytes"
+    assert cache.trim() >= 5000
+    assert not stale.exists() and fresh.exists(), "a killed writer's file kept, or a concurrent writer's deleted"
