@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, assume, given, settings
 from numba import njit
 
 from pytest_n2r.demo import demo_scene_names, ground_truth
@@ -46,6 +46,9 @@ def test_compiled_render_matches_the_vectorized_definition(moved):
     scene = ground_truth(name)
     camera = scene.views[0].camera.resized(80, 45)
     c2w = tau.apply(scene.views[index].c2w, scene.reference_length)
+    # a pose where over 1 % of pixels see two surfaces at one distance (the object's view 9 moved by pitch +9°,
+    # x -0.5, y +0.375, z +0.5 ref: 1.3 %, a property of the geometry) would leave too few pixels compared: drawn again
+    assume(scene.coincident_pixels(c2w, camera).mean() < 0.01)
     assert_agrees(scene, c2w, camera, f"{name} view {index} {tau.describe()}")
 
 
