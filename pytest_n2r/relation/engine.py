@@ -187,6 +187,9 @@ class Engine:
                 f"{self.metric!r} gave deviation {result.deviation} ({where}); the SUT's output probably "
                 "contains NaN or Inf"
             )
+        if getattr(result, "valid", True) and result.deviation < 0:  # a metric's own mistake, not the SUT's
+            raise InvalidType(f"{self.metric!r} gave deviation {result.deviation:g} ({where}); expected a deviation "
+                              "from the ideal >= 0 (0: ideal, larger: worse), e.g. abs(score - ideal)")
         return result
 
     def compute_on_renders(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from hypothesis.database import InMemoryExampleDatabase
 
 from pytest_n2r import Camera, InvalidArgument, InvalidType
+from pytest_n2r.errors import SUTOutputError
 from pytest_n2r.metrics import cosine_similarity
 from pytest_n2r.metrics.base import MetricResult
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, Validity, check_relation
@@ -489,3 +490,21 @@ def test_an_error_that_did_not_happen_again_is_said_as_itself_not_as_nondetermin
     text = f"{info.value}\n{getattr(info.value, '__notes__', [])}"
     assert "No such file or directory" in text and "not when Hypothesis replayed it" in text, text
     assert "not deterministic" not in text, text
+
+
+class _Signed(AbsDifference):
+    """A custom metric's slip: the signed difference as the deviation."""
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        d = float(out_follow) - float(out_source)
+        return MetricResult(self.name, d, d)
+
+
+def test_a_negative_deviation_is_the_metrics_mistake_said_at_once():
+    """A negative deviation passed any eps, was saved into a baseline the loader then refused ("expected a number
+    >= 0; regenerate it"), and regenerating wrote the same refused file."""
+    relation = Relation.build(_Signed(), 1000.0, transforms(yaw=3))
+    with pytest.raises(InvalidType, match=r"gave deviation -[0-9.e-]+ \(scene 'plane', .*expected a deviation from "
+                                          r"the ideal >= 0") as info:
+        check_relation(PlaneScene(texture="ramp"), lambda rgb: float(rgb[..., 0].mean()), relation, settings=FAST)
+    assert not isinstance(info.value, SUTOutputError), "the metric's mistake was blamed on the SUT"
