@@ -28,7 +28,7 @@ from ..scene.render_cache import RenderCache
 from ..strategies.follow_up import FollowUp
 from ..strategies.pose_change import as_follow_up
 from .artifacts import artifact_dir, save_pair
-from .determinism import check_deterministic
+from .determinism import check_deterministic, same_output
 from .failure import MAX_UNDEFINED, SAME_PIXELS, RelationFailure, failure_message, how_to_reproduce
 from .kept_results import kept_result, repainted_key
 from .outputs import SUTError, check_output
@@ -96,6 +96,9 @@ class Engine:
         #: The SUT's outputs on renders, by render key: the session's (shared with its other relations) or
         #: this run's own (so the SUT still runs once per source view).
         self.sut_outputs = sut_outputs if sut_outputs is not None else SUTOutputs()
+        #: Whether this run has called its SUT again on an image whose output it was handed by another test
+        #: (:meth:`sut_on_render`): a SUT object reconfigured between tests keeps its identity
+        self.sharing_checked = sut_outputs is None
         self.metric = relation.metric
         self.size = relation.size or settings.size
         needs = tuple(getattr(self.metric, "needs", ()) or ())
@@ -156,11 +159,22 @@ class Engine:
         __tracebackhide__ = True
         if key is not None:
             output = self.sut_outputs.get(self.sut, key)
-            if output is not MISSING:
+            if output is not MISSING and not self.sharing_checked:
+                # the first output another test left: a SUT object reconfigured since (a fixture's detector given
+                # another threshold, a module's function whose global a test patched) must not be judged by it
+                self.sharing_checked = True
+                fresh = self.run_sut(rendered.rgb, role, where)
+                if not same_output(fresh, output):
+                    self.sut_outputs.forget(self.sut)
+                output = fresh
+            elif output is not MISSING:
                 self.run_record.sut_shared += 1
                 check_output(output, role, where, self.metric)
                 return output
-        output = self.run_sut(rendered.rgb, role, where)
+            else:
+                output = self.run_sut(rendered.rgb, role, where)
+        else:
+            output = self.run_sut(rendered.rgb, role, where)
         if key is not None:
             self.sut_outputs.put(self.sut, key, output)
         return output

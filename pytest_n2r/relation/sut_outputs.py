@@ -6,12 +6,16 @@ camera, exact pose): the same key means the same pixels. The SUT is named by its
 tests that build their own detector (``detector("sift")`` in each) do not share, while tests that return
 one fixture's object do. A relation assumes its SUT is deterministic (the engine checks it, calling the SUT
 again, before the first failure counts); under that assumption a kept output is the one a new call would
-give. The determinism check itself always calls the SUT.
+give. The determinism check itself always calls the SUT. A SUT object reconfigured between tests (a session
+fixture's detector given another threshold by a parametrized test, a module's function whose global a test
+patched) keeps its identity but not its outputs: each relation calls its SUT again on the first output another
+test left, and where the two differ every output kept for that SUT is dropped
+(:meth:`~pytest_n2r.relation.engine.Engine.sut_on_render`). A reconfiguration that changes no output on that image
+goes unseen; building the SUT in the test (or a function-scoped fixture) shares nothing and is always safe.
 
 Mutated follow-ups (pixels changed at the source's pose) are not kept: their image is not a render. A
-follow-up whose pixels equal its source's byte for byte (a mutation of size zero, an identity pose change
-whose pose differs from the source's in its last bits) takes the SUT's output on the source
-(:meth:`~pytest_n2r.relation.engine.Engine.sut_on_render`): the same SUT object on the same input.
+follow-up whose pixels equal its source's byte for byte is no test and runs no SUT (the engine records it
+undefined).
 
 The validity verdict on a follow-up render is kept too (:meth:`SUTOutputs.verdict`), by the validity
 thresholds and the two render keys: it does not depend on the SUT, so a replayed example (a regression
@@ -105,6 +109,11 @@ class SUTOutputs:
         self._verdicts.move_to_end(key)
         while len(self._verdicts) > self.max_outputs:
             self._verdicts.popitem(last=False)
+
+    def forget(self, sut: Callable[..., Any]) -> None:
+        """Drop every output and metric result kept for ``sut`` (it no longer gives them: reconfigured)."""
+        if self._knows(sut):
+            self._forget(id(sut))
 
     def _knows(self, sut: Any) -> bool:
         held = self._suts.get(id(sut))

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import strategies as st
 
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, check_relation
+from pytest_n2r.relation.determinism import SUTNotDeterministic
 from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs
 from pytest_n2r.strategies import transforms
 from tests.plugin.fakemetrics import AbsDifference
@@ -66,7 +67,8 @@ def test_a_mutated_image_always_runs_the_sut():
     accepted = len(record.valid_examples)
     views = len({e.view for e in record.examples})
     assert record.sut_calls == accepted + views, "the sources once each, every mutated follow-up"
-    assert again.sut_calls == accepted and again.sut_shared == accepted, "the sources shared, mutations called"
+    # the sources shared but the first, called again to check the SUT object still gives what it left
+    assert again.sut_calls == accepted + 1 and again.sut_shared == accepted - 1, "the sources shared, mutations called"
 
 
 class _Keep(_Invert):
@@ -110,7 +112,8 @@ def test_outputs_are_forgotten_with_their_sut_and_capped():
 
 def test_a_replay_reuses_the_outputs_of_the_run_it_replays():
     """A regression gate's replay (the session's outputs passed on) runs the SUT on no render the relation
-    already ran it on, and gives the same deviations as a replay that calls it on every render."""
+    already ran it on but one (the check that the SUT object still gives the outputs it left), and gives the same
+    deviations as a replay that calls it on every render."""
     from pytest_n2r.relation import replay_relation
 
     scene = PlaneScene(texture="ramp")
@@ -119,7 +122,7 @@ def test_a_replay_reuses_the_outputs_of_the_run_it_replays():
     run = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
     calls = sut.calls
     replayed = replay_relation(scene, sut, relation, run.valid_examples, sut_outputs=shared)
-    assert sut.calls == calls and replayed.sut_calls == 0, f"{sut.calls - calls} SUT calls on renders it had run on"
+    assert sut.calls == calls + 1 and replayed.sut_calls == 1, f"{sut.calls - calls} SUT calls on renders it had run on"
     alone = replay_relation(scene, CountingSUT(), relation, run.valid_examples)
     assert [e.deviation for e in replayed.replayed] == [e.deviation for e in alone.replayed]
     assert alone.sut_calls > 0
@@ -148,7 +151,8 @@ def test_a_replay_of_evaluated_examples_reuses_the_metric_results_of_the_same_ob
     examples = replay_candidates(record)
     replayed = replay_relation(scene, sut, relation, examples, settings=SETTINGS, sut_outputs=shared)
     assert [e.deviation for e in replayed.replayed] == [e.deviation for e in examples]
-    assert (metric.computed, sut.calls) == (computed, calls), "the same objects on the same renders: nothing again"
+    assert (metric.computed, sut.calls) == (computed, calls + 1), (
+        "the same objects on the same renders: nothing again but the check of the first kept output")
     pairs = len({(e.view, tuple(sorted(e.transform.items()))) for e in examples})  # a pair drawn twice: once
     other = CountingDifference()
     again = replay_relation(scene, sut, Relation.build(other, 255, transforms(yaw=5)), examples, settings=SETTINGS,
@@ -190,3 +194,37 @@ def test_a_replay_reuses_the_validity_verdicts_of_the_same_renders(monkeypatch):
     alone = replay_relation(scene, sut, relation, examples, settings=SETTINGS)
     assert len(checks) > checked, "a replay without the session's kept verdicts judges its follow-ups"
     assert [(e.status, e.reason) for e in replayed.replayed] == [(e.status, e.reason) for e in alone.replayed]
+
+
+class Reconfigurable:
+    """One detector object that tests reconfigure: ``flip`` scales every output tenfold."""
+
+    def __init__(self) -> None:
+        self.flip = False
+
+    def __call__(self, rgb):
+        x = float(decode_ramp_x(rgb)[36, 48])
+        return 10 * x if self.flip else x
+
+
+@pytest.mark.parametrize("order", [(False, True), (True, False)], ids=["plain-then-flipped", "flipped-then-plain"])
+def test_a_sut_object_reconfigured_between_tests_is_judged_by_its_own_outputs(order):
+    """A session fixture's detector reconfigured by a parametrized test kept its identity: the second test was
+    handed the first configuration's outputs (a false pass of a broken configuration, or a correct one failing
+    "not deterministic"). Each verdict must be the one the test gets alone."""
+    scene = PlaneScene(texture="ramp")
+    relation = Relation.build(AbsDifference(), 0.3, transforms(yaw=5), examples=8)
+
+    def run(flip, shared):
+        sut = shared_sut if shared is not None else Reconfigurable()
+        sut.flip = flip
+        try:
+            return _verdicts(check_relation(scene, sut, relation, settings=SETTINGS, test_id=f"t{flip}",
+                                            sut_outputs=shared))
+        except (RelationFailure, SUTNotDeterministic) as exc:
+            return type(exc).__name__
+
+    shared_sut, shared = Reconfigurable(), SUTOutputs()
+    together = [run(flip, shared) for flip in order]
+    alone = [run(flip, None) for flip in order]
+    assert together == alone, f"with outputs shared: {together}; each alone: {alone}"
