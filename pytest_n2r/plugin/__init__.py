@@ -157,6 +157,8 @@ def _describe(config: pytest.Config, session: Any) -> str:
 @pytest.hookimpl(tryfirst=True)
 def pytest_pycollect_makeitem(collector: pytest.Collector, name: str, obj: Any) -> None:
     """Report an invalid ``@metamorphic(...)`` as a collection error naming the test."""
+    if isinstance(obj, (staticmethod, classmethod)):  # the function inside carries what @metamorphic set
+        obj = obj.__func__
     if inspect.isfunction(obj):
         error = obj.__dict__.get(ERROR_ATTR)
         if error:

@@ -61,6 +61,20 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
 
         import pytest
 
+        if isinstance(test, staticmethod):  # above @staticmethod: the function inside carries the relation
+            return staticmethod(decorate(test.__func__))  # type: ignore[return-value]
+        if isinstance(test, classmethod):
+            name = getattr(test.__func__, "__name__", repr(test))
+            setattr(test.__func__, ERROR_ATTR, f"@metamorphic(...): {name} is a classmethod, which pytest does not "
+                                               "collect as a test; make it a plain method or a staticmethod")
+            return test  # type: ignore[return-value]
+        if getattr(test, ERROR_ATTR, None) is not None:  # the inner decorator's error stands
+            return test
+        if getattr(test, RELATION_ATTR, None) is not None:
+            name = getattr(test, "__name__", repr(test))
+            setattr(test, ERROR_ATTR, f"@metamorphic(...): {name} has two @metamorphic decorators; a test checks one "
+                                      "relation (the outer one replaced the inner): write a test for each")
+            return test
         if error is None and (inspect.iscoroutinefunction(test) or inspect.isasyncgenfunction(test)):
             name = getattr(test, "__name__", repr(test))
             setattr(test, ERROR_ATTR, f"@metamorphic(...): {name} is async; a @metamorphic test returns the system "

@@ -97,6 +97,43 @@ async def test_bad(n2r_scene):
     result.stdout.fnmatch_lines(["*test_relations.py::test_bad: @metamorphic(...): test_bad is async; *plain def*"])
 
 
+def test_two_relations_on_one_test_are_a_collection_error(n2r_project):
+    """The outer @metamorphic replaced the inner one: a strict relation the SUT breaks passed unchecked."""
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=5))
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5))
+def test_two(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines([("*test_relations.py::test_two: @metamorphic(...): test_two has two @metamorphic "
+                                 "decorators*write a test for each*")])
+
+
+def test_a_relation_above_staticmethod_runs(n2r_project):
+    """@metamorphic above @staticmethod set its relation on the staticmethod object: the test ran unchecked and
+    passed (with pytest's "returned not None" warning), bad arguments included."""
+    n2r_project.write("""
+class TestStatic:
+    @metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=(2, 5)), examples=3)
+    @staticmethod
+    def test_breaks(n2r_scene):
+        return mean_colour
+
+
+class TestBad:
+    @metamorphic(AbsDifference(), eps=-1, transform=transforms(yaw=5))
+    @staticmethod
+    def test_bad_eps(n2r_scene):
+        return mean_colour
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, "--continue-on-collection-errors")
+    result.assert_outcomes(failed=1, errors=1)
+    result.stdout.fnmatch_lines(["*TestBad::test_bad_eps: @metamorphic(...): eps=-1*"])
+    assert "metamorphic relation violated" in result.stdout.str(), result.stdout.str()
+
+
 @pytest.mark.parametrize("decorator", ["@settings(max_examples=3)", "@example(view=None, tau=None)"])
 @pytest.mark.parametrize("above", [True, False], ids=["above", "below"])
 def test_hypothesis_decorators_on_a_relation_test_say_what_to_use_instead(n2r_project, decorator, above):
