@@ -745,6 +745,31 @@ def test_weak(n2r_scene):
     assert record["shrink_examples"] == 0 and "not shrunk: shrinking is off" in record["message"], record["message"]
 
 
+@pytest.mark.parametrize("mark, args", [('@pytest.mark.xfail(condition=False, reason="only on windows")', ()),
+                                        ('@pytest.mark.xfail(sys.platform == "win32", reason="on windows")', ()),
+                                        ('@pytest.mark.xfail(reason="a known weakness")', ("--runxfail",))],
+                         ids=["condition-keyword", "condition-positional", "runxfail"])
+def test_a_relation_not_expected_to_fail_is_shrunk(n2r_project, mark, args):
+    """``xfail(condition=False)`` as a keyword (and ``--runxfail``) was read as expected to fail: a real failure was
+    reported unshrunk, "shrinking is off (the test is expected to fail)"."""
+    n2r_project.write(f"""
+import sys
+import pytest
+from pytest_n2r import metamorphic, transforms
+from tests.plugin.fakemetrics import AbsDifference
+
+
+{mark}
+@metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+def test_weak(n2r_scene):
+    return lambda rgb: float(rgb.mean())
+""")
+    result = n2r_project.run("--n2r-scene", PLANE, *args)
+    result.assert_outcomes(failed=1)
+    assert "(minimal after shrinking)" in result.stdout.str() and "shrinking is off" not in result.stdout.str(), (
+        result.stdout.str())
+
+
 @pytest.mark.parametrize("workers", [[], ["-n", "2"]], ids=["serial", "xdist"])
 def test_a_relation_failure_is_located_at_its_test_not_in_pluggy(n2r_project, workers):
     """The failure was raised from the plugin's hook, every frame hidden: ``--tb=line`` (what IDEs and CI
