@@ -187,7 +187,9 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
                 f"{metafunc.definition.nodeid}: n2r_scene is parametrized by pytest-n2r over the configured scenes; "
                 f"choose this test's scenes with @pytest.mark.{SCENE_MARKER}(...), not @pytest.mark.parametrize")
     session = session_of(metafunc.config)
-    pins = [str(a) for m in metafunc.definition.iter_markers(SCENE_MARKER) for a in m.args]
+    # the closest pin decides (a function's over its class's over its module's), as for a fixture; no pins: all
+    closest = metafunc.definition.get_closest_marker(SCENE_MARKER)
+    pins = [str(a) for a in closest.args] if closest is not None else []
     try:
         specs = session.scene_specs(pins, base=Path(metafunc.definition.path).parent)
     except N2RError as exc:  # a collection error of this test's module, with just the message

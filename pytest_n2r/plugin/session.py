@@ -91,7 +91,7 @@ class N2RSession:
                     f"n2r_scene marker names the scene {pin!r}, which is not configured (configured: {known}); "
                     "pin a configured scene name, or give a .n2r path, 'demo:<name>' or 'module:function'"
                 )
-        return chosen
+        return list(dict.fromkeys(chosen))  # a scene pinned twice (by name and by entry) runs once
 
     def load(self, spec: SceneSpec) -> Scene:
         """The scene of ``spec``, loaded once per session."""

@@ -273,6 +273,35 @@ def test_ramp_only(n2r_scene):
         assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), test
 
 
+def test_the_closest_pin_decides_and_a_scene_pinned_twice_runs_once(n2r_project):
+    """Pins of every level were added up: a function pinned to "ramp" in a module pinned to "plane" ran on both, and
+    a method pinned to "plane" in a class and module pinned to it ran three times, as test_dup[plane0..2] (its id
+    changing when a pin was added elsewhere, so a baseline called it missing)."""
+    n2r_project.write(f"""
+pytestmark = pytest.mark.n2r_scene("plane")
+
+
+@pytest.mark.n2r_scene("ramp")
+def test_only_ramp(n2r_scene):
+    assert n2r_scene.name == "ramp"
+
+
+def test_module_pin(n2r_scene):
+    assert n2r_scene.name == "plane"
+
+
+@pytest.mark.n2r_scene("plane")
+class TestPinned:
+    @pytest.mark.n2r_scene("plane", {PLANE!r})
+    def test_dup(self, n2r_scene):
+        pass
+""", name="test_scenes")
+    result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
+    result.assert_outcomes(passed=3)
+    for test in ("test_only_ramp[ramp]", "test_module_pin[plane]", "TestPinned::test_dup[plane]"):
+        assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), f"{test} did not run:\n{result.stdout.str()}"
+
+
 def test_pinning_an_unconfigured_scene_is_a_collection_error_naming_the_test(n2r_project):
     n2r_project.write("""
 @pytest.mark.n2r_scene("kitchen")
