@@ -228,7 +228,11 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
     from ..errors import N2RError
     from .scenes import NO_SCENE_MESSAGE
 
-    spec = getattr(request, "param", None)
+    if not hasattr(request, "param"):  # pytest_generate_tests did not see this test take n2r_scene
+        pytest.fail("pytest-n2r: n2r_scene was requested where pytest-n2r cannot parametrize it over the configured "
+                    "scenes (a unittest.TestCase method, or request.getfixturevalue('n2r_scene')); take n2r_scene "
+                    "as an argument of a test function or of a method of a plain test class", pytrace=False)
+    spec = request.param
     if spec is None:
         pytest.skip(NO_SCENE_MESSAGE)
     try:

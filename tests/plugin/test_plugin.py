@@ -302,6 +302,29 @@ class TestPinned:
         assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), f"{test} did not run:\n{result.stdout.str()}"
 
 
+def test_n2r_scene_where_it_cannot_be_parametrized_says_so(n2r_project):
+    """A @metamorphic unittest.TestCase method and request.getfixturevalue("n2r_scene") were skipped with "no scene
+    configured for pytest-n2r: pass --n2r-scene", though a scene was configured: the relation never ran."""
+    n2r_project.write("""
+import unittest
+
+
+class T(unittest.TestCase):
+    @metamorphic(AbsDifference(), eps=0.0, transform=transforms(yaw=5), examples=3)
+    def test_ut(self):
+        return mean_colour
+
+
+def test_dynamic(request):
+    request.getfixturevalue("n2r_scene")
+""")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(failed=1, errors=1)
+    assert "no scene configured" not in result.stdout.str(), result.stdout.str()
+    assert result.stdout.str().count("n2r_scene was requested where pytest-n2r cannot parametrize it") == 2, (
+        result.stdout.str())
+
+
 def test_pinning_an_unconfigured_scene_is_a_collection_error_naming_the_test(n2r_project):
     n2r_project.write("""
 @pytest.mark.n2r_scene("kitchen")
