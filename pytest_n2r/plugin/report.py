@@ -55,11 +55,12 @@ def pytest_configure(config: pytest.Config) -> None:
     outputs = {name: path for name, path in read_options(config, tuple(option(n) for n in _OUTPUT_OPTIONS)).items()
                if path is not None}
     seen: dict[Path, tuple[str, Path]] = {}
-    for name, path in outputs.items():
+    others = _other_outputs(config) if outputs else []
+    for flag, path in [*((option(n).flag, p) for n, p in outputs.items()), *others]:
         # resolved: a/../out.json and out.json (or a link to it) are one file
-        other, other_path = seen.setdefault(path.resolve(), (name, path))
-        if other != name:
-            both = _one_file(option(other).flag, other_path, option(name).flag, path)
+        other, other_path = seen.setdefault(path.resolve(), (flag, path))
+        if other != flag and other.startswith("--n2r-"):  # two other plugins' files: not pytest-n2r's to judge
+            both = _one_file(other, other_path, flag, path)
             raise pytest.UsageError(f"pytest-n2r: {both}; give each output its own file (one would replace the other)")
     _check_compare_is_no_report(config, outputs)
     config.stash[_OUTPUTS] = outputs
@@ -72,6 +73,17 @@ def pytest_configure(config: pytest.Config) -> None:
     values = read_options(config, (*rules, option("compare")))
     config.stash[_RESULT] = {"margin": values["compare_fail"], "confidence": values["compare_confidence"],
                              "fail_on": values["compare_fail_on"], "baseline": values["compare"]}
+
+
+def _other_outputs(config: pytest.Config) -> list[tuple[str, Path]]:
+    """The files other plugins write that a pytest-n2r output must not share: pytest's ``--junitxml`` and
+    pytest-html's ``--html``, as they expand them. Checked only when a pytest-n2r output is given."""
+    import os
+
+    given = [(flag, getattr(config.option, dest, None)) for flag, dest in (("--junitxml", "xmlpath"),
+                                                                           ("--html", "htmlpath"))]
+    return [(flag, Path(os.path.expanduser(os.path.expandvars(value)))) for flag, value in given
+            if isinstance(value, str) and value]
 
 
 def _check_compare_is_no_report(config: pytest.Config, outputs: dict[str, Path]) -> None:
@@ -217,9 +229,18 @@ def _comparison_json(config: pytest.Config, result: dict) -> dict[str, Any]:
         "settings_differ": setting_differences(result["baseline"].meta, result.get("settings", {})),
         "passed": not any(c.fails for c in comparisons), "failed": [c.nodeid for c in comparisons if c.fails],
         "relations": [{"nodeid": c.nodeid, "outcome": c.outcome, "also": list(c.also), "verdict": c.verdict,
-                       "fails": c.fails, "n": c.n, "mean_change": c.mean_change, "bound": c.bound, "lost": c.lost,
+                       "fails": c.fails, "n": c.n, "mean_change": _number(c.mean_change),
+                       "bound": _number(c.bound), "lost": c.lost,
                        "message": c.message, "notes": list(c.notes)} for c in comparisons],
     }
+
+
+def _number(value: float | None) -> float | None:
+    """A comparison's number for the JSON report: ``null`` where it is not finite (no pair: NaN; one pair bounds
+    nothing: -Infinity), which no JSON reader but Python's accepts."""
+    import math
+
+    return value if value is None or math.isfinite(value) else None
 
 
 def _why(exc: BaseException) -> str:
@@ -281,12 +302,15 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     else:
         writers = []
     partial = _incomplete(session)
+    summary = config.pluginmanager.get_plugin("n2r-summary")
+    not_run = summary.not_run() if summary is not None else []
     if outputs.get("json") is not None:
         def json_text() -> str:  # NaN where a value is undefined (a rejected example's score): see docs/reporting.md
             payload: dict[str, Any] = {"complete": partial is None}
             if partial is not None:
                 payload["incomplete"] = partial
             payload["relations"] = [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]
+            payload["not_run"] = not_run
             if result.get("comparisons") is not None:
                 payload["comparison"] = _comparison_json(config, result)
             return json.dumps(payload, indent=1, allow_nan=True) + "\n"
@@ -294,7 +318,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         writers.append((outputs["json"], "the JSON results", lambda: atomic_write_text(outputs["json"], json_text())))
     if outputs.get("report") is not None:
         writers.append((outputs["report"], "the HTML report",
-                        lambda: write_html(outputs["report"], records, partial=partial)))
+                        lambda: write_html(outputs["report"], records, partial=partial, not_run=not_run)))
     for target, what, write in writers:
         try:
             done = write()

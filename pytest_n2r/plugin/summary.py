@@ -25,6 +25,11 @@ class Summary:
         #: pytest's word for a record whose test was marked xfail (XFAIL, XPASS), by the record's index
         self.labels: dict[int, str] = {}
         self.plain_passes: set[int] = set()  # indices of the records whose test passed, not marked xfail
+        #: the relation tests seen in reports (by their marker: pytest-xdist ships a report's keywords), the index
+        #: of each one's record, and pytest's outcome and reason of the tests that ended without one
+        self.relation_ids: set[str] = set()
+        self.recorded: dict[str, int] = {}
+        self.unrecorded: dict[str, tuple[str, str]] = {}
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if self.first_report is None:
@@ -34,17 +39,35 @@ class Summary:
             self.phases["relations" if record is not None else "other tests"] += report.duration
         else:
             self.phases["setup"] += report.duration  # setup and teardown: the fixtures' time
+        from . import RELATION_MARKER
+
+        if RELATION_MARKER in report.keywords:
+            self.relation_ids.add(report.nodeid)
+        if record is None or report.when != "call":
+            if report.nodeid in self.recorded and report.failed:  # its teardown failed: pytest says ERROR too
+                self.records[self.recorded[report.nodeid]].pytest_outcome = "error"
+            elif report.nodeid not in self.recorded and not report.passed:  # the first word pytest said of it
+                self.unrecorded.setdefault(report.nodeid, (_outcome(report), _reason(report)))
         if record is not None and report.when == "call":
             from ..relation.record import RelationRecord
 
             self.records.append(RelationRecord.from_dict(record))
-            index = len(self.records) - 1
+            index = self.recorded[report.nodeid] = len(self.records) - 1
+            self.records[index].pytest_outcome = _outcome(report)
             if hasattr(report, "wasxfail"):  # xfailed (skipped), or a non-strict xpass (passed)
                 self.labels[index] = "XFAIL" if report.skipped else "XPASS"
             elif report.failed and str(report.longrepr).startswith("[XPASS(strict)]"):  # pytest's own marking
                 self.labels[index] = "XPASS"
             elif report.passed:
                 self.plain_passes.add(index)
+
+    def not_run(self) -> list[dict[str, str]]:
+        """The relation tests that ended without a relation record, by test id: an error in a fixture's setup,
+        the test's body raising or skipping before it returned the SUT, a skip mark, a crashed pytest-xdist worker.
+        Each with pytest's outcome (``error``, ``failed``, ``skipped``, ``xfailed``) and its reason."""
+        return [{"nodeid": nodeid, "outcome": outcome, "reason": reason}
+                for nodeid, (outcome, reason) in sorted(self.unrecorded.items())
+                if nodeid in self.relation_ids and nodeid not in self.recorded]
 
     def pytest_terminal_summary(self, terminalreporter: Any) -> None:
         """The ``pytest-n2r`` section: each relation's line (with its field-floor lines), the totals line, the
@@ -102,3 +125,28 @@ class Summary:
             f"{t['validity']:.2f} s / field floors {t['floor']:.2f} s / search and other {other:.2f} s; other tests "
             f"{self.phases['other tests']:.1f} s"
         )
+
+
+def _outcome(report: pytest.TestReport) -> str:
+    """pytest's final word on a test report: ``passed``, ``failed`` (a strict xfail's pass too: pytest's
+    ``[XPASS(strict)]``), ``error`` (in a fixture's setup or teardown), ``skipped``, ``xfailed`` or ``xpassed``."""
+    if hasattr(report, "wasxfail"):
+        return "xfailed" if report.skipped else "xpassed"
+    if report.failed and report.when in ("setup", "teardown"):
+        return "error"
+    return report.outcome
+
+
+def _reason(report: pytest.TestReport) -> str:
+    """Why a test ended as it did, in one line: a skip's reason, the exception's message, a crash's words."""
+    longrepr = report.longrepr
+    if isinstance(longrepr, tuple) and len(longrepr) == 3:  # a skip: (path, line, "Skipped: why")
+        return str(longrepr[2])
+    crash = getattr(longrepr, "reprcrash", None)
+    if crash is not None:
+        return str(crash.message)
+    if getattr(longrepr, "errorstring", None):  # a missing fixture (FixtureLookupErrorRepr)
+        return str(longrepr.errorstring).strip().splitlines()[0]
+    lines = [line.strip() for line in str(longrepr or "").splitlines() if line.strip()]
+    errors = [line[1:].strip() for line in lines if line.startswith("E ")]  # pytest's marked lines, if any
+    return (errors or lines or [""])[0]

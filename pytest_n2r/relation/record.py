@@ -139,6 +139,10 @@ class RelationRecord:
     shrink_examples: int = 0
     #: The examples the search was asked for (0: not known, e.g. an older record).
     asked: int = 0
+    #: pytest's final outcome of the test (``passed``, ``failed``, ``error``, ``xfailed``, ``xpassed``; a strict
+    #: xfail's pass is ``failed``), set by the plugin; ``""`` outside pytest. :attr:`outcome` stays the relation's
+    #: own verdict (baselines and comparisons read it).
+    pytest_outcome: str = ""
 
     @property
     def valid_examples(self) -> list[ExampleRecord]:
@@ -218,6 +222,7 @@ class RelationRecord:
             floor=data.get("floor"), renders=int(data.get("renders", 0)),
             sut_calls=int(data.get("sut_calls", 0)), sut_shared=int(data.get("sut_shared", 0)),
             shrink_examples=int(data.get("shrink_examples", 0)), asked=int(data.get("asked", 0)),
+            pytest_outcome=str(data.get("pytest_outcome", "")),
         )
 
 

@@ -24,6 +24,8 @@ h1{font-size:1.6rem}h2{font-size:1.15rem;margin-top:2rem;border-bottom:1px solid
 table{border-collapse:collapse;margin:.5rem 0}td,th{border:1px solid #ddd;padding:.25rem .6rem;text-align:right}
 th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}
 .passed{color:#1a7f37}.failed{color:#cf222e}.skipped{color:#9a6700}
+.error{color:#fff;background:#cf222e;font-weight:bold}.xfailed,.xpassed{color:#9a6700}
+.not-run{background:#ffebe9;border:1px solid #cf222e;padding:.5rem}
 .ex{display:flex;gap:1rem;flex-wrap:wrap;align-items:flex-start}.ex figure{margin:0}
 .ex img{max-width:360px;border:1px solid #ccc}figcaption{font-size:.8rem;color:#555}
 pre{background:#f6f8fa;padding:.6rem;overflow-x:auto;font-size:.8rem}
@@ -87,7 +89,7 @@ def _example_block(title: str, ex: ExampleRecord) -> str:
     return (
         f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
         f"<code>{html.escape(ex.view)}</code>, {kind} <code>{html.escape(follow_up)}</code>: "
-        f"score {ex.score:.4f}, deviation {ex.deviation:.4f}</p><div class=\"ex\">{figures}</div>"
+        f"score {ex.score:.4g}, deviation {ex.deviation:.4g}</p><div class=\"ex\">{figures}</div>"
     )
 
 
@@ -98,9 +100,32 @@ def _floor(rel: RelationRecord) -> str:
     return html.escape(line) if line else "—"
 
 
-def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None) -> str:
+def _outcome(rel: RelationRecord) -> tuple[str, str]:
+    """The relation's outcome as (CSS class, words): pytest's final one where the record has it (``xfailed``,
+    ``xpassed``, a strict xfail's pass ``failed``), else the relation's own verdict."""
+    shown = rel.pytest_outcome or rel.outcome
+    if shown == "failed" and rel.outcome == "passed":
+        return shown, "failed (XPASS(strict): the relation held)"
+    return shown, shown
+
+
+def _not_run_table(not_run: list[dict[str, str]]) -> str:
+    """A banner and a table of the relation tests that ended without a relation record (pytest's outcome, why)."""
+    if not not_run:
+        return ""
+    rows = "".join(f'<tr><td>{html.escape(t["nodeid"])}</td><td class="{html.escape(t["outcome"])}">'
+                   f'{html.escape(t["outcome"])}</td><td>{html.escape(t["reason"])}</td></tr>' for t in not_run)
+    return (f'<p class="not-run"><strong>{len(not_run)} relation test(s) did not run their relation</strong> '
+            "(an error in a fixture, the test raising or skipping before it returned the system under test, a "
+            "skip mark, a crashed worker): they have no section below.</p><table><thead><tr><th>relation test</th>"
+            f"<th>outcome</th><th>reason</th></tr></thead><tbody>{rows}</tbody></table>")
+
+
+def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
+                not_run: list[dict[str, str]] | None = None) -> str:
     """The report as one HTML string; ``partial``: why the session did not run every selected relation, shown in
-    the title and a banner under it."""
+    the title and a banner under it; ``not_run``: the relation tests that ended without a relation record
+    (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the summary."""
     if partial is not None:
         title = f"{title} (partial)"
     summary_rows = []
@@ -110,23 +135,27 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
         rate = rel.inconsistencies / len(valid) if valid else math.nan
         worst = rel.worst
         anchor = f"rel{i}"
+        css, outcome = _outcome(rel)
         summary_rows.append(
-            f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{rel.outcome}">'
-            f"{rel.outcome}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
+            f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{css}">'
+            f"{outcome}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
             f"<td>{rel.inconsistencies}</td><td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
-            f"<td>{'—' if worst is None else f'{worst.deviation:.4f}'}</td><td>{rel.eps:g}</td>"
+            f"<td>{'—' if worst is None else f'{worst.deviation:.4g}'}</td><td>{rel.eps:g}</td>"
             f"<td>{_floor(rel)}</td></tr>"
         )
         timings = ", ".join(f"{k} {v:.2f} s" for k, v in rel.timings.items())
         body = [
             f'<h2 id="{anchor}">{html.escape(rel.nodeid)}</h2>',
             f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
-            f'<span class="{rel.outcome}">{rel.outcome}</span>'
+            f'<span class="{css}">{outcome}</span>'
+            + (f" (the relation's own verdict: {rel.outcome})" if rel.pytest_outcome not in ("", rel.outcome) else "")
             + (f"; time: {html.escape(timings)}" if timings else "") + "</p>",
             _histogram_svg([e.deviation for e in valid], rel.eps),
         ]
         if rel.minimal is not None:
-            body.append(_example_block("Minimal failing example (shrunk)", rel.minimal))
+            body.append(_example_block("Failing example (not shrunk: the test is marked xfail)"
+                                       if rel.pytest_outcome in ("xfailed", "xpassed")
+                                       else "Minimal failing example (shrunk)", rel.minimal))
         if worst is not None and worst.images and worst is not rel.minimal:
             body.append(_example_block("Worst example", worst))
         if rel.message:
@@ -136,7 +165,7 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
         f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
         f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
         + ("" if partial is None else f'<p class="partial"><strong>Partial report:</strong> {html.escape(partial)}; '
-           "the relations that did not run are not in it.</p>") +
+           "the relations that did not run are not in it.</p>") + _not_run_table(not_run or []) +
         "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
         "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr></thead>"
         "<tbody>"
@@ -145,6 +174,6 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
 
 
 def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
-               partial: str | None = None) -> Path:
+               partial: str | None = None, not_run: list[dict[str, str]] | None = None) -> Path:
     """Write :func:`render_html` to ``path`` atomically."""
-    return atomic_write_text(path, render_html(relations, title, partial))
+    return atomic_write_text(path, render_html(relations, title, partial, not_run))

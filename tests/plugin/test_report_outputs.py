@@ -162,10 +162,19 @@ def test_relations_deselected_when_the_baseline_was_saved_are_missing_later(n2r_
       "baseline this run compares with)")),
     (["--n2r-compare", "base.json", "--n2r-report", "sub/../base.json"],
      "--n2r-compare base.json and --n2r-report sub/../base.json are one file ({tmp}/base.json); give the report"),
+    # pytest's JUnit XML, or pytest-html's page (a stand-in plugin declares --html), on an n2r output silently
+    # replaced it (or was replaced)
+    (["--n2r-json", "same.out", "--junitxml", "same.out"],
+     "--n2r-json and --junitxml are both same.out; give each output its own file (one would replace the other)"),
+    (["-p", "fakehtml", "--n2r-report", "r.html", "--html", "sub/../r.html"],
+     "--n2r-report r.html and --html sub/../r.html are one file ({tmp}/r.html); give each output its own file"),
 ])
 def test_output_paths_are_checked_before_the_run(n2r_project, args, expected):
     tmp = n2r_project.pytester.path
     (tmp / "notes.txt").write_text("my notes\n")
+    n2r_project.pytester.syspathinsert()
+    n2r_project.pytester.makepyfile(fakehtml="def pytest_addoption(parser):\n"
+                                             "    parser.addoption('--html', dest='htmlpath')\n")
     n2r_project.write(TWO)
     result = n2r_project.run("--n2r-scene", PLANE, *(a.format(tmp=tmp) for a in args))
     err = " ".join(result.stderr.str().split())

@@ -30,7 +30,7 @@ def test_report_shows_counts_histogram_and_embedded_images(tmp_path):
     row = re.search(r"<tr><td><a href=\"#rel0\">.*?</tr>", page).group(0)
     cells = re.findall(r"<td[^>]*>(.*?)</td>", row)
     # examples (accepted), rejected, undefined, inconsistencies, rate, worst, eps, field floor (none measured)
-    assert cells[1:] == ["failed", "2", "1", "1", "1", "50.0%", "0.3000", "0.2", "—"], cells
+    assert cells[1:] == ["failed", "2", "1", "1", "1", "50.0%", "0.3", "0.2", "—"], cells
     rel = _failing_relation(tmp_path)
     rel.floor = {"line": "field floor 0.125 (photo vs field render)", "below_floor": False}
     assert "<td>field floor 0.125 (photo vs field render)</td></tr>" in render_html([rel]), \
@@ -74,3 +74,22 @@ def test_a_follow_up_that_cannot_be_rebuilt_is_shown_as_recorded(tmp_path):
     rel = RelationRecord("test_x.py::test_mine[wall]", "repeatability(px=2.0)", 0.2, [minimal], outcome="failed",
                          minimal=minimal)
     assert f"mutation <code>{html.escape(repr(minimal.mutation))}</code>" in render_html([rel])
+
+
+def test_small_deviations_are_shown_as_the_terminal_shows_them(tmp_path):
+    """A deviation of 1.04e-07 failing eps 1e-08 was shown 0.0000 (``:.4f``), as if it had passed with room."""
+    tiny = ExampleRecord("wall", "view3", {"yaw": 5.0}, 1.04e-07, 1.04e-07, False)
+    rel = RelationRecord("test_x.py::test_tiny[wall]", "abs", 1e-08, [tiny], outcome="failed", minimal=tiny)
+    page = render_html([rel])
+    row = re.search(r"<tr><td><a href=\"#rel0\">.*?</tr>", page).group(0)
+    assert "<td>1.04e-07</td>" in row, f"the worst deviation is not shown as the terminal shows it: {row}"
+    assert "score 1.04e-07, deviation 1.04e-07" in page, "the minimal example's numbers lost their digits"
+    assert "0.0000" not in page
+
+
+def test_errors_have_a_style():
+    """``class="error"`` (a relation that errored, a relation test whose fixture failed) had no CSS: plain black."""
+    rel = RelationRecord("test_x.py::test_err[wall]", "abs", 0.1, [], outcome="error", message="boom")
+    page = render_html([rel])
+    assert 'class="error"' in page
+    assert re.search(r"(^|[},\s])\.error\s*\{[^}]*color", page, re.MULTILINE), "class=\"error\" has no style"
