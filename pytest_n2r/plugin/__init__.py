@@ -186,6 +186,10 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
             raise pytest.Collector.CollectError(
                 f"{metafunc.definition.nodeid}: n2r_scene is parametrized by pytest-n2r over the configured scenes; "
                 f"choose this test's scenes with @pytest.mark.{SCENE_MARKER}(...), not @pytest.mark.parametrize")
+    definitions = getattr(metafunc, "_arg2fixturedefs", {}).get("n2r_scene") or ()
+    if definitions and definitions[-1].func is not n2r_scene.__wrapped__ \
+            and "n2r_scene" not in definitions[-1].argnames:
+        return  # a conftest's own n2r_scene fixture replaces pytest-n2r's: its scene, not the configured ones
     session = session_of(metafunc.config)
     # the closest pin decides (a function's over its class's over its module's), as for a fixture; no pins: all
     closest = metafunc.definition.get_closest_marker(SCENE_MARKER)

@@ -325,6 +325,41 @@ def test_dynamic(request):
         result.stdout.str())
 
 
+def test_a_users_own_n2r_scene_fixture_is_not_parametrized_over_the_configured_scenes(n2r_project):
+    """An n2r_scene fixture of the user's replaced pytest-n2r's, yet the test was still parametrized over the
+    configured scenes: it ran once per configured scene, each time on the user's scene, under ids and failure-picture
+    folders named after scenes it never saw. A fixture that wraps pytest-n2r's (requests n2r_scene) keeps them."""
+    n2r_project.write("""
+from tests.plugin.fakescene import PlaneScene
+
+
+@pytest.fixture(scope="session")
+def n2r_scene():
+    return PlaneScene(name="mine", texture="ramp")
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=5), examples=3)
+def test_own(n2r_scene):
+    assert n2r_scene.name == "mine"
+    return mean_colour
+""", name="test_own")
+    n2r_project.write("""
+@pytest.fixture(scope="session")
+def n2r_scene(n2r_scene):
+    return n2r_scene
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=5), examples=3)
+def test_wrapped(n2r_scene):
+    return mean_colour
+""", name="test_wrapped")
+    result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
+    result.assert_outcomes(passed=3)
+    for test in ("test_own.py::test_own PASSED", "test_wrapped.py::test_wrapped[plane] PASSED",
+                 "test_wrapped.py::test_wrapped[ramp] PASSED"):
+        assert test in result.stdout.str(), f"{test!r} not in:\n{result.stdout.str()}"
+
+
 def test_pinning_an_unconfigured_scene_is_a_collection_error_naming_the_test(n2r_project):
     n2r_project.write("""
 @pytest.mark.n2r_scene("kitchen")
