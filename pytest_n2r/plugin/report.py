@@ -9,6 +9,7 @@ by the controller process only.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -243,6 +244,20 @@ def _number(value: float | None) -> float | None:
     return value if value is None or math.isfinite(value) else None
 
 
+def _images_relative(relation: dict[str, Any], folder: Path) -> dict[str, Any]:
+    """``relation`` (a record's dict) with its failure pictures' paths relative to ``folder``, the JSON report's:
+    the report and the artifacts folder, downloaded together from CI, still find each other
+    (``write_html(..., images_base=<the JSON's folder>)``). A path on another drive stays absolute."""
+    start = folder.resolve()
+    for example in (relation.get("minimal"), *relation.get("examples", ())):
+        for role, path in ((example or {}).get("images") or {}).items():
+            try:
+                example["images"][role] = Path(os.path.relpath(path, start)).as_posix()
+            except ValueError:  # another drive
+                pass
+    return relation
+
+
 def _why(exc: BaseException) -> str:
     if isinstance(exc, OSError):
         return f"{exc.strerror or exc}" + (f" ({exc.filename})" if exc.filename else "")
@@ -309,7 +324,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             payload: dict[str, Any] = {"complete": partial is None}
             if partial is not None:
                 payload["incomplete"] = partial
-            payload["relations"] = [r.to_dict() for r in sorted(records, key=lambda r: r.nodeid)]
+            payload["relations"] = [_images_relative(r.to_dict(), outputs["json"].parent)
+                                    for r in sorted(records, key=lambda r: r.nodeid)]
             payload["not_run"] = not_run
             if result.get("comparisons") is not None:
                 payload["comparison"] = _comparison_json(config, result)

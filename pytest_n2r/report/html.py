@@ -59,8 +59,10 @@ def _histogram_svg(deviations: list[float], eps: float, bins: int = 20, width: i
     )
 
 
-def _image_tag(path: str, alt: str) -> str:
+def _image_tag(path: str, alt: str, images_base: Path | None) -> str:
     p = Path(path)
+    if images_base is not None and not p.is_absolute():  # a JSON report's paths are relative to its folder
+        p = images_base / p
     if not p.is_file():
         return f"<p><em>{html.escape(alt)}: image {html.escape(path)} not found</em></p>"
     data = base64.b64encode(p.read_bytes()).decode("ascii")
@@ -80,10 +82,10 @@ def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
         return kind, repr(ex.mutation if ex.mutation is not None else ex.transform)
 
 
-def _example_block(title: str, ex: ExampleRecord) -> str:
+def _example_block(title: str, ex: ExampleRecord, images_base: Path | None) -> str:
     kind, follow_up = _follow_up(ex)
     figures = "".join(
-        f"<figure>{_image_tag(path, name)}<figcaption>{html.escape(name)}</figcaption></figure>"
+        f"<figure>{_image_tag(path, name, images_base)}<figcaption>{html.escape(name)}</figcaption></figure>"
         for name, path in sorted(ex.images.items())
     )
     return (
@@ -122,10 +124,12 @@ def _not_run_table(not_run: list[dict[str, str]]) -> str:
 
 
 def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
-                not_run: list[dict[str, str]] | None = None) -> str:
+                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None) -> str:
     """The report as one HTML string; ``partial``: why the session did not run every selected relation, shown in
     the title and a banner under it; ``not_run``: the relation tests that ended without a relation record
-    (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the summary."""
+    (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the summary;
+    ``images_base``: the folder relative image paths start from (a JSON report's folder: it writes them so)."""
+    base = None if images_base is None else Path(images_base)
     if partial is not None:
         title = f"{title} (partial)"
     summary_rows = []
@@ -155,9 +159,9 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
         if rel.minimal is not None:
             body.append(_example_block("Failing example (not shrunk: the test is marked xfail)"
                                        if rel.pytest_outcome in ("xfailed", "xpassed")
-                                       else "Minimal failing example (shrunk)", rel.minimal))
+                                       else "Minimal failing example (shrunk)", rel.minimal, base))
         if worst is not None and worst.images and worst is not rel.minimal:
-            body.append(_example_block("Worst example", worst))
+            body.append(_example_block("Worst example", worst, base))
         if rel.message:
             body.append(f"<pre>{html.escape(rel.message)}</pre>")
         sections.append("\n".join(body))
@@ -174,6 +178,7 @@ def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report
 
 
 def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
-               partial: str | None = None, not_run: list[dict[str, str]] | None = None) -> Path:
+               partial: str | None = None, not_run: list[dict[str, str]] | None = None,
+               images_base: str | os.PathLike | None = None) -> Path:
     """Write :func:`render_html` to ``path`` atomically."""
-    return atomic_write_text(path, render_html(relations, title, partial, not_run))
+    return atomic_write_text(path, render_html(relations, title, partial, not_run, images_base))

@@ -159,3 +159,31 @@ def test_the_comparisons_numbers_are_strict_json(n2r_project):
     # one pair bounds nothing: the bound was written -Infinity, which the docs did not promise and strict readers reject
     [relation] = json.loads(text, parse_constant=_strict)["relations"]
     assert (relation["n"], relation["bound"]) == (1, None), f"one pair's bound is not null: {relation}"
+
+
+def test_a_json_report_and_its_pictures_moved_together_still_find_each_other(n2r_project, tmp_path):
+    """The JSON held the failure pictures' absolute paths on the machine that ran the tests: the HTML rebuilt from a
+    JSON report and artifacts folder downloaded from CI said "image /home/runner/... not found" for each."""
+    import shutil
+
+    from pytest_n2r.report import RelationRecord
+    from pytest_n2r.report.html import render_html
+
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=1e-9, transform=transforms(yaw=5), examples=3)
+def test_breaks(n2r_scene):
+    return mean_colour
+""")
+    here = n2r_project.pytester.path
+    n2r_project.run("--n2r-scene", PLANE, "--n2r-json=out/results.json").assert_outcomes(failed=1)
+    downloaded = tmp_path / "downloaded"
+    shutil.copytree(here / "out", downloaded / "out")
+    shutil.copytree(here / "n2r-artifacts", downloaded / "n2r-artifacts")
+    shutil.rmtree(here / "n2r-artifacts")
+    results = json.loads((downloaded / "out" / "results.json").read_text())
+    images = results["relations"][0]["minimal"]["images"]
+    assert images and all(not p.startswith("/") and p.startswith("../n2r-artifacts/") for p in images.values()), images
+    page = render_html([RelationRecord.from_dict(r) for r in results["relations"]],
+                       images_base=downloaded / "out")
+    assert "not found" not in page and page.count("data:image/png;base64,") == len(images), (
+        "the rebuilt report lost its pictures")
