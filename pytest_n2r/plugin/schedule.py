@@ -26,10 +26,12 @@ SLOW_FAMILIES = frozenset({"demo-field", "file.n2r"})
 
 
 def _on_slow_scene(item: pytest.Item) -> bool:
+    spec = getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")
+    if spec is None:  # before importing the engine: a suite that does not use pytest-n2r never loads it
+        return False
     from .precompile import family
 
-    spec = getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")
-    return spec is not None and family(spec) in SLOW_FAMILIES
+    return family(spec) in SLOW_FAMILIES
 
 
 def pytest_configure(config: pytest.Config) -> None:
