@@ -37,15 +37,9 @@ from .settings import RunSettings
 from .spec import Relation
 from .sut_outputs import MISSING, SUTOutputs
 from .timeout import time_limit
-from .validity import Verdict
+from .validity import Verdict, too_many_invalid_so_far
 
-__all__ = ["Engine", "Evaluation", "recorded_view", "same_pixels", "too_many_invalid_so_far"]
-
-#: Give up on a relation once this many draws were invalid and, with 99 % confidence, more than ``max_rejected``
-#: of all draws will be (see :meth:`Engine.count`).
-_MIN_REJECTED_TO_GIVE_UP = 40
-_GIVE_UP_CONFIDENCE = 0.99
-
+__all__ = ["Engine", "Evaluation", "recorded_view", "same_pixels"]
 
 def forced_seed() -> object:
     """pytest's ``--hypothesis-seed`` (``None`` without it): Hypothesis keeps no example database under it."""
@@ -96,9 +90,10 @@ class Engine:
         #: The SUT's outputs on renders, by render key: the session's (shared with its other relations) or
         #: this run's own (so the SUT still runs once per source view).
         self.sut_outputs = sut_outputs if sut_outputs is not None else SUTOutputs()
-        #: Whether this run has called its SUT again on an image whose output it was handed by another test
+        #: Whether this run has called its SUT again on an image whose output another run left
         #: (:meth:`sut_on_render`): a SUT object reconfigured between tests keeps its identity
         self.sharing_checked = sut_outputs is None
+        self.own_outputs: set[str] = set()  # the render keys this run kept the SUT's output of
         self.metric = relation.metric
         self.size = relation.size or settings.size
         needs = tuple(getattr(self.metric, "needs", ()) or ())
@@ -159,7 +154,7 @@ class Engine:
         __tracebackhide__ = True
         if key is not None:
             output = self.sut_outputs.get(self.sut, key)
-            if output is not MISSING and not self.sharing_checked:
+            if output is not MISSING and not self.sharing_checked and key not in self.own_outputs:
                 # the first output another test left: a SUT object reconfigured since (a fixture's detector given
                 # another threshold, a module's function whose global a test patched) must not be judged by it
                 self.sharing_checked = True
@@ -177,6 +172,7 @@ class Engine:
             output = self.run_sut(rendered.rgb, role, where)
         if key is not None:
             self.sut_outputs.put(self.sut, key, output)
+            self.own_outputs.add(key)
         return output
 
     def compute(self, out_source: Any, out_follow: Any, source: RenderedView, follow: RenderedView,
@@ -380,20 +376,6 @@ class Engine:
             view = recorded_view(rec, "replayed")
             out.append(self.evaluate(view, rec.follow_up(), camera=view.camera).record)
         return out
-
-
-def too_many_invalid_so_far(rejected: int, drawn: int, limit: float) -> bool:
-    """Whether ``rejected`` invalid draws of ``drawn`` show, with 99 % confidence (a one-sided Clopper-Pearson
-    bound), that more than ``limit`` of all draws will be invalid; never before 40 rejections.
-
-    >>> too_many_invalid_so_far(44, 44, 0.9), too_many_invalid_so_far(43, 44, 0.9)
-    (True, False)
-    """
-    if rejected < _MIN_REJECTED_TO_GIVE_UP or limit >= 1.0:
-        return False
-    from scipy.stats import beta
-
-    return float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit
 
 
 def same_pixels(image: np.ndarray, other: np.ndarray) -> bool:

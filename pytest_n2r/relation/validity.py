@@ -28,7 +28,12 @@ from ..geometry import CameraStack, backproject
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
 
-__all__ = ["Validity", "Verdict"]
+__all__ = ["Validity", "Verdict", "too_many_invalid_so_far"]
+
+#: Give up on a relation once this many draws were invalid and, with 99 % confidence, more than ``max_rejected``
+#: of all draws will be (:func:`too_many_invalid_so_far`, :meth:`~pytest_n2r.relation.engine.Engine.count`).
+_MIN_REJECTED_TO_GIVE_UP = 40
+_GIVE_UP_CONFIDENCE = 0.99
 
 #: A verdict's reason when the view passed.
 VALID = "valid"
@@ -167,3 +172,16 @@ def training_views(scene: Scene) -> list[SceneView]:
     train = [v for v in scene.views if v.split == "train"]
     return train or list(scene.views)
 
+
+def too_many_invalid_so_far(rejected: int, drawn: int, limit: float) -> bool:
+    """Whether ``rejected`` invalid draws of ``drawn`` show, with 99 % confidence (a one-sided Clopper-Pearson
+    bound), that more than ``limit`` of all draws will be invalid; never before 40 rejections.
+
+    >>> too_many_invalid_so_far(44, 44, 0.9), too_many_invalid_so_far(43, 44, 0.9)
+    (True, False)
+    """
+    if rejected < _MIN_REJECTED_TO_GIVE_UP or limit >= 1.0:
+        return False
+    from scipy.stats import beta
+
+    return float(beta.ppf(1.0 - _GIVE_UP_CONFIDENCE, rejected, drawn - rejected + 1)) > limit

@@ -242,7 +242,7 @@ def test_rejections_while_shrinking_do_not_turn_a_failure_into_giving_up(monkeyp
     """Shrinking a failure toward yaw=14° walks through the undefined band (5°..15°): those rejections
     must not count toward "almost every draw is invalid", or the final replay of the minimal failure is
     itself rejected and Hypothesis reports a FlakyFailure instead of the failure."""
-    monkeypatch.setattr("pytest_n2r.relation.engine._MIN_REJECTED_TO_GIVE_UP", 3)
+    monkeypatch.setattr("pytest_n2r.relation.validity._MIN_REJECTED_TO_GIVE_UP", 3)
     relation = Relation.build(_BandedHeading(), 0.5, transforms(yaw=(14, 20)),
                               validity=Validity(min_coverage=0, max_empty_increase=1))
     with pytest.raises(RelationFailure) as exc:
@@ -352,7 +352,7 @@ def _gives_up(share: float, rule, rng: np.random.Generator, asked: int = 20) -> 
 def test_the_search_gives_up_on_invalid_draws_only_when_the_end_is_known(share):
     """The running share passing 90 % after 40 rejections ended 7 % of the relations with 80 % invalid draws and
     30 % of those with 85 %, which pass at their end (max_rejected 0.9); the Clopper-Pearson rule ends under 1 %."""
-    from pytest_n2r.relation.engine import too_many_invalid_so_far
+    from pytest_n2r.relation.validity import too_many_invalid_so_far
 
     def running_share(rejected, drawn):
         return rejected >= 40 and rejected / drawn > 0.9
