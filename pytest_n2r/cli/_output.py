@@ -27,6 +27,7 @@ __all__ = [
     "OutputKind",
     "check_output",
     "check_output_dir",
+    "printable",
 ]
 
 FORCE_HELP = "replace an existing output even when it is not what this command writes"
@@ -139,3 +140,18 @@ def check_output_dir(path: Path, owned: Callable[[Path], bool], noun: str, *, op
                               "pass --force")
     _check_folder(path, option, path)
     return path
+
+
+def printable(text: object) -> str:
+    """``str(text)`` as any stdout can print it: the bytes of a file name that are not UTF-8 (which Python keeps as
+    lone surrogates) as backslash escapes (``\\xff``). Every path a command prints goes through it, so printing a
+    name it wrote cannot fail after the work is done.
+
+    >>> printable("bad" + chr(0xDCFF) + ".png"), printable(Path("ok.png"))
+    ('bad\\\\xff.png', 'ok.png')
+    """
+    text = str(text)
+    try:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+    except UnicodeEncodeError:  # a surrogate surrogateescape did not make
+        return text.encode("utf-8", "backslashreplace").decode("utf-8")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ._output import FORCE_HELP
+from ._output import FORCE_HELP, printable
 
 
 def _size(text: str) -> int | tuple[int, int]:
@@ -98,7 +98,7 @@ def run_export(args: argparse.Namespace) -> int:
                               "(`n2r demo list`)")
     check_output_dir(args.out, _is_export, "the export (transforms.json and images/)", force=args.force)
     path = export(args.name, args.out, args.size)
-    print(f"wrote {path} and {path.parent / 'images'}")
+    print(f"wrote {printable(path)} and {printable(path.parent / 'images')}")
     return 0
 
 
@@ -126,6 +126,7 @@ def run_build(args: argparse.Namespace) -> int:
         finally:
             bar.close()
         report = read_scene_file(path, images=False).report
-        print(f"wrote {path} ({path.stat().st_size / 2**20:.2f} MiB): held-out PSNR {report['psnr']:.2f} dB, "
-              f"SSIM {report['ssim']:.4f}; fit {timings['fit_s']:.1f} s, total {timings['total_s']:.1f} s")
+        print(f"wrote {printable(path)} ({path.stat().st_size / 2**20:.2f} MiB): held-out PSNR "
+              f"{report['psnr']:.2f} dB, SSIM {report['ssim']:.4f}; fit {timings['fit_s']:.1f} s, total "
+              f"{timings['total_s']:.1f} s")
     return 0

@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._output import FORCE_HELP
+from ._output import FORCE_HELP, printable
 from .poses import ANY_ROLL_HELP, add_frames_dir_argument
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "output about every minute, so a crash leaves the last good scene; Ctrl-C ends the fit "
                     "after its step and saves the field trained so far (before the first checkpoint it "
                     "writes nothing; a second Ctrl-C quits at once, keeping the last checkpoint), exit "
-                    "status 130.",
+                    "status 130; SIGTERM (timeout, docker stop) is handled as Ctrl-C, exit status 143.",
     )
     p.add_argument("source", metavar="SOURCE", help="transforms.json, COLMAP model folder, images folder or video")
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
@@ -142,7 +142,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 class _Progress:
-    """A tqdm bar over steps (``max_steps``) or training seconds (time budget) showing loss, PSNR and ETA."""
+    """A tqdm bar over steps (``max_steps``) or training seconds (time budget) showing loss, PSNR and ETA; drawn on
+    a terminal only (a log would get a line of carriage returns), and never where stderr is closed (``2>&-``)."""
 
     def __init__(self, max_steps: int | None, time_budget_s: float | None):
         from tqdm import tqdm
@@ -150,6 +151,7 @@ class _Progress:
         self.by_steps = max_steps is not None
         total = max_steps if self.by_steps else round(time_budget_s)
         self.bar = tqdm(total=total, desc="starting", dynamic_ncols=True, file=sys.stderr,
+                        disable=None if sys.stderr is not None else True,
                         bar_format="fit {percentage:3.0f}%|{bar}| {desc}")
 
     def __call__(self, info: dict) -> None:
@@ -196,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     from ..fit.budget import FINE_BUDGET_S, LONG_BUDGET_S, budget_config
     from ..fit.detail import DETAIL_STAGE_AT
     from ..scene.file import read_scene_file, save_scene
-    from ._interrupt import first_ctrl_c_deferred, interrupted
+    from ._interrupt import first_ctrl_c_deferred, interrupt_name, interrupted, sigterm_kept_from_pycolmap
     from ._output import SCENE, check_output
     from .info import format_exposure, format_info
     from .poses import (
@@ -209,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
     )
 
     check_arguments(args)
+    sigterm_kept_from_pycolmap()  # SIGTERM as Ctrl-C, also while structure from motion runs
     time_budget = args.time_budget
     if time_budget is None and args.max_steps is None:
         time_budget = 600.0
@@ -246,7 +249,7 @@ def run(args: argparse.Namespace) -> int:
     appearance, exposure = decide_appearance(capture, APPEARANCE[args.appearance])
     if exposure is not None:
         lines.append(format_exposure(exposure))
-    print("\n".join(lines), file=sys.stderr)
+    print(printable("\n".join(lines)), file=sys.stderr)
     context = {"source": str(args.source), "downscale": args.downscale, "ingest_seconds": round(ingest_s, 2),
                "skipped": skipped_records(capture.skipped), "warnings": list(capture.report.get("warnings", [])),
                **({} if exposure is None else {"exposure": exposure})}
@@ -272,8 +275,8 @@ def run(args: argparse.Namespace) -> int:
                 if not last:
                     raise KeyboardInterrupt
                 progress.close()
-                print("n2r fit: Ctrl-C: stopping here, then evaluating and saving the field trained so far "
-                      f"(Ctrl-C again to quit at once, keeping the checkpoint of step {last['steps']})",
+                print(f"n2r fit: {interrupt_name()}: stopping here, then evaluating and saving the field trained so "
+                      f"far (Ctrl-C again to quit at once, keeping the checkpoint of step {last['steps']})",
                       file=sys.stderr)
                 return True
 
@@ -292,13 +295,13 @@ def run(args: argparse.Namespace) -> int:
             return 130
         print(f"n2r fit: the fit failed; {_kept(output, last)}", file=sys.stderr)
         raise
-    print(format_info(read_scene_file(output, images=False)))
+    print(printable(format_info(read_scene_file(output, images=False))))
     if result.report["stopped"]:
         print(f"n2r fit: interrupted; the field at step {result.report['steps']} "
-              f"({result.report['train_seconds']:.0f} s of training) is saved in {output}", file=sys.stderr)
+              f"({result.report['train_seconds']:.0f} s of training) is saved in {printable(output)}", file=sys.stderr)
         return 130
     if late:
-        print(f"n2r fit: interrupted after training had ended; the complete field is saved in {output}",
+        print(f"n2r fit: interrupted after training had ended; the complete field is saved in {printable(output)}",
               file=sys.stderr)
         return 130
     return 0
@@ -343,6 +346,6 @@ def check_view_sizes(views: Sequence[CapturedView], downscale: float) -> None:
 
 def _kept(output: Path, last: dict) -> str:
     if not last:
-        return f"no checkpoint was written yet, so {output} was not touched"
+        return f"no checkpoint was written yet, so {printable(output)} was not touched"
     return (f"the last checkpoint (step {last['steps']}, {last['train_seconds']:.0f} s of training) is kept in "
-            f"{output}")
+            f"{printable(output)}")

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from ._output import FORCE_HELP
+from ._output import FORCE_HELP, printable
 
 __all__ = ["add_parser", "parse_rgb", "run"]
 
@@ -92,10 +92,10 @@ def run(args: argparse.Namespace) -> int:
     path = save_splat_scene(args.output, scene, report)
     held = sum(v.split == "heldout" for v in scene.views)
     g = scene.gaussians
-    print(f"read        {args.ply}: {len(g)} Gaussians, SH degree {g.sh_degree}", file=sys.stderr)
-    print(f"cameras     {cameras}: {len(scene.views)} views ({held} held out); reference length "
+    print(f"read        {printable(args.ply)}: {len(g)} Gaussians, SH degree {g.sh_degree}", file=sys.stderr)
+    print(f"cameras     {printable(cameras)}: {len(scene.views)} views ({held} held out); reference length "
           f"{scene.reference_length:.4g} scene units", file=sys.stderr)
-    print(f"wrote       {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    print(f"wrote       {printable(path)} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0
 
 
@@ -132,7 +132,8 @@ def _from_field(args: argparse.Namespace) -> int:
               "imported_by": f"pytest-n2r {__version__}", "import_s": round(time.perf_counter() - start, 3)}
     path = save_splat_scene(args.output, scene, report)
     g = scene.gaussians
-    print(f"read        {args.ply}: a {fitted.field.resolution}³ field, {int(fitted.field.occupancy.sum())} occupied "
-          f"voxels -> {len(g)} Gaussians, SH degree {g.sh_degree}", file=sys.stderr)
-    print(f"wrote       {path} ({path.stat().st_size / 1e6:.1f} MB)")
+    print(f"read        {printable(args.ply)}: a {fitted.field.resolution}³ field, "
+          f"{int(fitted.field.occupancy.sum())} occupied voxels -> {len(g)} Gaussians, SH degree {g.sh_degree}",
+          file=sys.stderr)
+    print(f"wrote       {printable(path)} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0

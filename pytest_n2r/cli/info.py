@@ -9,6 +9,7 @@ import json
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
+from ._output import printable
 from ._scene import SCENE_HELP
 
 if TYPE_CHECKING:
@@ -53,17 +54,17 @@ def run(args: argparse.Namespace) -> int:
                                           "photos)")
         info = splat_info(spec.source)
         lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
-        print(_json(info) if args.json else "\n".join(lines))
+        print(printable(_json(info) if args.json else "\n".join(lines)))
         return 0
     scene = _open(spec, images=args.shift)
     if not isinstance(scene, SceneFile):  # no fitted scene file behind it: an exact demo scene, a 3DGS .ply ...
         if args.shift:
             raise _no_photos(spec.source, f"no fitted scene file (a {type(scene).__name__})")
-        print(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec))
+        print(printable(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec)))
         return 0
     shift = _shift(scene, args.size) if args.shift else None
     if args.json:
-        print(_json({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})}))
+        print(printable(_json({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})})))
     else:
         try:
             text = format_info(scene)
@@ -72,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
 
             raise SceneFileError(f"{scene.path}: scene.json {exc.args[0]} (not as n2r fit writes it); "
                                  "n2r info --json prints it as stored") from exc
-        print(text + (f"\n{shift.format()}" if shift else ""))
+        print(printable(text + (f"\n{shift.format()}" if shift else "")))
     return 0
 
 

@@ -15,7 +15,8 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..errors import N2RError
-from ._interrupt import interrupted
+from ._interrupt import exit_status, interrupt_name, interrupted, sigterm_as_ctrl_c
+from ._output import printable
 
 #: Subcommand modules, in the order ``n2r --help`` lists them.
 COMMANDS: tuple[str, ...] = ("poses", "fit", "import", "render", "info", "demo", "study")
@@ -34,28 +35,39 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``n2r`` console script; returns the process exit code."""
+    """Entry point of the ``n2r`` console script; returns the process exit code (130 after Ctrl-C, 143 after
+    SIGTERM, which every command handles as Ctrl-C)."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
-        parser.print_help()
-        return 0
+        parser.error("expected a COMMAND: " + ", ".join(COMMANDS) + " (n2r --help describes them)")
+    try:
+        with sigterm_as_ctrl_c():
+            code = _run(args)
+    except KeyboardInterrupt:  # a SIGTERM in the instant after the command returned
+        code = 130
+    return exit_status() if code == 130 else code
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command's exit code, its errors printed as one line each."""
     try:
         return int(args.func(args) or 0)
     except N2RError as exc:
-        print(f"n2r {args.command}: error: {exc}", file=sys.stderr)
+        print(f"n2r {args.command}: error: {printable(exc)}", file=sys.stderr)
         return 2
     except (KeyboardInterrupt, SystemError) as exc:  # a SystemError: Ctrl-C inside a compiled kernel's call back
         if not interrupted(exc):
             raise
-        print(f"n2r {args.command}: interrupted", file=sys.stderr)
+        print(f"n2r {args.command}: interrupted" + (" (SIGTERM)" if interrupt_name() == "SIGTERM" else ""),
+              file=sys.stderr)
         return 130
     except BrokenPipeError:  # `n2r info ... | head`: the reader left; say nothing more
         sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - the interpreter flushes it at exit
         return 141
     except OSError as exc:  # the disk filled up, a file vanished: the system's reason, without a traceback
-        where = f" {exc.filename}" if exc.filename else ""
-        print(f"n2r {args.command}: error:{where}: {exc.strerror or exc}", file=sys.stderr)
+        where = f"{printable(exc.filename)}: " if exc.filename else ""  # none: stdout (`> /dev/full`), an open file
+        print(f"n2r {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except MemoryError:
         print(f"n2r {args.command}: error: out of memory (a smaller --size or --downscale needs less)",

@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._output import FORCE_HELP
+from ._output import FORCE_HELP, printable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -83,8 +83,10 @@ def check_frames_dir(frames_dir: Path | None, force: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..data.ingest import complete_points, extent, load_poses
     from ..data.transforms_json import write_transforms_json
+    from ._interrupt import sigterm_kept_from_pycolmap
 
     check_arguments(args)
+    sigterm_kept_from_pycolmap()  # SIGTERM as Ctrl-C, also while structure from motion runs
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # every skipped file is listed in the summary below
@@ -94,9 +96,9 @@ def run(args: argparse.Namespace) -> int:
         complete_points(poses)
     bounds, ref = extent(poses)
     total = time.perf_counter() - start
-    print(format_summary(poses, bounds, ref, total))
+    print(printable(format_summary(poses, bounds, ref, total)))
     for line in format_warnings(poses.report, "poses"):
-        print(line, file=sys.stderr)
+        print(printable(line), file=sys.stderr)
     if args.compare is not None:
         from ..data.compare import compare_poses
 
@@ -104,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
             warnings.simplefilter("ignore")
             other = load_poses(args.compare, sfm_max_size=args.max_size, matcher=args.matcher,
                                max_frames=args.max_frames, upright=not args.any_roll)
-        print(f"compare     against {other.source} ({other.kind}): {compare_poses(poses, other).summary()}")
+        print(printable(f"compare     against {other.source} ({other.kind}): {compare_poses(poses, other).summary()}"))
     if args.output is not None:
         # the photos not used ride in the n2r block, which nerfstudio and instant-ngp do not read (they read the keys
         # they know), so the file stays a plain transforms.json and the list cannot be separated from its poses
@@ -113,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
                          "images": _listed(poses), "skipped": skipped_records(poses.skipped),
                          "warnings": list(poses.report.get("warnings", []))}}
         path = write_transforms_json(args.output, poses, extra=extra)
-        print(f"wrote       {path} ({len(poses.frames)} frames)")
+        print(f"wrote       {printable(path)} ({len(poses.frames)} frames)")
     return 0
 
 
@@ -149,16 +151,7 @@ def skipped_records(skipped: list[tuple[str, str]]) -> list[dict[str, str]]:
     """The photos not used as JSON-ready records, ``{"file": ..., "reason": ...}`` each (what ``n2r poses -o`` and
     ``n2r fit``'s report keep). A file name that is not text (bytes no encoding decodes, which Python keeps as lone
     surrogates) is written with those bytes escaped (``\\xff``), so any terminal can print it back."""
-    return [{"file": _printable(name), "reason": _printable(reason)} for name, reason in skipped]
-
-
-def _printable(text: str) -> str:
-    """``text`` with lone surrogates (undecodable bytes of a file name) as backslash escapes.
-
-    >>> _printable("IMG_" + chr(0xDCFF) + ".JPG")
-    'IMG_\\\\udcff.JPG'
-    """
-    return text.encode("utf-8", "backslashreplace").decode("utf-8")
+    return [{"file": printable(name), "reason": printable(reason)} for name, reason in skipped]
 
 
 def format_frames(report: dict) -> list[str]:

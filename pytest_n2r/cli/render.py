@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._output import FORCE_HELP
+from ._output import FORCE_HELP, printable
 from ._scene import SCENE_HELP
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
@@ -133,5 +133,5 @@ def run(args: argparse.Namespace) -> int:
     print(f"rendered    view {view.index} {view.name!r} ({view.split}), {tau.describe(args.units)}, "
           f"{camera.width}x{camera.height} in {seconds:.2f} s{where}", file=sys.stderr)
     for path in written:
-        print(f"wrote       {path}")
+        print(f"wrote       {printable(path)}")
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ._output import printable
 from ._scene import SCENE_HELP
 
 
@@ -59,6 +60,29 @@ def _kinds(suts: list[str], given: list[tuple[str | None, str]]) -> dict[str, st
     return kinds
 
 
+def check_render_size(scenes: list, size: int) -> None:
+    """Every scene's test renders at ``--size`` (the longer side, never above a view's own) must keep
+    :data:`~pytest_n2r.cli.fit.MIN_VIEW_SIDE` pixels a side, for SSIM's window: checked before anything is rendered
+    (``--size 16`` used to fail after the renders, a 16:9 view being 16x9 pixels)."""
+    from ..errors import InvalidArgument
+    from .fit import MIN_VIEW_SIDE
+
+    for scene in scenes:
+        for view in scene.views:
+            camera = view.camera.fit_within(size)
+            if min(camera.width, camera.height) >= MIN_VIEW_SIDE:
+                continue
+            own = view.camera
+            needed = next((s for s in range(size, max(own.width, own.height) + 1)
+                           if min(own.fit_within(s).width, own.fit_within(s).height) >= MIN_VIEW_SIDE), None)
+            fix = (f"--size {needed} or more" if needed is not None and needed <= 4096 else
+                   f"a scene with larger views (its own are {own.width}x{own.height})")
+            raise InvalidArgument(
+                f"--size {size}: view {view.name!r} of {scene.name} would render {camera.width}x{camera.height} "
+                f"pixels; the study scores renders with SSIM, which needs at least {MIN_VIEW_SIDE} pixels a side: "
+                f"{fix}")
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "study", help="characterize SUTs on scenes as the N2R-Tester paper did (RQ1-RQ3)",
@@ -89,7 +113,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                              "(default: 480x270, 960x540, 1920x1080 as in the paper)")
     parser.add_argument("--fps-frames", type=int, default=3, metavar="N", help="frames timed per size (default: 3)")
     parser.add_argument("--seed", type=int, default=0, help="seed of every draw (default: 0)")
-    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"), help="render device")
+    parser.add_argument("--device", default="auto", metavar="DEVICE",
+                        help="render device: auto, cpu or cuda[:N] (default: auto)")
     parser.set_defaults(func=run)
 
 
@@ -100,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
 
     from ..demo.scene_specs import load_scene_spec
     from ..errors import InvalidArgument
+    from ..field.device import resolve_device
     from ..study import StudyConfig, resolve_sut, run_study, write_study
     from ._output import check_output_dir
     from ._scene import scene_arguments
@@ -109,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidArgument(f"{option} {value}: expected an integer >= 1")
     if not 16 <= args.size <= 4096:
         raise InvalidArgument(f"--size {args.size}: expected the longer side of the test renders in 16..4096 pixels")
+    resolve_device(args.device)  # as n2r render and n2r fit do: cuda without CUDA is an error, not the CPU
     kinds = _kinds(args.sut, args.sut_kind)  # checked before any work
     check_output_dir(Path(args.out), lambda folder: (folder / "study.md").is_file(), "the study's tables and plots",
                      force=args.force)
@@ -116,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
                          fps_frames=args.fps_frames, seed=args.seed,
                          **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))
     scenes = [load_scene_spec(spec, args.device) for spec in scene_arguments(args.scenes)]
+    check_render_size(scenes, args.size)
     view = scenes[0].views[0]
     probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).rgb
     suts = [resolve_sut(spec, probe, kinds.get(spec)) for spec in args.sut]
@@ -126,8 +154,8 @@ def run(args: argparse.Namespace) -> int:
 
         result = run_study(scenes, suts, config, progress)
     paths = write_study(result, args.out)
-    print(Path(args.out) / "study.md")
-    print(f"wrote {len(paths)} files to {args.out}")
+    print(printable(Path(args.out) / "study.md"))
+    print(f"wrote {len(paths)} files to {printable(args.out)}")
     for note in result.notes:
-        print(f"note: {note}")
+        print(f"note: {printable(note)}")
     return 0

@@ -7,16 +7,21 @@ Convention
 expect. ``train_filenames`` / ``val_filenames`` carry the split (every 8th view held out), which
 nerfstudio's own data parser honours. ``n2r_reference_length`` and ``n2r_content_hash`` say which scene
 and what translation unit the files belong to.
+
+The first file written is a placeholder ``transforms.json`` (``n2r_complete: false``, no frames) naming the
+scene: an export interrupted among its images leaves a folder ``n2r demo export`` knows as its own, so the same
+command run again writes into it without ``--force``; the real one replaces it last.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from ..data.atomic import atomic_write_bytes
+from ..data.atomic import atomic_write_bytes, atomic_write_text
 from ..data.poses import SourceFrame
 from ..data.transforms_json import write_transforms_json
 from .exact import GroundTruthScene
@@ -31,6 +36,8 @@ def export_scene(scene: GroundTruthScene, out_dir: str | os.PathLike, size: int 
 
     out = Path(out_dir)
     cap = capture_scene(scene, size)
+    marker = {"n2r_scene": scene.name, "n2r_content_hash": scene.content_hash, "n2r_complete": False, "frames": []}
+    atomic_write_text(out / "transforms.json", json.dumps(marker, indent=1) + "\n")  # before any image
     frames, train, val = [], [], []
     for v in cap.views:
         ok, png = cv2.imencode(".png", cv2.cvtColor(v.image, cv2.COLOR_RGB2BGR))  # OpenCV wants BGR

@@ -10,6 +10,8 @@ keypoint or a batch of one score vector.
 from __future__ import annotations
 
 import importlib
+import os
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -108,6 +110,14 @@ def _kind_of(output: Any, name: str, kind: Kind | None = None) -> Kind:
     )
 
 
+def _working_folder_importable() -> None:
+    """The working folder on the module path, as for a ``module:function`` scene (``n2r study --sut mysut:detect``
+    with ``mysut.py`` there); appended, so a ``cv2.py`` there cannot shadow the packages imported later."""
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.append(cwd)
+
+
 def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None) -> SUT:
     """A SUT from a built-in name (``orb``, ``sift``, ``akaze``) or ``package.module:attribute``.
 
@@ -126,6 +136,7 @@ def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None) -> SUT:
             f"--sut {spec!r} is not a built-in SUT ({', '.join(BUILTIN_SUTS)}) nor 'module:attribute'"
         )
     module_name, _, attr = spec.partition(":")
+    _working_folder_importable()
     try:
         fn = getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError) as exc:

@@ -1,0 +1,54 @@
+"""`n2r`'s entry: a missing COMMAND, and the errors and paths it prints."""
+
+from __future__ import annotations
+
+import errno
+import io
+
+import pytest
+
+import pytest_n2r.cli.info
+from pytest_n2r.cli.main import main
+
+
+def test_bare_n2r_is_a_usage_error(capsys):
+    """`n2r` alone printed the help and exited 0, as if it had done something (argparse exits 2 on a usage error)."""
+    with pytest.raises(SystemExit) as exit_:
+        main([])
+    assert exit_.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("usage: n2r") and "n2r: error: expected a COMMAND: poses, fit" in err, err
+
+
+def test_an_error_writing_stdout_has_one_colon(monkeypatch, capsys):
+    """`n2r info demo:wall > /dev/full` printed `n2r info: error:: No space left on device`."""
+
+    def full(_args: object) -> int:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(pytest_n2r.cli.info, "run", full)
+    assert main(["info", "demo:wall"]) == 1
+    assert capsys.readouterr().err == "n2r info: error: No space left on device\n"
+
+
+class StrictUTF8:
+    """A stdout as PYTHONIOENCODING=utf-8 gives it: a lone surrogate (a file name's byte that is not UTF-8) fails."""
+
+    def __init__(self) -> None:
+        self.stream = io.TextIOWrapper(io.BytesIO(), encoding="utf-8", errors="strict", write_through=True)
+
+    def text(self) -> str:
+        return self.stream.buffer.getvalue().decode("utf-8")
+
+
+def test_a_written_path_that_is_not_utf8_is_printed_escaped(tmp_path, monkeypatch):
+    """`n2r render ... -o $'bad\\xff.png'` wrote the PNG, then failed with UnicodeEncodeError printing its name."""
+    out, err = StrictUTF8(), StrictUTF8()
+    monkeypatch.setattr("sys.stdout", out.stream)
+    monkeypatch.setattr("sys.stderr", err.stream)
+    bad = tmp_path / ("bad" + chr(0xDCFF) + ".png")  # the byte 0xff, as os.fsdecode keeps it
+    assert main(["render", "demo:wall", "--size", "32", "-o", str(bad)]) == 0, err.text()
+    assert bad.is_file()
+    assert f"wrote       {tmp_path}/bad\\xff.png\n" in out.text()
+    assert main(["render", "demo:wall", "-o", str(bad.with_suffix(".txt"))]) == 2  # an error naming the path
+    assert f"-o {tmp_path}/bad\\xff.txt: expected a PNG image" in err.text()
