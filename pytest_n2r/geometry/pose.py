@@ -245,7 +245,11 @@ class Transform:
         length = check_real("length", length)
         T = np.eye(4)
         T[:3, :3] = self.rotation
-        T[:3, 3] = self.translation * length
+        with np.errstate(over="ignore"):
+            T[:3, 3] = self.translation * length
+        if not np.all(np.isfinite(T[:3, 3])):
+            raise InvalidArgument(f"{self!r} with length={length!r} moves the camera beyond float64 "
+                                  f"({T[:3, 3].tolist()}); expected a translation times length within ±1.8e308")
         return T
 
     @classmethod

@@ -223,3 +223,10 @@ def test_parse_rejects_a_non_string():
 def test_describe_shows_small_angles_and_leaves_out_float_noise(tau, expected):
     assert tau.describe() == expected, (f"{tau!r}.describe() is {tau.describe()!r}, expected {expected!r}: a small "
                                         "non-zero angle must not read +0.000° and float noise is left out")
+
+
+def test_a_translation_beyond_float64_is_refused_naming_the_transform():
+    """Transform(x=1e308) applied with a length of 10 gave a pose of inf and NaN, with only a RuntimeWarning."""
+    with pytest.raises(InvalidArgument, match=r"Transform\(x=1e\+308\) with length=10.0 moves the camera beyond "
+                                              r"float64"):
+        Transform(x=1e308).apply(np.eye(4), 10.0)
