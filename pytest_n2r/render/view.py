@@ -35,6 +35,15 @@ class RenderedView:
     depth: np.ndarray | None = None
     opacity: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        c2w = np.asarray(self.c2w)
+        if c2w.shape != (4, 4) or not np.issubdtype(c2w.dtype, np.number) or not np.all(np.isfinite(c2w)):
+            from ..errors import InvalidArgument
+
+            what = f"of shape {c2w.shape}" if c2w.shape != (4, 4) else "with values that are not finite numbers"
+            raise InvalidArgument(f"RenderedView c2w {what}; expected the view's 4x4 camera-to-world pose of finite "
+                                  "numbers (OpenCV axes)")
+
     def require(self, *outputs: str) -> None:
         """Raise a clear error if an output a metric needs was not rendered."""
         missing = [o for o in outputs if getattr(self, o) is None]

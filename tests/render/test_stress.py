@@ -301,3 +301,17 @@ def test_a_torch_sample_rounded_into_an_unoccupied_cell_reads_no_row_it_does_not
             f"the sample read a row none of its corners stores (the last, where -1 wraps?): its {name} is "
             f"{out[0.0][name].tolist()} with zeros there, {out[30.0][name].tolist()} with 30")
     assert float(out[0.0]["opacity"][0]) > 0, "the sample added no opacity: the test would pass vacuously"
+
+
+def test_a_rendered_view_with_a_pose_that_is_not_one_is_refused_naming_c2w():
+    """A metric given a view with a 3x3 c2w failed with a bare IndexError; a NaN pose named internal arrays
+    (``points_world contains 9 non-finite values``) instead of the view's pose."""
+    from pytest_n2r.errors import InvalidArgument
+    from pytest_n2r.geometry import Camera
+    from pytest_n2r.render.view import RenderedView
+
+    camera = Camera(32, 24, 30.0, 30.0, 15.5, 11.5)
+    for c2w, what in ((np.eye(3), r"of shape \(3, 3\)"),
+                      (np.full((4, 4), np.nan), "with values that are not finite numbers")):
+        with pytest.raises(InvalidArgument, match=rf"RenderedView c2w {what}"):
+            RenderedView(camera, c2w)
