@@ -19,10 +19,12 @@ from dataclasses import dataclass
 from dataclasses import field as dataclass_field
 from typing import Literal
 
+import numba
 import numpy as np
 import torch
 import torch.nn.functional as F
 
+from .. import __version__
 from ..data.capture import Capture, CapturedView
 from ..errors import FitError, InvalidArgument
 from ..field.config import FieldConfig
@@ -58,10 +60,6 @@ class FitResult:
 
 
 def _versions() -> dict:
-    import numba
-
-    from .. import __version__
-
     return {"pytest_n2r": __version__, "torch": torch.__version__, "numba": numba.__version__,
             "numpy": np.__version__, "python": platform.python_version()}
 
@@ -320,12 +318,11 @@ def fit(
     stopped = False
 
     def progress_fraction() -> float:
-        if max_steps is not None:
-            return trainer.steps / max_steps
-        return train_s / time_budget_s
+        return trainer.steps / max_steps if max_steps is not None else train_s / time_budget_s
 
-    def budget_left() -> bool:
-        return progress_fraction() < 1.0 and (time_budget_s is None or train_s < time_budget_s)
+    def budget_left() -> bool:  # and a step on this grid predicted to end within it, or nearly (phases.py)
+        left_s, budget_s = (math.inf, math.inf) if time_budget_s is None else (time_budget_s - train_s, time_budget_s)
+        return progress_fraction() < 1.0 and left_s > 0 and trainer.phases.may_step(left_s, budget_s)
 
     def snapshot() -> FitResult:
         return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2),
@@ -335,8 +332,12 @@ def fit(
     while budget_left():
         t0, compiled_before = time.perf_counter(), compiles.seconds
         frac = progress_fraction()
+        grow = config.stage(frac) > trainer.stage
+        if grow and max_steps is None:  # paced by its budget: a grid grows once pruned, where growth fits (phases.py)
+            finer, left_s = config.resolutions[trainer.stage + 1], time_budget_s - train_s
+            grow = not trainer.compact_pending and trainer.phases.may_grow(finer, left_s)  # compact_pending: unpruned
         with compiles.counting():
-            if config.stage(frac) > trainer.stage:
+            if grow:
                 trainer.refine()
                 trainer.phases.lap("refine")
                 config = trainer.config
