@@ -72,8 +72,9 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
             return test
         if getattr(test, RELATION_ATTR, None) is not None:
             name = getattr(test, "__name__", repr(test))
-            setattr(test, ERROR_ATTR, f"@metamorphic(...): {name} has two @metamorphic decorators; a test checks one "
-                                      "relation (the outer one replaced the inner): write a test for each")
+            setattr(test, ERROR_ATTR, f"@metamorphic(...): {name} was given two relations (two @metamorphic "
+                                      "decorators, or one function decorated twice); a test checks one relation (the "
+                                      "second replaced the first): write a test for each")
             return test
         if error is None and (inspect.iscoroutinefunction(test) or inspect.isasyncgenfunction(test)):
             name = getattr(test, "__name__", repr(test))

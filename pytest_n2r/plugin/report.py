@@ -79,8 +79,6 @@ def pytest_configure(config: pytest.Config) -> None:
 def _other_outputs(config: pytest.Config) -> list[tuple[str, Path]]:
     """The files other plugins write that a pytest-n2r output must not share: pytest's ``--junitxml`` and
     pytest-html's ``--html``, as they expand them. Checked only when a pytest-n2r output is given."""
-    import os
-
     given = [(flag, getattr(config.option, dest, None)) for flag, dest in (("--junitxml", "xmlpath"),
                                                                            ("--html", "htmlpath"))]
     return [(flag, Path(os.path.expanduser(os.path.expandvars(value)))) for flag, value in given

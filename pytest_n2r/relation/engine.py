@@ -266,7 +266,7 @@ class Engine:
             return rendered[-1][0]
 
         follow = tau.follow_view(source, self.scene, render_follow)
-        # the SUT runs once per render: the follow-up is one when it is what the render returned, unchanged
+        # the SUT's output is kept by render: the follow-up is one when it is what the render returned, unchanged
         follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
         if same_pixels(follow.rgb, source.rgb):  # a deterministic SUT cannot fail on it: not a test
             record.status, record.reason = "undefined", SAME_PIXELS

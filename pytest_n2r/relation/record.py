@@ -113,7 +113,7 @@ class RelationRecord:
     ``replayed`` holds the baseline examples replayed before the search (``None`` when none were asked
     for); ``minimal`` the minimal failing example after shrinking (with its saved ``images``); ``renders``
     the renders that missed the cache, ``sut_calls`` the calls of the SUT and ``sut_shared`` the outputs taken
-    from an earlier call on the same render or the same pixels (:mod:`pytest_n2r.relation.sut_outputs`),
+    from an earlier call on the same render (:mod:`pytest_n2r.relation.sut_outputs`),
     ``shrink_examples`` the examples Hypothesis ran while shrinking a failure. ``floor`` is the plain dict of
     the field-floor measurement beside the result (``None`` when none was made); reports show its ``line``
     beside the relation's deviations.

@@ -184,10 +184,11 @@ def portable_places(settings: dict[str, Any], baseline: str | os.PathLike) -> di
             return path
 
     out = dict(settings)
-    if settings.get("rootdir"):
-        out["rootdir"] = relative(settings["rootdir"], Path(baseline).expanduser().resolve().parent)
+    if settings.get("rootdir"):  # every path resolved: pytest keeps a rootdir reached through a link as given
+        root = str(Path(settings["rootdir"]).resolve())
+        out["rootdir"] = relative(root, Path(baseline).expanduser().resolve().parent)
         if settings.get("config_file"):
-            out["config_file"] = relative(settings["config_file"], settings["rootdir"])
+            out["config_file"] = relative(str(Path(settings["config_file"]).resolve()), root)
     return out
 
 

@@ -23,6 +23,7 @@ import math
 import os
 import re
 import shutil
+import sys
 import warnings
 from collections import OrderedDict
 from collections.abc import Callable, Iterable
@@ -372,8 +373,12 @@ class RenderCache:
 
     def _stop_storing(self, exc: OSError) -> None:
         self._store_error = exc
-        warnings.warn(CacheNotStored(f"the render cache {str(self.directory)!r} stores nothing more this session: "
-                                     f"{type(exc).__name__}: {exc}"), stacklevel=2)
+        note = CacheNotStored(f"the render cache {str(self.directory)!r} stores nothing more this session: "
+                              f"{type(exc).__name__}: {exc}")
+        try:
+            warnings.warn(note, stacklevel=2)
+        except CacheNotStored:  # -W error made the warning an exception: storing never fails a test, so said here
+            print(f"pytest-n2r: {note}", file=sys.stderr)
 
     def _prepare_directory(self, leaf: Path) -> None:
         """Make ``leaf``; tag the directory first where it is new or holds only pytest-n2r's files (a folder of the

@@ -66,12 +66,6 @@ def _patch_pixels(size: float, extent: int) -> int:
     return 0 if size == 0 else min(extent, max(1, round(size * extent)))
 
 
-def _is_abstract(cls: type) -> bool:
-    """Whether ``cls`` leaves an abstract method unimplemented (``__abstractmethods__`` is not set yet while the
-    class is being made)."""
-    return any(getattr(getattr(cls, n, None), "__isabstractmethod__", False) for n in dir(cls))
-
-
 def _plain(owner: str, field: str, value: Any) -> Any:
     """``value`` as plain JSON data (numpy scalars as Python numbers); other values are refused."""
     if isinstance(value, np.generic):
@@ -107,10 +101,7 @@ class Mutation(FollowUp):
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         name = cls.__dict__.get("name")
-        if name is None:
-            if getattr(cls, "name", None) is None and not _is_abstract(cls):
-                raise InvalidArgument(f"{cls.__qualname__} has no name: a Mutation subclass needs a short name for "
-                                      f"reports and records, e.g. name: ClassVar[str] = {cls.__name__.lower()!r}")
+        if name is None:  # a base of named mutations (abstract or not): refused only if drawn (as_dict)
             return
         if not isinstance(name, str) or not name:
             raise InvalidType(f"{cls.__qualname__}.name={name!r} must be a non-empty str")
@@ -168,6 +159,10 @@ class Mutation(FollowUp):
 
     def as_dict(self) -> dict[str, Any]:
         """Plain JSON-ready parameters, with the mutation's ``name`` (numpy scalars become Python numbers)."""
+        if getattr(self, "name", None) is None:
+            cls = type(self)
+            raise InvalidArgument(f"{cls.__qualname__} has no name: a Mutation that is drawn needs a short name for "
+                                  f"reports and records, e.g. name: ClassVar[str] = {cls.__name__.lower()!r}")
         return {"name": self.name, **{f.name: _plain(type(self).__name__, f.name, getattr(self, f.name))
                                       for f in fields(self)}}  # type: ignore[arg-type]
 

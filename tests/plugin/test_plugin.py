@@ -107,8 +107,8 @@ def test_two(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(errors=1)
-    result.stdout.fnmatch_lines([("*test_relations.py::test_two: @metamorphic(...): test_two has two @metamorphic "
-                                 "decorators*write a test for each*")])
+    result.stdout.fnmatch_lines([("*test_relations.py::test_two: @metamorphic(...): test_two was given two "
+                                  "relations (two @metamorphic decorators*write a test for each*")])
 
 
 def test_a_relation_above_staticmethod_runs(n2r_project):
@@ -295,10 +295,18 @@ class TestPinned:
     @pytest.mark.n2r_scene("plane", {PLANE!r})
     def test_dup(self, n2r_scene):
         pass
+
+
+@pytest.mark.n2r_scene("plane")
+@pytest.mark.n2r_scene("ramp")
+def test_stacked(n2r_scene):
+    pass
 """, name="test_scenes")
     result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
-    result.assert_outcomes(passed=3)
-    for test in ("test_only_ramp[ramp]", "test_module_pin[plane]", "TestPinned::test_dup[plane]"):
+    result.assert_outcomes(passed=5)
+    # two marks of one level both count (stacked here; a pytestmark list alike)
+    for test in ("test_only_ramp[ramp]", "test_module_pin[plane]", "TestPinned::test_dup[plane]",
+                 "test_stacked[plane]", "test_stacked[ramp]"):
         assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), f"{test} did not run:\n{result.stdout.str()}"
 
 
@@ -835,8 +843,9 @@ def test_weak(n2r_scene):
 
 @pytest.mark.parametrize("mark, args", [('@pytest.mark.xfail(condition=False, reason="only on windows")', ()),
                                         ('@pytest.mark.xfail(sys.platform == "win32", reason="on windows")', ()),
-                                        ('@pytest.mark.xfail(reason="a known weakness")', ("--runxfail",))],
-                         ids=["condition-keyword", "condition-positional", "runxfail"])
+                                        ('@pytest.mark.xfail(reason="a known weakness")', ("--runxfail",)),
+                                        ('@pytest.mark.xfail(raises=ValueError, reason="a loader bug")', ())],
+                         ids=["condition-keyword", "condition-positional", "runxfail", "raises-another-error"])
 def test_a_relation_not_expected_to_fail_is_shrunk(n2r_project, mark, args):
     """``xfail(condition=False)`` as a keyword (and ``--runxfail``) was read as expected to fail: a real failure was
     reported unshrunk, "shrinking is off (the test is expected to fail)"."""

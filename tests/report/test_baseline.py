@@ -547,3 +547,16 @@ def test_a_folder_is_not_a_baseline(tmp_path):
         load_baseline(tmp_path)
     assert str(info.value) == (f"baseline {tmp_path} is a folder; expected a baseline file (the JSON file that "
                                f"--n2r-save-baseline PATH writes, e.g. {tmp_path / 'n2r-baseline.json'})")
+
+
+def test_a_rootdir_reached_through_a_link_is_recorded_as_the_same_place(tmp_path):
+    """pytest keeps a rootdir reached through a symlink as given, while the baseline's folder was resolved: the
+    baseline recorded '../../../link/proj' for its own project, and a clone elsewhere got a false 'rootdir differs'."""
+    from pytest_n2r.report.baseline import portable_places
+
+    (tmp_path / "real" / "proj" / "tests").mkdir(parents=True)
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    proj = tmp_path / "link" / "proj"
+    places = portable_places({"rootdir": str(proj), "config_file": str(proj / "pyproject.toml")},
+                             proj / "tests" / "gate.json")
+    assert places == {"rootdir": "..", "config_file": "pyproject.toml"}, places

@@ -170,3 +170,15 @@ def test_trimming_deletes_what_a_killed_writer_left_but_not_a_writers_fresh_file
     assert cache.disk_usage() >= 10_000, f"temporary files not counted: {cache.disk_usage()} bytes"
     assert cache.trim() >= 5000
     assert not stale.exists() and fresh.exists(), "a killed writer's file kept, or a concurrent writer's deleted"
+
+
+def test_a_disk_that_cannot_store_fails_no_render_under_warnings_as_errors(tmp_path, monkeypatch, capsys):
+    """With -W error (filterwarnings = error, common in projects) the cache's warning became an exception raised
+    out of the store, into the relation: a full disk failed tests the docs say storing never fails."""
+    scene = PlaneScene()
+    cache = RenderCache(tmp_path)
+    monkeypatch.setattr(tempfile, "mkstemp", lambda *a, **k: (_ for _ in ()).throw(OSError(28, "No space left")))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cache.render(scene, _pose(scene, 3), scene.views[0].camera, "rgb").rgb is not None
+    assert "stores nothing more this session: OSError: [Errno 28] No space left" in capsys.readouterr().err
