@@ -304,4 +304,7 @@ def _undistorted_image(frame: SourceFrame, as_stored: bool) -> np.ndarray:
         return cam.undistort_image(image)
     except InvalidArgument as exc:  # a lens model that folds over within the photo (Camera.check_lens)
         raise IngestError(f"image {str(frame.path)!r} ({frame.name!r}): its camera ({cam.width}x{cam.height}, "
-                          f"fx={cam.fx:g}, fy={cam.fy:g}) cannot undistort it: {exc}") from None
+                          f"fx={cam.fx:g}, fy={cam.fy:g}) cannot undistort it: {exc}. A wide lens posed by "
+                          "structure from motion (`n2r poses`, one radial term) can fold so; give the capture a "
+                          "calibrated lens (transforms.json with k1 k2 [k3] or a COLMAP OPENCV camera) or crop the "
+                          "photos to their centre") from None
