@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import InvalidArgument, InvalidType, SceneFileError
+from ..errors import InvalidArgument, InvalidType
 from ..scene.base import Scene
 
 __all__ = ["SceneSpec", "parse_scene_specs", "resolve_scene", "default_scene_specs", "load_scene_spec",
@@ -85,15 +85,10 @@ def _file_spec(path: Path, origin: str, text: str, opened: bool) -> SceneSpec:
             f"{origin} {text!r}: {path} is not a scene file (a .n2r scene file is a zip archive written by "
             "`n2r fit`)"
         )
-    try:  # what scene/file.py's reader catches on opening a scene file
-        with zipfile.ZipFile(path) as archive:
-            names = archive.namelist()
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise SceneFileError(f"{origin} {text!r}: {path}: not a zip archive, or truncated ({exc}); a .n2r scene file "
-                             "is the zip archive `n2r fit` writes") from None
-    except (NotImplementedError, RuntimeError) as exc:  # e.g. "zip file version 9.1" in the central directory
-        raise SceneFileError(f"{origin} {text!r}: {path}: not a zip archive this reader can open ({exc}); a .n2r "
-                             "scene file is the zip archive `n2r fit` writes") from None
+    from ..scene.file import open_scene_archive  # here: the field's modules load only for a scene file
+
+    with open_scene_archive(path, f"{origin} {text!r}: {path}") as archive:  # as the scene file reader opens it
+        names = archive.namelist()
     if "scene.json" not in names:
         raise InvalidArgument(f"{origin} {text!r}: {path} is a zip archive without scene.json, not a scene file")
     return SceneSpec(path.stem, "file", str(path))

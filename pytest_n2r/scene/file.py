@@ -312,8 +312,10 @@ def _check_json(data: Any, source: str) -> tuple[list, float, float | None, np.n
     return frames, reference_length, metres_per_unit, bounds, config, field_meta
 
 
-def _open(path: Path) -> zipfile.ZipFile:
-    source = str(path)
+def open_scene_archive(path: Path, name: str | None = None) -> zipfile.ZipFile:
+    """The zip archive of the scene file at ``path``, else a :class:`~pytest_n2r.errors.SceneFileError` that starts
+    with ``name`` (default: the path) and says what is wrong (a folder, no file, not a zip archive, truncated)."""
+    source = str(path) if name is None else name
     if path.is_dir():
         raise SceneFileError(f"{source}: is a folder; expected a .n2r scene file (`n2r fit SOURCE -o scene.n2r` "
                              "writes one)")
@@ -337,7 +339,7 @@ def check_scene_file(path: str | os.PathLike) -> None:
     path = Path(path)
     if path.suffix.lower() == ".ply":  # a 3DGS splat scene: its reader checks it
         return
-    with _open(path) as archive:
+    with open_scene_archive(path) as archive:
         data = read_scene_json(archive, str(path))
         if isinstance(data, dict) and data.get("representation") == "splats":  # `n2r import`: its reader checks it
             return
@@ -356,7 +358,7 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
     """
     path = Path(path)
     source = str(path)
-    archive = _open(path)
+    archive = open_scene_archive(path)
     size = path.stat().st_size
     with archive:
         data = read_scene_json(archive, source)
