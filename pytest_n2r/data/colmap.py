@@ -47,8 +47,9 @@ def _cut(file: Path, what: str, need: int, left: int) -> IngestError:
 
 
 def _check_bin(file: Path) -> None:
-    """Walk the records of one binary model file (``cameras.bin``, ``images.bin``, ``points3D.bin``), checking
-    every count against the bytes left, so that pycolmap never allocates for a count the file cannot hold."""
+    """Walk the records of one binary model file (``cameras.bin``, ``images.bin``, ``points3D.bin``,
+    ``frames.bin``), checking every count against the bytes left, so that pycolmap never allocates or loops for a
+    count the file cannot hold; ``rigs.bin`` (COLMAP 3.12's) by its header's count alone."""
     try:
         data = file.read_bytes()
     except OSError as exc:
@@ -57,15 +58,17 @@ def _check_bin(file: Path) -> None:
     if end < 8:
         raise _cut(file, "the count of records", 8, end)
     count = u64(data)[0]
-    least = {"cameras": 24 + 8 * min(_PARAM_COUNTS), "images": 73, "points3D": 51}[kind]
+    least = {"cameras": 24 + 8 * min(_PARAM_COUNTS), "images": 73, "points3D": 51, "frames": 68, "rigs": 8}[kind]
     if count * least > end - 8:
         raise IngestError(f"{file}: the header claims {count} records, but its {end - 8} bytes after the count hold "
                           f"at most {(end - 8) // least} (a copy cut short, or not a COLMAP model); expected a binary "
                           "model whose counts match its bytes")
     at = 8
-    for index in range(count):  # the fixed part of each record fits: count * least was checked
+    for index in range(0 if kind == "rigs" else count):  # each record's fixed part fits: count * least was checked
         start = at
-        if kind == "points3D":  # id, xyz, rgb, error, track length; then (image id, point2D index) pairs
+        if kind == "frames":  # frame id, rig id, rig-from-world pose; then (sensor type, sensor id, data id) triples
+            n, item, at = struct.unpack_from("<I", data, at + 64)[0], 16, at + 68
+        elif kind == "points3D":  # id, xyz, rgb, error, track length; then (image id, point2D index) pairs
             n, item, at = u64(data, at + 43)[0], 8, at + 51
         elif kind == "cameras":  # id, model id, width, height; then the model's params
             model = struct.unpack_from("<i", data, at + 4)[0]
@@ -80,7 +83,8 @@ def _check_bin(file: Path) -> None:
                            "count,", (end if name_end < 0 else name_end) + 9 - start, end - start)
             n, item, at = u64(data, name_end + 1)[0], 24, name_end + 9
         if n * item > end - at:
-            what = {"points3D": "track entries", "cameras": "params", "images": "2-D points"}[kind]
+            what = {"points3D": "track entries", "cameras": "params", "images": "2-D points",
+                    "frames": "data ids"}[kind]
             name = f" {data[start + 64:at - 9].decode('utf-8', 'replace')!r}" if kind == "images" else ""
             raise _cut(file, f"{kind[:-1] if kind != 'points3D' else 'point'} record {index + 1} of {count}{name} "
                        f"(at byte {start}) claims {n} {what} ({item} bytes each), which", n * item, end - at)
@@ -88,8 +92,9 @@ def _check_bin(file: Path) -> None:
 
 
 def _check_binary_counts(model: Path) -> None:
-    """:func:`_check_bin` on each binary file of ``model``: pycolmap trusts their counts."""
-    for name in _MODEL_FILES:
+    """:func:`_check_bin` on each binary file of ``model``: pycolmap trusts their counts (a ``frames.bin`` claiming
+    10^12 frames and holding none made it loop on failed reads without end)."""
+    for name in (*_MODEL_FILES, "frames", "rigs"):
         if (model / f"{name}.bin").is_file():
             _check_bin(model / f"{name}.bin")
 

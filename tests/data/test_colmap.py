@@ -68,6 +68,32 @@ def test_binary_model_reads_the_same(model, tmp_path):
         np.testing.assert_allclose(f.c2w, g.c2w, atol=1e-12)
 
 
+def test_frames_and_rigs_beyond_their_files_are_refused_before_pycolmap_loops(model, tmp_path):
+    """COLMAP 3.12's frames.bin and rigs.bin (pycolmap 4.2 writes and reads them): a frames.bin claiming 10^12 frames
+    and holding none made pycolmap loop on failed reads without end (killed after 30 s)."""
+    import shutil
+    import struct
+
+    pycolmap = pytest.importorskip("pycolmap")
+    binary = tmp_path / "bin"
+    binary.mkdir()
+    pycolmap.Reconstruction(str(model / "sparse" / "0")).write_binary(str(binary))
+    if not (binary / "frames.bin").is_file():
+        pytest.skip("this pycolmap writes no frames.bin")
+    frames = (binary / "frames.bin").read_bytes()
+    cases = {"frames.bin": (struct.pack("<Q", 10**12), "the header claims 1000000000000 records"),
+             "rigs.bin": (struct.pack("<Q", 10**12), "the header claims 1000000000000 records")}
+    cases["frames.bin "] = (frames[:72] + struct.pack("<I", 5000) + frames[76:],
+                            "frame record 1 of 2 (at byte 8) claims 5000 data ids (16 bytes each)")
+    for name, (content, expected) in cases.items():
+        damaged = tmp_path / f"damaged-{len(content)}-{name.strip()}"
+        shutil.copytree(binary, damaged)
+        (damaged / name.strip()).write_bytes(content)
+        with pytest.raises(IngestError) as exc:
+            read_colmap_model(damaged, images_dir=model / "images")
+        assert f"{damaged / name.strip()}: {expected}" in str(exc.value), f"not refused as expected: {exc.value}"
+
+
 def test_model_folder_is_found_from_the_project(model):
     assert find_colmap_model(model) == model / "sparse" / "0"
     assert find_colmap_model(model / "images") is None
