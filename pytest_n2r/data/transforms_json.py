@@ -43,6 +43,7 @@ from .atomic import atomic_write_text
 from .images import read_image_size
 from .json_file import read_json_file
 from .poses import PoseSet, SourceFrame
+from .relative_path import relative_posix
 
 __all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json"]
 
@@ -304,7 +305,4 @@ def _camera_fields(camera: Camera) -> dict[str, float]:
 def _relative_name(frame: SourceFrame, root: Path) -> str:
     if frame.path is None:
         return frame.name
-    try:
-        return Path(os.path.relpath(Path(frame.path).resolve(), root.resolve())).as_posix()
-    except ValueError:  # another drive on Windows
-        return Path(frame.path).resolve().as_posix()
+    return relative_posix(frame.path, root)

@@ -246,13 +246,11 @@ def _images_relative(relation: dict[str, Any], folder: Path) -> dict[str, Any]:
     """``relation`` (a record's dict) with its failure pictures' paths relative to ``folder``, the JSON report's:
     the report and the artifacts folder, downloaded together from CI, still find each other
     (``write_html(..., images_base=<the JSON's folder>)``). A path on another drive stays absolute."""
-    start = folder.resolve()
+    from ..data.relative_path import relative_posix
+
     for example in (relation.get("minimal"), *relation.get("examples", ())):
         for role, path in ((example or {}).get("images") or {}).items():
-            try:
-                example["images"][role] = Path(os.path.relpath(path, start)).as_posix()
-            except ValueError:  # another drive
-                pass
+            example["images"][role] = relative_posix(path, folder)
     return relation
 
 

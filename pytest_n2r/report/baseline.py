@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..data.atomic import atomic_write_text
+from ..data.relative_path import relative_posix
 from ..errors import N2RError
 from ..relation.record import RelationRecord
 from .validate import BadField, DuplicateKey, check_version, meta_from_json, relation_from_json, unique_keys
@@ -177,18 +178,11 @@ def portable_places(settings: dict[str, Any], baseline: str | os.PathLike) -> di
     ...                 "/src/proj/tests/gate.json")
     {'rootdir': '..', 'config_file': 'pyproject.toml', 'size': '480'}
     """
-    def relative(path: str, start: str | os.PathLike) -> str:
-        try:
-            return Path(os.path.relpath(path, start)).as_posix()
-        except ValueError:  # another drive
-            return path
-
     out = dict(settings)
-    if settings.get("rootdir"):  # every path resolved: pytest keeps a rootdir reached through a link as given
-        root = str(Path(settings["rootdir"]).resolve())
-        out["rootdir"] = relative(root, Path(baseline).expanduser().resolve().parent)
+    if settings.get("rootdir"):  # resolved: pytest keeps a rootdir reached through a link as given
+        out["rootdir"] = relative_posix(settings["rootdir"], Path(baseline).expanduser().resolve().parent)
         if settings.get("config_file"):
-            out["config_file"] = relative(str(Path(settings["config_file"]).resolve()), root)
+            out["config_file"] = relative_posix(settings["config_file"], settings["rootdir"])
     return out
 
 

@@ -1,0 +1,29 @@
+"""A file's path as another folder reaches it: what a written file records of the files it names (a pose set's
+photos, a baseline's rootdir, a JSON report's failure pictures), so that the two can move together.
+
+Convention
+----------
+Both paths are resolved first (a folder reached through a link is the folder itself), and the result is
+``/``-separated whatever the platform. Where no relative path exists (another drive on Windows) the resolved path
+itself is returned.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+__all__ = ["relative_posix"]
+
+
+def relative_posix(path: str | os.PathLike, start: str | os.PathLike) -> str:
+    """``path`` relative to the folder ``start``, ``/``-separated (see the module's *Convention*).
+
+    >>> relative_posix("/src/proj/out/a.png", "/src/proj/tests")
+    '../out/a.png'
+    """
+    target = Path(path).resolve()
+    try:
+        return Path(os.path.relpath(target, Path(start).resolve())).as_posix()
+    except ValueError:  # another drive
+        return target.as_posix()
