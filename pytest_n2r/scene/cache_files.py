@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["STALE_TMP_SECONDS", "CacheNotStored", "cache_entries", "trim_entries", "write_entry"]
+__all__ = ["STALE_TMP_SECONDS", "CacheNotStored", "cache_entries", "touch", "trim_entries", "write_entry"]
 
 #: A temporary file (``.{name}.XXXX.tmp``) older than this (seconds) was left by a killed writer; a younger one
 #: may be a concurrent writer's, about to be renamed into place.
@@ -41,6 +41,15 @@ def write_entry(path: Path, write: Callable[[BinaryIO], object]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def touch(path: Path) -> None:
+    """Mark the entry at ``path`` recently used, so that :func:`trim_entries` evicts it last; an entry removed
+    meanwhile (another worker's trim, a clear) is no error."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
 
 
 def _scan(folder: str) -> list[os.DirEntry]:

@@ -38,7 +38,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
-from .cache_files import CacheNotStored, cache_entries, trim_entries, write_entry
+from .cache_files import CacheNotStored, cache_entries, touch, trim_entries, write_entry
 from .cache_folder import claim, foreign_entries, is_ours, not_a_cache
 from .first_render import first_render
 from .keep_threads import threads_kept
@@ -248,10 +248,7 @@ class RenderCache:
         except (OSError, ValueError, RecursionError):  # torn by a crash, disk trouble, nested too deep: decided again
             path.unlink(missing_ok=True)
             return None
-        try:
-            os.utime(path)  # mark as recently used for eviction
-        except OSError:
-            pass
+        touch(path)
         return value if isinstance(value, dict) else None
 
     def put_decision(self, key: str, value: dict) -> None:
@@ -328,10 +325,7 @@ class RenderCache:
         if value is None:  # not what was asked for (damaged or planted): re-render
             path.unlink(missing_ok=True)
             return None
-        try:
-            os.utime(path)  # mark as recently used for eviction
-        except OSError:
-            pass
+        touch(path)
         return value
 
     def _disk_put(self, key: str, name: str, value: np.ndarray) -> None:

@@ -25,6 +25,7 @@ from ...metrics.base import Metric
 from ...render.size import RenderSize
 from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
+from ...scene.cache_files import touch
 from ...scene.render_cache import RenderCache, source_digest
 from ..kept_results import output_digest
 from .nearby import nearby_image
@@ -175,10 +176,7 @@ class FloorStore:
             # absent, torn by a crash, or not a floor (nested too deep, another shape): measure again
             except (OSError, ValueError, KeyError, TypeError, AttributeError, RecursionError):
                 return None
-            try:
-                os.utime(path)  # recently used: trimmed last
-            except OSError:
-                pass
+            touch(path)  # recently used: trimmed last
             self._memory[key] = floor
         return floor
 
