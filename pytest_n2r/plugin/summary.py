@@ -24,7 +24,6 @@ class Summary:
         self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
         #: pytest's word for a record whose test was marked xfail (XFAIL, XPASS), by the record's index
         self.labels: dict[int, str] = {}
-        self.plain_passes: set[int] = set()  # indices of the records whose test passed, not marked xfail
         #: the relation tests seen in reports (by their marker: pytest-xdist ships a report's keywords), the index
         #: of each one's record, and pytest's outcome and reason of the tests that ended without one
         self.relation_ids: set[str] = set()
@@ -58,8 +57,6 @@ class Summary:
                 self.labels[index] = "XFAIL" if report.skipped else "XPASS"
             elif report.failed and str(report.longrepr).startswith("[XPASS(strict)]"):  # pytest's own marking
                 self.labels[index] = "XPASS"
-            elif report.passed:
-                self.plain_passes.add(index)
 
     def not_run(self) -> list[dict[str, str]]:
         """The relation tests that ended without a relation record, by test id: an error in a fixture's setup,
@@ -83,7 +80,7 @@ class Summary:
         from ..relation.record import plural
 
         for i, record in enumerate(records):
-            if terse and i in self.plain_passes:
+            if terse and record.pytest_outcome == "passed":  # plainly: not an xpass, no teardown error
                 continue
             line = record.summary_line()
             label = self.labels.get(i)
