@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-from collections.abc import Iterator
-from typing import TYPE_CHECKING
+import os
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, Any
 
 from ._output import printable
 from ._scene import SCENE_HELP
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
     from ..scene.file import SceneFile
     from ..study.fidelity import FidelityReport
 
-__all__ = ["add_parser", "run", "format_info", "info_dict", "format_scene_info", "scene_info_dict"]
+__all__ = ["add_parser", "run", "format_info", "info_dict", "format_scene_info", "scene_info_dict", "format_splat_info"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -53,8 +54,7 @@ def run(args: argparse.Namespace) -> int:
             raise _no_photos(spec.source, "a splat scene file (n2r import packs the splats and their cameras, no "
                                           "photos)")
         info = splat_info(spec.source)
-        lines = [f"{key:<18}{value}" for key, value in info.items() if key != "cameras"]
-        print(printable(_json(info) if args.json else "\n".join(lines)))
+        print(printable(_json(info) if args.json else _readable(format_splat_info, info, spec.source)))
         return 0
     scene = _open(spec, images=args.shift)
     if not isinstance(scene, SceneFile):  # no fitted scene file behind it: an exact demo scene, a 3DGS .ply ...
@@ -66,15 +66,20 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(printable(_json({**info_dict(scene), **({"shift": shift.to_dict()} if shift else {})})))
     else:
-        try:
-            text = format_info(scene)
-        except ReportUnreadable as exc:  # a report edited by hand, or written by another tool
-            from ..errors import SceneFileError
-
-            raise SceneFileError(f"{scene.path}: scene.json {exc.args[0]} (not as n2r fit writes it); "
-                                 "n2r info --json prints it as stored") from exc
-        print(printable(text + (f"\n{shift.format()}" if shift else "")))
+        print(printable(_readable(format_info, scene, scene.path) + (f"\n{shift.format()}" if shift else "")))
     return 0
+
+
+def _readable(format_text: Callable[[Any], str], what: Any, path: str | os.PathLike) -> str:
+    """``format_text(what)``; a report edited by hand, or written by another tool, is a
+    :class:`~pytest_n2r.errors.SceneFileError` naming the scene file ``path``."""
+    try:
+        return format_text(what)
+    except ReportUnreadable as exc:
+        from ..errors import SceneFileError
+
+        raise SceneFileError(f"{path}: scene.json {exc.args[0]} (not as n2r writes it); n2r info --json prints it "
+                             "as stored") from exc
 
 
 def _open(spec: SceneSpec, images: bool) -> SceneFile | Scene:
@@ -189,6 +194,39 @@ def format_scene_info(scene: Scene, spec: SceneSpec) -> str:
         views += f" ({scene.no_views_reason})"
     return "\n".join([f"scene       {spec.source}: {info['type']} {info['name']!r}, {renders}", views,
                       *_camera_and_scale_lines(info)])
+
+
+def format_splat_info(info: dict) -> str:
+    """The plain-text summary ``n2r info`` prints of a splat scene file (``info`` as
+    :func:`~pytest_n2r.scene.splat_file.splat_info` reads it; bounds in scene units)."""
+    from ..fit.memory import byte_count
+
+    splats, (low, high) = info["splats"], info["bounds"]
+    background = ", ".join(f"{c:g}" for c in splats["background"])
+    extent = ", ".join(f"{axis} {a:.4g} to {b:.4g}" for axis, a, b in zip("xyz", low, high, strict=True))
+    lines = [f"scene       {info['path']} ({byte_count(info['file_bytes'])}, 3-D Gaussian splats)",
+             (f"views       {info['views']}: {info['train_views']} train, {info['heldout_views']} held out; "
+              "no photos stored"),
+             *_camera_and_scale_lines(info),
+             f"splats      {splats['count']} Gaussians, SH degree {splats['sh_degree']}, background ({background})",
+             f"bounds      {extent} scene units (the Gaussians the views see)"]
+    with _reading("'source', 'source_sha256', 'cameras', 'from_field', 'imported_by' or 'import_s'"):
+        report = info["report"]
+        if "source" in report:
+            digest = f" (sha256 {report['source_sha256'][:12]}…)" if "source_sha256" in report else ""
+            lines.append(f"  source    {report['source']}{digest}")
+        if "cameras" in report:
+            lines.append(f"  cameras   {report['cameras']}")
+        made = report.get("from_field")
+        if made:
+            psnr = made.get("fit", {}).get("psnr")
+            lines += [f"  from      a {made['resolution']}³ field" + (f" ({psnr:.2f} dB held out)" if psnr else ""),
+                      (f"            one Gaussian a voxel: σ {made['size']:g} voxel sides, peak opacity for "
+                       f"{made['path']:g} voxels of density (--size, --path)")]
+        if "imported_by" in report:
+            seconds = f" in {report['import_s']:.1f} s" if "import_s" in report else ""
+            lines.append(f"  imported  by {report['imported_by']}{seconds}")
+    return "\n".join(lines)
 
 
 def _camera_and_scale_lines(info: dict) -> list[str]:

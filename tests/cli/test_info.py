@@ -1,9 +1,11 @@
-"""`n2r info`: strict JSON whatever the shift measured, and --shift on a splat scene file says why it cannot."""
+"""`n2r info`: strict JSON whatever the shift measured, --shift on a splat scene file says why it cannot, and a splat
+scene file's summary is read as a fitted one's is."""
 
 from __future__ import annotations
 
 import json
 import math
+import zipfile
 
 import pytest
 
@@ -86,3 +88,36 @@ def test_the_report_lines_list_every_photo_the_fit_skipped_and_its_warnings():
     assert [line for line in lines if line.startswith("  skipped")] == [
         f"  skipped   IMG_{i:04d}.JPG: not registered by structure from motion" for i in range(12)], lines
     assert "  warning   only 31 of the 48 readable photos registered and were kept" in lines, lines
+
+
+def test_a_splat_scene_files_summary_is_lines_not_python_reprs(splat_file, capsys):
+    """The summary printed the splats' and the import report's dicts and the bounds' nested list as Python wrote
+    them (``{'count': 4000, ...}``)."""
+    capsys.readouterr()
+    assert main(["info", str(splat_file)]) == 0
+    text = capsys.readouterr().out
+    assert not any(mark in text for mark in ("{'", "[[", "':")), f"a Python repr in the summary:\n{text}"
+    lines = text.splitlines()
+    assert lines[0].startswith(f"scene       {splat_file} (") and lines[0].endswith(", 3-D Gaussian splats)"), lines
+    assert "views       48: 42 train, 6 held out; no photos stored" in lines, lines
+    assert "splats      4000 Gaussians, SH degree 0, background (0, 0, 0)" in lines, lines
+    assert any(line.startswith("bounds      x -17.33 to 15.81, y ") for line in lines), lines
+    assert any(line.startswith("  source    ") and "(sha256 " in line for line in lines), lines
+    assert all(len(line) <= 120 for line in lines if not line.startswith(("  source", "  cameras"))), lines
+
+
+def test_a_splat_scene_files_report_edited_by_hand_is_an_error_naming_the_file(splat_file, tmp_path, capsys):
+    edited = tmp_path / "edited.n2r"
+    with zipfile.ZipFile(splat_file) as old, zipfile.ZipFile(edited, "w") as new:
+        for item in old.infolist():
+            data = old.read(item)
+            if item.filename == "scene.json":
+                scene = json.loads(data)
+                scene["report"]["import_s"] = "fast"
+                data = json.dumps(scene).encode()
+            new.writestr(item, data)
+    capsys.readouterr()
+    assert main(["info", str(edited)]) == 2
+    err = capsys.readouterr().err
+    assert f"{edited}: scene.json report 'source', 'source_sha256', 'cameras', 'from_field', 'imported_by' or " in err
+    assert "ValueError: Unknown format code 'f'" in err and "n2r info --json prints it as stored" in err, err

@@ -190,7 +190,7 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("info --size abc", "info {scene} --shift --size abc", r"--size='abc' is not a render size"),
     ("info on a zip without scene.json", "info {plain_zip}", r"the archive has no 'scene\.json'"),
     ("info on a report whose grid_limits rows lack their grids", "info {odd_limits}",
-     r"odd_limits\.n2r: scene\.json report 'grid_limits': KeyError: 'wanted' \(not as n2r fit writes it\); n2r info"),
+     r"odd_limits\.n2r: scene\.json report 'grid_limits': KeyError: 'wanted' \(not as n2r writes it\); n2r info"),
     ("info on a report whose detail holds text", "info {odd_detail}",
      r"odd_detail\.n2r: scene\.json report 'detail': ValueError: Unknown format code 'f'"),
     ("info on a report whose exposure holds text", "info {odd_exposure}",
