@@ -1,16 +1,15 @@
 """Render cache: an in-memory LRU for one session over an on-disk, content-addressed store.
 
 A render is identified by everything that determines its pixels: the scene's content hash (which covers its
-render settings), its renderer's version, the pose (exact float64 bytes), the camera and the package version.
-Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later request for more outputs renders
-only the missing ones. Beside the renders the disk store keeps *decisions*: small JSON objects that a check
-computed from renders alone (a follow-up's validity verdict, a keypoint metric's result), under a key that names
-those renders, folded with a digest of the package's source, so a checkout whose code was edited (its version
-unchanged) decides again rather than reading what the old code decided; renders, which the renderer's version names
-and which cost far more, are not. Files are written under a temporary name and renamed into place
-(:mod:`~.cache_files`, which also trims the store), so concurrent pytest-xdist workers sharing one directory never
-see a torn file: at worst two workers render the same view and the second rename wins with identical bytes
-(rendering is deterministic).
+render settings), its renderer's version, the pose (exact float64 bytes), the camera, the package version and a
+digest of its rendering code. Each output (``rgb``, ``depth``, ``opacity``) is stored on its own, so a later
+request for more outputs renders only the missing ones. Beside the renders the disk store keeps *decisions*: small
+JSON objects that a check computed from renders alone (a follow-up's validity verdict, a keypoint metric's result),
+under a key that names those renders, folded with a digest of the package's source, so a checkout whose code was
+edited (its version unchanged) decides again rather than reading what the old code decided. Files are written under
+a temporary name and renamed into place (:mod:`~.cache_files`, which also trims the store), so concurrent
+pytest-xdist workers sharing one directory never see a torn file: at worst two workers render the same view and the
+second rename wins with identical bytes (rendering is deterministic).
 """
 
 from __future__ import annotations
@@ -74,13 +73,19 @@ def parse_size(text: str | int, name: str = "size") -> int:
 DEFAULT_DISK_BYTES = parse_size(defaults.CACHE_SIZE)
 
 
+#: The subpackages whose code makes a render's pixels (:func:`render_key`).
+RENDERING_CODE = ("demo", "field", "render", "scene", "splats")
+
+
 @functools.cache
-def source_digest() -> str:
-    """Hex SHA-256 of every module of the installed package (paths and bytes), read once a process (~10 ms): it
-    names the code that made a decision, so an edit to a check or a metric in a checkout is decided again."""
+def source_digest(*subpackages: str) -> str:
+    """Hex SHA-256 of the modules of the package, or of its ``subpackages`` (paths and bytes), read once a process
+    (~10 ms): the code that made a decision or a picture, so an edit in a checkout is decided or rendered again."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
+        if subpackages and path.relative_to(root).parts[0] not in subpackages:
+            continue
         h.update(f"{path.relative_to(root).as_posix()}\0".encode())
         h.update(path.read_bytes())
     return h.hexdigest()
@@ -88,10 +93,12 @@ def source_digest() -> str:
 
 def render_key(scene: Scene, c2w: np.ndarray, camera: Camera) -> str:
     """Hex SHA-256 of what determines a render's pixels (the outputs are stored under this key): the package
-    version, the scene's :attr:`~pytest_n2r.scene.base.Scene.content_hash` (which covers its render settings),
+    version and its rendering code (:data:`RENDERING_CODE`: a renderer edited in a checkout without a version
+    bump), the scene's :attr:`~pytest_n2r.scene.base.Scene.content_hash` (which covers its render settings),
     its renderer's version, the camera and the exact pose."""
     spec = {
         "version": __version__,
+        "code": source_digest(*RENDERING_CODE),
         "scene": scene.content_hash,
         "renderer": scene.renderer_version,
         "camera": camera.to_dict(),

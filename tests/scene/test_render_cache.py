@@ -38,6 +38,26 @@ def test_a_second_cache_on_the_same_directory_renders_nothing(tmp_path):
     assert again.rgb.flags.writeable is False, "cached arrays are shared and must be read-only"
 
 
+def test_a_render_of_edited_rendering_code_is_not_read_and_other_edits_keep_the_renders(tmp_path, monkeypatch):
+    """A renderer edited in a checkout whose version did not move (a git install at another commit) must not be
+    given the old code's pictures; an edit outside the rendering code keeps them."""
+    from pytest_n2r.scene import render_cache
+
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    RenderCache(tmp_path).render(scene, _pose(scene), camera, "rgb")
+    original = render_cache.source_digest
+    monkeypatch.setattr(render_cache, "source_digest", lambda *parts: "edited" if not parts else original(*parts))
+    kept = RenderCache(tmp_path)
+    kept.render(scene, _pose(scene), camera, "rgb")
+    assert kept.stats.disk_hits == 1 and scene.calls == 1, f"an edit outside the renderers re-rendered: {kept.stats}"
+    monkeypatch.setattr(render_cache, "source_digest",
+                        lambda *parts: "edited renderer" if parts == render_cache.RENDERING_CODE else original(*parts))
+    edited = RenderCache(tmp_path)
+    edited.render(scene, _pose(scene), camera, "rgb")
+    assert edited.stats.renders == 1 and scene.calls == 2, f"the old renderer's picture was read: {edited.stats}"
+
+
 def test_only_missing_outputs_are_rendered(tmp_path, monkeypatch):
     scene = PlaneScene()
     asked = []
