@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import BinaryIO
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "unwritable_reason"]
+__all__ = ["atomic_write_bytes", "atomic_write_chunks", "atomic_write_text", "unwritable_reason"]
 
 
 def _read_umask() -> int:
@@ -19,12 +21,9 @@ def _read_umask() -> int:
 _UMASK = _read_umask()
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` so that readers see either the old file or the complete new one.
-
-    The new file keeps the old one's permissions, or gets those of a plainly created file (``0o666`` less
-    the umask) rather than the owner-only mode of the temporary file.
-    """
+def _atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -> Path:
+    """Call ``write`` with the temporary file's handle, then rename it over ``path``; on any error (in ``write``
+    too) remove it and leave the old file as it was."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -34,7 +33,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            write(fh)
             fh.flush()
             os.fsync(fh.fileno())
         os.chmod(tmp, mode)
@@ -45,13 +44,28 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     return path
 
 
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` so that readers see either the old file or the complete new one.
+
+    The new file keeps the old one's permissions, or gets those of a plainly created file (``0o666`` less
+    the umask) rather than the owner-only mode of the temporary file.
+    """
+    return _atomic_write(path, lambda fh: fh.write(data))
+
+
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     """:func:`atomic_write_bytes` for UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def atomic_write_chunks(path: str | os.PathLike, chunks: Iterable[str]) -> Path:
+    """:func:`atomic_write_text` for text in pieces (a generator), each encoded and written as it comes, so the
+    whole text is never in memory; an exception from ``chunks`` leaves the old file, as a failed write does."""
+    return _atomic_write(path, lambda fh: fh.writelines(chunk.encode("utf-8") for chunk in chunks))
+
+
 def unwritable_reason(folder: str | os.PathLike) -> str | None:
-    """Why files cannot be written into ``folder`` (created if missing), or ``None`` when they can.
+    """Why files cannot be written into ``folder``, or ``None`` when they can.
 
     Tried, not inferred from permission bits (which root, read-only mounts and ``/proc`` defeat): a
     temporary file is created and removed in the nearest folder that exists; nothing is created on the way.

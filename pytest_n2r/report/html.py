@@ -1,7 +1,9 @@
 """A self-contained HTML report of relation runs (one file: inline CSS, SVG histograms, base64 images).
 
 Built from plain :class:`~pytest_n2r.relation.record.RelationRecord` data only, so it can be regenerated from
-a JSON results file without pytest.
+a JSON results file without pytest. Built and written in pieces (:func:`html_chunks`), one picture at a time:
+a report of many failing relations at full resolution is hundreds of MiB, and held whole (with its copies while
+joined and encoded) took about five times that in memory.
 """
 
 from __future__ import annotations
@@ -10,12 +12,13 @@ import base64
 import html
 import math
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
-from ..data.atomic import atomic_write_text
+from ..data.atomic import atomic_write_chunks
 from ..relation.record import ExampleRecord, RelationRecord
 
-__all__ = ["render_html", "write_html"]
+__all__ = ["html_chunks", "render_html", "write_html"]
 
 _CSS = """
 .partial{background:#fff8c5;border:1px solid #d4a72c;padding:.5rem}
@@ -82,17 +85,15 @@ def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
         return kind, repr(ex.mutation if ex.mutation is not None else ex.transform)
 
 
-def _example_block(title: str, ex: ExampleRecord, images_base: Path | None) -> str:
+def _example_chunks(title: str, ex: ExampleRecord, images_base: Path | None) -> Iterator[str]:
+    """The example's heading and line, then its figures one at a time (each picture read only when asked for)."""
     kind, follow_up = _follow_up(ex)
-    figures = "".join(
-        f"<figure>{_image_tag(path, name, images_base)}<figcaption>{html.escape(name)}</figcaption></figure>"
-        for name, path in sorted(ex.images.items())
-    )
-    return (
-        f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
-        f"<code>{html.escape(ex.view)}</code>, {kind} <code>{html.escape(follow_up)}</code>: "
-        f"score {ex.score:.4g}, deviation {ex.deviation:.4g}</p><div class=\"ex\">{figures}</div>"
-    )
+    yield (f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
+           f"<code>{html.escape(ex.view)}</code>, {kind} <code>{html.escape(follow_up)}</code>: "
+           f"score {ex.score:.4g}, deviation {ex.deviation:.4g}</p><div class=\"ex\">")
+    for name, path in sorted(ex.images.items()):
+        yield f"<figure>{_image_tag(path, name, images_base)}<figcaption>{html.escape(name)}</figcaption></figure>"
+    yield "</div>"
 
 
 def _floor(rel: RelationRecord) -> str:
@@ -123,62 +124,79 @@ def _not_run_table(not_run: list[dict[str, str]]) -> str:
             f"<th>outcome</th><th>reason</th></tr></thead><tbody>{rows}</tbody></table>")
 
 
-def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
-                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None) -> str:
-    """The report as one HTML string; ``partial``: why the session did not run every selected relation, shown in
-    the title and a banner under it; ``not_run``: the relation tests that ended without a relation record
-    (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the summary;
-    ``images_base``: the folder relative image paths start from (a JSON report's folder: it writes them so)."""
-    base = None if images_base is None else Path(images_base)
-    if partial is not None:
-        title = f"{title} (partial)"
-    summary_rows = []
-    sections = []
-    for i, rel in enumerate(sorted(relations, key=lambda r: r.nodeid)):
-        valid = rel.valid_examples
-        rate = rel.inconsistencies / len(valid) if valid else math.nan
-        worst = rel.worst
-        anchor = f"rel{i}"
-        css, outcome = _outcome(rel)
-        summary_rows.append(
-            f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{css}">'
+def _summary_row(anchor: str, rel: RelationRecord) -> str:
+    valid = rel.valid_examples
+    rate = rel.inconsistencies / len(valid) if valid else math.nan
+    worst = rel.worst
+    css, outcome = _outcome(rel)
+    return (f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{css}">'
             f"{outcome}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
             f"<td>{rel.inconsistencies}</td><td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
             f"<td>{'—' if worst is None else f'{worst.deviation:.4g}'}</td><td>{rel.eps:g}</td>"
-            f"<td>{_floor(rel)}</td></tr>"
-        )
-        timings = ", ".join(f"{k} {v:.2f} s" for k, v in rel.timings.items())
-        body = [
-            f'<h2 id="{anchor}">{html.escape(rel.nodeid)}</h2>',
-            f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
-            f'<span class="{css}">{outcome}</span>'
-            + (f" (the relation's own verdict: {rel.outcome})" if rel.pytest_outcome not in ("", rel.outcome) else "")
-            + (f"; time: {html.escape(timings)}" if timings else "") + "</p>",
-            _histogram_svg([e.deviation for e in valid], rel.eps),
-        ]
-        if rel.minimal is not None:
-            body.append(_example_block("Failing example (not shrunk: the test is marked xfail)"
-                                       if rel.pytest_outcome in ("xfailed", "xpassed")
-                                       else "Minimal failing example (shrunk)", rel.minimal, base))
-        if worst is not None and worst.images and worst is not rel.minimal:
-            body.append(_example_block("Worst example", worst, base))
-        if rel.message:
-            body.append(f"<pre>{html.escape(rel.message)}</pre>")
-        sections.append("\n".join(body))
-    return (
-        f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
-        f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
-        + ("" if partial is None else f'<p class="partial"><strong>Partial report:</strong> {html.escape(partial)}; '
-           "the relations that did not run are not in it.</p>") + _not_run_table(not_run or []) +
-        "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
-        "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr></thead>"
-        "<tbody>"
-        + "".join(summary_rows) + "</tbody></table>" + "\n".join(sections) + "</body></html>\n"
-    )
+            f"<td>{_floor(rel)}</td></tr>")
+
+
+def _section(anchor: str, rel: RelationRecord, base: Path | None) -> Iterator[str]:
+    """The relation's section: heading, line, histogram, then its examples' pictures one at a time."""
+    css, outcome = _outcome(rel)
+    worst = rel.worst
+    timings = ", ".join(f"{k} {v:.2f} s" for k, v in rel.timings.items())
+    yield (f'<h2 id="{anchor}">{html.escape(rel.nodeid)}</h2>\n'
+           f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
+           f'<span class="{css}">{outcome}</span>'
+           + (f" (the relation's own verdict: {rel.outcome})" if rel.pytest_outcome not in ("", rel.outcome) else "")
+           + (f"; time: {html.escape(timings)}" if timings else "") + "</p>\n"
+           + _histogram_svg([e.deviation for e in rel.valid_examples], rel.eps))
+    if rel.minimal is not None:
+        yield "\n"
+        yield from _example_chunks("Failing example (not shrunk: the test is marked xfail)"
+                                   if rel.pytest_outcome in ("xfailed", "xpassed")
+                                   else "Minimal failing example (shrunk)", rel.minimal, base)
+    if worst is not None and worst.images and worst is not rel.minimal:
+        yield "\n"
+        yield from _example_chunks("Worst example", worst, base)
+    if rel.message:
+        yield f"\n<pre>{html.escape(rel.message)}</pre>"
+
+
+def html_chunks(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
+                not_run: list[dict[str, str]] | None = None,
+                images_base: str | os.PathLike | None = None) -> Iterator[str]:
+    """The report in pieces, built as they are asked for: the head and the summary table, then each relation's
+    section, each picture read and encoded only when its piece is (so one is in memory at a time). Arguments as
+    :func:`render_html`'s; the pieces joined are its page."""
+    base = None if images_base is None else Path(images_base)
+    if partial is not None:
+        title = f"{title} (partial)"
+    ordered = sorted(relations, key=lambda r: r.nodeid)
+    yield (f"<!DOCTYPE html><html lang=\"en\"><head><meta charset=\"utf-8\"><title>{html.escape(title)}</title>"
+           f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
+           + ("" if partial is None else f'<p class="partial"><strong>Partial report:</strong> {html.escape(partial)}; '
+              "the relations that did not run are not in it.</p>") + _not_run_table(not_run or []) +
+           "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
+           "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr>"
+           "</thead><tbody>" + "".join(_summary_row(f"rel{i}", rel) for i, rel in enumerate(ordered))
+           + "</tbody></table>")
+    for i, rel in enumerate(ordered):
+        if i:
+            yield "\n"
+        yield from _section(f"rel{i}", rel, base)
+    yield "</body></html>\n"
+
+
+def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
+                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None) -> str:
+    """The report as one HTML string (:func:`html_chunks` joined); ``partial``: why the session did not run every
+    selected relation, shown in the title and a banner under it; ``not_run``: the relation tests that ended without
+    a relation record (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the
+    summary; ``images_base``: the folder relative image paths start from (a JSON report's folder: it writes them
+    so)."""
+    return "".join(html_chunks(relations, title, partial, not_run, images_base))
 
 
 def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
                partial: str | None = None, not_run: list[dict[str, str]] | None = None,
                images_base: str | os.PathLike | None = None) -> Path:
-    """Write :func:`render_html` to ``path`` atomically."""
-    return atomic_write_text(path, render_html(relations, title, partial, not_run, images_base))
+    """Write the report to ``path`` atomically, piece by piece as :func:`html_chunks` builds it (one picture in
+    memory at a time, never the whole page); the file is :func:`render_html`'s page."""
+    return atomic_write_chunks(path, html_chunks(relations, title, partial, not_run, images_base))

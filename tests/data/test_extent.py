@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pytest_n2r.data.atomic import atomic_write_text
+from pytest_n2r.data.atomic import atomic_write_chunks, atomic_write_text
 from pytest_n2r.data.extent import reference_length, scene_bounds, seen_depths
 from pytest_n2r.data.triangulate import neighbour_pairs, triangulate_views
 from pytest_n2r.errors import IngestError, InvalidArgument
@@ -100,3 +100,29 @@ def test_atomic_write_gives_a_new_file_the_umask_mode_and_keeps_an_old_files_mod
     atomic_write_text(kept, "new")
     mode = stat.S_IMODE(kept.stat().st_mode)
     assert mode == 0o604, f"rewriting a file changed its mode to {oct(mode)}"
+    atomic_write_chunks(kept, ["newer"])
+    mode = stat.S_IMODE(kept.stat().st_mode)
+    assert mode == 0o604, f"rewriting a file in pieces changed its mode to {oct(mode)}"
+
+
+def test_atomic_write_of_pieces_writes_them_as_they_come_and_keeps_the_old_file_when_they_stop(tmp_path):
+    """The HTML report's writer: pieces (a generator) are written as they come, never held whole; pieces that
+    raise midway leave the old file as it was and no temporary file, as a failed write does."""
+    target = tmp_path / "report.html"
+    atomic_write_text(target, "old")
+    on_disk = []
+
+    def pieces():
+        yield "<html>"
+        yield "é" * 10_000  # past any write buffer
+        on_disk.extend((p.name, p.stat().st_size) for p in tmp_path.iterdir() if p != target)
+        raise RuntimeError("a picture could not be read")
+
+    with pytest.raises(RuntimeError, match="a picture could not be read"):
+        atomic_write_chunks(target, pieces())
+    assert target.read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.html"], "temporary file left behind"
+    assert len(on_disk) == 1 and on_disk[0][0].startswith(".report.html.") and on_disk[0][1] >= 20_000, \
+        f"the pieces were not written to a temporary file as they came: {on_disk}"
+    assert atomic_write_chunks(target, iter(["<p>", "é", "</p>\n"])) == target
+    assert target.read_bytes() == "<p>é</p>\n".encode()

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import base64
 import html
+import os
 import re
+from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from pytest_n2r.report import ExampleRecord, RelationRecord
 from pytest_n2r.report.html import render_html, write_html
@@ -93,3 +97,100 @@ def test_errors_have_a_style():
     page = render_html([rel])
     assert 'class="error"' in page
     assert re.search(r"(^|[},\s])\.error\s*\{[^}]*color", page, re.MULTILINE), "class=\"error\" has no style"
+
+
+def _report_cases(folder):
+    """Relations that use every part of the page (the banners, the not-run table, a strict XPASS, an xfail, an
+    error, a floor, timings, a minimal and a distinct worst example, an embedded PNG and JPEG, a missing picture),
+    with fixed picture bytes so that the page is the same on every machine (the pictures are embedded, not
+    decoded)."""
+    (folder / "a.png").write_bytes(bytes(range(256)) * 3)
+    (folder / "b.JPG").write_bytes(b"\xff\xd8 a jpeg's first bytes")
+    pictures = {"source": str(folder / "a.png"), "follow-up": "b.JPG", "diff": "gone.png"}
+    minimal = ExampleRecord("wall", "view3", {"yaw": 5.25}, 0.7, 0.3, False, images=pictures)
+    worst = ExampleRecord("wall", "view1", {"yaw": -7.5, "x": 0.125}, 0.2, 0.8, False, images={"source": "a.png"})
+    ok = ExampleRecord("wall", "view3", {"yaw": 1.0}, 0.95, 0.05, True)
+    rejected = ExampleRecord("wall", "view3", {"yaw": 80.0}, float("nan"), float("nan"), False, status="rejected",
+                             reason="outside the field")
+    bright = ExampleRecord("lab", "v0", None, 0.6, 0.4, False, mutation={"name": "brightness", "levels": 30},
+                           images={"follow-up": "a.png"})
+    return [
+        RelationRecord("test_b.py::test_orb[wall]", "repeatability(px=2.0)", 0.2, [ok, minimal, worst, rejected],
+                       outcome="failed", message="boom <b> & \"quotes\"", timings={"render": 1.5, "sut": 0.25},
+                       minimal=minimal, floor={"line": "field floor 0.125 (photo <vs> field render)"}),
+        RelationRecord("test_a.py::test_bright[lab]", "abs", 1e-08, [bright], outcome="failed",
+                       pytest_outcome="xfailed", minimal=bright),
+        RelationRecord("test_c.py::test_held[wall]", "abs", 0.5, [ok], outcome="passed", pytest_outcome="failed"),
+        RelationRecord("test_d.py::test_none[wall]", "abs", 0.5, [rejected], outcome="passed"),
+        RelationRecord("test_e.py::test_err[wall]", "abs", 0.1, [], outcome="error", message="Traceback\n  <boom>"),
+    ]
+
+
+_REPORT_CALLS = {  # golden file -> render_html's keywords besides the relations and images_base
+    "report-full.html": {"title": "n2r <&> report", "partial": "stopped after 1 failure (-x)",
+                         "not_run": [{"nodeid": "t.py::test_f[<x>]", "outcome": "error", "reason": "fixture 'sut'"}]},
+    "report-plain.html": {},
+}
+
+
+@pytest.mark.parametrize("golden", sorted(_REPORT_CALLS))
+def test_the_page_is_the_one_written_before_the_report_was_streamed(tmp_path, golden):
+    """The golden files were written by the report as it was before it was written in pieces (one string, one
+    write): the pieces join to the same bytes, in ``render_html`` and in the file ``write_html`` writes. A change
+    to the page made on purpose writes them again: ``write_html(tests/report/data/<golden>, _report_cases(tmp),
+    images_base=tmp, **_REPORT_CALLS[golden])``, the new page looked at in a browser first."""
+    kwargs = {**_REPORT_CALLS[golden], "images_base": tmp_path}
+    expected = (Path(__file__).parent / "data" / golden).read_bytes()
+    page = render_html(_report_cases(tmp_path), **kwargs).encode("utf-8")
+    assert page == expected, f"the page differs from tests/report/data/{golden} (a change on purpose: see above)"
+    out = write_html(tmp_path / "out" / "report.html", _report_cases(tmp_path), **kwargs)
+    assert out.read_bytes() == expected, "the file written in pieces differs from the page"
+
+
+def test_write_html_reads_a_relations_pictures_only_after_writing_the_relation_before(tmp_path, monkeypatch):
+    """The report is written as it is built: the next relation's pictures are read after the previous relation's
+    section is in the file, so one relation's pictures at a time are in memory (a page of many failing relations
+    at full resolution held whole took about five times its size)."""
+    for name in ("first", "second"):
+        (tmp_path / f"{name}.png").write_bytes(name.encode() * 100)
+    relations = []
+    for name in ("first", "second"):
+        ex = ExampleRecord("wall", "v", {"yaw": 1.0}, 0.5, 0.5, False, images={"source": str(tmp_path / f"{name}.png")})
+        relations.append(RelationRecord(f"t.py::test_{name}", "abs", 0.1, [ex], outcome="failed", minimal=ex))
+    events = []
+    read_bytes = Path.read_bytes
+
+    def recorded_read(self):
+        events.append(f"read {self.name}")
+        return read_bytes(self)
+
+    class RecordedFile:
+        def __init__(self, fh):
+            self._fh = fh
+
+        def __getattr__(self, name):
+            return getattr(self._fh, name)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return self._fh.__exit__(*exc)
+
+        def write(self, data):
+            for name in ("first", "second"):
+                if base64.b64encode(name.encode() * 100) in data:
+                    events.append(f"write {name}.png")
+            return self._fh.write(data)
+
+        def writelines(self, lines):
+            for data in lines:
+                self.write(data)
+
+    fdopen = os.fdopen
+    monkeypatch.setattr(Path, "read_bytes", recorded_read)
+    monkeypatch.setattr(os, "fdopen", lambda *args, **kwargs: RecordedFile(fdopen(*args, **kwargs)))
+    out = write_html(tmp_path / "report.html", relations)
+    assert events == ["read first.png", "write first.png", "read second.png", "write second.png"], \
+        f"the report was not written as it was built: {events}"
+    assert out.read_text() == render_html(relations)
