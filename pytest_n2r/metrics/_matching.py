@@ -1,5 +1,6 @@
-"""Matching two 2-D point sets within a distance: nearest neighbours, mutual nearest neighbours and the
-largest one-to-one matching (k-d tree, or binned numpy)."""
+"""Matching two 2-D point sets within a distance: the pairs within it, mutual nearest neighbours and the
+largest one-to-one matching (k-d tree, or binned numpy). "Within ``radius``" is inclusive, plus
+:data:`~pytest_n2r.metrics.coverage.DISC_SLACK` for round-off in mapped points."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["maximum_matching", "mutual_nearest", "nearest_within", "pairs_within"]
+from .coverage import DISC_SLACK
+
+__all__ = ["maximum_matching", "mutual_nearest", "pairs_within"]
 
 
 @functools.cache
@@ -23,20 +26,6 @@ def _kd_tree() -> Any:
     return cKDTree
 
 
-def nearest_within(queries: np.ndarray, points: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
-    """Index into ``points`` of each query's nearest point, or ``-1`` when none lies within ``radius``
-    (Euclidean distance, inclusive). Of points equally near, the lowest index wins, with SciPy or without.
-
-    >>> nearest_within(np.array([[0.0, 0.0]]), np.array([[1.0, 0.0], [-1.0, 0.0]]), 2.0).tolist()
-    [0]
-    """
-    q, p, d2 = _close_pairs(queries, points, radius, use_scipy)
-    nearest = np.full(len(queries), -1, dtype=np.intp)
-    first = _firsts(q, d2, p)
-    nearest[q[first]] = p[first]
-    return nearest
-
-
 def _firsts(key: np.ndarray, d2: np.ndarray, other: np.ndarray) -> np.ndarray:
     """Indices of the pairs that are nearest for their ``key`` point, ties going to the lowest ``other`` index
     (the pairs sorted by ``(key, d2, other)``, the first of each key)."""
@@ -46,22 +35,24 @@ def _firsts(key: np.ndarray, d2: np.ndarray, other: np.ndarray) -> np.ndarray:
 
 def _close_pairs(a: np.ndarray, b: np.ndarray, radius: float,
                  use_scipy: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(i, j, d2)``: every pair of ``a[i]`` and ``b[j]`` at most ``radius`` apart (inclusive) and its squared
-    distance, in no particular order. The k-d tree (``use_scipy`` and SciPy present) and the binned numpy
-    search only propose candidates; the squared distances and the test against ``radius`` are the same
-    numpy arithmetic on both paths, so both give the same pairs to the bit."""
+    """``(i, j, d2)``: every pair of ``a[i]`` and ``b[j]`` at most ``radius`` apart (inclusive, plus
+    :data:`~pytest_n2r.metrics.coverage.DISC_SLACK`, so that round-off in mapped points cannot drop a pair
+    exactly ``radius`` apart) and its squared distance, in no particular order. The k-d tree (``use_scipy`` and
+    SciPy present) and the binned numpy search only propose candidates; the squared distances and the test
+    against the radius are the same numpy arithmetic on both paths, so both give the same pairs to the bit."""
     empty = np.zeros(0, dtype=np.intp)
     if len(a) == 0 or len(b) == 0:
         return empty, empty, np.zeros(0)
+    reach = radius + DISC_SLACK
     tree = _kd_tree() if use_scipy else None
-    if tree is not None:  # candidates a little past radius; the test below decides
-        found = tree(a).sparse_distance_matrix(tree(b), np.nextafter(radius, np.inf), output_type="ndarray")
+    if tree is not None:  # candidates a little past reach; the test below decides
+        found = tree(a).sparse_distance_matrix(tree(b), np.nextafter(reach, np.inf), output_type="ndarray")
         i, j = found["i"].astype(np.intp), found["j"].astype(np.intp)
         d2 = ((a[i] - b[j]) ** 2).sum(axis=1)
     else:
-        cells = list(_cell_pairs(a, b, radius))
+        cells = list(_cell_pairs(a, b, reach))
         i, j, d2 = (np.concatenate([c[k] for c in cells]) for k in range(3)) if cells else (empty, empty, np.zeros(0))
-    near = d2 <= radius * radius
+    near = d2 <= reach * reach
     return i[near], j[near], d2[near]
 
 
@@ -92,8 +83,8 @@ def _cell_pairs(queries: np.ndarray, points: np.ndarray,
 
 def pairs_within(a: np.ndarray, b: np.ndarray, radius: float, *,
                  use_scipy: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every pair ``(i, j)`` with ``a[i]`` and ``b[j]`` at most ``radius`` apart (Euclidean, inclusive), as the
-    index arrays ``i``, ``j`` and the distances, nearest first (ties by ``i``, then ``j``)."""
+    """Every pair ``(i, j)`` with ``a[i]`` and ``b[j]`` at most ``radius`` apart (Euclidean, inclusive, plus the
+    slack), as the index arrays ``i``, ``j`` and the distances, nearest first (ties by ``i``, then ``j``)."""
     i, j, d2 = _close_pairs(a, b, radius, use_scipy)
     d = np.sqrt(d2)
     order = np.lexsort((j, i, d))
@@ -164,8 +155,8 @@ def _augment(root: int, adjacency: list[list[int]], mate_a: list[int], mate_b: l
 def mutual_nearest(a: np.ndarray, b: np.ndarray, radius: float, *, use_scipy: bool = True) -> np.ndarray:
     """``(M, 2)`` index pairs ``(i, j)`` such that ``b[j]`` is ``a[i]``'s nearest neighbour, ``a[i]`` is
     ``b[j]``'s, and they are at most ``radius`` apart. Each point is in at most one pair, sorted by ``i``. Of
-    points equally near, the lowest index is the nearest (as :func:`nearest_within`), with SciPy or without,
-    so points added far away (more than ``radius`` from every point) change no pair."""
+    points equally near, the lowest index is the nearest, with SciPy or without, so points added far away (more
+    than ``radius`` from every point) change no pair."""
     i, j, d2 = _close_pairs(a, b, radius, use_scipy)
     nearest_of_a = np.zeros(len(i), dtype=bool)
     nearest_of_a[_firsts(i, d2, j)] = True

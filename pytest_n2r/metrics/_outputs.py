@@ -105,7 +105,10 @@ def as_keypoints(value: Any, which: str) -> np.ndarray:
     """Keypoints as an ``(N, 2)`` float64 array of ``(u, v)`` pixels (OpenCV pixel centres).
 
     Accepts an ``(N, 2)`` array, an ``(N, K >= 2)`` array whose extra columns (score, size, ...) are
-    dropped, an empty sequence, or a sequence of ``cv2.KeyPoint`` (their ``pt``).
+    dropped, an empty sequence, or a sequence of ``cv2.KeyPoint`` (their ``pt``). A ``(3, K >= 4)`` array is
+    refused: it is three keypoints with extra columns or, as SuperPoint's reference code returns them, the
+    transposed ``(x, y, confidence)`` rows of ``K`` keypoints; ``(3, 2)`` and ``(3, 3)`` are three rows. A
+    ``(2, K)`` array is two keypoints (docs/metrics.md, "Keypoint metrics").
     """
     expected = "keypoints as an (N, 2) array of (u, v) pixels, an (N, K>=2) array, or a list of cv2.KeyPoint"
     if isinstance(value, Sequence) and not isinstance(value, (str, bytes)):
@@ -118,4 +121,9 @@ def as_keypoints(value: Any, which: str) -> np.ndarray:
         return np.zeros((0, 2))
     if arr.ndim != 2 or arr.shape[1] < 2:
         raise SUTOutputError(f"{which} output has shape {arr.shape}; expected {expected}")
+    if arr.shape[0] == 3 and arr.shape[1] >= 4:
+        raise SUTOutputError(
+            f"{which} output has shape {arr.shape}: 3 keypoints with {arr.shape[1] - 2} extra columns, or the "
+            f"transposed (x, y, confidence) rows of {arr.shape[1]} keypoints (as SuperPoint returns them)? Return "
+            "one row per keypoint, (N, 2) (u, v) or (N, 3) (u, v, score): pts.T for (3, N)")
     return np.ascontiguousarray(arr[:, :2])

@@ -3,7 +3,8 @@
 Convention
 ----------
 - Pixels are ``(u, v)`` with pixel centres at integer coordinates (OpenCV); a point is *inside* an
-  image of ``W x H`` pixels when ``-0.5 <= u <= W - 0.5`` and ``-0.5 <= v <= H - 0.5``.
+  image of ``W x H`` pixels when ``-0.5 <= u < W - 0.5`` and ``-0.5 <= v < H - 0.5`` (half-open, as
+  :func:`~pytest_n2r.geometry.inside_image`).
 - Depth is the rendered **z-depth** (scene units), poses are camera-to-world with OpenCV axes.
 
 Depth mapping (:class:`DepthMapping`), for a point ``uv`` of view *a* mapped into view *b*:

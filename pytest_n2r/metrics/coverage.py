@@ -19,8 +19,9 @@ from ..geometry import Camera
 
 __all__ = ["DISC_SLACK", "capped_radius", "coverage_mask", "coverage_bound"]
 
-#: Slack (pixels) added to a disc's radius so that round-off in mapped coordinates (~1e-12 px) cannot
-#: flip a pixel centre lying exactly on the circle.
+#: Slack (pixels) added to a disc's radius, and to repeatability's matching distance, so that round-off in mapped
+#: coordinates (~1e-13 px through a homography, typically 1e-7 px through float32 depth) cannot flip a pixel
+#: centre lying exactly on the circle, or drop a pair exactly ``px`` apart.
 DISC_SLACK = 1e-6
 #: Side (pixels) of the cells :func:`coverage_bound` counts.
 _CELL = 4

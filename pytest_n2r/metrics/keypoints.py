@@ -263,7 +263,7 @@ class Repeatability(_KeypointMetric):
 
     name = "repeatability"
     ideal = 1.0
-    result_version = "3"  # 3: mutual nearest ties go to the lowest index; homographies applied as H / max|H|
+    result_version = "4"  # 4: pairs px + DISC_SLACK apart match; 3: mutual ties to the lowest index, H / max|H|
 
     def __init__(
         self, px: float = 2.0, mapping: Mapping = "depth", *, form: Literal["schmid", "symmetric"] = "schmid",

@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis.errors import Unsatisfiable
 
 from pytest_n2r.errors import InvalidArgument, InvalidType, MetricArgumentError, MetricUndefined, SUTOutputError
-from pytest_n2r.geometry import Transform
+from pytest_n2r.geometry import Camera, Transform
 from pytest_n2r.metrics._matching import mutual_nearest
 from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping
 from pytest_n2r.metrics.coverage import coverage_bound
@@ -112,6 +112,30 @@ def test_points_shifted_by_3px_fail_at_2px_and_pass_at_4px():
         repeatability(px=2).assert_within(p, q_shifted, source, follow, eps=0.2)
     result = repeatability(px=4).assert_within(p, q_shifted, source, follow, eps=0.2)
     assert result.score > 0.9, result  # only points pushed out of the source image are lost
+
+
+@pytest.mark.parametrize("mapping", ["depth", "homography"])
+@pytest.mark.parametrize("moved", [False, True], ids=["same view", "moved"])
+def test_a_point_exactly_px_away_matches_despite_round_off(mapping, moved):
+    """The docs: a point exactly ``px`` away matches. Mapped points carry round-off (1e-14 px through a
+    homography, more through float32 depth) that a distance test without slack turned into misses: on one view
+    of 320 x 240 pixels, every point moved 2 px right scored 0.0 by homography (moved left, 0.88 by depth)."""
+    camera = Camera(320, 240, 300.0, 300.0, 159.5, 119.5)
+    tau = Transform(roll=10, pitch=-5, yaw=7, x=0.2, z=-0.3) if moved else Transform()
+    source, follow = pair(tau, camera=camera)
+    u, v = np.meshgrid(np.arange(10.0, 310.0, 12.0), np.arange(10.0, 230.0, 12.0))
+    p = np.column_stack([u.ravel(), v.ravel()]) + [0.3, 0.7]
+    plane = WALL_PLANE if moved else None  # not moved: the identity homography of the plane at infinity
+    if mapping == "depth":
+        metric, mapped = repeatability(px=2), DepthMapping(source, follow).to_follow(p)
+    else:
+        metric = repeatability(px=2, mapping="homography", plane=plane)
+        mapped = HomographyMapping.from_views(source, follow, plane).to_follow(p)
+    on_follow = mapped.uv[mapped.visible]
+    for offset, expected in ((1.999, 1.0), (2.0, 1.0), (2.001, 0.0)):
+        for direction in ([1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]):
+            result = metric(p, on_follow + offset * np.array(direction), source, follow)
+            assert result.score == expected, (offset, direction, result)
 
 
 def test_crowded_points_moved_within_the_tolerance_are_all_found_again():
@@ -253,6 +277,21 @@ def test_accepted_keypoint_forms_agree():
     assert scores == {1.0}
 
 
+def test_three_keypoints_are_rows_and_a_superpoint_style_3_by_n_array_is_refused():
+    """SuperPoint's reference code returns ``(3, N)`` (x, y, confidence): read as rows, it was 3 keypoints whose
+    coordinates were the first two x values, scored without a word. ``(3, 2)`` and ``(3, 3)`` are 3 rows."""
+    view, same = pair(Transform())
+    three = np.array([[20.0, 30.0, 0.9], [50.0, 60.0, 0.8], [90.0, 40.0, 0.7]])
+    for out in (three[:, :2], three, three.tolist()):
+        result = repeatability()(three[:, :2], out, view, same)
+        assert result.score == 1.0 and result.details["n_follow"] == 3, (out, result)
+    superpoint = grid_points().T  # (2, N): the (x, y) rows
+    superpoint = np.vstack([superpoint, np.ones(superpoint.shape[1])])
+    with pytest.raises(SUTOutputError, match=r"source output has shape \(3, \d+\): .*SuperPoint.*pts\.T"):
+        repeatability()(superpoint, grid_points(), view, same)
+    assert repeatability()(superpoint.T, grid_points(), view, same).score == 1.0
+
+
 @pytest.mark.parametrize(
     ("follow_output", "match"),
     [
@@ -261,6 +300,9 @@ def test_accepted_keypoint_forms_agree():
         (None, r"follow-up output is None; expected keypoints as an \(N, 2\) array"),
         (np.zeros((4, 1)), r"follow-up output has shape \(4, 1\); expected keypoints"),
         (np.zeros(5), r"follow-up output has shape \(5,\)"),
+        (np.ones((3, 500)), (r"follow-up output has shape \(3, 500\): 3 keypoints with 498 extra columns, or "
+                             r"the transposed \(x, y, confidence\) rows of 500 keypoints .*one row per keypoint")),
+        (np.ones((3, 4)), r"shape \(3, 4\): .* \(N, 2\) \(u, v\) or \(N, 3\) \(u, v, score\)"),
         ("points", "follow-up output of type str is not numeric"),
     ],
 )

@@ -1,16 +1,19 @@
-"""The largest one-to-one matching of two point sets within a distance, against SciPy's Hopcroft-Karp, and nearest
-neighbours whose distance ties go to the lowest index with SciPy and without."""
+"""The largest one-to-one matching of two point sets within a distance, against SciPy's Hopcroft-Karp, mutual
+nearest neighbours whose distance ties go to the lowest index with SciPy and without, and the distance test's
+slack for round-off."""
 
 from __future__ import annotations
 
 import hypothesis.strategies as st
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis.extra.numpy import arrays
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import maximum_bipartite_matching
 
-from pytest_n2r.metrics._matching import _kd_tree, maximum_matching, mutual_nearest, nearest_within, pairs_within
+from pytest_n2r.metrics._matching import _kd_tree, maximum_matching, mutual_nearest, pairs_within
+from pytest_n2r.metrics.coverage import DISC_SLACK
 
 
 def crowded(seed: int, n: int, spread: float) -> np.ndarray:
@@ -23,7 +26,7 @@ def largest_matching_size(a: np.ndarray, b: np.ndarray, radius: float) -> int:
     if len(a) == 0 or len(b) == 0:
         return 0
     d = np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1])
-    graph = csr_matrix((d <= radius).astype(np.int8))
+    graph = csr_matrix((d <= radius + DISC_SLACK).astype(np.int8))
     return int((maximum_bipartite_matching(graph, perm_type="column") >= 0).sum())
 
 
@@ -36,7 +39,8 @@ def test_the_matching_is_one_to_one_within_the_radius_and_as_large_as_one_can_be
     i, j = pairs.T
     assert len(set(i.tolist())) == len(i) and len(set(j.tolist())) == len(j), f"a point paired twice: {pairs}"
     distances = np.hypot(*(a[i] - b[j]).T)
-    assert np.all(distances <= radius), f"pairs farther than {radius} px: {distances[distances > radius]}"
+    far = distances > radius + DISC_SLACK
+    assert not far.any(), f"pairs farther than {radius} px: {distances[far]}"
     assert len(pairs) == largest_matching_size(a, b, radius), "not a maximum matching"
     assert len(pairs) >= len(mutual_nearest(a, b, radius)), "fewer pairs than mutual nearest neighbours"
 
@@ -56,6 +60,19 @@ def test_pairs_are_listed_nearest_first_and_a_pair_exactly_at_the_radius_counts(
     for use_scipy in (True, False):
         i, j, d = pairs_within(a, b, 2.0, use_scipy=use_scipy)
         assert (i.tolist(), j.tolist(), d.tolist()) == ([1, 0, 0], [1, 2, 0], [0.5, 1.0, 2.0]), use_scipy
+
+
+@pytest.mark.parametrize("use_scipy", [True, False], ids=["cKDTree", "numpy"])
+def test_a_pair_at_the_radius_plus_round_off_counts_and_one_past_the_slack_does_not(use_scipy):
+    """Mapped points carry round-off (1e-14 px through a homography, ~1e-7 px through float32 depth): a pair
+    exactly ``radius`` apart before mapping must still count, so the test has the coverage mask's slack
+    (``DISC_SLACK``); without it, one 2 px shift mapped through a homography scored 0 at ``px=2``."""
+    a = np.array([[10.3, 20.7], [40.0, 20.0], [70.0, 20.0], [100.0, 20.0], [130.0, 20.0]])
+    b = a + np.array([[2.0, 0.0], [0.0, 2.0 + 1e-12], [2.0 + DISC_SLACK / 2, 0.0], [2.001, 0.0], [0.0, 1.999]])
+    i, j, _ = pairs_within(a, b, 2.0, use_scipy=use_scipy)
+    assert sorted(zip(i.tolist(), j.tolist(), strict=True)) == [(0, 0), (1, 1), (2, 2), (4, 4)]
+    assert maximum_matching(a, b, 2.0, use_scipy=use_scipy).tolist() == [[0, 0], [1, 1], [2, 2], [4, 4]]
+    assert mutual_nearest(a, b, 2.0, use_scipy=use_scipy).tolist() == [[0, 0], [1, 1], [2, 2], [4, 4]]
 
 
 def test_a_crowded_set_moved_rigidly_is_matched_whole():
@@ -86,14 +103,14 @@ def test_scipy_and_numpy_paths_break_distance_ties_alike_by_the_lowest_index(a, 
     """On an integer grid many points are equally near. cKDTree broke such ties by its tree layout, the numpy
     path by the lowest index: the mutual pairs differed with and without SciPy (25 of 400 random cases)."""
     assert _kd_tree() is not None, "SciPy is needed to compare its path with the numpy one"
+    reach = radius + DISC_SLACK
     d2 = ((a[:, None, :] - b[None, :, :]) ** 2).sum(axis=2)  # what the metric computes, to the bit
-    within = d2 <= radius * radius
-    lowest = np.where(within.any(axis=1), np.argmin(np.where(within, d2, np.inf), axis=1), -1) if len(b) else (
-        np.full(len(a), -1))
+    d2 = np.where(d2 <= reach * reach, d2, np.inf)
+    lowest = [(i, int(np.argmin(d2[i]))) for i in range(len(a)) if len(b) and np.isfinite(d2[i]).any()]
+    lowest = [[i, j] for i, j in lowest if int(np.argmin(d2[:, j])) == i]  # argmin: the lowest index of ties
     for use_scipy in (True, False):
-        path = "cKDTree" if use_scipy else "numpy"
-        nearest = nearest_within(a, b, radius, use_scipy=use_scipy)
-        assert nearest.tolist() == lowest.tolist(), f"{path}: nearest {nearest} is not the lowest index {lowest}"
+        pairs = mutual_nearest(a, b, radius, use_scipy=use_scipy).tolist()
+        assert pairs == lowest, f"{'cKDTree' if use_scipy else 'numpy'}: {pairs} are not the lowest-index {lowest}"
     fast, slow = mutual_nearest(a, b, radius), mutual_nearest(a, b, radius, use_scipy=False)
     assert fast.tolist() == slow.tolist(), f"mutual pairs with SciPy {fast.tolist()} != without {slow.tolist()}"
 
