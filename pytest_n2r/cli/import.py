@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from .._validation import as_unit_rgb
 from ._output import FORCE_HELP, printable
 
 __all__ = ["add_parser", "parse_rgb", "run"]
@@ -22,13 +23,10 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
     >>> parse_rgb("1, 1, 1")
     (1.0, 1.0, 1.0)
     """
-    try:
-        rgb = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        rgb = ()
-    if len(rgb) != 3 or not all(0.0 <= v <= 1.0 for v in rgb):
+    rgb = as_unit_rgb(text.split(","))
+    if rgb is None:
         raise argparse.ArgumentTypeError(f"{text!r}: expected three comma-separated values in [0, 1], e.g. 1,1,1")
-    return rgb[0], rgb[1], rgb[2]
+    return rgb
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

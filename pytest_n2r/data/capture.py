@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -10,7 +11,7 @@ import numpy as np
 from ..errors import InvalidArgument
 from ..geometry import Camera
 
-__all__ = ["CapturedView", "Capture", "heldout_split"]
+__all__ = ["CapturedView", "Capture", "HELDOUT_EVERY", "heldout_split", "split_frames"]
 
 Split = Literal["train", "heldout"]
 
@@ -45,7 +46,7 @@ class Capture:
     bounds:
         ``(2, 3)`` float64 axis-aligned box ``[min, max]`` of the region the cameras observe (scene units).
     reference_length:
-        The median z-depth of ``points`` seen from the cameras (scene units): the unit of transform
+        The median z-depth of ``points`` seen from the training cameras (scene units): the unit of transform
         translations in the public API.
     source:
         Where the capture came from (path, as given).
@@ -72,7 +73,11 @@ class Capture:
         return [v for v in self.views if v.split == "heldout"]
 
 
-def heldout_split(n: int, every: int = 8, first: int = 0) -> list[Split]:
+#: The NeRF custom's default: every 8th image (0, 8, 16, ...) is held out.
+HELDOUT_EVERY = 8
+
+
+def heldout_split(n: int, every: int = HELDOUT_EVERY, first: int = 0) -> list[Split]:
     """The NeRF custom: every ``every``-th image from ``first`` (0, 8, 16, ... by default) is held out, the
     rest train.
 
@@ -84,3 +89,16 @@ def heldout_split(n: int, every: int = 8, first: int = 0) -> list[Split]:
     if not 0 <= first < max(every, 1):
         raise InvalidArgument(f"first={first!r}: expected an index in [0, every={every})")
     return ["heldout" if every > 0 and i % every == first else "train" for i in range(n)]
+
+
+def split_frames(names: Sequence[str], heldout: Collection[str] | None, heldout_every: int | None) -> list[Split]:
+    """The split of frames named ``names`` (in order): the source's own split (``heldout``: the names it holds
+    out) when ``heldout_every`` is ``None`` and the source has one, else every ``heldout_every``-th frame held out
+    (:func:`heldout_split`; :data:`HELDOUT_EVERY` when ``None``, 0 holds none).
+
+    >>> split_frames(["a", "b", "c"], {"b"}, None), split_frames(["a", "b", "c"], {"b"}, 2)
+    (['train', 'heldout', 'train'], ['heldout', 'train', 'heldout'])
+    """
+    if heldout_every is None and heldout is not None:
+        return ["heldout" if name in heldout else "train" for name in names]
+    return heldout_split(len(names), HELDOUT_EVERY if heldout_every is None else heldout_every)

@@ -23,7 +23,7 @@ import numpy as np
 from .._validation import check_positive
 from ..errors import IngestError, InvalidArgument, InvalidType
 from ..geometry import Camera
-from .capture import Capture, CapturedView, heldout_split
+from .capture import Capture, CapturedView, split_frames
 from .extent import reference_length, scene_bounds
 from .images import read_image, resize_image
 from .poses import PoseSet, SourceFrame
@@ -162,7 +162,7 @@ def ingest(
     images = _load_pixels(poses, (lambda cam: _output_camera(cam, downscale, max_size)) if load_images else None)
     frames = poses.frames  # without those whose image could not be decoded
     out_cameras = [_output_camera(f.camera, downscale, max_size) for f in frames]
-    splits = _splits(poses, heldout_every)
+    splits = split_frames([f.name for f in poses.frames], poses.heldout, heldout_every)
     views = [
         CapturedView(name=f.name, camera=cam, c2w=f.c2w.copy(), split=split, image=img)
         for f, cam, split, img in zip(frames, out_cameras, splits, images)
@@ -186,14 +186,6 @@ def complete_points(poses: PoseSet) -> PoseSet:
     return poses
 
 
-def _splits(poses: PoseSet, heldout_every: int | None) -> list[str]:
-    """Each frame's split: every ``heldout_every``-th held out, or the source's own split when that is
-    ``None`` and the source has one (else every 8th)."""
-    if heldout_every is None and poses.heldout is not None:
-        return ["heldout" if f.name in poses.heldout else "train" for f in poses.frames]
-    return heldout_split(len(poses.frames), 8 if heldout_every is None else heldout_every)
-
-
 def extent(poses: PoseSet, heldout_every: int | None = None) -> tuple[np.ndarray, float]:
     """``(bounds, reference_length)`` of a pose set with points: the box of the points seen by all
     cameras and the median z-depth of the points seen by the training cameras (scene units; the split
@@ -201,7 +193,7 @@ def extent(poses: PoseSet, heldout_every: int | None = None) -> tuple[np.ndarray
     frames = poses.frames
     if len(frames) < 3:
         raise IngestError(f"{poses.source}: only {len(frames)} registered images; at least 3 are needed")
-    splits = _splits(poses, heldout_every)
+    splits = split_frames([f.name for f in poses.frames], poses.heldout, heldout_every)
     train = [f for f, s in zip(frames, splits) if s == "train"] or frames
     ref = reference_length(poses.points, [f.camera for f in train], [f.c2w for f in train])
     bounds = scene_bounds(poses.points, [f.camera for f in frames], [f.c2w for f in frames])

@@ -46,7 +46,7 @@ class PoseSet:
         Registered frames in source order (sorted by name for models and SfM).
     points:
         ``(N, 3)`` float64 sparse surface points in world units (SfM / COLMAP points, or triangulated
-        from the given poses); may be empty until :func:`~pytest_n2r.data.triangulate.triangulate_frames`
+        from the given poses); may be empty until :func:`~pytest_n2r.data.triangulate.triangulate_views`
         fills it.
     source:
         The path the set was read from.

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import InvalidArgument
 from ..geometry import Camera, camera_rays, pixel_grid
-from ..scene.base import Scene, SceneView
+from ..scene.base import Scene, SceneView, hash_views
 from .portable_math import norm3
 from .primitives import T_MIN, Group, Primitive, primitive_bounds, slab_hits
 
@@ -144,9 +144,7 @@ class GroundTruthScene(Scene):
             for lo, _, members in self._groups:
                 h.update(f"{members}".encode() if lo is not None else b"")
             h.update(np.asarray([*self.light, self.ambient, *self.background, self.far, self.supersample]).tobytes())
-            for v in self.views:
-                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
-                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            hash_views(h, self.views)
             self._hash = h.hexdigest()
         return self._hash
 

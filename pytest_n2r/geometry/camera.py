@@ -109,10 +109,6 @@ class Camera:
         """``(width, height)`` in pixels, the order OpenCV uses."""
         return self.width, self.height
 
-    @property
-    def is_distorted(self) -> bool:
-        return bool(self.distortion)
-
     def resized(self, width: int, height: int) -> Camera:
         """The same camera for an image resized to ``width`` x ``height``.
 

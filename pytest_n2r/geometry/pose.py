@@ -224,6 +224,7 @@ class Transform:
 
     @classmethod
     def identity(cls) -> Transform:
+        """The transform that moves nothing: every component 0 (``Transform()``)."""
         return cls()
 
     @property

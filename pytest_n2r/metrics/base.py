@@ -2,7 +2,7 @@
 
 A metric compares the SUT's output on the source view with its output on the follow-up view. It has a
 ``score`` with a known ``ideal`` value; the relation holds when the **deviation** from the ideal is at
-most ``eps`` (design.md §6): repeatability 0.74 → deviation 0.26 → fails at ``eps=0.2``.
+most ``eps`` (docs/metrics.md, the top): repeatability 0.74 → deviation 0.26 → fails at ``eps=0.2``.
 """
 
 from __future__ import annotations

@@ -15,7 +15,12 @@ One concept per module:
 - :mod:`~pytest_n2r.relation.failure`: :class:`RelationFailure` and the messages of every verdict
   (:data:`MAX_UNDEFINED`);
 - :mod:`~pytest_n2r.relation.determinism`: telling a non-deterministic SUT from an inconsistency;
-- :mod:`~pytest_n2r.relation.floor`: the field floor beside a relation's result.
+- :mod:`~pytest_n2r.relation.floor`: the field floor beside a relation's result;
+- :mod:`~pytest_n2r.relation.artifacts`: failure pictures, the two renders with the SUT's output drawn on them;
+- :mod:`~pytest_n2r.relation.kept_results`: a metric's results kept in the render cache across sessions;
+- :mod:`~pytest_n2r.relation.sut_outputs`: the SUT's outputs on rendered views, kept so that one SUT runs once
+  on one render;
+- :mod:`~pytest_n2r.relation.timeout`: the per-call time limit, so that a hung render or SUT fails its test.
 """
 
 from .determinism import SUTNotDeterministic

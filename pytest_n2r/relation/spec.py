@@ -14,7 +14,7 @@ from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform
 from ..metrics import Metric, resolve_metric
 from ..render.size import RenderSize
-from ..scene.splits import SOURCE_SPLITS
+from ..scene.splits import check_source_split
 from ..strategies import PRESETS
 from .validity import Validity
 
@@ -62,6 +62,9 @@ class Relation:
     def build(cls, metric: Any, eps: Any, transform: Any, *, examples: int | None = None,
               size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
               validity: Validity | None = None) -> Relation:
+        """The relation of these arguments, each checked, with an error naming the bad one. The arguments are
+        :func:`~pytest_n2r.metamorphic`'s (see its parameters); ``size`` may be anything
+        :meth:`RenderSize.parse <pytest_n2r.render.size.RenderSize.parse>` reads."""
         metric = resolve_metric(metric)
         try:
             eps = check_range("eps", eps, 0.0)
@@ -77,8 +80,7 @@ class Relation:
             raise InvalidArgument(f"examples={examples!r} must be a whole number >= 1")
         if search not in SEARCHES:
             raise InvalidArgument(f"search={search!r}; expected one of {SEARCHES}")
-        if views not in SOURCE_SPLITS:
-            raise InvalidArgument(f"views={views!r}; expected one of {SOURCE_SPLITS}")
+        check_source_split("views", views)
         if not isinstance(interpolate, bool):
             raise InvalidType(f"interpolate={interpolate!r} must be True or False")
         if validity is not None and not isinstance(validity, Validity):

@@ -25,7 +25,7 @@ class RenderSize:
     ratio is always kept: ``width`` x ``height`` is exact for a view of that aspect (to a pixel), and a view of
     another (a portrait photo at ``320x180``, a 4:3 one) renders at the largest size of its own aspect that fits
     in the box: stretching it would hand the SUT a picture no camera took. Intrinsics are rescaled with the
-    pixel-centre rule of design.md §3."""
+    pixel-centre rule of docs/conventions.md ("Pixels: centres at integer coordinates", resizing)."""
 
     width: int | None = None
     height: int | None = None

@@ -16,7 +16,7 @@ from ..render.size import MAX_SIDE
 from ..render.view import OUTPUTS, RenderedView
 
 __all__ = ["MAX_CAMERA_DISTANCE", "MAX_FOCAL", "MIN_FOCAL", "PRINCIPAL_POINT_REACH", "Scene", "SceneView",
-           "check_render_camera", "normalize_outputs"]
+           "check_render_camera", "hash_views", "normalize_outputs"]
 
 #: How far from the captured cameras a render may be, in reference lengths: beyond it a float32 renderer
 #: cannot place a sample within a thousandth of a reference length, so the picture would be noise or NaN.
@@ -46,6 +46,14 @@ class SceneView:
         """Hypothesis's "Falsifying example" names the view, not its arrays (nor its camera: a relation renders
         it at the size it asks for)."""
         printer.text(f"SceneView(index={self.index}, name={self.name!r}, split={self.split!r})")
+
+
+def hash_views(h: Any, views: Iterable[SceneView]) -> None:
+    """Feed ``views`` to the hash ``h`` (a ``hashlib`` object), in order: each view's name, split and camera, then
+    its pose's bytes. A scene's ``content_hash`` takes its views this way; render cache keys depend on the bytes."""
+    for v in views:
+        h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
+        h.update(np.ascontiguousarray(v.c2w).tobytes())
 
 
 def normalize_outputs(outputs: str | Iterable[str]) -> tuple[str, ...]:

@@ -13,7 +13,7 @@ from ..field.device import resolve_device
 from ..field.grid import SceneField
 from ..geometry import Camera
 from ..render.field_render import RENDER_VERSION, FieldRenderer, RenderSettings
-from .base import Scene
+from .base import Scene, hash_views
 from .file import SceneFile
 
 __all__ = ["FieldScene", "RENDER_VERSION"]
@@ -73,9 +73,7 @@ class FieldScene(Scene):
             settings = {**self.settings.to_dict(), "background": list(background)}
             h.update(json.dumps(settings, sort_keys=True).encode())
             h.update(np.asarray([self.reference_length, self.metres_per_unit or 0.0]).tobytes())
-            for v in self.views:
-                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
-                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            hash_views(h, self.views)
             self._hash = h.hexdigest()
         return self._hash
 

@@ -16,14 +16,14 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import as_unit_rgb, check_positive, repeated_name
-from ..data.capture import heldout_split
+from ..data.capture import split_frames
 from ..data.poses import PoseSet
 from ..errors import IngestError, InvalidArgument, InvalidType
 from ..geometry import Camera, Units
 from ..render.size import MAX_SIDE
 from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSettings
 from ..splats.gaussians import Gaussians
-from .base import Scene, SceneView
+from .base import Scene, SceneView, hash_views
 
 __all__ = ["SplatScene", "load_splat_scene", "measure_reference_length", "splat_views"]
 
@@ -115,9 +115,7 @@ class SplatScene(Scene):
             h.update(json.dumps({**self.settings.to_dict(), "background": list(self._renderer.background)},
                                 sort_keys=True).encode())
             h.update(np.asarray([self._reference_length or 0.0, self.metres_per_unit or 0.0]).tobytes())
-            for v in self.views:
-                h.update(f"{v.name}/{v.split}/{v.camera.to_dict()}".encode())
-                h.update(np.ascontiguousarray(v.c2w).tobytes())
+            hash_views(h, self.views)
             self._hash = h.hexdigest()
         return self._hash
 
@@ -172,10 +170,7 @@ def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneV
                 raise IngestError(f"{poses.source}: frame [{i}] {f.name!r}: camera {key}={side!r}; expected a whole "
                                   f"number of pixels in 1..{MAX_SIDE}")
     frames = sorted(poses.frames, key=lambda f: f.name)
-    if heldout_every is None and poses.heldout is not None:
-        splits = ["heldout" if f.name in poses.heldout else "train" for f in frames]
-    else:
-        splits = heldout_split(len(frames), 8 if heldout_every is None else heldout_every)
+    splits = split_frames([f.name for f in frames], poses.heldout, heldout_every)
     return [SceneView(i, f.name, f.camera.undistorted(), f.c2w, split)
             for i, (f, split) in enumerate(zip(frames, splits))]
 

@@ -6,7 +6,7 @@ Rendering them is :mod:`pytest_n2r.render.splat_render`; a splat scene is :class
 
 from .gaussians import TENSORS, Gaussians
 from .ply import ply_properties, read_ply, write_ply
-from .sh import SH_C0, rgb_to_sh, sh_count, sh_to_rgb, view_colours
+from .sh import SH_C0, rgb_to_sh, sh_count, view_colours
 
 __all__ = [
            "SH_C0",
@@ -16,7 +16,6 @@ __all__ = [
            "read_ply",
            "rgb_to_sh",
            "sh_count",
-           "sh_to_rgb",
            "view_colours",
            "write_ply",
 ]

@@ -116,9 +116,5 @@ class Gaussians:
             h.update(array.tobytes())
         return h.hexdigest()
 
-    def subset(self, index: np.ndarray) -> Gaussians:
-        """The Gaussians selected by ``index`` (a boolean mask or indices)."""
-        return Gaussians(**{name: array[index] for name, array in self.tensors().items()})
-
     def __repr__(self) -> str:
         return f"<Gaussians: {len(self)}, SH degree {self.sh_degree}>"

@@ -31,7 +31,6 @@ __all__ = [
     "rgb_to_sh",
     "sh_count",
     "sh_degree_of",
-    "sh_to_rgb",
     "view_colours",
 ]
 
@@ -68,11 +67,6 @@ def rgb_to_sh(rgb: np.ndarray) -> np.ndarray:
     0.0
     """
     return (np.asarray(rgb, dtype=np.float64) - 0.5) / SH_C0
-
-
-def sh_to_rgb(dc: np.ndarray) -> np.ndarray:
-    """DC coefficients → the view-independent colour (inverse of :func:`rgb_to_sh`, before clamping)."""
-    return np.asarray(dc, dtype=np.float64) * SH_C0 + 0.5
 
 
 @njit(cache=True, inline="always")

@@ -51,7 +51,7 @@ class FollowUp(ABC):
 
     @abstractmethod
     def record_fields(self) -> dict[str, Any]:
-        """The follow-up's fields of an example record (:class:`~pytest_n2r.report.records.ExampleRecord`):
+        """The follow-up's fields of an example record (:class:`~pytest_n2r.relation.record.ExampleRecord`):
         ``transform`` and ``units``, or ``transform=None`` and ``mutation``."""
 
     @abstractmethod

@@ -4,8 +4,8 @@ Convention
 ----------
 - A drawn value is a :class:`~pytest_n2r.strategies.pose_change.PoseChange`: a
   :class:`~pytest_n2r.geometry.Transform` applied in the **source camera's frame** (``c2w_tau = c2w @
-  T(tau)``, design.md §2), angles in **degrees**, carrying the ``units`` of its translation (reference
-  lengths by default, so one bound means the same on every scene).
+  T(tau)``, docs/conventions.md, "Transforms τ"), angles in **degrees**, carrying the ``units`` of its
+  translation (reference lengths by default, so one bound means the same on every scene).
 - A :class:`PoseChangeFamily` (bounds, units, look-at) is the one place pose changes are drawn from:
   :meth:`~PoseChangeFamily.strategy` for Hypothesis (never the identity, shrinking toward the smallest
   motion on a decimal grid, :mod:`.grid`: a failing example is the smallest motion that still breaks the

@@ -105,7 +105,7 @@ def test_n2r_import_packs_a_file_that_renders_the_same_bits(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     assert main(["info", str(out)]) == 0
     shown = capsys.readouterr().out
-    assert "representation    splats" in shown and "'count': 4000, 'sh_degree': 0" in shown, shown
+    assert "3-D Gaussian splats)" in shown and "splats      4000 Gaussians, SH degree 0" in shown, shown
     with zipfile.ZipFile(out) as archive:
         assert sorted(archive.namelist()) == ["scene.json", "splats.safetensors"], archive.namelist()
         assert not any(name.endswith((".pkl", ".pt")) for name in archive.namelist())
