@@ -65,10 +65,12 @@ class FieldScene(Scene):
 
     @property
     def content_hash(self) -> str:
-        """SHA-256 of the stored field member, the views, the render settings and backend, and
+        """SHA-256 of the stored field member, the views, the render settings and backend (the torch backend with
+        its device, torch's version and the GPU: its kernels' round-off differs between them), and
         :data:`RENDER_VERSION`: anything that can change a rendered pixel."""
         if self._hash is None:
-            h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{self.backend}/{self.file.field_digest}".encode())
+            backend = self.backend if self.backend != "torch" else f"torch/{_torch_platform(self.device)}"
+            h = hashlib.sha256(f"FieldScene/{RENDER_VERSION}/{backend}/{self.file.field_digest}".encode())
             background = self.settings.background if self.settings.background is not None else self.file.background
             settings = {**self.settings.to_dict(), "background": list(background)}
             h.update(json.dumps(settings, sort_keys=True).encode())
@@ -87,3 +89,11 @@ class FieldScene(Scene):
     def __repr__(self) -> str:
         return (f"<FieldScene {self.name!r}: {len(self.views)} views, {self.field.resolution}³ grid on "
                 f"{self.device}, {self.backend} backend>")
+
+
+def _torch_platform(device: torch.device) -> str:
+    """What the torch backend's pixels depend on besides the scene: the device's kind, torch's version and, on
+    CUDA, the CUDA version and the GPU's name (renders of one field differ in the last bits between them)."""
+    if device.type != "cuda":
+        return f"{device.type}/{torch.__version__}"
+    return f"cuda/{torch.__version__}/{torch.version.cuda}/{torch.cuda.get_device_name(device)}"

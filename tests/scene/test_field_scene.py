@@ -81,6 +81,21 @@ def test_the_content_hash_follows_the_field_and_the_settings(scene_path, tmp_pat
     assert load_scene(other, device="cpu").content_hash != scene.content_hash, "another field kept the hash"
 
 
+def test_the_torch_backends_hash_names_torchs_version_and_the_compiled_ones_does_not(scene_path, monkeypatch):
+    """The torch backend's pixels differ in their last bits between torch versions, CPU kernels and GPUs (one
+    opacity pixel in four views between torch's AVX-512 and AVX2 kernels): a render cache shared by CI runners must
+    not hand one runner's pictures to another; the compiled backend's renders are the same bits everywhere."""
+    import torch
+
+    by_torch = load_scene(scene_path, device="cpu").with_settings(RenderSettings(backend="torch"))
+    compiled = load_scene(scene_path, device="cpu")
+    before = by_torch.content_hash, compiled.content_hash
+    monkeypatch.setattr(torch, "__version__", "2.99.0+another")
+    again = by_torch.with_settings(RenderSettings(backend="torch")).content_hash, load_scene(scene_path).content_hash
+    assert again[0] != before[0], "a torch backend's renders were keyed without torch's version"
+    assert again[1] == before[1], "the compiled backend's key moved with torch's version"
+
+
 def test_pair_moves_by_metres_when_the_scale_is_known(scene_path):
     scene = load_scene(scene_path, device="cpu")
     source, follow = scene.pair(1, Transform(x=1.0), units="metres")
