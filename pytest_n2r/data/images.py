@@ -1,4 +1,4 @@
-"""Listing and reading the photos of a capture.
+"""Reading the photos of a capture (:mod:`.listing` finds them; its names are re-exported here).
 
 Convention
 ----------
@@ -9,8 +9,9 @@ OpenCV decodes as stored, so that :func:`read_image_size` agrees with them); for
 (``.heic``, what iPhones store by default), the container's own rotation and mirror (``irot``, ``imir``), as the
 HEIF standard and libheif do, since there an EXIF tag only describes them. A file is read as HEIF by its
 content (an ISO media ``ftyp`` box), not by its name. Grayscale is repeated to three channels, an alpha channel is
-dropped (the colour under it is kept), 16-bit images are scaled by ``255 / 65535`` and floating-point
-images are clipped to ``[0, 1]`` then scaled by 255.
+dropped (the colour under it is kept, warned of), 16-bit images are scaled by ``255 / 65535`` and floating-point
+images are clipped to ``[0, 1]`` then scaled by 255; wider integers (a 32-bit TIFF) are refused. An embedded colour
+profile other than sRGB is converted to sRGB (:mod:`.colour`).
 
 ``read_image(path, oriented=False)`` reads the pixels **as stored** instead, as COLMAP does (its cameras and poses
 describe those): no EXIF orientation (OpenCV's ``IMREAD_IGNORE_ORIENTATION``; OpenCV's TIFF decoder orients
@@ -31,101 +32,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import IngestError
+from .colour import to_srgb, warn_if_transparent
+from .heif import decode_heif, heif_size, is_iso_media
+from .listing import IMAGE_SUFFIXES, images_in_subfolders, list_images, other_files, subfolder_hint
 
 if TYPE_CHECKING:
     import PIL.Image
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
-           "iter_readable", "images_in_subfolders", "subfolder_hint"]
+           "iter_readable", "images_in_subfolders", "subfolder_hint", "other_files"]
 
-#: File suffixes of HEIF photos (``.hif``: some cameras' name for the same format), decoded by pillow-heif.
-HEIF_SUFFIXES: tuple[str, ...] = (".heic", ".heif", ".hif")
-#: File suffixes treated as images when a folder is listed (compared lower-case).
-IMAGE_SUFFIXES: tuple[str, ...] = (
-    ".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp", ".ppm", ".pgm", *HEIF_SUFFIXES,
-)
 #: The largest image side (pixels) read: :data:`pytest_n2r.render.size.MAX_SIDE` (``data`` sits below ``render``).
 MAX_IMAGE_SIDE = 16384
-
-
-def list_images(folder: str | os.PathLike) -> list[Path]:
-    """The image files directly inside ``folder``, sorted by name (hidden files ignored).
-
-    Raises :class:`IngestError` naming the folder when it does not exist, is not a folder, or holds
-    no file with an image suffix (:data:`IMAGE_SUFFIXES`); then also the subfolders that do hold some
-    (:func:`subfolder_hint`), as a phone's ``DCIM/100APPLE`` does.
-    """
-    folder = Path(folder)
-    if not folder.exists():
-        raise IngestError(f"images folder {str(folder)!r} does not exist")
-    if not folder.is_dir():
-        raise IngestError(f"{str(folder)!r} is not a folder; expected a folder of images")
-    files = _images_in(folder)
-    if not files:
-        hint = subfolder_hint(folder)
-        expected = f" itself; {hint}" if hint else f"; expected files ending in {', '.join(IMAGE_SUFFIXES)}"
-        raise IngestError(f"images folder {str(folder)!r} holds no images{expected}")
-    return files
-
-
-def _images_in(folder: Path) -> list[Path]:
-    """The image files directly inside ``folder`` (:func:`_is_image`), sorted by name."""
-    return sorted(p for p in folder.iterdir() if _is_image(p))
-
-
-def _is_image(path: Path) -> bool:
-    """Whether ``path`` is an image file by its suffix (hidden files are not)."""
-    return path.is_file() and not path.name.startswith(".") and path.suffix.lower() in IMAGE_SUFFIXES
-
-
-#: How deep :func:`images_in_subfolders` looks below a folder (``DCIM/100APPLE`` is 2), and at most how many
-#: folders it opens, so that a home folder given by mistake costs a moment, not a walk of the whole disk.
-SUBFOLDER_DEPTH = 3
-SUBFOLDER_LIMIT = 1000
-
-
-def images_in_subfolders(folder: str | os.PathLike) -> list[tuple[str, int]]:
-    """``(subfolder, image count)`` for every subfolder of ``folder`` (down to :data:`SUBFOLDER_DEPTH` levels, hidden
-    ones and links skipped: a link back to ``folder`` would count its photos again, at most :data:`SUBFOLDER_LIMIT`
-    opened) holding images directly; the path relative to ``folder`` in ``/`` form, sorted by path. ``folder``
-    itself is not counted."""
-    folder = Path(folder)
-    found: list[tuple[str, int]] = []
-    queue, opened = [(folder, 0)], 0
-    while queue and opened < SUBFOLDER_LIMIT:
-        current, depth = queue.pop(0)
-        opened += 1
-        try:
-            entries = sorted(current.iterdir())  # listed once: its images counted, its subfolders queued
-            count = sum(_is_image(p) for p in entries) if current != folder else 0
-        except OSError:  # no permission, gone meanwhile
-            continue
-        if count:
-            found.append((current.relative_to(folder).as_posix(), count))
-        if depth < SUBFOLDER_DEPTH:
-            queue += [(p, depth + 1) for p in entries
-                      if not p.name.startswith(".") and not p.is_symlink() and p.is_dir()]
-    return sorted(found)
-
-
-def subfolder_hint(folder: str | os.PathLike, own: int = 0) -> str:
-    """What to say of the images in ``folder``'s subfolders (:func:`images_in_subfolders`), which structure from
-    motion does not read, when ``folder`` itself holds ``own`` images: ``""`` when there are none."""
-    below = images_in_subfolders(folder)
-    if not below:
-        return ""
-    if len(below) == 1:
-        (name, count), = below
-        listing = f"its subfolder {name} holds {count} image{'s' * (count != 1)}"
-        advice = "pass that folder"
-    else:
-        listing = "its subfolders hold images: " + ", ".join(f"{name} ({count})" for name, count in below[:5])
-        listing += f" and {len(below) - 5} more folders" if len(below) > 5 else ""
-        advice = "pass the folder of one capture"
-    if own:
-        return (f"{listing}, not read (only the photos directly in the folder are): put the capture's photos in one "
-                "folder")
-    return f"{listing}: {advice}"
 
 
 def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
@@ -146,11 +64,12 @@ def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
         img = ((img.astype(np.uint32) * 255 + 32767) // 65535).astype(np.uint8)
     elif img.dtype.kind == "f":
         img = np.round(np.clip(np.nan_to_num(img, nan=0.0), 0.0, 1.0) * 255.0).astype(np.uint8)
-    elif img.dtype.kind in "iu":
+    elif img.dtype.kind in "iu" and img.dtype.itemsize <= 2:
         info = np.iinfo(img.dtype)
         img = np.round(np.clip(img.astype(np.float64), 0, info.max) * (255.0 / info.max)).astype(np.uint8)
     else:
-        raise IngestError(f"image of dtype {img.dtype} cannot be converted to 8-bit RGB")
+        raise IngestError(f"image of dtype {img.dtype} cannot be converted to 8-bit RGB; expected 8- or 16-bit "
+                          "integers, or floating point in [0, 1]")
     channels = img.shape[2]
     if channels in (1, 2):  # gray (+ alpha)
         return np.ascontiguousarray(np.repeat(img[:, :, :1], 3, axis=2))
@@ -170,10 +89,13 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
     if not path.is_file():
         raise IngestError(f"image file {str(path)!r} does not exist")
     head = _head(path)
-    if _is_iso_media(head):
-        _check_sides(path, *_heif_size(path))
-        return to_rgb8(_decode_heif(path, oriented), bgr=False)
-    orientation = _stored_orientation(path)  # refuses a header claiming more than MAX_IMAGE_SIDE a side first
+    if is_iso_media(head):
+        _check_sides(path, *heif_size(path))
+        image, icc = decode_heif(path, oriented)
+        if image.ndim == 3 and image.shape[2] == 4:
+            warn_if_transparent(path, image[:, :, 3])
+        return to_srgb(_named(path, to_rgb8, image, bgr=False), icc, path)
+    orientation, icc, alpha = _stored_facts(path)  # refuses a header claiming more than MAX_IMAGE_SIDE a side first
     try:
         data = np.fromfile(path, dtype=np.uint8)
     except OSError as exc:  # no permission, a device gone
@@ -185,14 +107,63 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
     if not data.size:
         raise IngestError(f"image file {str(path)!r} is empty (0 bytes: a copy that did not finish, or a cloud photo "
                           "not downloaded to this device)")
-    img = cv2.imdecode(data, flags)
+    with _quiet_opencv():
+        img = cv2.imdecode(data, flags)
     if img is None:
-        cut = head[:2] == b"\xff\xd8" and b"\xff\xd9" not in data[-1024:].tobytes()  # a JPEG without its end marker
-        why = "a JPEG cut short: an interrupted copy?" if cut else "corrupt or not an image"
+        kind = _cut_short(head, data)
+        why = f"a {kind} cut short: an interrupted copy?" if kind else "corrupt or not an image"
         raise IngestError(f"image file {str(path)!r} cannot be decoded as an image ({why})")
     if _is_tiff(head) != oriented:  # applying a tag undoes its inverse: 6 and 8 swap, the others undo themselves
         img = _UNDO_ORIENTATION[orientation if _is_tiff(head) else {6: 8, 8: 6}.get(orientation, orientation)](img)
-    return to_rgb8(img)
+    if alpha:  # OpenCV drops the alpha channel itself (IMREAD_ANYCOLOR)
+        warn_if_transparent(path)
+    return to_srgb(_named(path, to_rgb8, img), icc, path)
+
+
+def _named(path: Path, convert, image: np.ndarray, **kwargs) -> np.ndarray:
+    """``convert(image, **kwargs)``, its :class:`IngestError` naming the file at ``path``."""
+    try:
+        return convert(image, **kwargs)
+    except IngestError as exc:
+        raise IngestError(f"image file {str(path)!r}: {exc}") from None
+
+
+def _cut_short(head: bytes, data: np.ndarray) -> str:
+    """``"JPEG"``, ``"PNG"`` or ``"WebP"`` when the file's bytes are such a file missing its end (a JPEG's end marker,
+    a PNG's ``IEND`` chunk, the length a WebP's RIFF header claims), else ``""``."""
+    if head[:2] == b"\xff\xd8" and b"\xff\xd9" not in data[-1024:].tobytes():
+        return "JPEG"
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and b"IEND" not in data[-12:].tobytes():
+        return "PNG"
+    if head[:4] == b"RIFF" and head[8:12] == b"WEBP" and int.from_bytes(head[4:8], "little") + 8 > data.size:
+        return "WebP"
+    return ""
+
+
+@contextmanager
+def _quiet_opencv() -> Iterator[None]:
+    """OpenCV's own log (its TIFF decoder's complaints on a broken file) kept off stderr: the error names the file.
+    The level is process-wide: the first of overlapping readers silences it, the last puts it back."""
+    import cv2
+
+    log = cv2.utils.logging
+    with _OPENCV_QUIET:
+        if not _quiet_readers:
+            _quiet_readers.append(log.getLogLevel())
+            log.setLogLevel(log.LOG_LEVEL_SILENT)
+        _quiet_readers.append(None)
+    try:
+        yield
+    finally:
+        with _OPENCV_QUIET:
+            _quiet_readers.pop()
+            if len(_quiet_readers) == 1:
+                log.setLogLevel(_quiet_readers.pop())
+
+
+#: Held while OpenCV's log level is changed; the level it had, then one entry per reader within :func:`_quiet_opencv`.
+_OPENCV_QUIET = threading.Lock()
+_quiet_readers: list[int | None] = []
 
 
 def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
@@ -202,8 +173,8 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
 
     path = Path(path)
     head = _head(path)
-    if _is_iso_media(head):
-        return _check_sides(path, *_heif_size(path))
+    if is_iso_media(head):
+        return _check_sides(path, *heif_size(path))
     try:
         with _header(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
@@ -259,18 +230,20 @@ def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
     return width, height
 
 
-def _stored_orientation(path: Path) -> int:
-    """The orientation :func:`_exif_orientation` reads from the header (1 when Pillow cannot read it: the decoder
-    names the file), refusing a stored size of more than :data:`MAX_IMAGE_SIDE` pixels a side."""
+def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:
+    """From the header: the orientation :func:`_exif_orientation` reads, the embedded ICC profile and whether the
+    pixels carry alpha or a transparent colour (``(1, None, False)`` when Pillow cannot read it: the decoder names
+    the file), refusing a stored size of more than :data:`MAX_IMAGE_SIDE` pixels a side."""
     from PIL import UnidentifiedImageError
 
     try:
         with _header(path) as im:
-            size, orientation = im.size, _exif_orientation(im)
+            size, orientation, icc = im.size, _exif_orientation(im), im.info.get("icc_profile")
+            alpha = im.mode in ("RGBA", "LA", "La", "RGBa", "PA") or "transparency" in im.info
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError, KeyError):
-        return 1
+        return 1, None, False
     _check_sides(path, *size)
-    return orientation
+    return orientation, icc, alpha
 
 
 def _exif_orientation(im: PIL.Image.Image) -> int:
@@ -306,60 +279,6 @@ def _head(path: Path) -> bytes:
             return f.read(12)
     except OSError:
         return b""  # the decoder that follows names the file
-
-
-def _is_iso_media(head: bytes) -> bool:
-    """Whether a file's first 12 bytes open an ISO base media file (its ``ftyp`` box), as HEIF photos do."""
-    return head[4:8] == b"ftyp"
-
-
-@contextmanager
-def _heif_errors(path: Path) -> Iterator[None]:
-    """Turn pillow-heif's errors on a corrupt or truncated file into an :class:`IngestError` naming it."""
-    try:
-        yield
-    # what pillow-heif raises on bad input (its own Pillow plugin catches the same): libheif's errors as ValueError,
-    # RuntimeError, EOFError (truncated) or SyntaxError (an unsupported file type, an AV1 payload); IndexError when
-    # the container holds no image
-    except (ValueError, RuntimeError, OSError, EOFError, SyntaxError, IndexError) as exc:
-        raise IngestError(
-            f"image file {str(path)!r} cannot be decoded as a HEIF photo (corrupt, truncated or not a photo): {exc}"
-        ) from exc
-
-
-def _decode_heif(path: Path, oriented: bool = True) -> np.ndarray:
-    """The HEIF photo at ``path``, upright (libheif applies ``irot`` / ``imir``) or, with ``oriented=False``, with
-    those undone (last applied, first undone), in an array of its own.
-
-    libheif converts HDR (10- and 12-bit) colour photos to 8 bits; a 16-bit result is scaled by :func:`to_rgb8`.
-    """
-    import pillow_heif
-
-    with _heif_errors(path):
-        heif = pillow_heif.open_heif(path, convert_hdr_to_8bit=True)
-        image = np.array(heif)  # a copy: pillow-heif's is read-only
-    if oriented:
-        return image
-    # the primary image's transformative properties in the order libheif applied them (pillow-heif keeps them on its
-    # decoded image, not yet under a public name)
-    transformations = getattr(getattr(heif[heif.primary_index], "_c_image", None), "transformations", None)
-    if transformations is None:
-        raise IngestError(f"image file {str(path)!r}: this pillow-heif does not tell the HEIF photo's rotation and "
-                          "mirror, so its pixels cannot be read as stored (as COLMAP reads them); upgrade pillow-heif")
-    for name, *values in reversed(transformations):
-        if name == "imir":  # libheif's mirror direction: 0 flips top and bottom, 1 left and right
-            image = image[::-1] if values[0] == 0 else image[:, ::-1]
-        elif name == "irot":  # degrees anticlockwise
-            image = np.rot90(image, -values[0] // 90)
-    return np.ascontiguousarray(image)
-
-
-def _heif_size(path: Path) -> tuple[int, int]:
-    """Upright ``(width, height)`` of the HEIF photo at ``path``, read from its container without decoding."""
-    import pillow_heif
-
-    with _heif_errors(path):
-        return pillow_heif.open_heif(path).size
 
 
 def resize_image(image: np.ndarray, width: int, height: int) -> np.ndarray:

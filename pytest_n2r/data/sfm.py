@@ -3,8 +3,9 @@
 Pipeline
 --------
 1. Read every image directly in the folder (EXIF orientation applied, so a phone's portrait photo is portrait;
-   unreadable files skipped with a warning; fewer than 3 readable images is an error naming each unreadable file
-   with its reason, and the subfolders that hold images, which are not read).
+   unreadable files skipped with a warning; a photo with the same pixels as one read before it, a copy or a link,
+   skipped: held out, it would score a copy of a training photo; fewer than 3 readable, different images is an error
+   naming each unreadable file with its reason, and the subfolders that hold images, which are not read).
 2. Write upright copies downscaled to at most ``max_size`` pixels into a temporary folder, one subfolder
    per upright image size: a phone capture mixing portrait and landscape photos (or two cameras) gets one
    camera per size and orientation.
@@ -30,6 +31,7 @@ cameras: upright size, number of photos, and how many of them registered and wer
 
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 import time
@@ -43,7 +45,9 @@ import numpy as np
 from ..errors import IngestError, InvalidType
 from ..geometry import invert_pose, orthonormalize
 from .colmap import PYCOLMAP_ERRORS, camera_from_colmap
-from .images import iter_readable, list_images, resize_image, subfolder_hint
+from .colour import PhotoColourWarning
+from .images import iter_readable, resize_image
+from .listing import list_images, other_files, subfolder_hint
 from .poses import PoseSet, SourceFrame
 from .upright import check_upright
 
@@ -58,6 +62,9 @@ __all__ = ["run_sfm", "partial_registration", "EXHAUSTIVE_MAX_IMAGES", "MATCHERS
 #: the two. A count cannot see every wrong reconstruction: the object at 480 px kept 44 of 48 (92 %) with about half of
 #: them half a turn wrong.
 MIN_KEPT_SHARE = 0.9
+#: When fewer than 3 photos register and all are under this many pixels a side, the error gives the largest's size
+#: (SIFT finds too few features on them: three 32x24 photos register none).
+SMALL_PHOTO_SIDE = 200
 #: ``matcher="auto"`` matches exhaustively up to this many images, sequentially beyond.
 EXHAUSTIVE_MAX_IMAGES = 100
 MATCHERS = ("auto", "exhaustive", "sequential")
@@ -72,7 +79,8 @@ def run_sfm(
 
     Returns a :class:`PoseSet` whose frames are the registered images sorted by file name, with the
     full-resolution camera. ``report["time_s"]`` holds seconds per stage (``read``, ``features``,
-    ``matching``, ``mapping``). Raises :class:`IngestError` naming the folder or files on bad input and
+    ``matching``, ``mapping``); ``report["other_files"]`` counts the files of the folder left alone (not images by
+    their suffix; 0 when ``files`` are given). Raises :class:`IngestError` naming the folder or files on bad input and
     when fewer than 3 images register.
     """
     import cv2
@@ -89,6 +97,9 @@ def run_sfm(
     files = list_images(images_dir) if given is None else [Path(f) for f in given]
     times: dict[str, float] = {}
     skipped: list[tuple[str, str]] = []
+    copies: list[tuple[str, str]] = []  # (file name, reason): the same pixels as a photo read before it
+    seen: dict[bytes, str] = {}  # digest of the decoded pixels -> the work file name of the photo kept
+    colour_notes: list[str] = []
 
     start = time.perf_counter()
     sizes: dict[tuple[int, int], list[str]] = {}
@@ -97,8 +108,16 @@ def run_sfm(
         (work / "images").mkdir()
         names: dict[str, Path] = {}  # work file name (size folder / index) -> original file
         full_size: dict[str, tuple[int, int]] = {}  # work file name -> upright (width, height)
-        for k, (file, image) in enumerate(iter_readable(files, skipped)):
+        for k, (file, image) in enumerate(_colour_noted(iter_readable(files, skipped), colour_notes)):
             h, w = image.shape[:2]
+            key = _pixels_key(image)
+            if key in seen:  # the same work copy: keep the name of the original, not of its copy
+                kept = names[seen[key]]
+                if _original(file) < _original(kept):
+                    names[seen[key]], file, kept = file, kept, file
+                    sizes[(w, h)][sizes[(w, h)].index(file.name)] = kept.name
+                copies.append((file.name, f"the same pixels as {kept.name} (a copy or a link to it)"))
+                continue
             sizes.setdefault((w, h), []).append(file.name)
             scale = min(1.0, max_size / max(w, h))
             small = resize_image(image, max(1, round(w * scale)), max(1, round(h * scale)))
@@ -108,8 +127,10 @@ def run_sfm(
                 raise IngestError(f"cannot write a downscaled copy of {str(file)!r} to the temporary folder {tmp!r}")
             names[work_name] = file
             full_size[work_name] = (w, h)
+            seen[key] = work_name
         if len(names) < 3:
-            raise IngestError(_too_few(images_dir, files, skipped, listed=given is None))
+            raise IngestError(_too_few(images_dir, files, skipped, copies, listed=given is None))
+        skipped += copies
         times["read"] = time.perf_counter() - start
 
         db = work / "database.db"
@@ -144,9 +165,8 @@ def run_sfm(
             models = pycolmap.incremental_mapping(db, work / "images", work / "sparse", options=options)
 
     if not models:
-        raise IngestError(
-            f"structure from motion on {str(images_dir)!r} registered no images (too little overlap or texture?)"
-        )
+        raise IngestError(f"structure from motion on {str(images_dir)!r} registered no images (too little overlap or "
+                          f"texture?){_small(sizes)}")
     rec = max(models.values(), key=lambda r: r.num_reg_images())
     frames: list[SourceFrame] = []
     for image in rec.images.values():
@@ -173,7 +193,7 @@ def run_sfm(
     if len(frames) < 3:
         raise IngestError(
             f"structure from motion on {str(images_dir)!r} registered only {len(frames)} of {len(names)} images; "
-            "at least 3 are needed (more overlap between photos helps)"
+            f"at least 3 are needed (more overlap between photos helps){_small(sizes)}"
         )
     up_record = check_upright([f.name for f in frames], [f.c2w for f in frames]).as_report()
     turned = up_record["upside_down"] if upright else {}
@@ -194,15 +214,16 @@ def run_sfm(
     kept = {image_id for image_id, image in rec.images.items() if names[image.name].name not in turned}
     points = np.array([p.xyz for _, p in sorted(rec.points3D.items())
                        if sum(el.image_id in kept for el in p.track.elements) >= 2], dtype=np.float64).reshape(-1, 3)
-    notes = [note for note in (partial_registration(len(frames), len(names)),
+    notes = colour_notes + [note for note in (partial_registration(len(frames), len(names)),
                                subfolder_hint(images_dir, len(files)) if given is None else "") if note]
-    for note in notes:
+    for note in notes[len(colour_notes):]:
         warnings.warn(f"structure from motion on {str(images_dir)!r}: {note}", stacklevel=2)
     registered_sizes = [(f.camera.width, f.camera.height) for f in frames]
     cameras = [{"width": w, "height": h, "photos": len(listed), "registered": registered_sizes.count((w, h))}
                for (w, h), listed in sorted(sizes.items(), key=lambda kv: -len(kv[1]))]
     report = {
-        "images": len(files), "matcher": used, "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
+        "images": len(files), "other_files": other_files(images_dir) if given is None else 0, "matcher": used,
+        "models": len(models), "sfm_max_size": max_size, "cameras": cameras,
         "time_s": times, "points_method": "structure from motion",
         "upright": {**up_record, "dropped": bool(turned)}, "warnings": notes,
     }
@@ -222,18 +243,61 @@ def partial_registration(kept: int, readable: int) -> str:
             "beside its photo")
 
 
-def _too_few(images_dir: Path, files: list[Path], skipped: list[tuple[str, str]], listed: bool) -> str:
-    """Why fewer than 3 of ``files`` could be read: each unreadable file with its reason, and the images in
-    subfolders (when the folder was ``listed``, not given as ``files``)."""
-    readable = len(files) - len(skipped)
-    if skipped:
-        text = (f"images folder {str(images_dir)!r}: only {readable} of {len(files)} images are readable; structure "
-                "from motion needs at least 3. Unreadable: " + "; ".join(reason for _, reason in skipped))
+def _too_few(images_dir: Path, files: list[Path], skipped: list[tuple[str, str]], copies: list[tuple[str, str]],
+             listed: bool) -> str:
+    """Why fewer than 3 of ``files`` could be used: each unreadable file with its reason, each copy of another, and
+    the images in subfolders (when the folder was ``listed``, not given as ``files``)."""
+    readable = len(files) - len(skipped) - len(copies)
+    if skipped or copies:
+        which = "readable" if not copies else "readable and different" if skipped else "different"
+        text = (f"images folder {str(images_dir)!r}: only {readable} of {len(files)} images are {which}; structure "
+                "from motion needs at least 3")
+        text += ". Unreadable: " + "; ".join(reason for _, reason in skipped) if skipped else ""
+        text += ". Copies: " + "; ".join(f"{name} has {reason}" for name, reason in copies) if copies else ""
     else:
         text = (f"images folder {str(images_dir)!r} holds only {readable} image{'s' * (readable != 1)} "
                 f"({', '.join(f.name for f in files)}); structure from motion needs at least 3")
     hint = subfolder_hint(images_dir, len(files)) if listed else ""
     return f"{text}; {hint}" if hint else text
+
+
+def _pixels_key(image: np.ndarray) -> bytes:
+    """A digest of the decoded pixels and their shape: two photos with the same one are copies of each other."""
+    digest = hashlib.blake2b(repr(image.shape).encode(), digest_size=16)
+    digest.update(np.ascontiguousarray(image).data)
+    return digest.digest()
+
+
+def _original(file: Path) -> tuple[bool, int, str]:
+    """Sorts the original of photos with the same pixels first: a file before a link to it, then the shorter name
+    (``IMG_0001.JPG`` before ``IMG_0001 (1).JPG``), then the name."""
+    return file.is_symlink(), len(file.name), file.name
+
+
+def _small(sizes: dict[tuple[int, int], list[str]]) -> str:
+    """``"; the largest photo is WxH pixels: ..."`` when every photo is under :data:`SMALL_PHOTO_SIDE` pixels a side
+    (SIFT finds too few features on them), else ``""``."""
+    w, h = max(sizes, key=max, default=(0, 0))
+    if not sizes or max(w, h) >= SMALL_PHOTO_SIDE:
+        return ""
+    return (f"; the largest photo is {w}x{h} pixels, too small to find enough features in: photos of a few hundred "
+            "pixels a side or more are needed")
+
+
+def _colour_noted(pairs: Iterator[tuple[Path, np.ndarray]], notes: list[str]) -> Iterator[tuple[Path, np.ndarray]]:
+    """``pairs``, each :class:`~.colour.PhotoColourWarning` of their reading added to ``notes`` (what the report's
+    ``warnings`` list, which ``n2r poses`` and ``n2r fit`` print) and warned again."""
+    while True:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", PhotoColourWarning)
+            pair = next(pairs, None)
+        for w in caught:
+            if issubclass(w.category, PhotoColourWarning):
+                notes.append(str(w.message))
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if pair is None:
+            return
+        yield pair
 
 
 @contextmanager

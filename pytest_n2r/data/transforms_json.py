@@ -7,8 +7,8 @@ Convention
 - Intrinsics ``fl_x fl_y cx cy w h`` may be global (top level) or per frame (a frame's value wins).
   ``cx, cy`` put the top-left pixel centre at ``(0.5, 0.5)`` as in COLMAP; ours is ``(0, 0)``, so
   ``cx_ours = cx - 0.5``. Without ``fl_x`` the focal length comes from ``camera_angle_x`` (radians,
-  full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; ``fl_y`` falls back to
-  ``camera_angle_y``, then to ``fl_x``; ``cx, cy`` fall back to the image centre.
+  full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; ``fl_y`` falls back to ``fl_x``,
+  or to ``camera_angle_y`` first when ``fl_x`` is absent too; ``cx, cy`` fall back to the image centre.
 - ``camera_model`` is one of nerfstudio's pinhole models (``OPENCV`` when absent, ``PINHOLE``, ``SIMPLE_PINHOLE``,
   ``SIMPLE_RADIAL``, ``RADIAL``), whose distortion is nerfstudio's ``k1 k2 k3`` (radial, the terms in r², r⁴, r⁶ of
   OpenCV's model) and ``p1 p2`` (tangential); nerfstudio's ``k4`` is a further radial term in r⁸, which OpenCV's
@@ -276,6 +276,12 @@ def write_transforms_json(
     if shared is not None:
         out.update(shared)
     names = [_relative_name(frame, path.parent) for frame in frames]
+    repeat = repeated_name(names)  # a file n2r would refuse to read back
+    if repeat is not None:
+        first, second, name = repeat
+        raise IngestError(f"cannot write {path}: frames {first} ({frames[first].name!r}) and {second} "
+                          f"({frames[second].name!r}) would both have file_path {name!r}; each frame needs a photo of "
+                          "its own")
     if heldout is not None:
         out["train_filenames"] = [n for f, n in zip(frames, names) if f.name not in heldout]
         out["val_filenames"] = [n for f, n in zip(frames, names) if f.name in heldout]
@@ -305,4 +311,4 @@ def _camera_fields(camera: Camera) -> dict[str, float]:
 def _relative_name(frame: SourceFrame, root: Path) -> str:
     if frame.path is None:
         return frame.name
-    return relative_posix(frame.path, root)
+    return relative_posix(frame.path, root, keep_name=True)  # a link keeps its own name: it is another frame

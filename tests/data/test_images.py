@@ -12,6 +12,7 @@ from pytest_n2r.data.images import (
     images_in_subfolders,
     iter_readable,
     list_images,
+    other_files,
     read_image,
     read_image_size,
     subfolder_hint,
@@ -167,7 +168,8 @@ def test_gray_rgba_and_16_bit(tmp_path):
     rgba = np.zeros((5, 7, 4), np.uint8)
     rgba[..., 0], rgba[..., 3] = 200, 10
     Image.fromarray(rgba).save(tmp_path / "a.png")
-    out = read_image(tmp_path / "a.png")
+    with pytest.warns(UserWarning, match="transparent pixels"):  # tests/data/test_colour.py
+        out = read_image(tmp_path / "a.png")
     assert out.shape == (5, 7, 3) and out[0, 0].tolist() == [200, 0, 0]
     deep = np.zeros((5, 7, 3), np.uint16)
     deep[..., 2] = 65535
@@ -183,6 +185,14 @@ def test_gray_rgba_and_16_bit(tmp_path):
 def test_float_images_are_clipped_and_scaled():
     out = to_rgb8(np.array([[[0.5, -1.0, 2.0]]], np.float32), bgr=False)
     assert out.tolist() == [[[128, 0, 255]]]
+
+
+def test_a_32_bit_integer_tiff_is_refused_naming_the_file_and_its_type(tmp_path):
+    """Pillow's mode I (32-bit signed) was scaled by 255 / 2^31: an image of values up to 70 000 read all black."""
+    Image.fromarray(np.arange(24, dtype=np.int32).reshape(4, 6) * 3000).save(tmp_path / "deep.tif")
+    with pytest.raises(IngestError, match=r"deep\.tif'?: image of dtype int32 cannot be converted to 8-bit RGB; "
+                                          r"expected 8- or 16-bit integers, or floating point in \[0, 1\]"):
+        read_image(tmp_path / "deep.tif")
 
 
 def test_corrupt_and_missing_files_name_the_file(tmp_path):
@@ -208,10 +218,20 @@ def test_a_file_that_cannot_be_read_names_the_file(tmp_path, monkeypatch):
 
 
 def test_list_images_sorted_and_filtered(tmp_path):
-    for name in ("b.JPG", "a.png", ".hidden.png", "notes.txt", "c.tiff", "d.HEIC", "e.heif", "f.mov"):
+    for name in ("b.JPG", "a.png", ".hidden.png", "notes.txt", "c.tiff", "d.HEIC", "e.heif", "f.mov", "g.jfif",
+                 "h.JPE"):
         (tmp_path / name).write_bytes(b"x")
     (tmp_path / "sub.png").mkdir()
-    assert [p.name for p in list_images(tmp_path)] == ["a.png", "b.JPG", "c.tiff", "d.HEIC", "e.heif"]
+    assert [p.name for p in list_images(tmp_path)] == ["a.png", "b.JPG", "c.tiff", "d.HEIC", "e.heif", "g.jfif",
+                                                       "h.JPE"]
+    assert other_files(tmp_path) == 2  # notes.txt, f.mov: the hidden file and the folder are not counted
+
+
+def test_a_jfif_photo_reads_as_the_jpeg_it_is(tmp_path):
+    """Chrome and Windows save JPEGs as .jfif (and some tools as .jpe): they were left out of the capture."""
+    cv2.imwrite(str(tmp_path / "a.jpg"), _pattern()[:, :, ::-1])
+    (tmp_path / "saved.jfif").write_bytes((tmp_path / "a.jpg").read_bytes())
+    assert np.array_equal(read_image(tmp_path / "saved.jfif"), read_image(tmp_path / "a.jpg"))
 
 
 def test_list_images_errors(tmp_path):
@@ -235,6 +255,30 @@ def test_an_empty_or_cut_short_photo_says_which(tmp_path):
     (tmp_path / "cut.jpg").write_bytes(data[:len(data) // 8])
     with pytest.raises(IngestError, match=r"cut\.jpg' cannot be decoded as an image \(a JPEG cut short: an interr"):
         read_image(tmp_path / "cut.jpg")
+
+
+@pytest.mark.parametrize(("suffix", "kind"), [(".png", "PNG"), (".webp", "WebP")])
+def test_a_png_or_webp_cut_short_says_so(tmp_path, suffix, kind):
+    """Only a JPEG was called cut short; a PNG or WebP copy interrupted was "corrupt or not an image"."""
+    cv2.imwrite(str(tmp_path / f"whole{suffix}"), np.random.default_rng(0).integers(0, 256, (64, 64, 3), np.uint8))
+    data = (tmp_path / f"whole{suffix}").read_bytes()
+    (tmp_path / f"cut{suffix}").write_bytes(data[:len(data) * 2 // 3])
+    with pytest.raises(IngestError, match=rf"cut\{suffix}' cannot be decoded as an image \(a {kind} cut short: an "
+                                          r"interrupted copy\?\)"):
+        read_image(tmp_path / f"cut{suffix}")
+
+
+def test_a_broken_tiff_leaves_stderr_to_the_error(tmp_path, capfd):
+    """OpenCV's TIFF decoder logged four lines of its own ([ WARN:0@0.046] global grfmt_tiff.cpp ...) beside the
+    error that names the file."""
+    cv2.imwrite(str(tmp_path / "whole.tif"), np.random.default_rng(0).integers(0, 256, (256, 256, 3), np.uint8))
+    data = (tmp_path / "whole.tif").read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[:len(data) * 2 // 3])
+    level = cv2.utils.logging.getLogLevel()
+    with pytest.raises(IngestError, match=r"cut\.tif' cannot be decoded"):
+        read_image(tmp_path / "cut.tif")
+    assert capfd.readouterr().err == ""
+    assert cv2.utils.logging.getLogLevel() == level, "OpenCV's log level was not restored"
 
 
 def test_a_folder_whose_photos_are_in_subfolders_names_them(tmp_path):

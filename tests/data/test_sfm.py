@@ -53,7 +53,7 @@ def test_sfm_recovers_the_rendered_poses(tmp_path, matcher):
 def _folder_of(tmp_path, sizes):
     tmp_path.mkdir(exist_ok=True)
     for k, (w, h) in enumerate(sizes):
-        Image.fromarray(np.full((h, w, 3), 100, np.uint8)).save(tmp_path / f"{k}.png")
+        Image.fromarray(np.full((h, w, 3), 100 + k, np.uint8)).save(tmp_path / f"{k}.png")  # each its own
     return tmp_path
 
 
@@ -223,3 +223,53 @@ def test_pycolmap_failures_become_ingest_errors_naming_the_stage(tmp_path, monke
     with pytest.raises(IngestError, match=r"imgs' failed during matching: .*out of memory"):
         run_sfm(folder)
     assert pycolmap.logging.minloglevel == level, "COLMAP's log level was not restored"
+
+
+@pytest.mark.slow
+def test_copies_and_links_of_a_photo_are_skipped_naming_the_original(tmp_path):
+    """The same pixels twice (``IMG_0001 (1).JPG``, a link to a photo in the same folder) were both registered: one
+    copy could be held out while its twin trained, its PSNR scoring a copy of a training photo."""
+    import os
+
+    cap = make_capture(tmp_path, n=8, camera=Camera(320, 240, 280.0, 280.0, 159.5, 119.5))
+    images = cap.images_dir
+    (images / "view_001 (1).png").write_bytes((images / "view_001.png").read_bytes())  # sorts before its original
+    os.symlink("view_002.png", images / "view_002_link.png")
+    rgb = np.asarray(Image.open(images / "view_003.png").convert("RGB"))
+    rgba = np.dstack([rgb, np.full((240, 320), 255, np.uint8)])
+    rgba[0, 0, 3] = 0  # one transparent pixel: warned of in the report, which n2r poses and n2r fit print
+    Image.fromarray(rgba, "RGBA").save(images / "view_003.png")
+    with pytest.warns(UserWarning, match=r"view_003\.png' has transparent pixels"):
+        poses = run_sfm(images, matcher="exhaustive", max_size=320)
+    assert [f.name for f in poses.frames] == [f"view_{k:03d}.png" for k in range(8)], poses.skipped
+    assert poses.skipped == [("view_001 (1).png", "the same pixels as view_001.png (a copy or a link to it)"),
+                             ("view_002_link.png", "the same pixels as view_002.png (a copy or a link to it)")]
+    assert poses.report["images"] == 10 and poses.report["cameras"][0]["photos"] == 8
+    note = (f"image file {str(images / 'view_003.png')!r} has transparent pixels: its alpha is dropped and the colour "
+            "stored under them is read (a cut-out's removed background may show)")
+    assert [text for text in poses.report["warnings"] if "transparent" in text] == [note]
+
+
+def test_too_few_different_photos_counts_the_copies_apart_from_the_unreadable(tmp_path):
+    folder = _folder_of(tmp_path / "imgs", [(64, 48), (64, 48)])
+    (folder / "0 copy.png").write_bytes((folder / "0.png").read_bytes())
+    (folder / "1 copy.png").write_bytes((folder / "1.png").read_bytes())
+    with pytest.raises(IngestError) as error:
+        run_sfm(folder)
+    assert re.fullmatch(r"images folder '.*imgs': only 2 of 4 images are different; structure from motion needs at "
+                        r"least 3\. Copies: 0 copy\.png has the same pixels as 0\.png \(a copy or a link to it\); "
+                        r"1 copy\.png has the same pixels as 1\.png \(a copy or a link to it\)", str(error.value)), \
+        error.value
+
+
+@pytest.mark.slow
+def test_photos_too_small_to_register_say_their_size(tmp_path):
+    """Three 32x24 photos: "registered no images (too little overlap or texture?)" did not say they were tiny."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    for k in range(3):
+        Image.fromarray(rng.integers(0, 256, (24, 32, 3), np.uint8)).save(folder / f"{k}.png")
+    with pytest.raises(IngestError, match=r"registered (no|only \d) images.* the largest photo is 32x24 pixels, too "
+                                          "small to find enough features in"):
+        run_sfm(folder)

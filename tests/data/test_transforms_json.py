@@ -354,3 +354,31 @@ def test_write_read_round_trip_property(tmp_path_factory, frames):
             assert ca.pop("cy") == pytest.approx(cb.pop("cy"), abs=1e-9)
             assert ca == cb
             np.testing.assert_allclose(b.c2w, a.c2w, atol=1e-9 * (1 + np.abs(a.c2w).max()))
+
+
+def test_a_photo_that_is_a_link_keeps_its_own_file_path(corner, tmp_path):
+    """``n2r poses DIR -o t.json`` with a link among the photos wrote both frames as the link's target: a file n2r
+    refused to read back (two frames with the same file_path)."""
+    import os
+    from dataclasses import replace
+
+    poses = read_transforms_json(write_transforms(corner))
+    link = corner.images_dir / "link.png"
+    os.symlink(corner.names[0], link)
+    poses.frames[1] = replace(poses.frames[1], name="link.png", path=link)
+    out = write_transforms_json(tmp_path / "out" / "t.json", poses)
+    assert json.loads(out.read_text())["frames"][1]["file_path"] == "../images/link.png"
+    names = [f.name for f in read_transforms_json(out).frames]  # read back: each frame its own photo
+    assert names[:2] == [f"../images/{corner.names[0]}", "../images/link.png"]
+
+
+def test_two_frames_of_one_photo_are_refused_before_anything_is_written(corner, tmp_path):
+    from dataclasses import replace
+
+    poses = read_transforms_json(write_transforms(corner))
+    poses.frames[2] = replace(poses.frames[2], path=poses.frames[0].path)
+    with pytest.raises(IngestError, match=rf"cannot write .*t\.json: frames 0 \('images/{corner.names[0]}'\) and 2 "
+                                          rf"\('images/{corner.names[2]}'\) would both have file_path "
+                                          rf"'\.\./images/{corner.names[0]}'; each frame needs a photo of its own"):
+        write_transforms_json(tmp_path / "out" / "t.json", poses)
+    assert not (tmp_path / "out" / "t.json").exists()
