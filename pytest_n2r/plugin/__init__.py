@@ -13,6 +13,7 @@ from __future__ import annotations
 import functools
 import gc
 import inspect
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -83,7 +84,7 @@ def pytest_configure(config: pytest.Config) -> None:
         "or a .n2r path, 'demo:<name>' or 'module:function')",
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
-    summary = Summary(config, _LOADED, lambda: _describe(config, session_of(config)))
+    summary = Summary(config, _LOADED, lambda: _describe(session_of(config)))
     config.pluginmanager.register(summary, "n2r-summary")
     if is_used(config):
         _pause_collector(config)  # before the engine's imports
@@ -133,19 +134,14 @@ def _resume_collector(config: pytest.Config) -> bool:
 
 
 def pytest_report_header(config: pytest.Config) -> list[str] | None:
-    if not is_used(config):
-        return None
-    return [_describe(config, session_of(config))]
+    return [_describe(session_of(config))] if is_used(config) else None
 
 
-def _describe(config: pytest.Config, session: Any) -> str:
-    import sys
-
+def _describe(session: Any) -> str:
     from .scenes import default_scene_specs
 
-    scenes = session.scenes or default_scene_specs()
-    names = ", ".join(s.name for s in scenes) or "none configured"
-    torch = sys.modules.get("torch")
+    names = ", ".join(s.name for s in session.scenes or default_scene_specs()) or "none configured"
+    torch = sys.modules.get("torch")  # not imported for the header
     threads = f"torch threads {torch.get_num_threads()}" if torch is not None else "torch not loaded"
     cache = session.cache_dir if session.cache_dir is not None else "memory only"
     return f"n2r: scenes {names}; device {session.device}; {threads}; cache {cache}"
@@ -221,15 +217,15 @@ def pytest_unconfigure(config: pytest.Config) -> None:
     _resume_collector(config)
     if config.stash.get(_FROZEN, False):
         gc.unfreeze()  # what the session froze (its config, scenes, a caller's objects) can be freed again
-    session = config.stash.get(_SESSION, None)
-    if session is not None:
+    if (session := config.stash.get(_SESSION, None)) is not None:
         session.close()
 
 
 @pytest.fixture(scope="session")
 def n2r_scene(request: pytest.FixtureRequest) -> Any:
-    """The scene under test (a :class:`pytest_n2r.Scene`), loaded once per session; tests that use it
-    are parametrized over every configured scene, with the scene name in the test id."""
+    """The scene under test (a :class:`pytest_n2r.Scene`); tests that use it are parametrized over every configured
+    scene, with the scene name in the test id. pytest runs them scene by scene: a scene is loaded for its first test
+    and released after its last (a fitted scene and its renderer hold some 450 MB)."""
     from ..errors import N2RError
     from .scenes import NO_SCENE_MESSAGE
 
@@ -237,13 +233,18 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
         pytest.fail("pytest-n2r: n2r_scene was requested where pytest-n2r cannot parametrize it over the configured "
                     "scenes (a unittest.TestCase method, or request.getfixturevalue('n2r_scene')); take n2r_scene "
                     "as an argument of a test function or of a method of a plain test class", pytrace=False)
-    spec = request.param
-    if spec is None:
+    if (spec := request.param) is None:
         pytest.skip(NO_SCENE_MESSAGE)
+    session = session_of(request.config)
     try:
-        return session_of(request.config).load(spec)
+        scene = session.load(spec)
     except N2RError as exc:  # the scene's own message, not a traceback through the loader
         message = f"pytest-n2r: scene {spec.source}: {exc}"
+    else:
+        yield scene
+        session.release(spec)
+        request.config.stash.get(_FROZEN_SCENES, set()).discard(id(scene))  # a later scene may reuse its id
+        return
     pytest.fail(message, pytrace=False)  # outside the except block, so the report shows the message once
 
 
@@ -261,23 +262,22 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
 
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_setup(item: pytest.Item) -> Any:
-    """After the setup of the first test on each scene, collect the garbage and then move every object alive
-    out of the cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads once and keeps
-    (imports, scenes, networks, compiled kernels) is then no longer walked by every full collection. Measured
-    on the main job: the collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many
-    collections), 0.9 → 0.6 s of a warm one (docs/performance-log.md). The collection first, and once a scene
-    rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
-    never be freed. After the session's first setup too, when the start-up ran with the collector off
-    (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next allocation
-    started a young collection of every object the start-up made (0.1 s in a warm main job) right before the full
-    one."""
+    """After the setup of the first test on each scene, collect the garbage and then move every object alive out
+    of the cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads and keeps (imports, the scene,
+    networks, compiled kernels) is then no longer walked by every full collection. Measured on the main job: the
+    collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many collections), 0.9 → 0.6 s of a
+    warm one (docs/performance-log.md). The collection first, and once a scene rather than at every test, so that
+    no garbage is frozen: a cycle that was already unreachable would never be freed (a released scene's objects in
+    cycles stay frozen, some 17 MB of a fitted scene's 450: unfreezing would walk the whole heap at each change of
+    scene). After the session's first setup too, when the start-up ran with the
+    collector off (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next
+    allocation started a young collection of every object the start-up made (0.1 s in a warm main job) first."""
     yield
     paused = item.config.stash.get(_GC_PAUSED, False)
     scene = getattr(item, "funcargs", {}).get("n2r_scene")
-    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())
-    new_scene = scene is not None and id(scene) not in frozen
-    if new_scene:
-        frozen.add(id(scene))  # scenes live for the session (the fixture's cache), so their ids stay theirs
+    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())  # the fixture drops an id with its scene
+    if new_scene := scene is not None and id(scene) not in frozen:
+        frozen.add(id(scene))
     if new_scene or paused:
         gc.collect()
         gc.freeze()

@@ -47,7 +47,7 @@ class N2RSession:
     while_waiting: Callable[[Scene], None] | None = field(default=None, repr=False)
     #: The kernel helper process, once started; :meth:`close` ends it.
     helper: subprocess.Popen | None = field(default=None, repr=False)
-    _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)
+    _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)  # by source, from load to release
     _cache: RenderCache | None = field(default=None, repr=False)
 
     @property
@@ -94,7 +94,7 @@ class N2RSession:
         return list(dict.fromkeys(chosen))  # a scene pinned twice (by name and by entry) runs once
 
     def load(self, spec: SceneSpec) -> Scene:
-        """The scene of ``spec``, loaded once per session."""
+        """The scene of ``spec``, loaded on first use and kept until :meth:`release` (then loaded again)."""
         scene = self._loaded.get(spec.source)
         if scene is None:
             scene = load_scene_spec(spec, self.device)
@@ -108,6 +108,12 @@ class N2RSession:
             _warn_if_unfinished(scene)
             self._loaded[spec.source] = scene
         return scene
+
+    def release(self, spec: SceneSpec) -> Scene | None:
+        """Drop the scene of ``spec`` (returned, or ``None`` if it was not loaded): a fitted scene and its renderer
+        hold some 450 MB, and the plugin releases each scene after its tests (pytest runs them scene by scene); a
+        later :meth:`load` loads it again."""
+        return self._loaded.pop(spec.source, None)
 
     def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
             replay: list[Any] | None = None, shrink: bool = True) -> RelationRecord:

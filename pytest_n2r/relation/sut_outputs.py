@@ -25,20 +25,41 @@ The metric's result on a pair of renders is kept beside the SUT's outputs (:meth
 same SUT object and the same metric object on the same two renders compare the same two outputs, so a
 replay of an example the session already evaluated (a regression gate's baseline) gets its result again
 without computing it. The metric is named by its object identity, checked on every lookup.
+
+The outputs kept are bounded in number (:data:`MAX_OUTPUTS`) and in bytes (:data:`MAX_OUTPUT_BYTES`, measured by
+:func:`output_bytes`), the least recently used dropped first (an enhancer's image output at 960x540 is 6 MiB: under
+the count cap alone a session kept 12 GiB of them); an output over an eighth of the byte budget is not kept at all.
+A dropped output costs only time: the deterministic SUT runs again. A torch tensor is kept detached from its
+autograd graph (a classifier called without ``torch.no_grad``: its graph holds every activation, 74 MiB an output
+for a MobileNetV2), and an output holding a tensor that could not be detached (inside an object of its own
+class) is not kept.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import sys
 import weakref
 from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["MISSING", "SUTOutputs"]
+__all__ = ["MISSING", "SUTOutputs", "output_bytes"]
 
-#: Outputs kept at most (least recently used first out): a classifier's 1000 probabilities or a detector's
-#: 500 keypoints are a few KiB each.
+#: Outputs kept at most (least recently used first out; :data:`MAX_OUTPUT_BYTES` bounds their bytes): a classifier's
+#: 1000 probabilities or a detector's 500 keypoints are a few KiB each.
 MAX_OUTPUTS = 4096
+#: Bytes of outputs kept at most (:func:`output_bytes`; least recently used first out): an image output (an
+#: enhancer's, for ``ssim_metric()``) is 1.5 MiB at 480x270 in float32: a session kept 3 GiB of them at the count cap.
+MAX_OUTPUT_BYTES = 256 * 2**20
+#: The largest share of the byte budget one output may take; a larger one is not kept.
+LARGEST_SHARE = 1 / 8
+#: How deep :func:`output_bytes` and the detaching of tensors look into containers; how many items of a container
+#: are detached at most (a longer one is kept as it is), and how many are measured (a longer container is measured
+#: by its first items: a detector's 500 ``cv2.KeyPoint`` measured one by one took 0.6 ms an output).
+_DEPTH = 6
+_ITEMS = 10_000
+_SAMPLE = 32
 
 #: What :meth:`SUTOutputs.get` returns for an output it does not hold (``None`` may be an output).
 MISSING = object()
@@ -48,9 +69,12 @@ class SUTOutputs:
     """Outputs of SUT calls keyed by ``(SUT object, render key)``; a SUT's outputs are forgotten when the SUT
     object is garbage-collected (objects that take no weak reference, e.g. built-in functions, are held)."""
 
-    def __init__(self, max_outputs: int = MAX_OUTPUTS):
+    def __init__(self, max_outputs: int = MAX_OUTPUTS, max_bytes: int = MAX_OUTPUT_BYTES):
         self.max_outputs = max_outputs
-        self._outputs: OrderedDict[tuple[int, str], Any] = OrderedDict()
+        self.max_bytes = max_bytes
+        #: Bytes of the outputs kept now (:func:`output_bytes`), at most ``max_bytes``.
+        self.bytes = 0
+        self._outputs: OrderedDict[tuple[int, str], tuple[Any, int]] = OrderedDict()  # (output, its bytes)
         self._suts: dict[int, Any] = {}  # id -> weak reference (or the object), so an id is never reused
         self._verdicts: OrderedDict[tuple[Any, str, str], Any] = OrderedDict()
         self.hits = 0
@@ -62,23 +86,38 @@ class SUTOutputs:
         """The kept output of ``sut`` on the render ``key``, or :data:`MISSING`."""
         if not self._knows(sut):
             return MISSING
-        output = self._outputs.get((id(sut), key), MISSING)
-        if output is not MISSING:
-            self._outputs.move_to_end((id(sut), key))
-            self.hits += 1
-        return output
+        kept = self._outputs.get((id(sut), key))
+        if kept is None:
+            return MISSING
+        self._outputs.move_to_end((id(sut), key))
+        self.hits += 1
+        return kept[0]
 
     def put(self, sut: Callable[..., Any], key: str, output: Any) -> None:
+        """Keep ``sut``'s ``output`` on the render ``key`` (a tensor detached from its autograd graph), unless it
+        takes over :data:`LARGEST_SHARE` of the byte budget."""
+        output = _detached(output)
+        self._keep(sut, key, output, output_bytes(output))
+
+    def _keep(self, sut: Callable[..., Any], key: str, value: Any, size: float) -> None:
         ident = id(sut)
         if not self._knows(sut):
             try:
                 self._suts[ident] = weakref.ref(sut, lambda _: self._forget(ident))
             except TypeError:  # no weak reference to it: hold the object itself
                 self._suts[ident] = sut
-        self._outputs[(id(sut), key)] = output
-        self._outputs.move_to_end((id(sut), key))
-        while len(self._outputs) > self.max_outputs:
-            self._outputs.popitem(last=False)
+        self._drop((ident, key))  # an output kept before under this key: its bytes leave the total
+        if size > self.max_bytes * LARGEST_SHARE:
+            return
+        self._outputs[(ident, key)] = (value, int(size))
+        self.bytes += int(size)
+        while self._outputs and (len(self._outputs) > self.max_outputs or self.bytes > self.max_bytes):
+            self._drop(next(iter(self._outputs)))
+
+    def _drop(self, key: tuple[int, str]) -> None:
+        kept = self._outputs.pop(key, None)
+        if kept is not None:
+            self.bytes -= kept[1]
 
     def result(self, sut: Callable[..., Any], metric: Any, source_key: str, follow_key: str) -> Any:
         """The kept result of ``metric`` on ``sut``'s outputs on the renders ``source_key`` and ``follow_key``,
@@ -91,8 +130,8 @@ class SUTOutputs:
     def put_result(self, sut: Callable[..., Any], metric: Any, source_key: str, follow_key: str,
                    result: Any) -> None:
         """Keep ``metric``'s ``result`` on ``sut``'s outputs on the two renders (held with the metric object,
-        so a result is never returned for another metric that reused its id)."""
-        self.put(sut, _pair_key(source_key, follow_key), (metric, result))
+        so a result is never returned for another metric that reused its id; its bytes are the result's alone)."""
+        self._keep(sut, _pair_key(source_key, follow_key), (metric, result), output_bytes(result))
 
     def verdict(self, validity: Any, source_key: str, follow_key: str) -> Any:
         """The kept verdict of ``validity`` (a frozen, hashable set of thresholds) on the follow-up render
@@ -124,7 +163,79 @@ class SUTOutputs:
     def _forget(self, ident: int) -> None:
         self._suts.pop(ident, None)
         for k in [k for k in self._outputs if k[0] == ident]:
-            del self._outputs[k]
+            self._drop(k)
+
+
+def output_bytes(value: Any) -> float:
+    """The bytes ``value`` holds, roughly and cheaply: an array or tensor by its buffer (a view by the whole array
+    it views), a list, tuple, set or dict, a dataclass or another object with a ``__dict__`` by its items (each object
+    once; a long container by its first items), anything else by :func:`sys.getsizeof`. Infinite for a tensor that
+    requires grad (its autograd graph holds what cannot be measured)."""
+    return _bytes(value, set(), 0)
+
+
+def _bytes(value: Any, seen: set[int], depth: int) -> float:
+    if id(value) in seen:
+        return 0
+    seen.add(id(value))
+    torch = sys.modules.get("torch")  # no tensor exists before torch is imported; never imported here
+    if torch is not None and isinstance(value, torch.Tensor):
+        if value.requires_grad:
+            return float("inf")
+        try:
+            return max(value.element_size() * value.nelement(), value.untyped_storage().nbytes())
+        except (RuntimeError, NotImplementedError, AttributeError):  # a tensor without storage (sparse, meta)
+            return value.element_size() * value.nelement()
+    nbytes = getattr(value, "nbytes", None)
+    if isinstance(nbytes, int):  # numpy arrays and scalars, memoryviews
+        base = value
+        while isinstance(getattr(base, "base", None), type(value)):  # a view keeps the array it views
+            base = base.base
+        return max(nbytes, getattr(base, "nbytes", 0))
+    size = sys.getsizeof(value, 64)
+    if isinstance(value, (str, bytes, bytearray, int, float, complex, bool)) or value is None or depth >= _DEPTH:
+        return size
+    if isinstance(value, dict):
+        items, count = [x for pair, _ in zip(value.items(), range(_SAMPLE // 2)) for x in pair], 2 * len(value)
+    elif isinstance(value, (list, tuple, set, frozenset)):
+        items, count = [v for v, _ in zip(value, range(_SAMPLE))], len(value)
+    elif dataclasses.is_dataclass(value) and not isinstance(value, type):
+        items = [getattr(value, f.name, None) for f in dataclasses.fields(value)]
+        count = len(items)
+    elif isinstance(getattr(value, "__dict__", None), dict) and not isinstance(value, type):
+        items = list(vars(value).values())
+        count = len(items)
+    else:
+        return size
+    measured = items[:_SAMPLE]
+    if not measured:
+        return size
+    return size + sum(_bytes(v, seen, depth + 1) for v in measured) * count / len(measured)
+
+
+def _detached(value: Any) -> Any:
+    """``value`` with every torch tensor that requires grad (in it, or in its lists, tuples and dicts) detached from
+    its autograd graph; ``value`` itself when there is none. Torch is never imported here."""
+    torch = sys.modules.get("torch")
+    return value if torch is None else _detach(value, torch.Tensor, 0)
+
+
+def _detach(value: Any, tensor: type, depth: int) -> Any:
+    if isinstance(value, tensor):
+        return value.detach() if value.requires_grad else value
+    if depth >= _DEPTH or not isinstance(value, (list, tuple, dict)) or len(value) > _ITEMS:
+        return value
+    if isinstance(value, dict):
+        if type(value) is not dict:
+            return value
+        items = {k: _detach(v, tensor, depth + 1) for k, v in value.items()}
+        return value if all(items[k] is v for k, v in value.items()) else items
+    new = [_detach(v, tensor, depth + 1) for v in value]
+    if all(a is b for a, b in zip(new, value)):
+        return value
+    if type(value) in (list, tuple):
+        return type(value)(new)
+    return type(value)._make(new) if hasattr(value, "_make") else value  # a named tuple; another class as it is
 
 
 def _pair_key(source_key: str, follow_key: str) -> str:

@@ -310,6 +310,51 @@ def test_stacked(n2r_scene):
         assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), f"{test} did not run:\n{result.stdout.str()}"
 
 
+def test_a_scene_is_released_after_its_tests_and_loaded_again_for_a_test_that_returns_to_it(n2r_project):
+    """Every scene a session loaded stayed in memory to its end: a fitted scene and its renderer hold some 450 MB,
+    and a session on two of them kept both (1.3 GB) though pytest runs the tests scene by scene. A test that comes
+    back to a released scene (here by an order the project chose) gets it loaded again, and its relation runs."""
+    conftest = n2r_project.pytester.path / "conftest.py"
+    conftest.write_text(conftest.read_text() + '''
+import pytest
+
+ORDER = ["test_first[plane]", "test_other[ramp]", "test_back[plane]"]
+
+
+@pytest.hookimpl(trylast=True)  # after pytest grouped the tests by scene: back to the plane after the ramp
+def pytest_collection_modifyitems(items):
+    items.sort(key=lambda item: ORDER.index(item.name))
+''')
+    n2r_project.write("""
+import weakref
+
+FIRST = {}
+
+
+@pytest.mark.n2r_scene("plane")
+def test_first(n2r_scene, n2r_session):
+    FIRST["plane"] = weakref.ref(n2r_scene)
+    assert n2r_session.spec_of(n2r_scene) is not None
+
+
+@pytest.mark.n2r_scene("ramp")
+def test_other(n2r_scene, n2r_session):
+    assert FIRST["plane"]() is None, "the plane scene is still held after its tests"
+    assert n2r_session.spec_of(n2r_scene).name == "ramp"
+
+
+@pytest.mark.n2r_scene("plane")
+@metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4, x=0.05), examples=5)
+def test_back(n2r_scene):
+    assert FIRST["plane"]() is None and n2r_scene.name == "plane", "the plane scene was not loaded again"
+    return mean_colour
+""", name="test_scenes")
+    result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
+    result.stdout.fnmatch_lines(["*test_first[[]plane[]] PASSED*", "*test_other[[]ramp[]] PASSED*",
+                                 "*test_back[[]plane[]] PASSED*"])
+    result.assert_outcomes(passed=3)
+
+
 def test_n2r_scene_where_it_cannot_be_parametrized_says_so(n2r_project):
     """A @metamorphic unittest.TestCase method and request.getfixturevalue("n2r_scene") were skipped with "no scene
     configured for pytest-n2r: pass --n2r-scene", though a scene was configured: the relation never ran."""

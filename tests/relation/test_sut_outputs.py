@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import gc
 
+import numpy as np
 import pytest
 from hypothesis import strategies as st
 
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, check_relation
 from pytest_n2r.relation.determinism import SUTNotDeterministic
-from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs
+from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs, output_bytes
 from pytest_n2r.strategies import transforms
 from tests.plugin.fakemetrics import AbsDifference
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
@@ -228,3 +229,70 @@ def test_a_sut_object_reconfigured_between_tests_is_judged_by_its_own_outputs(or
     together = [run(flip, shared) for flip in order]
     alone = [run(flip, None) for flip in order]
     assert together == alone, f"with outputs shared: {together}; each alone: {alone}"
+
+
+def test_a_byte_budget_drops_the_least_recently_used_outputs():
+    """An image output (an enhancer's, for ``ssim_metric()``) is MiBs: under the count cap alone a session kept
+    gigabytes of them."""
+    shared = SUTOutputs(max_bytes=8 * 2**20)
+
+    def sut(rgb):
+        return rgb
+
+    image = 2**20  # bytes of each output: 1 MiB, within the share one output may take
+    for key in "abcdefghij":
+        shared.put(sut, key, np.zeros(image, np.uint8))
+        shared.get(sut, "a")  # used again: the last to go
+        assert shared.bytes <= shared.max_bytes
+    kept = [key for key in "abcdefghij" if shared.get(sut, key) is not MISSING]
+    assert kept == ["a", "d", "e", "f", "g", "h", "i", "j"] and shared.bytes == 8 * image, (kept, shared.bytes)
+    shared.put(sut, "j", np.zeros(image // 2, np.uint8))  # put again under its key: the older bytes leave
+    assert shared.bytes == 7 * image + image // 2
+    shared.forget(sut)
+    assert len(shared) == 0 and shared.bytes == 0
+    shared.put(sut, "a", np.zeros(image, np.uint8))
+    del sut  # forgotten with the SUT object: its bytes too
+    gc.collect()
+    assert len(shared) == 0 and shared.bytes == 0
+
+
+def test_an_output_over_its_share_of_the_budget_is_not_kept_and_a_view_counts_its_array():
+    shared = SUTOutputs(max_bytes=8 * 2**20)
+
+    def sut(rgb):
+        return rgb
+
+    shared.put(sut, "small", np.zeros(100, np.float32))
+    shared.put(sut, "large", np.zeros(2**20 + 1, np.uint8))  # over an eighth of the budget
+    shared.put(sut, "view", np.zeros(2 * 2**20, np.uint8)[:10])  # holds its whole array
+    assert shared.get(sut, "large") is MISSING and shared.get(sut, "view") is MISSING
+    assert shared.get(sut, "small") is not MISSING and shared.bytes == output_bytes(np.zeros(100, np.float32))
+
+
+def test_a_tensor_is_kept_detached_from_its_autograd_graph():
+    """A classifier called without ``torch.no_grad``: its logits' graph holds every activation (74 MiB for a
+    MobileNetV2), which the kept output kept alive."""
+    torch = pytest.importorskip("torch")
+    weight = torch.ones(3, requires_grad=True)
+    logits = weight * torch.arange(3.0)
+    shared = SUTOutputs()
+
+    def sut(rgb):
+        return logits
+
+    shared.put(sut, "k", logits)
+    shared.put(sut, "pair", (logits, {"scores": [logits]}))
+    kept, (first, nested) = shared.get(sut, "k"), shared.get(sut, "pair")
+    for tensor in (kept, first, nested["scores"][0]):
+        assert tensor.grad_fn is None and not tensor.requires_grad and torch.equal(tensor, logits)
+    assert logits.grad_fn is not None, "the SUT's own output is left as it was"
+    assert shared.bytes == output_bytes(kept) + output_bytes(shared.get(sut, "pair")) > 0
+
+
+def test_the_outputs_module_does_not_import_torch():
+    import subprocess
+    import sys
+
+    code = ("import sys, numpy as np; from pytest_n2r.relation.sut_outputs import SUTOutputs; s = SUTOutputs(); "
+            "s.put(len, 'k', [np.zeros(3), {'a': (1, 2.0)}]); assert s.bytes > 0; assert 'torch' not in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True)
