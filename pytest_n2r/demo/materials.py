@@ -103,7 +103,27 @@ class Blend(Material):
         return self.bottom.albedo(a, b, footprint) * (1 - m) + self.top.albedo(a, b, footprint) * m
 
     def describe(self) -> str:
-        return f"Blend({self.bottom.describe()}, {self.top.describe()}, {self.mask_name})"
+        return f"Blend({self.bottom.describe()}, {self.top.describe()}, {self.mask_name}{_mask_code(self.mask)})"
+
+
+def _mask_code(mask: Callable) -> str:
+    """What names a mask's code beside its hand-written name in :meth:`Blend.describe` (and so in a scene's content
+    hash and render keys): ``", <fingerprint>"`` of a user's mask, so that an edited mask function renders again
+    under the same name; ``""`` for a mask of pytest-n2r's own demo package, whose source every render key
+    already names (:data:`~pytest_n2r.scene.render_cache.RENDERING_CODE`), and whose hand-written name the
+    shipped fitted twins' recipe digests depend on (:attr:`~pytest_n2r.demo.fitted.FittedRecipe.digest`: a
+    fingerprint, which names bytecode and source bytes, would make them stale on every edit or Python version)."""
+    import types
+
+    fn = getattr(mask, "py_func", mask)  # a mask already compiled by numba: its Python function
+    if not isinstance(fn, types.FunctionType) or fn.__module__.startswith(__package__ + "."):
+        return ""  # not a plain function (a ufunc, which cannot change; compile_mask refuses the rest) or ours
+    from .mask_kernel import mask_fingerprint
+
+    # None: the mask cannot be named stably (its source is no file: typed at a prompt or exec'd; or it closes over
+    # or defaults to something other than numbers and strings); its name is then all that tells it apart, as before
+    fingerprint = mask_fingerprint(fn)
+    return "" if fingerprint is None else f", {fingerprint}"
 
 
 @dataclass(frozen=True, eq=False)

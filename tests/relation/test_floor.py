@@ -10,8 +10,9 @@ import pytest
 from pytest_n2r.demo import ground_truth, load_demo
 from pytest_n2r.metrics import repeatability
 from pytest_n2r.metrics.base import Metric
+from pytest_n2r.metrics.keypoints import Repeatability
 from pytest_n2r.relation.floor import FieldFloor, FloorStore, measure_floor, reference_kind
-from pytest_n2r.relation.floor.reference import ShiftSample, floor_views
+from pytest_n2r.relation.floor.reference import ShiftSample, floor_views, shift_sample
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study
 from tests.plugin.fakefield import BlurredPlane, corners
@@ -26,6 +27,22 @@ class Counting:
     def __call__(self, rgb):
         self.calls += 1
         return self.fn(rgb)
+
+
+@pytest.fixture
+def measured(monkeypatch):
+    """How many floor samples the metric has computed since (0 after a floor taken from the store: a kept floor
+    still runs the SUT on every image, to name its outputs)."""
+    from pytest_n2r.relation.floor import measure
+
+    count = [0]
+
+    def counting(*args, **kwargs):
+        count[0] += 1
+        return shift_sample(*args, **kwargs)
+
+    monkeypatch.setattr(measure, "shift_sample", counting)
+    return count
 
 
 def test_render_equal_to_photo_gives_a_zero_floor():
@@ -68,19 +85,21 @@ def test_a_sut_whose_metric_is_undefined_everywhere_has_no_floor():
     assert "undefined on all 2 held-out views (nothing visible)" in floor.describe()
 
 
-def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path):
+def test_the_store_reuses_a_floor_and_remeasures_an_edited_sut(tmp_path, measured):
     scene = BlurredPlane(blur=1.5, width=160, height=120)
     first = Counting(corners)
     a = measure_floor(scene, first, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
     assert first.calls == 6, "photo, render and the nearest other photo brought there, for each of the 2 held-out views"
+    assert measured[0] == 4, "the render's and the nearest photo's sample of each held-out view"
     again = Counting(corners)
     b = measure_floor(scene, again, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
-    assert again.calls == 2 and b == a, "a new store on the same folder reads the floor back (1 call per photo)"
+    assert again.calls == 6 and b == a, "the SUT runs on every image the floor is computed from, to name its outputs"
+    assert measured[0] == 4, "a new store on the same folder reads the floor back: no metric is computed"
     assert len(list(tmp_path.glob("*.json"))) == 1
 
     edited = Counting(lambda rgb: corners(rgb)[::2])  # same name, other output: measured again
     c = measure_floor(scene, edited, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
-    assert edited.calls == 6 and c.key != a.key
+    assert edited.calls == 6 and c.key != a.key and measured[0] == 8
     other_size = measure_floor(scene, corners, repeatability(px=2), size=RenderSize.parse(80),
                                store=FloorStore(tmp_path), name="corners")
     assert other_size.key not in (a.key, c.key) and other_size.size == "80"
@@ -97,6 +116,46 @@ def test_an_edit_that_keeps_the_output_on_the_first_photo_is_measured_again(tmp_
     assert edited.calls == 6 and b.key != a.key, (
         f"the edited SUT's floor was taken from the store ({edited.calls} SUT calls): its output on the second "
         "photo differs")
+
+
+def test_an_edit_that_changes_the_output_on_field_renders_alone_is_measured_again(tmp_path, measured):
+    """Floors were keyed by the SUT's outputs on the reference images alone, though computed from its outputs on
+    the field's renders too: an edited detector (an adaptive threshold, the same on sharp photos, other on the
+    blurrier renders) got the old detector's floor back from a warm cache, and lost its "eps below the field floor"
+    warning."""
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    photos = [v.image for v in floor_views(scene)]
+    a = measure_floor(scene, corners, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+
+    def edited(rgb):  # the same output on every photo, its corners moved 4 pixels on anything else
+        return corners(rgb) if any(np.array_equal(rgb, p) for p in photos) else corners(rgb) + 4.0
+
+    before = measured[0]
+    b = measure_floor(scene, edited, repeatability(px=2), store=FloorStore(tmp_path), name="corners")
+    assert measured[0] > before and b.key != a.key, "the edited SUT's floor was taken from the store"
+    assert b.value == measure_floor(scene, edited, repeatability(px=2)).value != a.value, (a.value, b.value)
+
+
+def test_a_metric_whose_class_declares_no_result_version_is_never_kept(tmp_path, measured):
+    """A user's metric is named by its ``repr`` alone, which an edit of its ``compute`` keeps: the edited metric's
+    floor was the old one's (0.471 for 1.4 in the review's reproduction). As its kept results, its floor is kept
+    only when its own class declares a ``result_version``."""
+
+    class _Mine(Repeatability):  # a subclass of a kept metric that declares no version of its own
+        pass
+
+    class _Edited(Repeatability):
+        def compute(self, out_source, out_follow, source, follow):
+            result = super().compute(out_source, out_follow, source, follow)
+            return self.result(result.score / 2)
+
+    _Edited.__qualname__ = _Mine.__qualname__  # the same repr: an edit of _Mine.compute between two sessions
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    a = measure_floor(scene, corners, _Mine(px=2), store=FloorStore(tmp_path), name="corners")
+    assert measured[0] == 4 and not list(tmp_path.glob("*.json")), "an unversioned metric's floor was stored"
+    b = measure_floor(scene, corners, _Edited(px=2), store=FloorStore(tmp_path), name="corners")
+    assert repr(_Edited(px=2)) == repr(_Mine(px=2)) and measured[0] == 8, "the floor was taken from the store"
+    assert b.value == pytest.approx((1 + a.value) / 2) and b.value != a.value, (a.value, b.value)
 
 
 def test_a_floor_measured_by_other_code_is_measured_again(tmp_path, monkeypatch):
@@ -186,6 +245,7 @@ class _OnKeypoints(Metric):
     """Repeatability of the keypoints a SUT returns first, beside other outputs (scores, ...)."""
 
     name, ideal, needs = "on_keypoints", 1.0, ("depth", "opacity")
+    result_version = "1"  # a floor is kept only for a metric whose own class declares one
 
     def compute(self, out_source, out_follow, source, follow):
         return repeatability(px=2).compute(out_source[0], out_follow[0], source, follow)
@@ -238,6 +298,8 @@ def test_a_floor_of_keypoint_objects_beside_descriptors_is_kept_and_reused(tmp_p
         return [cv2.KeyPoint(float(u), float(v), 7.0) for u, v in points], np.zeros((len(points), 32), np.uint8)
 
     class _OnKeypointObjects(_OnKeypoints):
+        result_version = "1"
+
         def compute(self, out_source, out_follow, source, follow):
             as_points = [np.array([k.pt for k in out[0]], np.float32).reshape(-1, 2)
                          for out in (out_source, out_follow)]
@@ -249,7 +311,7 @@ def test_a_floor_of_keypoint_objects_beside_descriptors_is_kept_and_reused(tmp_p
     again = Counting(detect)
     b = measure_floor(scene, again, _OnKeypointObjects(), store=FloorStore(tmp_path), name="mine")
     assert a.available and len(list(tmp_path.glob("*.json"))) == 1, "the keypoint objects' floor was not stored"
-    assert again.calls == 2 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"
+    assert again.calls == 6 and b == a, f"the stored floor was not reused ({again.calls} SUT calls)"
 
 
 def _floor(deviations: list[float]) -> FieldFloor:

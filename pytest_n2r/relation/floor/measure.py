@@ -27,7 +27,7 @@ from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.cache_files import touch
 from ...scene.render_cache import RenderCache, source_digest
-from ..kept_results import output_digest
+from ..kept_results import output_digest, result_key
 from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
@@ -36,8 +36,9 @@ __all__ = ["FLOOR_VERSION", "FieldFloor", "FloorStore", "json_number", "measure_
 #: Bumped when the measurement changes, so cached floors of an older measurement are not reused
 #: (2: the nearest other photo's samples beside the render's; 3: a non-finite deviation is no sample; 4: a 'WxH'
 #: size keeps each view's aspect, where it stretched views of another; 5: keyed by the SUT's outputs on every
-#: reference image and by the package's source, not by its output on the first image alone).
-FLOOR_VERSION = 5
+#: reference image and by the package's source, not by its output on the first image alone; 6: by its outputs on the
+#: field renders and nearby images too, and kept only for a metric whose class declares its own ``result_version``).
+FLOOR_VERSION = 6
 
 
 @dataclass(frozen=True)
@@ -205,15 +206,18 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     photo; on a fitted demo scene the relation's replay on exact renders says more, and costs no extra render).
 
     Renders go through ``cache`` (default: none); ``store`` keeps measured floors keyed by the scene's
-    content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of its output
-    on every reference image, so an edited SUT whose output changes on any of them is measured again), the
-    metric's ``repr``, the size, the views, whether ``nearby``, :data:`FLOOR_VERSION`, the package's version and
-    source (:func:`~pytest_n2r.scene.render_cache.source_digest`) and numpy's version. Taking a kept floor
-    therefore costs one SUT call per reference image (at most ``max_views``; on a fitted demo scene each reference
-    is the exact twin's render, from ``cache`` when it holds it), which measuring it makes anyway. An output that no
-    digest names exactly (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers,
-    strings, arrays, tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them) is measured
-    every time: its floor is neither kept nor reused.
+    content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of every output
+    the floor is computed from: on each reference image, each field render and each nearby image, so an edited SUT
+    whose output changes on any of them is measured again), the metric (as a kept metric result is keyed,
+    :func:`~pytest_n2r.relation.kept_results.result_key`: its class, ``repr`` and ``result_version``), the size,
+    the views, whether ``nearby``, :data:`FLOOR_VERSION`, the package's version and source
+    (:func:`~pytest_n2r.scene.render_cache.source_digest`) and numpy's version. Taking a kept floor therefore costs
+    every SUT call measuring it makes (two per held-out view, three with ``nearby``; the renders and reference
+    images come from ``cache`` when it holds them) and saves the metric's. A floor is neither kept nor reused when
+    the metric's class declares no ``result_version`` of its own (a user's metric, whose arithmetic no version
+    names: an edited ``compute`` is measured again), nor when an output has no exact digest
+    (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers, strings, arrays,
+    tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them).
     """
     name = name or sut_name(sut)
     size_text = "view size" if size is None else str(size)
@@ -235,25 +239,37 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         return render_cache.render(s, c2w, camera, outputs if s is scene else ("rgb",))
 
     references = [reference_image(scene, v, camera_of(v), kind, render) for v in views]
+    renders = [render(scene, v.c2w, camera_of(v)) for v in views]
+    nears = [nearby_image(scene, v, r, size, kind, render) if nearby else None for v, r in zip(views, renders)]
+    # every SUT output the floor is computed from, before the store is asked: an edited SUT whose output changes
+    # only on the (blurrier) field renders or nearby images is measured again, not given the old SUT's floor
     outs_real = [sut(image) for image in references]
+    outs_field = [sut(r.rgb) for r in renders]
+    outs_near = [None if near is None else sut(near.image) for near in nears]
     twin = exact_twin(scene) if kind == "exact" else None
+    outputs = {"reference": [output_digest(out) for out in outs_real],
+               "field": [output_digest(out) for out in outs_field],
+               "nearby": [output_digest(out) if near is not None else "-" for out, near in zip(outs_near, nears)]}
+    # the metric as its kept results are keyed (class, repr, its class's own result_version); None when its class
+    # declares no result_version: a user's metric whose compute was edited would get its old floor back
+    metric_key = result_key(metric, "field floor", "field floor", None, None)
     spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "source": source_digest(), "numpy": np.__version__,
             "scene": scene.content_hash, "twin": twin.content_hash if twin is not None else None, "sut": name,
-            "outputs": [output_digest(out) for out in outs_real], "metric": repr(metric), "size": size_text,
-            "views": [v.name for v in views], "reference": kind, "nearby": nearby}
+            "outputs": outputs, "metric": repr(metric), "metric_key": metric_key,
+            "result_version": type(metric).result_version, "size": size_text, "views": [v.name for v in views],
+            "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-    if None in spec["outputs"]:  # an output no digest names exactly: an edited SUT could not be told apart
-        store, key = None, ""
+    if metric_key is None or any(None in digests for digests in outputs.values()):
+        store, key = None, ""  # an unversioned metric or an output no digest names exactly: neither kept nor reused
     if store is not None and (known := store.get(key)) is not None:
         return known
     samples, nearby_samples, gaps = [], [], []
-    for view, image, out_real in zip(views, references, outs_real):
-        rendered = render(scene, view.c2w, camera_of(view))
+    for view, image, rendered, out_real, out_field, near, out_near in zip(views, references, renders, outs_real,
+                                                                           outs_field, nears, outs_near):
         real = RenderedView(rendered.camera, rendered.c2w, rgb=image, depth=rendered.depth, opacity=rendered.opacity)
-        samples.append(shift_sample(metric, out_real, sut(rendered.rgb), real, rendered, view.name))
-        near = nearby_image(scene, view, rendered, size, kind, render) if nearby else None
+        samples.append(shift_sample(metric, out_real, out_field, real, rendered, view.name))
         if near is not None:
-            nearby_samples.append(shift_sample(metric, out_real, sut(near.image), real,
+            nearby_samples.append(shift_sample(metric, out_real, out_near, real,
                                                replace(rendered, rgb=near.image), view.name))
             gaps.append((near.degrees, near.distance))
     degrees, distance = np.median(gaps, axis=0) if gaps else (math.nan, math.nan)
