@@ -230,15 +230,16 @@ class Engine:
             return validity.check(follow, self.scene, source)
         verdict = self.sut_outputs.verdict(validity, source_key, follow_key)
         if verdict is MISSING:
-            stored_key = validity.verdict_key(self.scene, source_key, follow_key)
-            stored = self.cache.decision(stored_key)
+            stored_key = validity.verdict_key(self.scene, source_key, follow_key)  # None: a subclass's, not kept
+            stored = self.cache.decision(stored_key) if stored_key is not None else None
             try:
                 verdict = Verdict.from_dict(stored) if stored is not None else None
             except (KeyError, TypeError):  # another shape of decision under the key: checked again
                 verdict = None
             if verdict is None:
                 verdict = validity.check(follow, self.scene, source)
-                self.cache.put_decision(stored_key, verdict.to_dict())
+                if stored_key is not None:
+                    self.cache.put_decision(stored_key, verdict.to_dict())
             self.sut_outputs.put_verdict(validity, source_key, follow_key, verdict)
         return verdict
 

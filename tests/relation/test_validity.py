@@ -44,6 +44,31 @@ def test_a_verdict_key_names_the_thresholds_the_renders_and_the_training_cameras
     assert key not in others and len(others) == 3
 
 
+def test_a_subclass_checks_every_run_where_the_built_in_checks_are_taken_from_the_cache(tmp_path, monkeypatch):
+    """A user's Validity subclass is code no key names: edited to reject dark views, it was handed the old code's
+    "valid" from a warm render cache (a CI runner restoring the cache passed what a fresh one fails)."""
+    from pytest_n2r.scene.render_cache import RenderCache
+
+    calls = []
+    check = Validity.check
+    monkeypatch.setattr(Validity, "check", lambda self, *args: calls.append(1) or check(self, *args))
+
+    class Users(Validity):
+        """A subclass whose checks the user edits between runs."""
+
+    settings = RunSettings(examples=5, database=None, derandomize=True)
+    for validity, kept in ((Users(), False), (Validity(), True)):
+        relation = Relation.build(AbsDifference(), 255.0, transforms(yaw=(0, 5)), validity=validity)
+        checked = []
+        for _ in range(2):  # a cold run, then a run on the filled cache
+            calls.clear()
+            check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation, settings=settings,
+                           cache=RenderCache(tmp_path / type(validity).__name__))
+            checked.append(len(calls))
+        assert checked[0] > 0 and (checked[1] == 0) == kept, f"{type(validity).__name__}: checks cold, warm {checked}"
+    assert Users().verdict_key(PlaneScene(), "1" * 64, "2" * 64) is None
+
+
 def test_a_relation_whose_every_draw_is_rejected_fails_even_when_max_rejected_allows_all():
     # yaw 80-89 degrees turns every follow-up away from the plane: every draw is an empty view
     relation = Relation.build(AbsDifference(), 0.0, transforms(yaw=(80, 89)), validity=Validity(max_rejected=1.0))
