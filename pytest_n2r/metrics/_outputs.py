@@ -105,10 +105,11 @@ def as_keypoints(value: Any, which: str) -> np.ndarray:
     """Keypoints as an ``(N, 2)`` float64 array of ``(u, v)`` pixels (OpenCV pixel centres).
 
     Accepts an ``(N, 2)`` array, an ``(N, K >= 2)`` array whose extra columns (score, size, ...) are
-    dropped, an empty sequence, or a sequence of ``cv2.KeyPoint`` (their ``pt``). A ``(3, K >= 4)`` array is
-    refused: it is three keypoints with extra columns or, as SuperPoint's reference code returns them, the
-    transposed ``(x, y, confidence)`` rows of ``K`` keypoints; ``(3, 2)`` and ``(3, 3)`` are three rows. A
-    ``(2, K)`` array is two keypoints (docs/metrics.md, "Keypoint metrics").
+    dropped, an empty sequence, or a sequence of ``cv2.KeyPoint`` (their ``pt``). A ``(3, K >= 4)`` array whose
+    last row lies in [0, 1] while the others reach past 1 is refused: that is how SuperPoint's reference code returns
+    ``K`` keypoints (rows ``x``, ``y``, confidence), and as rows its third keypoint would sit within a pixel of the
+    image's corner with a size and a score of at most 1, which no detector reports; any other ``(3, K)`` array is
+    three rows. A ``(2, K)`` array is two keypoints (docs/metrics.md, "Keypoint metrics").
     """
     expected = "keypoints as an (N, 2) array of (u, v) pixels, an (N, K>=2) array, or a list of cv2.KeyPoint"
     if isinstance(value, Sequence) and not isinstance(value, (str, bytes)):
@@ -121,9 +122,16 @@ def as_keypoints(value: Any, which: str) -> np.ndarray:
         return np.zeros((0, 2))
     if arr.ndim != 2 or arr.shape[1] < 2:
         raise SUTOutputError(f"{which} output has shape {arr.shape}; expected {expected}")
-    if arr.shape[0] == 3 and arr.shape[1] >= 4:
+    if arr.shape[0] == 3 and arr.shape[1] >= 4 and _transposed(arr):
         raise SUTOutputError(
-            f"{which} output has shape {arr.shape}: 3 keypoints with {arr.shape[1] - 2} extra columns, or the "
-            f"transposed (x, y, confidence) rows of {arr.shape[1]} keypoints (as SuperPoint returns them)? Return "
-            "one row per keypoint, (N, 2) (u, v) or (N, 3) (u, v, score): pts.T for (3, N)")
+            f"{which} output has shape {arr.shape} and its last row lies in [0, 1]: the transposed (x, y, "
+            f"confidence) rows of {arr.shape[1]} keypoints, as SuperPoint returns them? Return one row per keypoint, "
+            "(N, 2) (u, v) or (N, 3) (u, v, score): pts.T for (3, N)")
     return np.ascontiguousarray(arr[:, :2])
+
+
+def _transposed(arr: np.ndarray) -> bool:
+    """Whether the ``(3, K)`` keypoint array ``arr`` reads as SuperPoint's transposed rows (``x``, ``y``,
+    confidence in [0, 1]) rather than three keypoints (:func:`as_keypoints`)."""
+    coordinates = np.abs(arr[:2][np.isfinite(arr[:2])])
+    return bool(np.all((arr[2] >= 0) & (arr[2] <= 1)) and coordinates.size and coordinates.max() > 1)

@@ -279,15 +279,19 @@ def test_accepted_keypoint_forms_agree():
 
 def test_three_keypoints_are_rows_and_a_superpoint_style_3_by_n_array_is_refused():
     """SuperPoint's reference code returns ``(3, N)`` (x, y, confidence): read as rows, it was 3 keypoints whose
-    coordinates were the first two x values, scored without a word. ``(3, 2)`` and ``(3, 3)`` are 3 rows."""
+    coordinates were the first two x values, scored without a word. ``(3, 2)`` and ``(3, 3)`` are 3 rows, and so is
+    ``(3, K >= 4)`` of a detector that appends a size and a response: refused by its shape alone, such a SUT failed
+    whenever it found exactly three points."""
     view, same = pair(Transform())
     three = np.array([[20.0, 30.0, 0.9], [50.0, 60.0, 0.8], [90.0, 40.0, 0.7]])
-    for out in (three[:, :2], three, three.tolist()):
+    sized = np.column_stack([three[:, :2], np.full(3, 7.0), [0.01, 0.02, 0.03]])  # (u, v, size, response)
+    for out in (three[:, :2], three, three.tolist(), sized):
         result = repeatability()(three[:, :2], out, view, same)
         assert result.score == 1.0 and result.details["n_follow"] == 3, (out, result)
     superpoint = grid_points().T  # (2, N): the (x, y) rows
     superpoint = np.vstack([superpoint, np.ones(superpoint.shape[1])])
-    with pytest.raises(SUTOutputError, match=r"source output has shape \(3, \d+\): .*SuperPoint.*pts\.T"):
+    refused = r"source output has shape \(3, \d+\) and its last row .*SuperPoint.*pts\.T"
+    with pytest.raises(SUTOutputError, match=refused):
         repeatability()(superpoint, grid_points(), view, same)
     assert repeatability()(superpoint.T, grid_points(), view, same).score == 1.0
 
@@ -300,9 +304,11 @@ def test_three_keypoints_are_rows_and_a_superpoint_style_3_by_n_array_is_refused
         (None, r"follow-up output is None; expected keypoints as an \(N, 2\) array"),
         (np.zeros((4, 1)), r"follow-up output has shape \(4, 1\); expected keypoints"),
         (np.zeros(5), r"follow-up output has shape \(5,\)"),
-        (np.ones((3, 500)), (r"follow-up output has shape \(3, 500\): 3 keypoints with 498 extra columns, or "
-                             r"the transposed \(x, y, confidence\) rows of 500 keypoints .*one row per keypoint")),
-        (np.ones((3, 4)), r"shape \(3, 4\): .* \(N, 2\) \(u, v\) or \(N, 3\) \(u, v, score\)"),
+        (np.vstack([np.full((2, 500), 50.0), np.full(500, 0.5)]),
+         (r"follow-up output has shape \(3, 500\) and its last row lies in \[0, 1\]: the transposed \(x, y, "
+          r"confidence\) rows of 500 keypoints, as SuperPoint .*one row per keypoint")),
+        (np.array([[20.0, 50, 90, 4], [30, 60, 40, 4], [0.9, 0.8, 0.7, 0.6]]),
+         r"shape \(3, 4\) .* \(N, 2\) \(u, v\) or \(N, 3\) \(u, v, score\)"),
         ("points", "follow-up output of type str is not numeric"),
     ],
 )
