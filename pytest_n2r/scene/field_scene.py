@@ -92,8 +92,9 @@ class FieldScene(Scene):
 
 
 def _torch_platform(device: torch.device) -> str:
-    """What the torch backend's pixels depend on besides the scene: the device's kind, torch's version and, on
-    CUDA, the CUDA version and the GPU's name (renders of one field differ in the last bits between them)."""
-    if device.type != "cuda":
-        return f"{device.type}/{torch.__version__}"
+    """What the torch backend's pixels depend on besides the scene: the device's kind, torch's version, on the CPU
+    the vector instructions its kernels use, on CUDA the CUDA version and the GPU's name (renders of one field
+    differ in the last bits between them)."""
+    if device.type != "cuda":  # the CPU kernels torch dispatches to: AVX512, AVX2, ... (its AVX2 ones differ)
+        return f"{device.type}/{torch.__version__}/{torch.backends.cpu.get_cpu_capability()}"
     return f"cuda/{torch.__version__}/{torch.version.cuda}/{torch.cuda.get_device_name(device)}"

@@ -74,7 +74,7 @@ DEFAULT_DISK_BYTES = parse_size(defaults.CACHE_SIZE)
 
 
 #: The subpackages whose code makes a render's pixels (:func:`render_key`).
-RENDERING_CODE = ("demo", "field", "render", "scene", "splats")
+RENDERING_CODE = ("demo", "field", "geometry", "render", "scene", "splats")
 
 
 @functools.cache

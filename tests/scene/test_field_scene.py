@@ -81,7 +81,7 @@ def test_the_content_hash_follows_the_field_and_the_settings(scene_path, tmp_pat
     assert load_scene(other, device="cpu").content_hash != scene.content_hash, "another field kept the hash"
 
 
-def test_the_torch_backends_hash_names_torchs_version_and_the_compiled_ones_does_not(scene_path, monkeypatch):
+def test_the_torch_backends_hash_names_torch_and_its_kernels_and_the_compiled_ones_does_not(scene_path, monkeypatch):
     """The torch backend's pixels differ in their last bits between torch versions, CPU kernels and GPUs (one
     opacity pixel in four views between torch's AVX-512 and AVX2 kernels): a render cache shared by CI runners must
     not hand one runner's pictures to another; the compiled backend's renders are the same bits everywhere."""
@@ -94,6 +94,9 @@ def test_the_torch_backends_hash_names_torchs_version_and_the_compiled_ones_does
     again = by_torch.with_settings(RenderSettings(backend="torch")).content_hash, load_scene(scene_path).content_hash
     assert again[0] != before[0], "a torch backend's renders were keyed without torch's version"
     assert again[1] == before[1], "the compiled backend's key moved with torch's version"
+    monkeypatch.setattr(torch.backends.cpu, "get_cpu_capability", lambda: "AVX2")
+    on_avx2 = by_torch.with_settings(RenderSettings(backend="torch")).content_hash
+    assert on_avx2 != again[0], "torch's AVX2 and AVX-512 kernels' renders shared a key"
 
 
 def test_pair_moves_by_metres_when_the_scale_is_known(scene_path):
