@@ -116,7 +116,7 @@ def _mask_code(mask: Callable) -> str:
     import types
 
     fn = getattr(mask, "py_func", mask)  # a mask already compiled by numba: its Python function
-    if not isinstance(fn, types.FunctionType) or fn.__module__.startswith(__package__ + "."):
+    if not isinstance(fn, types.FunctionType) or (fn.__module__ or "").startswith(__package__ + "."):
         return ""  # not a plain function (a ufunc, which cannot change; compile_mask refuses the rest) or ours
     from .mask_kernel import mask_fingerprint
 

@@ -43,3 +43,11 @@ def test_a_builtin_mask_keeps_its_name_alone_and_the_shipped_twins_stay_current(
     for name in RECIPES:
         if packaged_path(name).is_file():
             assert find_fitted(name)[0] == packaged_path(name), f"the shipped {name} twin is stale"
+
+
+def test_a_mask_without_a_module_is_named_by_its_name_not_an_error():
+    """A mask made by ``exec`` in a namespace without ``__name__`` has no ``__module__``: describing it raised."""
+    namespace: dict = {"np": np}
+    exec("def moss(a, b):\n    return 0.5 + 0.0 * a * b\n", namespace)  # noqa: S102 - the case under test
+    assert namespace["moss"].__module__ is None
+    assert _scene(namespace["moss"]).content_hash, "no content hash for a scene of an exec'd mask"
