@@ -158,6 +158,22 @@ def test_a_metric_whose_class_declares_no_result_version_is_never_kept(tmp_path,
     assert b.value == pytest.approx((1 + a.value) / 2) and b.value != a.value, (a.value, b.value)
 
 
+def test_a_metric_of_pytest_n2rs_own_is_kept_though_its_class_declares_no_result_version(tmp_path, measured):
+    """Cosine, L2, class invariance and SSIM declare no ``result_version`` (their results are not kept); their code
+    is pytest-n2r's, which the key names by its source digest, so their floors are kept as before."""
+    from pytest_n2r.metrics import cosine_similarity
+
+    def colour(rgb):
+        return rgb.reshape(-1, 3).mean(axis=0)
+
+    scene = BlurredPlane(blur=1.5, width=160, height=120)
+    assert "result_version" not in vars(type(cosine_similarity()))
+    a = measure_floor(scene, colour, cosine_similarity(), store=FloorStore(tmp_path), name="colour")
+    assert measured[0] == 4 and list(tmp_path.glob("*.json")), "a built-in metric's floor was not stored"
+    b = measure_floor(scene, colour, cosine_similarity(), store=FloorStore(tmp_path), name="colour")
+    assert measured[0] == 4 and b.value == a.value, "a built-in metric's kept floor was measured again"
+
+
 def test_a_floor_measured_by_other_code_is_measured_again(tmp_path, monkeypatch):
     """The key names the package's source, as a kept decision's does: an edited checkout (same version) measures
     again rather than reading a floor the old code measured."""

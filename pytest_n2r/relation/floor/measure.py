@@ -209,13 +209,14 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     content hash, the exact twin's, the SUT (``name``, default :func:`sut_name`, and an exact digest of every output
     the floor is computed from: on each reference image, each field render and each nearby image, so an edited SUT
     whose output changes on any of them is measured again), the metric (as a kept metric result is keyed,
-    :func:`~pytest_n2r.relation.kept_results.result_key`: its class, ``repr`` and ``result_version``), the size,
+    :func:`~pytest_n2r.relation.kept_results.result_key`: its class, ``repr`` and ``result_version``; a metric of
+    pytest-n2r's own by its class, its code named by the source digest), the size,
     the views, whether ``nearby``, :data:`FLOOR_VERSION`, the package's version and source
     (:func:`~pytest_n2r.scene.render_cache.source_digest`) and numpy's version. Taking a kept floor therefore costs
     every SUT call measuring it makes (two per held-out view, three with ``nearby``; the renders and reference
     images come from ``cache`` when it holds them) and saves the metric's. A floor is neither kept nor reused when
-    the metric's class declares no ``result_version`` of its own (a user's metric, whose arithmetic no version
-    names: an edited ``compute`` is measured again), nor when an output has no exact digest
+    the metric is a user's whose class declares no ``result_version`` of its own (its arithmetic no version names:
+    an edited ``compute`` is measured again), nor when an output has no exact digest
     (:func:`~pytest_n2r.relation.kept_results.output_digest`: an object that is not numbers, strings, arrays,
     tensors, ``cv2.KeyPoint`` objects, lists, tuples or string-keyed dicts of them).
     """
@@ -250,9 +251,13 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     outputs = {"reference": [output_digest(out) for out in outs_real],
                "field": [output_digest(out) for out in outs_field],
                "nearby": [output_digest(out) if near is not None else "-" for out, near in zip(outs_near, nears)]}
-    # the metric as its kept results are keyed (class, repr, its class's own result_version); None when its class
-    # declares no result_version: a user's metric whose compute was edited would get its old floor back
-    metric_key = result_key(metric, "field floor", "field floor", None, None)
+    # the metric as its kept results are keyed (class, repr, its class's own result_version), or, for a metric of
+    # pytest-n2r's own (cosine, L2, class invariance, SSIM), by its class and the package's source digest below; a
+    # user's metric whose class declares no result_version is never kept: an edited compute would get its old floor
+    cls = type(metric)
+    ours = cls.__module__.startswith("pytest_n2r.")
+    metric_key = result_key(metric, "field floor", "field floor", None, None) or (
+        f"{cls.__module__}.{cls.__qualname__}" if ours else None)
     spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "source": source_digest(), "numpy": np.__version__,
             "scene": scene.content_hash, "twin": twin.content_hash if twin is not None else None, "sut": name,
             "outputs": outputs, "metric": repr(metric), "metric_key": metric_key,
