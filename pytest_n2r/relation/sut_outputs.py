@@ -96,8 +96,11 @@ class SUTOutputs:
     def put(self, sut: Callable[..., Any], key: str, output: Any) -> None:
         """Keep ``sut``'s ``output`` on the render ``key`` (a tensor detached from its autograd graph), unless it
         takes over :data:`LARGEST_SHARE` of the byte budget."""
-        output = _detached(output)
-        self._keep(sut, key, output, output_bytes(output))
+        size = output_bytes(output)
+        if size == float("inf"):  # a tensor that requires grad: detached (walking the output only then)
+            output = _detached(output)
+            size = output_bytes(output)
+        self._keep(sut, key, output, size)
 
     def _keep(self, sut: Callable[..., Any], key: str, value: Any, size: float) -> None:
         ident = id(sut)
@@ -192,6 +195,8 @@ def _bytes(value: Any, seen: set[int], depth: int) -> float:
         while isinstance(getattr(base, "base", None), type(value)):  # a view keeps the array it views
             base = base.base
         return max(nbytes, getattr(base, "nbytes", 0))
+    if type(value).__module__.startswith("PIL.") and hasattr(value, "getbands"):  # a PIL image: its pixels' bytes
+        return value.width * value.height * len(value.getbands()) * (2 if value.mode.startswith("I;16") else 1)
     size = sys.getsizeof(value, 64)
     if isinstance(value, (str, bytes, bytearray, int, float, complex, bool)) or value is None or depth >= _DEPTH:
         return size

@@ -269,6 +269,15 @@ def test_an_output_over_its_share_of_the_budget_is_not_kept_and_a_view_counts_it
     assert shared.get(sut, "small") is not MISSING and shared.bytes == output_bytes(np.zeros(100, np.float32))
 
 
+def test_a_pil_image_output_counts_its_pixels():
+    """An image SUT may return PIL images (the image metrics take them): measured as an object they were 360 bytes
+    whatever their size, and escaped the byte budget."""
+    from PIL import Image
+
+    assert output_bytes(Image.new("RGB", (640, 480))) == 640 * 480 * 3
+    assert output_bytes(Image.new("I;16", (64, 48))) == 64 * 48 * 2
+
+
 def test_a_tensor_is_kept_detached_from_its_autograd_graph():
     """A classifier called without ``torch.no_grad``: its logits' graph holds every activation (74 MiB for a
     MobileNetV2), which the kept output kept alive."""
