@@ -58,6 +58,8 @@ def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
         img = img[:, :, None]
     if img.ndim != 3 or img.shape[2] not in (1, 2, 3, 4):
         raise IngestError(f"image of shape {img.shape} is not gray, gray+alpha, RGB or RGBA")
+    if img.dtype != np.uint8 and img.shape[2] in (2, 4):  # alpha dropped before the depth is converted
+        img = img[:, :, :-1]
     if img.dtype == np.uint8:
         pass
     elif img.dtype == np.uint16:
@@ -73,8 +75,9 @@ def to_rgb8(image: np.ndarray, bgr: bool = True) -> np.ndarray:
     channels = img.shape[2]
     if channels in (1, 2):  # gray (+ alpha)
         return np.ascontiguousarray(np.repeat(img[:, :, :1], 3, axis=2))
-    img = img[:, :, :3]
-    return np.ascontiguousarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB) if bgr else img)
+    if not bgr:
+        return np.ascontiguousarray(img[:, :, :3])
+    return np.ascontiguousarray(cv2.cvtColor(img, cv2.COLOR_BGRA2RGB if channels == 4 else cv2.COLOR_BGR2RGB))
 
 
 def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
@@ -104,6 +107,8 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
     # may read another: a JPEG with two EXIF segments), so OpenCV is told to ignore it, which its TIFF decoder does not
     # heed: there it is the TIFF's own tag, and undone below when not oriented.
     flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION
+    if alpha:  # decoded once, with the alpha (a transparent colour or palette entry made one) tested below and then
+        flags = cv2.IMREAD_UNCHANGED  # dropped by to_rgb8: the same depth and colours as above, no EXIF orientation
     if not data.size:
         raise IngestError(f"image file {str(path)!r} is empty (0 bytes: a copy that did not finish, or a cloud photo "
                           "not downloaded to this device)")
@@ -115,8 +120,8 @@ def read_image(path: str | os.PathLike, *, oriented: bool = True) -> np.ndarray:
         raise IngestError(f"image file {str(path)!r} cannot be decoded as an image ({why})")
     if _is_tiff(head) != oriented:  # applying a tag undoes its inverse: 6 and 8 swap, the others undo themselves
         img = _UNDO_ORIENTATION[orientation if _is_tiff(head) else {6: 8, 8: 6}.get(orientation, orientation)](img)
-    if alpha:  # OpenCV drops the alpha channel itself (IMREAD_ANYCOLOR)
-        warn_if_transparent(path)
+    if alpha:  # a transparent gray level, or a TIFF's gray + alpha, come without it: Pillow reads it (rare)
+        warn_if_transparent(path, img[:, :, -1] if img.ndim == 3 and img.shape[2] in (2, 4) else None)
     return to_srgb(_named(path, to_rgb8, img), icc, path)
 
 
@@ -179,7 +184,7 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         with _header(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
             width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
-            orientation = _exif_orientation(im)
+            orientation = _exif_orientation(im, path)
     except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]
         return width, height
@@ -238,7 +243,7 @@ def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:
 
     try:
         with _header(path) as im:
-            size, orientation, icc = im.size, _exif_orientation(im), im.info.get("icc_profile")
+            size, orientation, icc = im.size, _exif_orientation(im, path), im.info.get("icc_profile")
             alpha = im.mode in ("RGBA", "LA", "La", "RGBa", "PA") or "transparency" in im.info
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError, KeyError):
         return 1, None, False
@@ -246,11 +251,39 @@ def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:
     return orientation, icc, alpha
 
 
-def _exif_orientation(im: PIL.Image.Image) -> int:
+def _exif_orientation(im: PIL.Image.Image, path: Path) -> int:
     """The EXIF orientation tag Pillow reads (the first EXIF segment's; 1 when none or not one of the eight): the one
-    place both :func:`read_image` and :func:`read_image_size` take it from, so that they agree."""
-    orientation = im.getexif().get(0x0112, 1)
+    place both :func:`read_image` and :func:`read_image_size` take it from, so that they agree.
+
+    Pillow decodes a PNG's pixels to look for EXIF after them (``eXIf``, text or XMP chunks); when
+    :func:`_png_ends_at_pixels` finds none can be there, its header's are read without that decoding."""
+    from PIL import Image
+
+    if im.format == "PNG" and "exif" not in im.info and _png_ends_at_pixels(path):
+        exif = Image.Image.getexif(im)  # what PngImageFile.getexif returns once it has loaded the pixels
+    else:
+        exif = im.getexif()
+    orientation = exif.get(0x0112, 1)
     return orientation if orientation in _UNDO_ORIENTATION else 1
+
+
+def _png_ends_at_pixels(path: Path) -> bool:
+    """Whether the PNG at ``path`` has no chunk between its pixel data (``IDAT``) and its end (``IEND``); walked
+    chunk by chunk, without reading the pixels; ``False`` when that cannot be told."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(8)
+            pixels = False
+            while len(header := f.read(8)) == 8:
+                kind = header[4:]
+                if kind == b"IDAT":
+                    pixels = True
+                elif pixels:
+                    return kind == b"IEND"
+                f.seek(int.from_bytes(header[:4], "big") + 4, os.SEEK_CUR)
+    except OSError:
+        pass
+    return False
 
 
 #: EXIF orientation → what takes the upright pixels back to the stored ones (the inverse of the tag's transform:

@@ -393,3 +393,39 @@ def test_two_exif_segments_give_one_orientation_to_the_size_and_the_pixels(tmp_p
             f"decodes {image.shape[1]}x{image.shape[0]}"
         assert image.shape[:2] == ((64, 48) if first == 6 else (48, 64)), "not the first segment's orientation"
         assert read_image(path, oriented=False).shape[:2] == (48, 64), "the stored pixels are turned"
+
+
+def _exif_after_pixels(png: bytes) -> bytes:
+    """The PNG ``png`` with its ``eXIf`` chunk moved after its pixels (``IDAT``), where the PNG standard allows it."""
+    chunks, at = [], 8
+    while at < len(png):
+        end = at + 12 + int.from_bytes(png[at:at + 4], "big")
+        chunks.append(png[at:end])
+        at = end
+    exif = [c for c in chunks if c[4:8] == b"eXIf"]
+    rest = [c for c in chunks if c[4:8] not in (b"eXIf", b"IEND")]
+    return png[:8] + b"".join(rest + exif + [c for c in chunks if c[4:8] == b"IEND"])
+
+
+def test_a_png_orientation_is_read_without_decoding_its_pixels_unless_exif_may_follow_them(tmp_path, monkeypatch):
+    """Pillow decodes a PNG's pixels to look for EXIF after them: every PNG was decoded twice by read_image (0.1 s of
+    0.24 for 12 MP) and read_image_size decoded it."""
+    from PIL import PngImagePlugin
+
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    Image.fromarray(_pattern()).save(tmp_path / "before.png", exif=exif)
+    (tmp_path / "after.png").write_bytes(_exif_after_pixels((tmp_path / "before.png").read_bytes()))
+    upright = np.rot90(_pattern(), -1)
+    assert np.array_equal(read_image(tmp_path / "after.png"), upright)  # found after the pixels: decoded to look
+    assert read_image_size(tmp_path / "after.png") == (6, 4)
+
+    def decoded(*args, **kwargs):
+        raise AssertionError("Pillow decoded the pixels of a PNG")
+
+    monkeypatch.setattr(PngImagePlugin.PngImageFile, "load", decoded)
+    assert read_image_size(tmp_path / "before.png") == (6, 4)
+    assert np.array_equal(read_image(tmp_path / "before.png"), upright)
+    assert np.array_equal(read_image(tmp_path / "before.png", oriented=False), _pattern())
+    Image.fromarray(_pattern()).save(tmp_path / "plain.png")
+    assert read_image_size(tmp_path / "plain.png") == (4, 6)

@@ -262,6 +262,48 @@ def test_too_few_different_photos_counts_the_copies_apart_from_the_unreadable(tm
         error.value
 
 
+
+def test_every_copy_names_the_photo_kept_even_when_it_is_read_last(tmp_path):
+    """``IMG_1 (1).jpg`` is read first and kept until ``IMG_1.jpg``, read last, takes its place: ``IMG_1 (2).jpg``
+    was said to have the pixels of ``IMG_1 (1).jpg``, itself skipped as a copy."""
+    folder = _folder_of(tmp_path / "imgs", [(64, 48)])
+    Image.fromarray(np.full((48, 64, 3), 50, np.uint8)).save(folder / "IMG_1.jpg")
+    for copy in ("IMG_1 (1).jpg", "IMG_1 (2).jpg"):
+        (folder / copy).write_bytes((folder / "IMG_1.jpg").read_bytes())
+    with pytest.raises(IngestError) as error:
+        run_sfm(folder)
+    copies = str(error.value).split(". Copies: ")[1].split("; ")
+    assert copies == [f"IMG_1 ({k}).jpg has the same pixels as IMG_1.jpg (a copy or a link to it)" for k in (2, 1)], \
+        error.value
+
+
+def test_photos_alike_but_in_the_pixels_between_those_sampled_are_not_copies(tmp_path, monkeypatch):
+    """Photos are told apart by a sample of their pixels first: two that differ in one pixel outside it are both
+    kept (compared in all their pixels, one photo read again for it), and a copy of either is found by its bytes."""
+    from pytest_n2r.data import sfm
+
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    image = np.full((48, 64, 3), 90, np.uint8)
+    Image.fromarray(image).save(folder / "a.png")
+    image[1, 1] = 91  # not on the sample's every 7th row and column
+    Image.fromarray(image).save(folder / "b.png")
+    for name in ("a", "b"):
+        (folder / f"{name} copy.png").write_bytes((folder / f"{name}.png").read_bytes())  # read before its original
+    read_again, read = [], sfm.read_image
+
+    def counted(path):
+        read_again.append(path.name)
+        return read(path)
+
+    monkeypatch.setattr(sfm, "read_image", counted)
+    with pytest.raises(IngestError, match=r"only 2 of 4 images are different; .*Copies: a copy\.png has the same "
+                                          r"pixels as a\.png \(a copy or a link to it\); b copy\.png has the same "
+                                          r"pixels as b\.png "):
+        run_sfm(folder)
+    assert read_again == ["a.png"]  # to compare "b copy.png" with it; "a.png" and "b.png" have their copies' bytes
+
+
 @pytest.mark.slow
 def test_photos_too_small_to_register_say_their_size(tmp_path):
     """Three 32x24 photos: "registered no images (too little overlap or texture?)" did not say they were tiny."""
