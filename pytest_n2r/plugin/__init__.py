@@ -40,7 +40,7 @@ RELATION_MARKER = "n2r_relation"
 
 _SESSION = pytest.StashKey["Any"]()
 _RECORD = pytest.StashKey["dict"]()
-#: ids of the scenes after whose first setup the heap was frozen (see :func:`pytest_runtest_setup`).
+#: ids of the scenes after whose first setup since a scene was released the heap was frozen (pytest_runtest_setup).
 _FROZEN_SCENES = pytest.StashKey[set]()
 #: True once the session froze the heap (:func:`pytest_runtest_setup`); :func:`pytest_unconfigure` unfreezes it.
 _FROZEN = pytest.StashKey[bool]()
@@ -202,15 +202,23 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
-    """Tell the n2r session which scenes the collected tests use, in order: on its first render it starts a
-    helper compiling the kernels of the renderers it reaches later (:mod:`pytest_n2r.plugin.precompile`)."""
-    planned: list[Any] = []
-    for item in session.items:
-        spec = getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")
-        if spec is not None and spec not in planned:
-            planned.append(spec)
-    if planned:  # else an unused plugin stays unbuilt
-        session_of(session.config).planned = planned
+    """Tell the n2r session the scene of every collected test, in the final order (:meth:`.session.N2RSession.plan`)."""
+    tests = [(item, getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")) for item in session.items]
+    if any(spec is not None for _, spec in tests):  # else an unused plugin stays unbuilt
+        # in a pytest-xdist worker, the controller's --dist mode (pytest_configure_node; the worker's own is "no")
+        session_of(session.config).plan(tests, getattr(session.config, "workerinput", {}).get("n2r_dist", "no"))
+
+
+@pytest.hookimpl(optionalhook=True)  # pytest-xdist's, in its controller
+def pytest_configure_node(node: Any) -> None:
+    node.workerinput["n2r_dist"] = node.config.option.dist
+
+
+@pytest.hookimpl(trylast=True)  # after pytest's own teardown
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+    """Release the scenes no later test of this process uses (:meth:`~.session.N2RSession.release_done`)."""
+    if (session := item.config.stash.get(_SESSION, None)) is not None and session.release_done(item, nextitem):
+        item.config.stash.get(_FROZEN_SCENES, set()).clear()  # the next setup on a scene collects their cycles
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
@@ -223,9 +231,8 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 
 @pytest.fixture(scope="session")
 def n2r_scene(request: pytest.FixtureRequest) -> Any:
-    """The scene under test (a :class:`pytest_n2r.Scene`); tests that use it are parametrized over every configured
-    scene, with the scene name in the test id. pytest runs them scene by scene: a scene is loaded for its first test
-    and released after its last (a fitted scene and its renderer hold some 450 MB)."""
+    """The scene under test (a :class:`pytest_n2r.Scene`), parametrized over the configured scenes (its name in the
+    test id); a process keeps a scene from its first test to its last (:func:`pytest_runtest_teardown`)."""
     from ..errors import N2RError
     from .scenes import NO_SCENE_MESSAGE
 
@@ -235,16 +242,10 @@ def n2r_scene(request: pytest.FixtureRequest) -> Any:
                     "as an argument of a test function or of a method of a plain test class", pytrace=False)
     if (spec := request.param) is None:
         pytest.skip(NO_SCENE_MESSAGE)
-    session = session_of(request.config)
     try:
-        scene = session.load(spec)
+        return session_of(request.config).load(spec)
     except N2RError as exc:  # the scene's own message, not a traceback through the loader
         message = f"pytest-n2r: scene {spec.source}: {exc}"
-    else:
-        yield scene
-        session.release(spec)
-        request.config.stash.get(_FROZEN_SCENES, set()).discard(id(scene))  # a later scene may reuse its id
-        return
     pytest.fail(message, pytrace=False)  # outside the except block, so the report shows the message once
 
 
@@ -262,20 +263,20 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
 
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_setup(item: pytest.Item) -> Any:
-    """After the setup of the first test on each scene, collect the garbage and then move every object alive out
-    of the cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads and keeps (imports, the scene,
-    networks, compiled kernels) is then no longer walked by every full collection. Measured on the main job: the
-    collector's time 7.1 → 2.7 s of a cold run (the kernels' compilation makes many collections), 0.9 → 0.6 s of a
-    warm one (docs/performance-log.md). The collection first, and once a scene rather than at every test, so that
-    no garbage is frozen: a cycle that was already unreachable would never be freed (a released scene's objects in
-    cycles stay frozen, some 17 MB of a fitted scene's 450: unfreezing would walk the whole heap at each change of
-    scene). After the session's first setup too, when the start-up ran with the
-    collector off (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next
-    allocation started a young collection of every object the start-up made (0.1 s in a warm main job) first."""
+    """After the setup of the first test on each scene, collect the garbage and then move every object alive out of the
+    cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads and keeps (imports, the scene, networks,
+    compiled kernels) is then no longer walked by every full collection. Measured on the main job: the collector's time
+    7.1 → 2.7 s of a cold run (the kernels' compilation makes many collections), 0.9 → 0.6 s of a warm one
+    (docs/performance-log.md). The collection first, and once a scene (again after a release: it frees the released
+    scene's cycles) rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
+    never be freed (a released scene's cycles frozen before stay frozen, some 17 MB of a fitted scene's 450: unfreezing
+    would walk the whole heap at each change of scene). After the session's first setup too, when the start-up ran with
+    the collector off (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next
+    allocation started a young collection of every object the start-up made (0.1 s in a warm main job)."""
     yield
     paused = item.config.stash.get(_GC_PAUSED, False)
     scene = getattr(item, "funcargs", {}).get("n2r_scene")
-    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())  # the fixture drops an id with its scene
+    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())  # emptied by a release
     if new_scene := scene is not None and id(scene) not in frozen:
         frozen.add(id(scene))
     if new_scene or paused:

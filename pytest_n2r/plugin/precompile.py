@@ -140,9 +140,10 @@ def compile_apart_meanwhile(session: N2RSession, scene: Any) -> None:
     """While ``session``'s first render of ``scene`` waits for another process compiling its kernels (an xdist
     worker, or the helper): compile what the planned scenes of :data:`APART_FAMILIES` compile apart, which the
     process that compiles their kernels would otherwise compile after them (the session's ``while_waiting``, set
-    by the plugin). A piece another process is compiling is waited for and loaded."""
+    by the plugin). A piece another process is compiling is waited for and loaded. Not for a scene whose tests
+    this process ran already (released: it would be loaded again, and kept to the end, for nothing)."""
     for spec in session.planned:
-        if family(spec) in APART_FAMILIES:
+        if family(spec) in APART_FAMILIES and spec.source not in session.released:
             session.load(spec).compile_apart()
 
 

@@ -37,9 +37,17 @@ class N2RSession:
     records: list[RelationRecord] = field(default_factory=list)
     #: The SUTs' outputs on renders, shared by the relations that run one SUT object on one render.
     sut_outputs: SUTOutputs = field(default_factory=SUTOutputs, repr=False)
-    #: The scenes the session's tests use, in order (the plugin sets it after collection), for the kernel
-    #: helper (:mod:`.precompile`).
+    #: The scenes the session's tests use, in order (the plugin sets it after collection, :meth:`plan`), for the
+    #: kernel helper (:mod:`.precompile`).
     planned: list[SceneSpec] = field(default_factory=list)
+    #: The position of the last test on each planned scene in the run's order, by source, until
+    #: :meth:`release_done` releases it (:meth:`plan`).
+    last_use: dict[str, int] = field(default_factory=dict, repr=False)
+    #: Whether this process runs its tests in the order of :meth:`plan` (see :meth:`release_done`).
+    in_order: bool = True
+    #: The sources of the planned scenes whose last test this process is past: released, and not loaded again for
+    #: their kernel pieces (:func:`.precompile.compile_apart_meanwhile`).
+    released: set[str] = field(default_factory=set, repr=False)
     #: Called with the scene before the render cache's first render (the plugin starts the kernel helper).
     on_first_render: Callable[[Scene], None] | None = field(default=None, repr=False)
     #: Called with the scene while its first render waits for another process compiling its kernels (the plugin
@@ -48,6 +56,7 @@ class N2RSession:
     #: The kernel helper process, once started; :meth:`close` ends it.
     helper: subprocess.Popen | None = field(default=None, repr=False)
     _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)  # by source, from load to release
+    _positions: dict[Any, int] = field(default_factory=dict, repr=False)  # of the tests, by test (:meth:`plan`)
     _cache: RenderCache | None = field(default=None, repr=False)
 
     @property
@@ -93,8 +102,34 @@ class N2RSession:
                 )
         return list(dict.fromkeys(chosen))  # a scene pinned twice (by name and by entry) runs once
 
+    def plan(self, tests: list[tuple[Any, SceneSpec | None]], dist: str = "no") -> None:
+        """Take every test of the run (any hashable: the plugin gives its pytest items) with its scene (``None``: a
+        test on no scene), in the run's order: the :attr:`planned` scenes (for the kernel helper, :mod:`.precompile`),
+        and the last test on each, after which :meth:`release_done` releases it. ``dist``: ``"no"`` in a serial run,
+        else the pytest-xdist worker's ``--dist`` mode (under ``load`` and ``each`` it runs its tests in order)."""
+        self.planned = list(dict.fromkeys(spec for _, spec in tests if spec is not None))
+        self.last_use = {spec.source: position for position, (_, spec) in enumerate(tests) if spec is not None}
+        self._positions = {test: position for position, (test, _) in enumerate(tests)}
+        self.in_order = dist in ("no", "load", "each")
+
+    def release_done(self, test: Any, next_test: Any | None) -> list[Scene]:
+        """After ``test``, before ``next_test`` (the next test this process runs; ``None``: none), tests of
+        :meth:`plan`: release the scenes no later test of this process uses (returned, those that were loaded). In
+        order, those whose last test comes before ``next_test`` (a pytest-xdist worker skips the tests others run);
+        else (``loadfile``, ``loadscope``: a worker runs each file's tests on every scene, file after file) only the
+        scene whose last test of the whole run is ``test``."""
+        position, next_position = self._positions.get(test), self._positions.get(next_test)
+        if self.in_order:
+            done = [s for s, last in self.last_use.items() if next_position is None or last < next_position]
+        else:
+            done = [s for s, last in self.last_use.items() if last == position]
+        for source in done:
+            del self.last_use[source]
+        self.released.update(done)
+        return [scene for source in done if (scene := self._loaded.pop(source, None)) is not None]
+
     def load(self, spec: SceneSpec) -> Scene:
-        """The scene of ``spec``, loaded on first use and kept until :meth:`release` (then loaded again)."""
+        """The scene of ``spec``, loaded on first use and kept until it is released (then loaded again)."""
         scene = self._loaded.get(spec.source)
         if scene is None:
             scene = load_scene_spec(spec, self.device)
@@ -111,8 +146,8 @@ class N2RSession:
 
     def release(self, spec: SceneSpec) -> Scene | None:
         """Drop the scene of ``spec`` (returned, or ``None`` if it was not loaded): a fitted scene and its renderer
-        hold some 450 MB, and the plugin releases each scene after its tests (pytest runs them scene by scene); a
-        later :meth:`load` loads it again."""
+        hold some 450 MB (the plugin releases each scene after its last test, :meth:`release_done`); a later
+        :meth:`load` loads it again."""
         return self._loaded.pop(spec.source, None)
 
     def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,

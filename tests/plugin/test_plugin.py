@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from types import SimpleNamespace
 
 import pytest
 
@@ -310,49 +311,129 @@ def test_stacked(n2r_scene):
         assert f"test_scenes.py::{test} PASSED" in result.stdout.str(), f"{test} did not run:\n{result.stdout.str()}"
 
 
-def test_a_scene_is_released_after_its_tests_and_loaded_again_for_a_test_that_returns_to_it(n2r_project):
-    """Every scene a session loaded stayed in memory to its end: a fitted scene and its renderer hold some 450 MB,
-    and a session on two of them kept both (1.3 GB) though pytest runs the tests scene by scene. A test that comes
-    back to a released scene (here by an order the project chose) gets it loaded again, and its relation runs."""
+#: An inner conftest's lines that log every scene load (process id and scene) to loads.txt in the project.
+COUNT_LOADS = """
+import os
+
+import pytest_n2r.plugin.session as n2r_session_module
+
+_load = n2r_session_module.load_scene_spec
+
+
+def _counted(spec, *args, **kwargs):
+    with open(os.path.join(os.path.dirname(__file__), "loads.txt"), "a") as log:
+        log.write(f"{os.getpid()} {spec.name}\\n")
+    return _load(spec, *args, **kwargs)
+
+
+n2r_session_module.load_scene_spec = _counted
+
+
+def pytest_unconfigure(config):
+    n2r_session_module.load_scene_spec = _load
+"""
+
+
+def _loads(n2r_project) -> list[str]:
+    return (n2r_project.pytester.path / "loads.txt").read_text().splitlines()
+
+
+def test_a_scene_is_kept_to_its_last_test_and_released_after_it(n2r_project):
+    """Every scene a session loaded stayed in memory to its end: a fitted scene and its renderer hold some 450 MB.
+    Then each scene was released whenever pytest switched scenes, which is not only after its last test: pytest
+    groups a session fixture's tests by the index of their parameter, so a test pinned to the second scene ran among
+    the first scene's tests, and each scene was loaded twice (a fitted scene's first render costs again 0.66 s, a
+    module:function scene runs its function again). Now a scene is loaded once, kept while tests on other scenes
+    come between, and released after its last test, while the next scene's tests run."""
     conftest = n2r_project.pytester.path / "conftest.py"
-    conftest.write_text(conftest.read_text() + '''
+    conftest.write_text(conftest.read_text() + COUNT_LOADS + '''
 import pytest
 
-ORDER = ["test_first[plane]", "test_other[ramp]", "test_back[plane]"]
+# the order pytest gives these tests (the pinned test has the first parameter index): kept whatever its version does
+ORDER = ["test_first[plane]", "test_pinned[ramp]", "test_last[plane]", "test_first[ramp]", "test_last[ramp]"]
 
 
-@pytest.hookimpl(trylast=True)  # after pytest grouped the tests by scene: back to the plane after the ramp
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(items):
     items.sort(key=lambda item: ORDER.index(item.name))
 ''')
     n2r_project.write("""
 import weakref
 
-FIRST = {}
+SEEN = {}
 
 
-@pytest.mark.n2r_scene("plane")
-def test_first(n2r_scene, n2r_session):
-    FIRST["plane"] = weakref.ref(n2r_scene)
-    assert n2r_session.spec_of(n2r_scene) is not None
+def test_first(n2r_scene):
+    SEEN.setdefault(n2r_scene.name, weakref.ref(n2r_scene))
+    if n2r_scene.name == "ramp":
+        assert SEEN["plane"]() is None, "the plane scene is still held after its last test"
 
 
 @pytest.mark.n2r_scene("ramp")
-def test_other(n2r_scene, n2r_session):
-    assert FIRST["plane"]() is None, "the plane scene is still held after its tests"
-    assert n2r_session.spec_of(n2r_scene).name == "ramp"
+def test_pinned(n2r_scene):
+    SEEN["ramp"] = weakref.ref(n2r_scene)
 
 
-@pytest.mark.n2r_scene("plane")
 @metamorphic(AbsDifference(), eps=60, transform=transforms(yaw=4, x=0.05), examples=5)
-def test_back(n2r_scene):
-    assert FIRST["plane"]() is None and n2r_scene.name == "plane", "the plane scene was not loaded again"
+def test_last(n2r_scene):
+    assert SEEN[n2r_scene.name]() is n2r_scene, f"the {n2r_scene.name} scene was loaded again"
     return mean_colour
 """, name="test_scenes")
     result = n2r_project.run("-v", "--n2r-scene", PLANE, "--n2r-scene", RAMP)
-    result.stdout.fnmatch_lines(["*test_first[[]plane[]] PASSED*", "*test_other[[]ramp[]] PASSED*",
-                                 "*test_back[[]plane[]] PASSED*"])
-    result.assert_outcomes(passed=3)
+    result.stdout.fnmatch_lines([f"*{name.replace('[', '[[]')} PASSED*" for name in (
+        "test_first[plane]", "test_pinned[ramp]", "test_last[plane]", "test_first[ramp]", "test_last[ramp]")])
+    result.assert_outcomes(passed=5)
+    assert [line.split()[1] for line in _loads(n2r_project)] == ["plane", "ramp"]
+
+
+def test_an_xdist_worker_running_the_tests_file_by_file_loads_each_scene_once(n2r_project):
+    """Under ``-n 2 --dist loadfile`` a worker runs a file's tests on every scene, then the next file's: each
+    switch of scene released the other one, and a worker loaded each scene once per file (16 loads for 8 files
+    instead of 4). It now keeps a scene until the run's last test on it."""
+    conftest = n2r_project.pytester.path / "conftest.py"
+    conftest.write_text(conftest.read_text() + COUNT_LOADS)
+    for number in range(6):
+        n2r_project.write("""
+def test_scene(n2r_scene):
+    pass
+""", name=f"test_file{number}")
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "-n", "2", "--dist", "loadfile",
+                             "-p", "no:benchmark")
+    result.assert_outcomes(passed=12)
+    loads = _loads(n2r_project)
+    assert len(loads) == len(set(loads)) >= 2, f"a worker loaded a scene again: {sorted(loads)}"
+
+
+def test_a_worker_releases_a_scene_once_past_its_last_test_of_the_run(monkeypatch):
+    """A pytest-xdist worker runs some of the run's tests: under ``--dist load`` (and ``each``) in the run's order,
+    so a scene whose last test another worker runs is released as soon as this worker is past it (not kept to the
+    worker's end); under ``loadfile`` (file by file) only after the run's last test on it. A released scene is not
+    loaded again to compile its kernel pieces apart while a first render waits."""
+    from pytest_n2r.plugin.precompile import compile_apart_meanwhile
+    from pytest_n2r.plugin.session import N2RSession
+
+    session = N2RSession()
+    plane, ramp = session.scene_specs([PLANE, RAMP])
+    run = [("a", plane), ("b", ramp), ("c", plane), ("d", None), ("e", ramp)]
+    session.plan(run, dist="load")
+    scene = session.load(plane)
+    assert session.release_done("a", "b") == []  # its test c may be this worker's
+    assert session.release_done("b", "d") == [scene] and session.released == {plane.source}  # c was another's
+    assert session.release_done("d", None) == [] and session.released == {plane.source, ramp.source}
+
+    session.plan(run, dist="loadfile")
+    scene = session.load(plane)
+    assert session.release_done("a", "e") == []  # c may come later, with its file
+    assert session.release_done("c", "b") == [scene]
+
+    demo = N2RSession()
+    wall, objects = demo.scene_specs(["demo:wall", "demo:object"])
+    demo.plan([("a", wall), ("b", objects)])
+    demo.release_done("a", "b")
+    loaded = []
+    monkeypatch.setattr(demo, "load", lambda spec: loaded.append(spec.name) or SimpleNamespace(compile_apart=list))
+    compile_apart_meanwhile(demo, None)
+    assert loaded == ["object"], "a released scene was loaded again for its kernel pieces"
 
 
 def test_n2r_scene_where_it_cannot_be_parametrized_says_so(n2r_project):
