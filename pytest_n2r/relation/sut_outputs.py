@@ -44,6 +44,8 @@ from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 __all__ = ["MISSING", "SUTOutputs", "output_bytes"]
 
 #: Outputs kept at most (least recently used first out; :data:`MAX_OUTPUT_BYTES` bounds their bytes): a classifier's
@@ -96,8 +98,9 @@ class SUTOutputs:
     def put(self, sut: Callable[..., Any], key: str, output: Any) -> None:
         """Keep ``sut``'s ``output`` on the render ``key`` (a tensor detached from its autograd graph), unless it
         takes over :data:`LARGEST_SHARE` of the byte budget."""
-        size = output_bytes(output)
-        if size == float("inf"):  # a tensor that requires grad: detached (walking the output only then)
+        found = [False]
+        size = _bytes(output, set(), 0, found)
+        if found[0]:  # a tensor in what was measured (a container is measured by its first items): detached all
             output = _detached(output)
             size = output_bytes(output)
         self._keep(sut, key, output, size)
@@ -174,15 +177,17 @@ def output_bytes(value: Any) -> float:
     it views), a list, tuple, set or dict, a dataclass or another object with a ``__dict__`` by its items (each object
     once; a long container by its first items), anything else by :func:`sys.getsizeof`. Infinite for a tensor that
     requires grad (its autograd graph holds what cannot be measured)."""
-    return _bytes(value, set(), 0)
+    return _bytes(value, set(), 0, [False])
 
 
-def _bytes(value: Any, seen: set[int], depth: int) -> float:
+def _bytes(value: Any, seen: set[int], depth: int, tensors: list[bool]) -> float:
+    """:func:`output_bytes`; ``tensors[0]`` set when a torch tensor was met."""
     if id(value) in seen:
         return 0
     seen.add(id(value))
     torch = sys.modules.get("torch")  # no tensor exists before torch is imported; never imported here
     if torch is not None and isinstance(value, torch.Tensor):
+        tensors[0] = True
         if value.requires_grad:
             return float("inf")
         try:
@@ -196,7 +201,10 @@ def _bytes(value: Any, seen: set[int], depth: int) -> float:
             base = base.base
         return max(nbytes, getattr(base, "nbytes", 0))
     if type(value).__module__.startswith("PIL.") and hasattr(value, "getbands"):  # a PIL image: its pixels' bytes
-        return value.width * value.height * len(value.getbands()) * (2 if value.mode.startswith("I;16") else 1)
+        from PIL import ImageMode
+
+        mode = ImageMode.getmode(value.mode)
+        return value.width * value.height * len(mode.bands) * np.dtype(mode.typestr).itemsize
     size = sys.getsizeof(value, 64)
     if isinstance(value, (str, bytes, bytearray, int, float, complex, bool)) or value is None or depth >= _DEPTH:
         return size
@@ -215,7 +223,7 @@ def _bytes(value: Any, seen: set[int], depth: int) -> float:
     measured = items[:_SAMPLE]
     if not measured:
         return size
-    return size + sum(_bytes(v, seen, depth + 1) for v in measured) * count / len(measured)
+    return size + sum(_bytes(v, seen, depth + 1, tensors) for v in measured) * count / len(measured)
 
 
 def _detached(value: Any) -> Any:

@@ -276,6 +276,24 @@ def test_a_pil_image_output_counts_its_pixels():
 
     assert output_bytes(Image.new("RGB", (640, 480))) == 640 * 480 * 3
     assert output_bytes(Image.new("I;16", (64, 48))) == 64 * 48 * 2
+    assert output_bytes(Image.new("F", (100, 100))) == 100 * 100 * 4, "a float image counted a byte a pixel"
+
+
+def test_a_tensor_that_requires_grad_past_the_items_measured_is_detached_too():
+    """A container is measured by its first items: a grad tensor after 40 plain ones was kept with its graph."""
+    torch = pytest.importorskip("torch")
+    weights = torch.ones(50, 50, requires_grad=True)
+    shared = SUTOutputs()
+
+    def sut(rgb):
+        return rgb
+
+    for output in ([torch.zeros(2)] * 40 + [(weights * 2).sum(0)],
+                   {**{f"f{k}": torch.zeros(2) for k in range(20)}, "logits": (weights * 2).sum(0)}):
+        shared.put(sut, "k", output)
+        kept = shared.get(sut, "k")
+        last = kept[-1] if isinstance(kept, list) else kept["logits"]
+        assert last.grad_fn is None and not last.requires_grad, "a tensor past the measured items kept its graph"
 
 
 def test_a_tensor_is_kept_detached_from_its_autograd_graph():
