@@ -204,8 +204,8 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
 def pytest_collection_finish(session: pytest.Session) -> None:
     """Tell the n2r session the scene of every collected test, in the final order (:meth:`.session.N2RSession.plan`)."""
     tests = [(item, getattr(getattr(item, "callspec", None), "params", {}).get("n2r_scene")) for item in session.items]
-    if any(spec is not None for _, spec in tests):  # else an unused plugin stays unbuilt
-        # in a pytest-xdist worker, the controller's --dist mode (pytest_configure_node; the worker's own is "no")
+    if any(spec is not None for _, spec in tests):  # else an unused plugin stays unbuilt; an xdist worker's own
+        # --dist is "no": the controller's comes in its workerinput (pytest_configure_node)
         session_of(session.config).plan(tests, getattr(session.config, "workerinput", {}).get("n2r_dist", "no"))
 
 
@@ -214,9 +214,10 @@ def pytest_configure_node(node: Any) -> None:
     node.workerinput["n2r_dist"] = node.config.option.dist
 
 
-@pytest.hookimpl(trylast=True)  # after pytest's own teardown
-def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> None:
+@pytest.hookimpl(hookwrapper=True)  # after pytest's own teardown, even one whose fixture finalizer raised
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Any:
     """Release the scenes no later test of this process uses (:meth:`~.session.N2RSession.release_done`)."""
+    yield
     if (session := item.config.stash.get(_SESSION, None)) is not None and session.release_done(item, nextitem):
         item.config.stash.get(_FROZEN_SCENES, set()).clear()  # the next setup on a scene collects their cycles
 
@@ -301,10 +302,8 @@ def pytest_pyfunc_call(pyfuncitem: pytest.Function) -> bool | None:
     funcargs = pyfuncitem.funcargs
     sut = pyfuncitem.obj(**{arg: funcargs[arg] for arg in pyfuncitem._fixtureinfo.argnames})
     if not callable(sut):
-        pytest.fail(
-            f"{pyfuncitem.nodeid}: a @metamorphic test must return the system under test, a callable taking "
-            f"an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False,
-        )
+        pytest.fail(f"{pyfuncitem.nodeid}: a @metamorphic test must return the system under test, a callable "
+                    f"taking an H×W×3 uint8 RGB image; it returned {sut!r}", pytrace=False)
     session = session_of(pyfuncitem.config)
     from .report import baseline_examples
 

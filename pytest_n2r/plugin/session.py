@@ -114,15 +114,16 @@ class N2RSession:
 
     def release_done(self, test: Any, next_test: Any | None) -> list[Scene]:
         """After ``test``, before ``next_test`` (the next test this process runs; ``None``: none), tests of
-        :meth:`plan`: release the scenes no later test of this process uses (returned, those that were loaded). In
+        :meth:`plan`: release the scenes no later test of this process uses (returned, those that were loaded): in
         order, those whose last test comes before ``next_test`` (a pytest-xdist worker skips the tests others run);
-        else (``loadfile``, ``loadscope``: a worker runs each file's tests on every scene, file after file) only the
-        scene whose last test of the whole run is ``test``."""
-        position, next_position = self._positions.get(test), self._positions.get(next_test)
-        if self.in_order:
-            done = [s for s, last in self.last_use.items() if next_position is None or last < next_position]
+        out of order (``loadfile``, ``loadscope``, ``worksteal``: xdist hands a worker whole files, the largest first
+        by default, or tests stolen from another) none before the process's last test, since any later test may
+        come back to any scene."""
+        if not self.in_order:
+            done = list(self.last_use) if next_test is None else []
         else:
-            done = [s for s, last in self.last_use.items() if last == position]
+            next_position = self._positions.get(next_test)
+            done = [s for s, last in self.last_use.items() if next_position is None or last < next_position]
         for source in done:
             del self.last_use[source]
         self.released.update(done)

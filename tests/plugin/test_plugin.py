@@ -389,17 +389,27 @@ def test_last(n2r_scene):
 def test_an_xdist_worker_running_the_tests_file_by_file_loads_each_scene_once(n2r_project):
     """Under ``-n 2 --dist loadfile`` a worker runs a file's tests on every scene, then the next file's: each
     switch of scene released the other one, and a worker loaded each scene once per file (16 loads for 8 files
-    instead of 4). It now keeps a scene until the run's last test on it."""
+    instead of 4). Released at the run's last test on it, a scene still came back: xdist hands out the largest
+    file first, so the worker running the last file met the last tests early. It now keeps its scenes to its end."""
     conftest = n2r_project.pytester.path / "conftest.py"
     conftest.write_text(conftest.read_text() + COUNT_LOADS)
     for number in range(6):
         n2r_project.write("""
+import time
+
 def test_scene(n2r_scene):
-    pass
+    time.sleep(0.2)
 """, name=f"test_file{number}")
+    n2r_project.write("""
+import pytest
+
+@pytest.mark.parametrize("k", range(5))
+def test_scene(n2r_scene, k):
+    pass
+""", name="test_last")  # the largest file and the last in the run's order
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-scene", RAMP, "-n", "2", "--dist", "loadfile",
                              "-p", "no:benchmark")
-    result.assert_outcomes(passed=12)
+    result.assert_outcomes(passed=22)
     loads = _loads(n2r_project)
     assert len(loads) == len(set(loads)) >= 2, f"a worker loaded a scene again: {sorted(loads)}"
 
@@ -407,7 +417,7 @@ def test_scene(n2r_scene):
 def test_a_worker_releases_a_scene_once_past_its_last_test_of_the_run(monkeypatch):
     """A pytest-xdist worker runs some of the run's tests: under ``--dist load`` (and ``each``) in the run's order,
     so a scene whose last test another worker runs is released as soon as this worker is past it (not kept to the
-    worker's end); under ``loadfile`` (file by file) only after the run's last test on it. A released scene is not
+    worker's end); under ``loadfile`` (whole files, the largest first) only at the worker's end. A released scene is not
     loaded again to compile its kernel pieces apart while a first render waits."""
     from pytest_n2r.plugin.precompile import compile_apart_meanwhile
     from pytest_n2r.plugin.session import N2RSession
@@ -424,7 +434,8 @@ def test_a_worker_releases_a_scene_once_past_its_last_test_of_the_run(monkeypatc
     session.plan(run, dist="loadfile")
     scene = session.load(plane)
     assert session.release_done("a", "e") == []  # c may come later, with its file
-    assert session.release_done("c", "b") == [scene]
+    assert session.release_done("c", "b") == []  # so may a, with another file
+    assert session.release_done("b", None) == [scene]
 
     demo = N2RSession()
     wall, objects = demo.scene_specs(["demo:wall", "demo:object"])
