@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step wi
         MetricUndefined,
         N2RError,
         SceneFileError,
+        SUTError,
         SUTOutputError,
     )
     from .geometry import Camera, Transform, Units
@@ -37,7 +38,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step wi
         ssim_metric,
     )
     from .plugin.marker import metamorphic
-    from .relation import Relation, RelationFailure, SUTError, Validity, check_relation
+    from .relation import Relation, RelationFailure, Validity, check_relation
     from .render import RenderedView
     from .scene import FieldScene, Scene, SceneView, SplatScene, load_scene, save_scene
     from .scene.render_cache import RenderCache
@@ -84,7 +85,7 @@ _EXPORTS: dict[str, str] = {
     "views": "pytest_n2r.strategies",
     "Relation": "pytest_n2r.relation",
     "RelationFailure": "pytest_n2r.relation",
-    "SUTError": "pytest_n2r.relation",
+    "SUTError": "pytest_n2r.errors",
     "check_relation": "pytest_n2r.relation",
     "RenderCache": "pytest_n2r.scene.render_cache",
     "Validity": "pytest_n2r.relation",

@@ -15,7 +15,11 @@ __all__ = [
     "IngestError",
     "SceneFileError",
     "FitError",
+    "SUTError",
     "SUTOutputError",
+    "SUTNotDeterministic",
+    "CallTimeout",
+    "BaselineError",
     "MetricArgumentError",
     "MetricUndefined",
     "UnfinishedScene",
@@ -46,8 +50,24 @@ class FitError(N2RError):
     """Fitting a scene field failed (diverged to NaN, no usable views, ...)."""
 
 
+class SUTError(N2RError):
+    """The system under test raised; the original exception is chained (``__cause__``)."""
+
+
 class SUTOutputError(InvalidType):
     """The system under test returned something a metric cannot use (None, NaN, wrong shape)."""
+
+
+class SUTNotDeterministic(N2RError):
+    """The system under test gave two different outputs for the same image."""
+
+
+class CallTimeout(N2RError):
+    """A render or SUT call ran longer than its limit (``--n2r-timeout``)."""
+
+
+class BaselineError(N2RError):
+    """A baseline file that cannot be used: missing, unreadable, from another version, or malformed."""
 
 
 class MetricArgumentError(InvalidArgument):

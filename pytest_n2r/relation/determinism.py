@@ -14,15 +14,11 @@ from typing import Any
 import numpy as np
 
 from .._validation import is_tensor, tensor_values
-from ..errors import N2RError
+from ..errors import SUTNotDeterministic
 
 __all__ = ["NotDeterministic", "SUTNotDeterministic", "check_deterministic", "same_output", "show_output"]
 
 _SHOWN_ITEMS = 6
-
-
-class SUTNotDeterministic(N2RError):
-    """The system under test gave two different outputs for the same image."""
 
 
 class NotDeterministic(BaseException):

@@ -7,15 +7,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import N2RError, SUTOutputError
+from ..errors import SUTError, SUTOutputError
 from ..metrics.base import Metric
 
 __all__ = ["SUTError", "check_output"]
-
-
-class SUTError(N2RError):
-    """The system under test raised; the original exception is chained (``__cause__``)."""
-
 
 
 def check_output(output: Any, role: str, where: str, metric: Metric) -> None:

@@ -15,13 +15,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from ..errors import N2RError
+from ..errors import CallTimeout
 
 __all__ = ["CallTimeout", "TimeLimitReached", "time_limit"]
-
-
-class CallTimeout(N2RError):
-    """A render or SUT call ran longer than its limit (``--n2r-timeout``)."""
 
 
 class TimeLimitReached(BaseException):

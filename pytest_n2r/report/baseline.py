@@ -25,7 +25,7 @@ from typing import Any
 
 from ..data.atomic import atomic_write_text
 from ..data.relative_path import relative_posix
-from ..errors import N2RError
+from ..errors import BaselineError
 from ..relation.record import RelationRecord
 from .validate import BadField, DuplicateKey, check_version, meta_from_json, relation_from_json, unique_keys
 
@@ -34,10 +34,6 @@ __all__ = ["FORMAT", "VERSION", "BaselineError", "Baseline", "save_baseline", "l
 
 FORMAT = "pytest-n2r-baseline"
 VERSION = 2
-
-
-class BaselineError(N2RError):
-    """A baseline file that cannot be used: missing, unreadable, from another version, or malformed."""
 
 
 class Baseline(dict):
@@ -143,7 +139,6 @@ def load_baseline(path: str | os.PathLike) -> Baseline:
 
 def _reject_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number JSON allows (pytest-n2r writes null for 'no value')")
-
 
 
 # -- where a baseline came from ------------------------------------------------------------------------
