@@ -18,10 +18,14 @@ import functools
 import io
 import os
 import warnings
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["PhotoColourWarning", "to_srgb", "warn_if_transparent", "transparent"]
+if TYPE_CHECKING:
+    import PIL.Image
+
+__all__ = ["PhotoColourWarning", "has_alpha", "to_srgb", "warn_if_transparent", "transparent"]
 
 
 class PhotoColourWarning(UserWarning):
@@ -71,6 +75,12 @@ def _srgb() -> object:
     return ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB"))
 
 
+def has_alpha(im: PIL.Image.Image) -> bool:
+    """Whether the Pillow image ``im`` (its header read, its pixels need not be) carries an alpha channel or a
+    transparent colour or palette entry."""
+    return im.mode in ("RGBA", "LA", "La", "RGBa", "PA") or "transparency" in im.info
+
+
 def transparent(path: str | os.PathLike) -> bool:
     """Whether the image at ``path`` has a pixel that is not opaque, as Pillow reads it (an alpha channel or a
     transparent palette entry); ``False`` when Pillow cannot read it."""
@@ -78,7 +88,7 @@ def transparent(path: str | os.PathLike) -> bool:
 
     try:
         with Image.open(path) as im:
-            if im.mode not in ("RGBA", "LA", "La", "RGBa", "PA") and "transparency" not in im.info:
+            if not has_alpha(im):
                 return False
             return im.convert("RGBA").getchannel("A").getextrema()[0] < 255
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError):

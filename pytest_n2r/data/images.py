@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import IngestError
-from .colour import to_srgb, warn_if_transparent
+from .colour import has_alpha, to_srgb, warn_if_transparent
 from .heif import decode_heif, heif_size, is_iso_media
 from .listing import IMAGE_SUFFIXES, images_in_subfolders, list_images, other_files, subfolder_hint
 
@@ -244,7 +244,7 @@ def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:
     try:
         with _header(path) as im:
             size, orientation, icc = im.size, _exif_orientation(im, path), im.info.get("icc_profile")
-            alpha = im.mode in ("RGBA", "LA", "La", "RGBa", "PA") or "transparency" in im.info
+            alpha = has_alpha(im)
     except (OSError, UnidentifiedImageError, ValueError, SyntaxError, KeyError):
         return 1, None, False
     _check_sides(path, *size)
