@@ -55,7 +55,7 @@ class N2RSession:
     while_waiting: Callable[[Scene], None] | None = field(default=None, repr=False)
     #: The kernel helper process, once started; :meth:`close` ends it.
     helper: subprocess.Popen | None = field(default=None, repr=False)
-    _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)  # by source, from load to release
+    _loaded: dict[str, Scene] = field(default_factory=dict, repr=False)  # by source, from load to release_done
     _positions: dict[Any, int] = field(default_factory=dict, repr=False)  # of the tests, by test (:meth:`plan`)
     _cache: RenderCache | None = field(default=None, repr=False)
 
@@ -130,7 +130,7 @@ class N2RSession:
         return [scene for source in done if (scene := self._loaded.pop(source, None)) is not None]
 
     def load(self, spec: SceneSpec) -> Scene:
-        """The scene of ``spec``, loaded on first use and kept until it is released (then loaded again)."""
+        """The scene of ``spec``, loaded on first use and kept until :meth:`release_done` releases it."""
         scene = self._loaded.get(spec.source)
         if scene is None:
             scene = load_scene_spec(spec, self.device)
@@ -144,12 +144,6 @@ class N2RSession:
             _warn_if_unfinished(scene)
             self._loaded[spec.source] = scene
         return scene
-
-    def release(self, spec: SceneSpec) -> Scene | None:
-        """Drop the scene of ``spec`` (returned, or ``None`` if it was not loaded): a fitted scene and its renderer
-        hold some 450 MB (the plugin releases each scene after its last test, :meth:`release_done`); a later
-        :meth:`load` loads it again."""
-        return self._loaded.pop(spec.source, None)
 
     def run(self, scene: Scene, sut: Callable[[Any], Any], relation: Relation, test_id: str,
             replay: list[Any] | None = None, shrink: bool = True) -> RelationRecord:
