@@ -127,9 +127,9 @@ DEGRADATIONS = {
 
 def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
     """Per degradation (:data:`DEGRADATIONS`): PSNR / SSIM of the degraded reference image against the reference,
-    and each detector's repeatability between the two, on ``scene``'s held-out views at ``size``; the mapping
-    between them is the render's (same pose, its depth and opacity), as in :func:`measure_fidelity`. Empty when the
-    scene has no reference image."""
+    and each detector's repeatability between the two, on ``scene``'s held-out views at ``size``; their points are
+    paired by the homography between the two cameras (one pose: the identity, or the whole-pixel shift a degradation
+    tells), as in :func:`measure_fidelity`. Empty when the scene has no reference image."""
     kind, _ = reference_kind(scene)
     if kind == "none":
         return {}
@@ -162,7 +162,8 @@ def _repeatabilities(reference: RenderedView, other: RenderedView, view: str, ou
     scores = {}
     for d in DETECTORS:
         sut = resolve_sut(d, None)
-        sample = shift_sample(sut.metrics()["repeatability"], outputs[d], sut.fn(other.rgb), reference, other, view)
+        metric = sut.same_pose_metrics()["repeatability"]
+        sample = shift_sample(metric, outputs[d], sut.fn(other.rgb), reference, other, view)
         scores[d] = sample.score if sample.valid else float("nan")
     return scores
 

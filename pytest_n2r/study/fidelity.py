@@ -3,8 +3,11 @@ the built-in detectors (ORB, SIFT, AKAZE: repeatability and interest-point sprea
 render at the same held-out pose). ``n2r info --shift`` and ``benchmarks/fidelity.py`` print it.
 
 The reference image is the stored photo, or the exact render for a fitted demo scene
-(:func:`pytest_n2r.relation.floor.reference_kind`). Scores are the metrics' (1 is ideal for both); the deviation
-``1 - score`` is the field floor a relation with that detector and metric inherits. Beside it, the yardstick:
+(:func:`pytest_n2r.relation.floor.reference_kind`). Scores are the metrics' (1 is ideal for both), with the points
+of the two images paired as the paper pairs them, by the identity between two images of one pose
+(:data:`~pytest_n2r.study.suts.SAME_POSE_METRICS_BY_KIND`): the photo's points where the field rendered nothing
+count. A relation's own field floor (the plugin's) is measured with the relation's metric instead, which with a
+depth mapping leaves those points out of both sides, as the relation's examples do. Beside it, the yardstick:
 each detector's repeatability on the capture's nearest other photo brought to the same pose
 (:mod:`pytest_n2r.relation.floor.nearby`), what a real image taken nearby scores against the reference.
 """
@@ -138,7 +141,7 @@ def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: i
     floors = {}
     for name in DETECTORS:
         sut = resolve_sut(name, None)
-        for key, metric in sut.metrics().items():
+        for key, metric in sut.same_pose_metrics().items():
             floors[name, key] = measure_floor(scene, sut.fn, metric, size=render_size, cache=cache, store=store,
                                               name=name, max_views=max_views, nearby=True)
     return FidelityReport(scene.name, size_text, kind, "", tuple(images), floors)

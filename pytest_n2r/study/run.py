@@ -182,7 +182,7 @@ def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedVie
     real_view = RenderedView(source.camera, source.c2w, rgb=real, depth=source.depth, opacity=source.opacity)
     for sut in suts:
         out_real, out_field = sut.fn(real), sut.fn(source.rgb)
-        for name, metric in sut.metrics().items():
+        for name, metric in sut.same_pose_metrics().items():
             sample = shift_sample(metric, out_real, out_field, real_view, source, view.name)
             result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name, "metric": name,
                                         "score": sample.score, "deviation": sample.deviation,

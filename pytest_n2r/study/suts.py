@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import InvalidArgument, InvalidType
 from ..metrics import Metric, class_invariance, cosine_similarity, interest_point_spread, l2_norm, repeatability
 
-__all__ = ["SUT", "BUILTIN_SUTS", "KINDS", "resolve_sut", "METRICS_BY_KIND"]
+__all__ = ["SUT", "BUILTIN_SUTS", "KINDS", "resolve_sut", "METRICS_BY_KIND", "SAME_POSE_METRICS_BY_KIND"]
 
 Kind = Literal["detector", "classifier"]
 
@@ -31,6 +31,19 @@ METRICS_BY_KIND: dict[str, Callable[[], dict[str, Metric]]] = {
     "classifier": lambda: {
         "cosine": cosine_similarity(), "l2": l2_norm(), "class_invariance": class_invariance(),
     },
+}
+
+#: The same metrics for two images of one pose: a reference photo and the render there (the paper's τ0, the
+#: reality-to-field shift). The detectors' map points as the paper does, by the homography between the two
+#: cameras, the identity at one pose, so every point counts; a depth mapping would leave out of both sides the
+#: points where the field rendered nothing (opacity < 0.5), and a field that left half the photo empty would
+#: score as if that half were right (a photo with 40 points, the render with the 20 of its left half and nothing on
+#: the right: interest-point spread 1.0 by depth, 0.515 by the identity; repeatability, matches over the smaller
+#: count, 1.0 by both).
+SAME_POSE_METRICS_BY_KIND: dict[str, Callable[[], dict[str, Metric]]] = {
+    "detector": lambda: {"repeatability": repeatability(px=2.0, mapping="homography"),
+                         "ip_spread": interest_point_spread(mapping="homography")},
+    "classifier": METRICS_BY_KIND["classifier"],
 }
 
 
@@ -71,7 +84,13 @@ class SUT:
     fn: Callable[[np.ndarray], Any]
 
     def metrics(self) -> dict[str, Metric]:
+        """The metrics between a source view and a follow-up at another pose (:data:`METRICS_BY_KIND`)."""
         return METRICS_BY_KIND[self.kind]()
+
+    def same_pose_metrics(self) -> dict[str, Metric]:
+        """The metrics between two images of one pose, a reference photo and its render
+        (:data:`SAME_POSE_METRICS_BY_KIND`)."""
+        return SAME_POSE_METRICS_BY_KIND[self.kind]()
 
 
 #: The kinds of SUT (``--sut-kind``).

@@ -15,9 +15,10 @@ from pytest_n2r.demo import ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.strategies import PRESET_FAMILIES
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study, write_study
-from pytest_n2r.study.fidelity import FidelityReport
+from pytest_n2r.study.fidelity import FidelityReport, measure_fidelity
 from pytest_n2r.study.run import StudyResult
 from pytest_n2r.study.sampling import sample_mutation, sample_transform
+from tests.plugin.fakefield import BlurredPlane
 
 TINY = StudyConfig(examples=1, max_views=1, size=64, fps_frames=1, fps_sizes=((64, 36),))
 
@@ -230,3 +231,32 @@ def test_the_fidelity_report_is_strict_json():
     data = json.loads(json.dumps(report.to_dict(), allow_nan=False))
     assert data["images"][0]["psnr"] is None and data["psnr"] is None, data
     assert data["detectors"]["orb"] == {"repeatability": None, "ip_spread": None}, data["detectors"]
+
+
+class _RightHalfEmpty(BlurredPlane):
+    """A field that renders the photo exactly on the left half and nothing (opacity 0, black) on the right."""
+
+    @property
+    def content_hash(self) -> str:  # not the whole plane's: what is kept by scene content must not be shared
+        return "right half empty " + super().content_hash
+
+    def _render(self, c2w, camera, outputs):
+        out = super()._render(c2w, camera, outputs)
+        right = slice(camera.width // 2, None)
+        for key in ("rgb", "opacity"):
+            if key in out:
+                out[key][:, right] = 0
+        return out
+
+
+def test_the_reality_to_field_shift_counts_the_photos_points_where_the_field_rendered_nothing():
+    """The shift mapped points through the rendered depth, which left out of both sides the photo's points where the
+    render was empty: a field that rendered half of every photo black scored a spread of 1.0. The paper pairs the
+    points of one pose by the identity; the study's RQ1 and the fidelity report do now."""
+    scene = _RightHalfEmpty(blur=0.0, name="half", width=160, height=120)
+    report = measure_fidelity(scene, size=None)
+    spreads = {d: report.score(d, "ip_spread") for d in ("orb", "sift", "akaze")}
+    assert all(score < 0.8 for score in spreads.values()), f"the empty half went uncounted: {spreads}"
+    result = run_study([scene], [resolve_sut("orb", None)], dataclasses.replace(TINY, size=160))
+    rows = {row["metric"]: row["score"] for row in result.domain_shift}
+    assert rows["ip_spread"] < 0.8, f"RQ1's shift left the empty half out: {rows}"
