@@ -39,8 +39,8 @@ from .listing import IMAGE_SUFFIXES, images_in_subfolders, list_images, other_fi
 if TYPE_CHECKING:
     import PIL.Image
 
-__all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "to_rgb8", "resize_image",
-           "iter_readable", "images_in_subfolders", "subfolder_hint", "other_files"]
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "read_orientation", "to_rgb8",
+           "resize_image", "iter_readable", "images_in_subfolders", "subfolder_hint", "other_files"]
 
 #: The largest image side (pixels) read: :data:`pytest_n2r.render.size.MAX_SIDE` (``data`` sits below ``render``).
 MAX_IMAGE_SIDE = 16384
@@ -148,10 +148,14 @@ def _cut_short(head: bytes, data: np.ndarray) -> str:
 @contextmanager
 def _quiet_opencv() -> Iterator[None]:
     """OpenCV's own log (its TIFF decoder's complaints on a broken file) kept off stderr: the error names the file.
-    The level is process-wide: the first of overlapping readers silences it, the last puts it back."""
+    The level is process-wide: the first of overlapping readers silences it, the last puts it back. OpenCV before
+    4.13 has no ``cv2.utils.logging`` to set it with: there its log is left as it is."""
     import cv2
 
-    log = cv2.utils.logging
+    log = getattr(cv2.utils, "logging", None)
+    if log is None:
+        yield
+        return
     with _OPENCV_QUIET:
         if not _quiet_readers:
             _quiet_readers.append(log.getLogLevel())
@@ -233,6 +237,12 @@ def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
         raise IngestError(f"image file {str(path)!r} is {width}x{height} pixels; expected at most {MAX_IMAGE_SIDE} "
                           "pixels a side")
     return width, height
+
+
+def read_orientation(path: str | os.PathLike) -> int:
+    """The EXIF orientation tag of the image file ``path`` (1 to 8; 1 when it has none, or when Pillow cannot read
+    its header: the decoder names the file), the one :func:`read_image` turns the photo by."""
+    return _stored_facts(Path(path))[0]
 
 
 def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:
