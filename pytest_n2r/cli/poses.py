@@ -82,7 +82,7 @@ def check_frames_dir(frames_dir: Path | None, force: bool) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..data.ingest import complete_points, extent, load_poses
-    from ..data.transforms_json import write_transforms_json
+    from ..data.transforms_json import RATIONAL_MODEL_NOTE, camera_model_of, write_transforms_json
     from ._interrupt import sigterm_kept_from_pycolmap
 
     check_arguments(args)
@@ -116,6 +116,8 @@ def run(args: argparse.Namespace) -> int:
                          "warnings": list(poses.report.get("warnings", []))}}
         path = write_transforms_json(args.output, poses, extra=extra)
         print(f"wrote       {printable(path)} ({len(poses.frames)} frames)")
+        if camera_model_of(poses) != "OPENCV":  # a lens only n2r reads back: say so where the file is named
+            print(printable(f"n2r poses: warning: {path} has {RATIONAL_MODEL_NOTE}"), file=sys.stderr)
     return 0
 
 

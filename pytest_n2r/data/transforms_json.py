@@ -7,13 +7,17 @@ Convention
 - Intrinsics ``fl_x fl_y cx cy w h`` may be global (top level) or per frame (a frame's value wins).
   ``cx, cy`` put the top-left pixel centre at ``(0.5, 0.5)`` as in COLMAP; ours is ``(0, 0)``, so
   ``cx_ours = cx - 0.5``. Without ``fl_x`` the focal length comes from ``camera_angle_x`` (radians,
-  full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; ``fl_y`` falls back to ``fl_x``,
-  or to ``camera_angle_y`` first when ``fl_x`` is absent too; ``cx, cy`` fall back to the image centre.
+  full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; without ``fl_y``, from
+  ``camera_angle_y`` (full vertical field of view, radians) when given, else ``fl_y = fl_x`` (each axis on its own,
+  as instant-ngp reads them); ``cx, cy`` fall back to the image centre. ``w, h`` are whole pixels; without them the
+  size is the photo's, read upright, which a photo with an EXIF orientation tag makes ambiguous (the intrinsics may
+  describe its pixels as stored, as nerfstudio and instant-ngp read them): refused there.
 - ``camera_model`` is one of nerfstudio's pinhole models (``OPENCV`` when absent, ``PINHOLE``, ``SIMPLE_PINHOLE``,
   ``SIMPLE_RADIAL``, ``RADIAL``), whose distortion is nerfstudio's ``k1 k2 k3`` (radial, the terms in r², r⁴, r⁶ of
   OpenCV's model) and ``p1 p2`` (tangential); nerfstudio's ``k4`` is a further radial term in r⁸, which OpenCV's
   model cannot hold, so a non-zero ``k4`` (or ``k5``, ``k6``, no part of these models) is refused. ``FULL_OPENCV``
-  (COLMAP's name for OpenCV's rational model, what :func:`write_transforms_json` writes for such a lens) reads
+  (COLMAP's name for OpenCV's rational model, what :func:`write_transforms_json` writes for such a lens, which only
+  n2r reads back: nerfstudio has no such model and instant-ngp reads ``k4`` as a radial term) reads
   ``k1 k2 p1 p2 k3 k4 k5 k6`` as OpenCV's. Every other model (fisheye, omnidirectional, VR180, equirectangular,
   orthographic, a typo) and instant-ngp's other lenses (``is_fisheye`` true, ``latlong``, ``equirectangular``,
   ``ftheta_p0``) are refused.
@@ -22,7 +26,9 @@ Convention
   to a frame's ``file_path`` as nerfstudio does, as paths relative to the json's folder (``./a.jpg`` is ``a.jpg``);
   one that names no frame is refused.
 - ``file_path`` is relative to the json's folder; a path without a suffix gets ``.png`` (the NeRF
-  synthetic data sets list ``./train/r_0``).
+  synthetic data sets list ``./train/r_0``); Windows separators (``images\\a.jpg``, written on Windows) are read as
+  ``/`` when no file has the name as written, as instant-ngp reads them.
+- A frame's ``mask_path`` (nerfstudio leaves the masked pixels out of its loss) is not read: warned of once.
 """
 
 from __future__ import annotations
@@ -40,17 +46,24 @@ from .._validation import is_finite, repeated_name
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
-from .images import read_image_size
+from .images import read_image_size, read_orientation
 from .json_file import read_json_file
 from .poses import PoseSet, SourceFrame
 from .relative_path import relative_posix
 
-__all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json"]
+__all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json", "camera_model_of",
+           "RATIONAL_MODEL_NOTE"]
 
 _DISTORTION_KEYS = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 #: camera models read as they are meant (see the module's *Convention*)
 _PINHOLE_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL")
 _RATIONAL_MODEL = "FULL_OPENCV"
+#: what a file written with :data:`_RATIONAL_MODEL` means to the tools that read transforms.json
+RATIONAL_MODEL_NOTE = (
+    f"camera_model {_RATIONAL_MODEL} (OpenCV's rational lens, k4 k5 k6 non-zero), which n2r reads back exactly but "
+    f"nerfstudio and instant-ngp do not: nerfstudio has no {_RATIONAL_MODEL} camera (its dataparser stops on the "
+    "name) and instant-ngp reads k4 as a radial term (and p1 p2 where k3 k4 go); no OPENCV camera holds this lens"
+)
 #: instant-ngp's fields for lenses other than a pinhole one
 _OTHER_LENS_FIELDS = ("is_fisheye", "latlong", "equirectangular", "ftheta_p0")
 #: nerfstudio's split fields; the first one present of the last two is held out
@@ -74,8 +87,9 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     size must be in the json (``w`` and ``h``). The split (``val_filenames``, else ``test_filenames``) becomes
     :attr:`PoseSet.heldout`, as the names of the frames it lists. Raises :class:`IngestError` naming the file, the
     frame index and the field when a field is missing or malformed or names a camera model or lens that is not read
-    correctly (see the module's *Convention*), a matrix is not a finite rigid transform, a split names no frame, or
-    no frame has its image.
+    correctly (see the module's *Convention*), a size is not whole pixels, a photo with an EXIF orientation tag has
+    no ``w`` and ``h``, a matrix is not a finite rigid transform, a split names no frame, or no frame has its image.
+    Frames with a ``mask_path`` are warned of once (masks are not read), also in ``report["warnings"]``.
     """
     path = Path(path)
     meta = read_json_file(path, 'transforms')
@@ -117,8 +131,15 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     if not frames:
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
     heldout = _read_split(meta, path, [raw["file_path"] for raw in raw_frames])
-    return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped,
-                   report={"listed": len(raw_frames)}, heldout=heldout)
+    report: dict[str, Any] = {"listed": len(raw_frames)}
+    masked = sum(1 for raw in raw_frames if raw.get("mask_path") is not None)
+    if masked:
+        note = (f"{path}: {masked} of {len(raw_frames)} frames have a 'mask_path' (pixels nerfstudio leaves out of "
+                "its loss); n2r does not read masks: n2r fit fits every pixel of each photo, the masked ones too")
+        warnings.warn(note, stacklevel=2)
+        report["warnings"] = [note]
+    return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped, report=report,
+                   heldout=heldout)
 
 
 def _camera_model(fields: dict, where: str, default: str) -> str:
@@ -160,7 +181,17 @@ def _read_split(meta: dict, path: Path, listed: list[str]) -> frozenset[str] | N
 
 
 def _resolve_image(root: Path, name: str) -> Path | None:
-    image = root / name
+    """The image file ``name`` (a frame's ``file_path``) names, relative to ``root``; ``None`` when there is none. A
+    name with backslashes (written on Windows) that names no file as written is read with them as ``/`` on POSIX, as
+    instant-ngp reads every ``file_path``."""
+    image = _existing(root / name)
+    if image is None and os.sep == "/" and "\\" in name:
+        image = _existing(root / name.replace("\\", "/"))
+    return image
+
+
+def _existing(image: Path) -> Path | None:
+    """``image`` if it is a file, else a suffix-less ``image`` with ``.png``, ``.jpg`` or ``.jpeg`` that is one."""
     if image.is_file():
         return image
     if not image.suffix:
@@ -210,14 +241,37 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
+def _upright_size(image: Path, where: str) -> tuple[int, int]:
+    """``(width, height)`` in pixels of the photo ``image`` as n2r reads it (upright), the size of a frame without
+    ``w`` and ``h``; an :class:`IngestError` naming the file when the photo has an EXIF orientation tag. Such a photo
+    is shown otherwise than stored: nerfstudio, instant-ngp and COLMAP read its pixels as stored, n2r reads a
+    transforms.json's photos upright (n2r writes their cameras so), and without ``w`` and ``h`` nothing tells which
+    of the two the file's intrinsics and poses describe."""
+    width, height = read_image_size(image)
+    orientation = read_orientation(image)
+    if orientation == 1:
+        return width, height
+    stored = (height, width) if orientation in (5, 6, 7, 8) else (width, height)
+    raise IngestError(
+        f"{where}: image file {str(image)!r} has EXIF orientation {orientation}: stored as {stored[0]}x{stored[1]} "
+        f"pixels, shown turned or mirrored as {width}x{height}, and the file gives no 'w' and 'h' to tell which its "
+        "intrinsics and pose describe (nerfstudio and instant-ngp read the pixels as stored, n2r reads the photo "
+        f"upright); expected fields 'w' and 'h' of the upright photo ({width}x{height}) when they describe it, else "
+        "photos saved as they are shown (turned, the tag removed) with their intrinsics and poses turned to match"
+    )
+
+
 def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: str) -> Camera:
     w, h = _number(meta, raw, "w", where), _number(meta, raw, "h", where)
     if (w is None or h is None) and image is None:
         raise IngestError(f"{where}: no image size; expected fields 'w' and 'h' (the image is not there to read it)")
+    for key, side in (("w", w), ("h", h)):
+        if side is not None and not side.is_integer():
+            raise IngestError(f"{where}: field {key!r}={side!r} must be a whole number of pixels (the image's "
+                              f"{'width' if key == 'w' else 'height'})")
     if w is None or h is None:
-        w, h = read_image_size(image)
+        w, h = _upright_size(image, where)
     fx, fy = _number(meta, raw, "fl_x", where), _number(meta, raw, "fl_y", where)
-    focal_given = fx is not None
     if fx is None:
         angle_x = _number(meta, raw, "camera_angle_x", where)
         if angle_x is None:
@@ -227,7 +281,7 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
         fx = 0.5 * w / math.tan(0.5 * angle_x)
     if fy is None:
         angle_y = _number(meta, raw, "camera_angle_y", where)
-        if angle_y is not None and not focal_given:
+        if angle_y is not None:
             if not 0 < angle_y < math.pi:
                 raise IngestError(f"{where}: field 'camera_angle_y'={angle_y!r} must be in (0, pi) radians")
             fy = 0.5 * h / math.tan(0.5 * angle_y)
@@ -245,7 +299,7 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
                           "reads k4 k5 k6 as OpenCV's rational terms)")
     try:
         return Camera.from_colmap_pixels(
-            int(round(w)), int(round(h)), fx, fy, w / 2 if cx is None else cx, h / 2 if cy is None else cy,
+            int(w), int(h), fx, fy, w / 2 if cx is None else cx, h / 2 if cy is None else cy,
             tuple(coeffs),
         )
     except N2RError as exc:
@@ -255,12 +309,15 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
 def write_transforms_json(
     path: str | os.PathLike, frames: list[SourceFrame] | PoseSet, *, extra: dict[str, Any] | None = None,
 ) -> Path:
-    """Write frames as a nerfstudio-compatible transforms.json (atomically) and return its path.
+    """Write frames as a transforms.json (atomically) and return its path: nerfstudio's and instant-ngp's format, which
+    both read unless a lens needs ``FULL_OPENCV`` (below).
 
     ``file_path`` is the image's path relative to the json's folder when the frame knows its file
     (else the frame's name), so two pose sets of the same images can be compared frame by frame.
     Intrinsics shared by every frame are written once at the top level, otherwise per frame;
-    ``camera_model`` is ``OPENCV``, or ``FULL_OPENCV`` when a lens has OpenCV's rational terms (k4 k5 k6).
+    ``camera_model`` is :func:`camera_model_of` the frames: ``OPENCV``, which nerfstudio and instant-ngp read, or
+    ``FULL_OPENCV`` when a lens has OpenCV's rational terms (k4 k5 k6), which only n2r reads
+    (:data:`RATIONAL_MODEL_NOTE`: tell the user).
     A pose set's own split (:attr:`PoseSet.heldout`) is written as ``train_filenames`` and ``val_filenames``
     (the same ``file_path`` strings). ``extra`` adds top-level fields (e.g. ``{"reference_length": ...}``).
     """
@@ -271,8 +328,7 @@ def write_transforms_json(
         raise IngestError(f"cannot write {path}: no frames")
     cameras = [_camera_fields(f.camera) for f in frames]
     shared = cameras[0] if all(c == cameras[0] for c in cameras) else None
-    rational = any(len(f.camera.distortion) == 8 for f in frames)
-    out: dict[str, Any] = {"camera_model": _RATIONAL_MODEL if rational else "OPENCV"}
+    out: dict[str, Any] = {"camera_model": camera_model_of(frames)}
     if shared is not None:
         out.update(shared)
     names = [_relative_name(frame, path.parent) for frame in frames]
@@ -296,6 +352,14 @@ def write_transforms_json(
     out["frames"] = records
     atomic_write_text(path, json.dumps(out, indent=2) + "\n")
     return path
+
+
+def camera_model_of(frames: list[SourceFrame] | PoseSet) -> str:
+    """The ``camera_model`` :func:`write_transforms_json` writes for ``frames``: ``FULL_OPENCV`` when a camera has a
+    non-zero rational term (k4 k5 k6: its distortion has all eight of OpenCV's coefficients, trailing zeros being
+    dropped), else ``OPENCV``, which holds every other lens n2r reads (k1 k2 p1 p2 k3)."""
+    frames = frames.frames if isinstance(frames, PoseSet) else frames
+    return _RATIONAL_MODEL if any(len(f.camera.distortion) == 8 for f in frames) else "OPENCV"
 
 
 def _camera_fields(camera: Camera) -> dict[str, float]:
