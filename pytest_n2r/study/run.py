@@ -4,9 +4,12 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
 
 - ``realness``: per scene, view and source (τ0 = the scene's render at the captured pose, m1–m3 = the
   mutated real photo): PSNR (dB), SSIM and LPIPS (when available) against the real photo.
-- ``domain_shift``: per scene, view, SUT and metric: the metric between the SUT's output on the real
+- ``domain_shift``: per scene, view, SUT (with ``points``, the keypoints a built-in detector kept per image; empty
+  for an imported SUT) and metric: the metric between the SUT's output on the real
   photo and on the τ0 render (RQ1's "SUT performance under the reality-to-field shift").
-- ``examples``: per scene, view, SUT, metric and drawn transform / mutation: score and deviation.
+- ``examples``: per scene, view, SUT (with ``points``), metric and drawn transform / mutation: score and deviation.
+  RQ2's mutations m1–m3 mutate the τ0 render, the source every τ follow-up is compared with (the paper mutated
+  real photos), so motions and mutations share one source image.
 - ``inconsistencies``: ``examples`` counted per scene, SUT, metric and family at each eps (RQ2); NaN where no
   example of the family is valid (nothing was compared: not zero inconsistencies).
 - ``fps``: per scene and render size: frames per second of RGB renders (RQ3).
@@ -15,6 +18,9 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
 images it is the exact render at the captured pose, and for a fitted demo scene the exact twin's render
 (:mod:`pytest_n2r.relation.floor` measures the same shift for the plugin's field floor). Scenes with neither skip
 RQ1.
+
+Each scene's draws come from two streams spawned from ``seed`` (:func:`_streams`), one for RQ1's mutations of the
+photo and one for RQ2's transforms and mutations, so RQ2 draws the same with or without a real photo.
 """
 
 from __future__ import annotations
@@ -123,14 +129,33 @@ def _score(
     return float(result.score), float(result.deviation), bool(result.valid)
 
 
+def _streams(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
+    """The generators of one scene's RQ1 and RQ2 draws: two independent children of ``seed``'s
+    :class:`numpy.random.SeedSequence`, so whether RQ1 runs (a real photo or not) leaves RQ2's draws as they are."""
+    rq1, rq2 = np.random.SeedSequence(seed).spawn(2)
+    return np.random.default_rng(rq1), np.random.default_rng(rq2)
+
+
+def _points_notes(suts: Sequence[SUT]) -> list[str]:
+    """What the built-in detectors kept: one note per ``points`` value (the paper's detectors kept 100)."""
+    by_points: dict[int, list[str]] = {}
+    for sut in suts:
+        if sut.points is not None:
+            by_points.setdefault(sut.points, []).append(sut.name)
+    orb = " (ORB as configured for {n} points: its pyramid levels share them)"
+    return [f"detectors {', '.join(names)} kept at most the {n} highest-response points of each image"
+            f"{orb.format(n=n) if 'orb' in names else ''} (--points {n}; the paper's detectors kept 100)"
+            for n, names in sorted(by_points.items())]
+
+
 def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig = StudyConfig(),
               progress: Callable[[str], None] | None = None) -> StudyResult:
     """Run RQ1–RQ3 on every scene for every SUT; see the module docstring for the rows produced."""
-    result = StudyResult(eps=tuple(config.eps))
+    result = StudyResult(eps=tuple(config.eps), notes=_points_notes(suts))
     validity = Validity()
     say = progress or (lambda _msg: None)
     for scene in scenes:
-        rng = np.random.default_rng(config.seed)
+        rq1_rng, rng = _streams(config.seed)
         outputs = ("rgb", "depth", "opacity")
         for view in _source_views(scene, config.max_views):
             camera = view.camera.fit_within(config.size)
@@ -138,7 +163,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
             source = scene.render(view.c2w, camera, outputs)
             real = _reference_image(scene, view, camera)
             if real is not None:
-                _rq1(result, scene, view, source, real, suts, rng)
+                _rq1(result, scene, view, source, real, suts, rq1_rng)
             elif not any("RQ1" in n and scene.name in n for n in result.notes):
                 result.notes.append(f"RQ1 skipped for {scene.name}: its views store no real photos")
             sut_source = {sut.name: sut.fn(source.rgb) for sut in suts}
@@ -160,7 +185,8 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                                               if valid else (float("nan"), float("nan"), False))
                             result.examples.append({
                                 "scene": scene.name, "view": view.name, "family": family, "drawn": drawn,
-                                "sut": sut.name, "metric": name, "score": score, "deviation": dev,
+                                "sut": sut.name, "points": sut.points, "metric": name, "score": score,
+                                "deviation": dev,
                                 "valid": bool(valid and ok),
                             })
         _rq3(result, scene, config, say)
@@ -184,7 +210,8 @@ def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedVie
         out_real, out_field = sut.fn(real), sut.fn(source.rgb)
         for name, metric in sut.same_pose_metrics().items():
             sample = shift_sample(metric, out_real, out_field, real_view, source, view.name)
-            result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name, "metric": name,
+            result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name,
+                                        "points": sut.points, "metric": name,
                                         "score": sample.score, "deviation": sample.deviation,
                                         "valid": sample.valid})
 
