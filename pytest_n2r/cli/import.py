@@ -44,9 +44,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
     p.add_argument("--cameras", type=Path, metavar="PATH",
                    help="cameras.json, transforms.json or COLMAP model folder (default: found beside the ply)")
+    p.add_argument("--dataparser-transforms", type=Path, metavar="PATH",
+                   help="nerfstudio's dataparser_transforms.json of the run that trained the ply (splatfacto exports "
+                        "are in its normalized frame): the cameras are moved into that frame (default: one found "
+                        "in the ply's folder or up to two folders above, else none)")
     p.add_argument("--heldout-every", type=int, metavar="N",
                    help="hold out every N-th view by name from the first (default: the source's own split, else 8: "
-                        "the --eval split of 3DGS and nerfstudio); 0 holds none")
+                        "the --eval split of 3DGS, not nerfstudio's 90 %% fraction); 0 holds none")
     p.add_argument("--background", type=parse_rgb, metavar="R,G,B",
                    help="the colour the scene was trained over, in [0, 1] (default: 0,0,0, 3DGS's; 1,1,1 for "
                         "--white_background)")
@@ -73,24 +77,31 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidArgument(f"{', '.join(knobs)}: only for a fitted scene file (.n2r); a .ply holds its Gaussians")
     if args.heldout_every is not None and args.heldout_every < 0:
         raise InvalidArgument(f"--heldout-every {args.heldout_every}: expected an int >= 0")
-    for option, path in (("PLY", args.ply), ("--cameras", args.cameras)):
+    for option, path in (("PLY", args.ply), ("--cameras", args.cameras),
+                         ("--dataparser-transforms", args.dataparser_transforms)):
         if path is not None and not path.exists():
             raise InvalidArgument(f"{option} {path}: does not exist")
-    check_output(args.output, SCENE, inputs=[p for p in (args.ply, args.cameras) if p is not None], force=args.force)
+    inputs = [p for p in (args.ply, args.cameras, args.dataparser_transforms) if p is not None]
+    check_output(args.output, SCENE, inputs=inputs, force=args.force)
     start = time.perf_counter()
     cameras = args.cameras if args.cameras is not None else find_cameras(args.ply)
     if cameras is None:
         raise InvalidArgument(f"{args.ply}: no cameras found beside it (a cameras.json, transforms.json or COLMAP "
                               "model in its folder or up to two folders above); pass --cameras PATH")
-    scene = load_splat_scene(args.ply, cameras=cameras, heldout_every=args.heldout_every,
+    scene = load_splat_scene(args.ply, cameras=cameras, dataparser_transforms=args.dataparser_transforms,
+                             heldout_every=args.heldout_every,
                              background=args.background or (0.0, 0.0, 0.0), name=args.output.stem)
     report = {"source": str(args.ply), "source_sha256": hashlib.sha256(args.ply.read_bytes()).hexdigest(),
               "cameras": str(cameras), "imported_by": f"pytest-n2r {__version__}",
               "import_s": round(time.perf_counter() - start, 3)}
+    if scene.notes:
+        report["notes"] = list(scene.notes)
     path = save_splat_scene(args.output, scene, report)
     held = sum(v.split == "heldout" for v in scene.views)
     g = scene.gaussians
     print(f"read        {printable(args.ply)}: {len(g)} Gaussians, SH degree {g.sh_degree}", file=sys.stderr)
+    for note in scene.notes:
+        print(f"  note      {printable(note)}", file=sys.stderr)
     print(f"cameras     {printable(cameras)}: {len(scene.views)} views ({held} held out); reference length "
           f"{scene.reference_length:.4g} scene units", file=sys.stderr)
     print(f"wrote       {printable(path)} ({path.stat().st_size / 1e6:.1f} MB)")
@@ -110,6 +121,7 @@ def _from_field(args: argparse.Namespace) -> int:
     size = DEFAULT_SIZE if args.size is None else args.size
     path_voxels = DEFAULT_PATH if args.path is None else args.path
     given = [name for name, value in (("--cameras", args.cameras), ("--heldout-every", args.heldout_every),
+                                      ("--dataparser-transforms", args.dataparser_transforms),
                                       ("--background", args.background)) if value is not None]
     if given:
         raise InvalidArgument(f"{', '.join(given)}: only for a .ply; a fitted scene file {args.ply} brings its own "

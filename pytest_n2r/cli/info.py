@@ -192,8 +192,9 @@ def format_scene_info(scene: Scene, spec: SceneSpec) -> str:
              f"{info['photos_stored']} photos stored")
     if not scene.views and scene.no_views_reason:
         views += f" ({scene.no_views_reason})"
+    notes = [f"  note      {note}" for note in getattr(scene, "notes", ())]  # what a splat loader converted
     return "\n".join([f"scene       {spec.source}: {info['type']} {info['name']!r}, {renders}", views,
-                      *_camera_and_scale_lines(info)])
+                      *_camera_and_scale_lines(info), *notes])
 
 
 def format_splat_info(info: dict) -> str:
@@ -217,6 +218,7 @@ def format_splat_info(info: dict) -> str:
             lines.append(f"  source    {report['source']}{digest}")
         if "cameras" in report:
             lines.append(f"  cameras   {report['cameras']}")
+        lines += [f"  note      {note}" for note in report.get("notes", ())]
         made = report.get("from_field")
         if made:
             psnr = made.get("fit", {}).get("psnr")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -25,10 +26,20 @@ from ..render.splat_render import SPLAT_RENDER_VERSION, SplatRenderer, SplatSett
 from ..splats.gaussians import Gaussians
 from .base import Scene, SceneView, hash_views
 
-__all__ = ["SplatScene", "load_splat_scene", "measure_reference_length", "splat_views"]
+__all__ = ["MIN_COVERAGE", "SplatScene", "load_splat_scene", "measure_coverage", "measure_reference_length",
+           "splat_views"]
 
 #: Training views rendered (at most) to measure the reference length, and their longer side in pixels.
 REFERENCE_VIEWS, REFERENCE_SIZE = 16, 64
+#: The least share of the training views' pixels the Gaussians must cover (mean opacity of the reference
+#: renders) for ``load_splat_scene`` to accept a ply and its cameras as one scene. Measured (7 December 2026,
+#: ``tests/scene/test_splat_pairing.py`` pins the cases): paired right, the shipped demo splats cover 0.82
+#: (object-sh0), 0.91 (wall-sh3) and 0.81 (object-rotated), a 3000-Gaussian blob under the fox's 67 cameras
+#: 0.43; paired with the capture's cameras while in nerfstudio's normalized frame, the blob covers 0.034 and
+#: object-rotated 0.062 (refused), wall-sh3 0.17 and object-sh0 0.30 (not caught: a check of coverage only
+#: catches a gross mismatch). The share of Gaussians whose centre is in front of and inside some view was 1.0
+#: in all eight cases (a cloud shrunk about the origin stays in view), so it cannot tell them apart.
+MIN_COVERAGE = 0.10
 
 
 class SplatScene(Scene):
@@ -54,6 +65,9 @@ class SplatScene(Scene):
         Metres per scene unit when the capture's scale is known.
     no_cameras:
         Why there are no views (``None`` when there are).
+    notes:
+        What the loader converted on the way (read from a red/green/blue ply, a Mip-Splatting filter baked in,
+        cameras moved into the splats' frame), one sentence each, for reports.
     """
 
     is_exact = False
@@ -63,7 +77,7 @@ class SplatScene(Scene):
     def __init__(self, gaussians: Gaussians, views: Sequence[SceneView] = (), *, name: str = "splats",
                  reference_length: float | None = None, background: Sequence[float] = (0.0, 0.0, 0.0),
                  settings: SplatSettings | None = None, metres_per_unit: float | None = None,
-                 no_cameras: str | None = None) -> None:
+                 no_cameras: str | None = None, notes: Sequence[str] = ()) -> None:
         if not isinstance(gaussians, Gaussians):
             raise InvalidType(f"gaussians must be a pytest_n2r.splats.Gaussians, got {type(gaussians).__name__}")
         if settings is not None and not isinstance(settings, SplatSettings):
@@ -80,6 +94,7 @@ class SplatScene(Scene):
         self.settings = settings or SplatSettings()
         self.metres_per_unit = metres_per_unit
         self.no_views_reason = no_cameras if not self.views else None
+        self.notes = tuple(notes)
         self._renderer = SplatRenderer(gaussians, self.settings, bg)
         if reference_length is None and self.views:
             reference_length = measure_reference_length(self, self.views)
@@ -123,7 +138,7 @@ class SplatScene(Scene):
         """The same scene rendered with other ``settings`` (a new content hash)."""
         return SplatScene(self.gaussians, self.views, name=self.name, reference_length=self._reference_length,
                           background=self.background, settings=settings, metres_per_unit=self.metres_per_unit,
-                          no_cameras=self.no_views_reason)
+                          no_cameras=self.no_views_reason, notes=self.notes)
 
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
         return self._renderer.render(c2w, camera, outputs)
@@ -134,28 +149,47 @@ class SplatScene(Scene):
                 f"(SH degree {self.gaussians.sh_degree}), {cams}>")
 
 
+def _reference_renders(scene: Scene, views: Sequence[SceneView]) -> tuple[int, np.ndarray, float]:
+    """``(views rendered, z-depths of the pixels of opacity >= 0.5, mean opacity)`` of up to
+    :data:`REFERENCE_VIEWS` training views (evenly spread; all views when none is marked ``train``), rendered
+    :data:`REFERENCE_SIZE` pixels on the longer side."""
+    train = [v for v in views if v.split == "train"] or list(views)
+    picked = [train[i] for i in np.linspace(0, len(train) - 1, min(REFERENCE_VIEWS, len(train))).round().astype(int)]
+    depths, covered = [], []
+    for view in picked:
+        out = scene.render(view.c2w, view.camera.fit_within(REFERENCE_SIZE), ("depth", "opacity"))
+        depths.append(out.depth[out.opacity >= 0.5])
+        covered.append(float(out.opacity.mean()))
+    return len(picked), np.concatenate(depths), float(np.mean(covered))
+
+
+def measure_coverage(scene: Scene, views: Sequence[SceneView]) -> float:
+    """The share of the training views' pixels the scene covers: the mean opacity, in [0, 1], of the renders
+    :func:`measure_reference_length` makes."""
+    return _reference_renders(scene, views)[2]
+
+
 def measure_reference_length(scene: Scene, views: Sequence[SceneView]) -> float:
     """The median z-depth of the surface (opacity >= 0.5) that up to :data:`REFERENCE_VIEWS` training
     views (evenly spread; all views when none is marked ``train``) see, rendered :data:`REFERENCE_SIZE`
     pixels on the longer side (scene units)."""
-    train = [v for v in views if v.split == "train"] or list(views)
-    picked = [train[i] for i in np.linspace(0, len(train) - 1, min(REFERENCE_VIEWS, len(train))).round().astype(int)]
-    depths = []
-    for view in picked:
-        out = scene.render(view.c2w, view.camera.fit_within(REFERENCE_SIZE), ("depth", "opacity"))
-        depths.append(out.depth[out.opacity >= 0.5])
-    seen = np.concatenate(depths)
+    count, seen, _ = _reference_renders(scene, views)
+    return _median_depth(scene, count, seen)
+
+
+def _median_depth(scene: Scene, count: int, seen: np.ndarray) -> float:
     if not seen.size:
-        raise IngestError(f"scene {scene.name!r}: none of {len(picked)} training views sees a surface (opacity >= 0.5) "
+        raise IngestError(f"scene {scene.name!r}: none of {count} training views sees a surface (opacity >= 0.5) "
                           "at its camera; the cameras do not look at these Gaussians (a different world frame?)")
     return float(np.median(seen))
 
 
 def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneView]:
-    """Views of a pose set, sorted by name, with ideal pinhole cameras (distortion dropped: splats are trained
-    on undistorted images). Held out: the source's own split (a transforms.json's ``val_filenames``) when
-    ``heldout_every`` is ``None`` and it has one, else every ``heldout_every``-th (default 8, from the first:
-    the ``--eval`` split of 3DGS and nerfstudio); 0 holds none out.
+    """Views of a pose set, sorted by name, with ideal pinhole cameras (distortion dropped, ``K`` and the size
+    kept: a warning says so when a camera had distortion). Held out: the source's own split (a
+    transforms.json's ``val_filenames``) when ``heldout_every`` is ``None`` and it has one, else every
+    ``heldout_every``-th (default 8, from the first: the 3DGS reference's ``--eval`` split, ``llffhold`` 8;
+    nerfstudio's default differs, see docs/splat-scenes.md); 0 holds none out.
 
     Raises :class:`IngestError` naming the source and the frame for two frames of one name or a camera side
     that is not a whole number of pixels in 1..:data:`~pytest_n2r.render.size.MAX_SIDE`."""
@@ -169,6 +203,14 @@ def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneV
             if not 1 <= side <= MAX_SIDE:
                 raise IngestError(f"{poses.source}: frame [{i}] {f.name!r}: camera {key}={side!r}; expected a whole "
                                   f"number of pixels in 1..{MAX_SIDE}")
+    distorted = sum(bool(f.camera.distortion) for f in poses.frames)
+    if distorted:
+        warnings.warn(f"{poses.source}: {distorted} of {len(poses.frames)} cameras have lens distortion; the views "
+                      "drop it and keep its K and size, while nerfstudio and gsplat train on images undistorted to "
+                      "cv2.getOptimalNewCameraMatrix(K, dist, (w, h), 0) cropped to its ROI (the 3DGS reference: "
+                      "COLMAP's image_undistorter), so the views' field of view differs slightly from the "
+                      "trained one; give the undistorted cameras (e.g. the undistorted COLMAP model) for exact views",
+                      UserWarning, stacklevel=3)
     frames = sorted(poses.frames, key=lambda f: f.name)
     splits = split_frames([f.name for f in frames], poses.heldout, heldout_every)
     return [SceneView(i, f.name, f.camera.undistorted(), f.c2w, split)
@@ -176,29 +218,66 @@ def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneV
 
 
 def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | None = None,
-                     heldout_every: int | None = None, background: Sequence[float] = (0.0, 0.0, 0.0),
-                     settings: SplatSettings | None = None, name: str | None = None) -> SplatScene:
+                     dataparser_transforms: str | os.PathLike | None = None, heldout_every: int | None = None,
+                     background: Sequence[float] = (0.0, 0.0, 0.0), settings: SplatSettings | None = None,
+                     name: str | None = None, min_coverage: float = MIN_COVERAGE) -> SplatScene:
     """The splat scene of the 3DGS ``.ply`` file ``path``.
 
     ``cameras`` is a 3DGS ``cameras.json``, a ``transforms.json`` or a COLMAP model (folder); ``None`` looks
     for one beside the ply (:func:`~pytest_n2r.data.camera_sources.find_cameras`), and without one the scene
-    has no views. ``heldout_every`` chooses the split (:func:`splat_views`); ``background`` is the colour the
-    scene was trained over (3DGS: black unless trained with ``--white_background``).
+    has no views. ``dataparser_transforms`` is nerfstudio's ``dataparser_transforms.json`` of the run that
+    trained the ply (``None``: one in the ply's folder or up to two above it, if any): the cameras are moved
+    into the splats' frame by it (:mod:`~pytest_n2r.data.trainer_frame`), and ``notes`` says so.
+    ``heldout_every`` chooses the split (:func:`splat_views`); ``background`` is the colour the scene was
+    trained over (3DGS: black unless trained with ``--white_background``).
+
+    Raises :class:`IngestError` naming both files when the Gaussians cover less than ``min_coverage`` (default
+    :data:`MIN_COVERAGE`; 0 turns the check off) of the training views' pixels: the ply and the cameras are
+    then not in one frame.
     """
     from ..data.camera_sources import find_cameras, read_cameras
-    from ..splats.ply import read_ply
+    from ..data.trainer_frame import find_dataparser_transforms, read_dataparser_transforms
+    from ..splats.ply import read_ply_with_notes
 
     path = Path(path)
-    gaussians = read_ply(path)
+    gaussians, ply_notes = read_ply_with_notes(path)
+    notes = list(ply_notes)
     found = Path(cameras) if cameras is not None else find_cameras(path)
     views: list[SceneView] = []
     reason = None
+    length = None
+    if found is None and dataparser_transforms is not None:
+        raise InvalidArgument(f"dataparser_transforms={str(dataparser_transforms)!r} moves cameras, and {path} has "
+                              "none (none given, none found beside it); pass cameras=... too")
     if found is None:
         reason = (f"no cameras were given and none were found beside {path} (a cameras.json, transforms.json or "
                   "COLMAP model in its folder or up to two folders above), so it has no captured views, no "
                   "train / held-out split, no reference length and no validity checks; it renders at the poses "
                   "you give. Pass cameras=... to load_scene (or `n2r import --cameras`) to have them.")
     else:
-        views = splat_views(read_cameras(found), heldout_every)
-    return SplatScene(gaussians, views, name=name or path.stem, background=background, settings=settings,
-                      no_cameras=reason)
+        poses = read_cameras(found)
+        frame = Path(dataparser_transforms) if dataparser_transforms is not None else find_dataparser_transforms(path)
+        if frame is not None:
+            poses, note = read_dataparser_transforms(frame).apply(poses)
+            notes.append(note)
+        views = splat_views(poses, heldout_every)
+        probe = SplatScene(gaussians, (), name=name or path.stem, background=background, settings=settings)
+        count, depths, coverage = _reference_renders(probe, views)
+        if coverage < min_coverage:
+            raise IngestError(_not_paired(path, found, frame, count, coverage, min_coverage))
+        length = _median_depth(probe, count, depths)
+    return SplatScene(gaussians, views, name=name or path.stem, reference_length=length, background=background,
+                      settings=settings, no_cameras=reason, notes=notes)
+
+
+def _not_paired(ply: Path, cameras: Path, frame: Path | None, count: int, coverage: float, least: float) -> str:
+    """The message of a ply whose Gaussians its cameras barely see."""
+    moved = f", moved by {frame}," if frame is not None else ""
+    cause = ("the transform does not belong to this ply and these cameras" if frame is not None else
+             "the ply is likely in a trainer's normalized frame (nerfstudio's splatfacto orients, centres and "
+             "scales the capture before training, and ns-export writes the Gaussians in that frame): pass that "
+             "run's dataparser_transforms.json (dataparser_transforms=... / n2r import --dataparser-transforms; "
+             "for gsplat's normalize_world_space, which records nothing, export in the capture's frame)")
+    return (f"{ply} with the cameras of {cameras}{moved}: the Gaussians cover {coverage:.1%} of the pixels of "
+            f"{count} training views (mean opacity at {REFERENCE_SIZE} pixels); expected at least {least:.0%} for "
+            f"a ply and its cameras in one frame. {cause[0].upper()}{cause[1:]}. (min_coverage=0 skips this check.)")

@@ -10,7 +10,14 @@ One ``vertex`` element; each vertex a Gaussian with float properties (any order,
 - ``f_rest_0..M-1``: the higher SH coefficients **grouped by colour channel** (all of R's, then G's, then
   B's), ``M = 3·((d + 1)² - 1)``: 0, 9, 24 or 45 for SH degree ``d`` = 0, 1, 2, 3;
 - ``opacity``: the opacity logit (pre-sigmoid); ``scale_0..2``: log standard deviations;
-- ``rot_0..3``: the rotation quaternion, **w first**.
+- ``rot_0..3``: the rotation quaternion, **w first**;
+- ``filter_3D`` (optional, Mip-Splatting's ``save_ply``): the 3-D filter's standard deviation (scene units),
+  baked into the scales and opacities on reading (:func:`bake_filter_3d`), so the Gaussians render as
+  Mip-Splatting renders them;
+- ``red green blue`` (uchar) in place of ``f_dc_0..2`` and without ``f_rest_*`` (nerfstudio's
+  ``ns-export gaussian-splat --ply-color-mode rgb``): read as SH degree 0, ``f_dc = (c/255 - 0.5) / C0``.
+
+Any other vertex property is not read, and one ``UserWarning`` names them all.
 
 Formats ``binary_little_endian``, ``binary_big_endian`` and ``ascii`` are read; files are written in the
 reference code's layout (``binary_little_endian``, float32, the property order above, zero normals).
@@ -23,6 +30,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +38,9 @@ import numpy as np
 from ..data.atomic import atomic_write_bytes
 from ..errors import SceneFileError
 from .gaussians import Gaussians
-from .sh import sh_count, sh_degree_of
+from .sh import SH_C0, sh_count, sh_degree_of
 
-__all__ = ["ply_properties", "read_ply", "write_ply"]
+__all__ = ["MIP_FILTER", "bake_filter_3d", "ply_properties", "read_ply", "read_ply_with_notes", "write_ply"]
 
 _TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
@@ -42,6 +50,11 @@ _TYPES = {
 _FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": None}
 _REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
              "rot_0", "rot_1", "rot_2", "rot_3")
+_DC = ("f_dc_0", "f_dc_1", "f_dc_2")
+_RGB = ("red", "green", "blue")
+_NORMALS = ("nx", "ny", "nz")
+#: Mip-Splatting's per-Gaussian 3-D filter size (scene units), baked in on reading (:func:`bake_filter_3d`).
+MIP_FILTER = "filter_3D"
 _MAX_HEADER = 1 << 16
 _MAX_COUNT_DIGITS = 15  # a larger element count cannot fit any file
 
@@ -128,6 +141,13 @@ def _vertex_element(elements, source: str):
 
 def read_ply(path: str | os.PathLike) -> Gaussians:
     """The Gaussians of the 3DGS ``.ply`` file ``path`` (see the module *Convention*)."""
+    return read_ply_with_notes(path)[0]
+
+
+def read_ply_with_notes(path: str | os.PathLike) -> tuple[Gaussians, tuple[str, ...]]:
+    """The Gaussians of the 3DGS ``.ply`` file ``path`` and one sentence for each conversion made on reading
+    (colours from ``red green blue``, a Mip-Splatting ``filter_3D`` baked in); warns once, naming them, of
+    vertex properties it does not read."""
     path = Path(path)
     source = str(path)
     if not path.is_file():
@@ -139,7 +159,8 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
     if "list" in kinds.values():
         bad = [name for name, kind in props if kind == "list"]
         raise SceneFileError(f"{source}: vertex property {bad[0]!r} is a list; 3DGS vertex properties are scalars")
-    missing = [name for name in _REQUIRED if name not in kinds]
+    rgb = _is_rgb_export(kinds)
+    missing = [name for name in _REQUIRED if name not in kinds and not (rgb and name in _DC)]
     if missing:
         hint = (" (this looks like a point cloud, not Gaussian splats)"
                 if {"red", "green", "blue"} & set(kinds) or len(missing) == len(_REQUIRED) - 3 else "")
@@ -154,8 +175,15 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
         if number != expected:
             raise SceneFileError(f"{source}: vertex property 'f_rest_{expected}' is missing (found {name} "
                                  f"among {len(rest)} f_rest_* properties)")
+    _warn_unread(source, [name for name, _ in props], rgb)
     columns = _read_body(raw, offset, fmt, count, props, skip, source)
-    for name in (*_REQUIRED, *(n for _, n in rest)):
+    notes = []
+    if rgb:
+        for channel, name in zip(_RGB, _DC):
+            columns[name] = ((columns[channel] / np.float32(255.0) - np.float32(0.5)) / np.float32(SH_C0))
+        notes.append(f"{source}: colours read from red/green/blue (uchar, nerfstudio's --ply-color-mode rgb) as "
+                     "SH degree 0, f_dc = (c/255 - 0.5)/C0; the view-dependent colour was not exported")
+    for name in (*_REQUIRED, *(n for _, n in rest), *((MIP_FILTER,) if MIP_FILTER in kinds else ())):
         bad = ~np.isfinite(columns[name])
         if bad.any():
             first = int(np.argmax(bad))
@@ -173,8 +201,58 @@ def read_ply(path: str | os.PathLike) -> Gaussians:
     if zero.any():
         raise SceneFileError(f"{source}: rot_0..rot_3 of vertex {int(np.argmax(zero))} are all 0; a rotation needs a "
                              f"non-zero quaternion ({int(zero.sum())} vertices have one)")
-    return Gaussians(means=stack(["x", "y", "z"]), quats=quats, log_scales=stack(["scale_0", "scale_1", "scale_2"]),
-                     opacity_logits=columns["opacity"], sh=sh)
+    log_scales, logits = stack(["scale_0", "scale_1", "scale_2"]), columns["opacity"]
+    if MIP_FILTER in kinds:
+        log_scales, logits = bake_filter_3d(log_scales, logits, columns[MIP_FILTER])
+        notes.append(f"{source}: Mip-Splatting's 3-D filter ({MIP_FILTER}) baked in: scales sqrt(s² + f²), "
+                     "opacities times sqrt(det Σ / det(Σ + f²I))")
+    return (Gaussians(means=stack(["x", "y", "z"]), quats=quats, log_scales=log_scales, opacity_logits=logits, sh=sh),
+            tuple(notes))
+
+
+def _is_rgb_export(kinds: dict[str, str]) -> bool:
+    """Whether the vertex holds ``red green blue`` in place of ``f_dc_0..2`` (nerfstudio's
+    ``--ply-color-mode rgb``) besides a Gaussian's opacity, scales and rotation."""
+    gaussian = ("opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+    return (not any(name in kinds for name in _DC) and all(name in kinds for name in (*_RGB, *gaussian))
+            and not any(name.startswith("f_rest_") for name in kinds))
+
+
+def _warn_unread(source: str, names: list[str], rgb: bool) -> None:
+    """One warning naming the vertex properties that are neither read nor the ignored normals."""
+    read = {*_REQUIRED, *_NORMALS, MIP_FILTER, *(_RGB if rgb else ())}
+    unread = [n for n in names if n not in read and not re.fullmatch(r"f_rest_\d+", n)]
+    if unread:
+        noun = "property" if len(unread) == 1 else "properties"
+        verb = "is" if len(unread) == 1 else "are"
+        warnings.warn(f"{source}: vertex {noun} {', '.join(unread)} {verb} not read (this 3DGS .ply reader uses "
+                      f"{', '.join(_REQUIRED)}, f_rest_* and Mip-Splatting's {MIP_FILTER}); the splats are "
+                      "rendered without them", UserWarning, stacklevel=4)
+
+
+def bake_filter_3d(log_scales: np.ndarray, opacity_logits: np.ndarray,
+                   filter_3d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mip-Splatting's 3-D smoothing filter folded into plain 3DGS parameters: ``(log_scales, opacity_logits)``.
+
+    Convention
+    ----------
+    Mip-Splatting renders each Gaussian with covariance ``Σ + f²·I`` (``f`` = ``filter_3D``, scene units) and
+    peak opacity ``o · sqrt(det Σ / det(Σ + f²I))``; as ``Σ = R S² Rᵀ`` that is, per axis,
+    ``s' = sqrt(s² + f²)`` and ``o' = o · Π s / Π s'``. Scales are log standard deviations, opacities logits.
+    Computed in float64; returned as float32.
+
+    >>> ls, lo = bake_filter_3d(np.log([[3.0, 3.0, 3.0]]), np.array([0.0]), np.array([4.0]))
+    >>> np.round(np.exp(ls), 4).tolist(), round(float(1 / (1 + np.exp(-lo[0]))), 4)
+    ([[5.0, 5.0, 5.0]], 0.108)
+    """
+    s2 = np.exp(2.0 * np.asarray(log_scales, np.float64))
+    f2 = np.square(np.asarray(filter_3d, np.float64)).reshape(-1, 1)
+    after = s2 + f2
+    log_ratio = 0.5 * (np.log(s2).sum(axis=1) - np.log(after).sum(axis=1))  # log sqrt(det Σ / det Σ')
+    logit = np.asarray(opacity_logits, np.float64)
+    log_o = -np.logaddexp(0.0, -logit) + log_ratio  # log(sigmoid(logit) · coef), in logs against underflow
+    new_logit = log_o - np.log(-np.expm1(log_o))  # logit = log(o / (1 - o)), o < 1
+    return (0.5 * np.log(after)).astype(np.float32), new_logit.astype(np.float32)
 
 
 def _read_body(raw: bytes, offset: int, fmt: str, count: int, props, skip, source: str) -> dict[str, np.ndarray]:

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
+from PIL import Image
 
 from pytest_n2r.cli.main import main
 from pytest_n2r.errors import SceneFileError
@@ -221,6 +222,10 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"deep\.json: not a readable JSON file \(nested too deeply for the JSON parser\)"),
     ("poses of a fisheye transforms.json", "poses {fisheye_json}",
      r"fisheye\.json: field 'camera_model'='FISHEYE624' is not supported; expected one of OPENCV, PINHOLE"),
+    ("poses of a transforms.json whose w is 160.5 pixels", "poses {fraction_json}",
+     r"fraction\.json: frames\[0\]: field 'w'=160\.5 must be a whole number of pixels"),
+    ("poses of a transforms.json without w, h of a photo turned by its EXIF tag", "poses {turned_json}",
+     r"turned\.json: frames\[0\]: image file .*p\.jpg' has EXIF orientation 6: .*expected fields 'w' and 'h'"),
     ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
     ("poses of a folder whose photos are in DCIM/100APPLE", "poses {dcim}",
      r"images folder '.*dcim' holds no images itself; its subfolder DCIM/100APPLE holds 3 images: pass that folder$"),
@@ -232,6 +237,12 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
     ("import a missing ply", "import {tmp}/nowhere.ply -o {new_n2r}", r"PLY .*nowhere\.ply: does not exist"),
     ("import with missing cameras", "import {notes_txt} --cameras {tmp}/nowhere.json -o {new_n2r}",
      r"--cameras .*nowhere\.json: does not exist"),
+    ("import with a missing dataparser transform",
+     "import {notes_txt} --dataparser-transforms {tmp}/nowhere.json -o {new_n2r}",
+     r"--dataparser-transforms .*nowhere\.json: does not exist"),
+    ("import --dataparser-transforms of a fitted scene",
+     "import {scene} -o {new_n2r} --dataparser-transforms {notes_txt}",
+     r"--dataparser-transforms: only for a \.ply; a fitted scene file .* brings its own views"),
     ("import over a text file", "import {notes_txt} -o {fake_n2r}", r"fake\.n2r: exists and is not a \.n2r scene file"),
     ("import to .txt", "import {notes_txt} -o {tmp}/out.txt", r"expected a \.n2r scene file, a name ending in \.n2r"),
     ("import over its own ply", "import {scene} -o {scene}", r"is this command's input"),
@@ -292,6 +303,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--sut-kind 'orb=banana': expected detector or classifier"),
     ("study --sut-kind of no --sut", "study {scene} --sut orb -o {tmp}/study --sut-kind sift=detector",
      r"--sut-kind sift=detector: 'sift' is not one of the --sut given"),
+    ("study --points 0", "study {scene} --sut orb -o {tmp}/study --points 0",
+     r"--points 0: expected a positive integer, the number of highest-response points"),
 ]
 
 
@@ -315,7 +328,15 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     (tmp / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
     (tmp / "fisheye.json").write_text(json.dumps({"camera_model": "FISHEYE624", "frames": [
         {"file_path": "x.png", "transform_matrix": np.eye(4).tolist()}]}))
-    corner = write_transforms(make_capture(tmp / "corner", n=4))
+    corner_capture = make_capture(tmp / "corner", n=4)
+    corner = write_transforms(corner_capture)
+    write_transforms(corner_capture, tmp / "corner" / "fraction.json", w=160.5)
+    (tmp / "turned").mkdir()
+    exif = Image.Exif()
+    exif[0x0112] = 6  # a phone's portrait photo: landscape pixels, shown turned a quarter
+    Image.new("RGB", (64, 48)).save(tmp / "turned" / "p.jpg", exif=exif.tobytes())
+    (tmp / "turned" / "turned.json").write_text(json.dumps({"fl_x": 50, "frames": [
+        {"file_path": "p.jpg", "transform_matrix": np.eye(4).tolist()}]}))
     (tmp / "dcim" / "DCIM" / "100APPLE").mkdir(parents=True)  # a phone's folders copied as they are
     for k in range(3):
         shutil.copy(tmp / "corner" / "images" / f"view_{k:03d}.png", tmp / "dcim" / "DCIM" / "100APPLE" / f"{k}.png")
@@ -344,7 +365,8 @@ def workspace(tmp_path_factory) -> dict[str, str]:
             "odd_exposure": str(tmp / "odd_exposure.n2r"), "huge_downscale": str(tmp / "huge_downscale.n2r"),
             "zip91_n2r": str(tmp / "zip91.n2r"), "deep_json": str(tmp / "deep.json"),
             "fisheye_json": str(tmp / "fisheye.json"), "corner": str(corner), "dcim": str(tmp / "dcim"),
-            "two": str(two)}
+            "two": str(two), "fraction_json": str(tmp / "corner" / "fraction.json"),
+            "turned_json": str(tmp / "turned" / "turned.json")}
 
 
 def _needing_zip_version(path: str | Path, version: int) -> Path:
