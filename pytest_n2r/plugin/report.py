@@ -65,6 +65,10 @@ def pytest_configure(config: pytest.Config) -> None:
             raise pytest.UsageError(f"pytest-n2r: {both}; give each output its own file (one would replace the other)")
     _check_compare_is_no_report(config, outputs)
     config.stash[_OUTPUTS] = outputs
+    if outputs.keys() & {"json", "report"}:  # the previous run's reports are replaced at the first test's start
+        from .placeholder import register
+
+        register(config, outputs)
     rules = (option("compare_confidence"), option("compare_fail"), option("compare_fail_on"))
     given = [o.flag for o in rules if o.given(config) is not None]
     if given and not config.getoption("n2r_compare"):
@@ -320,8 +324,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             payload: dict[str, Any] = {"complete": partial is None}
             if partial is not None:
                 payload["incomplete"] = partial
-            payload["relations"] = [_images_relative(r.to_dict(), outputs["json"].parent)
-                                    for r in sorted(records, key=lambda r: r.nodeid)]
+            reruns = summary.reruns if summary is not None else {}  # a record is its test's last try's
+            payload["relations"] = [_images_relative({**r.to_dict(), **({"reruns": reruns[r.nodeid]} if reruns.get(
+                r.nodeid) else {})}, outputs["json"].parent) for r in sorted(records, key=lambda r: r.nodeid)]
             payload["not_run"] = not_run
             if result.get("comparisons") is not None:
                 payload["comparison"] = _comparison_json(config, result)

@@ -19,16 +19,25 @@ class Summary:
 
     def __init__(self, config: pytest.Config, loaded: float, describe: Callable[[], str]):
         self.config, self.loaded, self.describe = config, loaded, describe
-        self.records: list[Any] = []
+        #: the record of each relation test, by test id, in the order their last reports arrived: a test run again
+        #: under the same id (pytest-rerunfailures' ``--reruns``) keeps only its last try's record
+        self.recorded: dict[str, Any] = {}
         self.first_report: float | None = None  # when the first test report arrived, less its duration
         self.phases = dict.fromkeys(("setup", "relations", "other tests"), 0.0)
-        #: pytest's word for a record whose test was marked xfail (XFAIL, XPASS), by the record's index
-        self.labels: dict[int, str] = {}
-        #: the relation tests seen in reports (by their marker: pytest-xdist ships a report's keywords), the index
-        #: of each one's record, and pytest's outcome and reason of the tests that ended without one
+        #: pytest's word for a record whose test was marked xfail (XFAIL, XPASS), or that a pytest outcome raised
+        #: inside its run ended (FAILED: pytest-timeout's ``Failed``), by test id
+        self.labels: dict[str, str] = {}
+        #: the relation tests seen in reports (by their marker: pytest-xdist ships a report's keywords), and
+        #: pytest's outcome and reason of the tests that ended without a record
         self.relation_ids: set[str] = set()
-        self.recorded: dict[str, int] = {}
         self.unrecorded: dict[str, tuple[str, str]] = {}
+        #: how many earlier tries of a test pytest-rerunfailures reported as ``rerun`` (their records dropped)
+        self.reruns: dict[str, int] = {}
+
+    @property
+    def records(self) -> list[Any]:
+        """One record per relation test: the last try's."""
+        return list(self.recorded.values())
 
     def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
         if self.first_report is None:
@@ -42,21 +51,43 @@ class Summary:
 
         if RELATION_MARKER in report.keywords:
             self.relation_ids.add(report.nodeid)
+        if report.outcome == "rerun":  # pytest-rerunfailures runs this test again: this try's outcome is not final
+            self._superseded(report)
+            return
         if record is None or report.when != "call":
             if report.nodeid in self.recorded and report.failed:  # its teardown failed: pytest says ERROR too
-                self.records[self.recorded[report.nodeid]].pytest_outcome = "error"
+                self.recorded[report.nodeid].pytest_outcome = "error"
             elif report.nodeid not in self.recorded and not report.passed:  # the first word pytest said of it
                 self.unrecorded.setdefault(report.nodeid, (_outcome(report), _reason(report)))
-        if record is not None and report.when == "call":
-            from ..relation.record import RelationRecord
+            return
+        from ..relation.record import RelationRecord
 
-            self.records.append(RelationRecord.from_dict(record))
-            index = self.recorded[report.nodeid] = len(self.records) - 1
-            self.records[index].pytest_outcome = _outcome(report)
-            if hasattr(report, "wasxfail"):  # xfailed (skipped), or a non-strict xpass (passed)
-                self.labels[index] = "XFAIL" if report.skipped else "XPASS"
-            elif report.failed and str(report.longrepr).startswith("[XPASS(strict)]"):  # pytest's own marking
-                self.labels[index] = "XPASS"
+        self._forget(report.nodeid)  # a test run again under its id (without a 'rerun' report): the last try counts
+        added = self.recorded[report.nodeid] = RelationRecord.from_dict(record)
+        added.pytest_outcome = _outcome(report)
+        if hasattr(report, "wasxfail"):  # xfailed (skipped), or a non-strict xpass (passed)
+            self.labels[report.nodeid] = "XFAIL" if report.skipped else "XPASS"
+        elif report.failed and str(report.longrepr).startswith("[XPASS(strict)]"):  # pytest's own marking
+            self.labels[report.nodeid] = "XPASS"
+        elif added.outcome == "error" and added.message and added.message == _reason(report) \
+                and added.pytest_outcome in ("failed", "skipped"):
+            # pytest's own outcome raised inside the run (pytest-timeout's Failed, a pytest.skip in the SUT) ended
+            # it: no error of the relation's, pytest's word
+            self.labels[report.nodeid] = added.pytest_outcome.upper()
+
+    def _superseded(self, report: pytest.TestReport) -> None:
+        """A try that pytest-rerunfailures reports as ``rerun``: it will run again, so whatever it left is dropped
+        and counted (its ``rerun`` attribute numbers the tries from 0; without it, one more)."""
+        self._forget(report.nodeid)
+        tries = getattr(report, "rerun", None)
+        count = tries + 1 if isinstance(tries, int) else self.reruns.get(report.nodeid, 0) + 1
+        self.reruns[report.nodeid] = max(count, self.reruns.get(report.nodeid, 0))
+
+    def _forget(self, nodeid: str) -> None:
+        """Drop what an earlier try of ``nodeid`` left: its record, its label, pytest's word on it."""
+        self.recorded.pop(nodeid, None)
+        self.labels.pop(nodeid, None)
+        self.unrecorded.pop(nodeid, None)
 
     def not_run(self) -> list[dict[str, str]]:
         """The relation tests that ended without a relation record, by test id: an error in a fixture's setup,
@@ -79,11 +110,13 @@ class Summary:
         from ..relation.floor import annotation_lines
         from ..relation.record import plural
 
-        for i, record in enumerate(records):
-            if terse and record.pytest_outcome == "passed":  # plainly: not an xpass, no teardown error
+        for record in records:
+            reruns = self.reruns.get(record.nodeid, 0)
+            if terse and record.pytest_outcome == "passed" and not reruns:  # plainly: no xpass, no rerun, no error
                 continue
-            line = record.summary_line()
-            label = self.labels.get(i)
+            tries = "1 earlier try" if reruns == 1 else f"{reruns} earlier tries"
+            line = record.summary_line() + (f"; rerun: {tries} dropped (pytest-rerunfailures)" if reruns else "")
+            label = self.labels.get(record.nodeid)
             terminalreporter.write_line(f"{label:6s} {line.split(' ', 1)[1].lstrip()}" if label else line)
             for line, warn in annotation_lines(record.floor):
                 if terse and not warn:

@@ -98,6 +98,10 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         raise exc.error() from None
     except Flaky as exc:
         record.outcome = "error"
+        outcome = _not_an_error(exc)
+        if outcome is not None:  # pytest-timeout's Failed, a KeyboardInterrupt: raised once, as itself
+            record.message, interrupted = f"{type(outcome).__name__}: {outcome}", True
+            raise outcome from None
         sut_error = _sut_error(exc)
         if sut_error is not None:  # the SUT raised (or returned garbage) once, then not on the same example
             record.message = _intermittent(sut_error)
@@ -105,15 +109,15 @@ def check_relation(scene: Scene, sut: Callable[[np.ndarray], Any], relation: Rel
         other = _other_error(exc)
         if other is not None:  # e.g. an OSError of the disk or the render cache's folder: said as itself
             record.message = f"{type(other).__name__}: {other}"
-            other.add_note("pytest-n2r: raised on an example and not when Hypothesis replayed it, so neither the SUT "
-                           "nor the relation's verdict; its traceback is the first run's")
+            _add_note(other, "pytest-n2r: raised on an example and not when Hypothesis replayed it, so neither the "
+                             "SUT nor the relation's verdict; its traceback is the first run's")
             raise other from None
         # a failure that passed on replay without the SUT changing its outputs: the scene's render
         record.message = ("the relation failed on an example and passed when Hypothesis replayed it: something "
                          "is not deterministic. The system under test gave the same outputs twice on the first "
                          "failure, but may still vary from call to call; else the scene's renders (a custom Scene "
                          "with randomness?) or the metric vary")
-        raise SUTNotDeterministic(record.message) from None
+        raise SUTNotDeterministic(record.message) from exc  # Hypothesis's own account beside ours
     except BaseException as exc:
         record.outcome, record.message = "error", f"{type(exc).__name__}: {exc}"
         interrupted = not isinstance(exc, Exception)
@@ -150,6 +154,30 @@ def _sut_error(exc: BaseException) -> SUTError | SUTOutputError | None:
     """The SUT's own error inside Hypothesis's ``FlakyFailure`` (an exception group, perhaps nested), if any."""
     for inner in getattr(exc, "exceptions", ()):
         found = inner if isinstance(inner, (SUTError, SUTOutputError)) else _sut_error(inner)
+        if found is not None:
+            return found
+    return None
+
+
+def _add_note(exc: BaseException, note: str) -> None:
+    """``exc.add_note(note)``, which Python 3.10 lacks: there the note is kept in ``__notes__`` as 3.11 keeps it."""
+    if hasattr(exc, "add_note"):
+        exc.add_note(note)
+    else:
+        exc.__notes__ = [*getattr(exc, "__notes__", ()), note]
+
+
+def _not_an_error(exc: BaseException) -> BaseException | None:
+    """A ``BaseException`` that is no ``Exception`` inside Hypothesis's ``FlakyFailure``, if any: a test runner's
+    outcome (pytest's ``Failed`` of pytest-timeout, ``Skipped``, ``Exit``), ``KeyboardInterrupt``, ``SystemExit``.
+    Hypothesis wraps each in an ``Exception`` whose ``__cause__`` it is (an exception group holds only
+    exceptions); it stops the run as itself, not as an error of the example it interrupted."""
+    for inner in getattr(exc, "exceptions", ()):
+        for found in (inner, inner.__cause__):
+            if isinstance(found, BaseException) and not isinstance(found, Exception) \
+                    and not hasattr(found, "exceptions"):  # a group's own members are looked at below
+                return found
+        found = _not_an_error(inner)
         if found is not None:
             return found
     return None

@@ -178,12 +178,13 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
                    margin: float = defaults.COMPARE_MARGIN, confidence: float = defaults.COMPARE_CONFIDENCE,
                    fail_on: tuple[str, ...] = DEFAULT_FAIL_ON, collected: Collection[str] | None = None,
                    scenes: Collection[str] | None = None) -> list[PairedComparison]:
-    """Compare every current relation with the same test id's baseline on the replayed examples, in pairs;
-    baseline relations that did not run are ``missing``. ``collected`` (the relation test ids this session
-    collected) and ``scenes`` (this run's scene names as its relation records carry them, :attr:`RelationRecord.scene`),
-    where given, tell why one is missing or new: deselected, a scene set that differs from the baseline's (the scenes
-    its relations were recorded on), or renamed or deleted."""
+    """Compare every current relation with the same test id's baseline on the replayed examples, in pairs (of
+    several records of one test id, the last); baseline relations that did not run are ``missing``. ``collected``
+    (the relation test ids this session collected) and ``scenes`` (this run's scene names as its relation records
+    carry them, :attr:`RelationRecord.scene`), where given, tell why one is missing or new: deselected, a scene set
+    that differs from the baseline's (the scenes its relations were recorded on), or renamed or deleted."""
     check_confidence(confidence)
+    current = list({rel.nodeid: rel for rel in current}.values())  # a test run again under its id: its last record
     out = [_compare_one(baseline.get(rel.nodeid), rel, margin, confidence)
            for rel in sorted(current, key=lambda r: r.nodeid)]
     ran = {rel.nodeid for rel in current}
