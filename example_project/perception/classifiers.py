@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-__all__ = ["CLASSIFIERS", "WeightsMissing", "classifier", "weights_path"]
+__all__ = ["CLASSIFIERS", "WeightsMissing", "classifier", "efficientnet_lite0", "mobilenet_v2", "weights_path"]
 
 #: name -> (weights package, file inside it, normalization mean, std)
 CLASSIFIERS: dict[str, tuple[str, str, tuple[float, ...], tuple[float, ...]]] = {
@@ -94,3 +94,15 @@ def classifier(name: str) -> Callable[[np.ndarray], np.ndarray]:
 
     classify.__name__ = classify.__qualname__ = name
     return classify
+
+
+def mobilenet_v2(rgb: np.ndarray) -> np.ndarray:
+    """MobileNetV2's ImageNet probabilities ``(1000,)`` for ``rgb`` (H×W×3 uint8): a SUT by name, built on first use
+    (``n2r study --sut perception.classifiers:mobilenet_v2``)."""
+    return classifier("mobilenet_v2")(rgb)
+
+
+def efficientnet_lite0(rgb: np.ndarray) -> np.ndarray:
+    """EfficientNet-Lite0's ImageNet probabilities ``(1000,)`` for ``rgb`` (H×W×3 uint8): a SUT by name, built on first
+    use (``n2r study --sut perception.classifiers:efficientnet_lite0``)."""
+    return classifier("efficientnet_lite0")(rgb)

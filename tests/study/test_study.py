@@ -260,3 +260,15 @@ def test_the_reality_to_field_shift_counts_the_photos_points_where_the_field_ren
     result = run_study([scene], [resolve_sut("orb", None)], dataclasses.replace(TINY, size=160))
     rows = {row["metric"]: row["score"] for row in result.domain_shift}
     assert rows["ip_spread"] < 0.8, f"RQ1's shift left the empty half out: {rows}"
+
+
+@pytest.mark.parametrize("name", ["mobilenet_v2", "efficientnet_lite0"])
+def test_the_example_classifiers_are_study_suts_by_name(name, monkeypatch):
+    """docs/study.md runs the paper's classifier half with ``--sut perception.classifiers:<name>``."""
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parents[2] / "example_project"))
+    sut = resolve_sut(f"perception.classifiers:{name}", np.full((120, 160, 3), 90, np.uint8))
+    scores = sut.fn(np.full((120, 160, 3), 90, np.uint8))
+    assert sut.kind == "classifier" and scores.shape == (1000,), (sut.kind, scores.shape)
+    assert abs(float(scores.sum()) - 1.0) < 1e-4, f"{name}: probabilities sum to {scores.sum()}"
