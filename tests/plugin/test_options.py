@@ -12,6 +12,16 @@ import pytest
 from pytest_n2r import defaults
 from pytest_n2r.plugin.options import OPTIONS, REPORT_OPTIONS, RUN_OPTIONS, Where, option
 
+#: pytest 9 reads ``pytest.toml`` and pyproject's ``[tool.pytest]`` (typed values); pytest 8 (the floor) reads only
+#: ``[tool.pytest.ini_options]``
+PYTEST_9 = pytest.mark.skipif(int(pytest.__version__.split(".")[0]) < 9,
+                              reason="pytest.toml and [tool.pytest] are read from pytest 9 on")
+
+
+def toml_table(name: str, table: str):
+    """A (config file, table) parameter, skipped on pytest 8 where pytest 9 is needed to read it."""
+    return pytest.param(name, table, marks=() if table == "[tool.pytest.ini_options]" else PYTEST_9)
+
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
@@ -99,8 +109,9 @@ n2r_scenes = "tests.plugin.fakescene:plane tests.plugin.fakescene:ramp"
 """
 
 
-@pytest.mark.parametrize(("name", "table"), [("pyproject.toml", "[tool.pytest]"), ("pytest.toml", "[pytest]"),
-                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+@pytest.mark.parametrize(("name", "table"), [toml_table("pyproject.toml", "[tool.pytest]"),
+                                             toml_table("pytest.toml", "[pytest]"),
+                                             toml_table("pyproject.toml", "[tool.pytest.ini_options]")])
 def test_typed_values_of_a_toml_config_file_parse(pytester, name, table):
     pytester.makefile(".toml", **{name.removesuffix(".toml"): table + TYPED_TOML})
     config = pytester.parseconfig()
@@ -112,6 +123,7 @@ def test_typed_values_of_a_toml_config_file_parse(pytester, name, table):
     assert scenes == ["plane", "ramp"], f"{name} {table}: n2r_scenes gave {scenes}"
 
 
+@PYTEST_9
 def test_a_bad_typed_value_of_a_toml_table_is_a_usage_error_naming_the_key(pytester):
     pytester.makepyprojecttoml("[tool.pytest]\nn2r_examples = 0\nn2r_timeout = 1e12\n")
     config = pytester.parseconfig()
@@ -123,6 +135,7 @@ def test_a_bad_typed_value_of_a_toml_table_is_a_usage_error_naming_the_key(pytes
         assert expected in str(caught.value), f"the usage error should say {expected!r}, not {caught.value}"
 
 
+@PYTEST_9
 def test_a_run_configured_with_typed_toml_values_runs(n2r_project):
     n2r_project.pytester.makepyprojecttoml(
         "[tool.pytest]\nn2r_examples = 7\nn2r_timeout = 0\nn2r_derandomize = true\n"
@@ -139,8 +152,9 @@ def test_a(n2r_scene):
 
 
 @pytest.mark.parametrize("key", ["n2r_examples", "n2r_render_scale", "n2r_timeout", "n2r_cache_dir", "n2r_artifacts"])
-@pytest.mark.parametrize(("name", "table"), [("pytest.toml", "[pytest]"), ("pyproject.toml", "[tool.pytest]"),
-                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+@pytest.mark.parametrize(("name", "table"), [toml_table("pytest.toml", "[pytest]"),
+                                             toml_table("pyproject.toml", "[tool.pytest]"),
+                                             toml_table("pyproject.toml", "[tool.pytest.ini_options]")])
 def test_a_list_for_a_one_value_option_in_a_toml_file_is_a_usage_error_naming_the_key(pytester, name, table, key):
     pytester.makefile(".toml", **{name.removesuffix(".toml"): f'{table}\n{key} = ["1"]\n'})
     pytester.makepyfile(test_inner="def test_nothing():\n    pass\n")
@@ -152,8 +166,8 @@ def test_a_list_for_a_one_value_option_in_a_toml_file_is_a_usage_error_naming_th
     assert f"pytest-n2r: {flag} / ini {key}: ['1'] is a list; expected one value, not a list" in err, err
 
 
-@pytest.mark.parametrize(("name", "table"), [("pytest.toml", "[pytest]"),
-                                             ("pyproject.toml", "[tool.pytest.ini_options]")])
+@pytest.mark.parametrize(("name", "table"), [toml_table("pytest.toml", "[pytest]"),
+                                             toml_table("pyproject.toml", "[tool.pytest.ini_options]")])
 def test_toml_false_for_a_folder_option_means_none_and_true_is_a_usage_error(pytester, name, table):
     stem = name.removesuffix(".toml")
     pytester.makefile(".toml", **{stem: f"{table}\nn2r_cache_dir = false\nn2r_artifacts = false\n"})
@@ -166,6 +180,7 @@ def test_toml_false_for_a_folder_option_means_none_and_true_is_a_usage_error(pyt
         option("artifacts").value(pytester.parseconfig())
 
 
+@PYTEST_9
 def test_an_empty_ini_folder_is_the_default_and_a_blank_one_a_usage_error(pytester):
     pytester.makefile(".toml", pytest='[pytest]\nn2r_cache_dir = ""\nn2r_artifacts = " "\n')
     config = pytester.parseconfig()
