@@ -62,7 +62,9 @@ class Summary:
             return
         from ..relation.record import RelationRecord
 
-        self._forget(report.nodeid)  # a test run again under its id (without a 'rerun' report): the last try counts
+        if report.nodeid in self.recorded:  # run again under its id without a 'rerun' report (--keep-duplicates)
+            self.reruns[report.nodeid] = self.reruns.get(report.nodeid, 0) + 1
+        self._forget(report.nodeid)  # the last try counts, and the summary says how many were dropped
         added = self.recorded[report.nodeid] = RelationRecord.from_dict(record)
         added.pytest_outcome = _outcome(report)
         if hasattr(report, "wasxfail"):  # xfailed (skipped), or a non-strict xpass (passed)
@@ -115,7 +117,8 @@ class Summary:
             if terse and record.pytest_outcome == "passed" and not reruns:  # plainly: no xpass, no rerun, no error
                 continue
             tries = "1 earlier try" if reruns == 1 else f"{reruns} earlier tries"
-            line = record.summary_line() + (f"; rerun: {tries} dropped (pytest-rerunfailures)" if reruns else "")
+            line = record.summary_line() + (f"; rerun: {tries} under this test id dropped, the last one counts"
+                                            if reruns else "")
             label = self.labels.get(record.nodeid)
             terminalreporter.write_line(f"{label:6s} {line.split(' ', 1)[1].lstrip()}" if label else line)
             for line, warn in annotation_lines(record.floor):

@@ -82,7 +82,7 @@ def test_a_rerun_relation_has_one_record_in_every_output(n2r_project, monkeypatc
     assert "2 relations: " in out, out
     flaky = [line for line in result.outlines if line.startswith(("PASSED", "ERROR")) and "::test_flaky[" in line]
     assert len(flaky) == 1 and flaky[0].startswith("PASSED"), flaky
-    assert flaky[0].endswith("; rerun: 1 earlier try dropped (pytest-rerunfailures)"), flaky[0]
+    assert flaky[0].endswith("; rerun: 1 earlier try under this test id dropped, the last one counts"), flaky[0]
     relations = json.loads((pytester.path / "r.json").read_text())["relations"]
     shown = sorted((r["nodeid"].split("::")[-1], r["outcome"], r.get("reruns", 0)) for r in relations)
     assert shown == [("test_flaky[plane]", "passed", 1), ("test_steady[plane]", "passed", 0)], shown
@@ -159,3 +159,31 @@ def test_a_session_that_dies_leaves_no_report_that_looks_current(n2r_project):
     pytester.runpytest("-p", "no:cacheprovider", "--co", "--n2r-scene", PLANE, "--n2r-json", "r.json")
     payload = json.loads((pytester.path / "r.json").read_text())
     assert payload["incomplete"] == "--collect-only ran no test", payload
+
+
+TWICE = """
+TRIES = []
+
+
+def crash(rgb):
+    raise RuntimeError("the first run crashes")
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=5), examples=3)
+def test_twice(n2r_scene):
+    TRIES.append(1)
+    return crash if len(TRIES) == 1 else mean_colour
+"""
+
+
+def test_a_test_run_twice_under_one_id_says_the_earlier_run_was_dropped(n2r_project):
+    """pytest --keep-duplicates runs a file given twice twice, under the same ids and without a 'rerun' report: the
+    first run's failure vanished from the summary, the JSON and the gate without a word."""
+    n2r_project.write(TWICE)
+    name = next(n2r_project.pytester.path.glob("test_*.py")).name
+    result = n2r_project.run("--keep-duplicates", name, name, "--n2r-scene", PLANE, "--n2r-json", "r.json")
+    result.assert_outcomes(failed=1, passed=1)
+    line = n2r_project.summary(result, "test_twice[plane]")
+    assert line.endswith("; rerun: 1 earlier try under this test id dropped, the last one counts"), line
+    (relation,) = json.loads((n2r_project.pytester.path / "r.json").read_text())["relations"]
+    assert relation["reruns"] == 1 and relation["outcome"] == "passed", relation
