@@ -128,8 +128,8 @@ DEGRADATIONS = {
 def ceiling(scene, size: str, max_views: int | None) -> dict[str, dict]:
     """Per degradation (:data:`DEGRADATIONS`): PSNR / SSIM of the degraded reference image against the reference,
     and each detector's repeatability between the two, on ``scene``'s held-out views at ``size``; their points are
-    paired by the homography between the two cameras (one pose: the identity, or the whole-pixel shift a degradation
-    tells), as in :func:`measure_fidelity`. Empty when the scene has no reference image."""
+    paired by the homography between the two cameras (one pose: the identity, or the shift a degradation tells
+    the mapping of), as in :func:`measure_fidelity`. Empty when the scene has no reference image."""
     kind, _ = reference_kind(scene)
     if kind == "none":
         return {}
