@@ -191,6 +191,9 @@ def _device(value: str, where: Where) -> str:
 
         if not torch.cuda.is_available():
             raise InvalidArgument(f"{device!r}: CUDA is not available on this machine; use auto or cpu")
+        index = int(device.partition(":")[2] or 0)
+        if index >= (count := torch.cuda.device_count()):  # else every test's setup said so, not the start
+            raise InvalidArgument(f"{device!r}: this machine has {count} CUDA device(s), cuda:0 to cuda:{count - 1}")
     return device
 
 

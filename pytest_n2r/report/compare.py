@@ -244,8 +244,11 @@ def _compare_one(
     if base.scene_hash != cur.scene_hash:
         return PairedComparison(
             nodeid, "changed-scene", message=f"recorded on scene content {base.scene_hash[:12]}, run on "
-            f"{cur.scene_hash[:12]} (the scene file, its render settings or pytest-n2r's renderer changed): the "
-            "examples cannot be replayed as they were; save a new baseline on the new scene")
+            f"{cur.scene_hash[:12]} (the scene file, its render settings or pytest-n2r's renderer changed, or a "
+            "fitted scene rendered on another device: its content names the CPU's compiled renderer or torch's "
+            "device and GPU, so a baseline saved on CPU CI differs on a GPU machine; pin --n2r-device cpu where "
+            "baselines are gated): the examples cannot be replayed as they were; save a new baseline on the new "
+            "scene")
     base_examples = replay_candidates(base)
     replayed = cur.replayed or []
     if not replayed or len(replayed) != len(base_examples):

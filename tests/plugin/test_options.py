@@ -189,3 +189,15 @@ def test_an_empty_ini_folder_is_the_default_and_a_blank_one_a_usage_error(pytest
                                                 r"folder path, or 'none'"):
         option("artifacts").value(config)
     assert not (pytester.path / " ").exists()
+
+
+def test_a_gpu_index_the_machine_lacks_is_a_usage_error_at_the_start(pytester, monkeypatch):
+    """``--n2r-device cuda:7`` on a one-GPU machine passed the start and failed every test's setup instead."""
+    import torch
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    assert option("device").value(pytester.parseconfig("--n2r-device", "cuda:0")) == "cuda:0"
+    with pytest.raises(pytest.UsageError, match=r"--n2r-device / ini n2r_device: 'cuda:7': this machine has 1 CUDA "
+                                                r"device\(s\), cuda:0 to cuda:0"):
+        option("device").value(pytester.parseconfig("--n2r-device", "cuda:7"))
