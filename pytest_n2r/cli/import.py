@@ -10,11 +10,12 @@ import hashlib
 import sys
 import time
 from pathlib import Path
+from typing import Literal
 
 from .._validation import as_unit_rgb
 from ._output import FORCE_HELP, printable
 
-__all__ = ["add_parser", "parse_rgb", "run"]
+__all__ = ["add_parser", "parse_dataparser", "parse_rgb", "run"]
 
 
 def parse_rgb(text: str) -> tuple[float, float, float]:
@@ -27,6 +28,15 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
     if rgb is None:
         raise argparse.ArgumentTypeError(f"{text!r}: expected three comma-separated values in [0, 1], e.g. 1,1,1")
     return rgb
+
+
+def parse_dataparser(text: str) -> Path | Literal[False]:
+    """``--dataparser-transforms``: a path, or ``none`` (any case) for no transform.
+
+    >>> parse_dataparser("none"), parse_dataparser("run/dataparser_transforms.json").name
+    (False, 'dataparser_transforms.json')
+    """
+    return False if text.strip().lower() == "none" else Path(text)
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -44,10 +54,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, type=Path, metavar="PATH", help="the scene file to write (.n2r)")
     p.add_argument("--cameras", type=Path, metavar="PATH",
                    help="cameras.json, transforms.json or COLMAP model folder (default: found beside the ply)")
-    p.add_argument("--dataparser-transforms", type=Path, metavar="PATH",
+    p.add_argument("--dataparser-transforms", type=parse_dataparser, metavar="PATH",
                    help="nerfstudio's dataparser_transforms.json of the run that trained the ply (splatfacto exports "
                         "are in its normalized frame): the cameras are moved into that frame (default: one found "
-                        "in the ply's folder or up to two folders above, else none)")
+                        "in the ply's folder or up to two folders above, else none); 'none': use none (a ply in "
+                        "the capture's frame beside such a file; ./none names a file called none)")
+    p.add_argument("--min-coverage", type=float, metavar="FRACTION",
+                   help="the least share, in [0, 1], of the training views' pixels the Gaussians must cover for the "
+                        "ply and its cameras to count as one frame (default 0.10); 0 skips the check (an object "
+                        "small in a background-free capture)")
     p.add_argument("--heldout-every", type=int, metavar="N",
                    help="hold out every N-th view by name from the first (default: the source's own split, else 8: "
                         "the --eval split of 3DGS, not nerfstudio's 90 %% fraction); 0 holds none")
@@ -77,11 +92,14 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidArgument(f"{', '.join(knobs)}: only for a fitted scene file (.n2r); a .ply holds its Gaussians")
     if args.heldout_every is not None and args.heldout_every < 0:
         raise InvalidArgument(f"--heldout-every {args.heldout_every}: expected an int >= 0")
-    for option, path in (("PLY", args.ply), ("--cameras", args.cameras),
-                         ("--dataparser-transforms", args.dataparser_transforms)):
+    if args.min_coverage is not None and not 0.0 <= args.min_coverage <= 1.0:  # NaN fails both
+        raise InvalidArgument(f"--min-coverage {args.min_coverage}: expected a number in [0, 1] (a share of the "
+                              "training views' pixels; 0 skips the check)")
+    dataparser = args.dataparser_transforms or None  # False ('none') is no file
+    for option, path in (("PLY", args.ply), ("--cameras", args.cameras), ("--dataparser-transforms", dataparser)):
         if path is not None and not path.exists():
             raise InvalidArgument(f"{option} {path}: does not exist")
-    inputs = [p for p in (args.ply, args.cameras, args.dataparser_transforms) if p is not None]
+    inputs = [p for p in (args.ply, args.cameras, dataparser) if p is not None]
     check_output(args.output, SCENE, inputs=inputs, force=args.force)
     start = time.perf_counter()
     cameras = args.cameras if args.cameras is not None else find_cameras(args.ply)
@@ -89,8 +107,9 @@ def run(args: argparse.Namespace) -> int:
         raise InvalidArgument(f"{args.ply}: no cameras found beside it (a cameras.json, transforms.json or COLMAP "
                               "model in its folder or up to two folders above); pass --cameras PATH")
     scene = load_splat_scene(args.ply, cameras=cameras, dataparser_transforms=args.dataparser_transforms,
-                             heldout_every=args.heldout_every,
-                             background=args.background or (0.0, 0.0, 0.0), name=args.output.stem)
+                             heldout_every=args.heldout_every, background=args.background or (0.0, 0.0, 0.0),
+                             name=args.output.stem,
+                             **({} if args.min_coverage is None else {"min_coverage": args.min_coverage}))
     report = {"source": str(args.ply), "source_sha256": hashlib.sha256(args.ply.read_bytes()).hexdigest(),
               "cameras": str(cameras), "imported_by": f"pytest-n2r {__version__}",
               "import_s": round(time.perf_counter() - start, 3)}
@@ -122,6 +141,7 @@ def _from_field(args: argparse.Namespace) -> int:
     path_voxels = DEFAULT_PATH if args.path is None else args.path
     given = [name for name, value in (("--cameras", args.cameras), ("--heldout-every", args.heldout_every),
                                       ("--dataparser-transforms", args.dataparser_transforms),
+                                      ("--min-coverage", args.min_coverage),
                                       ("--background", args.background)) if value is not None]
     if given:
         raise InvalidArgument(f"{', '.join(given)}: only for a .ply; a fitted scene file {args.ply} brings its own "

@@ -22,13 +22,13 @@ COLMAP model or of a transforms.json without ``A`` move by ``T`` and ``s``.
 from __future__ import annotations
 
 import json
-import math
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from .._validation import is_finite
 from ..errors import IngestError
 from ..geometry import apply_similarity_to_pose, rotation_angle_deg
 from .poses import PoseSet
@@ -115,10 +115,17 @@ def read_dataparser_transforms(path: str | os.PathLike) -> FrameTransform:
         raise IngestError(f"{path}: expected a JSON object with 'transform' (3x4) and 'scale', as nerfstudio's "
                           f"{DATAPARSER_FILE} holds")
     m = _matrix(data["transform"], 3, f"{path}: 'transform'")
-    scale = data["scale"]
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
-        raise IngestError(f"{path}: 'scale' is {scale!r}; expected a finite number > 0")
-    return FrameTransform(float(scale), _rotation(m[:, :3], f"{path}: 'transform'"), m[:, 3].copy(), str(path))
+    scale = _scale(data["scale"], f"{path}: 'scale'")
+    return FrameTransform(scale, _rotation(m[:, :3], f"{path}: 'transform'"), m[:, 3].copy(), str(path))
+
+
+def _scale(value: object, where: str) -> float:
+    """A JSON scale as a finite float > 0, or :class:`IngestError` naming ``where`` (an integer too large for a
+    float, ``10**400``, is not finite)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (is_finite(value) and value > 0):
+        shown = repr(value) if len(repr(value)) <= 40 else f"{repr(value)[:12]}… ({len(repr(value))} characters)"
+        raise IngestError(f"{where} is {shown}; expected a finite number > 0")
+    return float(value)
 
 
 def _applied_transform(poses: PoseSet) -> tuple[tuple[np.ndarray, np.ndarray], float] | None:
@@ -133,10 +140,8 @@ def _applied_transform(poses: PoseSet) -> tuple[tuple[np.ndarray, np.ndarray], f
     if not isinstance(data, dict) or "applied_transform" not in data:
         return None
     m = _matrix(data["applied_transform"], 3, f"{source}: 'applied_transform'")
-    scale = data.get("applied_scale", 1.0)
-    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (math.isfinite(scale) and scale > 0):
-        raise IngestError(f"{source}: 'applied_scale' is {scale!r}; expected a finite number > 0")
-    return (_rotation(m[:, :3], f"{source}: 'applied_transform'"), m[:, 3].copy()), float(scale)
+    scale = _scale(data.get("applied_scale", 1.0), f"{source}: 'applied_scale'")
+    return (_rotation(m[:, :3], f"{source}: 'applied_transform'"), m[:, 3].copy()), scale
 
 
 def find_dataparser_transforms(ply: str | os.PathLike) -> Path | None:

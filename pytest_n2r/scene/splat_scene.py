@@ -13,10 +13,11 @@ import os
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 
-from .._validation import as_unit_rgb, check_positive, repeated_name
+from .._validation import as_unit_rgb, check_positive, check_range, repeated_name
 from ..data.capture import split_frames
 from ..data.poses import PoseSet
 from ..errors import IngestError, InvalidArgument, InvalidType
@@ -218,27 +219,34 @@ def splat_views(poses: PoseSet, heldout_every: int | None = None) -> list[SceneV
 
 
 def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | None = None,
-                     dataparser_transforms: str | os.PathLike | None = None, heldout_every: int | None = None,
-                     background: Sequence[float] = (0.0, 0.0, 0.0), settings: SplatSettings | None = None,
-                     name: str | None = None, min_coverage: float = MIN_COVERAGE) -> SplatScene:
+                     dataparser_transforms: str | os.PathLike | Literal[False] | None = None,
+                     heldout_every: int | None = None, background: Sequence[float] = (0.0, 0.0, 0.0),
+                     settings: SplatSettings | None = None, name: str | None = None,
+                     min_coverage: float = MIN_COVERAGE) -> SplatScene:
     """The splat scene of the 3DGS ``.ply`` file ``path``.
 
     ``cameras`` is a 3DGS ``cameras.json``, a ``transforms.json`` or a COLMAP model (folder); ``None`` looks
     for one beside the ply (:func:`~pytest_n2r.data.camera_sources.find_cameras`), and without one the scene
     has no views. ``dataparser_transforms`` is nerfstudio's ``dataparser_transforms.json`` of the run that
-    trained the ply (``None``: one in the ply's folder or up to two above it, if any): the cameras are moved
-    into the splats' frame by it (:mod:`~pytest_n2r.data.trainer_frame`), and ``notes`` says so.
-    ``heldout_every`` chooses the split (:func:`splat_views`); ``background`` is the colour the scene was
-    trained over (3DGS: black unless trained with ``--white_background``).
+    trained the ply: the cameras are moved into the splats' frame by it (:mod:`~pytest_n2r.data.trainer_frame`),
+    and ``notes`` says so; ``None`` uses one in the ply's folder or up to two above it, if any; ``False`` uses
+    none (a ply already in the capture's frame beside such a file). ``heldout_every`` chooses the split
+    (:func:`splat_views`); ``background`` is the colour the scene was trained over (3DGS: black unless trained
+    with ``--white_background``).
 
-    Raises :class:`IngestError` naming both files when the Gaussians cover less than ``min_coverage`` (default
-    :data:`MIN_COVERAGE`; 0 turns the check off) of the training views' pixels: the ply and the cameras are
-    then not in one frame.
+    Raises :class:`IngestError` naming both files when the Gaussians cover less than ``min_coverage`` (in
+    [0, 1], default :data:`MIN_COVERAGE`; 0 turns the check off) of the training views' pixels: the ply and the
+    cameras are then not in one frame (when a transform found beside the ply caused it, the message says so).
     """
     from ..data.camera_sources import find_cameras, read_cameras
     from ..data.trainer_frame import find_dataparser_transforms, read_dataparser_transforms
     from ..splats.ply import read_ply_with_notes
 
+    min_coverage = check_range("min_coverage", min_coverage, 0.0, 1.0)
+    if not (dataparser_transforms is None or dataparser_transforms is False
+            or isinstance(dataparser_transforms, (str, os.PathLike))):
+        raise InvalidArgument(f"dataparser_transforms={dataparser_transforms!r}; expected a path, None (look for one "
+                              "beside the ply) or False (use none)")
     path = Path(path)
     gaussians, ply_notes = read_ply_with_notes(path)
     notes = list(ply_notes)
@@ -246,7 +254,7 @@ def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | No
     views: list[SceneView] = []
     reason = None
     length = None
-    if found is None and dataparser_transforms is not None:
+    if found is None and dataparser_transforms:
         raise InvalidArgument(f"dataparser_transforms={str(dataparser_transforms)!r} moves cameras, and {path} has "
                               "none (none given, none found beside it); pass cameras=... too")
     if found is None:
@@ -255,29 +263,50 @@ def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | No
                   "train / held-out split, no reference length and no validity checks; it renders at the poses "
                   "you give. Pass cameras=... to load_scene (or `n2r import --cameras`) to have them.")
     else:
-        poses = read_cameras(found)
-        frame = Path(dataparser_transforms) if dataparser_transforms is not None else find_dataparser_transforms(path)
+        captured = read_cameras(found)
+        given = dataparser_transforms is not None
+        if given:
+            frame = None if dataparser_transforms is False else Path(dataparser_transforms)
+        else:
+            frame = find_dataparser_transforms(path)
+        poses = captured
         if frame is not None:
-            poses, note = read_dataparser_transforms(frame).apply(poses)
+            poses, note = read_dataparser_transforms(frame).apply(captured)
             notes.append(note)
         views = splat_views(poses, heldout_every)
         probe = SplatScene(gaussians, (), name=name or path.stem, background=background, settings=settings)
         count, depths, coverage = _reference_renders(probe, views)
         if coverage < min_coverage:
-            raise IngestError(_not_paired(path, found, frame, count, coverage, min_coverage))
+            without = None
+            if frame is not None and not given:  # a file found beside the ply: would the cameras fit without it?
+                without = _reference_renders(probe, splat_views(captured, heldout_every))[2]
+            raise IngestError(_not_paired(path, found, frame, count, coverage, min_coverage,
+                                          without if without is not None and without >= min_coverage else None))
         length = _median_depth(probe, count, depths)
     return SplatScene(gaussians, views, name=name or path.stem, reference_length=length, background=background,
                       settings=settings, no_cameras=reason, notes=notes)
 
 
-def _not_paired(ply: Path, cameras: Path, frame: Path | None, count: int, coverage: float, least: float) -> str:
-    """The message of a ply whose Gaussians its cameras barely see."""
-    moved = f", moved by {frame}," if frame is not None else ""
-    cause = ("the transform does not belong to this ply and these cameras" if frame is not None else
-             "the ply is likely in a trainer's normalized frame (nerfstudio's splatfacto orients, centres and "
-             "scales the capture before training, and ns-export writes the Gaussians in that frame): pass that "
-             "run's dataparser_transforms.json (dataparser_transforms=... / n2r import --dataparser-transforms; "
-             "for gsplat's normalize_world_space, which records nothing, export in the capture's frame)")
+def _not_paired(ply: Path, cameras: Path, frame: Path | None, count: int, coverage: float, least: float,
+                without: float | None) -> str:
+    """The message of a ply whose Gaussians its cameras barely see; ``without``: the coverage without the
+    dataparser transform ``frame`` found beside the ply, when that is enough."""
+    moved = f" moved by {frame}" if frame is not None else ""
+    if without is not None:
+        cause = (f"{frame} was found beside the ply and applied; without it the cameras cover {without:.1%}, so "
+                 "the ply is likely in the capture's frame already: pass dataparser_transforms=False "
+                 "(n2r import --dataparser-transforms none) to use no transform")
+    elif frame is not None:
+        cause = "the transform does not belong to this ply and these cameras"
+    else:
+        cause = ("the ply is likely in a trainer's normalized frame (nerfstudio's splatfacto orients, centres and "
+                 "scales the capture before training, and ns-export writes the Gaussians in that frame): pass that "
+                 "run's dataparser_transforms.json (dataparser_transforms=... / n2r import --dataparser-transforms "
+                 "PATH; for gsplat's normalize_world_space, which records nothing, export in the capture's frame)")
+    skip = (f"If they do belong together (the object just small in the views), lower or skip the check: "
+            f"min_coverage=0 to load_scene / load_splat_scene, `n2r import {ply} --min-coverage 0 -o scene.n2r` "
+            "(the .n2r then loads anywhere, --n2r-scene included), or a --n2r-scene / n2r_scenes entry "
+            f"'module:function' whose function returns load_scene({str(ply)!r}, min_coverage=0)")
     return (f"{ply} with the cameras of {cameras}{moved}: the Gaussians cover {coverage:.1%} of the pixels of "
             f"{count} training views (mean opacity at {REFERENCE_SIZE} pixels); expected at least {least:.0%} for "
-            f"a ply and its cameras in one frame. {cause[0].upper()}{cause[1:]}. (min_coverage=0 skips this check.)")
+            f"a ply and its cameras in one frame. {cause[0].upper()}{cause[1:]}. {skip}.")

@@ -17,7 +17,10 @@ One ``vertex`` element; each vertex a Gaussian with float properties (any order,
 - ``red green blue`` (uchar) in place of ``f_dc_0..2`` and without ``f_rest_*`` (nerfstudio's
   ``ns-export gaussian-splat --ply-color-mode rgb``): read as SH degree 0, ``f_dc = (c/255 - 0.5) / C0``.
 
-Any other vertex property is not read, and one ``UserWarning`` names them all.
+All three of ``red green blue`` beside ``f_dc_0..2`` (a preview colour some exporters add) are not read and not
+warned of:
+the SH coefficients are the colour. Any other vertex property is not read, and one ``UserWarning`` names them
+all.
 
 Formats ``binary_little_endian``, ``binary_big_endian`` and ``ascii`` are read; files are written in the
 reference code's layout (``binary_little_endian``, float32, the property order above, zero normals).
@@ -219,15 +222,18 @@ def _is_rgb_export(kinds: dict[str, str]) -> bool:
 
 
 def _warn_unread(source: str, names: list[str], rgb: bool) -> None:
-    """One warning naming the vertex properties that are neither read nor the ignored normals."""
-    read = {*_REQUIRED, *_NORMALS, MIP_FILTER, *(_RGB if rgb else ())}
+    """One warning naming the vertex properties that are neither read nor known and ignored (the normals, and
+    all three of ``red green blue`` beside ``f_dc_*``: a preview colour). ``rgb``: the colours are read from them."""
+    preview = all(name in names for name in (*_DC, *_RGB))
+    read = {*_REQUIRED, *_NORMALS, MIP_FILTER, *(_RGB if rgb or preview else ())}
     unread = [n for n in names if n not in read and not re.fullmatch(r"f_rest_\d+", n)]
     if unread:
         noun = "property" if len(unread) == 1 else "properties"
         verb = "is" if len(unread) == 1 else "are"
         warnings.warn(f"{source}: vertex {noun} {', '.join(unread)} {verb} not read (this 3DGS .ply reader uses "
-                      f"{', '.join(_REQUIRED)}, f_rest_* and Mip-Splatting's {MIP_FILTER}); the splats are "
-                      "rendered without them", UserWarning, stacklevel=4)
+                      f"{', '.join(_REQUIRED)}, f_rest_* and Mip-Splatting's {MIP_FILTER}, and ignores normals "
+                      "and a preview red/green/blue); the splats are rendered without them", UserWarning,
+                      stacklevel=4)
 
 
 def bake_filter_3d(log_scales: np.ndarray, opacity_logits: np.ndarray,
@@ -239,7 +245,9 @@ def bake_filter_3d(log_scales: np.ndarray, opacity_logits: np.ndarray,
     Mip-Splatting renders each Gaussian with covariance ``Σ + f²·I`` (``f`` = ``filter_3D``, scene units) and
     peak opacity ``o · sqrt(det Σ / det(Σ + f²I))``; as ``Σ = R S² Rᵀ`` that is, per axis,
     ``s' = sqrt(s² + f²)`` and ``o' = o · Π s / Π s'``. Scales are log standard deviations, opacities logits.
-    Computed in float64; returned as float32.
+    Computed in float64 and in logs, ``logit' = log o' − log(1 − o')`` with ``1 − o' = σ(−l) + σ(l)·(1 − r)``
+    (``l`` the logit, ``r = Π s / Π s'``), so a saturated logit (±800) stays finite and ``f = 0`` returns it
+    unchanged; returned as float32.
 
     >>> ls, lo = bake_filter_3d(np.log([[3.0, 3.0, 3.0]]), np.array([0.0]), np.array([4.0]))
     >>> np.round(np.exp(ls), 4).tolist(), round(float(1 / (1 + np.exp(-lo[0]))), 4)
@@ -250,9 +258,17 @@ def bake_filter_3d(log_scales: np.ndarray, opacity_logits: np.ndarray,
     after = s2 + f2
     log_ratio = 0.5 * (np.log(s2).sum(axis=1) - np.log(after).sum(axis=1))  # log sqrt(det Σ / det Σ')
     logit = np.asarray(opacity_logits, np.float64)
-    log_o = -np.logaddexp(0.0, -logit) + log_ratio  # log(sigmoid(logit) · coef), in logs against underflow
-    new_logit = log_o - np.log(-np.expm1(log_o))  # logit = log(o / (1 - o)), o < 1
+    log_p, log_q = -np.logaddexp(0.0, -logit), -np.logaddexp(0.0, logit)  # log σ(l), log σ(−l)
+    log_not_o = np.logaddexp(log_q, log_p + _log1mexp(log_ratio))  # log(1 − σ(l)·r), no cancellation
+    new_logit = log_p + log_ratio - log_not_o
     return (0.5 * np.log(after)).astype(np.float32), new_logit.astype(np.float32)
+
+
+def _log1mexp(x: np.ndarray) -> np.ndarray:
+    """``log(1 − exp(x))`` for ``x ≤ 0`` (``-inf`` at 0), accurate at both ends (Mächler 2012)."""
+    x = np.minimum(x, 0.0)
+    with np.errstate(divide="ignore"):
+        return np.where(x < -np.log(2.0), np.log1p(-np.exp(x)), np.log(-np.expm1(x)))
 
 
 def _read_body(raw: bytes, offset: int, fmt: str, count: int, props, skip, source: str) -> dict[str, np.ndarray]:

@@ -136,6 +136,7 @@ def test_a_transforms_json_applied_transform_is_undone_first(tmp_path_factory, a
     ({"transform": [[1, 0, 0, 0]], "scale": 1}, r"'transform': expected 3 rows of 4 finite numbers"),
     ({"transform": (2 * np.eye(4)[:3]).tolist(), "scale": 1}, r"'transform': its 3x3 part is not a rotation"),
     ({"scale": 1}, r"expected a JSON object with 'transform' \(3x4\) and 'scale'"),
+    ({"transform": np.eye(4)[:3].tolist(), "scale": 10**400}, r"'scale' is 100000000000… \(401 characters\); expected"),
 ])
 def test_a_bad_dataparser_file_is_named_with_its_field(tmp_path, content, expected):
     path = tmp_path / "dataparser_transforms.json"
@@ -164,3 +165,86 @@ def test_the_split_docs_do_not_claim_nerfstudios_default():
     assert "train_split_fraction" in page
 
 
+
+
+def test_load_scene_and_n2r_import_take_min_coverage_and_the_message_names_them(splatfacto, tmp_path, capsys):
+    """The coverage check refused scenes that loaded before (an object small in a background-free capture) with
+    only load_splat_scene's keyword as a way out; load_scene, n2r import and the message now name theirs."""
+    from pytest_n2r.scene import load_scene
+
+    bare, cams = splatfacto["bare"], splatfacto["cameras"]
+    with pytest.raises(IngestError) as err:
+        load_scene(bare, cameras=cams)
+    text = str(err.value)
+    assert "--min-coverage 0" in text and "min_coverage=0" in text and "'module:function'" in text, text
+    assert f"load_scene({str(bare)!r}, min_coverage=0)" in text and ",:" not in text, text
+    assert load_scene(bare, cameras=cams, min_coverage=0).views
+    out = tmp_path / "s.n2r"
+    assert main(["import", str(bare), "--cameras", str(cams), "-o", str(out), "--min-coverage", "0"]) == 0
+    assert load_scene(out).views
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    (float("nan"), r"min_coverage=nan must be finite"),
+    (-0.5, r"min_coverage=-0\.5 is out of range; expected a value in \[0, 1\]"),
+    (2, r"min_coverage=2\.0 is out of range; expected a value in \[0, 1\]"),
+])
+def test_a_bad_min_coverage_is_refused_naming_it(splatfacto, value, expected):
+    """NaN or a negative share used to turn the check off silently."""
+    from pytest_n2r.errors import InvalidArgument
+
+    with pytest.raises(InvalidArgument, match=expected):
+        load_splat_scene(splatfacto["ply"], cameras=splatfacto["cameras"], min_coverage=value)
+
+
+def test_load_scene_refuses_splat_options_for_a_fitted_scene_file(tmp_path):
+    from pytest_n2r.errors import InvalidArgument
+    from pytest_n2r.scene import load_scene
+
+    for key, value in (("min_coverage", 0.0), ("dataparser_transforms", False)):
+        with pytest.raises(InvalidArgument, match=rf"{key}=.* applies to a \.ply only"):
+            load_scene(tmp_path / "fitted.n2r", **{key: value})
+
+
+@pytest.fixture(scope="module")
+def stale(tmp_path_factory) -> dict[str, Path]:
+    """wall-sh3 (a ply in its capture's frame) beside a dataparser_transforms.json of a nerfstudio run of the
+    same capture: measured, the found transform leaves 5.1 % covered, the cameras alone 91 %."""
+    import shutil
+
+    root = tmp_path_factory.mktemp("stale") / "wall"
+    shutil.copytree(DATA / "wall-sh3", root)
+    cams = read_cameras(root / "transforms.json")
+    rot, t, s = nerfstudio_frame([f.c2w for f in cams.frames])
+    (root / "dataparser_transforms.json").write_text(json.dumps({"transform": np.c_[rot, t].tolist(), "scale": s}))
+    return {"ply": root / "splat.ply", "dataparser": root / "dataparser_transforms.json",
+            "original": DATA / FILES["wall-sh3"][0]}
+
+
+def test_a_found_transform_that_empties_the_views_is_named_and_can_be_turned_off(stale, tmp_path, capsys):
+    """A dataparser_transforms.json beside a ply already in the capture's frame moved its cameras and nothing
+    turned the search off; the refusal now names the found file and the off switch, which loads it right."""
+    from pytest_n2r.scene import load_scene
+
+    with pytest.raises(IngestError) as err:
+        load_splat_scene(stale["ply"])
+    text = " ".join(str(err.value).split())
+    assert f"{stale['dataparser']} was found beside the ply and applied; without it the cameras cover" in text, text
+    assert "dataparser_transforms=False" in text and "--dataparser-transforms none" in text and ",:" not in text
+    ref = load_splat_scene(stale["original"])
+    for scene in (load_splat_scene(stale["ply"], dataparser_transforms=False),
+                  load_scene(stale["ply"], dataparser_transforms=False)):
+        assert not any("dataparser" in n for n in scene.notes), scene.notes
+        assert scene.reference_length == pytest.approx(ref.reference_length, rel=1e-9)
+        for a, b in zip(ref.views, scene.views):
+            np.testing.assert_array_equal(a.c2w, b.c2w)
+    out = tmp_path / "w.n2r"
+    assert main(["import", str(stale["ply"]), "-o", str(out), "--dataparser-transforms", "none"]) == 0
+    assert "dataparser" not in capsys.readouterr().err
+
+
+def test_an_explicit_transform_is_not_second_guessed(stale):
+    """Given (not found), a transform that empties the views is blamed as before, without measuring the other."""
+    with pytest.raises(IngestError, match=r"The transform does not belong to this ply and these cameras"):
+        load_splat_scene(stale["ply"], dataparser_transforms=stale["dataparser"])

@@ -98,3 +98,34 @@ def test_the_reference_layout_reads_without_a_warning(tmp_path):
         warnings.simplefilter("error")
         g, notes = read_ply_with_notes(path)
     assert notes == () and len(g) == 3
+
+
+def test_a_preview_colour_beside_the_sh_is_known_and_not_warned_of(tmp_path):
+    """Some exporters add uchar red/green/blue beside f_dc_*: the SH are the colour, the preview is ignored
+    without a warning (it used to be named as 'not read')."""
+    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "red", "green", "blue", *GAUSSIAN]
+    types = ["float"] * 9 + ["uchar"] * 3 + ["float"] * len(GAUSSIAN)
+    path = write(tmp_path / "preview.ply", names, [[0.0] * 6 + [0.25, 0.5, 0.75, 10, 20, 30, 1, 0, 0, 0, 1, 0, 0, 0]],
+                 types)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        g, notes = read_ply_with_notes(path)
+    assert notes == () and g.sh_degree == 0
+    np.testing.assert_allclose(g.sh[0, 0], [0.25, 0.5, 0.75])
+
+
+@pytest.mark.parametrize("logit", [800.0, -800.0, 40.0, -40.0, 0.0])
+def test_baking_keeps_saturated_opacities_finite(logit):
+    """A saturated logit (800: sigmoid is 1.0 in float64) used to bake to +inf with a divide warning; f = 0
+    returns it unchanged, f > 0 gives the formula's finite logit."""
+    log_s = np.log([[0.01, 0.02, 0.03]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _, same = bake_filter_3d(log_s, np.array([logit]), np.array([0.0]))
+        _, baked = bake_filter_3d(log_s, np.array([logit]), np.array([0.02]))
+    assert same[0] == pytest.approx(logit, abs=1e-5)
+    s = np.exp(log_s[0])
+    ratio = math.prod(s) / math.prod(np.sqrt(s ** 2 + 0.02 ** 2))
+    log_p = math.log(ratio) + (-math.log1p(math.exp(-logit)) if logit > -700 else logit)
+    expected = log_p - math.log1p(-math.exp(log_p))
+    assert math.isfinite(float(baked[0])) and float(baked[0]) == pytest.approx(expected, rel=1e-5, abs=1e-4)
