@@ -220,7 +220,7 @@ def read_colmap_model(model: str | os.PathLike, images_dir: str | os.PathLike | 
             name = file.relative_to(images_dir).as_posix()
             if file.is_file() and file.suffix.lower() in IMAGE_SUFFIXES and name not in registered:
                 skipped.append((name, "not registered in the COLMAP model"))
-    return PoseSet(frames=frames, points=points, source=str(found), kind="colmap", skipped=skipped,
+    return PoseSet(frames=frames, points=points, source=str(found), kind="colmap", skipped=skipped, pixels="stored",
                    report={"images_dir": None if images_dir is None else str(images_dir),
                            "points_method": "points3D of the COLMAP model" if len(points) else ""})
 

@@ -212,7 +212,7 @@ def _load_pixels(
     if len(poses.frames) < 3:
         raise IngestError(f"{poses.source}: only {len(poses.frames)} registered images; at least 3 are needed")
     need_points = len(poses.points) == 0
-    as_stored = poses.kind == "colmap"  # COLMAP's cameras describe the pixels as stored (it ignores orientation)
+    as_stored = poses.pixels == "stored"  # a COLMAP model's, another tool's transforms.json: the tag ignored
     kept: list[SourceFrame] = []
     images: list[np.ndarray | None] = []
     small: list[np.ndarray] = []
@@ -225,7 +225,7 @@ def _load_pixels(
             images.append(None)
             continue
         try:
-            full = _undistorted_image(frame, as_stored)
+            full = _undistorted_image(frame, as_stored, poses.kind)
         except _Undecodable as exc:
             warnings.warn(f"skipping frame {frame.name!r}: {exc}", stacklevel=3)
             poses.skipped.append((frame.name, str(exc)))
@@ -266,13 +266,24 @@ def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Ca
     return cam if max_size is None else cam.fit_within(max_size)
 
 
+#: why a photo read as stored has another size than its camera, by the source's kind
+_STORED_SIZE_HINT = {
+    "colmap": ("its pixels as stored: COLMAP ignores a photo's orientation tag, so a model made from these files has "
+               "cameras of their stored size; was it made from turned copies? give it those)"),
+    "transforms.json": ("its pixels as stored: a transforms.json that n2r did not write describes the photos as "
+                        "nerfstudio and instant-ngp read them, the orientation tag ignored; was it made from turned "
+                        "copies? give it those)"),
+}
+
+
 class _Undecodable(IngestError):
     """An image file that exists but cannot be decoded (the frame is skipped, not fatal)."""
 
 
-def _undistorted_image(frame: SourceFrame, as_stored: bool) -> np.ndarray:
-    """The frame's photo with its lens distortion removed: upright, or its pixels as stored (``as_stored``: a
-    COLMAP model's photo, whose camera and pose describe the pixels as COLMAP reads them, the orientation ignored)."""
+def _undistorted_image(frame: SourceFrame, as_stored: bool, kind: str = "colmap") -> np.ndarray:
+    """The frame's photo with its lens distortion removed: upright, or its pixels as stored (``as_stored``: the photo
+    of a COLMAP model or of a transforms.json another tool wrote, of the source ``kind``, whose camera and pose
+    describe the pixels as COLMAP, nerfstudio and instant-ngp read them, the orientation ignored)."""
     if frame.path is None:
         raise IngestError(
             f"image {frame.name!r} listed in the COLMAP model was not found; put the images in an 'images' "
@@ -288,9 +299,8 @@ def _undistorted_image(frame: SourceFrame, as_stored: bool) -> np.ndarray:
         raise IngestError(
             f"image {str(frame.path)!r} is {image.shape[1]}x{image.shape[0]} pixels but its camera says "
             f"{cam.width}x{cam.height} ("
-            + ("its pixels as stored: COLMAP ignores a photo's orientation tag, so a model made from these files has "
-               "cameras of their stored size; was it made from turned copies? give it those)"
-               if as_stored else "after EXIF orientation)")
+            + (_STORED_SIZE_HINT.get(kind, _STORED_SIZE_HINT["transforms.json"]) if as_stored
+               else "after EXIF orientation)")
         )
     try:
         return cam.undistort_image(image)

@@ -2,20 +2,24 @@
 
 Convention
 ----------
-Cameras are those of the **source images as stored on disk** (full resolution, lens distortion still
-present, OpenCV pixel centres); poses are camera-to-world 4x4 float64 with OpenCV camera axes. A pose set
-can be written back as a nerfstudio ``transforms.json`` that points at the same image files
-(:func:`~pytest_n2r.data.transforms_json.write_transforms_json`).
+Cameras are those of the **source images on disk** (full resolution, lens distortion still present, OpenCV pixel
+centres), of their pixels upright or as stored as :attr:`PoseSet.pixels` says; poses are camera-to-world 4x4 float64
+with OpenCV camera axes. A pose set can be written back as a nerfstudio ``transforms.json`` that points at the same
+image files (:func:`~pytest_n2r.data.transforms_json.write_transforms_json`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..geometry import Camera
+
+if TYPE_CHECKING:
+    from .transforms_pixels import Pixels
 
 __all__ = ["SourceFrame", "PoseSet"]
 
@@ -59,6 +63,11 @@ class PoseSet:
     heldout:
         Names (:attr:`SourceFrame.name`) of the frames the source itself holds out (a transforms.json's
         ``val_filenames``, else its ``test_filenames``); ``None`` when the source has no split.
+    pixels:
+        Which pixels of a photo with an EXIF orientation tag the cameras and poses describe, so which ingestion
+        reads: ``"upright"`` (the tag applied: structure from motion's photos, a transforms.json n2r wrote of such)
+        or ``"stored"`` (the tag ignored: a COLMAP model's, and a transforms.json another tool wrote, as COLMAP,
+        nerfstudio and instant-ngp read them; :mod:`~pytest_n2r.data.transforms_pixels`).
     """
 
     frames: list[SourceFrame]
@@ -68,6 +77,7 @@ class PoseSet:
     skipped: list[tuple[str, str]] = field(default_factory=list)
     report: dict = field(default_factory=dict)
     heldout: frozenset[str] | None = None
+    pixels: Pixels = "upright"
 
     @property
     def centres(self) -> np.ndarray:

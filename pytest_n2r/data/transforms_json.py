@@ -10,8 +10,11 @@ Convention
   full horizontal field of view): ``fl_x = w / (2 tan(camera_angle_x / 2))``; without ``fl_y``, from
   ``camera_angle_y`` (full vertical field of view, radians) when given, else ``fl_y = fl_x`` (each axis on its own,
   as instant-ngp reads them); ``cx, cy`` fall back to the image centre. ``w, h`` are whole pixels; without them the
-  size is the photo's, read upright, which a photo with an EXIF orientation tag makes ambiguous (the intrinsics may
-  describe its pixels as stored, as nerfstudio and instant-ngp read them): refused there.
+  size is the photo's, as its pixels are read (below).
+- The cameras describe a photo with an EXIF orientation tag as the file's writer reads it
+  (:mod:`~pytest_n2r.data.transforms_pixels`): upright in a file n2r wrote (a top-level ``n2r`` block; its
+  ``n2r.pixels`` says ``"stored"`` when the poses came from a COLMAP model or another tool's file), as stored in any
+  other (nerfstudio, instant-ngp, Blender read the pixels as stored). Such a file's tagged photos are warned of once.
 - ``camera_model`` is one of nerfstudio's pinhole models (``OPENCV`` when absent, ``PINHOLE``, ``SIMPLE_PINHOLE``,
   ``SIMPLE_RADIAL``, ``RADIAL``), whose distortion is nerfstudio's ``k1 k2 k3`` (radial, the terms in r², r⁴, r⁶ of
   OpenCV's model) and ``p1 p2`` (tangential); nerfstudio's ``k4`` is a further radial term in r⁸, which OpenCV's
@@ -46,10 +49,10 @@ from .._validation import is_finite, repeated_name
 from ..errors import IngestError, N2RError
 from ..geometry import Camera, opencv_to_opengl, opengl_to_opencv, orthonormalize
 from .atomic import atomic_write_text
-from .images import read_image_size, read_orientation
 from .json_file import read_json_file
 from .poses import PoseSet, SourceFrame
 from .relative_path import relative_posix
+from .transforms_pixels import PIXELS, Pixels, photo_size, pixels_of, tagged_count, tagged_photos_note
 
 __all__ = ["read_transforms_json", "write_transforms_json", "find_transforms_json", "camera_model_of",
            "RATIONAL_MODEL_NOTE"]
@@ -87,9 +90,11 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     size must be in the json (``w`` and ``h``). The split (``val_filenames``, else ``test_filenames``) becomes
     :attr:`PoseSet.heldout`, as the names of the frames it lists. Raises :class:`IngestError` naming the file, the
     frame index and the field when a field is missing or malformed or names a camera model or lens that is not read
-    correctly (see the module's *Convention*), a size is not whole pixels, a photo with an EXIF orientation tag has
-    no ``w`` and ``h``, a matrix is not a finite rigid transform, a split names no frame, or no frame has its image.
-    Frames with a ``mask_path`` are warned of once (masks are not read), also in ``report["warnings"]``.
+    correctly (see the module's *Convention*), a size is not whole pixels, a matrix is not a finite rigid transform,
+    a split names no frame, or no frame has its image. :attr:`PoseSet.pixels` is ``n2r.pixels`` of a file n2r wrote
+    (``"upright"`` without it), else ``"stored"``; the photos of such another tool's file that have an EXIF
+    orientation tag (read as stored) are warned of once, and frames with a ``mask_path`` (masks are not read), each
+    also in ``report["warnings"]``.
     """
     path = Path(path)
     meta = read_json_file(path, 'transforms')
@@ -99,6 +104,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     if not isinstance(raw_frames, list) or not raw_frames:
         raise IngestError(f"{path}: field 'frames' is missing or empty; expected a list of frames")
     model = _camera_model(meta, str(path), "OPENCV")
+    pixels = pixels_of(meta, path)
 
     root = path.parent
     frames: list[SourceFrame] = []
@@ -114,7 +120,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
         c2w = _read_matrix(raw, where)  # validate every listed frame, even those without images
         frame_model = _camera_model(raw, where, model)
         if image is None and not images:
-            camera = _read_camera(meta, raw, where, None, frame_model)
+            camera = _read_camera(meta, raw, where, None, frame_model, pixels)
             frames.append(SourceFrame(name=name, path=None, camera=camera, c2w=c2w))
             continue
         if image is None:
@@ -122,7 +128,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
             warnings.warn(f"skipping frame: {reason}", stacklevel=2)
             skipped.append((name, reason))
             continue
-        camera = _read_camera(meta, raw, where, image, frame_model)
+        camera = _read_camera(meta, raw, where, image, frame_model, pixels)
         frames.append(SourceFrame(name=name, path=image, camera=camera, c2w=c2w))
     repeat = repeated_name(raw["file_path"] for raw in raw_frames)  # each a string: checked above
     if repeat is not None:  # a view's name is its file_path: two views of one name cannot both be tested or saved
@@ -131,15 +137,20 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
     if not frames:
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
     heldout = _read_split(meta, path, [raw["file_path"] for raw in raw_frames])
-    report: dict[str, Any] = {"listed": len(raw_frames)}
+    notes: list[str] = []
+    if pixels == "stored" and not isinstance(meta.get("n2r"), dict):  # another tool's file: its tagged photos
+        notes.append(tagged_photos_note(path, [f.path for f in frames if f.path is not None]) or "")
     masked = sum(1 for raw in raw_frames if raw.get("mask_path") is not None)
     if masked:
-        note = (f"{path}: {masked} of {len(raw_frames)} frames have a 'mask_path' (pixels nerfstudio leaves out of "
-                "its loss); n2r does not read masks: n2r fit fits every pixel of each photo, the masked ones too")
+        notes.append(f"{path}: {masked} of {len(raw_frames)} frames have a 'mask_path' (pixels nerfstudio leaves out "
+                     "of its loss); n2r does not read masks: n2r fit fits every pixel of each photo, the masked ones "
+                     "too")
+    report: dict[str, Any] = {"listed": len(raw_frames)}
+    for note in filter(None, notes):
         warnings.warn(note, stacklevel=2)
-        report["warnings"] = [note]
+        report.setdefault("warnings", []).append(note)
     return PoseSet(frames=frames, source=str(path), kind="transforms.json", skipped=skipped, report=report,
-                   heldout=heldout)
+                   heldout=heldout, pixels=pixels)
 
 
 def _camera_model(fields: dict, where: str, default: str) -> str:
@@ -241,27 +252,7 @@ def _number(meta: dict, raw: dict, key: str, where: str) -> float | None:
     return float(value)
 
 
-def _upright_size(image: Path, where: str) -> tuple[int, int]:
-    """``(width, height)`` in pixels of the photo ``image`` as n2r reads it (upright), the size of a frame without
-    ``w`` and ``h``; an :class:`IngestError` naming the file when the photo has an EXIF orientation tag. Such a photo
-    is shown otherwise than stored: nerfstudio, instant-ngp and COLMAP read its pixels as stored, n2r reads a
-    transforms.json's photos upright (n2r writes their cameras so), and without ``w`` and ``h`` nothing tells which
-    of the two the file's intrinsics and poses describe."""
-    width, height = read_image_size(image)
-    orientation = read_orientation(image)
-    if orientation == 1:
-        return width, height
-    stored = (height, width) if orientation in (5, 6, 7, 8) else (width, height)
-    raise IngestError(
-        f"{where}: image file {str(image)!r} has EXIF orientation {orientation}: stored as {stored[0]}x{stored[1]} "
-        f"pixels, shown turned or mirrored as {width}x{height}, and the file gives no 'w' and 'h' to tell which its "
-        "intrinsics and pose describe (nerfstudio and instant-ngp read the pixels as stored, n2r reads the photo "
-        f"upright); expected fields 'w' and 'h' of the upright photo ({width}x{height}) when they describe it, else "
-        "photos saved as they are shown (turned, the tag removed) with their intrinsics and poses turned to match"
-    )
-
-
-def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: str) -> Camera:
+def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: str, pixels: Pixels) -> Camera:
     w, h = _number(meta, raw, "w", where), _number(meta, raw, "h", where)
     if (w is None or h is None) and image is None:
         raise IngestError(f"{where}: no image size; expected fields 'w' and 'h' (the image is not there to read it)")
@@ -270,7 +261,7 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
             raise IngestError(f"{where}: field {key!r}={side!r} must be a whole number of pixels (the image's "
                               f"{'width' if key == 'w' else 'height'})")
     if w is None or h is None:
-        w, h = _upright_size(image, where)
+        w, h = photo_size(image, pixels)
     fx, fy = _number(meta, raw, "fl_x", where), _number(meta, raw, "fl_y", where)
     if fx is None:
         angle_x = _number(meta, raw, "camera_angle_x", where)
@@ -308,6 +299,7 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
 
 def write_transforms_json(
     path: str | os.PathLike, frames: list[SourceFrame] | PoseSet, *, extra: dict[str, Any] | None = None,
+    pixels: Pixels | None = None,
 ) -> Path:
     """Write frames as a transforms.json (atomically) and return its path: nerfstudio's and instant-ngp's format, which
     both read unless a lens needs ``FULL_OPENCV`` (below).
@@ -320,8 +312,15 @@ def write_transforms_json(
     (:data:`RATIONAL_MODEL_NOTE`: tell the user).
     A pose set's own split (:attr:`PoseSet.heldout`) is written as ``train_filenames`` and ``val_filenames``
     (the same ``file_path`` strings). ``extra`` adds top-level fields (e.g. ``{"reference_length": ...}``).
+    The ``n2r`` block (``extra["n2r"]``; made when absent and a photo has an EXIF orientation tag, the one case where
+    it matters) gets ``pixels``: ``pixels``, else the pose set's :attr:`PoseSet.pixels`, else ``"upright"``, so the
+    file reads back to the same cameras and the same pixels (:mod:`~pytest_n2r.data.transforms_pixels`).
     """
     path = Path(path)
+    if pixels is None:
+        pixels = frames.pixels if isinstance(frames, PoseSet) else "upright"
+    if pixels not in PIXELS:
+        raise IngestError(f"cannot write {path}: pixels={pixels!r} is not one of {', '.join(map(repr, PIXELS))}")
     heldout = frames.heldout if isinstance(frames, PoseSet) else None
     frames = frames.frames if isinstance(frames, PoseSet) else list(frames)
     if not frames:
@@ -342,6 +341,9 @@ def write_transforms_json(
         out["train_filenames"] = [n for f, n in zip(frames, names) if f.name not in heldout]
         out["val_filenames"] = [n for f, n in zip(frames, names) if f.name in heldout]
     out.update(extra or {})
+    block = out.get("n2r")
+    if isinstance(block, dict) or tagged_count([f.path for f in frames if f.path is not None]):
+        out["n2r"] = {**(block or {}), "pixels": pixels}
     records = []
     for frame, name, cam in zip(frames, names, cameras):
         record: dict[str, Any] = {"file_path": name}

@@ -1,5 +1,5 @@
 """transforms.json as other tools write and read it: instant-ngp's per-axis focal lengths and Windows separators,
-nerfstudio's masks, photos with an EXIF orientation tag, whole-pixel sizes, and what ``n2r poses -o`` tells the user
+nerfstudio's masks, whole-pixel sizes, and what ``n2r poses -o`` tells the user
 when it writes a lens nerfstudio and instant-ngp cannot read."""
 
 from __future__ import annotations
@@ -94,36 +94,6 @@ def test_a_file_whose_name_holds_a_backslash_is_read_as_written(tmp_path):
     Image.new("RGB", (32, 24)).save(tmp_path / "images\\a.png")  # a POSIX file name with a backslash in it
     frame = read_transforms_json(_write(tmp_path, {"fl_x": 50}, [{"file_path": "images\\a.png"}])).frames[0]
     assert frame.path == tmp_path / "images\\a.png" and frame.camera.width == 32
-
-
-def _tagged_jpeg(path: Path, orientation: int | None) -> None:
-    """A 64x48 JPEG (stored landscape) with the EXIF orientation tag ``orientation`` (none: no tag)."""
-    exif = Image.Exif()
-    if orientation is not None:
-        exif[0x0112] = orientation
-    Image.new("RGB", (64, 48), (90, 120, 150)).save(path, exif=exif.tobytes())
-
-
-@pytest.mark.parametrize("orientation", [6, 8, 3, 2])
-def test_a_photo_with_an_orientation_tag_and_no_w_h_is_refused_naming_it(tmp_path, orientation):
-    """Without ``w`` and ``h``, intrinsics of the pixels as stored (nerfstudio's, instant-ngp's) and of the upright
-    photo (n2r's) cannot be told apart: the camera used to take the upright size and keep the stored cx, cy."""
-    _tagged_jpeg(tmp_path / "p.jpg", orientation)
-    path = _write(tmp_path, {"fl_x": 50, "fl_y": 50, "cx": 34, "cy": 24}, [{"file_path": "p.jpg"}])
-    upright = "48x64" if orientation in (6, 8) else "64x48"
-    with pytest.raises(IngestError, match=rf"frames\[0\]: image file '.*p\.jpg' has EXIF orientation {orientation}: "
-                                          rf"stored as 64x48 pixels, shown turned or mirrored as {upright}.*"
-                                          rf"no 'w' and 'h'.*expected fields 'w' and 'h' of the upright photo"):
-        read_transforms_json(path)
-
-
-def test_a_photo_without_a_tag_or_with_w_h_is_read(tmp_path):
-    _tagged_jpeg(tmp_path / "plain.jpg", None)
-    _tagged_jpeg(tmp_path / "turned.jpg", 6)
-    plain = read_transforms_json(_write(tmp_path, {"fl_x": 50}, [{"file_path": "plain.jpg"}])).frames[0].camera
-    assert (plain.width, plain.height) == (64, 48)
-    sized = _write(tmp_path, {"fl_x": 50, "w": 48, "h": 64}, [{"file_path": "turned.jpg"}])
-    assert read_transforms_json(sized).frames[0].camera.width == 48  # w, h say which: the upright photo
 
 
 @settings(max_examples=40, deadline=None)

@@ -299,7 +299,7 @@ def test_write_then_read_keeps_names_cameras_and_poses(corner, tmp_path):
     assert [f.path.resolve() for f in again.frames] == [f.path.resolve() for f in poses.frames]
     meta = json.loads(out.read_text())
     assert meta["frames"][0]["file_path"] == f"../images/{corner.names[0]}"
-    assert meta["n2r"] == {"reference_length": 3.0}
+    assert meta["n2r"] == {"reference_length": 3.0, "pixels": "stored"}  # another tool's file: read as stored
     for a, b in zip(again.frames, poses.frames):
         assert a.camera == b.camera
         np.testing.assert_allclose(a.c2w, b.c2w, atol=1e-12)

@@ -224,8 +224,8 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"fisheye\.json: field 'camera_model'='FISHEYE624' is not supported; expected one of OPENCV, PINHOLE"),
     ("poses of a transforms.json whose w is 160.5 pixels", "poses {fraction_json}",
      r"fraction\.json: frames\[0\]: field 'w'=160\.5 must be a whole number of pixels"),
-    ("poses of a transforms.json without w, h of a photo turned by its EXIF tag", "poses {turned_json}",
-     r"turned\.json: frames\[0\]: image file .*p\.jpg' has EXIF orientation 6: .*expected fields 'w' and 'h'"),
+    ("poses of a transforms.json whose n2r.pixels is neither upright nor stored", "poses {turned_json}",
+     r"turned\.json: field 'n2r\.pixels'='sideways' is not one of 'upright', 'stored'"),
     ("poses --matcher fancy", "poses {capture} --matcher fancy", r"invalid choice: 'fancy'"),
     ("poses of a folder whose photos are in DCIM/100APPLE", "poses {dcim}",
      r"images folder '.*dcim' holds no images itself; its subfolder DCIM/100APPLE holds 3 images: pass that folder$"),
@@ -258,6 +258,11 @@ COMMAND_CASES: list[tuple[str, str, str]] = [
      r"--path nan: expected a finite number > 0 \(voxels\)"),
     ("import --background 2,2,2", "import {notes_txt} -o {new_n2r} --background 2,2,2",
      r"'2,2,2': expected three comma-separated values in \[0, 1\]"),
+    ("import --min-coverage 2", "import {notes_txt} -o {new_n2r} --min-coverage 2",
+     (r"--min-coverage 2\.0: expected a number in \[0, 1\] \(a share of the training views' pixels; 0 skips "
+      r"the check\)")),
+    ("import --min-coverage nan", "import {notes_txt} -o {new_n2r} --min-coverage nan",
+     r"--min-coverage nan: expected a number in \[0, 1\]"),
     # -- n2r demo
     ("demo export of an unknown scene", "demo export castle -o {tmp}/export",
      r"NAME 'castle': no such demo scene; expected one of"),
@@ -335,7 +340,7 @@ def workspace(tmp_path_factory) -> dict[str, str]:
     exif = Image.Exif()
     exif[0x0112] = 6  # a phone's portrait photo: landscape pixels, shown turned a quarter
     Image.new("RGB", (64, 48)).save(tmp / "turned" / "p.jpg", exif=exif.tobytes())
-    (tmp / "turned" / "turned.json").write_text(json.dumps({"fl_x": 50, "frames": [
+    (tmp / "turned" / "turned.json").write_text(json.dumps({"fl_x": 50, "n2r": {"pixels": "sideways"}, "frames": [
         {"file_path": "p.jpg", "transform_matrix": np.eye(4).tolist()}]}))
     (tmp / "dcim" / "DCIM" / "100APPLE").mkdir(parents=True)  # a phone's folders copied as they are
     for k in range(3):
