@@ -49,16 +49,33 @@ def decode_heif(path: Path, oriented: bool = True) -> tuple[np.ndarray, bytes | 
         return image, icc
     # the primary image's transformative properties in the order libheif applied them (pillow-heif keeps them on its
     # decoded image, not yet under a public name)
-    transformations = getattr(getattr(heif[heif.primary_index], "_c_image", None), "transformations", None)
-    if transformations is None:
-        raise IngestError(f"image file {str(path)!r}: this pillow-heif does not tell the HEIF photo's rotation and "
-                          "mirror, so its pixels cannot be read as stored (as COLMAP reads them); upgrade pillow-heif")
-    for name, *values in reversed(transformations):
+    for name, *values in reversed(_transformations(path, heif)):
         if name == "imir":  # libheif's mirror direction: 0 flips top and bottom, 1 left and right
             image = image[::-1] if values[0] == 0 else image[:, ::-1]
         elif name == "irot":  # degrees anticlockwise
             image = np.rot90(image, -values[0] // 90)
     return np.ascontiguousarray(image), icc
+
+
+def _transformations(path: Path, heif) -> list:
+    """The primary image's transformative properties (``("irot", degrees anticlockwise)``, ``("imir", axis)``) in
+    the order libheif applies them (pillow-heif keeps them on its image, not yet under a public name)."""
+    transformations = getattr(getattr(heif[heif.primary_index], "_c_image", None), "transformations", None)
+    if transformations is None:
+        raise IngestError(f"image file {str(path)!r}: this pillow-heif does not tell the HEIF photo's rotation and "
+                          "mirror, so its pixels cannot be read as stored (as COLMAP reads them); upgrade pillow-heif")
+    return list(transformations)
+
+
+def heif_turn(path: Path) -> tuple[bool, bool]:
+    """Whether the HEIF photo at ``path`` is shown otherwise than stored (an ``irot`` or ``imir``), and whether a
+    quarter turn swaps its sides, read from its container without decoding."""
+    import pillow_heif
+
+    with heif_errors(path):
+        steps = _transformations(path, pillow_heif.open_heif(path))
+    degrees = sum(values[0] for name, *values in steps if name == "irot") % 360
+    return degrees != 0 or any(name == "imir" for name, *_ in steps), degrees % 180 == 90
 
 
 def heif_size(path: Path) -> tuple[int, int]:

@@ -33,13 +33,13 @@ import numpy as np
 
 from ..errors import IngestError
 from .colour import has_alpha, to_srgb, warn_if_transparent
-from .heif import decode_heif, heif_size, is_iso_media
+from .heif import decode_heif, heif_size, heif_turn, is_iso_media
 from .listing import IMAGE_SUFFIXES, images_in_subfolders, list_images, other_files, subfolder_hint
 
 if TYPE_CHECKING:
     import PIL.Image
 
-__all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "read_orientation", "to_rgb8",
+__all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "read_turn", "to_rgb8",
            "resize_image", "iter_readable", "images_in_subfolders", "subfolder_hint", "other_files"]
 
 #: The largest image side (pixels) read: :data:`pytest_n2r.render.size.MAX_SIDE` (``data`` sits below ``render``).
@@ -239,10 +239,16 @@ def _check_sides(path: Path, width: int, height: int) -> tuple[int, int]:
     return width, height
 
 
-def read_orientation(path: str | os.PathLike) -> int:
-    """The EXIF orientation tag of the image file ``path`` (1 to 8; 1 when it has none, or when Pillow cannot read
-    its header: the decoder names the file), the one :func:`read_image` turns the photo by."""
-    return _stored_facts(Path(path))[0]
+def read_turn(path: str | os.PathLike) -> tuple[bool, bool]:
+    """Whether :func:`read_image` shows the image file ``path`` otherwise than its pixels are stored (its EXIF
+    orientation tag, 2 to 8; a HEIF photo's ``irot`` / ``imir``, which its tag only describes), and whether the sides
+    are swapped so (a quarter turn); ``(False, False)`` when Pillow cannot read the header (the decoder names the
+    file)."""
+    path = Path(path)
+    if is_iso_media(_head(path)):
+        return heif_turn(path)
+    orientation = _stored_facts(path)[0]
+    return orientation != 1, orientation in (5, 6, 7, 8)
 
 
 def _stored_facts(path: Path) -> tuple[int, bytes | None, bool]:

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Literal
 
 from ..errors import IngestError
-from .images import read_image_size, read_orientation
+from .images import read_image_size, read_turn
 
 __all__ = ["Pixels", "PIXELS", "pixels_of", "photo_size", "tagged_count", "tagged_photos_note"]
 
@@ -56,16 +56,17 @@ def pixels_of(meta: dict, path: Path) -> Pixels:
 
 def photo_size(image: Path, pixels: Pixels) -> tuple[int, int]:
     """``(width, height)`` of the photo ``image`` as ``pixels`` reads it: upright, or as stored (a quarter turn by its
-    EXIF tag, orientations 5 to 8, swaps the sides back)."""
+    EXIF tag, orientations 5 to 8, or a HEIF photo's ``irot``, swaps the sides back)."""
     width, height = read_image_size(image)
-    if pixels == "stored" and read_orientation(image) in (5, 6, 7, 8):
+    if pixels == "stored" and read_turn(image)[1]:
         return height, width
     return width, height
 
 
 def tagged_count(images: list[Path]) -> int:
-    """How many of the photos ``images`` have an EXIF orientation tag other than 1 (read from their headers)."""
-    return sum(1 for image in images if read_orientation(image) != 1)
+    """How many of the photos ``images`` are shown otherwise than stored: an EXIF orientation tag other than 1, a
+    HEIF photo's rotation or mirror (read from their headers)."""
+    return sum(1 for image in images if read_turn(image)[0])
 
 
 def tagged_photos_note(path: Path, images: list[Path]) -> str | None:
@@ -75,6 +76,6 @@ def tagged_photos_note(path: Path, images: list[Path]) -> str | None:
     if not tagged:
         return None
     return (f"{path}: {tagged} of {len(images)} photos have an EXIF orientation tag; read as stored (the tag "
-            "ignored), as nerfstudio and instant-ngp read a transforms.json's photos, so the file's cameras and poses "
-            "are taken to describe the stored pixels; if they describe the photos as shown (upright), save the photos "
-            "turned, the tag removed")
+            "ignored, a HEIF photo's rotation undone), as nerfstudio and instant-ngp read a transforms.json's photos, "
+            "so the file's cameras and poses are taken to describe the stored pixels; if they describe the photos as "
+            "shown (upright), save the photos turned, the tag removed")

@@ -15,6 +15,7 @@ from pytest_n2r.data.images import (
     other_files,
     read_image,
     read_image_size,
+    read_turn,
     subfolder_hint,
     to_rgb8,
 )
@@ -118,6 +119,22 @@ def test_a_heif_photo_as_stored_has_its_rotation_and_mirror_undone(tmp_path, ori
     assert got.shape == stored.shape, f"orientation {orientation}: the HEIF read as stored is {got.shape}"
     error = np.abs(got.astype(int) - stored).mean()
     assert error < 2.0, f"orientation {orientation}: the HEIF read as stored differs from its pixels by {error:.1f}"
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_read_turn_says_how_a_photo_is_shown_against_its_stored_pixels(tmp_path, orientation):
+    """A HEIF photo's turn is its irot / imir (its EXIF tag only describes them): read_turn took the tag alone, so a
+    transforms.json of turned HEIC photos was read as if none were turned."""
+    stored = cv2.resize(_pattern(), (40, 60), interpolation=cv2.INTER_NEAREST)
+    _save_heic(stored, tmp_path / "a.heic", orientation)
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    Image.fromarray(stored).save(tmp_path / "a.jpg", exif=exif, quality=100)
+    for name in ("a.heic", "a.jpg"):
+        turned, swapped = read_turn(tmp_path / name)
+        shown = read_image(tmp_path / name)
+        assert turned == (orientation != 1), f"{name}, orientation {orientation}: turned={turned}"
+        assert swapped == (shown.shape[:2] != stored.shape[:2]), f"{name}, orientation {orientation}: swapped={swapped}"
 
 
 def test_a_heif_photo_is_read_by_its_content_whatever_its_name(tmp_path):
