@@ -76,6 +76,6 @@ def tagged_photos_note(path: Path, images: list[Path]) -> str | None:
     if not tagged:
         return None
     return (f"{path}: {tagged} of {len(images)} photos have an EXIF orientation tag; read as stored (the tag "
-            "ignored, a HEIF photo's rotation undone), as nerfstudio and instant-ngp read a transforms.json's photos, "
+            "ignored; a HEIF photo's rotation undone), as nerfstudio and instant-ngp read a transforms.json's photos, "
             "so the file's cameras and poses are taken to describe the stored pixels; if they describe the photos as "
             "shown (upright), save the photos turned, the tag removed")

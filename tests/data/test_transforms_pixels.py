@@ -161,7 +161,7 @@ def test_the_warning_names_the_file_and_how_many_photos_have_a_tag(corner, capsy
     _tag(corner.images_dir / corner.names[2], 6)
     _tag(corner.images_dir / corner.names[4], 8)
     path = write_transforms(corner)
-    expected = f"{path}: 2 of 6 photos have an EXIF orientation tag; read as stored (the tag ignored)"
+    expected = f"{path}: 2 of 6 photos have an EXIF orientation tag; read as stored (the tag ignored;"
     with pytest.warns(UserWarning, match=re.escape(expected)) as caught:
         poses = read_transforms_json(path)
     assert len([w for w in caught if "EXIF orientation" in str(w.message)]) == 1, "warned more than once"
