@@ -48,16 +48,15 @@ def _is_scene_zip(path: Path) -> bool:
         return False
 
 
-def _json_with_key(key: str) -> Callable[[Path], bool]:
-    def sniff(path: Path) -> bool:
-        if path.stat().st_size > 256 * 2**20:
-            return False
-        try:
-            data = json.loads(path.read_bytes())
-        except (ValueError, RecursionError):
-            return False
-        return isinstance(data, dict) and key in data
-    return sniff
+def _json_object(path: Path) -> dict | None:
+    """The JSON object in the file at ``path``; ``None`` when it is over 256 MiB, not JSON or not an object."""
+    if path.stat().st_size > 256 * 2**20:
+        return None
+    try:
+        data = json.loads(path.read_bytes())
+    except (ValueError, RecursionError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 @dataclass(frozen=True)
@@ -79,9 +78,16 @@ class OutputKind:
 SCENE = OutputKind("a .n2r scene file", (".n2r",), _is_scene_zip)
 PNG = OutputKind("a PNG image", (".png",), _has_magic(b"\x89PNG\r\n\x1a\n"))
 NPY = OutputKind("a NumPy .npy array", (".npy",), _has_magic(b"\x93NUMPY"))
-#: ``n2r poses -o``: a transforms.json it wrote before carries its ``n2r`` key; any other one (the
-#: capture's own, nerfstudio's) is the user's data.
-POSES_JSON = OutputKind("a transforms.json written by `n2r poses`", (".json",), _json_with_key("n2r"))
+def _poses_json(path: Path) -> bool:
+    """A transforms.json ``n2r poses -o`` wrote: its ``n2r`` block names the poses' ``source`` (the block alone is
+    not enough: any file n2r writes of turned photos records its ``pixels`` there, a phone capture's too)."""
+    block = (_json_object(path) or {}).get("n2r")
+    return isinstance(block, dict) and "source" in block
+
+
+#: ``n2r poses -o``: a transforms.json it wrote before carries its ``n2r`` block with the poses' source; any other
+#: one (the capture's own, nerfstudio's, a phone capture's) is the user's data.
+POSES_JSON = OutputKind("a transforms.json written by `n2r poses`", (".json",), _poses_json)
 
 
 def _same_file(a: Path, b: Path) -> bool:

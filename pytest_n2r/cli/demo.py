@@ -26,10 +26,10 @@ def _size(text: str) -> int | tuple[int, int]:
 
 def _is_export(folder: Path) -> bool:
     """Whether ``folder`` holds an earlier ``n2r demo export`` (its transforms.json names the demo scene)."""
-    from ._output import _json_with_key
+    from ._output import _json_object
 
     path = folder / "transforms.json"
-    return path.is_file() and _json_with_key("n2r_scene")(path)
+    return path.is_file() and "n2r_scene" in (_json_object(path) or {})
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import IngestError
 
-__all__ = ["is_iso_media", "decode_heif", "heif_size", "heif_errors"]
+__all__ = ["is_iso_media", "decode_heif", "heif_size", "heif_turn", "heif_errors"]
 
 
 def is_iso_media(head: bytes) -> bool:

@@ -246,7 +246,10 @@ def read_turn(path: str | os.PathLike) -> tuple[bool, bool]:
     file)."""
     path = Path(path)
     if is_iso_media(_head(path)):
-        return heif_turn(path)
+        try:
+            return heif_turn(path)
+        except IngestError:  # a HEIF photo cut short or corrupt: decoding it names the file (its frame is skipped)
+            return False, False
     orientation = _stored_facts(path)[0]
     return orientation != 1, orientation in (5, 6, 7, 8)
 

@@ -270,9 +270,9 @@ def _output_camera(camera: Camera, downscale: float, max_size: int | None) -> Ca
 _STORED_SIZE_HINT = {
     "colmap": ("its pixels as stored: COLMAP ignores a photo's orientation tag, so a model made from these files has "
                "cameras of their stored size; was it made from turned copies? give it those)"),
-    "transforms.json": ("its pixels as stored: a transforms.json that n2r did not write describes the photos as "
-                        "nerfstudio and instant-ngp read them, the orientation tag ignored; was it made from turned "
-                        "copies? give it those)"),
+    "transforms.json": ("its pixels as stored: the transforms.json describes the photos as stored (another tool's "
+                        "file, read as nerfstudio and instant-ngp read it, the orientation tag ignored, or n2r's with "
+                        "n2r.pixels 'stored'); was it made from turned copies? give it those)"),
 }
 
 

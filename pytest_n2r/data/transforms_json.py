@@ -138,7 +138,7 @@ def read_transforms_json(path: str | os.PathLike, *, images: bool = True) -> Pos
         raise IngestError(f"{path}: none of the {len(raw_frames)} frames has its image file")
     heldout = _read_split(meta, path, [raw["file_path"] for raw in raw_frames])
     notes: list[str] = []
-    if pixels == "stored" and not isinstance(meta.get("n2r"), dict):  # another tool's file: its tagged photos
+    if images and pixels == "stored" and not isinstance(meta.get("n2r"), dict):  # another tool's, photos to read
         notes.append(tagged_photos_note(path, [f.path for f in frames if f.path is not None]) or "")
     masked = sum(1 for raw in raw_frames if raw.get("mask_path") is not None)
     if masked:

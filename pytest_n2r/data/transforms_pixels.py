@@ -78,4 +78,5 @@ def tagged_photos_note(path: Path, images: list[Path]) -> str | None:
     return (f"{path}: {tagged} of {len(images)} photos have an EXIF orientation tag; read as stored (the tag "
             "ignored; a HEIF photo's rotation undone), as nerfstudio and instant-ngp read a transforms.json's photos, "
             "so the file's cameras and poses are taken to describe the stored pixels; if they describe the photos as "
-            "shown (upright), save the photos turned, the tag removed")
+            "shown (upright), save the photos turned, the tag removed, or, for a file n2r wrote before 7 December "
+            "2026, add \"n2r\": {\"pixels\": \"upright\"}")

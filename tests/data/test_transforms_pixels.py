@@ -206,3 +206,29 @@ def test_an_n2r_block_with_another_pixels_is_refused_naming_the_field(tmp_path):
     with pytest.raises(IngestError, match=r"transforms\.json: field 'n2r\.pixels'='sideways' is not one of 'upright', "
                                           r"'stored'"):
         read_transforms_json(tmp_path / "transforms.json")
+
+
+def test_a_corrupt_heic_among_the_photos_is_skipped_not_the_whole_file(corner):
+    """Counting the photos shown turned read every header, and a HEIC photo cut short raised there: the whole
+    transforms.json failed to load where the frame alone had been skipped."""
+    bad = corner.images_dir / corner.names[3]
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    meta["frames"][3]["file_path"] = meta["frames"][3]["file_path"].rsplit(".", 1)[0] + ".heic"
+    path.write_text(json.dumps(meta))
+    bad.with_suffix(".heic").write_bytes(b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00" + b"\x00" * 20)  # cut short
+    with pytest.warns(UserWarning, match=r"skipping frame 'images/view_003\.heic': .* cannot be decoded as a HEIF"):
+        captured = ingest(path)
+    assert len(captured.views) == len(corner.names) - 1, [v.name for v in captured.views]
+
+
+def test_poses_o_replaces_only_its_own_output_not_a_file_with_an_n2r_pixels_block(corner, tmp_path):
+    """Any file n2r writes of turned photos records n2r.pixels, a phone capture's too; n2r poses took every file with
+    an n2r block for its own output and replaced it without --force."""
+    theirs = tmp_path / "capture.json"
+    theirs.write_text(json.dumps({"frames": [], "n2r": {"pixels": "upright"}}))
+    assert main(["poses", str(write_transforms(corner)), "-o", str(theirs)]) == 2
+    assert json.loads(theirs.read_text()) == {"frames": [], "n2r": {"pixels": "upright"}}, "the file was replaced"
+    ours = tmp_path / "poses.json"
+    assert main(["poses", str(write_transforms(corner)), "-o", str(ours)]) == 0
+    assert main(["poses", str(write_transforms(corner)), "-o", str(ours)]) == 0, "its own output needs no --force"
