@@ -83,6 +83,7 @@ def check_frames_dir(frames_dir: Path | None, force: bool) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..data.ingest import complete_points, extent, load_poses
     from ..data.transforms_json import RATIONAL_MODEL_NOTE, camera_model_of, write_transforms_json
+    from ..data.transforms_pixels import tagged_count
     from ._interrupt import sigterm_kept_from_pycolmap
 
     check_arguments(args)
@@ -118,6 +119,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote       {printable(path)} ({len(poses.frames)} frames)")
         if camera_model_of(poses) != "OPENCV":  # a lens only n2r reads back: say so where the file is named
             print(printable(f"n2r poses: warning: {path} has {RATIONAL_MODEL_NOTE}"), file=sys.stderr)
+        turned = tagged_count([f.path for f in poses.frames if f.path is not None]) if poses.pixels == "upright" else 0
+        if turned:  # upright cameras of photos another tool reads as stored
+            print(printable(f"n2r poses: warning: {path} describes its photos upright ({turned} of them turned by an "
+                            "EXIF tag or a HEIF rotation), as n2r reads them back; nerfstudio and instant-ngp read "
+                            "the pixels as stored, so for them save the photos turned, the tag removed"),
+                  file=sys.stderr)
     return 0
 
 

@@ -302,7 +302,8 @@ def write_transforms_json(
     pixels: Pixels | None = None,
 ) -> Path:
     """Write frames as a transforms.json (atomically) and return its path: nerfstudio's and instant-ngp's format, which
-    both read unless a lens needs ``FULL_OPENCV`` (below).
+    both read as meant unless a lens needs ``FULL_OPENCV`` (below) or the cameras describe turned photos upright
+    (``pixels``: those tools read the pixels as stored).
 
     ``file_path`` is the image's path relative to the json's folder when the frame knows its file
     (else the frame's name), so two pose sets of the same images can be compared frame by frame.

@@ -112,11 +112,13 @@ def _upright_n2r_json(corner: SyntheticCapture, orientation: int) -> Path:
 
 
 @pytest.mark.parametrize("orientation", [3, 6])
-def test_a_file_n2r_wrote_reads_its_photos_upright_through_poses_o(corner, tmp_path, orientation, recwarn):
+def test_a_file_n2r_wrote_reads_its_photos_upright_through_poses_o(corner, tmp_path, orientation, recwarn, capsys):
     renders = [_stored(corner.images_dir / n) for n in corner.names]
     path = _upright_n2r_json(corner, orientation)
     out = tmp_path / "out" / "again.json"
     assert main(["poses", str(path), "-o", str(out)]) == 0
+    assert (f"n2r poses: warning: {out} describes its photos upright ({len(corner.names)} of them turned by an EXIF "
+            "tag or a HEIF rotation)") in capsys.readouterr().err, "the file other tools misread was not said"
     for source in (path, out):
         capture = ingest(source)
         for view, render, c2w in zip(capture.views, renders, corner.c2ws):
