@@ -21,7 +21,6 @@ COLMAP model or of a transforms.json without ``A`` move by ``T`` and ``s``.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -31,6 +30,7 @@ import numpy as np
 from .._validation import is_finite
 from ..errors import IngestError
 from ..geometry import apply_similarity_to_pose, rotation_angle_deg
+from .json_file import read_json_file
 from .poses import PoseSet
 
 __all__ = ["DATAPARSER_FILE", "FrameTransform", "find_dataparser_transforms", "read_dataparser_transforms"]
@@ -107,10 +107,7 @@ def read_dataparser_transforms(path: str | os.PathLike) -> FrameTransform:
     Raises :class:`IngestError` naming the file and the field for anything else.
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise IngestError(f"{path}: cannot read it as nerfstudio's {DATAPARSER_FILE} ({exc})") from None
+    data = read_json_file(path, DATAPARSER_FILE)
     if not isinstance(data, dict) or "transform" not in data or "scale" not in data:
         raise IngestError(f"{path}: expected a JSON object with 'transform' (3x4) and 'scale', as nerfstudio's "
                           f"{DATAPARSER_FILE} holds")
@@ -134,8 +131,8 @@ def _applied_transform(poses: PoseSet) -> tuple[tuple[np.ndarray, np.ndarray], f
         return None
     source = Path(poses.source)
     try:
-        data = json.loads(source.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        data = read_json_file(source, "transforms")
+    except IngestError:
         return None  # it was read moments ago; its reader names what is wrong
     if not isinstance(data, dict) or "applied_transform" not in data:
         return None

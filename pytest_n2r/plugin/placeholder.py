@@ -61,6 +61,7 @@ def html_placeholder() -> str:
 
 
 def register(config: pytest.Config, outputs: dict[str, Path]) -> None:
-    """Register the placeholders of the session's JSON and HTML reports, in the controller, if any is given."""
-    if not hasattr(config, "workerinput") and ("json" in outputs or "report" in outputs):
+    """Register the placeholders of the session's JSON and HTML reports (the caller has one of them), in the
+    controller."""
+    if not hasattr(config, "workerinput"):
         config.pluginmanager.register(Placeholders(outputs), "n2r-placeholders")
