@@ -11,7 +11,6 @@ and ``@pytest.mark.n2r_scene`` override them per test: marker keyword > command 
 from __future__ import annotations
 
 import functools
-import gc
 import inspect
 import sys
 import time
@@ -20,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from . import garbage_collector
 from .options import OPTIONS, add_options, is_used, read_options
 from .summary import Summary
 
@@ -40,12 +40,6 @@ RELATION_MARKER = "n2r_relation"
 
 _SESSION = pytest.StashKey["Any"]()
 _RECORD = pytest.StashKey["dict"]()
-#: ids of the scenes after whose first setup since a scene was released the heap was frozen (pytest_runtest_setup).
-_FROZEN_SCENES = pytest.StashKey[set]()
-#: True once the session froze the heap (:func:`pytest_runtest_setup`); :func:`pytest_unconfigure` unfreezes it.
-_FROZEN = pytest.StashKey[bool]()
-#: True while the cyclic garbage collector is off for the session's start-up (see :func:`_pause_collector`).
-_GC_PAUSED = pytest.StashKey[bool]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -84,14 +78,15 @@ def pytest_configure(config: pytest.Config) -> None:
         "or a .n2r path, 'demo:<name>' or 'module:function')",
     )
     config.addinivalue_line("markers", f"{RELATION_MARKER}: a @metamorphic relation test (set by the decorator)")
+    config.add_cleanup(functools.partial(garbage_collector.unfreeze, config))  # the first, so the last to run
     summary = Summary(config, _LOADED, lambda: _describe(session_of(config)))
     config.pluginmanager.register(summary, "n2r-summary")
     if is_used(config):
-        _pause_collector(config)  # before the engine's imports
+        garbage_collector.pause(config)  # before the engine's imports
         try:
             session = session_of(config)  # bad options fail now, before collection
         except BaseException:
-            _resume_collector(config)
+            garbage_collector.resume(config)
             raise
         if config.getoption("n2r_cache_clear") and not hasattr(config, "workerinput"):
             session.cache.clear()  # the controller clears before xdist workers start
@@ -109,28 +104,6 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
     error = check_rootdir(params.args, params.dir, config.rootpath, config.inipath)
     if error is not None:
         raise pytest.UsageError(error)
-
-
-def _pause_collector(config: pytest.Config) -> None:
-    """Turn the cyclic garbage collector off until the end of the first test's setup, where
-    :func:`pytest_runtest_setup` collects once, freezes the heap and turns it back on. The start-up (the engine's
-    imports, the test modules', a network's in its fixture) allocates millions of objects that live for the session
-    and few cycles, and the collector walked them all in each of its full collections: in a warm main job 12 of
-    them took 0.55-0.70 s of CPU, with the collector off during the start-up 5 took 0.37-0.45 s
-    (docs/performance-log.md, 2 December). Not in a pytest-xdist controller (it runs no test), nor when the collector
-    was off already; :func:`pytest_unconfigure` turns it back on in a session that ran no test."""
-    if gc.isenabled() and (hasattr(config, "workerinput") or getattr(config.option, "dist", "no") == "no"):
-        gc.disable()
-        config.stash[_GC_PAUSED] = True
-
-
-def _resume_collector(config: pytest.Config) -> bool:
-    """Turn the collector back on if :func:`_pause_collector` turned it off; whether it did."""
-    if not config.stash.get(_GC_PAUSED, False):
-        return False
-    config.stash[_GC_PAUSED] = False
-    gc.enable()
-    return True
 
 
 def pytest_report_header(config: pytest.Config) -> list[str] | None:
@@ -219,13 +192,11 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> 
     """Release the scenes no later test of this process uses (:meth:`~.session.N2RSession.release_done`)."""
     yield
     if (session := item.config.stash.get(_SESSION, None)) is not None and session.release_done(item, nextitem):
-        item.config.stash.get(_FROZEN_SCENES, set()).clear()  # the next setup on a scene collects their cycles
+        garbage_collector.rescan_scenes(item.config)
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    _resume_collector(config)
-    if config.stash.get(_FROZEN, False):
-        gc.unfreeze()  # what the session froze (its config, scenes, a caller's objects) can be freed again
+    garbage_collector.resume(config)
     if (session := config.stash.get(_SESSION, None)) is not None:
         session.close()
 
@@ -264,27 +235,9 @@ def n2r_session(request: pytest.FixtureRequest) -> Any:
 
 @pytest.hookimpl(hookwrapper=True)  # old-style wrapper: works from pytest 7.4 on
 def pytest_runtest_setup(item: pytest.Item) -> Any:
-    """After the setup of the first test on each scene, collect the garbage and then move every object alive out of the
-    cyclic garbage collector's sight (:func:`gc.freeze`): what a session loads and keeps (imports, the scene, networks,
-    compiled kernels) is then no longer walked by every full collection. Measured on the main job: the collector's time
-    7.1 → 2.7 s of a cold run (the kernels' compilation makes many collections), 0.9 → 0.6 s of a warm one
-    (docs/performance-log.md). The collection first, and once a scene (again after a release: it frees the released
-    scene's cycles) rather than at every test, so that no garbage is frozen: a cycle that was already unreachable would
-    never be freed (a released scene's cycles frozen before stay frozen, some 17 MB of a fitted scene's 450: unfreezing
-    would walk the whole heap at each change of scene). After the session's first setup too, when the start-up ran with
-    the collector off (:func:`_pause_collector`), which it turns back on after the freeze: turned on first, its next
-    allocation started a young collection of every object the start-up made (0.1 s in a warm main job)."""
+    """Freeze the heap after the first setup on each scene (:func:`.garbage_collector.freeze_after_setup`)."""
     yield
-    paused = item.config.stash.get(_GC_PAUSED, False)
-    scene = getattr(item, "funcargs", {}).get("n2r_scene")
-    frozen = item.config.stash.setdefault(_FROZEN_SCENES, set())  # emptied by a release
-    if new_scene := scene is not None and id(scene) not in frozen:
-        frozen.add(id(scene))
-    if new_scene or paused:
-        gc.collect()
-        gc.freeze()
-        item.config.stash[_FROZEN] = True
-    _resume_collector(item.config)
+    garbage_collector.freeze_after_setup(item)
 
 
 @pytest.hookimpl(tryfirst=True)
