@@ -116,8 +116,13 @@ def _describe(session: Any) -> str:
     names = ", ".join(s.name for s in session.scenes or default_scene_specs()) or "none configured"
     torch = sys.modules.get("torch")  # not imported for the header
     threads = f"torch threads {torch.get_num_threads()}" if torch is not None else "torch not loaded"
+    device = session.device
+    if device == "auto" and torch is not None:  # loaded (by a scene, a SUT, the caller): say which it chose
+        from ..field.device import resolve_device
+
+        device = f"auto ({resolve_device(device)})"
     cache = session.cache_dir if session.cache_dir is not None else "memory only"
-    return f"n2r: scenes {names}; device {session.device}; {threads}; cache {cache}"
+    return f"n2r: scenes {names}; device {device}; {threads}; cache {cache}"
 
 
 # -- collection --------------------------------------------------------------------------------------------

@@ -689,10 +689,19 @@ def test_breaks(n2r_scene):
 
 
 def test_header_lists_scenes_device_threads_and_cache(n2r_project):
+    """Run in this process, where torch is loaded: "auto" is shown with the device it chooses."""
+    import torch
+
     n2r_project.write("def test_nothing():\n    pass\n")
     result = n2r_project.run("--n2r-scene", PLANE, "--n2r-cache-dir", "mycache")
-    result.stdout.fnmatch_lines(["n2r: scenes plane; device auto; torch *; cache */mycache"])
-    assert "torch threads torch not loaded" not in result.stdout.str()
+    chosen = "cuda" if torch.cuda.is_available() else "cpu"
+    result.stdout.fnmatch_lines([f"n2r: scenes plane; device auto ({chosen}); torch threads *; cache */mycache"])
+
+
+def test_header_does_not_load_torch_to_name_the_device(n2r_project):
+    n2r_project.write("def test_nothing():\n    pass\n")
+    result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider", "--n2r-scene", PLANE)
+    result.stdout.fnmatch_lines(["n2r: scenes plane; device auto; torch not loaded; cache *"])
 
 
 def test_the_plugin_does_nothing_when_unused(n2r_project):
