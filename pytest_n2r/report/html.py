@@ -12,7 +12,7 @@ import base64
 import html
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from ..data.atomic import atomic_write_chunks
@@ -124,19 +124,26 @@ def _not_run_table(not_run: list[dict[str, str]]) -> str:
             f"<th>outcome</th><th>reason</th></tr></thead><tbody>{rows}</tbody></table>")
 
 
-def _summary_row(anchor: str, rel: RelationRecord) -> str:
+def _reruns(count: int) -> str:
+    """What a count of earlier tries (pytest-rerunfailures' ``--reruns``) adds to an outcome, or nothing."""
+    if not count:
+        return ""
+    return f" after {'1 earlier try' if count == 1 else f'{count} earlier tries'} under this test id (the last counts)"
+
+
+def _summary_row(anchor: str, rel: RelationRecord, reruns: int) -> str:
     valid = rel.valid_examples
     rate = rel.inconsistencies / len(valid) if valid else math.nan
     worst = rel.worst
     css, outcome = _outcome(rel)
     return (f'<tr><td><a href="#{anchor}">{html.escape(rel.nodeid)}</a></td><td class="{css}">'
-            f"{outcome}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
+            f"{outcome}{_reruns(reruns)}</td><td>{len(valid)}</td><td>{rel.rejected}</td><td>{rel.undefined}</td>"
             f"<td>{rel.inconsistencies}</td><td>{'—' if math.isnan(rate) else f'{rate:.1%}'}</td>"
             f"<td>{'—' if worst is None else f'{worst.deviation:.4g}'}</td><td>{rel.eps:g}</td>"
             f"<td>{_floor(rel)}</td></tr>")
 
 
-def _section(anchor: str, rel: RelationRecord, base: Path | None) -> Iterator[str]:
+def _section(anchor: str, rel: RelationRecord, base: Path | None, reruns: int) -> Iterator[str]:
     """The relation's section: heading, line, histogram, then its examples' pictures one at a time."""
     css, outcome = _outcome(rel)
     worst = rel.worst
@@ -145,7 +152,7 @@ def _section(anchor: str, rel: RelationRecord, base: Path | None) -> Iterator[st
            f"<p>metric <code>{html.escape(rel.metric)}</code>, eps {rel.eps:g}, outcome "
            f'<span class="{css}">{outcome}</span>'
            + (f" (the relation's own verdict: {rel.outcome})" if rel.pytest_outcome not in ("", rel.outcome) else "")
-           + (f"; time: {html.escape(timings)}" if timings else "") + "</p>\n"
+           + _reruns(reruns) + (f"; time: {html.escape(timings)}" if timings else "") + "</p>\n"
            + _histogram_svg([e.deviation for e in rel.valid_examples], rel.eps))
     if rel.minimal is not None:
         yield "\n"
@@ -160,12 +167,13 @@ def _section(anchor: str, rel: RelationRecord, base: Path | None) -> Iterator[st
 
 
 def html_chunks(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
-                not_run: list[dict[str, str]] | None = None,
-                images_base: str | os.PathLike | None = None) -> Iterator[str]:
+                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None,
+                reruns: Mapping[str, int] | None = None) -> Iterator[str]:
     """The report in pieces, built as they are asked for: the head and the summary table, then each relation's
     section, each picture read and encoded only when its piece is (so one is in memory at a time). Arguments as
     :func:`render_html`'s; the pieces joined are its page."""
     base = None if images_base is None else Path(images_base)
+    reruns = reruns or {}
     if partial is not None:
         title = f"{title} (partial)"
     ordered = sorted(relations, key=lambda r: r.nodeid)
@@ -175,28 +183,31 @@ def html_chunks(relations: list[RelationRecord], title: str = "pytest-n2r report
               "the relations that did not run are not in it.</p>") + _not_run_table(not_run or []) +
            "<table><thead><tr><th>relation</th><th>outcome</th><th>examples</th><th>rejected</th><th>undefined</th>"
            "<th>inconsistencies</th><th>rate</th><th>worst deviation</th><th>eps</th><th>field floor</th></tr>"
-           "</thead><tbody>" + "".join(_summary_row(f"rel{i}", rel) for i, rel in enumerate(ordered))
+           "</thead><tbody>"
+           + "".join(_summary_row(f"rel{i}", rel, reruns.get(rel.nodeid, 0)) for i, rel in enumerate(ordered))
            + "</tbody></table>")
     for i, rel in enumerate(ordered):
         if i:
             yield "\n"
-        yield from _section(f"rel{i}", rel, base)
+        yield from _section(f"rel{i}", rel, base, reruns.get(rel.nodeid, 0))
     yield "</body></html>\n"
 
 
 def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
-                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None) -> str:
+                not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None,
+                reruns: Mapping[str, int] | None = None) -> str:
     """The report as one HTML string (:func:`html_chunks` joined); ``partial``: why the session did not run every
     selected relation, shown in the title and a banner under it; ``not_run``: the relation tests that ended without
     a relation record (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the
     summary; ``images_base``: the folder relative image paths start from (a JSON report's folder: it writes them
-    so)."""
-    return "".join(html_chunks(relations, title, partial, not_run, images_base))
+    so); ``reruns``: by test id, how many earlier tries of it pytest-rerunfailures ran (the JSON report's ``reruns``),
+    said beside its outcome."""
+    return "".join(html_chunks(relations, title, partial, not_run, images_base, reruns))
 
 
 def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
                partial: str | None = None, not_run: list[dict[str, str]] | None = None,
-               images_base: str | os.PathLike | None = None) -> Path:
+               images_base: str | os.PathLike | None = None, reruns: Mapping[str, int] | None = None) -> Path:
     """Write the report to ``path`` atomically, piece by piece as :func:`html_chunks` builds it (one picture in
     memory at a time, never the whole page); the file is :func:`render_html`'s page."""
-    return atomic_write_chunks(path, html_chunks(relations, title, partial, not_run, images_base))
+    return atomic_write_chunks(path, html_chunks(relations, title, partial, not_run, images_base, reruns))

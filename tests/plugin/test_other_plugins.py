@@ -168,10 +168,17 @@ def test_a_test_run_twice_under_one_id_says_the_earlier_run_was_dropped(n2r_proj
     monkeypatch.setenv("N2R_FLAKY", "1")
     n2r_project.write(FLAKY)
     name = next(n2r_project.pytester.path.glob("test_*.py")).name
-    result = n2r_project.run("--keep-duplicates", name, name, "--n2r-scene", PLANE, "--n2r-json", "r.json")
+    result = n2r_project.run("--keep-duplicates", name, name, "--n2r-scene", PLANE, "--n2r-json", "r.json",
+                             "--n2r-report", "r.html")
     result.assert_outcomes(failed=1, passed=3)
     line = n2r_project.summary(result, "test_flaky[plane]")
     assert line.endswith("; rerun: 1 earlier try under this test id dropped, the last one counts"), line
     relations = json.loads((n2r_project.pytester.path / "r.json").read_text())["relations"]
     flaky = [r for r in relations if r["nodeid"].endswith("test_flaky[plane]")]
     assert len(relations) == 2 and flaky[0]["reruns"] == 1 and flaky[0]["outcome"] == "passed", relations
+    page = (n2r_project.pytester.path / "r.html").read_text()
+    row = page.split("test_flaky[plane]</a></td>", 1)[1].split("</tr>", 1)[0]
+    section = page.split("test_flaky[plane]</h2>", 1)[1].split("</p>", 1)[0]
+    for where, text in (("table row", row), ("section", section)):
+        assert "passed after 1 earlier try under this test id (the last counts)" in text.replace("</span>", ""), \
+            f"the HTML report's {where} should say the relation passed on its second try: {text}"
