@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import json
 import os
+import sys
 from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
@@ -43,7 +44,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..render.size import RenderSize
-    from ..scene.file import SceneFile
     from ..scene.splat_file import is_splat_file, splat_info
     from ._scene import scene_argument
 
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         print(printable(_json(info) if args.json else _readable(format_splat_info, info, spec.source)))
         return 0
     scene = _open(spec, images=args.shift)
-    if not isinstance(scene, SceneFile):  # no fitted scene file behind it: an exact demo scene, a 3DGS .ply ...
+    if not _instance(scene, "pytest_n2r.scene.file", "SceneFile"):  # an exact demo scene, a 3DGS .ply ...
         if args.shift:
             raise _no_photos(spec.source, f"no fitted scene file (a {type(scene).__name__})")
         print(printable(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec)))
@@ -90,10 +90,16 @@ def _open(spec: SceneSpec, images: bool) -> SceneFile | Scene:
 
         return read_scene_file(spec.source, images=images)
     from ..demo.scene_specs import load_scene_spec
-    from ..scene.field_scene import FieldScene
 
     scene = load_scene_spec(spec, "cpu", images=images)
-    return scene.file if isinstance(scene, FieldScene) else scene
+    return scene.file if _instance(scene, "pytest_n2r.scene.field_scene", "FieldScene") else scene
+
+
+def _instance(obj: Any, module: str, name: str) -> bool:
+    """``isinstance(obj, module.name)`` without importing ``module``: an object of a class whose module is not
+    imported is none of its instances (the fitted-scene modules import torch, about 1 s an exact scene need not pay)."""
+    loaded = sys.modules.get(module)
+    return loaded is not None and isinstance(obj, getattr(loaded, name))
 
 
 def _json(data: dict) -> str:

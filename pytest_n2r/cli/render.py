@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from ..data.atomic import atomic_write_bytes
     from ..demo.scene_specs import load_scene_spec
     from ..errors import InvalidArgument
-    from ..field.device import resolve_device
+    from ..field.device import check_device
     from ..geometry import Transform
     from ..render.size import RenderSize
     from ._output import NPY, PNG, check_output
@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     tau = Transform.parse(args.transform, name="--transform")
     size = None if args.size is None else RenderSize.parse(args.size, name="--size")
-    resolve_device(args.device)
+    check_device(args.device)  # torch imported only to check a CUDA device
     spec = scene_argument(args.scene)
     inputs = scene_inputs(spec)
     paths = output_paths(check_output(args.output, PNG, inputs=inputs, force=args.force))

@@ -1,28 +1,60 @@
-"""Which torch device a fit or a scene uses."""
+"""Which torch device a fit or a scene uses.
+
+Conventions
+-----------
+- A device is named ``"auto"`` (CUDA where there is one, else the CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``,
+  or given as a ``torch.device`` of type ``cpu`` or ``cuda``.
+- :func:`check_device` checks a name without importing torch, but for a CUDA device, whose existence only torch
+  can tell: a command that renders an exact scene or reads a scene file does not pay ``import torch`` (about 1 s)
+  to check its ``--device``.
+"""
 
 from __future__ import annotations
 
-import torch
+import re
+from typing import TYPE_CHECKING
 
 from ..errors import InvalidArgument
 
-__all__ = ["resolve_device"]
+if TYPE_CHECKING:
+    import torch
+
+__all__ = ["check_device", "resolve_device"]
+
+_NAME = re.compile(r"auto|cpu|cuda(?::(?P<index>\d+))?")
+
+
+def check_device(device: str | torch.device) -> str:
+    """The name of ``device``, checked: one of the names above, and a CUDA device this machine has (``"cuda:N"``
+    needs at least N + 1 GPUs).
+
+    >>> check_device("auto"), check_device("cpu")
+    ('auto', 'cpu')
+    >>> check_device("tpu")
+    Traceback (most recent call last):
+    ...
+    pytest_n2r.errors.InvalidArgument: device='tpu': expected 'auto', 'cpu' or 'cuda[:N]'
+    """
+    name = str(device)
+    match = _NAME.fullmatch(name)
+    if match is None:
+        raise InvalidArgument(f"device={device!r}: expected 'auto', 'cpu' or 'cuda[:N]'")
+    if name.startswith("cuda"):
+        import torch
+
+        if not torch.cuda.is_available():
+            raise InvalidArgument(f"device={device!r}: CUDA is not available on this machine; use 'auto' or 'cpu'")
+        if match["index"] is not None and int(match["index"]) >= (count := torch.cuda.device_count()):
+            raise InvalidArgument(f"device={device!r}: this machine has {count} CUDA device(s), 'cuda:0' to "
+                                  f"'cuda:{count - 1}'")
+    return name
 
 
 def resolve_device(device: str | torch.device) -> torch.device:
-    """``"auto"`` → CUDA when available, else CPU; otherwise the device named, checked to exist (``"cuda:N"``
-    needs at least N + 1 GPUs)."""
-    if str(device) == "auto":
+    """The torch device ``device`` names (:func:`check_device`): ``"auto"`` → CUDA when available, else CPU."""
+    import torch
+
+    name = check_device(device)
+    if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError):
-        raise InvalidArgument(f"device={device!r}: expected 'auto', 'cpu' or 'cuda[:N]'") from None
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise InvalidArgument(f"device={device!r}: CUDA is not available on this machine; use 'auto' or 'cpu'")
-    if dev.type not in ("cpu", "cuda"):
-        raise InvalidArgument(f"device={device!r}: expected 'auto', 'cpu' or 'cuda[:N]'")
-    if dev.type == "cuda" and dev.index is not None and dev.index >= (count := torch.cuda.device_count()):
-        raise InvalidArgument(f"device={device!r}: this machine has {count} CUDA device(s), 'cuda:0' to "
-                              f"'cuda:{count - 1}'")
-    return dev
+    return torch.device(name)

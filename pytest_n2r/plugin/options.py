@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -183,18 +182,9 @@ def _render_size(value: str, where: Where) -> Any:
 
 
 def _device(value: str, where: Where) -> str:
-    device = str(value).strip().lower()
-    if not re.fullmatch(r"auto|cpu|cuda(:\d+)?", device):
-        raise InvalidArgument(f"{device!r}; expected auto, cpu, cuda or cuda:N")
-    if device.startswith("cuda"):
-        import torch
+    from ..field.device import check_device
 
-        if not torch.cuda.is_available():
-            raise InvalidArgument(f"{device!r}: CUDA is not available on this machine; use auto or cpu")
-        index = int(device.partition(":")[2] or 0)
-        if index >= (count := torch.cuda.device_count()):  # else every test's setup said so, not the start
-            raise InvalidArgument(f"{device!r}: this machine has {count} CUDA device(s), cuda:0 to cuda:{count - 1}")
-    return device
+    return check_device(str(value).strip().lower())  # a CUDA device checked now, not at every test's setup
 
 
 def _byte_size(value: str, where: Where) -> int:

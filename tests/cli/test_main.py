@@ -52,3 +52,17 @@ def test_a_written_path_that_is_not_utf8_is_printed_escaped(tmp_path, monkeypatc
     assert f"wrote       {tmp_path}/bad\\xff.png\n" in out.text()
     assert main(["render", "demo:wall", "-o", str(bad.with_suffix(".txt"))]) == 2  # an error naming the path
     assert f"-o {tmp_path}/bad\\xff.txt: expected a PNG image" in err.text()
+
+
+@pytest.mark.parametrize("argv", [["info", "demo:wall"], ["render", "demo:wall", "--size", "32", "-o", "{tmp}/w.png"]])
+def test_commands_on_an_exact_scene_do_not_import_torch(argv, tmp_path):
+    """`n2r info demo:wall` imported torch for an isinstance check and `n2r render demo:wall` to check `--device
+    auto`: about 1.5 s of each command's 0.5 and 1.1 s."""
+    import subprocess
+    import sys
+
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    code = ("import sys; from pytest_n2r.cli.main import main; code = main(sys.argv[1:]); "
+            "assert code == 0, code; assert 'torch' not in sys.modules, 'torch was imported'")
+    result = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True)
+    assert result.returncode == 0, f"n2r {' '.join(argv)}: {result.stderr[-2000:]}"
