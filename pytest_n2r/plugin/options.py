@@ -24,7 +24,7 @@ from .. import defaults
 from ..errors import InvalidArgument, N2RError
 from .path_options import cache_folder, folder, output_file
 
-__all__ = ["Option", "Where", "OPTIONS", "RUN_OPTIONS", "REPORT_OPTIONS", "option", "read_options", "is_used"]
+__all__ = ["Option", "Where", "OPTIONS", "RUN_OPTIONS", "REPORT_OPTIONS", "option", "read_options", "is_used", "on_ci"]
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,13 @@ def _switch(text: str, expected: str) -> bool:
 
 def _derandomize(value: str, where: Where) -> bool:
     text = str(value).strip().lower()
-    return bool(os.environ.get("CI")) if text == "auto" else _switch(text, "auto, yes or no")
+    return on_ci() if text == "auto" else _switch(text, "auto, yes or no")
+
+
+def on_ci() -> bool:
+    """Whether the ``CI`` environment variable says this runs on CI: set to anything but empty, ``0``, ``false``
+    or ``no`` (any case; ``CI=false`` turns a CI-like environment's default off)."""
+    return os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 
 
 def _yes_no(value: str, where: Where) -> bool:
@@ -294,8 +300,8 @@ OPTIONS: tuple[Option, ...] = (
            "(default: {default})", default=_text(defaults.TIMEOUT_S),
            parse=_number_in(0.0, MAX_TIMEOUT_S, f"a number of seconds >= 0 and <= {MAX_TIMEOUT_S:g} (0: no limit)")),
     Option("--n2r-derandomize", "n2r_derandomize", "auto|yes|no",
-           "draw the same examples every run; 'auto' means yes when the CI environment variable is set "
-           "(default: {default})", default="auto", parse=_derandomize),
+           "draw the same examples every run; 'auto' means yes when the CI environment variable is set (not "
+           "to '', 0, false or no) (default: {default})", default="auto", parse=_derandomize),
     Option("--n2r-precompile", "n2r_precompile", "yes|no",
            "on the first render, compile the kernels of the other renderers the tests use in a helper process, "
            "on an idle core, and kernel pieces while a first render waits for another process's kernels "

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from pytest_n2r import defaults
-from pytest_n2r.plugin.options import OPTIONS, REPORT_OPTIONS, RUN_OPTIONS, Where, option
+from pytest_n2r.plugin.options import OPTIONS, REPORT_OPTIONS, RUN_OPTIONS, Where, on_ci, option
 
 #: pytest 9 reads ``pytest.toml`` and pyproject's ``[tool.pytest]`` (typed values); pytest 8 (the floor) reads only
 #: ``[tool.pytest.ini_options]``
@@ -198,6 +198,18 @@ def test_a_gpu_index_the_machine_lacks_is_a_usage_error_at_the_start(pytester, m
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
     assert option("device").value(pytester.parseconfig("--n2r-device", "cuda:0")) == "cuda:0"
-    with pytest.raises(pytest.UsageError, match=r"--n2r-device / ini n2r_device: 'cuda:7': this machine has 1 CUDA "
-                                                r"device\(s\), cuda:0 to cuda:0"):
+    with pytest.raises(pytest.UsageError, match=r"--n2r-device / ini n2r_device: device='cuda:7': this machine has 1 "
+                                                r"CUDA device\(s\), 'cuda:0' to 'cuda:0'"):
         option("device").value(pytester.parseconfig("--n2r-device", "cuda:7"))
+
+
+@pytest.mark.parametrize("value, expected", [("true", True), ("1", True), ("yes", True), ("woodpecker", True),
+                                             ("false", False), ("False", False), ("0", False), ("no", False),
+                                             ("", False), (" ", False), (None, False)])
+def test_ci_is_read_as_ci_services_and_users_set_it(monkeypatch, value, expected):
+    """`CI=false` (how a user turns a CI-like environment's default off) derandomized the run: any value counted."""
+    if value is None:
+        monkeypatch.delenv("CI", raising=False)
+    else:
+        monkeypatch.setenv("CI", value)
+    assert on_ci() is expected, f"CI={value!r} read as {'' if on_ci() else 'not '}on CI"
