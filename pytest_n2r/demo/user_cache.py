@@ -3,7 +3,10 @@
 
 from __future__ import annotations
 
+import functools
 import os
+import tempfile
+import warnings
 from pathlib import Path
 
 __all__ = ["cache_dir"]
@@ -11,10 +14,24 @@ __all__ = ["cache_dir"]
 
 def cache_dir() -> Path:
     """The user cache folder of the demo scenes: ``$N2R_CACHE_DIR`` when set, else the platform's user cache
-    dir for ``pytest-n2r`` (``~/.cache/pytest-n2r`` on Linux)."""
+    dir for ``pytest-n2r`` (``~/.cache/pytest-n2r`` on Linux); where there is no home folder to find it under (a
+    container's user with no ``HOME`` and no passwd entry), a folder of this user's in the temporary folder, said
+    once in a warning."""
     env = os.environ.get("N2R_CACHE_DIR")
     if env:
         return Path(env).expanduser()
     import platformdirs
 
-    return Path(platformdirs.user_cache_dir("pytest-n2r", appauthor=False))
+    try:
+        return Path(platformdirs.user_cache_dir("pytest-n2r", appauthor=False))
+    except (RuntimeError, KeyError, OSError) as exc:  # Path.home() / pwd without a home folder
+        return _temporary_cache_dir(str(exc))
+
+
+@functools.cache
+def _temporary_cache_dir(why: str) -> Path:
+    uid = os.getuid() if hasattr(os, "getuid") else os.getpid()
+    folder = Path(tempfile.gettempdir()) / f"pytest-n2r-cache-{uid}"
+    warnings.warn(f"no user cache folder ({why}): the demo scenes' cache is {folder}, which the system may clear; "
+                  "set N2R_CACHE_DIR to keep it elsewhere", stacklevel=3)
+    return folder

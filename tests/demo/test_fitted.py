@@ -247,3 +247,27 @@ def test_the_plugin_runs_on_a_fitted_demo_scene_and_rejects_unknown_names(pytest
     result = pytester.runpytest("-p", "no:cacheprovider", "--n2r-scene", "demo:object-fields")
     assert result.ret == pytest.ExitCode.USAGE_ERROR, result.ret
     result.stderr.fnmatch_lines(["*demo:object-fields*no such demo scene*'object-field'*"])
+
+
+def test_no_home_folder_puts_the_cache_in_the_temporary_folder_with_a_warning(monkeypatch, tmp_path):
+    """A container's user with no HOME and no passwd entry: platformdirs raised `RuntimeError: could not determine
+    the home directory` from every demo scene, the shipped fitted twins too, though they need no cache."""
+    import platformdirs
+
+    from pytest_n2r.demo import user_cache
+
+    def no_home(*args, **kwargs):
+        raise RuntimeError("could not determine home directory")
+
+    monkeypatch.delenv("N2R_CACHE_DIR", raising=False)
+    monkeypatch.setattr(platformdirs, "user_cache_dir", no_home)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    user_cache._temporary_cache_dir.cache_clear()
+    try:
+        with pytest.warns(UserWarning, match=r"no user cache folder \(could not determine home directory\): the demo "
+                                             r"scenes' cache is .*pytest-n2r-cache-\d+.*set N2R_CACHE_DIR"):
+            folder = user_cache.cache_dir()
+        assert folder.parent == tmp_path, f"the fallback cache {folder} is not in the temporary folder {tmp_path}"
+        assert fitted_path("wall") == packaged_path("wall"), "the shipped twin should load without a home folder"
+    finally:
+        user_cache._temporary_cache_dir.cache_clear()
