@@ -9,7 +9,11 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from .kernel_cache import ensure_kernel_cache
+
 __version__ = "0.1.0"
+
+ensure_kernel_cache()  # before any kernel module imports numba: a read-only installation still imports them
 
 if TYPE_CHECKING:  # what type checkers and IDEs see; a test keeps it in step with _EXPORTS
     from .data import Capture, ingest
