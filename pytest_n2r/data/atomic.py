@@ -8,17 +8,37 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["atomic_write_bytes", "atomic_write_chunks", "atomic_write_text", "unwritable_reason"]
+__all__ = ["atomic_write_bytes", "atomic_write_chunks", "atomic_write_text", "created_file_mode", "current_umask",
+           "unwritable_reason"]
+
+#: Linux's status of this process; its ``Umask:`` line (kernel 4.7 and later) gives the umask without setting it.
+_PROC_STATUS = "/proc/self/status"
 
 
-def _read_umask() -> int:
+def current_umask() -> int:
+    """The process's umask now (a conftest may have changed it since import).
+
+    Read from the ``Umask:`` line of ``/proc/self/status`` where there is one (Linux 4.7 and later), which leaves it
+    as it is (some 15 µs a read, against some 500 µs for an atomic write and its fsync); elsewhere by
+    :func:`os.umask`, which can only read it by setting it and back: a thread creating a file in between gets mode
+    ``0o666``.
+    """
+    try:
+        with open(_PROC_STATUS, "rb") as fh:
+            for line in fh:
+                if line.startswith(b"Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-#: The process's umask, read once (reading it means setting it, which is not thread-safe).
-_UMASK = _read_umask()
+def created_file_mode() -> int:
+    """The mode :func:`open` gives a new file now (``0o666`` less the umask), for a file made another way
+    (:func:`tempfile.mkstemp` makes it ``0o600``, readable to its owner alone)."""
+    return 0o666 & ~current_umask()
 
 
 def _atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) -> Path:
@@ -29,7 +49,7 @@ def _atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], object]) 
     try:
         mode = path.stat().st_mode & 0o7777
     except FileNotFoundError:
-        mode = 0o666 & ~_UMASK
+        mode = created_file_mode()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -48,7 +68,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` so that readers see either the old file or the complete new one.
 
     The new file keeps the old one's permissions, or gets those of a plainly created file (``0o666`` less
-    the umask) rather than the owner-only mode of the temporary file.
+    the umask, read as it is written) rather than the owner-only mode of the temporary file.
     """
     return _atomic_write(path, lambda fh: fh.write(data))
 

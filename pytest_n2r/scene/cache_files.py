@@ -16,7 +16,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["STALE_TMP_SECONDS", "CacheNotStored", "cache_entries", "touch", "trim_entries", "write_entry"]
+from ..data.atomic import created_file_mode
+
+__all__ = ["STALE_TMP_SECONDS", "CacheNotStored", "cache_entries", "discard", "touch", "trim_entries", "write_entry"]
 
 #: A temporary file (``.{name}.XXXX.tmp``) older than this (seconds) was left by a killed writer; a younger one
 #: may be a concurrent writer's, about to be renamed into place.
@@ -32,11 +34,15 @@ class CacheNotStored(UserWarning):
 
 def write_entry(path: Path, write: Callable[[BinaryIO], object]) -> None:
     """Write a cache file under a temporary name in its folder, then rename it into place (no fsync, unlike
-    :func:`~pytest_n2r.data.atomic.atomic_write_bytes`: an entry lost in a power cut is just computed again)."""
+    :func:`~pytest_n2r.data.atomic.atomic_write_bytes`: an entry lost in a power cut is just computed again), with
+    the mode :func:`open` would give it (:func:`~pytest_n2r.data.atomic.created_file_mode`), not the temporary
+    file's ``0o600``: a cache shared between users (a CI cache restored by another uid, a group's folder) is
+    readable to them as the umask allows."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
+        os.chmod(tmp, created_file_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -48,6 +54,15 @@ def touch(path: Path) -> None:
     meanwhile (another worker's trim, a clear) is no error."""
     try:
         os.utime(path)
+    except OSError:
+        pass
+
+
+def discard(path: Path) -> None:
+    """Delete the entry at ``path``, which could not be used (damaged, not what was asked for); one already gone or
+    that cannot be deleted (another user's, a read-only cache) is left as it is: a miss never fails a test."""
+    try:
+        path.unlink()
     except OSError:
         pass
 

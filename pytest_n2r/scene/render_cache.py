@@ -37,7 +37,7 @@ from ..errors import InvalidArgument
 from ..geometry import Camera, check_pose
 from ..render.view import RenderedView
 from .base import Scene, normalize_outputs
-from .cache_files import CacheNotStored, cache_entries, touch, trim_entries, write_entry
+from .cache_files import CacheNotStored, cache_entries, discard, touch, trim_entries, write_entry
 from .cache_folder import claim, foreign_entries, is_ours, not_a_cache
 from .first_render import first_render
 from .keep_threads import threads_kept
@@ -250,10 +250,10 @@ class RenderCache:
         path = self._decision_path(key)
         try:
             value = json.loads(path.read_bytes())
-        except FileNotFoundError:
+        except (FileNotFoundError, PermissionError):  # none, or another user's that we may not read (nor delete)
             return None
         except (OSError, ValueError, RecursionError):  # torn by a crash, disk trouble, nested too deep: decided again
-            path.unlink(missing_ok=True)
+            discard(path)
             return None
         touch(path)
         return value if isinstance(value, dict) else None
@@ -323,14 +323,14 @@ class RenderCache:
         path = self._path(key, name)
         try:
             value = _read_npy(path)
-        except FileNotFoundError:
+        except (FileNotFoundError, PermissionError):  # none, or another user's that we may not read (nor delete)
             return None
         except (OSError, ValueError):  # unreadable (disk trouble, another version's format): re-render
-            path.unlink(missing_ok=True)
+            discard(path)
             return None
         value = _as_requested(value, name, camera)
         if value is None:  # not what was asked for (damaged or planted): re-render
-            path.unlink(missing_ok=True)
+            discard(path)
             return None
         touch(path)
         return value

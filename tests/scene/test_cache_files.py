@@ -4,12 +4,15 @@ writer left."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
+import stat
 import tempfile
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -182,3 +185,80 @@ def test_a_disk_that_cannot_store_fails_no_render_under_warnings_as_errors(tmp_p
         warnings.simplefilter("error")
         assert cache.render(scene, _pose(scene, 3), scene.views[0].camera, "rgb").rgb is not None
     assert "stores nothing more this session: OSError: [Errno 28] No space left" in capsys.readouterr().err
+
+
+@contextlib.contextmanager
+def _umask(mask):
+    old = os.umask(mask)
+    try:
+        yield
+    finally:
+        os.umask(old)
+
+
+def _entries(folder):
+    return [p for sub in ("renders", "decisions") for p in (folder / sub).rglob("*") if p.is_file()]
+
+
+@pytest.mark.parametrize("mask", [0o002, 0o027], ids=["umask 002", "umask 027"])
+def test_entries_get_the_mode_open_gives_under_the_umask(tmp_path, mask):
+    """A cache shared between users (a CI cache restored by another uid, a group's project folder): its entries
+    were 0o600 whatever the umask, so unreadable to the others."""
+    scene = PlaneScene()
+    with _umask(mask):
+        cache = RenderCache(tmp_path)
+        cache.render(scene, _pose(scene), scene.views[0].camera, ("rgb", "depth"))
+        cache.put_decision("ab" + "0" * 62, {"valid": True})
+    modes = {p.relative_to(tmp_path).as_posix(): oct(stat.S_IMODE(p.stat().st_mode)) for p in _entries(tmp_path)}
+    assert len(modes) == 3 and set(modes.values()) == {oct(0o666 & ~mask)}, \
+        f"under umask {oct(mask)} the entries got modes {modes}, expected {oct(0o666 & ~mask)}"
+
+
+def _refused(monkeypatch, folder, *, read):
+    """Deletions (and reads too, with ``read``) of the entries under ``folder`` fail with PermissionError, as for
+    another user's 0o600 entry in a folder of theirs (chmod does not do it for root, who runs CI); the deletions
+    tried are returned."""
+    read_bytes, tried = Path.read_bytes, []
+
+    def refuse(kind, original):
+        def call(path, *args, **kwargs):
+            if path.parent.parent.parent != folder or path.parent.parent.name not in ("renders", "decisions"):
+                return original(path, *args, **kwargs)
+            if kind == "unlink":
+                tried.append(path)
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return call
+
+    monkeypatch.setattr(Path, "unlink", refuse("unlink", Path.unlink))
+    if read:
+        monkeypatch.setattr(Path, "read_bytes", refuse("read", read_bytes))
+    return tried
+
+
+def test_an_entry_we_may_not_read_is_a_miss_and_left_where_it_is(tmp_path, monkeypatch):
+    """Another user's 0o600 entry: the PermissionError of its read, then of its deletion, failed the test."""
+    scene, key = PlaneScene(), "cd" + "0" * 62
+    RenderCache(tmp_path).render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    RenderCache(tmp_path).put_decision(key, {"valid": True})
+    tried = _refused(monkeypatch, tmp_path, read=True)
+    cache = RenderCache(tmp_path)
+    assert cache.decision(key) is None, "a decision that cannot be read was not a miss"
+    view = cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    assert view.rgb is not None and scene.calls == 2, f"the unreadable entry was not rendered again ({scene.calls})"
+    assert not tried, f"entries we may not read are not ours to delete, yet deleting {tried} was tried"
+    assert len(_entries(tmp_path)) == 2, f"the entries are not all there: {_entries(tmp_path)}"
+
+
+def test_a_damaged_entry_that_cannot_be_deleted_is_a_miss(tmp_path, monkeypatch):
+    """A damaged entry in a folder we may not write: the PermissionError of its deletion failed the test."""
+    scene, key = PlaneScene(), "ef" + "0" * 62
+    RenderCache(tmp_path).render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    RenderCache(tmp_path).put_decision(key, {"valid": True})
+    for entry in _entries(tmp_path):
+        entry.write_bytes(entry.read_bytes()[:7])
+    tried = _refused(monkeypatch, tmp_path, read=False)
+    cache = RenderCache(tmp_path)
+    assert cache.decision(key) is None, "a torn decision was read"
+    view = cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
+    assert view.rgb is not None and scene.calls == 2, f"the damaged entry was not rendered again ({scene.calls})"
+    assert len(tried) == 2, f"the damaged entries were not both tried for deletion: {tried}"
