@@ -74,14 +74,16 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
 
 
 def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
-    """:func:`atomic_write_bytes` for UTF-8 text."""
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    """:func:`atomic_write_bytes` for UTF-8 text. A character that stands for a byte a file name could not decode
+    (Python's ``surrogateescape``: under an ASCII locale every non-ASCII name reads so) is written as that byte, so
+    a path in a report comes out as the name on disk; strict UTF-8 refused the whole report."""
+    return atomic_write_bytes(path, text.encode("utf-8", "surrogateescape"))
 
 
 def atomic_write_chunks(path: str | os.PathLike, chunks: Iterable[str]) -> Path:
     """:func:`atomic_write_text` for text in pieces (a generator), each encoded and written as it comes, so the
     whole text is never in memory; an exception from ``chunks`` leaves the old file, as a failed write does."""
-    return _atomic_write(path, lambda fh: fh.writelines(chunk.encode("utf-8") for chunk in chunks))
+    return _atomic_write(path, lambda fh: fh.writelines(chunk.encode("utf-8", "surrogateescape") for chunk in chunks))
 
 
 def unwritable_reason(folder: str | os.PathLike) -> str | None:

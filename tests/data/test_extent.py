@@ -169,3 +169,12 @@ def test_the_umask_is_read_without_setting_it_where_linux_tells_it(tmp_path, mon
         read = atomic.current_umask()
         assert read == 0o027, f"the umask read by setting it was {oct(read)}, expected 0o027"
         assert atomic.current_umask() == 0o027, "reading the umask by setting it did not restore it"
+
+
+@pytest.mark.parametrize("write", [atomic_write_text, lambda path, text: atomic_write_chunks(path, iter([text]))])
+def test_a_file_name_read_under_an_ascii_locale_is_written_as_its_bytes(tmp_path, write):
+    """Under LC_ALL=C without UTF-8 mode, `é` in a test's folder reads as two surrogates: the HTML report that
+    names it failed with 'surrogates not allowed' and was not written."""
+    name = b"caf\xc3\xa9".decode("ascii", "surrogateescape")  # os.fsdecode's result under an ASCII locale
+    write(tmp_path / "report.html", f"<p>{name}</p>")
+    assert (tmp_path / "report.html").read_bytes() == "<p>café</p>".encode(), "the name's bytes were not kept"
