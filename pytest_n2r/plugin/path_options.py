@@ -15,7 +15,9 @@ __all__ = ["folder", "cache_folder", "output_file"]
 
 def folder(value: str | bool, where: Where) -> Path | None:
     """A writable folder, relative to the rootdir; ``none`` (a TOML ``false``): ``None`` (nothing written). An empty
-    value (``--n2r-cache-dir "$UNSET"``) is refused: taken as a path it would be the rootdir itself."""
+    value (``--n2r-cache-dir "$UNSET"``) is refused: taken as a path it would be the rootdir itself. A default
+    folder that cannot be written (a read-only checkout) is ``None`` with a warning, as pytest's own cache does: only
+    a folder the user chose refuses the run."""
     if isinstance(value, bool):
         if value:
             raise InvalidArgument("true is not a folder; expected a folder path, or 'none' (or false)")
@@ -30,6 +32,12 @@ def folder(value: str | bool, where: Where) -> Path | None:
     path = Path(value).expanduser()
     target = path if path.is_absolute() else where.root / path
     reason = unwritable_reason(target)
+    if reason is not None and where.origin == "default":
+        import warnings
+
+        warnings.warn(f"pytest-n2r: the default folder {target}: {reason}: nothing is written there this run; "
+                      "choose a writable folder, or 'none'", stacklevel=2)
+        return None
     if reason is not None:
         raise InvalidArgument(f"{target}: {reason}; choose a writable folder, or 'none'")
     return target

@@ -213,3 +213,25 @@ def test_ci_is_read_as_ci_services_and_users_set_it(monkeypatch, value, expected
     else:
         monkeypatch.setenv("CI", value)
     assert on_ci() is expected, f"CI={value!r} read as {'' if on_ci() else 'not '}on CI"
+
+
+@pytest.mark.parametrize("origin", ["default", "--n2r-cache-dir"])
+def test_an_unwritable_default_folder_writes_nothing_with_a_warning_a_chosen_one_refuses_the_run(
+        monkeypatch, tmp_path, origin):
+    """A read-only checkout refused every run (`--n2r-cache-dir ...: cannot write into ...`) though nobody had
+    asked for a folder there; pytest's own cache only warns."""
+    from pytest_n2r.data import atomic
+    from pytest_n2r.errors import InvalidArgument
+    from pytest_n2r.plugin.path_options import cache_folder, folder
+
+    monkeypatch.setattr(atomic, "unwritable_reason",
+                        lambda path: f"cannot write into {tmp_path} (Read-only file system)")
+    where = Where(origin, tmp_path, tmp_path)
+    for parse in (folder, cache_folder):
+        if origin == "default":
+            with pytest.warns(UserWarning, match=r"the default folder .*\.n2r-cache: cannot write into .*Read-only "
+                                                 r"file system.*: nothing is written there this run"):
+                assert parse(".n2r-cache", where) is None, f"{parse.__name__} kept an unwritable default folder"
+        else:
+            with pytest.raises(InvalidArgument, match=r"cannot write into .*choose a writable folder, or 'none'"):
+                parse(".n2r-cache", where)
