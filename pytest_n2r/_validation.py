@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable
 from numbers import Real
 from typing import Any
@@ -135,3 +136,26 @@ def check_array(
         bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
         raise InvalidArgument(f"{name} contains {bad} non-finite value(s) (NaN or Inf)")
     return arr
+
+
+#: A size's units (:func:`parse_size`), binary whatever their spelling.
+_UNITS = {"": 1, "b": 1, "k": 2**10, "kb": 2**10, "kib": 2**10, "m": 2**20, "mb": 2**20, "mib": 2**20,
+          "g": 2**30, "gb": 2**30, "gib": 2**30}
+
+
+def parse_size(text: str | int, name: str = "size") -> int:
+    """``"512MiB"``, ``"2G"``, ``"300kb"`` or a plain number of bytes → bytes (binary units).
+
+    >>> parse_size("512MiB"), parse_size("2G"), parse_size(300)
+    (536870912, 2147483648, 300)
+    """
+    if isinstance(text, int) and not isinstance(text, bool):
+        value = text
+    else:
+        match = re.fullmatch(r"\s*(\d+(?:\.\d+)?)\s*([a-zA-Z]*)\s*", str(text))
+        if not match or match.group(2).lower() not in _UNITS:
+            raise InvalidArgument(f"{name}={text!r} is not a size; expected e.g. '2GiB', '512MB' or a byte count")
+        value = int(float(match.group(1)) * _UNITS[match.group(2).lower()])
+    if value < 0:
+        raise InvalidArgument(f"{name}={text!r} must not be negative")
+    return value

@@ -188,7 +188,7 @@ def _device(value: str, where: Where) -> str:
 
 
 def _byte_size(value: str, where: Where) -> int:
-    from ..scene.render_cache import parse_size
+    from .._validation import parse_size
 
     return parse_size(str(value), "n2r_cache_size")
 

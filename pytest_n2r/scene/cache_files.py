@@ -118,10 +118,11 @@ def _unlink(path: Path) -> bool:
     return True
 
 
-def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> int:
+def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> tuple[int, int]:
     """Delete the temporary files older than :data:`STALE_TMP_SECONDS`, then, when the cache holds more than
     ``cap`` bytes, the least recently used entries (renders, decisions and floors alike) until it holds at most
-    80 % of ``cap``; returns the bytes freed. The caller checks that ``directory`` is pytest-n2r's."""
+    80 % of ``cap``; returns the bytes freed and the bytes it holds then. The caller checks that ``directory`` is
+    pytest-n2r's."""
     now = time.time() if now is None else now
     freed, kept = 0, []
     for mtime, path, size, tmp in cache_entries(directory):
@@ -131,7 +132,7 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> int:
             kept.append((mtime, path, size, tmp))
     total = sum(size for _, _, size, _ in kept)
     if total <= cap:
-        return freed
+        return freed, total
     target = 0.8 * cap
     for _, path, size, tmp in sorted(kept, key=lambda f: f[0]):
         if total <= target:
@@ -139,4 +140,4 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> int:
         if not tmp and _unlink(path):  # a fresh temporary file is a concurrent writer's
             total -= size
             freed += size
-    return freed
+    return freed, total

@@ -262,3 +262,23 @@ def test_a_damaged_entry_that_cannot_be_deleted_is_a_miss(tmp_path, monkeypatch)
     view = cache.render(scene, _pose(scene), scene.views[0].camera, "rgb")
     assert view.rgb is not None and scene.calls == 2, f"the damaged entry was not rendered again ({scene.calls})"
     assert len(tried) == 2, f"the damaged entries were not both tried for deletion: {tried}"
+
+
+def test_the_cache_is_scanned_for_its_cap_only_once_it_may_be_near_it(tmp_path, monkeypatch):
+    """A cold main job scanned its 4 360 entries 9 times (a scan every 64 MiB stored: 35-43 ms each, linear in the
+    entries) though they held a quarter of the cap; the cap must still hold."""
+    from pytest_n2r.scene import render_cache
+
+    scans = []
+    trim = render_cache.trim_entries
+    monkeypatch.setattr(render_cache, "trim_entries", lambda *a, **k: (scans.append(1), trim(*a, **k))[1])
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    cache = RenderCache(tmp_path, disk_bytes=40 * one, memory_bytes=0)  # a tenth of it: 4 renders
+    for yaw in range(19):  # a scan after 5 renders (nothing known held yet), then none below half the cap
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    assert len(scans) == 1, f"{len(scans)} scans for 19 renders into a cap of 40 (one every 5 before)"
+    for yaw in range(19, 120):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    assert _du(tmp_path / "renders") <= 45 * one, f"the cap of 40 renders passed: {_du(tmp_path) / one:.1f} held"
