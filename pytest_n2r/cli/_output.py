@@ -8,8 +8,10 @@ then written atomically (:mod:`pytest_n2r.data.atomic`), so an interrupted comma
 
 from __future__ import annotations
 
+import codecs
 import json
 import os
+import sys
 import zipfile
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -25,9 +27,11 @@ __all__ = [
     "POSES_JSON",
     "SCENE",
     "OutputKind",
+    "as_text",
     "check_output",
     "check_output_dir",
     "printable",
+    "tolerant_streams",
 ]
 
 FORCE_HELP = "replace an existing output even when it is not what this command writes"
@@ -148,16 +152,101 @@ def check_output_dir(path: Path, owned: Callable[[Path], bool], noun: str, *, op
     return path
 
 
-def printable(text: object) -> str:
-    """``str(text)`` as any stdout can print it: the bytes of a file name that are not UTF-8 (which Python keeps as
-    lone surrogates) as backslash escapes (``\\xff``). Every path a command prints goes through it, so printing a
-    name it wrote cannot fail after the work is done.
+def as_text(text: object) -> str:
+    """``str(text)`` with no lone surrogates, for text a command keeps in a file (a JSON record): the bytes of a
+    file name that are UTF-8 as their characters, the others (which Python keeps as lone surrogates) as backslash
+    escapes (``\\xff``).
 
-    >>> printable("bad" + chr(0xDCFF) + ".png"), printable(Path("ok.png"))
-    ('bad\\\\xff.png', 'ok.png')
+    >>> as_text("bad" + chr(0xDCFF) + ".png"), as_text("caf" + chr(0xDCC3) + chr(0xDCA9))
+    ('bad\\\\xff.png', 'café')
     """
     text = str(text)
     try:
         return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
     except UnicodeEncodeError:  # a surrogate surrogateescape did not make
         return text.encode("utf-8", "backslashreplace").decode("utf-8")
+
+
+def printable(text: object) -> str:
+    """``str(text)`` as any stdout can print it: the bytes of a file name that are not UTF-8 (which Python keeps as
+    lone surrogates) as backslash escapes (``\\xff``). Every path a command prints goes through it, so printing a
+    name it wrote cannot fail after the work is done.
+
+    Where the file system's encoding is not UTF-8 (an ASCII locale, ``LC_ALL=C``), a name's bytes that encoding does
+    not decode stay lone surrogates: the output streams :func:`tolerant_streams` set up write them as the very bytes
+    where the stream takes bytes of that encoding (a surrogateescape stdout), else as ``\\xc3`` escapes.
+
+    >>> printable("bad" + chr(0xDCFF) + ".png"), printable(Path("ok.png"))
+    ('bad\\\\xff.png', 'ok.png')
+    """
+    text = str(text)
+    if _is_utf8(sys.getfilesystemencoding()):
+        return as_text(text)
+    return "".join(_escape(c) if 0xD800 <= ord(c) <= 0xDFFF and not _is_byte(c) else c for c in text)
+
+
+# Output streams -------------------------------------------------------------------------------------------------
+#
+# Convention: a character a stream's encoding cannot write is written as Python's backslash escape of it (``\xb3``
+# for ``³``, ``\u03c4`` for ``τ``); a lone surrogate U+DC80..U+DCFF (a byte of a file name the file system's
+# encoding did not decode) is written as that byte where the stream takes such bytes, else as ``\xNN``.
+
+#: The error handlers :func:`tolerant_streams` gives ``sys.stdout`` and ``sys.stderr``.
+ESCAPE, BYTES = "n2r.escape", "n2r.bytes"
+
+
+def _is_utf8(encoding: str | None) -> bool:
+    return codecs.lookup(encoding or "ascii").name == "utf-8"
+
+
+def _is_byte(char: str) -> bool:
+    """Whether ``char`` is a lone surrogate U+DC80..U+DCFF: the byte ``surrogateescape`` could not decode."""
+    return 0xDC80 <= ord(char) <= 0xDCFF
+
+
+def _escape(char: str) -> str:
+    """``char`` as a backslash escape; a surrogate-escaped byte as the byte's (``\\xff``, not ``\\udcff``)."""
+    if _is_byte(char):
+        return f"\\x{ord(char) - 0xDC00:02x}"
+    return char.encode("ascii", "backslashreplace").decode("ascii")
+
+
+def _escape_errors(exc: UnicodeError) -> tuple[str, int]:
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    return "".join(_escape(c) for c in exc.object[exc.start:exc.end]), exc.end
+
+
+def _bytes_errors(exc: UnicodeError) -> tuple[str | bytes, int]:
+    """Surrogate-escaped bytes as those bytes, anything else as escapes: one run of either kind per call (the
+    encoder calls again for the rest)."""
+    if not isinstance(exc, UnicodeEncodeError):
+        raise exc
+    part = exc.object[exc.start:exc.end]
+    run = next((i for i, c in enumerate(part) if _is_byte(c) != _is_byte(part[0])), len(part))
+    if _is_byte(part[0]):
+        return bytes(ord(c) - 0xDC00 for c in part[:run]), exc.start + run
+    return "".join(map(_escape, part[:run])), exc.start + run
+
+
+codecs.register_error(ESCAPE, _escape_errors)
+codecs.register_error(BYTES, _bytes_errors)
+
+
+def tolerant_streams() -> None:
+    """Make ``sys.stdout`` and ``sys.stderr`` write anything, in their own encoding: what it cannot encode as
+    backslash escapes (see the convention above), so that no command fails for its output, and none after its work.
+    A stream that takes a file name's raw bytes (``errors="surrogateescape"``, or the file system's own encoding when
+    that is not UTF-8) keeps writing them as they are. Streams that are not text files are left as they are."""
+    for name in ("stdout", "stderr"):
+        stream = getattr(sys, name, None)
+        errors, encoding = getattr(stream, "errors", None), getattr(stream, "encoding", None)
+        if errors in (ESCAPE, BYTES) or not hasattr(stream, "reconfigure"):
+            continue
+        try:
+            raw = errors == "surrogateescape" or (
+                not _is_utf8(encoding) and codecs.lookup(encoding or "").name == codecs.lookup(
+                    sys.getfilesystemencoding()).name)
+            stream.reconfigure(errors=BYTES if raw else ESCAPE)
+        except (LookupError, OSError, ValueError):  # an unknown encoding, a closed stream: leave it
+            continue

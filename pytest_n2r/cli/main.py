@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from .. import __version__
 from ..errors import N2RError
 from ._interrupt import exit_status, interrupt_name, interrupted, sigterm_as_ctrl_c
-from ._output import printable
+from ._output import printable, tolerant_streams
 
 #: Subcommand modules, in the order ``n2r --help`` lists them.
 COMMANDS: tuple[str, ...] = ("poses", "fit", "import", "render", "info", "demo", "study")
@@ -36,7 +36,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``n2r`` console script; returns the process exit code (130 after Ctrl-C, 143 after
-    SIGTERM, which every command handles as Ctrl-C)."""
+    SIGTERM, which every command handles as Ctrl-C). Its output never fails for a character the terminal cannot
+    show (an ASCII locale, a Windows console): :func:`~._output.tolerant_streams` writes such characters escaped,
+    its help and usage errors included."""
+    tolerant_streams()
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

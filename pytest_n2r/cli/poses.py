@@ -9,7 +9,7 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._output import FORCE_HELP, printable
+from ._output import FORCE_HELP, as_text, printable
 
 if TYPE_CHECKING:
     import numpy as np
@@ -160,7 +160,7 @@ def skipped_records(skipped: list[tuple[str, str]]) -> list[dict[str, str]]:
     """The photos not used as JSON-ready records, ``{"file": ..., "reason": ...}`` each (what ``n2r poses -o`` and
     ``n2r fit``'s report keep). A file name that is not text (bytes no encoding decodes, which Python keeps as lone
     surrogates) is written with those bytes escaped (``\\xff``), so any terminal can print it back."""
-    return [{"file": printable(name), "reason": printable(reason)} for name, reason in skipped]
+    return [{"file": as_text(name), "reason": as_text(reason)} for name, reason in skipped]
 
 
 def format_frames(report: dict) -> list[str]:
