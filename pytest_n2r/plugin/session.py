@@ -64,7 +64,9 @@ class N2RSession:
         """The render cache (created on first use, so an unused session touches no file), trimmed to its cap as it
         opens: a session that stores less than the cache's trimming interval would otherwise never trim it."""
         if self._cache is None:
-            self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes)
+            workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")  # xdist's workers store into it at once
+            self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes,
+                                      writers=int(workers) if workers.isdigit() else 1)
             self._cache.trim()  # a directory scan (some 15 ms per 1 000 entries)
             self._cache.on_first_render = self.on_first_render
             self._cache.while_waiting = self.while_waiting

@@ -162,8 +162,9 @@ class RenderCache:
     """
 
     def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,
-                 disk_bytes: int = DEFAULT_DISK_BYTES):
+                 disk_bytes: int = DEFAULT_DISK_BYTES, writers: int = 1):
         self.directory = Path(directory) if directory is not None else None
+        self.writers = max(1, int(writers))  # processes storing into the directory at once (xdist's workers)
         self.memory_bytes = parse_size(memory_bytes, "memory_bytes")
         self.disk_bytes = parse_size(disk_bytes, "disk_bytes")
         self.stats = CacheStats()
@@ -326,11 +327,11 @@ class RenderCache:
 
     def _wrote(self, nbytes: int) -> None:
         """Count ``nbytes`` stored; trim after a tenth of the cap (at most 64 MiB) since the last trim once what the
-        last trim found held and what was stored since pass half the cap: a cold main job scanned its 4 360 entries
-        9 times (35-43 ms a scan, linear in the entries) though they held a quarter of it."""
+        last trim found held and what the writers stored since (this one's times :attr:`writers`) pass half the cap:
+        a cold main job scanned its 4 360 entries 9 times (35-43 ms each, linear in the entries) at a quarter of it."""
         self._written_since_trim += nbytes
         if self._written_since_trim >= min(_TRIM_EVERY_BYTES, self.disk_bytes // 10 + 1) and \
-                self._held + self._written_since_trim > self.disk_bytes // 2:
+                self._held + self._written_since_trim * self.writers > self.disk_bytes // 2:
             self.trim()
 
     def _replace(self, path: Path, write: Callable[[BinaryIO], object]) -> None:

@@ -282,3 +282,22 @@ def test_the_cache_is_scanned_for_its_cap_only_once_it_may_be_near_it(tmp_path, 
     for yaw in range(19, 120):
         cache.render(scene, _pose(scene, yaw), camera, "rgb")
     assert _du(tmp_path / "renders") <= 45 * one, f"the cap of 40 renders passed: {_du(tmp_path) / one:.1f} held"
+
+
+def test_workers_storing_into_one_cache_keep_it_under_its_cap(tmp_path):
+    """Each of pytest-xdist's workers counts only what it stores: four that each waited for half the cap before
+    scanning again held twice the cap together."""
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    RenderCache(tmp_path).render(scene, _pose(scene, -1), camera, "rgb")  # a cache folder an earlier run made
+    workers = [RenderCache(tmp_path, disk_bytes=40 * one, memory_bytes=0, writers=4) for _ in range(4)]
+    for cache in workers:
+        cache.trim()  # as each session does when it opens the cache: each finds 1 render held
+    peak = 0
+    for yaw in range(120):
+        workers[yaw % 4].render(scene, _pose(scene, yaw), camera, "rgb")
+        peak = max(peak, _du(tmp_path / "renders"))
+    # each checks after a tenth of the cap of its own (4 renders): four may pass the cap by that much each before one
+    # scans (46 here, as before scans waited for half the cap; 73 when each counted only its own stores)
+    assert peak <= 50 * one, f"four workers held {peak / one:.1f} renders under a cap of 40"
