@@ -7,17 +7,20 @@ Conventions
   (``~/.cache/numba``). Where none of these can be written (a package installed by root, run by a container's
   ``--user`` whose home is ``/`` or missing), numba refuses every ``cache=True`` kernel at import with
   ``RuntimeError: cannot cache function ...: no locator available``: an INTERNALERROR for the whole run.
-- :func:`ensure_kernel_cache`, run when ``pytest_n2r`` is imported, names a folder of this user's in the temporary
-  folder in ``NUMBA_CACHE_DIR`` then (numba's own ``config.CACHE_DIR`` when numba is loaded already); it changes
-  nothing where numba has a place to write, or where ``NUMBA_CACHE_DIR`` is set.
+- :func:`ensure_kernel_cache`, run when ``pytest_n2r`` is imported, names a folder of this user's alone in the
+  temporary folder (:func:`~pytest_n2r.private_folder.private_temp_folder`) in ``NUMBA_CACHE_DIR`` then (numba's
+  own ``config.CACHE_DIR`` when numba is loaded already); it changes nothing where numba has a place to write, or
+  where ``NUMBA_CACHE_DIR`` is set. It looks at the package's own folder and at ``$XDG_CACHE_HOME/numba`` or
+  ``~/.cache/numba`` (numba's folder on Linux; elsewhere a writable package folder is the usual case).
 """
 
 from __future__ import annotations
 
 import os
 import sys
-import tempfile
 from pathlib import Path
+
+from .private_folder import private_temp_folder
 
 __all__ = ["ensure_kernel_cache"]
 
@@ -27,7 +30,7 @@ def ensure_kernel_cache(package: Path = Path(__file__).parent) -> Path | None:
     named, or ``None`` where nothing was changed. ``package``: the installed package's folder."""
     if os.environ.get("NUMBA_CACHE_DIR") or os.access(package, os.W_OK) or _writable(_user_cache()):
         return None
-    folder = Path(tempfile.gettempdir()) / f"pytest-n2r-numba-{os.getuid() if hasattr(os, 'getuid') else 0}"
+    folder = private_temp_folder("pytest-n2r-numba")  # numba unpickles what it finds there: this user's alone
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     numba_config = sys.modules.get("numba.core.config")
     if numba_config is not None:  # read at numba's import: set where its locators look now

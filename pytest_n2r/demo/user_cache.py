@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import functools
 import os
-import tempfile
 import warnings
 from pathlib import Path
+
+from ..private_folder import private_temp_folder
 
 __all__ = ["cache_dir"]
 
@@ -30,8 +31,7 @@ def cache_dir() -> Path:
 
 @functools.cache
 def _temporary_cache_dir(why: str) -> Path:
-    uid = os.getuid() if hasattr(os, "getuid") else os.getpid()
-    folder = Path(tempfile.gettempdir()) / f"pytest-n2r-cache-{uid}"
+    folder = private_temp_folder("pytest-n2r-cache")  # its scene files are read back: this user's alone
     warnings.warn(f"no user cache folder ({why}): the demo scenes' cache is {folder}, which the system may clear; "
                   "set N2R_CACHE_DIR to keep it elsewhere", stacklevel=3)
     return folder
