@@ -9,11 +9,12 @@ then written atomically (:mod:`pytest_n2r.data.atomic`), so an interrupted comma
 from __future__ import annotations
 
 import codecs
+import contextlib
 import json
 import os
 import sys
 import zipfile
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -172,9 +173,10 @@ def printable(text: object) -> str:
     lone surrogates) as backslash escapes (``\\xff``). Every path a command prints goes through it, so printing a
     name it wrote cannot fail after the work is done.
 
-    Where the file system's encoding is not UTF-8 (an ASCII locale, ``LC_ALL=C``), a name's bytes that encoding does
-    not decode stay lone surrogates: the output streams :func:`tolerant_streams` set up write them as the very bytes
-    where the stream takes bytes of that encoding (a surrogateescape stdout), else as ``\\xc3`` escapes.
+    Where the file system's encoding is not UTF-8 (an ASCII locale: ``LC_ALL=C`` with Python's UTF-8 mode off,
+    ``PYTHONUTF8=0``), a name's bytes that encoding does not decode stay lone surrogates: the output streams
+    :func:`tolerant_streams` set up write them as the very bytes where the stream takes bytes of that encoding (a
+    surrogateescape stdout), else as ``\\xc3`` escapes.
 
     >>> printable("bad" + chr(0xDCFF) + ".png"), printable(Path("ok.png"))
     ('bad\\\\xff.png', 'ok.png')
@@ -233,11 +235,14 @@ codecs.register_error(ESCAPE, _escape_errors)
 codecs.register_error(BYTES, _bytes_errors)
 
 
-def tolerant_streams() -> None:
-    """Make ``sys.stdout`` and ``sys.stderr`` write anything, in their own encoding: what it cannot encode as
+@contextlib.contextmanager
+def tolerant_streams() -> Iterator[None]:
+    """Within it, ``sys.stdout`` and ``sys.stderr`` write anything, in their own encoding: what it cannot encode as
     backslash escapes (see the convention above), so that no command fails for its output, and none after its work.
     A stream that takes a file name's raw bytes (``errors="surrogateescape"``, or the file system's own encoding when
-    that is not UTF-8) keeps writing them as they are. Streams that are not text files are left as they are."""
+    that is not UTF-8) keeps writing them as they are. Streams that are not text files are left as they are; each is
+    given back its own handler at the end (``main()`` called from a user's script or a test leaves them as found)."""
+    changed = []
     for name in ("stdout", "stderr"):
         stream = getattr(sys, name, None)
         errors, encoding = getattr(stream, "errors", None), getattr(stream, "encoding", None)
@@ -250,3 +255,12 @@ def tolerant_streams() -> None:
             stream.reconfigure(errors=BYTES if raw else ESCAPE)
         except (LookupError, OSError, ValueError):  # an unknown encoding, a closed stream: leave it
             continue
+        changed.append((stream, errors))
+    try:
+        yield
+    finally:
+        for stream, errors in changed:
+            try:
+                stream.reconfigure(errors=errors)
+            except (OSError, ValueError):  # closed, or a broken pipe's flush: nothing more is written to it
+                pass

@@ -39,16 +39,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     SIGTERM, which every command handles as Ctrl-C). Its output never fails for a character the terminal cannot
     show (an ASCII locale, a Windows console): :func:`~._output.tolerant_streams` writes such characters escaped,
     its help and usage errors included."""
-    tolerant_streams()
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.error("expected a COMMAND: " + ", ".join(COMMANDS) + " (n2r --help describes them)")
-    try:
-        with sigterm_as_ctrl_c():
-            code = _run(args)
-    except KeyboardInterrupt:  # a SIGTERM in the instant after the command returned
-        code = 130
+    with tolerant_streams():
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.error("expected a COMMAND: " + ", ".join(COMMANDS) + " (n2r --help describes them)")
+        try:
+            with sigterm_as_ctrl_c():
+                code = _run(args)
+        except KeyboardInterrupt:  # a SIGTERM in the instant after the command returned
+            code = 130
     return exit_status() if code == 130 else code
 
 

@@ -122,8 +122,9 @@ def test_tolerant_streams_write_anything(encoding, errors, expected, monkeypatch
 
     for name in ("stdout", "stderr"):
         monkeypatch.setattr(f"sys.{name}", io.TextIOWrapper(io.BytesIO(), encoding=encoding, errors=errors))
-    tolerant_streams()
-    for stream in (sys.stdout, sys.stderr):
-        stream.write("a\udcc3\udca9τ\udcffb³")
-        stream.flush()
-        assert stream.buffer.getvalue() == expected, f"{encoding}/{errors} wrote {stream.buffer.getvalue()!r}"
+    with tolerant_streams():
+        for stream in (sys.stdout, sys.stderr):
+            stream.write("a\udcc3\udca9τ\udcffb³")
+            stream.flush()
+            assert stream.buffer.getvalue() == expected, f"{encoding}/{errors} wrote {stream.buffer.getvalue()!r}"
+    assert (sys.stdout.errors, sys.stderr.errors) == (errors, errors), "the streams' own handlers were not given back"
