@@ -2,8 +2,9 @@
 
 Conventions
 -----------
-- A device is named ``"auto"`` (CUDA where there is one, else the CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``,
-  or given as a ``torch.device`` of type ``cpu`` or ``cuda``.
+- A device is named ``"auto"`` (CUDA where there is one, else the CPU), ``"cpu"``, ``"cuda"`` or ``"cuda:N"``
+  (``N`` without leading zeros, as ``torch.device`` reads it), or given as a ``torch.device`` of type ``cpu`` or
+  ``cuda``.
 - :func:`check_device` checks a name without importing torch, but for a CUDA device, whose existence only torch
   can tell: a command that renders an exact scene or reads a scene file does not pay ``import torch`` (about 1 s)
   to check its ``--device``.
@@ -21,7 +22,7 @@ if TYPE_CHECKING:
 
 __all__ = ["check_device", "resolve_device"]
 
-_NAME = re.compile(r"auto|cpu|cuda(?::(?P<index>\d+))?")
+_NAME = re.compile(r"auto|cpu(?::0)?|cuda(?::(?P<index>0|[1-9]\d*))?")  # the names torch.device takes, cpu:0 too
 
 
 def check_device(device: str | torch.device) -> str:

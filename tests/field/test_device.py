@@ -37,3 +37,16 @@ def test_cuda_where_there_is_none_is_refused(monkeypatch):
     with pytest.raises(InvalidArgument, match=r"device='cuda:0': CUDA is not available on this machine"):
         resolve_device("cuda:0")
     assert resolve_device("auto") == torch.device("cpu"), "'auto' without CUDA did not resolve to the CPU"
+
+
+@pytest.mark.parametrize("device", ["cuda:01", "cuda:00", "gpu", "cpu:1", "CUDA", " cpu"])
+def test_a_name_torch_would_not_read_is_refused_before_torch_sees_it(device):
+    """`--n2r-device cuda:01` passed the start and then failed every test's setup in torch.device."""
+    from pytest_n2r.field.device import check_device
+
+    with pytest.raises(InvalidArgument, match=r"expected 'auto', 'cpu' or 'cuda\[:N\]'"):
+        check_device(device)
+
+
+def test_a_cpu_device_with_its_index_is_the_cpu():
+    assert resolve_device(torch.device("cpu", 0)) == resolve_device("cpu:0") == torch.device("cpu:0")
