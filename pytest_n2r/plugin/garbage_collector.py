@@ -10,7 +10,9 @@ Conventions
 - Garbage is never frozen: :func:`freeze_after_setup` collects first, and freezes once a scene rather than at every
   test (a cycle that was unreachable when frozen would never be freed). A released scene's cycles frozen before stay
   frozen (some 17 MB of a fitted scene's 450): unfreezing would walk the whole heap at each change of scene.
-- The heap is unfrozen at the session's very end (:func:`unfreeze`), after pytest's own cleanups.
+- The heap is unfrozen at the session's very end (:func:`unfreeze`), after pytest's own cleanups. So pytest's last
+  collections, which report an exception raised in a ``__del__`` (an "unraisable" one), do not collect what the
+  session froze and later dropped: such an exception shows later, at the next full collection or at exit.
 """
 
 from __future__ import annotations

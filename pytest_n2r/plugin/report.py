@@ -319,12 +319,12 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     partial = _incomplete(session)
     summary = config.pluginmanager.get_plugin("n2r-summary")
     not_run = summary.not_run() if summary is not None else []
+    reruns = summary.reruns if summary is not None else {}  # a record is its test's last try's
     if outputs.get("json") is not None:
         def json_text() -> str:  # NaN where a value is undefined (a rejected example's score): see docs/reporting.md
             payload: dict[str, Any] = {"complete": partial is None}
             if partial is not None:
                 payload["incomplete"] = partial
-            reruns = summary.reruns if summary is not None else {}  # a record is its test's last try's
             payload["relations"] = [_images_relative({**r.to_dict(), **({"reruns": reruns[r.nodeid]} if reruns.get(
                 r.nodeid) else {})}, outputs["json"].parent) for r in sorted(records, key=lambda r: r.nodeid)]
             payload["not_run"] = not_run
@@ -335,8 +335,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         writers.append((outputs["json"], "the JSON results", lambda: atomic_write_text(outputs["json"], json_text())))
     if outputs.get("report") is not None:
         writers.append((outputs["report"], "the HTML report",
-                        lambda: write_html(outputs["report"], records, partial=partial, not_run=not_run,
-                                           reruns=summary.reruns if summary is not None else None)))
+                        lambda: write_html(outputs["report"], records, partial=partial, not_run=not_run, reruns=reruns)))
     for target, what, write in writers:
         try:
             done = write()

@@ -1063,6 +1063,8 @@ def test_pytests_last_collections_walk_only_what_the_session_did_not_freeze(n2r_
 
     from _pytest import unraisableexception
 
+    if not hasattr(unraisableexception, "gc_collect_harder"):  # pytest < 8.4 collects no garbage at its end
+        pytest.skip("this pytest collects no garbage in its last cleanups")
     frozen_then = []
     collect = unraisableexception.gc_collect_harder
     monkeypatch.setattr(unraisableexception, "gc_collect_harder",
