@@ -335,7 +335,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         writers.append((outputs["json"], "the JSON results", lambda: atomic_write_text(outputs["json"], json_text())))
     if outputs.get("report") is not None:
         writers.append((outputs["report"], "the HTML report",
-                        lambda: write_html(outputs["report"], records, partial=partial, not_run=not_run, reruns=reruns)))
+                        lambda: write_html(outputs["report"], records, partial=partial, not_run=not_run,
+                                           reruns=reruns)))
     for target, what, write in writers:
         try:
             done = write()
