@@ -20,8 +20,6 @@ import os
 import sys
 from pathlib import Path
 
-from .private_folder import private_temp_folder
-
 __all__ = ["ensure_kernel_cache"]
 
 
@@ -30,6 +28,8 @@ def ensure_kernel_cache(package: Path = Path(__file__).parent) -> Path | None:
     named, or ``None`` where nothing was changed. ``package``: the installed package's folder."""
     if os.environ.get("NUMBA_CACHE_DIR") or os.access(package, os.W_OK) or _writable(_user_cache()):
         return None
+    from .private_folder import private_temp_folder  # here: every import of pytest_n2r runs this function
+
     folder = private_temp_folder("pytest-n2r-numba")  # numba unpickles what it finds there: this user's alone
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     numba_config = sys.modules.get("numba.core.config")

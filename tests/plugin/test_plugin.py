@@ -712,12 +712,11 @@ def test_plain():
     loaded = sorted(m for m in sys.modules if m.startswith("pytest_n2r."))
     # the plugin, its option registry and its path parsers, the two leaf modules that registry reads, the plugin's
     # two hook modules (its reports; the test order under xdist), its terminal summary and its garbage collector's
-    # cleanup (gc and pytest alone), and the package's check that numba can cache its kernels (with the private
-    # folder it names where it cannot): nothing of the engine
+    # cleanup (gc and pytest alone), and the package's check that numba can cache its kernels: nothing of the engine
     assert loaded == ["pytest_n2r.defaults", "pytest_n2r.errors", "pytest_n2r.kernel_cache", "pytest_n2r.plugin",
                       "pytest_n2r.plugin.garbage_collector", "pytest_n2r.plugin.options",
                       "pytest_n2r.plugin.path_options", "pytest_n2r.plugin.report",
-                      "pytest_n2r.plugin.schedule", "pytest_n2r.plugin.summary", "pytest_n2r.private_folder"], loaded
+                      "pytest_n2r.plugin.schedule", "pytest_n2r.plugin.summary"], loaded
 """)
     result = n2r_project.pytester.runpytest_subprocess("-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
