@@ -61,3 +61,13 @@ def doc_blocks(page: str) -> list[DocBlock]:
     """The fenced code blocks of ``docs/<page>``, in page order."""
     text = (REPO_ROOT / "docs" / page).read_text(encoding="utf-8")
     return [DocBlock(m[1], m[2] or "", text.count("\n", 0, m.start()) + 1, m[3]) for m in _FENCE.finditer(text)]
+
+
+@pytest.fixture
+def umask():
+    """``umask(mask)``: the process's umask set to ``mask`` for the rest of the test (as a conftest may set it after
+    pytest-n2r was imported), the test's own restored after it."""
+    before = os.umask(0o022)
+    os.umask(before)
+    yield os.umask
+    os.umask(before)

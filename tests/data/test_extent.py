@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import os
 import stat
 
@@ -92,19 +91,9 @@ def test_atomic_write_leaves_the_old_file_when_writing_fails(tmp_path, monkeypat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["poses.json"], "temporary file left behind"
 
 
-@contextlib.contextmanager
-def _umask(mask):
-    """The process's umask set to ``mask`` (as a conftest may set it after pytest-n2r was imported), then restored."""
-    old = os.umask(mask)
-    try:
-        yield
-    finally:
-        os.umask(old)
-
-
-def test_atomic_write_gives_a_new_file_the_umask_mode_and_keeps_an_old_files_mode(tmp_path):
-    with _umask(0o027):
-        fresh = atomic_write_text(tmp_path / "new.json", "{}")
+def test_atomic_write_gives_a_new_file_the_umask_mode_and_keeps_an_old_files_mode(tmp_path, umask):
+    umask(0o027)
+    fresh = atomic_write_text(tmp_path / "new.json", "{}")
     mode = stat.S_IMODE(fresh.stat().st_mode)
     assert mode == 0o640, f"a new file got mode {oct(mode)}, expected 0o640 under umask 027"
     kept = tmp_path / "kept.json"
@@ -142,16 +131,16 @@ def test_atomic_write_of_pieces_writes_them_as_they_come_and_keeps_the_old_file_
 
 
 @pytest.mark.parametrize("mask", [0o002, 0o077], ids=["umask 002", "umask 077"])
-def test_atomic_write_follows_a_umask_set_after_import(tmp_path, mask):
+def test_atomic_write_follows_a_umask_set_after_import(tmp_path, mask, umask):
     """The umask was read once, at import: a conftest's ``os.umask(0o002)`` still gave 0o644 files, where
     :func:`open` gives 0o664 (two masks, so that one differs from the umask at import, whatever it was)."""
-    with _umask(mask):
-        mode = stat.S_IMODE(atomic_write_text(tmp_path / "new.json", "{}").stat().st_mode)
+    umask(mask)
+    mode = stat.S_IMODE(atomic_write_text(tmp_path / "new.json", "{}").stat().st_mode)
     assert mode == 0o666 & ~mask, f"a new file got mode {oct(mode)} under umask {oct(mask)}, " \
         f"expected {oct(0o666 & ~mask)}"
 
 
-def test_the_umask_is_read_without_setting_it_where_linux_tells_it(tmp_path, monkeypatch):
+def test_the_umask_is_read_without_setting_it_where_linux_tells_it(tmp_path, monkeypatch, umask):
     """Setting the umask to read it races with other threads creating files: ``/proc/self/status`` is read where
     it has a ``Umask:`` line; elsewhere (no /proc, a kernel before 4.7) the umask is set and restored."""
     try:
@@ -159,16 +148,16 @@ def test_the_umask_is_read_without_setting_it_where_linux_tells_it(tmp_path, mon
             told = any(line.startswith(b"Umask:") for line in fh)
     except OSError:
         told = False
-    with _umask(0o027):
-        if told:
-            with monkeypatch.context() as m:
-                m.setattr(os, "umask", lambda mask: pytest.fail(f"the umask was set to {oct(mask)} to read it"))
-                read = atomic.current_umask()
-                assert read == 0o027, f"/proc/self/status read as umask {oct(read)}, expected 0o027"
-        monkeypatch.setattr(atomic, "_PROC_STATUS", str(tmp_path / "no-such-status"))
-        read = atomic.current_umask()
-        assert read == 0o027, f"the umask read by setting it was {oct(read)}, expected 0o027"
-        assert atomic.current_umask() == 0o027, "reading the umask by setting it did not restore it"
+    umask(0o027)
+    if told:
+        with monkeypatch.context() as m:
+            m.setattr(os, "umask", lambda mask: pytest.fail(f"the umask was set to {oct(mask)} to read it"))
+            read = atomic.current_umask()
+            assert read == 0o027, f"/proc/self/status read as umask {oct(read)}, expected 0o027"
+    monkeypatch.setattr(atomic, "_PROC_STATUS", str(tmp_path / "no-such-status"))
+    read = atomic.current_umask()
+    assert read == 0o027, f"the umask read by setting it was {oct(read)}, expected 0o027"
+    assert atomic.current_umask() == 0o027, "reading the umask by setting it did not restore it"
 
 
 @pytest.mark.parametrize("write", [atomic_write_text, lambda path, text: atomic_write_chunks(path, iter([text]))])

@@ -4,7 +4,6 @@ writer left."""
 
 from __future__ import annotations
 
-import contextlib
 import errno
 import json
 import os
@@ -187,28 +186,19 @@ def test_a_disk_that_cannot_store_fails_no_render_under_warnings_as_errors(tmp_p
     assert "stores nothing more this session: OSError: [Errno 28] No space left" in capsys.readouterr().err
 
 
-@contextlib.contextmanager
-def _umask(mask):
-    old = os.umask(mask)
-    try:
-        yield
-    finally:
-        os.umask(old)
-
-
 def _entries(folder):
     return [p for sub in ("renders", "decisions") for p in (folder / sub).rglob("*") if p.is_file()]
 
 
 @pytest.mark.parametrize("mask", [0o002, 0o027], ids=["umask 002", "umask 027"])
-def test_entries_get_the_mode_open_gives_under_the_umask(tmp_path, mask):
+def test_entries_get_the_mode_open_gives_under_the_umask(tmp_path, mask, umask):
     """A cache shared between users (a CI cache restored by another uid, a group's project folder): its entries
     were 0o600 whatever the umask, so unreadable to the others."""
     scene = PlaneScene()
-    with _umask(mask):
-        cache = RenderCache(tmp_path)
-        cache.render(scene, _pose(scene), scene.views[0].camera, ("rgb", "depth"))
-        cache.put_decision("ab" + "0" * 62, {"valid": True})
+    umask(mask)
+    cache = RenderCache(tmp_path)
+    cache.render(scene, _pose(scene), scene.views[0].camera, ("rgb", "depth"))
+    cache.put_decision("ab" + "0" * 62, {"valid": True})
     modes = {p.relative_to(tmp_path).as_posix(): oct(stat.S_IMODE(p.stat().st_mode)) for p in _entries(tmp_path)}
     assert len(modes) == 3 and set(modes.values()) == {oct(0o666 & ~mask)}, \
         f"under umask {oct(mask)} the entries got modes {modes}, expected {oct(0o666 & ~mask)}"
