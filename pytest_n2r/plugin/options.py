@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -31,11 +32,13 @@ __all__ = ["Option", "Where", "OPTIONS", "RUN_OPTIONS", "REPORT_OPTIONS", "optio
 class Where:
     """Where a value came from: ``origin`` names it in errors (``--n2r-scene``, ``ini n2r_scenes``), relative
     scene paths are taken from ``base`` (the working directory, or the ini file's folder) and relative output
-    folders from ``root`` (pytest's rootdir)."""
+    folders from ``root`` (pytest's rootdir); ``warn`` says what a parser warns of (in a session, as pytest's
+    configuration warnings, which its ``-W`` and ``filterwarnings`` reach)."""
 
     origin: str
     base: Path
     root: Path
+    warn: Callable[[str], None] = lambda message: warnings.warn(message, pytest.PytestConfigWarning, stacklevel=3)
 
 
 @dataclass(frozen=True)
@@ -136,8 +139,10 @@ class Option:
             given = self.default, Where("default", Path(config.rootpath), Path(config.rootpath))
         if self.parse is None:
             return given[0]
+        where = replace(given[1], warn=lambda message: config.issue_config_time_warning(
+            pytest.PytestConfigWarning(message), stacklevel=2))
         try:
-            return self.parse(*given)
+            return self.parse(given[0], where)
         except N2RError as exc:
             raise self._usage_error(f"{exc}") from None
 

@@ -33,10 +33,8 @@ def folder(value: str | bool, where: Where) -> Path | None:
     target = path if path.is_absolute() else where.root / path
     reason = unwritable_reason(target)
     if reason is not None and where.origin == "default":
-        import warnings
-
-        warnings.warn(f"pytest-n2r: the default folder {target}: {reason}: nothing is written there this run; "
-                      "choose a writable folder, or 'none'", stacklevel=2)
+        where.warn(f"pytest-n2r: the default folder {target}: {reason}: nothing is written there this run; "
+                   "choose a writable folder, or 'none'")
         return None
     if reason is not None:
         raise InvalidArgument(f"{target}: {reason}; choose a writable folder, or 'none'")

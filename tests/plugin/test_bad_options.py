@@ -162,3 +162,23 @@ def test_heading(n2r_scene):
     assert "metamorphic relation violated" in text and "transform:  yaw=" in text, text
     assert re.search(r"images:\s+not saved \(Permission denied: .*n2r-artifacts", text), text
     assert "PermissionError" not in text, text
+
+
+def test_an_unwritable_default_folder_is_a_configuration_warning_pytest_filters(n2r_project, monkeypatch):
+    """A read-only checkout: the default cache and artifacts folders warn and write nothing, as pytest's own cache
+    does, through pytest's configuration warnings, so `-W error` makes them errors and `filterwarnings` hides them
+    (a plain warnings.warn at configure time reached neither)."""
+    from pytest_n2r.data import atomic
+
+    real = atomic.unwritable_reason
+    monkeypatch.setattr(atomic, "unwritable_reason", lambda path: "cannot write into it (Read-only file system)"
+                        if Path(path).name in (".n2r-cache", "n2r-artifacts") else real(path))
+    n2r_project.write("def test_scene(n2r_scene):\n    pass\n")
+    result = n2r_project.run("--n2r-scene", PLANE)
+    result.assert_outcomes(passed=1)
+    warning = ("*PytestConfigWarning: pytest-n2r: the default folder *.n2r-cache: cannot write into it (Read-only "
+               "file system): nothing is written there this run*")
+    result.stdout.fnmatch_lines([warning])
+    strict = n2r_project.run("--n2r-scene", PLANE, "-W", "error::pytest.PytestConfigWarning")
+    assert strict.ret != 0 and "the default folder" in strict.stdout.str() + strict.stderr.str(), \
+        "-W error did not turn the default folder's warning into an error"
