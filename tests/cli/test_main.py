@@ -66,3 +66,14 @@ def test_commands_on_an_exact_scene_do_not_import_torch(argv, tmp_path):
             "assert code == 0, code; assert 'torch' not in sys.modules, 'torch was imported'")
     result = subprocess.run([sys.executable, "-c", code, *argv], check=False, capture_output=True, text=True)
     assert result.returncode == 0, f"n2r {' '.join(argv)}: {result.stderr[-2000:]}"
+
+
+def test_python_dash_m_runs_n2r_where_its_script_is_not_on_path():
+    """`pip install --user` puts the `n2r` script where PATH may not look: `python -m pytest_n2r.cli` had no
+    __main__ to run."""
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "pytest_n2r.cli", "--version"], check=False, capture_output=True,
+                            text=True)
+    assert result.returncode == 0 and result.stdout.startswith("pytest-n2r "), (result.stdout, result.stderr)
