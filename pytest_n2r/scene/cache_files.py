@@ -9,6 +9,7 @@ worker trimming) and never follows a link.
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 import time
@@ -122,11 +123,16 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> tupl
     """Delete the temporary files older than :data:`STALE_TMP_SECONDS`, then, when the cache holds more than
     ``cap`` bytes, the least recently used entries (renders, decisions and floors alike) until it holds at most
     80 % of ``cap``; returns the bytes freed and the bytes it holds then. The caller checks that ``directory`` is
-    pytest-n2r's."""
+    pytest-n2r's.
+
+    A time later than ``now`` was set under another clock (a cache CI restored from a machine whose clock ran ahead):
+    such an entry has not been used here since (a use sets it to now), so it goes first, and such a temporary file is
+    no writer's here; under a clock behind (a board that boots in 1970) the entries used here are the ones at or
+    before ``now``, and they stay."""
     now = time.time() if now is None else now
     freed, kept = 0, []
     for mtime, path, size, tmp in cache_entries(directory):
-        if tmp and now - mtime > STALE_TMP_SECONDS and _unlink(path):
+        if tmp and abs(now - mtime) > STALE_TMP_SECONDS and _unlink(path):
             freed += size
         else:
             kept.append((mtime, path, size, tmp))
@@ -134,7 +140,7 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> tupl
     if total <= cap:
         return freed, total
     target = 0.8 * cap
-    for _, path, size, tmp in sorted(kept, key=lambda f: f[0]):
+    for _, path, size, tmp in sorted(kept, key=lambda f: f[0] if f[0] <= now else -math.inf):
         if total <= target:
             break
         if not tmp and _unlink(path):  # a fresh temporary file is a concurrent writer's

@@ -291,3 +291,32 @@ def test_workers_storing_into_one_cache_keep_it_under_its_cap(tmp_path):
     # each checks after a tenth of the cap of its own (4 renders): four may pass the cap by that much each before one
     # scans (46 here, as before scans waited for half the cap; 73 when each counted only its own stores)
     assert peak <= 50 * one, f"four workers held {peak / one:.1f} renders under a cap of 40"
+
+
+def test_entries_dated_by_a_clock_ahead_go_first_and_the_ones_used_here_stay(tmp_path):
+    """A cache CI restored from a machine whose clock ran a day ahead: its entries looked newer than the ones this
+    session had just used, so each trim evicted the entries in use and kept the dead ones (and a temporary file
+    dated tomorrow was no writer's, but stayed)."""
+    from pytest_n2r.scene.cache_files import cache_entries, trim_entries
+
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    cache = RenderCache(tmp_path, disk_bytes=10**9)
+    for yaw in range(20):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    now = time.time()
+    restored = sorted(p for _, p, _, _ in cache_entries(tmp_path))
+    for path in restored:
+        os.utime(path, (now + 86400, now + 86400))  # written under a clock a day ahead
+    leftover = restored[0].with_name(f".{restored[0].name}.abcd1234.tmp")
+    leftover.write_bytes(b"x")
+    os.utime(leftover, (now + 86400, now + 86400))
+    used = RenderCache(tmp_path, disk_bytes=10**9)
+    for yaw in range(20, 30):
+        used.render(scene, _pose(scene, yaw), camera, "rgb")  # stored now, by this machine's clock
+    trim_entries(tmp_path, 15 * one, now=time.time())
+    left = {p for _, p, _, _ in cache_entries(tmp_path)}
+    assert not leftover.exists(), "a temporary file dated by another clock was kept"
+    assert len(left) == 10 and left.isdisjoint(restored), (
+        f"{len(left & set(restored))} restored entries kept, {len(left - set(restored))} of the 10 stored here")
