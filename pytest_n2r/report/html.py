@@ -1,4 +1,5 @@
-"""A self-contained HTML report of relation runs (one file: inline CSS, SVG histograms, base64 images).
+"""An HTML report of relation runs (one file: inline CSS, SVG histograms, base64 images; past
+:data:`EMBEDDED_IMAGES` pictures, links to the picture files).
 
 Built from plain :class:`~pytest_n2r.relation.record.RelationRecord` data only, so it can be regenerated from
 a JSON results file without pytest. Built and written in pieces (:func:`html_chunks`), one picture at a time:
@@ -12,13 +13,18 @@ import base64
 import html
 import math
 import os
+import urllib.parse
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 from ..data.atomic import atomic_write_chunks
 from ..relation.record import ExampleRecord, RelationRecord
 
-__all__ = ["html_chunks", "render_html", "write_html"]
+__all__ = ["EMBEDDED_IMAGES", "html_chunks", "render_html", "write_html"]
+
+#: Pictures embedded in a page at most (some 65 KiB each: about 13 MiB); the rest are linked by their path. A
+#: regression that broke 1 000 relations made a 348 MB page, which no browser opens, just when it was needed.
+EMBEDDED_IMAGES = 200
 
 _CSS = """
 .partial{background:#fff8c5;border:1px solid #d4a72c;padding:.5rem}
@@ -62,15 +68,36 @@ def _histogram_svg(deviations: list[float], eps: float, bins: int = 20, width: i
     )
 
 
-def _image_tag(path: str, alt: str, images_base: Path | None) -> str:
-    p = Path(path)
-    if images_base is not None and not p.is_absolute():  # a JSON report's paths are relative to its folder
-        p = images_base / p
-    if not p.is_file():
-        return f"<p><em>{html.escape(alt)}: image {html.escape(path)} not found</em></p>"
-    data = base64.b64encode(p.read_bytes()).decode("ascii")
-    mime = "image/png" if p.suffix.lower() == ".png" else "image/jpeg"
-    return f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{data}">'
+class _Pictures:
+    """The page's pictures: the first ``embed`` embedded, the rest linked (relative to ``page_dir``, the folder of
+    the page's file, where there is one; else by absolute ``file:`` URI). ``base``: the folder relative picture
+    paths start from (a JSON report's)."""
+
+    def __init__(self, base: Path | None, page_dir: Path | None, embed: int):
+        self.base, self.page_dir, self.left = base, page_dir, embed
+
+    def tag(self, path: str, alt: str) -> str:
+        p = Path(path)
+        if self.base is not None and not p.is_absolute():  # a JSON report's paths are relative to its folder
+            p = self.base / p
+        if not p.is_file():
+            return f"<p><em>{html.escape(alt)}: image {html.escape(path)} not found</em></p>"
+        if self.left <= 0:
+            href, where = html.escape(self._href(p)), html.escape(str(p))
+            return f'<a href="{href}">{html.escape(alt)} (not embedded: {where})</a>'
+        self.left -= 1
+        data = base64.b64encode(p.read_bytes()).decode("ascii")
+        mime = "image/png" if p.suffix.lower() == ".png" else "image/jpeg"
+        return f'<img alt="{html.escape(alt)}" src="data:{mime};base64,{data}">'
+
+    def _href(self, p: Path) -> str:
+        absolute = p.absolute()
+        if self.page_dir is not None:
+            try:
+                return urllib.parse.quote(Path(os.path.relpath(absolute, self.page_dir.absolute())).as_posix())
+            except ValueError:  # another drive
+                pass
+        return absolute.as_uri()
 
 
 def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
@@ -85,14 +112,14 @@ def _follow_up(ex: ExampleRecord) -> tuple[str, str]:
         return kind, repr(ex.mutation if ex.mutation is not None else ex.transform)
 
 
-def _example_chunks(title: str, ex: ExampleRecord, images_base: Path | None) -> Iterator[str]:
+def _example_chunks(title: str, ex: ExampleRecord, pictures: _Pictures) -> Iterator[str]:
     """The example's heading and line, then its figures one at a time (each picture read only when asked for)."""
     kind, follow_up = _follow_up(ex)
     yield (f"<h3>{html.escape(title)}</h3><p>scene <code>{html.escape(ex.scene)}</code>, view "
            f"<code>{html.escape(ex.view)}</code>, {kind} <code>{html.escape(follow_up)}</code>: "
            f"score {ex.score:.4g}, deviation {ex.deviation:.4g}</p><div class=\"ex\">")
     for name, path in sorted(ex.images.items()):
-        yield f"<figure>{_image_tag(path, name, images_base)}<figcaption>{html.escape(name)}</figcaption></figure>"
+        yield f"<figure>{pictures.tag(path, name)}<figcaption>{html.escape(name)}</figcaption></figure>"
     yield "</div>"
 
 
@@ -143,7 +170,7 @@ def _summary_row(anchor: str, rel: RelationRecord, reruns: int) -> str:
             f"<td>{_floor(rel)}</td></tr>")
 
 
-def _section(anchor: str, rel: RelationRecord, base: Path | None, reruns: int) -> Iterator[str]:
+def _section(anchor: str, rel: RelationRecord, pictures: _Pictures, reruns: int) -> Iterator[str]:
     """The relation's section: heading, line, histogram, then its examples' pictures one at a time."""
     css, outcome = _outcome(rel)
     worst = rel.worst
@@ -158,21 +185,24 @@ def _section(anchor: str, rel: RelationRecord, base: Path | None, reruns: int) -
         yield "\n"
         yield from _example_chunks("Failing example (not shrunk: the test is marked xfail)"
                                    if rel.pytest_outcome in ("xfailed", "xpassed")
-                                   else "Minimal failing example (shrunk)", rel.minimal, base)
+                                   else "Minimal failing example (shrunk)", rel.minimal, pictures)
     if worst is not None and worst.images and worst is not rel.minimal:
         yield "\n"
-        yield from _example_chunks("Worst example", worst, base)
+        yield from _example_chunks("Worst example", worst, pictures)
     if rel.message:
         yield f"\n<pre>{html.escape(rel.message)}</pre>"
 
 
 def html_chunks(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
                 not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None,
-                reruns: Mapping[str, int] | None = None) -> Iterator[str]:
+                reruns: Mapping[str, int] | None = None, page_dir: str | os.PathLike | None = None,
+                embed: int = EMBEDDED_IMAGES) -> Iterator[str]:
     """The report in pieces, built as they are asked for: the head and the summary table, then each relation's
     section, each picture read and encoded only when its piece is (so one is in memory at a time). Arguments as
-    :func:`render_html`'s; the pieces joined are its page."""
-    base = None if images_base is None else Path(images_base)
+    :func:`render_html`'s; ``page_dir``: the folder of the page's file, from which the pictures past the first
+    ``embed`` are linked; the pieces joined are its page."""
+    pictures = _Pictures(None if images_base is None else Path(images_base),
+                         None if page_dir is None else Path(page_dir), embed)
     reruns = reruns or {}
     if partial is not None:
         title = f"{title} (partial)"
@@ -189,25 +219,29 @@ def html_chunks(relations: list[RelationRecord], title: str = "pytest-n2r report
     for i, rel in enumerate(ordered):
         if i:
             yield "\n"
-        yield from _section(f"rel{i}", rel, base, reruns.get(rel.nodeid, 0))
+        yield from _section(f"rel{i}", rel, pictures, reruns.get(rel.nodeid, 0))
     yield "</body></html>\n"
 
 
 def render_html(relations: list[RelationRecord], title: str = "pytest-n2r report", partial: str | None = None,
                 not_run: list[dict[str, str]] | None = None, images_base: str | os.PathLike | None = None,
-                reruns: Mapping[str, int] | None = None) -> str:
+                reruns: Mapping[str, int] | None = None, embed: int = EMBEDDED_IMAGES) -> str:
     """The report as one HTML string (:func:`html_chunks` joined); ``partial``: why the session did not run every
     selected relation, shown in the title and a banner under it; ``not_run``: the relation tests that ended without
     a relation record (``{"nodeid", "outcome", "reason"}``, as the JSON report's ``not_run``), in a table above the
     summary; ``images_base``: the folder relative image paths start from (a JSON report's folder: it writes them
     so); ``reruns``: by test id, how many earlier tries of it pytest-rerunfailures ran (the JSON report's ``reruns``),
-    said beside its outcome."""
-    return "".join(html_chunks(relations, title, partial, not_run, images_base, reruns))
+    said beside its outcome; ``embed``: how many pictures are embedded at most, the rest linked by absolute
+    ``file:`` URI."""
+    return "".join(html_chunks(relations, title, partial, not_run, images_base, reruns, embed=embed))
 
 
 def write_html(path: str | os.PathLike, relations: list[RelationRecord], title: str = "pytest-n2r report",
                partial: str | None = None, not_run: list[dict[str, str]] | None = None,
-               images_base: str | os.PathLike | None = None, reruns: Mapping[str, int] | None = None) -> Path:
+               images_base: str | os.PathLike | None = None, reruns: Mapping[str, int] | None = None,
+               embed: int = EMBEDDED_IMAGES) -> Path:
     """Write the report to ``path`` atomically, piece by piece as :func:`html_chunks` builds it (one picture in
-    memory at a time, never the whole page); the file is :func:`render_html`'s page."""
-    return atomic_write_chunks(path, html_chunks(relations, title, partial, not_run, images_base, reruns))
+    memory at a time, never the whole page); the file is :func:`render_html`'s page, but for the pictures past the
+    first ``embed``, linked relative to its folder."""
+    return atomic_write_chunks(path, html_chunks(relations, title, partial, not_run, images_base, reruns,
+                                                 page_dir=Path(path).parent, embed=embed))

@@ -187,3 +187,22 @@ def test_write_html_reads_a_relations_pictures_only_after_writing_the_relation_b
     assert events == ["read first.png", "write first.png", "read second.png", "write second.png"], \
         f"the report was not written as it was built: {events}"
     assert out.read_text() == render_html(relations)
+
+
+def test_pictures_past_the_budget_are_linked_so_a_large_regression_still_opens(tmp_path):
+    """1 000 failing relations, every picture embedded, made a 348 MB page no browser opens; past the budget the
+    pictures are linked by their path, relative to the page's folder."""
+    from pytest_n2r.report.html import EMBEDDED_IMAGES
+
+    pictures = tmp_path / "artifacts" / "é x"
+    pictures.mkdir(parents=True)
+    relations = []
+    for i in range(3):
+        rel = _failing_relation(pictures)
+        rel.nodeid = f"test_x.py::test_orb[{i}]"
+        relations.append(rel)
+    page = write_html(tmp_path / "out" / "report.html", relations, embed=2).read_text()
+    assert page.count("data:image/png;base64,") == 2, "not the first 2 pictures embedded"
+    assert page.count('<a href="../artifacts/%C3%A9%20x/follow.png">follow-up (not embedded: ') == 1, \
+        "the third picture is not linked relative to the page's folder"
+    assert EMBEDDED_IMAGES >= 100 and render_html(relations).count("data:image/png;base64,") == 3
