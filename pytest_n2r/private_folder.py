@@ -5,7 +5,9 @@ Conventions
 - The folder's name is fixed (``<name>-<uid>``), so a later process finds what an earlier one kept there. What is
   kept is read back and trusted (numba loads its cached kernels with pickle), so the folder must be this user's
   alone: made with mode ``0o700``, and one that exists already is used only when it is a real folder (not a
-  link), owned by this user, and closed to every other (``mode & 0o077 == 0``).
+  link), owned by this user, and writable by no other (``mode & 0o022 == 0``; one others may read, as an earlier
+  version made it, is closed to them). On Windows, without owners in ``st_mode``, the temporary folder is the
+  user's own: a real folder is used.
 - Otherwise (another user made it first, or its mode was opened) a fresh folder of ``tempfile.mkdtemp`` is used,
   for this process alone.
 """
@@ -35,6 +37,12 @@ def private_temp_folder(name: str) -> Path:
         info = folder.lstat()
     except OSError:
         return Path(tempfile.mkdtemp(prefix=f"{name}-"))
-    if not stat.S_ISDIR(info.st_mode) or (uid is not None and info.st_uid != uid) or info.st_mode & 0o077:
+    if not stat.S_ISDIR(info.st_mode):  # a file, or a link planted in its place
         return Path(tempfile.mkdtemp(prefix=f"{name}-"))
+    if uid is None:  # Windows: the temporary folder is the user's own, and st_mode says nothing of others
+        return folder
+    if info.st_uid != uid or info.st_mode & 0o022:  # another user's, or one others could have written into
+        return Path(tempfile.mkdtemp(prefix=f"{name}-"))
+    if info.st_mode & 0o077:  # this user's and written by no other, but open to reading (made so before): close it
+        folder.chmod(0o700)
     return folder

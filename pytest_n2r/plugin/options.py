@@ -15,7 +15,7 @@ import math
 import os
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -38,7 +38,9 @@ class Where:
     origin: str
     base: Path
     root: Path
-    warn: Callable[[str], None] = lambda message: warnings.warn(message, pytest.PytestConfigWarning, stacklevel=3)
+    warn: Callable[[str], None] = field(
+        default=lambda message: warnings.warn(message, pytest.PytestConfigWarning, stacklevel=3), repr=False,
+        compare=False)
 
 
 @dataclass(frozen=True)

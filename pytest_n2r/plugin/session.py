@@ -66,7 +66,7 @@ class N2RSession:
         if self._cache is None:
             workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")  # xdist's workers store into it at once
             self._cache = RenderCache(self.cache_dir, disk_bytes=self.cache_bytes,
-                                      writers=int(workers) if workers.isdigit() else 1)
+                                      writers=int(workers) if workers.isdecimal() else 1)
             self._cache.trim()  # a directory scan (some 15 ms per 1 000 entries)
             self._cache.on_first_render = self.on_first_render
             self._cache.while_waiting = self.while_waiting

@@ -73,7 +73,7 @@ class _Pictures:
     the page's file, where there is one; else by absolute ``file:`` URI). ``base``: the folder relative picture
     paths start from (a JSON report's)."""
 
-    def __init__(self, base: Path | None, page_dir: Path | None, embed: int):
+    def __init__(self, base: Path | None, page_dir: Path | None, embed: int) -> None:
         self.base, self.page_dir, self.left = base, page_dir, embed
 
     def tag(self, path: str, alt: str) -> str:
@@ -92,12 +92,13 @@ class _Pictures:
 
     def _href(self, p: Path) -> str:
         absolute = p.absolute()
-        if self.page_dir is not None:
-            try:
-                return urllib.parse.quote(Path(os.path.relpath(absolute, self.page_dir.absolute())).as_posix())
-            except ValueError:  # another drive
-                pass
-        return absolute.as_uri()
+        if self.page_dir is None:
+            return absolute.as_uri()
+        try:
+            relative = os.path.relpath(absolute, self.page_dir.absolute())
+        except ValueError:  # another drive
+            return absolute.as_uri()
+        return urllib.parse.quote(os.fsencode(Path(relative).as_posix()))  # a name's undecodable bytes as themselves
 
 
 def _follow_up(ex: ExampleRecord) -> tuple[str, str]:

@@ -125,10 +125,11 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> tupl
     80 % of ``cap``; returns the bytes freed and the bytes it holds then. The caller checks that ``directory`` is
     pytest-n2r's.
 
-    A time later than ``now`` was set under another clock (a cache CI restored from a machine whose clock ran ahead):
-    such an entry has not been used here since (a use sets it to now), so it goes first, and such a temporary file is
-    no writer's here; under a clock behind (a board that boots in 1970) the entries used here are the ones at or
-    before ``now``, and they stay."""
+    A time later than ``now`` by more than :data:`STALE_TMP_SECONDS` was set under another clock (a cache CI restored
+    from a machine whose clock ran ahead): such an entry has not been used here since (a use sets it to now), so it
+    goes first, and such a temporary file is no writer's here (a time a little later is another worker's store or
+    use during the scan, or an NFS server's clock); under a clock behind (a board that boots in 1970) the entries
+    used here are the ones at or before ``now``, and they stay."""
     now = time.time() if now is None else now
     freed, kept = 0, []
     for mtime, path, size, tmp in cache_entries(directory):
@@ -140,7 +141,8 @@ def trim_entries(directory: Path, cap: int, *, now: float | None = None) -> tupl
     if total <= cap:
         return freed, total
     target = 0.8 * cap
-    for _, path, size, tmp in sorted(kept, key=lambda f: f[0] if f[0] <= now else -math.inf):
+    ahead = now + STALE_TMP_SECONDS  # later than this: another clock's (not a worker's store during the scan)
+    for _, path, size, tmp in sorted(kept, key=lambda f: f[0] if f[0] <= ahead else -math.inf):
         if total <= target:
             break
         if not tmp and _unlink(path):  # a fresh temporary file is a concurrent writer's

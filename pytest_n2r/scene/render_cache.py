@@ -158,7 +158,8 @@ class RenderCache:
     processes sharing the directory compile a kernel once. Entries are deleted (evicted, cleared) only in a
     directory that carries pytest-n2r's ``CACHEDIR.TAG``, written on the first store into a directory that is new,
     empty or holds only pytest-n2r's files: a folder of the user's is never tagged (:func:`foreign_entries`), and
-    its ``.gitignore`` never replaced.
+    its ``.gitignore`` never replaced. ``writers``: how many processes store into ``directory`` at once (pytest-xdist's
+    workers), which the trim's rhythm counts.
     """
 
     def __init__(self, directory: str | os.PathLike | None = None, *, memory_bytes: int = DEFAULT_MEMORY_BYTES,

@@ -206,3 +206,16 @@ def test_pictures_past_the_budget_are_linked_so_a_large_regression_still_opens(t
     assert page.count('<a href="../artifacts/%C3%A9%20x/follow.png">follow-up (not embedded: ') == 1, \
         "the third picture is not linked relative to the page's folder"
     assert EMBEDDED_IMAGES >= 100 and render_html(relations).count("data:image/png;base64,") == 3
+
+
+def test_a_linked_picture_whose_name_is_not_text_keeps_its_bytes(tmp_path):
+    """A folder name no encoding decodes (Python holds its bytes as lone surrogates): quoting it failed and the
+    link fell back to an absolute file: URI, which breaks when the report is moved."""
+    made = tmp_path / "made"
+    made.mkdir()
+    rel = _failing_relation(made)  # OpenCV cannot write under such a name (it crashes): made under another
+    pictures = tmp_path / os.fsdecode(b"caf\xff")
+    made.rename(pictures)
+    rel.minimal.images = {name: str(pictures / Path(path).name) for name, path in rel.minimal.images.items()}
+    page = write_html(tmp_path / "report.html", [rel], embed=0).read_text(errors="replace")
+    assert '<a href="caf%FF/follow.png">' in page, "the picture is not linked relative to the page by its bytes"

@@ -320,3 +320,22 @@ def test_entries_dated_by_a_clock_ahead_go_first_and_the_ones_used_here_stay(tmp
     assert not leftover.exists(), "a temporary file dated by another clock was kept"
     assert len(left) == 10 and left.isdisjoint(restored), (
         f"{len(left & set(restored))} restored entries kept, {len(left - set(restored))} of the 10 stored here")
+
+
+def test_an_entry_stored_during_the_trims_scan_is_the_newest_not_another_clocks(tmp_path):
+    """A worker's store a moment after the trim read the time is dated after it: taken for another clock's, it went
+    first, before an entry an hour old."""
+    from pytest_n2r.scene.cache_files import cache_entries, trim_entries
+
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    one = camera.width * camera.height * 3 + 128
+    cache = RenderCache(tmp_path, disk_bytes=10**9)
+    for yaw in range(3):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    now = time.time()
+    old, recent, during = sorted(p for _, p, _, _ in cache_entries(tmp_path))
+    for path, when in ((old, now - 3600), (recent, now - 1), (during, now + 0.05)):
+        os.utime(path, (when, when))
+    trim_entries(tmp_path, 2 * one, now=now)  # 80 % of 2 renders: one stays
+    assert [p for _, p, _, _ in cache_entries(tmp_path)] == [during], "not the newest entry kept"
