@@ -293,18 +293,24 @@ def test_workers_storing_into_one_cache_keep_it_under_its_cap(tmp_path):
     assert peak <= 50 * one, f"four workers held {peak / one:.1f} renders under a cap of 40"
 
 
+def _rendered(folder, count):
+    """``count`` views of the plane rendered into a cache in ``folder`` (no cap to speak of); the scene, the camera
+    and the bytes one view takes."""
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    cache = RenderCache(folder, disk_bytes=10**9)
+    for yaw in range(count):
+        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    return scene, camera, camera.width * camera.height * 3 + 128
+
+
 def test_entries_dated_by_a_clock_ahead_go_first_and_the_ones_used_here_stay(tmp_path):
     """A cache CI restored from a machine whose clock ran a day ahead: its entries looked newer than the ones this
     session had just used, so each trim evicted the entries in use and kept the dead ones (and a temporary file
     dated tomorrow was no writer's, but stayed)."""
     from pytest_n2r.scene.cache_files import cache_entries, trim_entries
 
-    scene = PlaneScene()
-    camera = scene.views[0].camera
-    one = camera.width * camera.height * 3 + 128
-    cache = RenderCache(tmp_path, disk_bytes=10**9)
-    for yaw in range(20):
-        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    scene, camera, one = _rendered(tmp_path, 20)
     now = time.time()
     restored = sorted(p for _, p, _, _ in cache_entries(tmp_path))
     for path in restored:
@@ -327,12 +333,7 @@ def test_an_entry_stored_during_the_trims_scan_is_the_newest_not_another_clocks(
     first, before an entry an hour old."""
     from pytest_n2r.scene.cache_files import cache_entries, trim_entries
 
-    scene = PlaneScene()
-    camera = scene.views[0].camera
-    one = camera.width * camera.height * 3 + 128
-    cache = RenderCache(tmp_path, disk_bytes=10**9)
-    for yaw in range(3):
-        cache.render(scene, _pose(scene, yaw), camera, "rgb")
+    _, _, one = _rendered(tmp_path, 3)
     now = time.time()
     old, recent, during = sorted(p for _, p, _, _ in cache_entries(tmp_path))
     for path, when in ((old, now - 3600), (recent, now - 1), (during, now + 0.05)):
