@@ -27,22 +27,28 @@ def private_temp_folder(name: str) -> Path:
     ``mkdtemp`` folder."""
     uid = os.getuid() if hasattr(os, "getuid") else None
     folder = Path(tempfile.gettempdir()) / f"{name}-{uid if uid is not None else 'user'}"
+    return folder if _usable(folder, uid) else Path(tempfile.mkdtemp(prefix=f"{name}-"))
+
+
+def _usable(folder: Path, uid: int | None) -> bool:
+    """Whether ``folder``, made now or found, is a real folder of ``uid``'s that no other can write into (closed to
+    their reading too, where it was open to it); ``uid=None`` (Windows): whether it is a real folder."""
     try:
         folder.mkdir(mode=0o700)
     except FileExistsError:
         pass
     except OSError:
-        return Path(tempfile.mkdtemp(prefix=f"{name}-"))
+        return False
     try:
         info = folder.lstat()
+        if not stat.S_ISDIR(info.st_mode):  # a file, or a link planted in its place
+            return False
+        if uid is None:  # Windows: the temporary folder is the user's own, and st_mode says nothing of others
+            return True
+        if info.st_uid != uid or info.st_mode & 0o022:  # another user's, or one others could have written into
+            return False
+        if info.st_mode & 0o077:  # this user's and written by no other, but open to reading (made so before)
+            folder.chmod(0o700)
     except OSError:
-        return Path(tempfile.mkdtemp(prefix=f"{name}-"))
-    if not stat.S_ISDIR(info.st_mode):  # a file, or a link planted in its place
-        return Path(tempfile.mkdtemp(prefix=f"{name}-"))
-    if uid is None:  # Windows: the temporary folder is the user's own, and st_mode says nothing of others
-        return folder
-    if info.st_uid != uid or info.st_mode & 0o022:  # another user's, or one others could have written into
-        return Path(tempfile.mkdtemp(prefix=f"{name}-"))
-    if info.st_mode & 0o077:  # this user's and written by no other, but open to reading (made so before): close it
-        folder.chmod(0o700)
-    return folder
+        return False
+    return True
