@@ -27,7 +27,7 @@ import numpy as np
 from hypothesis import HealthCheck, Phase, given
 from hypothesis import seed as hypothesis_seed
 from hypothesis import settings as hsettings
-from hypothesis.database import ReadOnlyDatabase
+from hypothesis.database import ExampleDatabase
 from hypothesis.errors import Flaky, Unsatisfiable
 
 from ..errors import InvalidArgument, InvalidType, SUTOutputError
@@ -244,9 +244,10 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
             test = hypothesis_seed(seed)(test)
         hsettings(**options, database=db)(test)()
 
-    try:  # the survey: records every draw, never fails (and leaves the example database as it was)
+    survey_database = None if database is None else _HeldBackWrites(database)
+    try:  # the survey: records every draw, never fails (its writes to the example database held back)
         with _without_local_constants():
-            search(None if database is None else ReadOnlyDatabase(database))
+            search(survey_database)
     except Unsatisfiable:
         pass
     drawn, undefined = len(run.examples), run.undefined
@@ -256,6 +257,8 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
     if engine.gave_up == "invalid" or not run.valid_examples or run.rejected / drawn > relation.validity.max_rejected:
         raise InvalidArgument(too_many_invalid(run, relation))
     if not run.inconsistencies:
+        if survey_database is not None:  # nothing failed: the saved failures replayed and passed, so they go
+            survey_database.write()
         return
     if not settings.shrink:
         _report_as_drawn(engine, "not shrunk: shrinking is off (the test is expected to fail)")
@@ -275,6 +278,39 @@ def _report_as_drawn(engine: Engine, note: str) -> None:
     worst = engine.run_record.worst
     view, tau = recorded_view(worst, "drawn"), worst.follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera), note=note)
+
+
+class _HeldBackWrites(ExampleDatabase):
+    """An example database read as it is, whose writes are held back until :meth:`write`.
+
+    The survey never raises a failure, so to Hypothesis every example it replays from the database passes, and it
+    deletes each as fixed. Held back, those deletions happen only when the survey found no failure (the failure was
+    fixed: the saved examples go, as plain Hypothesis drops them); after a failure the writes are dropped and the
+    shrink pass replays the saved examples first, against the database itself.
+    """
+
+    def __init__(self, database: ExampleDatabase) -> None:
+        super().__init__()
+        self.database = database
+        self.writes: list[tuple[str, bytes, bytes]] = []  # (method, key, value), in Hypothesis's order
+
+    def __repr__(self) -> str:
+        return f"_HeldBackWrites({self.database!r})"
+
+    def fetch(self, key: bytes) -> Iterator[bytes]:
+        yield from self.database.fetch(key)
+
+    def save(self, key: bytes, value: bytes) -> None:
+        self.writes.append(("save", key, value))
+
+    def delete(self, key: bytes, value: bytes) -> None:
+        self.writes.append(("delete", key, value))
+
+    def write(self) -> None:
+        """Make the held-back writes, in the order Hypothesis asked for them."""
+        for method, key, value in self.writes:
+            getattr(self.database, method)(key, value)
+        self.writes.clear()
 
 
 #: A memory address in a repr (``<Obj object at 0x7f3a...>``): it differs between processes.

@@ -58,6 +58,17 @@ def test_heading(n2r_scene):
     assert replayed["transform"] == before["minimal"]["transform"] and not replayed["passed"], replayed
     minimal = re.compile(r"transform:\s+(.*)\(minimal")
     assert minimal.search(first.stdout.str()).group(1) == minimal.search(second.stdout.str()).group(1)
+    # the SUT fixed: the run that passes drops the saved failure, so the run after it does not replay it first
+    n2r_project.write("""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=20), examples=60)
+def test_heading(n2r_scene):
+    return lambda rgb: 0
+""")
+    n2r_project.run("--n2r-scene", RAMP).assert_outcomes(passed=1)
+    n2r_project.run("--n2r-scene", RAMP, "--n2r-json", "fourth.json").assert_outcomes(passed=1)
+    (fourth,) = json.loads((n2r_project.pytester.path / "fourth.json").read_text())["relations"]
+    assert fourth["examples"][0]["transform"] != before["minimal"]["transform"], (
+        f"the fixed failure {before['minimal']['transform']} was still replayed first")
 
 
 @pytest.mark.parametrize(

@@ -307,6 +307,27 @@ def test_a_failure_says_how_a_rerun_finds_it_again(settings, says):
         info.value), str(info.value)
 
 
+def test_a_fixed_failure_leaves_the_example_database_as_plain_hypothesis_would():
+    """The survey read the database read-only and only a failing run wrote it, so a failure fixed long ago was
+    replayed first in every run for good; plain Hypothesis drops a saved example once it passes."""
+    database = InMemoryExampleDatabase()
+    relation = Relation.build(AbsDifference(), 0.05, transforms(yaw=10), examples=10)
+    scene, settings = PlaneScene(texture="ramp"), RunSettings(database=database)
+
+    def saved() -> dict[str, int]:
+        return {"secondary" if key.endswith(b".secondary") else "primary": len(values)
+                for key, values in database.data.items() if not key.endswith(b".pareto")}
+
+    with pytest.raises(RelationFailure):
+        check_relation(scene, lambda rgb: float(decode_ramp_x(rgb)[36, 48]), relation, settings=settings)
+    failed = saved()
+    assert failed["primary"] == 1 and failed["secondary"] > 1, f"after the failure the database holds {failed}"
+    check_relation(scene, lambda rgb: 0.0, relation, settings=settings)  # the SUT fixed: the saved examples pass
+    fixed = saved()
+    assert fixed["primary"] == 0 and fixed["secondary"] < failed["secondary"], (
+        f"after the fix the database holds {fixed} (after the failure {failed}): the replayed examples were kept")
+
+
 def test_a_failure_under_a_forced_seed_says_to_give_the_seed_again(monkeypatch):
     """Under ``--hypothesis-seed`` Hypothesis writes no example database, yet the failure said the database would
     replay the example: the next run without the seed drew other examples."""
