@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data.atomic import atomic_write_bytes, atomic_write_text
+from .correlation import ALPHA
 from .run import StudyResult
 
 __all__ = ["write_study", "markdown_table", "PLOTS"]
@@ -70,13 +71,28 @@ def summary_markdown(result: StudyResult) -> str:
     parts += ["## RQ1 — realness (mean over views; reference: the real photo)\n",
               markdown_table(_mean_by(result.realness, ("scene", "source"), ("psnr", "ssim", "lpips"))),
               "\n### SUT metrics under the reality-to-field shift (τ0)\n",
-              markdown_table(_mean_by(result.domain_shift, ("scene", "sut", "metric"), ("score", "deviation")))]
+              markdown_table(_mean_by(result.domain_shift, ("scene", "sut", "metric"), ("score", "deviation"))),
+              "\n### Image quality against the SUT metrics (Spearman, τ0 over the views)\n",
+              _dependence(result.correlations), markdown_table(result.correlations)]
     parts += ["\n## RQ2 — inconsistencies per SUT, metric and transform family\n",
               markdown_table(result.inconsistencies)]
     parts += ["\n## RQ3 — rendering speed (RGB only)\n", markdown_table(result.fps)]
     if result.notes:
         parts += ["\n## Notes\n", "".join(f"- {n}\n" for n in result.notes)]
     return "\n".join(parts)
+
+
+def _dependence(rows: list[dict]) -> str:
+    """How many combinations show a dependence, out of those with a rank correlation (the paper: 38 of 48)."""
+    if not rows:
+        return ("No view paired a field's render with a real photo (exact scenes, or no stored photos): nothing to "
+                "correlate.\n\n")
+    ranked = [r for r in rows if not math.isnan(r["rho"])]
+    significant = sum(r["significant"] for r in ranked)
+    unranked = (f"; {len(rows) - len(ranked)} without one (fewer than 3 views with both values, e.g. LPIPS not "
+                f"measured, or all values equal)") if len(ranked) < len(rows) else ""
+    return (f"{significant} of {len(ranked)} combinations with a rank correlation are significant at p < {ALPHA:g} "
+            f"(the paper: 38 of 48){unranked}.\n\n")
 
 
 def _plots(result: StudyResult, out: Path) -> list[str]:
@@ -143,7 +159,7 @@ def write_study(result: StudyResult, out: str | os.PathLike) -> list[Path]:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tables = {"realness": result.realness, "domain_shift": result.domain_shift, "examples": result.examples,
-              "inconsistencies": result.inconsistencies, "fps": result.fps}
+              "inconsistencies": result.inconsistencies, "correlations": result.correlations, "fps": result.fps}
     paths = [atomic_write_text(out / f"{name}.csv", _csv(rows)) for name, rows in tables.items()]
     notes = _plots(result, out)
     for name in PLOTS:  # a plot this run did not draw is not left from an earlier run into the same folder

@@ -12,6 +12,8 @@ Every result is a plain ``dict`` row (written as CSV and Markdown by :mod:`pytes
   real photos), so motions and mutations share one source image.
 - ``inconsistencies``: ``examples`` counted per scene, SUT, metric and family at each eps (RQ2); NaN where no
   example of the family is valid (nothing was compared: not zero inconsistencies).
+- ``correlations``: per SUT, metric and image quality metric: Spearman's rank correlation between τ0's image
+  quality and the SUT's score under the reality-to-field shift, over the views (:mod:`pytest_n2r.study.correlation`).
 - ``fps``: per scene and render size: frames per second of RGB renders (RQ3).
 
 "Real photo" is the view's stored image (``SceneView.image``); for an exact demo scene without stored
@@ -41,6 +43,7 @@ from ..relation.floor import exact_twin, reference_image, shift_sample
 from ..relation.validity import Validity
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
+from .correlation import rank_correlations
 from .sampling import MUTATION_FAMILIES, TRANSFORM_FAMILIES, sample_mutation, sample_transform
 from .suts import SUT
 
@@ -101,6 +104,12 @@ class StudyResult:
                 row[f"inc@{eps:g}"] = sum(r["deviation"] > eps for r in valid) if valid else math.nan
             out.append(row)
         return out
+
+    @property
+    def correlations(self) -> list[dict]:
+        """Image quality against the SUT metrics under the reality-to-field shift, one row per combination
+        (:func:`~pytest_n2r.study.correlation.rank_correlations`)."""
+        return rank_correlations(self.realness, self.domain_shift)
 
 
 def _reference_image(scene: Scene, view: SceneView, camera: Camera) -> np.ndarray | None:

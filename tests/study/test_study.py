@@ -15,6 +15,7 @@ from pytest_n2r.demo import ground_truth
 from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.strategies import PRESET_FAMILIES
 from pytest_n2r.study import StudyConfig, resolve_sut, run_study, write_study
+from pytest_n2r.study.correlation import rank_correlations
 from pytest_n2r.study.fidelity import FidelityReport, measure_fidelity
 from pytest_n2r.study.run import StudyResult
 from pytest_n2r.study.sampling import sample_mutation, sample_transform
@@ -272,3 +273,75 @@ def test_the_example_classifiers_are_study_suts_by_name(name, monkeypatch):
     scores = sut.fn(np.full((120, 160, 3), 90, np.uint8))
     assert sut.kind == "classifier" and scores.shape == (1000,), (sut.kind, scores.shape)
     assert abs(float(scores.sum()) - 1.0) < 1e-4, f"{name}: probabilities sum to {scores.sum()}"
+
+
+def _shift_rows(quality: list[float], scores: list[float], **row) -> tuple[list[dict], list[dict]]:
+    """RQ1's τ0 realness rows (PSNR ``quality``, SSIM and LPIPS from it) and ORB's shift rows with ``scores``."""
+    realness = [{"scene": "s", "view": f"v{i}", "source": "tau0", "psnr": q, "ssim": q / 40, "lpips": 1 - q / 40}
+                for i, q in enumerate(quality)]
+    shift = [{"scene": "s", "view": f"v{i}", "sut": "orb", "metric": "repeatability", "score": score,
+              "deviation": 1 - score, "valid": True, **row} for i, score in enumerate(scores)]
+    return realness, shift
+
+
+def test_image_quality_and_sut_scores_are_rank_correlated_as_the_paper_tests_them(tmp_path):
+    """The paper tests Spearman rank correlations between PSNR, SSIM, LPIPS and each SUT metric under the
+    reality-to-field shift (38 of its 48 combinations significant at p < 0.05); the study did not compute them."""
+    realness, shift = _shift_rows([20.0, 24.0, 22.0, 27.0, 25.0, 29.0], [0.3, 0.5, 0.4, 0.8, 0.6, 0.9])
+    result = StudyResult(realness=realness, domain_shift=shift)
+    rows = {r["image_quality"]: r for r in result.correlations}
+    assert set(rows) == {"psnr", "ssim", "lpips"}, rows
+    assert rows["psnr"]["rho"] == pytest.approx(1.0) and rows["ssim"]["rho"] == pytest.approx(1.0), rows
+    assert rows["lpips"]["rho"] == pytest.approx(-1.0), "lower LPIPS is the more faithful render: a negative rho"
+    assert all(r["n"] == 6 and r["p"] < 0.05 and r["significant"] for r in rows.values()), rows
+    written = {p.name for p in write_study(result, tmp_path)}
+    assert "correlations.csv" in written, written
+    with open(tmp_path / "correlations.csv") as fh:
+        assert [r["image_quality"] for r in csv.DictReader(fh)] == ["psnr", "ssim", "lpips"]
+    assert "3 of 3 combinations with a rank correlation are significant at p < 0.05" in (
+        tmp_path / "study.md").read_text()
+
+
+def test_a_correlation_of_nothing_to_rank_is_undefined_not_zero():
+    """Too few views, a constant column, invalid samples, exact renders (the reference itself: no field, no
+    shift) and a missing LPIPS have no rank correlation: NaN and not significant, never a measured independence."""
+    cases = {  # case: (rows, the pairs each combination should count)
+        "two views": (_shift_rows([20.0, 25.0], [0.3, 0.9]), 2),
+        "constant scores": (_shift_rows([20.0, 25.0, 22.0, 27.0], [0.5] * 4), 4),
+        "invalid samples": (_shift_rows([20.0, 25.0, 22.0, 27.0], [0.3, 0.9, 0.5, 0.7], valid=False), 0),
+        "exact renders": (_shift_rows([math.inf] * 4, [1.0, 0.9, 0.8, 0.7]), None),
+    }
+    for case, ((realness, shift), pairs) in cases.items():
+        rows = rank_correlations(realness, shift)
+        if pairs is None:  # no view of a field: no combination to report
+            assert rows == [], (case, rows)
+            continue
+        assert [r["n"] for r in rows] == [pairs] * 3, (case, rows)
+        assert all(math.isnan(r["rho"]) and math.isnan(r["p"]) and not r["significant"] for r in rows), (case, rows)
+    realness, shift = _shift_rows([20.0, 25.0, 22.0, 27.0], [0.3, 0.9, 0.5, 0.7])
+    for row in realness:
+        row["lpips"] = None  # the lpips package is not installed
+    lpips_row = next(r for r in rank_correlations(realness, shift) if r["image_quality"] == "lpips")
+    assert lpips_row["n"] == 0 and math.isnan(lpips_row["rho"]), lpips_row
+
+
+def test_a_study_of_exact_scenes_says_there_is_nothing_to_correlate(study, tmp_path):
+    assert study.correlations == [], "an exact scene's τ0 is its own reference: no shift to correlate"
+    write_study(study, tmp_path)
+    assert "nothing to correlate" in (tmp_path / "study.md").read_text()
+
+
+def test_a_few_views_get_the_exact_p_value_not_the_t_approximation():
+    """Three views ranked alike are one ordering in three of six (both directions): p = 1/3, not significant. The
+    t approximation SciPy's spearmanr uses gives 0 there, and 0.037 for five views at rho 0.9 (exactly 1/12)."""
+    from scipy.stats import permutation_test, spearmanr
+
+    rows = rank_correlations(*_shift_rows([20.0, 22.0, 25.0], [0.3, 0.5, 0.9]))
+    assert all(r["rho"] == pytest.approx(1.0) and r["p"] == pytest.approx(abs(r["rho"]) / 3) and not r["significant"]
+               for r in rows if r["image_quality"] != "lpips"), rows
+    x, y = [20.0, 20.0, 22.0, 23.0, 25.0, 21.0, 24.0], [0.3, 0.2, 0.2, 0.6, 0.9, 0.5, 0.4]  # ties in both
+    psnr = next(r for r in rank_correlations(*_shift_rows(x, y)) if r["image_quality"] == "psnr")
+    exact = permutation_test((x,), lambda a: abs(spearmanr(a, y).statistic), permutation_type="pairings",
+                             n_resamples=10**6, alternative="greater")  # every pairing: P(|rho| >= |observed|)
+    assert abs(psnr["rho"]) == pytest.approx(exact.statistic) and psnr["p"] == pytest.approx(exact.pvalue), (
+        psnr, exact.statistic, exact.pvalue)
