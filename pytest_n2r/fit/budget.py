@@ -55,12 +55,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection
+from numbers import Real
+from typing import Any
 
-from ..errors import InvalidArgument
+from ..errors import InvalidArgument, InvalidType
 from ..field.config import FieldConfig
 
 __all__ = ["FINE_BUDGET_PIXELS_PER_VOXEL", "FINE_BUDGET_S", "LONG_BUDGET_RESOLUTIONS", "LONG_BUDGET_S",
-           "LONG_BUDGET_SH_DEGREE", "budget_config"]
+           "LONG_BUDGET_SH_DEGREE", "budget_config", "check_time_budget"]
 
 #: Training seconds from which a fit takes :data:`LONG_BUDGET_SH_DEGREE`: 20 minutes.
 LONG_BUDGET_S = 1200.0
@@ -74,6 +76,22 @@ FINE_BUDGET_S = 1800.0
 #: The pixels a voxel (where the cameras look closest) that a fit of :data:`FINE_BUDGET_S` or more sizes its
 #: finer grid for (``FieldConfig.max_pixels_per_voxel``; the default is 6).
 FINE_BUDGET_PIXELS_PER_VOXEL = 3.5
+
+
+def check_time_budget(time_budget_s: Any) -> float | None:
+    """``time_budget_s`` as seconds (a finite number > 0) or ``None``; raise naming it otherwise.
+
+    >>> check_time_budget(600), check_time_budget(None)
+    (600.0, None)
+    """
+    if time_budget_s is None:
+        return None
+    expected = "expected a finite number of seconds > 0, or None"
+    if isinstance(time_budget_s, bool) or not isinstance(time_budget_s, Real):
+        raise InvalidType(f"time_budget_s={time_budget_s!r}: {expected}, not {type(time_budget_s).__name__}")
+    if not (math.isfinite(time_budget_s) and time_budget_s > 0):
+        raise InvalidArgument(f"time_budget_s={time_budget_s!r}: {expected}")
+    return float(time_budget_s)
 
 
 def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps: int | None = None,
@@ -101,8 +119,7 @@ def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps
     >>> budget_config(chosen, 1200.0) == chosen
     True
     """
-    if time_budget_s is not None and not (math.isfinite(time_budget_s) and time_budget_s > 0):
-        raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected a finite number of seconds > 0, or None")
+    time_budget_s = check_time_budget(time_budget_s)
     if time_budget_s is None or time_budget_s < LONG_BUDGET_S or max_steps is not None:
         return config
     default = FieldConfig()

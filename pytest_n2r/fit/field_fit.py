@@ -35,6 +35,7 @@ from ..field.march import MarchGrid, march_compiled, march_dense
 from ..field.query import ALPHA_MAX, composite, distinct_rows, distortion, interpolate, sh_basis, shade, trilinear
 from ..field.space import SceneSpace
 from .appearance import Appearance, decide_appearance
+from .budget import check_time_budget
 from .compile_clock import CompileClock
 from .detail import capture_detail, detailed_config
 from .evaluate import FIT_RENDER, evaluate_views, final_scores, mean_scores
@@ -298,9 +299,9 @@ def fit(
     config = config or FieldConfig()
     if time_budget_s is None and max_steps is None:
         raise InvalidArgument("fit needs time_budget_s or max_steps (or both)")
-    if time_budget_s is not None and not (math.isfinite(time_budget_s) and time_budget_s > 0):
-        raise InvalidArgument(f"time_budget_s={time_budget_s!r}: expected seconds > 0")
-    if max_steps is not None and not (isinstance(max_steps, int) and max_steps >= 1):
+    time_budget_s = check_time_budget(time_budget_s)
+    if max_steps is not None and not (isinstance(max_steps, int) and not isinstance(max_steps, bool)
+                                      and max_steps >= 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
     train = fit_views(capture)  # every view checked before its photos are measured or its rays built

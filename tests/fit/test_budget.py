@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.field.config import SH_DEGREES, FieldConfig
 from pytest_n2r.fit.budget import (
     FINE_BUDGET_PIXELS_PER_VOXEL,
@@ -77,7 +77,8 @@ def test_the_thresholds_are_inclusive():
     assert budget_config(DEFAULT, math.nextafter(FINE_BUDGET_S, 0.0)) == long
 
 
-@pytest.mark.parametrize("budget", [0.0, -5.0, math.nan, math.inf])
+@pytest.mark.parametrize("budget", [0.0, -5.0, math.nan, math.inf, "10m", True])
 def test_a_budget_that_is_not_seconds_is_refused(budget):
-    with pytest.raises(InvalidArgument, match=r"time_budget_s=.*: expected a finite number of seconds > 0, or None"):
+    expected = r"time_budget_s=.*: expected a finite number of seconds > 0, or None"
+    with pytest.raises((InvalidArgument, InvalidType), match=expected):
         budget_config(FieldConfig(), budget)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from pytest_n2r.errors import FitError, InvalidArgument
+from pytest_n2r.errors import FitError, InvalidArgument, InvalidType
 from pytest_n2r.field.config import FieldConfig
 from pytest_n2r.field.grid import SceneField
 from pytest_n2r.fit import evaluate_views, fit
@@ -128,14 +128,16 @@ def test_a_capture_without_training_images_is_a_fit_error_saying_why(capture48, 
 
 @pytest.mark.parametrize("kwargs, message", [
     ({}, "needs time_budget_s or max_steps"),
-    ({"time_budget_s": -1}, r"time_budget_s=-1: expected seconds > 0"),
+    ({"time_budget_s": -1}, r"time_budget_s=-1: expected a finite number of seconds > 0"),
     ({"time_budget_s": float("nan")}, r"time_budget_s=nan"),
+    ({"time_budget_s": "10m"}, r"time_budget_s='10m': expected a finite number of seconds > 0, or None, not str"),
     ({"max_steps": 0}, r"max_steps=0: expected an integer >= 1"),
     ({"max_steps": 2.5}, r"max_steps=2.5: expected an integer"),
+    ({"max_steps": True}, r"max_steps=True: expected an integer >= 1"),
     ({"max_steps": 1, "device": "tpu"}, r"device='tpu': expected 'auto', 'cpu' or 'cuda\[:N\]'"),
 ])
 def test_bad_fit_arguments_are_named(capture48, kwargs, message):
-    with pytest.raises(InvalidArgument, match=message):
+    with pytest.raises((InvalidArgument, InvalidType), match=message):
         fit(capture48, SHORT_CONFIG, **kwargs)
 
 
