@@ -300,8 +300,7 @@ def fit(
     if time_budget_s is None and max_steps is None:
         raise InvalidArgument("fit needs time_budget_s or max_steps (or both)")
     time_budget_s = check_time_budget(time_budget_s)
-    if max_steps is not None and not (isinstance(max_steps, int) and not isinstance(max_steps, bool)
-                                      and max_steps >= 1):
+    if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
     train = fit_views(capture)  # every view checked before its photos are measured or its rays built
