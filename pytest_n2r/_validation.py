@@ -5,12 +5,15 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterable
+from enum import Enum
 from numbers import Real
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
 from .errors import InvalidArgument, InvalidType
+
+_E = TypeVar("_E", bound=Enum)
 
 
 def is_tensor(value: Any) -> bool:
@@ -90,6 +93,24 @@ def check_int(name: str, value: Any, lo: int, hi: int) -> int:
     return int(value)
 
 
+def check_choice(name: str, value: Any, choices: type[_E], what: str) -> _E:
+    """``value`` as a member of the enum ``choices`` (a member or its value), or an :class:`InvalidArgument` naming
+    ``name``, saying it is not ``what`` and listing the values.
+
+    >>> from pytest_n2r.geometry import Units
+    >>> check_choice("units", "scene", Units, "a unit").name
+    'SCENE'
+    >>> check_choice("units", "meters", Units, "a unit")
+    Traceback (most recent call last):
+    ...
+    pytest_n2r.errors.InvalidArgument: units='meters' is not a unit; expected one of ['reference', 'scene', 'metres']
+    """
+    try:
+        return choices(value)
+    except ValueError:
+        raise InvalidArgument(f"{name}={value!r} is not {what}; expected one of {[c.value for c in choices]}") from None
+
+
 def check_positive(name: str, value: Any) -> float:
     """Return ``value`` as a finite float > 0, or raise."""
     value = check_real(name, value)
@@ -99,12 +120,19 @@ def check_positive(name: str, value: Any) -> float:
 
 
 def as_unit_rgb(value: Any) -> tuple[float, float, float] | None:
-    """``value`` as an RGB triple of floats in [0, 1], or ``None`` when it is not one (callers name it)."""
-    try:
-        rgb = tuple(float(c) for c in value)
-    except (TypeError, ValueError):
+    """``value`` as an RGB triple of floats in [0, 1], or ``None`` when it is not one (callers name it): a list,
+    tuple or 1-D array of three real numbers (a bool is not a number, a string not three of them, and a set or a
+    dict has no channel order).
+
+    >>> as_unit_rgb([0.25, 1, 0]), as_unit_rgb("101"), as_unit_rgb((True, False, True)), as_unit_rgb(["1", "0", "1"])
+    ((0.25, 1.0, 0.0), None, None, None)
+    """
+    if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) != 1 or len(value) != 3:
         return None
-    if len(rgb) != 3 or not all(0.0 <= c <= 1.0 for c in rgb):
+    if any(isinstance(c, (bool, np.bool_)) or not isinstance(c, (Real, np.integer, np.floating)) for c in value):
+        return None
+    rgb = tuple(float(c) for c in value)
+    if not all(0.0 <= c <= 1.0 for c in rgb):
         return None
     return rgb[0], rgb[1], rgb[2]
 

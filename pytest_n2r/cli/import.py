@@ -24,7 +24,10 @@ def parse_rgb(text: str) -> tuple[float, float, float]:
     >>> parse_rgb("1, 1, 1")
     (1.0, 1.0, 1.0)
     """
-    rgb = as_unit_rgb(text.split(","))
+    try:
+        rgb = as_unit_rgb([float(part) for part in text.split(",")])
+    except ValueError:
+        rgb = None
     if rgb is None:
         raise argparse.ArgumentTypeError(f"{text!r}: expected three comma-separated values in [0, 1], e.g. 1,1,1")
     return rgb

@@ -33,9 +33,9 @@ _KINDS: dict[str, tuple[str, Callable[[object], bool]]] = {
     "tuple[float, ...]": ("a list of numbers",
                           lambda v: isinstance(v, (tuple, list)) and all(_is_number(x, float) for x in v)),
 }
-#: a colour: also a NumPy array of numbers (the caller checks its length and range and stores plain floats)
+#: a colour: also a 1-D NumPy array of numbers (the caller checks its length and range and stores plain floats)
 _KINDS["tuple[float, float, float]"] = (
-    "three numbers", lambda v: (isinstance(v, (tuple, list)) or type(v).__name__ == "ndarray")
+    "three numbers", lambda v: (isinstance(v, (tuple, list)) or (type(v).__name__ == "ndarray" and v.ndim == 1))
     and all(isinstance(x, numbers.Real) and not isinstance(x, bool) for x in v))
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import repeated_name
+from .._validation import check_choice, repeated_name
 from ..errors import InvalidArgument, InvalidType, N2RError
 from ..geometry import Camera, Transform, Units, check_pose
 from ..render.size import MAX_SIDE
@@ -200,7 +200,7 @@ class Scene(ABC):
 
     def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
         """Scene units per unit of transform translation in ``units``."""
-        units = Units(units)
+        units = check_choice("units", units, Units, "a unit")
         if units is Units.REFERENCE:
             return float(self.reference_length)
         if units is Units.SCENE:
@@ -213,7 +213,8 @@ class Scene(ABC):
         return 1.0 / float(self.metres_per_unit)
 
     def view(self, index: int | str | object) -> SceneView:
-        """A captured view by index or image name (or a drawn ``strategies.ViewPick``, resolved here)."""
+        """A captured view by index (an int or NumPy integer) or image name (or a drawn ``strategies.ViewPick``,
+        resolved here)."""
         resolve = getattr(index, "resolve", None)
         if callable(resolve):
             return resolve(self)
@@ -222,7 +223,10 @@ class Scene(ABC):
                 if v.name == index:
                     return v
             raise InvalidArgument(f"scene {self.name!r} has no view named {index!r}")
-        if not 0 <= int(index) < len(self.views):
+        if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+            raise InvalidType(f"view={index!r} must be a view index (an int) or an image name (a str), not "
+                              f"{type(index).__name__}")
+        if not 0 <= index < len(self.views):
             raise InvalidArgument(f"view={index!r} is out of range; scene {self.name!r} has {len(self.views)} views")
         return self.views[int(index)]
 
@@ -245,10 +249,13 @@ class Scene(ABC):
         if not isinstance(tau, Transform):
             raise InvalidType(f"tau must be a pytest_n2r.Transform, got {type(tau).__name__}")
         own = getattr(tau, "units", None)  # a PoseChange (pytest_n2r.strategies) carries its units
-        if units is not None and own is not None and Units(units) is not own:
-            raise InvalidArgument(f"units={Units(units).value!r} contradicts tau={tau!r}, whose translation is in "
-                                  f"{own.value!r} units; leave units out")
-        units = units if units is not None else own if own is not None else Units.REFERENCE
+        if units is None:
+            units = own if own is not None else Units.REFERENCE
+        else:
+            units = check_choice("units", units, Units, "a unit")
+            if own is not None and units is not own:
+                raise InvalidArgument(f"units={units.value!r} contradicts tau={tau!r}, whose translation is in "
+                                      f"{own.value!r} units; leave units out")
         camera = view.camera if camera is None else camera
         source = self.render(view.c2w, camera, outputs)
         follow = self.render(tau.apply(view.c2w, self.length_scale(units)), camera, outputs)

@@ -17,7 +17,7 @@ from typing import Literal
 
 import numpy as np
 
-from .._validation import as_unit_rgb, check_positive, check_range, repeated_name
+from .._validation import as_unit_rgb, check_choice, check_positive, check_range, repeated_name
 from ..data.capture import split_frames
 from ..data.poses import PoseSet
 from ..errors import IngestError, InvalidArgument, InvalidType
@@ -113,7 +113,7 @@ class SplatScene(Scene):
 
     def length_scale(self, units: Units | str = Units.REFERENCE) -> float:
         __tracebackhide__ = True
-        if Units(units) is Units.REFERENCE:
+        if check_choice("units", units, Units, "a unit") is Units.REFERENCE:
             return self.reference_length
         return super().length_scale(units)
 

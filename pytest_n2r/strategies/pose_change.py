@@ -17,6 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from .._validation import check_choice
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform, Units
 from .follow_up import FollowUp
@@ -46,11 +47,7 @@ class PoseChange(Transform, FollowUp):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        try:
-            object.__setattr__(self, "units", Units(self.units))
-        except ValueError:
-            raise InvalidArgument(
-                f"units={self.units!r} is not a unit; expected one of {[u.value for u in Units]}") from None
+        object.__setattr__(self, "units", check_choice("units", self.units, Units, "a unit"))
 
     @classmethod
     def of(cls, transform: Transform, units: Units | str = Units.REFERENCE) -> PoseChange:

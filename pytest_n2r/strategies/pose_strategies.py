@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
+from .._validation import check_choice
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Transform, Units
 from ..geometry.look_at import look_at_transform
@@ -53,11 +54,7 @@ class PoseChangeFamily:
             lo, hi = check_bound(name, value)
             if (lo, hi) != (0.0, 0.0):
                 bounds[name] = (lo, hi)
-        try:
-            units = Units(units)
-        except ValueError:
-            raise InvalidArgument(
-                f"units={units!r} is not a unit; expected one of {[u.value for u in Units]}") from None
+        units = check_choice("units", units, Units, "a unit")
         if not isinstance(look_at, bool):
             raise InvalidType(f"look_at={look_at!r} must be True or False")
         if look_at and units is not Units.REFERENCE:

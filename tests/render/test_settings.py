@@ -58,6 +58,9 @@ def test_bad_settings_are_named(changes, name):
     ({"adaptive_stride": 2.0}, "an integer or None (default: None)"),
     ({"tail": (0.3, None)}, "a list of numbers (default: 0.3,0.1)"),
     ({"background": (1, True, 0)}, "three numbers or None (default: None)"),
+    ({"background": np.array(0.5)}, "three numbers or None (default: None)"),  # was a bare TypeError (0-d array)
+    ({"background": np.full((3, 1), 0.5)}, "three numbers or None (default: None)"),
+    ({"background": "101"}, "three numbers or None (default: None)"),
     ({"backend": None}, "a string (default: auto)"),
 ])
 def test_settings_of_the_wrong_type_are_named_with_the_type_expected(changes, expected):

@@ -173,11 +173,24 @@ def test_renders_are_bit_identical_on_one_thread():
     ("tile", 0, "SplatSettings.tile=0; expected an int in 1..256"),
     ("max_pairs", 2.5, "SplatSettings.max_pairs=2.5; expected an int >= 1"),
     ("background", (2, 0, 0), "SplatSettings.background=(2, 0, 0); expected None or three values in [0, 1]"),
+    # a string or bytes was taken character by character ('101' as magenta), a bool as 0 or 1
+    ("background", "101", "SplatSettings.background='101'; expected None or three values in [0, 1]"),
+    ("background", b"\x01\x00\x01", "SplatSettings.background=b'\\x01\\x00\\x01'; expected None or three values"),
+    ("background", (True, False, True), "SplatSettings.background=(True, False, True); expected None or three"),
+    ("background", np.array([True, False, True]), "SplatSettings.background=array([ True, False,  True]); expected"),
 ])
 def test_bad_settings_are_named(field, value, expected):
     with pytest.raises(InvalidArgument) as info:
         SplatSettings(**{field: value})
     assert expected in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("background", ["101", b"\x01\x00\x01", (True, False, True), (1, 0, 0, True)], ids=repr)
+def test_a_background_that_is_no_three_numbers_is_refused_by_the_renderer(background):
+    """A string or bytes was taken character by character ('101' rendered over magenta), a bool as 0 or 1."""
+    with pytest.raises(InvalidArgument) as info:
+        SplatRenderer(random_scene(1), background=background)
+    assert str(info.value) == f"background={background!r}; expected three values in [0, 1]", str(info.value)
 
 
 def test_only_the_outputs_asked_for_are_returned():

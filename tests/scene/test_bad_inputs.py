@@ -678,3 +678,24 @@ def test_a_splat_scene_file_declaring_more_gaussians_than_memory_holds_is_refuse
     bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": b"x"})
     _refused_in_bounded_memory(load_scene, bad, r"scene\.json: splats\.count=1,000,000,000 Gaussians of SH degree 3 "
                                                 r"would take about 659\.\d+ GiB to decode, more than the 1\.00 GiB")
+
+
+@pytest.mark.parametrize("background", ["101", [True, False, True]], ids=repr)
+def test_a_background_that_is_no_three_numbers_is_refused_in_a_scene_file(background, good_scene, tmp_path):
+    """``field.background`` or ``splats.background`` of ``"101"`` was read character by character (as magenta),
+    ``[true, false, true]`` as 1, 0, 1."""
+    from pytest_n2r.scene import load_scene
+
+    bad = rewrite(good_scene, tmp_path / "bad.n2r", edit_json=_set("field.background", background))
+    expected = rf"field\.background={re.escape(repr(background))}; expected three values in \[0, 1\]"
+    _refused_in_bounded_memory(read_scene_file, bad, expected)
+    with pytest.raises(SceneFileError, match=expected):
+        check_scene_file(bad)
+
+    def as_splats(data):
+        data["representation"] = "splats"
+        data["splats"] = {"count": 3, "sh_degree": 0, "background": background}
+
+    bad = rewrite(good_scene, tmp_path / "splats.n2r", edit_json=as_splats, replace={"splats.safetensors": b"x"})
+    _refused_in_bounded_memory(load_scene, bad, rf"splats\.background=.*'background': "
+                                                rf"{re.escape(repr(background))}.*; expected three values in \[0, 1\]")

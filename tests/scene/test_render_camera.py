@@ -1,14 +1,15 @@
 """Scene.render bounds the camera: a size, focal length or principal point no renderer can draw is refused by name
 (before: a 10**10-pixel camera failed in numpy after seconds, fx <= 1e-38 or cx = 1e300 divided by zero inside a
-compiled kernel of a fitted field)."""
+compiled kernel of a fitted field). Scene.view, Scene.pair and Scene.length_scale name a view or units they cannot
+use."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from pytest_n2r.errors import InvalidArgument
-from pytest_n2r.geometry import Camera
+from pytest_n2r.errors import InvalidArgument, InvalidType
+from pytest_n2r.geometry import Camera, Transform
 from pytest_n2r.render.size import MAX_SIDE
 from pytest_n2r.scene.base import MAX_FOCAL, MIN_FOCAL, PRINCIPAL_POINT_REACH
 from tests.plugin.fakescene import PlaneScene
@@ -60,3 +61,34 @@ def test_every_view_of_the_demo_scenes_is_within_the_bounds():
     for name in ("wall", "object"):
         for view in load_demo(name).views:
             assert check_render_camera(view.camera) is view.camera
+
+
+@pytest.mark.parametrize("view", [None, [0], 1.7, True, np.float64(1.0), b"view1"], ids=repr)
+def test_a_view_that_is_no_index_or_name_is_refused_naming_the_argument(view):
+    """``Scene.view`` (and ``Scene.pair``) took ``int(view)``: None or a list ended in a bare TypeError from
+    ``int``, and 1.7 or True picked view 1."""
+    scene = PlaneScene()
+    expected = (f"view={view!r} must be a view index (an int) or an image name (a str), not "
+                f"{type(view).__name__}")
+    for method, call in (("view", lambda: scene.view(view)), ("pair", lambda: scene.pair(view, Transform(yaw=1)))):
+        with pytest.raises(InvalidType) as info:
+            call()
+        assert str(info.value) == expected, f"Scene.{method}({view!r}): the message does not say what a view is"
+
+
+@pytest.mark.parametrize("view", [2, np.int64(2), np.uint8(2), "view2"], ids=repr)
+def test_a_view_is_taken_by_int_numpy_integer_or_name(view):
+    assert PlaneScene().view(view).index == 2, f"Scene.view({view!r}) picked another view"
+
+
+@pytest.mark.parametrize("call", [
+    lambda scene, units: scene.length_scale(units),
+    lambda scene, units: scene.pair(0, Transform(yaw=1), units=units),
+], ids=["length_scale", "pair"])
+@pytest.mark.parametrize("units", ["meters", "METRES", 5])
+def test_units_that_are_no_unit_are_refused_listing_the_units(call, units):
+    """``units='meters'`` ended in a bare ``ValueError: 'meters' is not a valid Units``."""
+    with pytest.raises(InvalidArgument) as info:
+        call(PlaneScene(), units)
+    assert str(info.value) == f"units={units!r} is not a unit; expected one of ['reference', 'scene', 'metres']", (
+        f"the message does not list the units: {info.value}")
