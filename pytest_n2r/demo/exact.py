@@ -25,11 +25,13 @@ one grey level, bit for bit in almost every pixel, except where surfaces coincid
 from __future__ import annotations
 
 import hashlib
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._validation import as_unit_rgb, check_array, check_int, check_positive, check_range
 from ..errors import InvalidArgument
 from ..geometry import Camera, camera_rays, pixel_grid
 from ..scene.base import Scene, SceneView, hash_views
@@ -46,6 +48,8 @@ __all__ = ["GroundTruthScene"]
 #: fitted twins stale). Kept at "1" by both compiled kernels: their images are those of the numpy definition,
 #: to one grey level.
 RENDERER_VERSION = "1"
+#: The most rays per pixel along each axis (256 a pixel; the built-in scenes cast 2): more is a slip, not a setting.
+MAX_SUPERSAMPLE = 16
 
 
 def _check_group_box(scene: str, item: int, group: Group) -> None:
@@ -75,15 +79,15 @@ class GroundTruthScene(Scene):
     views:
         The capture trajectory (every 8th view held out).
     light:
-        Direction towards the light, world frame (normalized here).
+        Direction towards the light, world frame: a finite, non-zero 3-vector (normalized here).
     ambient:
         Fraction of the albedo seen in shadow-facing regions, in ``[0, 1]``.
     background:
         RGB in ``[0, 1]`` of rays that hit nothing (open water, sky).
     far:
-        z-depth reported where nothing is hit (scene units).
+        z-depth reported where nothing is hit (scene units, > 0).
     supersample:
-        Rays per pixel along each axis for ``rgb`` and ``opacity``.
+        Rays per pixel along each axis for ``rgb`` and ``opacity``: an int in ``[1, MAX_SUPERSAMPLE]``.
     reference_length:
         The median z-depth of the surface seen from the training views (scene units), the unit of the
         pose transforms' translations; ``None`` measures it by casting rays 64 pixels wide (the kernel's first
@@ -122,16 +126,24 @@ class GroundTruthScene(Scene):
                 flat.append(item)
         self.primitives = tuple(flat)
         self.views = tuple(views)
-        light = np.asarray(light, dtype=np.float64)
-        self.light = light / norm3(light)  # the same bits on every machine: the content hash covers them
-        self.ambient = float(ambient)
-        self.background = np.asarray(background, dtype=np.float32)
-        self.far = float(far)
-        self.supersample = int(supersample)
-        self.metres_per_unit = metres_per_unit
+        direction = check_array("light", light, "3", dtype=np.float64)
+        length = math.hypot(*direction)
+        if not 1e-150 < length < 1e150:  # bounds within which norm3's sum of squares neither underflows nor overflows
+            raise InvalidArgument(f"light={tuple(direction.tolist())} has length {length:g}; expected a non-zero "
+                                  "3-vector towards the light (world frame), of length between 1e-150 and 1e150")
+        self.light = direction / norm3(direction.tolist())  # the same bits on every machine: the content hash has them
+        self.ambient = check_range("ambient", ambient, 0.0, 1.0)
+        rgb = as_unit_rgb(background)
+        if rgb is None:
+            raise InvalidArgument(f"background={background!r}; expected an RGB triple of three values in [0, 1]")
+        self.background = np.asarray(rgb, dtype=np.float32)
+        self.far = check_positive("far", far)
+        self.supersample = check_int("supersample", supersample, 1, MAX_SUPERSAMPLE)
+        self.metres_per_unit = None if metres_per_unit is None else check_positive("metres_per_unit", metres_per_unit)
         self._hash: str | None = None
         self._compiled: CompiledScene | None = None
-        self.reference_length = self.median_train_depth() if reference_length is None else float(reference_length)
+        self.reference_length = (self.median_train_depth() if reference_length is None
+                                 else check_positive("reference_length", reference_length))
 
     # -- Scene interface -------------------------------------------------------------------------------
     @property

@@ -168,7 +168,10 @@ def _check_view(name: str, view: Any, outputs: tuple[str, ...]) -> RenderedView:
             f"{name} must be the RenderedView the SUT saw (to map points between the views), "
             f"got {type(view).__name__}"
         )
-    view.require(*outputs)
+    missing = [out for out in outputs if getattr(view, out) is None]
+    if missing:
+        raise InvalidArgument(f"{name} was rendered without {', '.join(missing)}; expected a view rendered with "
+                              f"outputs including {outputs!r} (to map points between the views)")
     for out in outputs:
         arr = getattr(view, out)
         if np.shape(arr) != (view.camera.height, view.camera.width):
@@ -217,6 +220,7 @@ class DepthMapping(PointMapping):
         """Points ``uv`` ``(N, 2)`` of ``view`` (the source or the follow-up) lifted into the world: the half
         of the mapping that does not depend on the other view, so a caller may keep it for several pairs."""
         uv = check_array("uv", uv, "N 2", dtype=np.float64)
+        view = _check_view("view", view, ("depth", "opacity"))
         inside = _inside(uv, view.camera)
         idx = np.flatnonzero(inside)
         has, depth = self._surface(view, uv[idx])
@@ -226,6 +230,9 @@ class DepthMapping(PointMapping):
 
     def land(self, lifted: LiftedPoints, view: RenderedView) -> MappedPoints:
         """``lifted`` points projected into ``view``, kept where it sees them (see the module's rules)."""
+        if not isinstance(lifted, LiftedPoints):
+            raise InvalidType(f"lifted must be the LiftedPoints of DepthMapping.lift, got {type(lifted).__name__}")
+        view = _check_view("view", view, ("depth", "opacity"))
         out = np.full((lifted.n, 2), np.nan)
         visible = np.zeros(lifted.n, dtype=bool)
         uv_b, z_b = project(lifted.world, view.camera, view.c2w)

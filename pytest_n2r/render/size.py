@@ -7,6 +7,7 @@ import math
 import re
 from dataclasses import dataclass
 
+from .._validation import check_int
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera
 
@@ -25,11 +26,23 @@ class RenderSize:
     ratio is always kept: ``width`` x ``height`` is exact for a view of that aspect (to a pixel), and a view of
     another (a portrait photo at ``320x180``, a 4:3 one) renders at the largest size of its own aspect that fits
     in the box: stretching it would hand the SUT a picture no camera took. Intrinsics are rescaled with the
-    pixel-centre rule of docs/conventions.md ("Pixels: centres at integer coordinates", resizing)."""
+    pixel-centre rule of docs/conventions.md ("Pixels: centres at integer coordinates", resizing). Each side given is
+    an int in [:data:`MIN_SIDE`, :data:`MAX_SIDE`]; a width alone (``RenderSize(480)``) is refused: the longer side
+    is ``RenderSize(longer=480)``."""
 
     width: int | None = None
     height: int | None = None
     longer: int | None = None
+
+    def __post_init__(self) -> None:
+        given = tuple(getattr(self, label) is not None for label in ("width", "height", "longer"))
+        if given not in ((True, True, False), (False, False, True)):
+            raise InvalidArgument(f"{self!r} is not a render size; expected a width and a height (a box), or only "
+                                  "longer (the longer side): e.g. RenderSize(480, 270), RenderSize(longer=480) or "
+                                  "RenderSize.parse('480')")
+        for label in ("width", "height", "longer"):
+            if getattr(self, label) is not None:
+                check_int(f"RenderSize {label}", getattr(self, label), MIN_SIDE, MAX_SIDE)
 
     @classmethod
     def parse(cls, value: RenderSize | str | int | tuple[int, int], name: str = "size") -> RenderSize:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass, fields, replace
+from dataclasses import Field, dataclass, fields, is_dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -34,6 +34,8 @@ from ..errors import InvalidArgument, InvalidType
 from .follow_up import FollowUp
 
 if TYPE_CHECKING:
+    from typing_extensions import Self  # typing.Self from Python 3.11
+
     from ..render.view import RenderedView
     from ..scene.base import Scene
 
@@ -80,6 +82,16 @@ def _plain(owner: str, field: str, value: Any) -> Any:
                       "numbers, strings, booleans, None, or lists and str-keyed dicts of them")
 
 
+def _fields_of(cls: type[Mutation]) -> tuple[Field, ...]:
+    """The parameters (dataclass fields) of a mutation class; raises naming the class when it is not a dataclass (a
+    dataclass decorator runs after ``__init_subclass__``, so this is checked when the class is first used)."""
+    if not is_dataclass(cls):
+        raise InvalidType(f"{cls.__module__}.{cls.__qualname__} is a Mutation but not a dataclass: declare it "
+                          "@dataclass(frozen=True, repr=False), with its parameters as fields, so that its repr, "
+                          "its record (as_dict) and mutation_from_dict can list them")
+    return fields(cls)
+
+
 #: Mutation classes by ``name``, for :func:`mutation_from_dict` (every subclass with a name registers).
 _KINDS: dict[str, type[Mutation]] = {}
 
@@ -91,7 +103,8 @@ class Mutation(FollowUp):
     ``repr`` rebuilds the constructor call; :meth:`describe` says what it does in words. A mutation of
     your own is a frozen dataclass subclass (``@dataclass(frozen=True, repr=False)``) with a ``name``
     (registered, so :func:`mutation_from_dict` rebuilds it from an example record while the class is
-    imported), ``_apply``, ``is_identity`` and ``describe``.
+    imported), ``_apply``, ``is_identity`` and ``describe``; one that is not a dataclass is refused
+    (:class:`~pytest_n2r.errors.InvalidType`) when it is first made.
     """
 
     #: Short name used in reports and records (``"brightness"``).
@@ -114,6 +127,11 @@ class Mutation(FollowUp):
                                   f"{taken.__module__}.{taken.__qualname__}; a record rebuilds its mutation by "
                                   "name, so give one of the two classes another name")
         _KINDS[name] = cls  # the same module and class again: a reload
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> Self:
+        self = super().__new__(cls)
+        _fields_of(cls)  # a mutation of one's own that is not a dataclass is refused here, before it is drawn
+        return self
 
     def __call__(self, rgb: np.ndarray) -> np.ndarray:
         return self.apply(rgb)
@@ -291,7 +309,7 @@ def mutation_from_dict(data: dict[str, Any]) -> Mutation:
                               "its class is imported")
     cls = _KINDS[data["name"]]
     params = {k: v for k, v in data.items() if k != "name"}
-    unknown = sorted(set(params) - {f.name for f in fields(cls)})
+    unknown = sorted(set(params) - {f.name for f in _fields_of(cls)})
     if unknown:
         raise InvalidArgument(f"mutation={data!r}: {cls.__name__} has no parameter(s) {unknown}")
     return cls(**params)

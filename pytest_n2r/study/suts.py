@@ -186,6 +186,9 @@ def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None, *, point
     keypoints of largest response per image (see :func:`_builtin`); None keeps OpenCV's caps (1000 for ORB and SIFT,
     none for AKAZE). An imported SUT runs as given, whatever ``points``.
     """
+    if not isinstance(spec, str):
+        raise InvalidType(f"--sut {spec!r} must be a str: a built-in SUT ({', '.join(BUILTIN_SUTS)}) or "
+                          "'module:attribute'")
     if points is not None:
         points = check_points(points)
     if kind is not None and kind not in KINDS:
@@ -199,6 +202,11 @@ def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None, *, point
             f"--sut {spec!r} is not a built-in SUT ({', '.join(BUILTIN_SUTS)}) nor 'module:attribute'"
         )
     module_name, _, attr = spec.partition(":")
+    if not all(part.isidentifier() for part in module_name.split(".")) or not attr.isidentifier():
+        raise InvalidArgument(
+            f"--sut {spec!r} is not 'module:attribute': expected an absolute module name (package.module) before "
+            "the ':' and the name of a callable in it after (e.g. mysut:detect)"
+        )
     _working_folder_importable()
     try:
         fn = getattr(importlib.import_module(module_name), attr)

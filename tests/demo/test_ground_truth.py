@@ -11,7 +11,7 @@ from pytest_n2r.demo.exact import GroundTruthScene
 from pytest_n2r.demo.materials import Flat
 from pytest_n2r.demo.primitives import Box, Cylinder, Disc, Group, ReliefWall
 from pytest_n2r.demo.scenes import build_scene
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import Transform, backproject, camera_rays, pixel_grid, project
 
 from .strategies import moved_views
@@ -203,3 +203,33 @@ def test_a_group_box_that_clips_its_children_is_refused():
     with pytest.raises(InvalidArgument, match=r"GroundTruthScene 'crate': primitives\[0\] is a Group whose box .*"
                                               r"does not hold its child 0 \(Box"):
         _grouped_crate((-0.1, -0.1, -0.1), (1.1, 1.1, 0.5))
+
+
+@pytest.mark.parametrize(
+    ("arguments", "error", "match"),
+    [
+        ({"light": (0, 0, 0)}, InvalidArgument, r"light=\(0\.0, 0\.0, 0\.0\) has length 0; expected a non-zero"),
+        ({"light": (1e200, 0, 0)}, InvalidArgument, r"light=\(1e\+200, 0\.0, 0\.0\) has length 1e\+200"),
+        ({"light": (0, float("nan"), 1)}, InvalidArgument, r"light contains 1 non-finite value"),
+        ({"light": (0, 1)}, InvalidType, r"light must have shape \(3\), got \(2,\)"),
+        ({"ambient": 7.0}, InvalidArgument, r"ambient=7\.0 is out of range; expected a value in \[0, 1\]"),
+        ({"ambient": "0.5"}, InvalidType, r"ambient='0\.5' must be a real number"),
+        ({"background": (2, 2)}, InvalidArgument, r"background=\(2, 2\); expected an RGB triple of three values in"),
+        ({"background": (0.1, 1.5, 0.2)}, InvalidArgument, r"background=\(0\.1, 1\.5, 0\.2\); expected an RGB triple"),
+        ({"supersample": 0}, InvalidArgument, r"supersample=0 is out of range; expected an int in \[1, 16\]"),
+        ({"supersample": 2.0}, InvalidType, r"supersample=2\.0 must be an int"),
+        ({"far": 0.0}, InvalidArgument, r"far=0\.0 must be > 0"),
+        ({"reference_length": -1.0}, InvalidArgument, r"reference_length=-1\.0 must be > 0"),
+        ({"metres_per_unit": float("inf")}, InvalidArgument, r"metres_per_unit=inf must be finite"),
+    ],
+)
+def test_bad_scene_arguments_are_named(arguments, error, match):
+    """A zero light normalized to NaN and rendered every surface black; supersample=0, ambient=7 and a two-value
+    background were taken as given."""
+    crate = Box((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), {"*": Flat((0.5, 0.5, 0.5))})
+    valid = {"light": (0.0, 0.0, 2.0), "ambient": 0.5, "background": (0.0, 0.5, 1.0), "far": 10.0,
+             "reference_length": 1.0}
+    scene = GroundTruthScene("crate", [crate], [], **valid)
+    assert scene.light.tolist() == [0.0, 0.0, 1.0] and scene.background.dtype == np.float32
+    with pytest.raises(error, match=match):
+        GroundTruthScene("crate", [crate], [], **{**valid, **arguments})

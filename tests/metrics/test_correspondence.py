@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import Camera, Transform, camera_rays, plane_homography
-from pytest_n2r.metrics.correspondence import HomographyMapping, sample_depth
+from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping, sample_depth
+from pytest_n2r.render.view import RenderedView
 
-from .scenes import CAMERA
+from .scenes import CAMERA, pair
 
 
 def plane_depth(camera: Camera, c2w: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
@@ -100,3 +101,25 @@ def test_small_and_zero_homographies():
         assert mapped.uv.tolist() == [[3.0, 4.0]], f"np.eye(3) * {scale:g} is the identity, got {mapped.uv}"
     with pytest.raises(InvalidArgument, match="H is singular"):
         HomographyMapping(np.zeros((3, 3)), CAMERA, CAMERA)
+
+
+def test_lift_and_land_name_a_view_rendered_without_depth_or_opacity():
+    """The constructor checked its views, but lift and land took any view: one rendered without depth crashed with
+    "'NoneType' object has no attribute 'shape'"."""
+    source, follow = pair(Transform(x=0.1))
+    mapping = DepthMapping(source, follow)
+    rgb_only = RenderedView(source.camera, source.c2w, rgb=np.zeros((CAMERA.height, CAMERA.width, 3), np.uint8))
+    uv = np.array([[80.0, 60.0]])
+    expected = r"view was rendered without depth, opacity; expected a view rendered with outputs including"
+    with pytest.raises(InvalidArgument, match=expected):
+        mapping.lift(uv, rgb_only)
+    lifted = mapping.lift(uv, source)
+    with pytest.raises(InvalidArgument, match=expected):
+        mapping.land(lifted, rgb_only)
+    with pytest.raises(InvalidType, match="view must be the RenderedView the SUT saw"):
+        mapping.lift(uv, None)
+    with pytest.raises(InvalidType, match="lifted must be the LiftedPoints of DepthMapping.lift, got ndarray"):
+        mapping.land(uv, follow)
+    with pytest.raises(InvalidArgument, match="source was rendered without depth, opacity"):
+        DepthMapping(rgb_only, follow)
+    assert mapping.land(lifted, follow).visible.tolist() == [True]

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pytest_n2r.errors import InvalidArgument
+from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import Camera
 from pytest_n2r.render.size import MIN_SIDE, RenderSize
 from tests.plugin.fakescene import PlaneScene
@@ -56,3 +56,25 @@ def test_a_render_size_that_leaves_a_side_below_min_side_is_refused(size, larger
         and f"expected a larger render size ({larger} for this view)" in message, f"the refusal misleads: {message}"
     suggested = RenderSize.parse(larger.split()[-1]).apply(camera)
     assert min(suggested.size) >= MIN_SIDE, f"the suggested size {larger} still renders {suggested.size}"
+
+
+@pytest.mark.parametrize(
+    ("args", "kwargs", "error", "match"),
+    [
+        ((480,), {}, InvalidArgument, (r"RenderSize\(width=480, height=None, longer=None\) is not a render size; "
+                                       r"expected a width and a height \(a box\), or only longer")),
+        ((), {}, InvalidArgument, r"RenderSize\(width=None, height=None, longer=None\) is not a render size"),
+        ((480, 270), {"longer": 480}, InvalidArgument, r"RenderSize\(width=480, height=270, longer=480\) is not a"),
+        ((None, 270), {}, InvalidArgument, r"RenderSize\(width=None, height=270, longer=None\) is not a render size"),
+        ((8, 270), {}, InvalidArgument, r"RenderSize width=8 is out of range; expected an int in \[16, 16384\]"),
+        ((), {"longer": 20000}, InvalidArgument, r"RenderSize longer=20000 is out of range"),
+        (("480", 270), {}, InvalidType, r"RenderSize width='480' must be an int, not str"),
+    ],
+)
+def test_a_render_size_made_directly_is_checked(args, kwargs, error, match):
+    """RenderSize(480) (a width alone, through Relation.build(size=...)) failed in apply with "unsupported operand
+    type(s) for /: 'NoneType' and 'int'"; a longer side alone is RenderSize(longer=480)."""
+    with pytest.raises(error, match=match):
+        RenderSize(*args, **kwargs)
+    camera = PlaneScene().views[0].camera
+    assert RenderSize(longer=96).apply(camera).size == RenderSize.parse("96").apply(camera).size == (96, 72)

@@ -178,3 +178,34 @@ def test_follow_up_view_keeps_the_geometry():
         m.Brightness(1).apply_to_view(RenderedView(camera, np.eye(4), depth=depth))
     with pytest.raises(InvalidType, match="view must be a RenderedView, got ndarray"):
         m.Brightness(1).apply_to_view(rgb)
+
+
+def test_a_mutation_that_is_not_a_dataclass_is_refused_naming_how_to_declare_it(monkeypatch):
+    """A subclass without @dataclass was registered and applied, then its repr, record and mutation_from_dict failed
+    with a bare "must be called with a dataclass type or instance"."""
+    from typing import ClassVar
+
+    from pytest_n2r.strategies import mutation as module
+
+    monkeypatch.setattr(module, "_KINDS", dict(module._KINDS))  # the class registers in a copy, not for later tests
+
+    class Undecorated(m.Mutation):
+        name: ClassVar[str] = "test_undecorated"
+
+        @property
+        def is_identity(self) -> bool:
+            return False
+
+        def _apply(self, rgb):
+            return 255 - rgb
+
+        def describe(self) -> str:
+            return "invert"
+
+    expected = (r"tests\.strategies\.test_mutations\..*Undecorated is a Mutation but not a dataclass: declare it "
+                r"@dataclass\(frozen=True, repr=False\)")
+    with pytest.raises(InvalidType, match=expected):
+        Undecorated()
+    with pytest.raises(InvalidType, match=expected):
+        m.mutation_from_dict({"name": "test_undecorated"})
+    assert m.Brightness(3) == m.mutation_from_dict({"name": "brightness", "levels": 3})  # dataclasses still are
