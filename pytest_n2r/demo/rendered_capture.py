@@ -28,12 +28,10 @@ def check_size(size: int | tuple[int, int], camera: Camera) -> Camera:
         longer = max(camera.width, camera.height)
         w, h = round(camera.width * size / longer), round(camera.height * size / longer)
     else:
-        try:
-            w, h = (int(v) for v in size)
-        except (TypeError, ValueError):
-            raise InvalidType(
-                f"size={size!r} must be an int (longer side, pixels) or a (width, height) pair"
-            ) from None
+        pair = tuple(size) if isinstance(size, (tuple, list)) else ()
+        if len(pair) != 2 or any(isinstance(v, bool) or not isinstance(v, (int, np.integer)) for v in pair):
+            raise InvalidType(f"size={size!r} must be an int (longer side, pixels) or a (width, height) pair of ints")
+        w, h = int(pair[0]), int(pair[1])
     if w < 8 or h < 8:
         raise InvalidArgument(f"size={size!r} gives {w}x{h} pixels; expected at least 8x8")
     return camera.resized(w, h)
