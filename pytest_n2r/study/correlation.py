@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["ALPHA", "EXACT_UP_TO", "IMAGE_QUALITY", "MIN_PAIRS", "rank_correlations"]
+__all__ = ["ALPHA", "EXACT_UP_TO", "IMAGE_QUALITY", "MIN_PAIRS", "can_be_significant", "rank_correlations"]
 
 #: The image quality metrics of a render against its photo, as RQ1's ``realness`` rows name them.
 IMAGE_QUALITY = ("psnr", "ssim", "lpips")
@@ -65,6 +65,16 @@ def rank_correlations(realness: Sequence[dict], domain_shift: Sequence[dict]) ->
             out.append({"sut": sut, "metric": metric, "image_quality": name, "n": len(ranked), "rho": rho, "p": p,
                         "significant": bool(p < ALPHA)})
     return out
+
+
+def can_be_significant(n: int) -> bool:
+    """Whether a rank correlation over ``n`` pairs can reach ``p < ALPHA`` at all: with the exact test the smallest
+    p is 2 / n! (both perfect orderings), so 5 pairs are the fewest that can (1/60; 4 give 1/12).
+
+    >>> [n for n in range(3, 10) if can_be_significant(n)][0]
+    5
+    """
+    return n > EXACT_UP_TO or 2 / math.factorial(n) < ALPHA
 
 
 def _finite(value: object) -> bool:

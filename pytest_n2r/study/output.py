@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data.atomic import atomic_write_bytes, atomic_write_text
-from .correlation import ALPHA
+from .correlation import ALPHA, can_be_significant
 from .run import StudyResult
 
 __all__ = ["write_study", "markdown_table", "PLOTS"]
@@ -91,8 +91,11 @@ def _dependence(rows: list[dict]) -> str:
     significant = sum(r["significant"] for r in ranked)
     unranked = (f"; {len(rows) - len(ranked)} without one (fewer than 3 views with both values, e.g. LPIPS not "
                 f"measured, or all values equal)") if len(ranked) < len(rows) else ""
+    few = sum(not can_be_significant(r["n"]) for r in ranked)
+    too_few = (f"; {few} of them on too few views to reach p < {ALPHA:g} at all (fewer than 5: raise --views)"
+               if few else "")
     return (f"{significant} of {len(ranked)} combinations with a rank correlation are significant at p < {ALPHA:g} "
-            f"(the paper: 38 of 48){unranked}.\n\n")
+            f"(the paper: 38 of 48){too_few}{unranked}.\n\n")
 
 
 def _plots(result: StudyResult, out: Path) -> list[str]:

@@ -331,14 +331,19 @@ def test_a_study_of_exact_scenes_says_there_is_nothing_to_correlate(study, tmp_p
     assert "nothing to correlate" in (tmp_path / "study.md").read_text()
 
 
-def test_a_few_views_get_the_exact_p_value_not_the_t_approximation():
+def test_a_few_views_get_the_exact_p_value_not_the_t_approximation(tmp_path):
     """Three views ranked alike are one ordering in three of six (both directions): p = 1/3, not significant. The
     t approximation SciPy's spearmanr uses gives 0 there, and 0.037 for five views at rho 0.9 (exactly 1/12)."""
     from scipy.stats import permutation_test, spearmanr
 
-    rows = rank_correlations(*_shift_rows([20.0, 22.0, 25.0], [0.3, 0.5, 0.9]))
+    realness, shift = _shift_rows([20.0, 22.0, 25.0], [0.3, 0.5, 0.9])
+    rows = rank_correlations(realness, shift)
     assert all(r["rho"] == pytest.approx(1.0) and r["p"] == pytest.approx(abs(r["rho"]) / 3) and not r["significant"]
                for r in rows if r["image_quality"] != "lpips"), rows
+    write_study(StudyResult(realness=realness, domain_shift=shift), tmp_path)
+    line = next(t for t in (tmp_path / "study.md").read_text().splitlines() if "combinations" in t)
+    assert "0 of 3 combinations" in line and "3 of them on too few views to reach p < 0.05 at all" in line, (
+        f"three views read as no dependence, not as too few to tell: {line}")
     x, y = [20.0, 20.0, 22.0, 23.0, 25.0, 21.0, 24.0], [0.3, 0.2, 0.2, 0.6, 0.9, 0.5, 0.4]  # ties in both
     psnr = next(r for r in rank_correlations(*_shift_rows(x, y)) if r["image_quality"] == "psnr")
     exact = permutation_test((x,), lambda a: abs(spearmanr(a, y).statistic), permutation_type="pairings",
