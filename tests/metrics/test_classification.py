@@ -8,7 +8,7 @@ import hypothesis.strategies as st
 import numpy as np
 import pytest
 import torch
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis.extra.numpy import arrays
 
 from pytest_n2r.errors import InvalidArgument, InvalidType, MetricArgumentError, SUTOutputError
@@ -392,3 +392,43 @@ def test_an_int_too_large_for_a_float_is_an_output_error_naming_it():
     """``[10**400, 1]`` escaped as a bare OverflowError from numpy."""
     with pytest.raises(SUTOutputError, match="source output holds a number too large for a float64"):
         cosine_similarity(inputs="raw")([10**400, 1], [1, 2])
+
+
+@settings(max_examples=60)
+@given(classes=st.integers(3, 2000), share=st.floats(0.0, 0.99), seed=st.integers(0, 2**16))
+@example(classes=100, share=5e-15 / (100 * np.finfo(np.float64).eps), seed=0)
+def test_probabilities_rounding_below_zero_by_up_to_their_length_are_read_as_probabilities(classes, share, seed):
+    """The rounding allowed below 0 grows with the vector's length (``v.size * eps``: a probability computed as
+    ``1 - sum(others)`` of many classes rounds by up to that much): with ``eps`` alone, a 100-class one-hot with a
+    -5e-15 entry read as logits, and two different one-hots scored a cosine of 0.97 instead of 0."""
+    eps = float(np.finfo(np.float64).eps)
+    i, j, k = np.random.default_rng(seed).choice(classes, 3, replace=False)
+    a, b = np.zeros(classes), np.zeros(classes)
+    a[i], b[j] = 1.0, 1.0
+    a[k] = b[k] = -share * classes * eps  # the rounding of 1 - sum(others), inside the documented bound
+    cos = cosine_similarity()(a, b)
+    assert cos.details.get("inputs") == "probabilities", f"a {classes}-class one-hot read as {cos.details}"
+    assert cos.valid and cos.score == pytest.approx(0.0, abs=1e-12), (
+        f"two different {classes}-class one-hots scored cosine {cos.score}, not 0")
+
+
+@settings(max_examples=50)
+@given(span=st.floats(1.0, 1e5), classes=st.integers(2, 20), seed=st.integers(0, 2**16))
+def test_softmax_of_logits_spanning_more_than_exp_can_hold_is_finite(span, classes, seed):
+    """exp overflows past 709: the softmax subtracts the largest logit first, so every exponent is <= 0. Subtracting
+    the smallest one made a softmax of [1000, 0] NaN, and the metric reported a NaN score as valid."""
+    logits_ = np.random.default_rng(seed).uniform(0.0, span, classes)
+    logits_[0], logits_[1] = 0.0, span  # the span is reached
+    p = softmax(logits_)
+    assert np.all(np.isfinite(p)), f"softmax of logits spanning {span:g} is not finite: {p}"
+    assert p.sum() == pytest.approx(1.0) and int(np.argmax(p)) == int(np.argmax(logits_)), p
+
+
+def test_the_softmax_of_a_logit_far_above_the_others_is_one_hot():
+    """softmax([1000, 0]) is [1, 0], and two such confident opposite predictions score cosine 0 (it was NaN with
+    valid=True when the softmax subtracted the smallest logit)."""
+    np.testing.assert_allclose(softmax(np.array([1000.0, 0.0])), [1.0, 0.0], atol=0.0,
+                               err_msg="softmax([1000, 0]) is not [1, 0]")
+    result = cosine_similarity(inputs="logits")([1000.0, 0.0], [0.0, 1000.0])
+    assert result.valid and result.score == 0.0, f"opposite confident logits did not score cosine 0: {result}"
+    assert cosine_similarity()([1000.0, 0.0, -1000.0], [1000.0, 0.0, -1000.0]).score == 1.0

@@ -6,14 +6,14 @@ from __future__ import annotations
 import hypothesis.strategies as st
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 
 from pytest_n2r.errors import InvalidArgument, InvalidType
 from pytest_n2r.geometry import Camera, Transform, camera_rays, plane_homography
 from pytest_n2r.metrics.correspondence import DepthMapping, HomographyMapping, sample_depth
 from pytest_n2r.render.view import RenderedView
 
-from .scenes import CAMERA, pair
+from .scenes import CAMERA, WALL, Plane, pair, render_planes
 
 
 def plane_depth(camera: Camera, c2w: np.ndarray, uv: np.ndarray | None = None) -> np.ndarray:
@@ -123,3 +123,48 @@ def test_lift_and_land_name_a_view_rendered_without_depth_or_opacity():
     with pytest.raises(InvalidArgument, match="source was rendered without depth, opacity"):
         DepthMapping(rgb_only, follow)
     assert mapping.land(lifted, follow).visible.tolist() == [True]
+
+
+def test_points_landing_on_empty_space_are_low_opacity_never_occluded():
+    """A source point that lands where the follow-up render has nothing (opacity 0, sky) is rejected as
+    ``low_opacity`` only: counting it as ``occluded`` too reported sky as occlusion (and counted it twice)."""
+    patch = Plane((0.0, 0.0, 1.0), -4.0, centre=(0.0, 0.0, 4.0), half=0.4)  # the follow-up sees only this much
+    source = render_planes(np.eye(4), [WALL])
+    follow = render_planes(Transform(yaw=3).apply(np.eye(4)), [patch])
+    u, v = np.meshgrid(np.arange(10.0, 150.0, 9.0), np.arange(10.0, 110.0, 9.0))
+    p = np.column_stack([u.ravel(), v.ravel()]) + [0.3, 0.4]
+    mapped = DepthMapping(source, follow).to_follow(p)
+    assert 0 < mapped.visible.sum() < len(p) - 10, "the case must put some points on the patch and many on sky"
+    assert mapped.rejected["occluded"] == 0, f"points on empty space counted as occluded: {mapped.rejected}"
+    assert mapped.rejected["low_opacity"] + mapped.rejected["outside"] + mapped.visible.sum() == len(p), (
+        f"every point should be visible or rejected once: {mapped.rejected}, {mapped.visible.sum()} visible")
+
+
+def scaled_occluder_scene(scale: float) -> tuple[RenderedView, RenderedView]:
+    """A wall at z = 4 and a square occluder in front of it at z = 2, seen from the origin and from x = 0.5, all
+    lengths times ``scale`` (edges off pixel centres, so round-off cannot flip a pixel's hit)."""
+    wall = Plane((0.0, 0.0, 1.0), -4.0 * scale)
+    occluder = Plane((0.0, 0.0, 1.0), -2.0 * scale, centre=(0.337 * scale, 0.02 * scale, 2.0 * scale),
+                     half=0.241 * scale)
+    source = render_planes(np.eye(4), [wall, occluder])
+    follow = render_planes(Transform(x=0.5 * scale).apply(np.eye(4)), [wall, occluder])
+    return source, follow
+
+
+@settings(max_examples=25, deadline=None)
+@given(exponent=st.floats(-2, 2))
+@example(exponent=-2.0)
+@example(exponent=2.0)
+def test_occlusion_does_not_depend_on_the_scene_scale(exponent):
+    """The depth tolerance is relative (5 % of the rendered depth): the same scene in centimetres or kilometres
+    sees the same points. An absolute tolerance of 0.05 scene units saw through the occluder of a scene 100 times
+    smaller (wall at 0.04, occluder at 0.02)."""
+    u, v = np.meshgrid(np.arange(1.0, 159.0, 3.0), np.arange(1.0, 119.0, 3.0))
+    p = np.column_stack([u.ravel(), v.ravel()]) + [0.37, 0.21]
+    reference = DepthMapping(*scaled_occluder_scene(1.0)).to_follow(p)
+    assert reference.rejected["occluded"] > 20, "the scene must hide points behind the occluder"
+    scaled = DepthMapping(*scaled_occluder_scene(10.0**exponent)).to_follow(p)
+    np.testing.assert_array_equal(scaled.visible, reference.visible,
+                                  err_msg=f"a scene scaled by 1e{exponent:.3g} sees other points")
+    assert scaled.rejected == reference.rejected, (
+        f"a scene scaled by 1e{exponent:.3g} rejects {scaled.rejected}, not {reference.rejected}")

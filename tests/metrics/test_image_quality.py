@@ -193,3 +193,42 @@ def test_two_constant_output_images_are_undefined_never_ideal(value):
     structured[4:8, 4:8] = 255 - value
     assert iq.ssim_metric()(blank, structured).valid, "one constant output against a structured one is scored"
     assert iq.ssim(blank, blank) == pytest.approx(1.0), "the ssim function itself still compares two images"
+
+
+def _skimage_ssim(a: np.ndarray, b: np.ndarray, **settings_) -> float:
+    from skimage.metrics import structural_similarity
+
+    return float(structural_similarity(a.astype(np.float64), b.astype(np.float64), data_range=255,
+                                       channel_axis=-1, **settings_))
+
+
+#: The settings :func:`iq.ssim` documents: the paper's 11×11 Gaussian window (σ = 1.5) and population covariance.
+DOCUMENTED = {"gaussian_weights": True, "sigma": 1.5, "use_sample_covariance": False}
+
+
+def test_ssim_uses_the_documented_gaussian_window_and_population_covariance():
+    """ssim documents Wang et al.'s settings; a uniform 7×7 window or the sample covariance (skimage's defaults)
+    gives other values (here 0.187 and 0.152 against 0.153), and results would not compare with the paper's."""
+    rng = np.random.default_rng(42)
+    smooth = np.clip(np.add.outer(np.arange(32), np.arange(40))[..., None] * [3, 2, 1], 0, 255).astype(np.uint8)
+    noisy = np.clip(smooth + rng.normal(0, 25, smooth.shape), 0, 255).astype(np.uint8)
+    expected = _skimage_ssim(smooth, noisy, **DOCUMENTED)
+    for name, changed in (("a uniform window", {**DOCUMENTED, "gaussian_weights": False}),
+                          ("the sample covariance", {**DOCUMENTED, "use_sample_covariance": True})):
+        other = _skimage_ssim(smooth, noisy, **changed)
+        assert abs(other - expected) > 1e-4, f"the pair cannot tell {name} from the documented settings"
+    assert iq.ssim(smooth, noisy) == pytest.approx(expected, rel=1e-12, abs=1e-12), (
+        f"ssim {iq.ssim(smooth, noisy)} is not skimage's {expected} with the documented settings {DOCUMENTED}")
+    assert iq.ssim_metric()(smooth, noisy).score == pytest.approx(expected, rel=1e-12, abs=1e-12), (
+        "the SSIM metric does not score what ssim() documents")
+
+
+@settings(max_examples=20, deadline=None)
+@given(image=images, seed=st.integers(0, 2**16))
+def test_ssim_equals_skimage_with_the_documented_settings(image, seed):
+    """Any pair scores what scikit-image gives with the documented settings: another window or covariance (skimage's
+    defaults) went unnoticed, as the other tests only check ranges and orderings."""
+    other = np.random.default_rng(seed).integers(0, 256, size=image.shape, dtype=np.uint8)
+    expected = _skimage_ssim(image, other, **DOCUMENTED)
+    assert iq.ssim(image, other) == pytest.approx(expected, rel=1e-12, abs=1e-12), (
+        f"ssim {iq.ssim(image, other)} is not skimage's {expected} with the documented settings")

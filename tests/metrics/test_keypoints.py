@@ -9,7 +9,7 @@ import cv2
 import hypothesis.strategies as st
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis.errors import Unsatisfiable
 
 from pytest_n2r.errors import InvalidArgument, InvalidType, MetricArgumentError, MetricUndefined, SUTOutputError
@@ -396,7 +396,13 @@ def test_a_disc_holds_no_more_pixels_than_the_coverage_bound_counts(u, v, radius
     held = int(coverage_mask(centre, CAMERA, radius).sum())
     bound = (int(np.floor(2 * (radius + 1e-6))) + 1) ** 2
     assert held <= bound, f"a disc of radius {radius} at {centre[0].tolist()} holds {held} pixels > bound {bound}"
-    assert _may_cover(1, CAMERA, radius) == (bound >= MAX_COVERAGE * CAMERA.width * CAMERA.height)
+    # at the least number of discs whose bound reaches the share, and one fewer: one disc never could here (a disc
+    # of radius 12 holds at most 625 of 19 200 pixels), so comparing at 1 disc held whatever the bound counted
+    share = MAX_COVERAGE * CAMERA.width * CAMERA.height
+    least = math.ceil(share / bound)
+    for n in (least - 1, least, least + 1):
+        assert _may_cover(n, CAMERA, radius) == (n * bound >= share), (
+            f"_may_cover({n}, radius={radius}) disagrees with {n} discs of at most {bound} pixel centres each")
 
 
 @pytest.mark.parametrize(
@@ -574,3 +580,103 @@ def test_tolerances_must_be_finite_and_positive(bad):
         repeatability(px=bad)
     with pytest.raises(InvalidArgument, match=r"radius=.* must be|radius=.* finite"):
         interest_point_spread(radius=bad)
+
+
+def test_spread_of_a_perfect_detector_under_camera_motion_is_ideal():
+    """Spread compares the source points *mapped into the follow-up image* with the follow-up points: scoring the
+    source points where they lie in the source image ignored the camera motion (a perfect detector under yaw 4°
+    scored 0.77)."""
+    source, follow = pair(Transform(yaw=4, x=0.1))
+    p = grid_points()
+    mapped = DepthMapping(source, follow).to_follow(p)
+    result = interest_point_spread()(p, mapped.uv[mapped.visible], source, follow)
+    assert result.valid and result.score == 1.0, f"a perfect detector under yaw 4°, x 0.1 did not score 1: {result}"
+
+
+@settings(max_examples=40, deadline=None)
+@given(tau=small_motion)
+def test_spread_of_a_perfect_detector_is_ideal_under_any_small_motion(tau):
+    """A detector that finds every visible source point again where the camera motion puts it covers the same
+    area: spread 1 (up to a pixel centre on a disc's rim, as follow-up points are rounded to 1e-6 px). Spread of
+    the unmapped source points ignored the motion (0.77 under yaw 4°, x 0.1)."""
+    source, follow = pair(tau)
+    p = grid_points(step=20.0)  # sparse enough that moving closer (z 0.5) stays under MAX_COVERAGE
+    mapped = DepthMapping(source, follow).to_follow(p)
+    result = interest_point_spread()(p, mapped.uv[mapped.visible], source, follow)
+    assert result.valid and result.score == pytest.approx(1.0, abs=1e-3), (
+        f"a perfect detector under {tau} did not score spread 1: {result}")
+
+
+@settings(max_examples=60, deadline=None)
+@given(tau=small_motion, a=pixel_sets, b=pixel_sets)
+@example(tau=Transform(), a=np.array([[20.0, 20.0]]), b=np.array([[25.0, 20.0]]))
+def test_spread_is_the_intersection_over_the_union_of_the_covered_areas(tau, a, b):
+    """The documented score is IoU, ``both / (source + follow - both)`` of the covered pixel counts it reports; a
+    score of ``both / max(source, follow)`` (overlap over the larger area) scored two discs of radius 5 px, 5 px
+    apart, 0.42 instead of 0.27."""
+    source, follow = pair(tau)
+    result = interest_point_spread(radius=5)(a, b, source, follow)
+    if result.valid and "covered_both" in result.details:
+        d = result.details
+        iou = d["covered_both"] / (d["covered_source"] + d["covered_follow"] - d["covered_both"])
+        assert result.score == pytest.approx(iou, abs=1e-12), f"spread {result.score} is not the IoU {iou}: {d}"
+
+
+@settings(max_examples=40, deadline=None)
+@given(tau=small_motion, a=pixel_sets, b=pixel_sets, seed=st.integers(0, 2**16),
+       mapping=st.sampled_from(["depth", "homography"]))
+def test_keypoints_reported_twice_count_once(tau, a, b, seed, mapping):
+    """A multi-scale detector reports one location at several octaves: those are one detection (module docs).
+    Keeping duplicates doubled n_source and made the symmetric form count every doubled point as unrepeated."""
+    rng = np.random.default_rng(seed)
+    source, follow = pair(tau)
+    metric = repeatability(px=3, form="symmetric", mapping=mapping,
+                           plane=WALL_PLANE if mapping == "homography" else None)
+    once = metric(a, b, source, follow)
+    twice = metric(rng.permutation(np.vstack([a, a])), rng.permutation(np.vstack([b, b])), source, follow)
+    assert (twice.valid, twice.details) == (once.valid, once.details), (
+        f"doubling every keypoint changed the details: {twice.details} != {once.details}")
+    assert twice.score == once.score or (math.isnan(twice.score) and math.isnan(once.score)), (
+        f"doubling every keypoint changed the score: {twice.score} != {once.score}")
+
+
+def dense_grid(step: float) -> np.ndarray:
+    """Points every ``step`` px over the whole CAMERA image."""
+    u, v = np.meshgrid(np.arange(0, CAMERA.width, step), np.arange(0, CAMERA.height, step))
+    return np.stack([u.ravel(), v.ravel()], axis=1).astype(float)
+
+
+@pytest.mark.parametrize("metric", [repeatability(px=3), interest_point_spread(radius=8)], ids=repr)
+@pytest.mark.parametrize("dense_side", ["source", "follow-up"])
+def test_a_dense_grid_on_either_side_alone_is_undefined(metric, dense_side):
+    """The chance-match rule holds for each view's points: a dense grid in the follow-up view against sparse,
+    genuine source points matched them by chance just the same, when only the source side was checked."""
+    source, follow = pair(Transform(yaw=2))
+    dense = dense_grid(metric.tolerance)
+    sparse = grid_points(step=20.0)
+    p, q = (dense, sparse) if dense_side == "source" else (sparse, dense)
+    result = metric(p, q, source, follow)
+    assert not result.valid and f"the {dense_side} keypoints cover" in result.details.get("reason", ""), (
+        f"a dense {dense_side} grid against sparse points was not undefined: {result}")
+
+
+@settings(max_examples=30, deadline=None)
+@given(cut=st.floats(0.0, 60.0), dense_side=st.sampled_from(["source", "follow-up"]))
+@example(cut=20.0, dense_side="source")  # covers 92 %: between the documented 90 % and 95 %
+@example(cut=20.0, dense_side="follow-up")
+@example(cut=24.0, dense_side="source")  # covers 89.5 %: scored
+def test_points_covering_90_percent_of_the_image_are_undefined(cut, dense_side):
+    """The module documents the chance-match rule at 90 % of the image covered by discs of the tolerance: a point
+    set covering 92 % was scored when the threshold was 95 %."""
+    view, same = pair(Transform())
+    points = dense_grid(4.0)
+    points = points[points[:, 0] >= cut]  # the image left of `cut` - 8 px stays uncovered
+    covered = coverage_mask(points, CAMERA, 8.0).mean()
+    sparse = grid_points(step=20.0)
+    p, q = (points, sparse) if dense_side == "source" else (sparse, points)
+    result = interest_point_spread(radius=8)(p, q, view, same)
+    if covered >= 0.9:
+        assert not result.valid and "any point set would match by chance" in result.details.get("reason", ""), (
+            f"{dense_side} points covering {covered:.1%} of the image were scored: {result}")
+    else:
+        assert result.valid, f"{dense_side} points covering only {covered:.1%} of the image were refused: {result}"
