@@ -529,3 +529,14 @@ def test_a_negative_deviation_is_the_metrics_mistake_said_at_once():
                                           r"the ideal >= 0") as info:
         check_relation(PlaneScene(texture="ramp"), lambda rgb: float(rgb[..., 0].mean()), relation, settings=FAST)
     assert not isinstance(info.value, SUTOutputError), "the metric's mistake was blamed on the SUT"
+
+
+def test_an_eps_0_relation_passes_examples_whose_deviation_is_exactly_0():
+    """An example passes when its deviation is at most eps: compared with ``<`` every example whose deviation equals
+    eps failed, so an eps=0 relation (the output must not change at all) failed on a SUT whose output never does."""
+    relation = Relation.build(AbsDifference(), 0.0, transforms(yaw=(0.5, 3)))
+    record = check_relation(PlaneScene(), lambda rgb: 1.0, relation, settings=FAST)
+    assert record.outcome == "passed" and record.inconsistencies == 0, (
+        f"a constant SUT broke an eps=0 relation: {record.summary_line()}")
+    assert record.valid_examples and all(e.deviation == 0.0 and e.passed for e in record.valid_examples), (
+        f"an example of deviation 0 did not pass at eps=0: {[(e.deviation, e.passed) for e in record.examples]}")

@@ -84,3 +84,10 @@ def test_stats_are_ordered_and_bounded(devs, eps):
 
 def test_stats_of_nothing_are_nan():
     assert all(math.isnan(v) for v in deviation_stats([], 0.1).values())
+
+
+def test_a_deviation_equal_to_eps_is_not_counted_as_inconsistent():
+    """The inconsistency rate counts deviations above eps, as the engine fails them: counting ``d >= eps`` reported
+    examples that passed (deviation exactly eps, e.g. 0 at eps=0) as inconsistent."""
+    assert deviation_stats([0.25], 0.25)["rate"] == 0.0, "a deviation equal to eps counted as inconsistent"
+    assert deviation_stats([0.0, 0.0, 0.5], 0.0)["rate"] == 1 / 3, "at eps=0 only the deviation above 0 counts"

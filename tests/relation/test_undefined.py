@@ -8,7 +8,8 @@ import pytest
 
 from pytest_n2r import InvalidArgument, transforms
 from pytest_n2r.metrics import MetricResult, interest_point_spread, repeatability
-from pytest_n2r.relation import MAX_UNDEFINED, Relation, RelationFailure, RunSettings, check_relation
+from pytest_n2r.relation import MAX_UNDEFINED, Relation, RelationFailure, RunSettings, Validity, check_relation
+from pytest_n2r.relation.validity import Verdict
 from tests.plugin.fakemetrics import AbsDifference
 from tests.plugin.fakescene import PlaneScene
 
@@ -136,3 +137,54 @@ def test_a_follow_up_with_the_source_pixels_is_undefined_not_a_pass():
     assert record.undefined_reasons, record
     assert "the follow-up's pixels equal the source's, byte for byte" in str(info.value)
     assert "the changes drawn left the pictures as they were" in str(info.value).lower(), str(info.value)
+
+
+class _UndefinedOn(AbsDifference):
+    """Undefined on the pairs whose call number (from 1) modulo ``period`` is in ``on``."""
+
+    def __init__(self, period: int, on: tuple[int, ...]):
+        self.period, self.on, self.calls = period, on, 0
+
+    def compute(self, out_source, out_follow, source=None, follow=None):
+        self.calls += 1
+        if self.calls % self.period in self.on:
+            return MetricResult.undefined(self.name, "no output this time")
+        return super().compute(out_source, out_follow, source, follow)
+
+
+class _RejectMost(Validity):
+    """Every follow-up but each third is invalid, whatever it shows."""
+
+    def __init__(self):
+        super().__init__(max_empty_increase=1.0, min_coverage=0.0)
+        object.__setattr__(self, "checks", 0)
+
+    def check(self, view, scene, source=None, cameras=None):
+        object.__setattr__(self, "checks", self.checks + 1)
+        return Verdict(True) if self.checks % 3 == 0 else Verdict(False, "empty view", "rejected by the test")
+
+
+def test_rejected_draws_do_not_dilute_the_share_of_undefined_ones():
+    """The undefined share is of the draws the metric evaluated (valid and undefined): over all draws, rejected ones
+    diluted it, and a relation whose SUT gave nothing to compare on two thirds of its evaluated draws passed."""
+    relation = Relation.build(_UndefinedOn(3, (1, 2)), eps=255, transform=transforms(yaw=(0.5, 3)),
+                              validity=_RejectMost())
+    with pytest.raises(RelationFailure, match="the SUT produced nothing to test") as info:
+        check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
+    record = info.value.record
+    evaluated = len(record.valid_examples) + record.undefined
+    assert record.undefined / evaluated > MAX_UNDEFINED, record.summary_line()
+    assert record.rejected and record.undefined / len(record.examples) <= MAX_UNDEFINED, (
+        f"the test needs enough rejected draws to bring the share of all draws under the limit: "
+        f"{record.summary_line()}")
+
+
+def test_a_relation_undefined_on_55_percent_of_its_draws_fails():
+    """More than :data:`MAX_UNDEFINED` (one half) of the evaluated draws undefined fails "nothing to test": with the
+    limit at 0.6 a SUT that gave nothing to compare on 5 draws of 9 passed."""
+    relation = Relation.build(_UndefinedOn(9, (0, 1, 3, 5, 7)), eps=255, transform=transforms(yaw=(0.5, 3)))
+    with pytest.raises(RelationFailure, match=r"nothing to test: .* undefined on \d+ of \d+ evaluated draws") as info:
+        check_relation(PlaneScene(), mean_colour, relation, settings=SETTINGS)
+    record = info.value.record
+    share = record.undefined / (len(record.valid_examples) + record.undefined)
+    assert MAX_UNDEFINED < share < 0.6, f"the test needs a share between one half and 0.6, got {share:.0%}"

@@ -96,3 +96,38 @@ def test_the_grid_must_be_an_int(grid):
 def test_the_grid_must_be_in_range():
     with pytest.raises(InvalidArgument, match=r"grid=1 is out of range; expected an int in \[2, 256\]"):
         Validity(grid=1)
+
+
+def test_max_rejected_zero_passes_a_relation_with_no_invalid_draw():
+    """``max_rejected=0`` allows no invalid draw, so a run with none passes: compared with ``>=`` the share 0 was
+    "too many" and the strictest setting failed every relation, however valid its draws."""
+    relation = Relation.build(AbsDifference(), 255.0, transforms(yaw=(0.5, 2)), validity=Validity(max_rejected=0.0))
+    record = check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation,
+                            settings=RunSettings(examples=8, database=None, derandomize=True))
+    assert record.rejected == 0, f"the test needs a run without invalid draws: {record.summary_line()}"
+    assert record.outcome == "passed" and len(record.valid_examples) == 8, (
+        f"max_rejected=0 with no invalid draw should pass: {record.summary_line()}")
+
+
+def test_a_view_with_no_solid_pixel_has_no_coverage_and_is_not_valid():
+    """A follow-up that shows nothing (every pixel empty) has no surface a training camera saw: its coverage is 0.
+    Were it 1, turning the empty-view check off (``max_empty_increase=1``) let blank views through as valid."""
+    scene = PlaneScene()
+    view = scene.views[1]
+    blank = scene.render(Transform(yaw=85).apply(view.c2w), view.camera, ("rgb", "depth", "opacity"))
+    assert not (blank.opacity >= 0.5).any(), "the test needs a follow-up without a solid pixel"
+    coverage = Validity().coverage(blank, scene)
+    assert coverage == 0.0, f"a view with no solid pixel has coverage {coverage}, expected 0"
+    verdict = Validity(max_empty_increase=1.0).check(blank, scene)
+    assert (verdict.valid, verdict.reason) == (False, "outside the captured region"), (
+        f"a blank view passed the coverage check: {verdict}")
+
+
+@pytest.mark.parametrize("limit", [0.5, 0.8])
+def test_the_search_never_gives_up_on_invalid_draws_before_40_of_them(limit):
+    """Giving up needs at least 40 invalid draws, whatever ``max_rejected``: with a lower floor (20) a relation with a
+    ``max_rejected`` under 0.9 was given up on after a short unlucky start, though the bound alone says so."""
+    from pytest_n2r.relation.validity import too_many_invalid_so_far
+
+    assert not too_many_invalid_so_far(39, 39, limit), f"gave up after 39 invalid draws of 39 (max_rejected {limit})"
+    assert too_many_invalid_so_far(40, 40, limit), f"40 invalid draws of 40 should end it (max_rejected {limit})"

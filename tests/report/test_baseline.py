@@ -560,3 +560,27 @@ def test_a_rootdir_reached_through_a_link_is_recorded_as_the_same_place(tmp_path
     places = portable_places({"rootdir": str(proj), "config_file": str(proj / "pyproject.toml")},
                              proj / "tests" / "gate.json")
     assert places == {"rootdir": "..", "config_file": "pyproject.toml"}, places
+
+
+def test_a_margin_of_0_passes_an_unchanged_relation():
+    """``mean:0`` allows no increase at all: an unchanged SUT (every change 0, so a bound of exactly 0) is within it.
+    Compared with ``>=``, the bound 0 "exceeded" the margin 0 and an unchanged run was called worse."""
+    base = _relation("a::t", [0.1, 0.3, 0.0, 0.25] * 5)
+    (c,) = compare_paired({"a::t": base}, [_replayed(base, [e.deviation for e in base.examples])],
+                          margin=parse_margin("mean:0"))
+    assert (c.outcome, c.bound, c.fails) == ("ok", 0.0, False), (
+        f"an unchanged relation under margin 0 was judged {c.verdict} (bound {c.bound}): {c.message}")
+
+
+def test_a_test_run_again_is_judged_on_its_last_record():
+    """Of several records of one test id (a test rerun in the session), the comparison takes the last: judging the
+    first gated the relation on a stale record (worse here, though its rerun replayed the baseline unchanged)."""
+    base = _relation("a::t", [0.1, 0.3, 0.0, 0.25] * 5)
+    stale = _replayed(base, [e.deviation + 0.5 for e in base.examples])
+    rerun = _replayed(base, [e.deviation for e in base.examples])
+    (c,) = compare_paired({"a::t": base}, [stale, rerun], margin=0.02)
+    assert (c.outcome, c.mean_change, c.fails) == ("ok", 0.0, False), (
+        f"judged on the stale first record: {c.verdict}, mean change {c.mean_change}")
+    (c,) = compare_paired({"a::t": base}, [rerun, stale], margin=0.02)
+    assert c.outcome == "worse" and c.mean_change == pytest.approx(0.5), (
+        f"the last record (worse) was not the one judged: {c.verdict}, mean change {c.mean_change}")

@@ -190,6 +190,21 @@ def test_a_family_draws_the_same_pose_changes_for_hypothesis_and_the_study():
     drawn_by_hypothesis()
 
 
+def test_a_family_samples_its_components_in_alphabetical_order_whatever_order_its_bounds_came_in():
+    """``sample`` draws one uniform per bounded component in alphabetical order of the names, so ``n2r study`` draws
+    the same pose changes for a seed: in the order of the bounds dict, a family built with its bounds in another
+    order (or a new release that orders them otherwise) drew other pose changes from the same seed."""
+    bounds = {"yaw": (-10.0, 10.0), "x": (-0.2, 0.2), "pitch": (-3.0, 5.0)}
+    orders = [dict(sorted(bounds.items())), bounds, dict(reversed(list(bounds.items())))]
+    drawn = [PoseChangeFamily(order).sample(np.random.default_rng(0)) for order in orders]
+    assert drawn[0] == drawn[1] == drawn[2], f"the order of the bounds changed the draws: {drawn}"
+    rng = np.random.default_rng(0)
+    pitch, x, yaw = (float(rng.uniform(*bounds[axis])) for axis in ("pitch", "x", "yaw"))
+    expected = PoseChange.of(Transform(pitch=pitch, yaw=yaw, x=x))
+    assert PoseChangeFamily.of(pitch=(-3, 5), yaw=10, x=0.2).sample(np.random.default_rng(0)) == expected, (
+        "the draws of seed 0 are not pitch, x, yaw in turn")
+
+
 def test_bad_family_arguments_are_named():
     with pytest.raises(InvalidArgument, match="look_at=True needs units='reference'"):
         PoseChangeFamily.of(x=0.1, units="scene", look_at=True)

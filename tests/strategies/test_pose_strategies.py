@@ -206,3 +206,33 @@ def test_the_grid_draws_what_hypothesis_integers_draw():
         return values
 
     assert drawn(_integers) == drawn(st.integers), "the built-once strategies drew other values than st.integers"
+
+
+@pytest.mark.parametrize("pitch, y, clamped", [(89.0, 0.5, 90.0), (-89.0, -0.5, -90.0)])
+def test_a_look_at_pitch_is_clamped_after_the_compensation_is_added(pitch, y, clamped):
+    """The look-at pitch is clamped to ±90° once the compensation is added: clamping the drawn pitch before adding
+    it turned the camera past straight down (or up), a pitch of 89° plus 26.6° of compensation giving 115.6°."""
+    from pytest_n2r.geometry.look_at import MAX_LOOK_AT_PITCH, look_at_transform
+
+    tau = look_at_transform(pitch=pitch, y=y)
+    assert tau.pitch == clamped, f"look_at_transform(pitch={pitch}, y={y}) has pitch {tau.pitch}, expected {clamped}"
+    family = n2r.PoseChangeFamily.of(pitch=(80, 89), y=(0.4, 0.5), look_at=True)
+    drawn = family.build({"pitch": abs(pitch), "y": abs(y)})
+    assert drawn.pitch == MAX_LOOK_AT_PITCH, f"a look-at draw turned past straight down: pitch {drawn.pitch}"
+
+
+@pytest.mark.parametrize("bound, expected", [(-10, (-10.0, 10.0)), (10, (-10.0, 10.0)), (-0.2, (-0.2, 0.2))])
+def test_a_negative_number_bound_means_minus_b_to_b(bound, expected):
+    """A number ``b`` means ``-|b|..|b|``: taken as ``-b..b``, ``yaw=-10`` became the bound (10, -10), lo above hi."""
+    axis = "yaw" if abs(bound) > 1 else "x"
+    assert check_bound(axis, bound) == expected, f"{axis}={bound} gave {check_bound(axis, bound)}, expected {expected}"
+    tau = find(n2r.transforms(**{axis: bound}), lambda t: abs(getattr(t, axis)) > abs(bound) / 2,
+               settings=settings(database=None))
+    assert expected[0] <= getattr(tau, axis) <= expected[1], f"{tau!r} is outside {axis}={expected}"
+
+
+def test_a_bound_that_excludes_0_is_never_forced_off_its_nearest_end():
+    """When some bound excludes 0 no draw can be the identity, so no component is forced off 0: with one forced (the
+    last bounded one, here x), shrinking stopped one grid step short of the smallest motion, at x=0.10001."""
+    tau = find(n2r.transforms(yaw=5, x=(0.1, 0.2)), lambda t: True, settings=settings(database=None))
+    assert (tau.yaw, tau.x) == (0.0, 0.1), f"shrunk to {tau!r}; expected yaw=0 and x=0.1, the end of its bound"
