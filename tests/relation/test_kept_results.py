@@ -190,3 +190,30 @@ def test_a_mutation_relation_is_replayed_on_the_exact_twin_too(tmp_path, monkeyp
     computed = _counting(monkeypatch)
     again = compare_exact(scene, orb, repeatability(px=2), records, camera_of, cache=RenderCache(tmp_path))
     assert computed == [] and again == first, "the mutated exact renders' results were not kept"
+
+
+def test_a_result_key_names_the_follow_up_output():
+    """Guards against a result key without the follow-up output's digest: a SUT change that altered only the
+    follow-up outputs was handed the old session's result from the render cache."""
+    points = np.zeros((3, 2), np.float32)
+    moved = points + np.float32(1)
+    assert result_key(repeatability(), "a", "b", points, points) != result_key(repeatability(), "a", "b", points,
+                                                                              moved), (
+        "other follow-up outputs, same result key")
+
+
+def test_a_result_key_names_the_metrics_parameters():
+    """Guards against a result key without the metric's repr: repeatability(px=3) was given px=2's results."""
+    points = np.zeros((3, 2), np.float32)
+    assert result_key(repeatability(px=2), "a", "b", points, points) != result_key(repeatability(px=3), "a", "b",
+                                                                                  points, points), (
+        "another tolerance, same result key")
+
+
+def test_a_result_key_names_the_source_render():
+    """Guards against a result key without the source render's key: a pair with another source view but the same
+    follow-up render and outputs was given the other pair's result."""
+    points = np.zeros((3, 2), np.float32)
+    assert result_key(repeatability(), "c", "b", points, points) != result_key(repeatability(), "a", "b", points,
+                                                                              points), (
+        "another source render, same result key")

@@ -4,6 +4,7 @@ never for a mutated image that changed a pixel, forgotten with the SUT."""
 from __future__ import annotations
 
 import gc
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -12,7 +13,8 @@ from hypothesis import strategies as st
 from pytest_n2r.relation import Relation, RelationFailure, RunSettings, check_relation
 from pytest_n2r.relation.determinism import SUTNotDeterministic
 from pytest_n2r.relation.sut_outputs import MISSING, SUTOutputs, output_bytes
-from pytest_n2r.strategies import transforms
+from pytest_n2r.strategies import brightness, transforms
+from pytest_n2r.strategies.pose_change import PoseChange
 from tests.plugin.fakemetrics import AbsDifference
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
 from tests.relation.test_engine import _Invert
@@ -323,3 +325,62 @@ def test_the_outputs_module_does_not_import_torch():
     code = ("import sys, numpy as np; from pytest_n2r.relation.sut_outputs import SUTOutputs; s = SUTOutputs(); "
             "s.put(len, 'k', [np.zeros(3), {'a': (1, 2.0)}]); assert s.bytes > 0; assert 'torch' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_every_mutation_of_one_source_view_computes_its_own_metric_result():
+    """Guards against keying a mutation's metric result by its source render alone (``follow_key or source_key``):
+    every mutation of one view then shared one result in the session, so a noise_patch relation reported the
+    first mutation's deviation for the later ones of the same view (.05 .1 .1 .05 .05, not .05 .1 .2 .175 .375)."""
+    scene = PlaneScene(texture="ramp", n_views=2)
+    metric, sut = CountingDifference(), CountingSUT()
+    relation = Relation.build(metric, 300, brightness(max_levels=100), examples=10)
+    record = check_relation(scene, sut, relation, settings=SETTINGS)
+    accepted = record.valid_examples
+    views = {e.view for e in accepted}
+    pairs = {(e.view, tuple(sorted(e.mutation.items()))) for e in accepted}
+    assert len(accepted) >= 8 and len(views) <= 2 < len(pairs), "the test needs several mutations of a view"
+    assert metric.computed == len(pairs), (
+        f"{metric.computed} metric results computed for {len(pairs)} different mutations: a result was reused "
+        "for another mutation of the same view")
+    deviations = {e.deviation for e in accepted}
+    assert len(deviations) > len(views), f"mutations of {len(views)} views gave only deviations {sorted(deviations)}"
+
+
+@dataclass(frozen=True, repr=False)
+class _Painted(PoseChange):
+    """A user's follow-up that renders the moved pose and then changes the picture (inverts it)."""
+
+    def follow_view(self, source, scene, render):
+        view = render(self.apply(source.c2w, scene.length_scale(self.units)))
+        return replace(view, rgb=255 - view.rgb)
+
+
+def test_a_follow_up_that_changes_its_render_runs_the_sut_on_its_own_picture():
+    """Guards against keying the SUT output of a follow-up by the last render its follow_view made even when it
+    returned another picture: a follow-up that renders and then adds noise was given the clean render's output."""
+    scene = PlaneScene(texture="ramp")
+    painted = transforms(yaw=5).map(lambda tau: _Painted.of(tau, tau.units))
+    relation = Relation.build(AbsDifference(), 300, painted, examples=6)
+    shared, sut = SUTOutputs(), CountingSUT()
+    record = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    again = check_relation(scene, sut, relation, settings=SETTINGS, sut_outputs=shared)
+    accepted = len(again.valid_examples)
+    assert accepted > 0 and [e.transform for e in again.examples] == [e.transform for e in record.examples], (
+        "the test needs the same follow-ups drawn again")
+    assert again.sut_calls >= accepted, (
+        f"{again.sut_calls} SUT calls for {accepted} changed follow-ups: the output on the clean render was reused")
+    assert [e.deviation for e in again.valid_examples] == [e.deviation for e in record.valid_examples], (
+        "another run of the same draws gave other deviations")
+
+
+def test_a_kept_result_is_only_returned_for_its_own_source_render():
+    """Guards against a metric result keyed by its follow-up render alone: the result of another source view's
+    pair with the same follow-up was returned."""
+    shared = SUTOutputs()
+
+    def sut(rgb):
+        return 0
+
+    metric = AbsDifference()
+    shared.put_result(sut, metric, "s", "f", "result")
+    assert shared.result(sut, metric, "other source", "f") is MISSING, "the result of another source render returned"

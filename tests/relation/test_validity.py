@@ -131,3 +131,11 @@ def test_the_search_never_gives_up_on_invalid_draws_before_40_of_them(limit):
 
     assert not too_many_invalid_so_far(39, 39, limit), f"gave up after 39 invalid draws of 39 (max_rejected {limit})"
     assert too_many_invalid_so_far(40, 40, limit), f"40 invalid draws of 40 should end it (max_rejected {limit})"
+
+
+def test_a_verdict_key_names_the_source_render():
+    """Guards against a verdict key without the source render's key: the verdict on one follow-up of another
+    source view (its empty-pixel increase is relative to the source) was reused."""
+    scene, follow = PlaneScene(), "2" * 64
+    assert Validity().verdict_key(scene, "1" * 64, follow) != Validity().verdict_key(scene, "3" * 64, follow), (
+        "another source render, same verdict key")

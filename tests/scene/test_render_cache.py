@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import ast
 import multiprocessing
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -375,3 +377,55 @@ def test_clear_and_trim_of_a_directory_another_tool_tagged_delete_nothing(tmp_pa
     with pytest.raises(InvalidArgument, match=r"holds CACHEDIR\.TAG, renders; nothing was deleted"):
         cache.clear()
     assert (tmp_path / "renders" / "ab" / "theirs.npy").exists()
+
+
+def test_a_render_key_names_the_exact_pose():
+    """Guards against hashing the pose in float32: a pose one float64 step away was given the other's render."""
+    scene = PlaneScene()
+    camera = scene.views[0].camera
+    c2w = _pose(scene)
+    c2w[0, 3] = 1.2345
+    nudged = c2w.copy()
+    nudged[0, 3] = np.nextafter(1.2345, np.inf)
+    assert render_key(scene, c2w, camera) != render_key(scene, nudged, camera), "a float64 step: same render key"
+
+
+def _imported_subpackages(path: Path, package: Path) -> set[str]:
+    """The pytest_n2r subpackages (folders) that the module ``path`` imports from, relative imports resolved."""
+    parts = list(path.relative_to(package.parent).with_suffix("").parts)[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            base = parts[:len(parts) - node.level + 1] if node.level else []
+            names = (base + (node.module.split(".") if node.module else []))
+            names = [n for n in names if n]
+            targets = [names + [alias.name] for alias in node.names]
+        elif isinstance(node, ast.Import):
+            targets = [alias.name.split(".") for alias in node.names]
+        else:
+            continue
+        for target in targets:
+            if len(target) > 1 and target[0] == package.name and (package / target[1]).is_dir():
+                found.add(target[1])
+    return found
+
+
+def test_the_rendering_code_covers_every_scene_class_and_renderer():
+    """Guards against a subpackage that makes pixels missing from RENDERING_CODE (``splats`` dropped): an edit of
+    the splat renderer in a checkout was handed the old code's pictures from the render cache."""
+    from pytest_n2r.scene import render_cache
+
+    package = Path(render_cache.__file__).resolve().parents[1]
+    scene_modules = []
+    for path in sorted(package.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef) and any(ast.unparse(b).split(".")[-1] == "Scene" for b in node.bases):
+                scene_modules.append(path)
+    renderers = sorted((package / "render").glob("*.py"))
+    assert len(scene_modules) >= 3 and renderers, f"the test needs the scene classes: {scene_modules}"
+    needed = {path.relative_to(package).parts[0] for path in scene_modules + renderers}
+    for path in renderers:
+        needed |= _imported_subpackages(path, package)
+    assert {"splats", "field", "demo", "render"} <= needed, f"the derivation missed a renderer: {sorted(needed)}"
+    missing = needed - set(render_cache.RENDERING_CODE)
+    assert not missing, f"subpackages that make pixels but do not key renders: {sorted(missing)}"
