@@ -168,10 +168,7 @@ def _check_view(name: str, view: Any, outputs: tuple[str, ...]) -> RenderedView:
             f"{name} must be the RenderedView the SUT saw (to map points between the views), "
             f"got {type(view).__name__}"
         )
-    missing = [out for out in outputs if getattr(view, out) is None]
-    if missing:
-        raise InvalidArgument(f"{name} was rendered without {', '.join(missing)}; expected a view rendered with "
-                              f"outputs including {outputs!r} (to map points between the views)")
+    view.require(*outputs, name=name)
     for out in outputs:
         arr = getattr(view, out)
         if np.shape(arr) != (view.camera.height, view.camera.width):

@@ -44,13 +44,13 @@ class RenderedView:
             raise InvalidArgument(f"RenderedView c2w {what}; expected the view's 4x4 camera-to-world pose of finite "
                                   "numbers (OpenCV axes)")
 
-    def require(self, *outputs: str) -> None:
-        """Raise a clear error if an output a metric needs was not rendered."""
+    def require(self, *outputs: str, name: str = "this view") -> None:
+        """Raise a clear error, naming the view ``name``, if an output a metric needs was not rendered."""
         missing = [o for o in outputs if getattr(self, o) is None]
         if missing:
             from ..errors import InvalidArgument
 
             raise InvalidArgument(
-                f"this view was rendered without {', '.join(missing)}; render with outputs including "
+                f"{name} was rendered without {', '.join(missing)}; expected a view rendered with outputs including "
                 f"{tuple(outputs)!r}"
             )
