@@ -217,3 +217,73 @@ def test_a_result_key_names_the_source_render():
     assert result_key(repeatability(), "c", "b", points, points) != result_key(repeatability(), "a", "b", points,
                                                                               points), (
         "another source render, same result key")
+
+
+def test_a_result_key_names_the_numpy_version(monkeypatch):
+    """Guards against a result key without NumPy's version: a kept keypoint-metric result was reused after a NumPy
+    upgrade, whose arithmetic may give another result."""
+    from pytest_n2r.relation import kept_results
+
+    points = np.zeros((3, 2), np.float32)
+    before = result_key(repeatability(), "a", "b", points, points)
+    monkeypatch.setattr(kept_results.np, "__version__", "0.0.1-not-this-numpy")
+    after = result_key(repeatability(), "a", "b", points, points)
+    assert before is not None and after is not None, "the test needs kept results"
+    assert before != after, "another NumPy version, same result key"
+
+
+def test_an_arrays_dtype_is_named_by_its_digest_and_its_kept_result(tmp_path):
+    """Guards against a digest without the array's dtype: int8 and uint8 SUT outputs with the same bytes had one
+    digest, so a result kept for one was handed to the other."""
+    from pytest_n2r.relation.kept_results import kept_result
+
+    signed, unsigned = np.array([1, 2], np.int8), np.array([1, 2], np.uint8)
+    assert signed.tobytes() == unsigned.tobytes(), "the test needs the same bytes"
+    assert output_digest(signed) != output_digest(unsigned), "int8 and uint8 outputs with the same bytes, one digest"
+    cache = RenderCache(tmp_path)
+    first = MetricResult("repeatability", 0.25, 0.75, {})
+    kept = kept_result(cache, repeatability(), "a", "b", signed, signed, lambda: first)
+    assert kept is first, "the first session computes"
+    other = MetricResult("repeatability", 0.5, 0.5, {})
+    got = kept_result(RenderCache(tmp_path), repeatability(), "a", "b", unsigned, unsigned, lambda: other)
+    assert got is other, f"the int8 outputs' kept result {got} was returned for uint8 outputs"
+
+
+def test_a_follow_up_with_another_camera_pose_or_depth_has_no_repainted_key():
+    """Guards against repainted_key without its guard: a follow-up rendered from another camera, pose or depth
+    was keyed as the source render repainted, and so given the source's kept results."""
+    from pytest_n2r.geometry import Camera
+    from pytest_n2r.relation.kept_results import repainted_key
+    from pytest_n2r.render.view import RenderedView
+
+    camera = Camera(2, 1, 1, 1, 0.5, 0)
+    rgb = np.zeros((1, 2, 3), np.uint8)
+    source = RenderedView(camera, np.eye(4), rgb=rgb)
+    assert repainted_key(source, "k", RenderedView(camera, np.eye(4), rgb=rgb + 1)) is not None, (
+        "the test needs a repainted follow-up to have a key")
+    moved = np.eye(4)
+    moved[0, 3] = 0.5
+    others = {"camera": RenderedView(Camera(2, 1, 2, 2, 0.5, 0), np.eye(4), rgb=rgb + 1),
+              "pose": RenderedView(camera, moved, rgb=rgb + 1),
+              "depth": RenderedView(camera, np.eye(4), rgb=rgb + 1, depth=np.ones((1, 2), np.float32))}
+    for what, follow in others.items():
+        assert repainted_key(source, "k", follow) is None, f"a follow-up with another {what} got a repainted key"
+
+
+def test_a_valid_kept_result_with_a_nan_deviation_is_refused(tmp_path):
+    """Guards against result_from_dict without its finiteness check: a planted or corrupted 'valid' result with a
+    NaN deviation was read back and handed to the engine as a passing/failing test."""
+    from pytest_n2r.relation.kept_results import kept_result
+
+    planted = {"metric": "repeatability", "score": math.nan, "deviation": math.nan, "details": {}, "valid": True}
+    try:
+        back = result_from_dict(json.loads(json.dumps(planted)))
+    except ValueError:
+        back = None
+    assert back is None, f"a valid kept result with a NaN deviation was accepted: {back}"
+    points = np.zeros((3, 2), np.float32)
+    cache = RenderCache(tmp_path)
+    cache.put_decision(result_key(repeatability(), "a", "b", points, points), planted)
+    fresh = MetricResult("repeatability", 0.25, 0.75, {})
+    got = kept_result(RenderCache(tmp_path), repeatability(), "a", "b", points, points, lambda: fresh)
+    assert got is fresh, f"the planted NaN 'valid' result was taken from the cache: {got}"

@@ -91,3 +91,13 @@ def test_a_deviation_equal_to_eps_is_not_counted_as_inconsistent():
     examples that passed (deviation exactly eps, e.g. 0 at eps=0) as inconsistent."""
     assert deviation_stats([0.25], 0.25)["rate"] == 0.0, "a deviation equal to eps counted as inconsistent"
     assert deviation_stats([0.0, 0.0, 0.5], 0.0)["rate"] == 1 / 3, "at eps=0 only the deviation above 0 counts"
+
+
+def test_an_example_key_names_the_follow_ups_units():
+    """Guards against ExampleRecord.key() without units: a yaw/translation in metres and the same numbers in
+    reference units were paired as one example when comparing against a baseline."""
+    metres, reference = _example(1), _example(1)
+    metres.units = "metres"
+    assert reference.units != metres.units, "the test needs other units"
+    assert metres.key() != reference.key(), "records differing only in their follow-up's units have one key"
+    assert _example(1).key() == reference.key(), "equal records must keep one key"
