@@ -127,8 +127,8 @@ def as_unit_rgb(value: Any) -> tuple[float, float, float] | None:
     >>> as_unit_rgb([0.25, 1, 0]), as_unit_rgb("101"), as_unit_rgb((True, False, True)), as_unit_rgb(["1", "0", "1"])
     ((0.25, 1.0, 0.0), None, None, None)
     """
-    if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) != 1 or len(value) != 3:
-        return None
+    if not (isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1)) or len(value) != 3:
+        return None  # np.ndim of a ragged list ([1, [2, 3], 4]) would raise, not answer
     if any(isinstance(c, (bool, np.bool_)) or not isinstance(c, (Real, np.integer, np.floating)) for c in value):
         return None
     rgb = tuple(float(c) for c in value)

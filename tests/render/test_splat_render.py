@@ -178,6 +178,7 @@ def test_renders_are_bit_identical_on_one_thread():
     ("background", b"\x01\x00\x01", "SplatSettings.background=b'\\x01\\x00\\x01'; expected None or three values"),
     ("background", (True, False, True), "SplatSettings.background=(True, False, True); expected None or three"),
     ("background", np.array([True, False, True]), "SplatSettings.background=array([ True, False,  True]); expected"),
+    ("background", [1, [0, 0], 1], "SplatSettings.background=[1, [0, 0], 1]; expected None or three values"),
 ])
 def test_bad_settings_are_named(field, value, expected):
     with pytest.raises(InvalidArgument) as info:
