@@ -16,6 +16,9 @@ from pytest_n2r.geometry import Camera, project
 
 #: A camera 5 units up the world z axis looking straight down (OpenCV: its y axis along world -y).
 LOOKING_DOWN = np.array([[1.0, 0, 0, 0], [0, -1, 0, 0], [0, 0, -1, 5.0], [0, 0, 0, 1]])
+#: A camera at (1, 2, 3) looking along world +x, its image's right along world -y: a rotation that is not its own
+#: transpose (LOOKING_DOWN's is), so a reader or writer that transposes it is seen.
+TURNED = np.array([[0.0, 0, 1, 1], [-1, 0, 0, 2], [0, -1, 0, 3], [0, 0, 0, 1]])
 
 
 def test_a_3dgs_cameras_json_entry_is_read_as_an_opencv_camera_to_world_pose(tmp_path):
@@ -35,15 +38,29 @@ def test_a_3dgs_cameras_json_entry_is_read_as_an_opencv_camera_to_world_pose(tmp
     assert z[0] == pytest.approx(5.0)
 
 
+def test_a_3dgs_rotation_is_read_as_camera_to_world_rows(tmp_path):
+    entry = {"id": 0, "img_name": "a", "width": 8, "height": 6, "position": TURNED[:3, 3].tolist(),
+             "rotation": TURNED[:3, :3].tolist(), "fx": 5.0, "fy": 5.0}
+    path = tmp_path / "cameras.json"
+    path.write_text(json.dumps([entry]))
+    np.testing.assert_array_equal(read_gs_cameras(path).frames[0].c2w, TURNED)
+
+
 def test_cameras_json_round_trips(tmp_path):
-    frames = [SourceFrame("a.png", None, Camera(30, 20, 25.0, 25.0, 14.5, 9.5), LOOKING_DOWN)]
-    back = read_gs_cameras(write_gs_cameras(tmp_path / "cameras.json", frames)).frames[0]
-    assert back.name == "a" and back.camera == frames[0].camera
-    np.testing.assert_allclose(back.c2w, LOOKING_DOWN, atol=1e-15)
+    """Unequal focal lengths and a rotation that is not its own transpose: a swap of either is seen in the file."""
+    frames = [SourceFrame("a.png", None, Camera(30, 20, 25.0, 27.0, 14.5, 9.5), TURNED)]
+    path = write_gs_cameras(tmp_path / "cameras.json", frames)
+    entry = json.loads(path.read_text())[0]
+    assert (entry["fx"], entry["fy"]) == (25.0, 27.0), entry
+    assert entry["rotation"] == TURNED[:3, :3].tolist() and entry["position"] == [1.0, 2.0, 3.0], entry
+    back = read_gs_cameras(path).frames[0]
+    assert back.name == "a" and back.camera == frames[0].camera, back.camera
+    np.testing.assert_allclose(back.c2w, TURNED, atol=1e-15)
 
 
 @pytest.mark.parametrize("change, expected", [
     ({"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 2]]}, "field 'rotation' is not a rotation"),
+    ({"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}, "field 'rotation' is not a rotation"),  # a mirror
     ({"fx": -3}, "field 'fx'=-3; expected a finite number > 0"),
     ({"position": [0, 0]}, "'position' has shape (2,)"),
     ({"width": 10.5}, "expected whole pixels"),

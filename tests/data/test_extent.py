@@ -1,4 +1,4 @@
-"""Reference length and bounds from sparse points; triangulation input checks; atomic writes."""
+"""Reference length and bounds from sparse points; triangulation and its filters; atomic writes."""
 
 from __future__ import annotations
 
@@ -57,6 +57,56 @@ def test_bounds_ignore_stray_points_and_are_padded(seed):
     size = inlier.max(0) - inlier.min(0)
     assert np.all(hi[2] < 3.5) and np.all(hi[0] < 1.0), f"stray points widened the box: {lo}, {hi}"
     np.testing.assert_allclose(hi - lo, 1.1 * size, rtol=0.1)
+
+
+def _blob(centre, n=200, seed=0) -> np.ndarray:
+    """``n`` points spread ±0.3 around ``centre``."""
+    return np.random.default_rng(seed).uniform(-0.3, 0.3, size=(n, 3)) + centre
+
+
+def test_scene_bounds_cover_what_every_camera_sees():
+    right = Transform(x=10.0).apply(np.eye(4))  # sees only the second blob; the first camera only the first
+    points = np.vstack([_blob([0.0, 0.0, 2.0]), _blob([10.0, 0.0, 2.0], seed=1)])
+    lo, hi = scene_bounds(points, [CAM, CAM], [np.eye(4), right])
+    assert lo[0] < 0.0 and hi[0] > 10.0, f"the bounds {lo}, {hi} leave out what one camera sees"
+
+
+def test_scene_bounds_leave_out_points_no_camera_sees():
+    behind = _blob([0.0, 0.0, -50.0], n=100, seed=2)  # a third of the points, all behind the camera
+    lo, hi = scene_bounds(np.vstack([_blob([0.0, 0.0, 2.0]), behind]), [CAM], [np.eye(4)])
+    assert lo[2] > 1.0, f"the bounds {lo}, {hi} take in points behind the camera"
+
+
+def test_the_reference_length_is_measured_from_the_training_cameras_only():
+    """Held-out views (0 and 2 with ``heldout_every=2``) stand 8 units further back: the unit of the pose
+    tolerances must not depend on them."""
+    from pytest_n2r.data.ingest import extent
+    from pytest_n2r.data.poses import PoseSet, SourceFrame
+
+    far = Transform(z=-8.0).apply(np.eye(4))
+    frames = [SourceFrame(f"{k}.png", None, CAM, far if k % 2 == 0 else np.eye(4)) for k in range(4)]
+    _, length = extent(PoseSet(frames=frames, points=np.array([[0.0, 0.0, 2.0]])), heldout_every=2)
+    assert length == pytest.approx(2.0), f"reference length {length}: the held-out cameras' depth counted"
+
+
+def _project(c2w: np.ndarray, points: np.ndarray) -> np.ndarray:
+    w2c = np.linalg.inv(c2w)
+    x = (points @ w2c[:3, :3].T + w2c[:3, 3]) @ CAM.K.T
+    return x[:, :2] / x[:, 2:3]
+
+
+def test_a_pair_keeps_only_points_in_front_that_reproject_with_parallax():
+    from pytest_n2r.data.triangulate import _triangulate_pair
+
+    c2w_i, c2w_j = np.eye(4), Transform(x=0.5).apply(np.eye(4))
+    points = np.array([[0.0, 0.0, 4.0],       # kept
+                       [0.3, 0.1, 3.0],       # matched to a pixel 15 px off in j
+                       [0.1, 0.0, -4.0],      # behind both cameras
+                       [0.0, 0.2, 1000.0]])   # 0.03° of parallax: its depth is a guess
+    ui, uj = _project(c2w_i, points), _project(c2w_j, points)
+    uj[1, 1] += 15.0
+    _, ok = _triangulate_pair(ui, uj, CAM, CAM, np.linalg.inv(c2w_i), np.linalg.inv(c2w_j), 2.0, 1.5)
+    assert ok.tolist() == [True, False, False, False], f"kept {ok.tolist()}"
 
 
 def test_neighbour_pairs_respect_viewing_direction():

@@ -249,3 +249,9 @@ def test_a_colmap_camera_of_the_upright_size_is_refused_naming_the_orientation(c
     with pytest.raises(IngestError, match=rf"{corner.names[0]}' is 160x120 pixels but its camera says 120x160 "
                                           r"\(its pixels as stored: COLMAP ignores a photo's orientation tag"):
         ingest(corner.root, load_images=False)
+
+
+def test_heldout_every_0_holds_none_out_even_where_the_source_has_no_split():
+    from pytest_n2r.data.capture import split_frames
+
+    assert split_frames([f"{k}.png" for k in range(10)], None, 0) == ["train"] * 10

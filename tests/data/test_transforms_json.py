@@ -50,6 +50,43 @@ def test_camera_angle_fallback_and_centre_default(corner):
     assert (cam.cx, cam.cy) == (79.5, 59.5)
 
 
+def test_camera_angle_y_gives_fy_from_the_height(corner):
+    """A 160×120 photo: ``fl_y = h / (2 tan(camera_angle_y / 2))``, from the height, not the width."""
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    del meta["fl_x"], meta["fl_y"]
+    meta["camera_angle_x"] = 2 * math.atan(0.5 * 160 / 150.0)
+    meta["camera_angle_y"] = 2 * math.atan(0.5 * 120 / 180.0)
+    path.write_text(json.dumps(meta))
+    cam = read_transforms_json(path).frames[0].camera
+    assert (cam.fx, cam.fy) == (pytest.approx(150.0), pytest.approx(180.0)), (cam.fx, cam.fy)
+
+
+@pytest.mark.parametrize("key", ["camera_angle_x", "camera_angle_y"])
+def test_a_field_of_view_in_degrees_is_refused_naming_the_field(corner, key):
+    def mutate(m):
+        del m["fl_x"], m["fl_y"]
+        m["camera_angle_x"] = 0.9
+        m[key] = 60.0  # degrees, not radians
+    assert f"'{key}'=60.0 must be in (0, pi) radians" in _break(corner, mutate)
+
+
+def test_a_width_that_is_not_whole_pixels_is_refused(corner):
+    assert "'w'=160.5 must be a whole number of pixels" in _break(corner, lambda m: m.update(w=160.5))
+
+
+def test_a_windows_file_path_is_read(corner):
+    """``images\\a.png``, as a transforms.json written on Windows has it."""
+    path = write_transforms(corner)
+    meta = json.loads(path.read_text())
+    for frame in meta["frames"]:
+        frame["file_path"] = frame["file_path"].replace("/", "\\")
+    path.write_text(json.dumps(meta))
+    poses = read_transforms_json(path)
+    assert len(poses.frames) == len(corner.names) and poses.skipped == [], poses.skipped
+    assert poses.frames[0].path == corner.images_dir / corner.names[0], poses.frames[0].path
+
+
 def test_size_from_the_image_when_w_h_absent(corner):
     path = write_transforms(corner)
     meta = json.loads(path.read_text())
@@ -136,10 +173,16 @@ def test_a_matrix_entry_too_large_for_a_float_names_the_frame(corner):
     assert "frames[2]" in msg and "'transform_matrix' holds a number too large for a float" in msg
 
 
-def test_non_rigid_matrix_is_refused(corner):
+@pytest.mark.parametrize("matrix", [
+    np.eye(4) * 2,  # a scale
+    np.diag([1.0, 1.0, -1.0, 1.0]),  # a mirror: orthonormal, determinant -1
+    np.vstack([np.eye(4)[:3], [0.0, 0.0, 0.0, 2.0]]),  # a last row that is not 0 0 0 1
+], ids=["scale", "mirror", "last-row"])
+def test_non_rigid_matrix_is_refused(corner, matrix):
     def mutate(m):
-        m["frames"][1]["transform_matrix"] = (np.eye(4) * 2).tolist()
-    assert "not a rigid" in _break(corner, mutate)
+        m["frames"][1]["transform_matrix"] = matrix.tolist()
+    message = _break(corner, mutate)
+    assert "frames[1]" in message and "not a rigid" in message, message
 
 
 def test_wrong_matrix_shape(corner):

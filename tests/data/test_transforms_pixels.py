@@ -234,3 +234,23 @@ def test_poses_o_replaces_only_its_own_output_not_a_file_with_an_n2r_pixels_bloc
     ours = tmp_path / "poses.json"
     assert main(["poses", str(write_transforms(corner)), "-o", str(ours)]) == 0
     assert main(["poses", str(write_transforms(corner)), "-o", str(ours)]) == 0, "its own output needs no --force"
+
+
+def test_write_records_upright_pixels_for_tagged_photos_without_an_n2r_block(tmp_path):
+    """Upright cameras of tagged photos written without ``extra``: the ``n2r`` block is made for them, or the file
+    would read back as another tool's (stored pixels) and its cameras would land on the photos turned a quarter."""
+    from pytest_n2r.data.poses import PoseSet
+    from pytest_n2r.geometry import Camera
+
+    frames = []
+    for k in range(3):
+        photo = tmp_path / f"p{k}.jpg"
+        Image.fromarray(np.full((8, 12, 3), 100, np.uint8)).save(photo)  # stored 12×8: upright 8×12 once tagged
+        _tag(photo, 6)
+        c2w = np.eye(4)
+        c2w[0, 3] = k
+        frames.append(SourceFrame(name=photo.name, path=photo, camera=Camera(8, 12, 10.0, 10.0, 3.5, 5.5), c2w=c2w))
+    out = write_transforms_json(tmp_path / "transforms.json", PoseSet(frames=frames, pixels="upright"))
+    block = json.loads(out.read_text()).get("n2r")
+    assert block == {"pixels": "upright"}, f"the written n2r block: {block}"
+    assert read_transforms_json(out).pixels == "upright"

@@ -58,6 +58,20 @@ def test_frames_are_reused_for_the_same_video_and_settings(tmp_path, corner_fram
     assert json.loads((tmp_path / "f" / "frames.json").read_text())["max_frames"] == 3
 
 
+def test_an_extraction_cut_short_is_redone_not_reused(tmp_path, corner_frames):
+    """A frames.json left by an extraction interrupted after 3 of 5 frames (``complete`` false) is not taken as the
+    extraction: the frames are extracted again, all 5."""
+    video = _write_video(tmp_path / "v.avi", corner_frames)
+    first = extract_frames(video, tmp_path / "f", max_frames=5)
+    manifest = tmp_path / "f" / "frames.json"
+    saved = json.loads(manifest.read_text())
+    saved["frames"], saved["complete"] = saved["frames"][:3], False
+    manifest.write_text(json.dumps(saved))
+    again = extract_frames(video, tmp_path / "f", max_frames=5)
+    assert again == first, f"after an interrupted extraction: {[p.name for p in again]}"
+    assert json.loads(manifest.read_text())["complete"] is True
+
+
 def test_more_windows_than_frames_keeps_every_frame(tmp_path, corner_frames):
     video = _write_video(tmp_path / "v.avi", corner_frames[:4])
     assert len(extract_frames(video, tmp_path / "f", max_frames=50)) == 4
