@@ -121,3 +121,58 @@ def test_a_splat_scene_files_report_edited_by_hand_is_an_error_naming_the_file(s
     err = capsys.readouterr().err
     assert f"{edited}: scene.json report 'source', 'source_sha256', 'cameras', 'from_field', 'imported_by' or " in err
     assert "ValueError: Unknown format code 'f'" in err and "n2r info --json prints it as stored" in err, err
+
+
+def _cams(n):
+    return [{"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32.0, "cy": 24.0} for _ in range(n)]
+
+@pytest.mark.parametrize(("n", "more"), [(3, None), (4, "  ... and 1 more cameras"), (6, "  ... and 3 more cameras")])
+def test_the_camera_lines_show_three_and_count_the_rest(n, more):
+    from pytest_n2r.cli.info import _camera_and_scale_lines
+
+    lines = _camera_and_scale_lines({"cameras": _cams(n), "metres_per_unit": None, "reference_length": 1.0})
+    assert sum(line.startswith("  camera ") for line in lines) == min(n, 3)
+    assert [line for line in lines if "more cameras" in line] == ([more] if more else [])
+
+def test_info_json_of_a_fitted_scene_counts_tensor_bytes_and_its_split(capsys):
+    from pytest_n2r.demo.fitted import packaged_path
+    from pytest_n2r.scene.file import read_scene_file
+
+    path = packaged_path("wall")
+    assert main(["info", str(path), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    scene = read_scene_file(path, images=False)
+    tensors = scene.field.tensors().values()
+    assert info["field"]["tensor_bytes"] == sum(t.numel() * t.element_size() for t in tensors)
+    splits = [v.split for v in scene.views]
+    assert (info["train_views"], info["heldout_views"]) == (splits.count("train"), splits.count("heldout"))
+    assert main(["info", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert f"{100 * info['field']['occupied_fraction']:.1f}% of cells occupied" in text, text
+
+def test_info_of_an_exact_scene_counts_its_split_and_photos(capsys):
+    from pytest_n2r.demo import ground_truth
+
+    assert main(["info", "demo:wall", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    scene = ground_truth("wall")
+    splits = [v.split for v in scene.views]
+    assert (info["views"], info["train_views"], info["heldout_views"]) == (
+        len(splits), splits.count("train"), splits.count("heldout"))
+    assert info["photos_stored"] == sum(v.image is not None for v in scene.views)
+
+def test_report_lines_of_a_report_with_gains_history_and_compile_time():
+    from pytest_n2r.cli.info import _report_lines
+
+    lines = "\n".join(_report_lines({
+        "complete": True, "steps": 10, "train_seconds": 3.0, "compile_seconds": 0.2,
+        "source": "cap", "appearance": {"a.png": [0.9, 1.0, 1.1], "b.png": [1.2, 1.0, 0.95]},
+        "history": [{"seconds": 1, "step": 3, "psnr": 20.0, "ssim": 0.5}],
+    }))
+    assert "fit         complete: 10 steps, 3.0 s of training (and 0.2 s compiling its kernels)" in lines, lines
+    assert "  source    cap (downscale 1)" in lines, lines
+    assert "(2 photos, 0.900 to 1.200); renders use none" in lines, lines
+    assert "after 1 s of training (step 3): PSNR 20.00 dB, SSIM 0.5000" in lines, lines
+
+
+# poses.py / fit.py / study.py / demo.py: the smallest values documented as accepted -------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import errno
 import io
+import sys
 
 import pytest
 
@@ -77,3 +78,27 @@ def test_python_dash_m_runs_n2r_where_its_script_is_not_on_path():
     result = subprocess.run([sys.executable, "-m", "pytest_n2r.cli", "--version"], check=False, capture_output=True,
                             text=True)
     assert result.returncode == 0 and result.stdout.startswith("pytest-n2r "), (result.stdout, result.stderr)
+
+
+def test_a_reader_that_left_is_exit_141_and_nothing_printed(monkeypatch, capsys):
+    """`n2r info demo:wall | head -0`: the shell's 141 (128 + SIGPIPE), no error line."""
+    def gone(_args):
+        raise BrokenPipeError(32, "Broken pipe")
+    monkeypatch.setattr(pytest_n2r.cli.info, "run", gone)
+    monkeypatch.setattr(sys, "stdout", sys.stdout)  # main() replaces it with os.devnull; put it back after
+    assert main(["info", "demo:wall"]) == 141
+    assert capsys.readouterr().err == ""
+
+def test_out_of_memory_is_exit_1_with_a_hint(monkeypatch, capsys):
+    def big(_args):
+        raise MemoryError
+    monkeypatch.setattr(pytest_n2r.cli.info, "run", big)
+    assert main(["info", "demo:wall"]) == 1
+    assert capsys.readouterr().err == "n2r info: error: out of memory (a smaller --size or --downscale needs less)\n"
+
+def test_an_os_error_on_a_file_names_the_file(monkeypatch, capsys):
+    def vanished(_args):
+        raise FileNotFoundError(2, "No such file or directory", "/gone/x.n2r")
+    monkeypatch.setattr(pytest_n2r.cli.info, "run", vanished)
+    assert main(["info", "demo:wall"]) == 1
+    assert capsys.readouterr().err == "n2r info: error: /gone/x.n2r: No such file or directory\n"

@@ -177,3 +177,20 @@ def test_fit_keeps_every_skipped_photo_and_warning_in_its_report(corner, tmp_pat
     report = read_scene_file(out, images=False).report
     assert [r["file"] for r in report["skipped"]] == missing and "does not exist" in report["skipped"][0]["reason"]
     assert report["warnings"] == ["only 6 of the 18 photos"], report["warnings"]
+
+
+def test_poses_compare_reads_the_other_source_as_the_first_any_roll_included(tmp_path, monkeypatch, capsys):
+    import importlib
+
+    ingest = importlib.import_module("pytest_n2r.data.ingest")  # the package re-exports a function of that name
+    assert main(["demo", "export", "object", "-o", str(tmp_path / "cap"), "--size", "32x24"]) == 0
+    calls, real = [], ingest.load_poses
+
+    def recording(source, **kw):
+        calls.append(kw)
+        return real(source, **kw)
+
+    monkeypatch.setattr(ingest, "load_poses", recording)
+    source = str(tmp_path / "cap" / "transforms.json")
+    assert main(["poses", source, "--compare", source, "--any-roll", "--max-size", "480"]) == 0, capsys.readouterr().err
+    assert [(c.get("upright"), c["sfm_max_size"]) for c in calls] == [(False, 480), (False, 480)]
