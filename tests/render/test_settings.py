@@ -39,6 +39,9 @@ from ..field.fields import CAMERA, named_pose, random_field
     ({"colour_direction": "camera"}, "colour_direction"),
     ({"min_weight": 1.0}, "min_weight"),
     ({"min_weight": float("nan")}, "min_weight"),
+    ({"adaptive": 1.5}, "adaptive"),  # above 1: nearly every pixel interpolated, a blurred picture
+    ({"min_alpha": 1.0}, "min_alpha"),  # every cell skipped: a blank picture
+    ({"shell_samples": 5000}, "shell_samples"),
 ])
 def test_bad_settings_are_named(changes, name):
     ((_, value),) = changes.items()
@@ -146,3 +149,18 @@ def test_a_background_may_be_a_numpy_array_and_is_stored_as_plain_floats():
     settings = RenderSettings(background=np.array([0.25, 0.5, 1.0], dtype=np.float32))
     assert settings.background == (0.25, 0.5, 1.0), settings.background
     assert all(type(c) is float for c in settings.background), [type(c) for c in settings.background]
+
+
+def test_a_field_render_rounds_colours_to_the_nearest_level():
+    """An empty field shows its background (0.5, 0.25, 1.0): 127.5 and 63.75 grey levels, rounded to 128 and 64."""
+    import dataclasses
+
+    import numpy as np
+
+    from pytest_n2r.render.field_render import FieldRenderer
+    from tests.field.fields import CAMERA, named_pose, random_field
+
+    field = dataclasses.replace(random_field(resolution=8), background=(0.5, 0.25, 1.0))
+    field.occupancy[:] = False
+    rgb = FieldRenderer(field, RenderSettings()).render(named_pose("inside"), CAMERA, ("rgb",))["rgb"]
+    assert (rgb == [128, 64, 255]).all(), np.unique(rgb.reshape(-1, 3), axis=0)

@@ -78,3 +78,8 @@ def test_a_render_size_made_directly_is_checked(args, kwargs, error, match):
         RenderSize(*args, **kwargs)
     camera = PlaneScene().views[0].camera
     assert RenderSize(longer=96).apply(camera).size == RenderSize.parse("96").apply(camera).size == (96, 72)
+
+
+def test_a_box_three_pixels_off_the_views_aspect_is_not_filled_by_stretching():
+    camera = Camera(1000, 1000, 1200.0, 1200.0, 499.5, 499.5)
+    assert RenderSize(100, 103).apply(camera).size == (100, 100)

@@ -129,3 +129,11 @@ def test_the_tiny_fit_round_trips_with_its_report(tiny_scene_file, tiny_fit, tin
     got = scene.render(view.c2w, view.camera, ("rgb", "opacity"))
     assert np.array_equal(got.rgb, want["rgb"]) and np.array_equal(got.opacity, want["opacity"]), \
         "the fitted field renders differently after saving and loading"
+
+
+def test_splat_settings_for_a_fitted_field_are_refused_by_type(tmp_path):
+    from pytest_n2r.errors import InvalidType
+    from pytest_n2r.render.splat_render import SplatSettings
+
+    with pytest.raises(InvalidType, match="holds a fitted field"):
+        load_scene(tmp_path / "scene.n2r", settings=SplatSettings())

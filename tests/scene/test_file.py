@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import time
@@ -15,6 +16,7 @@ import torch
 
 from pytest_n2r.errors import InvalidArgument, SceneFileError
 from pytest_n2r.field.config import FieldConfig
+from pytest_n2r.geometry import Camera
 from pytest_n2r.render.field_render import FieldRenderer
 from pytest_n2r.scene import SceneView, read_scene_file, save_scene
 from pytest_n2r.scene.schema import FIELD_FILE, FORMAT_VERSION, SCENE_JSON
@@ -389,3 +391,11 @@ def test_reading_a_splat_scene_file_imports_no_torch():
             "pytest_n2r.scene.memory_guard; print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "False", "reading a splat scene file imported torch"
+
+
+def test_each_frame_of_a_scene_file_comes_back_with_its_own_camera(tmp_path):
+    """Frames of two cameras: each is read back with its own intrinsics, not the first camera's."""
+    other = Camera(20, 16, 21.0, 19.0, 9.0, 8.0)
+    views = [v if v.index % 2 == 0 else dataclasses.replace(v, camera=other) for v in tiny_views()]
+    loaded = read_scene_file(write(tmp_path / "s.n2r", views=views))
+    assert [v.camera for v in loaded.views] == [v.camera for v in views], [v.camera for v in loaded.views]

@@ -5,6 +5,8 @@ use."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -92,3 +94,37 @@ def test_units_that_are_no_unit_are_refused_listing_the_units(call, units):
         call(PlaneScene(), units)
     assert str(info.value) == f"units={units!r} is not a unit; expected one of ['reference', 'scene', 'metres']", (
         f"the message does not list the units: {info.value}")
+
+
+def test_pair_renders_both_views_at_the_camera_given():
+    scene = PlaneScene()
+    small = Camera(48, 36, 38.4, 38.4, 23.5, 17.5)
+    source, follow = scene.pair(0, Transform(yaw=1), camera=small)
+    for view in (source, follow):
+        assert view.camera == small and view.rgb.shape[:2] == (36, 48)
+
+
+def test_a_camera_with_lens_distortion_is_refused():
+    scene = PlaneScene()
+    camera = dataclasses.replace(scene.views[0].camera, distortion=(0.1, 0.0, 0.0, 0.0))
+    with pytest.raises(InvalidArgument, match="camera has lens distortion"):
+        scene.render(scene.views[0].c2w, camera)
+
+
+def test_no_outputs_are_refused():
+    scene = PlaneScene()
+    with pytest.raises(InvalidArgument, match=r"outputs=\(\): expected one or more of"):
+        scene.render(scene.views[0].c2w, scene.views[0].camera, ())
+
+
+class _NaNDepth(PlaneScene):
+    def _render(self, c2w, camera, outputs):
+        out = super()._render(c2w, camera, outputs)
+        out["depth"] = np.full((camera.height, camera.width), np.nan, np.float32)
+        return out
+
+
+def test_a_nan_depth_is_refused_naming_depth():
+    scene = _NaNDepth()
+    with pytest.raises(InvalidArgument, match=r"rendered \d+ NaN/Inf depth value"):
+        scene.render(scene.views[0].c2w, scene.views[0].camera, ("depth",))

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import zipfile
@@ -232,3 +233,49 @@ def test_a_splat_scene_file_the_reader_would_refuse_is_never_written(tmp_path, k
         save_splat_scene(out, scene)
     assert out.read_bytes() == b"the user's earlier file", "the earlier file was replaced"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["object.n2r"], "a temporary file was left behind"
+
+
+def _wall() -> Gaussians:
+    """A wall of 49 × 49 opaque splats in the plane z = 0, 12 units wide."""
+    xs = np.linspace(-6, 6, 49)
+    means = np.stack(np.meshgrid(xs, xs, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    n = len(means)
+    return Gaussians(means=means, quats=np.tile([1.0, 0, 0, 0], (n, 1)), log_scales=np.full((n, 3), np.log(0.2)),
+                     opacity_logits=np.full(n, 6.0), sh=np.full((n, 1, 3), 0.3))
+
+
+def _view(i: int, distance: float, split: str) -> SceneView:
+    c2w = np.eye(4)
+    c2w[:3, 3] = (0.01 * i, 0.0, -distance)  # OpenCV axes: looks along +z at the wall z = 0
+    return SceneView(i, f"v{i}", Camera(32, 24, 25.0, 25.0, 15.5, 11.5), c2w, split)
+
+
+def test_a_splat_scenes_reference_length_is_measured_on_its_training_views_only():
+    views = [_view(0, 2.0, "train"), _view(1, 4.0, "heldout"), _view(2, 2.0, "train"), _view(3, 4.0, "heldout")]
+    assert SplatScene(_wall(), views).reference_length == pytest.approx(2.0, rel=0.02)
+
+
+def test_a_splat_scene_with_other_settings_keeps_its_background():
+    scene = SplatScene(_wall(), [_view(0, 2.0, "train")], background=(1.0, 1.0, 1.0))
+    other = scene.with_settings(SplatSettings(tile=16))
+    assert other.background == scene.background
+    far = np.eye(4)
+    far[:3, 3] = (100.0, 0.0, -2.0)  # beside the wall: nothing in view
+    assert (other.render(far, scene.views[0].camera).rgb == 255).all()
+
+
+def test_a_fields_splats_keep_the_fields_background():
+    from types import SimpleNamespace
+
+    from pytest_n2r.scene.splat_from_field import splat_scene_from_field
+    from tests.field.fields import random_field
+
+    field = dataclasses.replace(random_field(resolution=8, occupied=0.3, seed=2), background=(0.5, 0.25, 1.0))
+    fake = SimpleNamespace(field=field, views=PlaneScene().views, name="f", reference_length=2.0, metres_per_unit=None)
+    assert splat_scene_from_field(fake).background == (0.5, 0.25, 1.0)
+
+
+def test_splat_views_hold_out_every_heldout_every_th_frame():
+    camera = Camera(8, 6, 5.0, 5.0, 3.5, 2.5)
+    poses = PoseSet([SourceFrame(f"{i}.png", None, camera, np.eye(4)) for i in range(6)], source="t.json")
+    assert [v.split for v in splat_views(poses, heldout_every=2)] == ["heldout", "train"] * 3

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -50,3 +52,14 @@ def test_trajectory_segments_wrap_around_and_a_single_view_is_its_own_trajectory
     views = list(PlaneScene(n_views=3).views)
     np.testing.assert_array_equal(trajectory_view(views, 3, 0.5).c2w, interpolate_view(views[1], views[2], 0.5).c2w)
     assert trajectory_view(views[:1], 7, 0.5) is views[0]
+
+
+def test_an_interpolated_view_keeps_the_first_views_camera():
+    a, b = PlaneScene(n_views=2).views
+    b = dataclasses.replace(b, camera=b.camera.scaled(0.5))
+    assert interpolate_view(a, b, 0.5).camera == a.camera
+
+
+def test_trajectory_segments_past_the_last_wrap_to_the_first():
+    views = list(PlaneScene(n_views=3).views)  # 2 segments: segment 2 is segment 0
+    np.testing.assert_array_equal(trajectory_view(views, 2, 0.5).c2w, interpolate_view(views[0], views[1], 0.5).c2w)
