@@ -235,3 +235,42 @@ def test_an_unwritable_default_folder_writes_nothing_with_a_warning_a_chosen_one
         else:
             with pytest.raises(InvalidArgument, match=r"cannot write into .*choose a writable folder, or 'none'"):
                 parse(".n2r-cache", where)
+
+
+@pytest.mark.parametrize(("text", "expected"), [("yes", True), ("true", True), ("1", True),
+                                                ("no", False), ("false", False), ("0", False)])
+def test_every_switch_word_is_read(pytester, text, expected):
+    """The help and errors promise yes/no, true/false, 1/0 for the switch options."""
+    pytester.makeini(f"[pytest]\nn2r_derandomize = {text}\nn2r_precompile = {text}\n")
+    config = pytester.parseconfig()
+    assert option("derandomize").value(config) is expected
+    assert option("precompile").value(config) is expected
+
+
+def test_ini_scene_paths_are_taken_from_the_ini_files_folder_not_the_rootdir(pytester):
+    """With --rootdir elsewhere, an ini entry is still relative to the ini file's folder."""
+    project = pytester.mkdir("project")
+    (project / "pytest.ini").write_text("[pytest]\nn2r_scenes = scenes/*.n2r\n")
+    elsewhere = pytester.mkdir("elsewhere")
+    config = pytester.parseconfig("-c", str(project / "pytest.ini"), "--rootdir", str(elsewhere))
+    with pytest.raises(pytest.UsageError, match=r"matched no file \(relative to (?P<b>.*)\)") as info:
+        option("scene").value(config)
+    assert f"(relative to {project})" in str(info.value), str(info.value)
+
+
+def test_a_tilde_in_a_folder_option_is_the_home_folder(pytester, monkeypatch, tmp_path):
+    """--n2r-artifacts=~/art (after '=' no shell expands it) is the home folder's, not <rootdir>/~/art."""
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    config = pytester.parseconfig("--n2r-artifacts=~/art", "--n2r-cache-dir=~/cache")
+    assert option("artifacts").value(config) == home / "art"
+    assert option("cache_dir").value(config) == home / "cache"
+
+
+@pytest.mark.parametrize("word", ["none", "None", "NONE"])
+def test_none_in_any_case_writes_no_folder(pytester, word):
+    """'None' turns a folder option off as 'none' does, rather than naming a folder None."""
+    config = pytester.parseconfig(f"--n2r-artifacts={word}", f"--n2r-cache-dir={word}")
+    assert option("artifacts").value(config) is None
+    assert option("cache_dir").value(config) is None

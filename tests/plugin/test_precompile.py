@@ -119,3 +119,23 @@ def test_the_log_is_never_written_or_emptied_through_a_link(tmp_path):
     assert not link.is_symlink() and link.read_text() == "helper line\n"
     _restart_log(cache)
     assert link.read_text() == "" and victim.read_text() == "important notes\n"
+
+
+def test_close_ends_a_running_kernel_helper():
+    """The session's close ends a helper that still runs (else it outlives pytest)."""
+    import subprocess
+    import sys
+
+    from pytest_n2r.plugin.session import N2RSession
+
+    proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        session = N2RSession()
+        session.helper = proc
+        session.close()
+        assert proc.poll() is not None, "the helper still runs after close()"
+        assert session.helper is None
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

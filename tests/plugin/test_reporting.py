@@ -308,3 +308,17 @@ def test_a_comparison_from_another_rootdir_says_so(n2r_project):
     moved = n2r_project.run(*DERANDOMIZED, f"--rootdir={base.parent}", "--n2r-compare", str(base))
     moved.stdout.fnmatch_lines([("note: this run's settings differ from the baseline's: rootdir (from the "
                                  "baseline's folder) . (baseline: ..)*")])
+
+
+def test_a_passing_comparison_may_refresh_its_baseline_in_place(n2r_project):
+    """--n2r-save-baseline onto the --n2r-compare file is refused only after a failing gate."""
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=4), examples=6)
+def test_mean_colour(n2r_scene):
+    return mean_colour
+""")
+    derandomized = ("--n2r-scene", "tests.plugin.fakescene:plane", "--n2r-derandomize", "yes")
+    n2r_project.run(*derandomized, "--n2r-save-baseline=b.json").assert_outcomes(passed=1)
+    again = n2r_project.run(*derandomized, "--n2r-compare=b.json", "--n2r-save-baseline=b.json")
+    assert again.ret == pytest.ExitCode.OK, again.stdout.str()
+    assert "did not save the baseline" not in again.stdout.str()

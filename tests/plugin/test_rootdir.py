@@ -54,3 +54,17 @@ def test_a_path_elsewhere_that_moves_where_pytest_looks_but_not_what_it_finds_is
     result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", str(elsewhere))
     assert result.ret == pytest.ExitCode.OK, f"exit code {result.ret}:\n{result.stdout.str()}\n{result.stderr.str()}"
 
+
+def test_a_folder_option_written_apart_that_moves_the_config_is_a_usage_error(repository):
+    """--n2r-artifacts DIR / --n2r-cache-dir DIR take a path as well as --n2r-json PATH does."""
+    repository.mkdir("art")
+    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-artifacts", "art")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR, result.stdout.str() + result.stderr.str()
+    assert "write --n2r-artifacts=art" in " ".join(result.stderr.str().split())
+
+
+def test_a_config_file_given_in_pytest_addopts_is_the_users_choice(repository, monkeypatch):
+    """-c in PYTEST_ADDOPTS names the config file as on the command line: no path option moved it."""
+    monkeypatch.setenv("PYTEST_ADDOPTS", "-c pyproject.toml")
+    result = repository.runpytest("-p", "no:cacheprovider", "project", "--n2r-json", "report.json")
+    assert result.ret != pytest.ExitCode.USAGE_ERROR, result.stdout.str() + result.stderr.str()

@@ -76,3 +76,9 @@ def test_x():
     assert not heavy, f"imported by a worker of a suite that uses no relation: {heavy}"
 """)
     pytester.runpytest_subprocess("-p", "no:cacheprovider", "-n", "2").assert_outcomes(passed=1)
+
+
+def test_a_suite_that_does_not_use_pytest_n2r_keeps_xdists_chunks(pytester):
+    """--maxschedchunk 1 only for a session that uses pytest-n2r; other suites keep xdist's own scheduling."""
+    pytest.importorskip("xdist")
+    assert pytester.parseconfigure("-n", "2", "--dist", "load").option.maxschedchunk is None

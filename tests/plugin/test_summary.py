@@ -70,3 +70,20 @@ def test_at_q_every_relation_and_the_time_are_shown(n2r_project):
     assert any(line.startswith("XPASS  ") and "test_strict_xpass" in line for line in section), section
     assert any(line.startswith("5 relations: ") for line in section), section
     assert any(line.startswith("time ") and "since pytest loaded pytest-n2r" in line for line in section), section
+
+
+def test_at_qq_a_failure_below_the_floor_keeps_its_floor_warning(n2r_project):
+    """-qq drops the plain floor lines but keeps the warnings (eps below the floor) of relations shown."""
+    n2r_project.write("""
+from pytest_n2r.metrics import repeatability
+from tests.plugin.fakefield import corners
+
+
+@metamorphic(repeatability(px=2), eps=0.01, transform=transforms(x=(0.1, 0.2)), examples=3)
+def test_turn(n2r_scene):
+    return corners
+""")
+    result = n2r_project.run("--n2r-scene", "tests.plugin.fakefield:blurred_plane", "-qq")
+    assert result.ret == 1
+    assert any(line.startswith("       field floor") and "WARNING: eps 0.01 is below the field floor" in line
+               for line in result.outlines), "\n".join(result.outlines)
