@@ -22,7 +22,7 @@ def test_poses_prints_a_summary_and_writes_transforms_json(corner, tmp_path, cap
     text = capsys.readouterr().out
     for expected in (
         "6 found, 5 registered, 1 skipped", f"images/{corner.names[5]}", "160x120 fx=150.00 fy=150.00 cx=79.50",
-        "reference", "bounds", "time", f"wrote       {out}",
+        "reference", "bounds", "time", f"wrote       {out} (5 frames)",
     ):
         assert expected in text, f"{expected!r} missing from the summary:\n{text}"
     written = read_transforms_json(out)
@@ -194,3 +194,16 @@ def test_poses_compare_reads_the_other_source_as_the_first_any_roll_included(tmp
     source = str(tmp_path / "cap" / "transforms.json")
     assert main(["poses", source, "--compare", source, "--any-roll", "--max-size", "480"]) == 0, capsys.readouterr().err
     assert [(c.get("upright"), c["sfm_max_size"]) for c in calls] == [(False, 480), (False, 480)]
+
+
+@pytest.mark.parametrize(("count", "more"), [(3, None), (4, "  ... and 1 more")])
+def test_the_summary_lists_three_cameras_and_counts_the_rest(count, more):
+    from pytest_n2r.cli.poses import format_summary
+    from pytest_n2r.data.poses import PoseSet, SourceFrame
+    from pytest_n2r.geometry import Camera
+
+    cameras = [Camera(64, 48, 50.0 + k, 50.0, 31.5, 23.5) for k in range(count)]  # each frame a camera of its own
+    frames = [SourceFrame(f"{k}.png", None, camera, np.eye(4)) for k, camera in enumerate(cameras)]
+    lines = format_summary(PoseSet(frames=frames, points=np.zeros((1, 3))), np.zeros((2, 3)), 1.0, 0.1).splitlines()
+    assert sum(line.startswith("  64x48 fx=") for line in lines) == 3, lines
+    assert [line for line in lines if "more" in line] == ([more] if more else []), lines

@@ -528,3 +528,19 @@ def test_every_setting_can_be_given_including_those_stored_only_when_changed():
     assert (config.max_pixels_per_voxel, config.detail_grid_max) == (0.0, 512), config
     for name in LATER_SETTINGS:  # their defaults are accepted too (an override that changes nothing)
         assert build_config([(name, getattr(FieldConfig(), name))]) == FieldConfig(), name
+
+
+def test_fit_without_a_budget_trains_ten_minutes(exported, tmp_path, monkeypatch, capsys):
+    """``n2r fit`` given neither ``--time-budget`` nor ``--max-steps`` trains for the documented 10 minutes."""
+    from pytest_n2r import fit as fitting
+
+    asked = {}
+
+    def fit(*args, time_budget_s, max_steps, **kwargs):
+        asked.update(time_budget_s=time_budget_s, max_steps=max_steps)
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(fitting, "fit", fit)
+    assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu"]) == 2
+    assert asked == {"time_budget_s": 600.0, "max_steps": None}, asked
+    assert "stopped by the test" in capsys.readouterr().err
