@@ -57,6 +57,7 @@ class Summary:
         if record is None or report.when != "call":
             if report.nodeid in self.recorded and report.failed:  # its teardown failed: pytest says ERROR too
                 self.recorded[report.nodeid].pytest_outcome = "error"
+                self.labels[report.nodeid] = "ERROR"  # and so does the section's line, not the relation's PASSED
             elif report.nodeid not in self.recorded and not report.passed:  # the first word pytest said of it
                 self.unrecorded.setdefault(report.nodeid, (_outcome(report), _reason(report)))
             return

@@ -193,3 +193,29 @@ def test_breaks(n2r_scene):
                        images_base=downloaded / "out")
     assert "not found" not in page and page.count("data:image/png;base64,") == len(images), (
         "the rebuilt report lost its pictures")
+
+
+TEARDOWN_FAILS = """
+@pytest.fixture
+def model():
+    yield mean_colour
+    raise RuntimeError("the model's file could not be closed")
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=5), examples=3)
+def test_teardown_fails(n2r_scene, model):
+    return model
+"""
+
+
+def test_a_relation_whose_teardown_fails_is_an_error_in_every_report(n2r_project):
+    """The relation held, then a fixture's teardown raised: pytest says ERROR, and so must the JSON report and the
+    summary, not "passed"."""
+    n2r_project.write(TEARDOWN_FAILS)
+    result = n2r_project.run("--n2r-scene", PLANE, "--n2r-json", "r.json", "--n2r-report", "r.html")
+    result.assert_outcomes(passed=1, errors=1)
+    (relation,) = json.loads((n2r_project.pytester.path / "r.json").read_text())["relations"]
+    assert (relation["outcome"], relation["pytest_outcome"]) == ("passed", "error"), relation
+    assert n2r_project.summary(result, "test_teardown_fails[plane]").startswith("ERROR"), result.stdout.str()
+    cells = _outcome_cells((n2r_project.pytester.path / "r.html").read_text())
+    assert cells["test_teardown_fails"][0] == "error", cells
