@@ -1106,3 +1106,44 @@ def test_collected_once_then_on(n2r_scene):
 """)
     result = n2r_project.run("--n2r-scene", PLANE)
     result.assert_outcomes(passed=1)
+
+
+CLEAR_LOG_PLUGIN = """
+
+import os
+
+from pytest_n2r.scene.render_cache import RenderCache
+
+_clear = RenderCache.clear
+
+
+def clear(self):
+    with open(os.environ["N2R_TEST_CLEAR_LOG"], "a") as log:
+        log.write(os.environ.get("PYTEST_XDIST_WORKER", "controller") + "\\n")
+    return _clear(self)
+
+
+RenderCache.clear = clear
+"""
+
+
+def test_cache_clear_under_xdist_is_done_once_by_the_controller(n2r_project, monkeypatch):
+    """``--n2r-cache-clear -n 2``: the controller clears the shared cache before the workers start; a worker that
+    cleared it too would delete what the other had just rendered."""
+    pytest.importorskip("xdist")
+    conftest = n2r_project.pytester.path / "conftest.py"  # loaded by the controller and by every worker
+    conftest.write_text(conftest.read_text() + CLEAR_LOG_PLUGIN)
+    log = n2r_project.pytester.path / "clears.log"
+    monkeypatch.setenv("N2R_TEST_CLEAR_LOG", str(log))
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=4), examples=3)
+def test_a(n2r_scene):
+    return mean_colour
+
+
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=3), examples=3)
+def test_b(n2r_scene):
+    return mean_colour
+""")
+    n2r_project.run("--n2r-scene", PLANE, "-n", "2", "--n2r-cache-clear").assert_outcomes(passed=2)
+    assert log.read_text().split() == ["controller"], f"RenderCache.clear was called by: {log.read_text().split()}"
