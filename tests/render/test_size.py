@@ -81,5 +81,13 @@ def test_a_render_size_made_directly_is_checked(args, kwargs, error, match):
 
 
 def test_a_box_three_pixels_off_the_views_aspect_is_not_filled_by_stretching():
+    """A box within a pixel of the view's aspect is filled; 3 pixels off, the view is fitted in it, not stretched."""
     camera = Camera(1000, 1000, 1200.0, 1200.0, 499.5, 499.5)
     assert RenderSize(100, 103).apply(camera).size == (100, 100)
+
+
+@pytest.mark.parametrize("value", [True, False])
+def test_a_boolean_size_is_refused_by_type(value):
+    """``size=True`` is no size (``True`` is the int 1 to Python): refused as a type, naming the argument."""
+    with pytest.raises(InvalidType, match=rf"size={value!r} must be 'WxH', a pair \(W, H\) or an int"):
+        RenderSize.parse(value)
