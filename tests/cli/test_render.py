@@ -55,3 +55,13 @@ def test_render_units_scene_moves_by_scene_units(tmp_path, capsys):
 
 
 # import.py -------------------------------------------------------------------------------------------------------
+
+
+def test_a_file_in_the_way_of_the_depth_array_is_not_written_over(tmp_path, capsys):
+    """``--depth -o v.png`` also writes ``v.depth.npy``: a file of the user's there that is no NumPy array is left
+    as it is and named, unless ``--force``."""
+    notes = tmp_path / "v.depth.npy"
+    notes.write_text("my notes")
+    assert main(["render", "demo:wall", "--size", "32", "--depth", "-o", str(tmp_path / "v.png")]) == 2
+    assert "v.depth.npy" in capsys.readouterr().err
+    assert notes.read_text() == "my notes" and not (tmp_path / "v.png").exists()
