@@ -322,3 +322,24 @@ def test_mean_colour(n2r_scene):
     again = n2r_project.run(*derandomized, "--n2r-compare=b.json", "--n2r-save-baseline=b.json")
     assert again.ret == pytest.ExitCode.OK, again.stdout.str()
     assert "did not save the baseline" not in again.stdout.str()
+
+
+def test_a_baseline_is_replayed_only_under_the_metric_it_was_saved_with(n2r_project):
+    """``--n2r-compare`` replays a relation's baseline examples before its search; once the test's metric changed,
+    those examples measured something else, so they are not replayed (the comparison reports the change)."""
+    n2r_project.write("""
+@metamorphic(AbsDifference(), eps=1000, transform=transforms(yaw=4), examples=6)
+def test_turn(n2r_scene):
+    return mean_colour
+""")
+    n2r_project.run(*DERANDOMIZED, "--n2r-save-baseline=b.json").assert_outcomes(passed=1)
+    same = n2r_project.run(*DERANDOMIZED, "--n2r-compare=b.json")
+    assert "baseline examples replayed" in n2r_project.summary(same, "test_turn[plane]"), same.stdout.str()
+    n2r_project.write("""
+@metamorphic(SameLabel(), eps=0.5, transform=transforms(yaw=4), examples=6)
+def test_turn(n2r_scene):
+    return heading_class
+""")
+    changed = n2r_project.run(*DERANDOMIZED, "--n2r-compare=b.json")
+    assert "baseline examples replayed" not in n2r_project.summary(changed, "test_turn[plane]"), \
+        changed.stdout.str()
