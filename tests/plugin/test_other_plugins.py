@@ -182,3 +182,16 @@ def test_a_test_run_twice_under_one_id_says_the_earlier_run_was_dropped(n2r_proj
     for where, text in (("table row", row), ("section", section)):
         assert "passed after 1 earlier try under this test id (the last counts)" in text.replace("</span>", ""), \
             f"the HTML report's {where} should say the relation passed on its second try: {text}"
+
+
+def test_at_qq_a_relation_that_passed_only_on_its_rerun_is_still_shown(n2r_project, monkeypatch):
+    """``-qq`` leaves out the relations that passed plainly; one that passed on its rerun stays, with its rerun,
+    since a CI log should keep the sign that it is flaky."""
+    conftest = n2r_project.pytester.path / "conftest.py"
+    conftest.write_text(conftest.read_text() + "\nimport pytest\n" + FAKE_RERUNS)
+    n2r_project.write(FLAKY)
+    monkeypatch.setenv("N2R_FLAKY", "1")
+    result = n2r_project.run("--n2r-scene", PLANE, "-qq")
+    shown = [line for line in result.outlines if "::test_" in line and line.startswith(("PASSED", "ERROR"))]
+    assert len(shown) == 1 and "::test_flaky[" in shown[0], "\n".join(result.outlines)
+    assert shown[0].endswith("; rerun: 1 earlier try under this test id dropped, the last one counts"), shown[0]
