@@ -82,3 +82,15 @@ def test_a_suite_that_does_not_use_pytest_n2r_keeps_xdists_chunks(pytester):
     """--maxschedchunk 1 only for a session that uses pytest-n2r; other suites keep xdist's own scheduling."""
     pytest.importorskip("xdist")
     assert pytester.parseconfigure("-n", "2", "--dist", "load").option.maxschedchunk is None
+
+
+@pytest.mark.parametrize(("source", "slow"), [("scenes/site.n2r", True), ("scenes/SITE.N2R", True),
+                                               ("scenes/site.ply", False)])
+def test_fitted_scene_files_are_scheduled_with_the_slow_scenes(source, slow):
+    """A user's fitted ``.n2r`` renders as slowly as the demo's fitted twins: under xdist its tests go first too."""
+    from pytest_n2r.plugin.precompile import family
+    from pytest_n2r.plugin.scenes import SceneSpec
+    from pytest_n2r.plugin.schedule import SLOW_FAMILIES
+
+    assert (family(SceneSpec("site", "file", source)) in SLOW_FAMILIES) is slow
+    assert family(SceneSpec("wall-field", "demo", "demo:wall-field")) in SLOW_FAMILIES
