@@ -279,3 +279,16 @@ def test_mine(n2r_scene):
     again = n2r_project.run(*DERANDOMIZED, "--n2r-compare", str(base))
     assert _row(again, "test_mine[plane]")[-1] == "ok", "an unchanged user metric must compare as ok"
     assert again.ret == pytest.ExitCode.OK
+
+
+def test_two_other_plugins_sharing_a_file_is_not_pytest_n2rs_to_refuse(n2r_project):
+    """``--junitxml`` and ``--html`` on one file is pytest's and pytest-html's clash: pytest-n2r (checking its own
+    outputs against theirs) says nothing of it."""
+    n2r_project.pytester.syspathinsert()
+    n2r_project.pytester.makepyfile(fakehtml="def pytest_addoption(parser):\n"
+                                             "    parser.addoption('--html', dest='htmlpath')\n")
+    n2r_project.write(TWO)
+    result = n2r_project.run("-p", "fakehtml", "--n2r-scene", PLANE, "--n2r-json", "r.json", "--junitxml", "o.xml",
+                             "--html", "o.xml")
+    assert "pytest-n2r:" not in result.stderr.str(), result.stderr.str()
+    assert result.ret != pytest.ExitCode.USAGE_ERROR, result.stdout.str()
