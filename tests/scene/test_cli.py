@@ -544,3 +544,26 @@ def test_fit_without_a_budget_trains_ten_minutes(exported, tmp_path, monkeypatch
     assert main(["fit", str(exported), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--device", "cpu"]) == 2
     assert asked == {"time_budget_s": 600.0, "max_steps": None}, asked
     assert "stopped by the test" in capsys.readouterr().err
+
+
+def test_fit_prints_each_photo_size_of_a_mixed_capture(tmp_path, monkeypatch, capsys):
+    """A capture of landscape and portrait photos: ``n2r fit`` names both sizes and their counts, not one size."""
+    from pytest_n2r import fit as fitting
+
+    assert main(["demo", "export", "object", "-o", str(tmp_path / "cap"), "--size", "32x24"]) == 0
+    path = tmp_path / "cap" / "transforms.json"
+    meta = json.loads(path.read_text())
+    frame = meta["frames"][0]  # turned to portrait: the photo and its camera
+    photo = path.parent / frame["file_path"]
+    cv2.imwrite(str(photo), cv2.rotate(cv2.imread(str(photo)), cv2.ROTATE_90_CLOCKWISE))
+    frame.update(w=24, h=32, fl_x=meta["fl_y"], fl_y=meta["fl_x"], cx=meta["cy"], cy=meta["cx"])
+    path.write_text(json.dumps(meta))
+
+    def fit(*args, **kwargs):
+        raise FitError("stopped by the test")
+
+    monkeypatch.setattr(fitting, "fit", fit)
+    assert main(["fit", str(path.parent), "-o", str(tmp_path / "x.n2r"), "--downscale", "1", "--max-steps", "1"]) == 2
+    ingested = next(line for line in capsys.readouterr().err.splitlines() if line.startswith("ingested"))
+    count = len(meta["frames"])
+    assert f"32x24 ({count - 1} views), 24x32 (1 views)" in ingested, ingested
