@@ -148,3 +148,14 @@ def test_the_floors_sut_calls_are_under_the_time_limit(n2r_project):
     result.stdout.fnmatch_lines([("*field floor n/a: measuring it failed: CallTimeout: the system under test, "
                                   "measuring the field floor did not finish within 1 s*")])
     assert result.duration < 20, f"the 1 s limit did not stop the floor's 30 s hang: {result.duration:.1f} s"
+
+
+def test_the_floor_is_measured_at_the_relations_own_render_size(n2r_project, tmp_path):
+    """``@metamorphic(size=...)`` renders the relation at its size: its floor must be measured there too, not at
+    ``--n2r-size``."""
+    n2r_project.write(BODY.replace("examples=2)\ndef test_tight", "examples=2, size=64)\ndef test_tight"))
+    out = tmp_path / "run.json"
+    n2r_project.run("--n2r-scene", BLURRED, "--n2r-json", str(out)).assert_outcomes(passed=2)
+    records = {r["nodeid"].rsplit("::", 1)[1]: r for r in json.loads(out.read_text())["relations"]}
+    sizes = {name: records[f"{name}[blurred_plane]"]["floor"]["floor"]["size"] for name in ("test_tight", "test_loose")}
+    assert sizes["test_tight"] != sizes["test_loose"] and "64" in sizes["test_tight"], sizes

@@ -1147,3 +1147,39 @@ def test_b(n2r_scene):
 """)
     n2r_project.run("--n2r-scene", PLANE, "-n", "2", "--n2r-cache-clear").assert_outcomes(passed=2)
     assert log.read_text().split() == ["controller"], f"RenderCache.clear was called by: {log.read_text().split()}"
+
+
+def test_every_metamorphic_argument_reaches_the_relation():
+    """``views=``, ``interpolate=`` and ``validity=`` of ``@metamorphic`` must reach the Relation the plugin runs: a
+    call that dropped one ran every test on the held-out views, on captured poses only, with default thresholds."""
+    from pytest_n2r import Validity, metamorphic, transforms
+    from pytest_n2r.plugin import RELATION_ATTR
+    from tests.plugin.fakemetrics import AbsDifference
+
+    strict = Validity(max_rejected=0.25)
+
+    @metamorphic(AbsDifference(), eps=1, transform=transforms(yaw=5), views="train", interpolate=True,
+                 validity=strict, search="targeted")
+    def test_all(n2r_scene):
+        return float
+
+    relation = getattr(test_all, RELATION_ATTR)
+    assert (relation.views, relation.interpolate, relation.search) == ("train", True, "targeted"), relation
+    assert relation.validity == strict, relation.validity
+
+
+def test_a_pin_of_the_default_scene_collects_without_a_configured_scene(n2r_project):
+    """With no scene configured, the default demo scene is the configured one: pinning it by name must select it,
+    not fail collection as an unknown scene."""
+    from pytest_n2r.plugin.scenes import default_scene_specs
+
+    default = default_scene_specs()[0].name
+    n2r_project.write(f"""
+@pytest.mark.n2r_scene({default!r})
+@metamorphic(AbsDifference(), eps=255, transform=transforms(yaw=2), examples=2)
+def test_pinned(n2r_scene):
+    return mean_colour
+""")
+    result = n2r_project.run("--collect-only", "-q", "--n2r-examples", "2")
+    assert result.ret == pytest.ExitCode.OK, result.stdout.str()
+    result.stdout.fnmatch_lines([f"*test_pinned[[]{default}[]]*"])

@@ -139,3 +139,16 @@ def test_close_ends_a_running_kernel_helper():
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_a_waiting_first_render_leaves_out_the_scenes_this_process_released(monkeypatch):
+    """A released scene loaded again for its pieces would be kept to the end of the session, for nothing."""
+    from pytest_n2r.demo.exact import GroundTruthScene
+    from pytest_n2r.plugin.session import N2RSession
+
+    compiled: list[str] = []
+    monkeypatch.setattr(GroundTruthScene, "compile_apart", lambda self: compiled.append(self.name) or True)
+    session = N2RSession(planned=[WALL, WALL_FIELD, OBJECT], released={WALL.source})
+    compile_apart_meanwhile(session, session.load(WALL_FIELD))
+    assert compiled == ["object"], f"compiled apart {compiled}: the released wall was loaded again"
+    assert WALL.source not in session._loaded, "the released scene is held again"

@@ -109,3 +109,23 @@ def test_a_run_without_failure_pictures_removes_those_of_an_earlier_failure(tmp_
     with pytest.raises(KeyboardInterrupt):
         _run(tmp_path, 0.05, interrupted)
     assert folder.is_dir(), "an interrupted run did not end: the pictures of the last one that did stay"
+
+
+def test_each_picture_shows_its_own_render_and_output(tmp_path):
+    """The follow-up's pictures are the follow-up render with the follow-up's output drawn, not the source's."""
+    source = np.zeros((60, 80, 3), np.uint8)
+    follow = np.full((60, 80, 3), 200, np.uint8)
+    paths = save_pair(tmp_path, source, follow, np.array([[10.0, 10.0]]), np.array([[60.0, 45.0]]))
+    read = {role: cv2.imread(path)[..., ::-1] for role, path in paths.items()}
+    np.testing.assert_array_equal(read["source_raw"], source)
+    np.testing.assert_array_equal(read["follow_raw"], follow)
+    np.testing.assert_array_equal(read["follow"], draw_output(follow, np.array([[60.0, 45.0]]), (235, 50, 50)))
+    np.testing.assert_array_equal(read["source"], draw_output(source, np.array([[10.0, 10.0]])))
+
+
+def test_keypoints_with_nan_coordinates_are_drawn_without_them():
+    """A detector may return NaN rows: the finite keypoints are circled and the picture is still saved (an error
+    there turned a relation's failure into a crash)."""
+    rgb = np.zeros((60, 80, 3), np.uint8)
+    drawn = draw_output(rgb, np.array([[np.nan, 5.0], [40.0, 30.0], [np.inf, np.nan]]))
+    assert drawn[30, 40:48].any() and not drawn[5:10, 60:70].any()

@@ -101,3 +101,18 @@ def test_an_example_key_names_the_follow_ups_units():
     assert reference.units != metres.units, "the test needs other units"
     assert metres.key() != reference.key(), "records differing only in their follow-up's units have one key"
     assert _example(1).key() == reference.key(), "equal records must keep one key"
+
+
+def test_every_counter_and_outcome_survives_the_round_trip():
+    """pytest-xdist and the plugin's summary read each record back from its dict: a field from_dict dropped reads as
+    its default (0 SUT calls, no "asked" note, no pytest outcome) in the terminal summary and the reports."""
+    run = _run()
+    run.asked, run.sut_calls, run.sut_shared, run.pytest_outcome = 40, 6, 3, "xfailed"
+    again = RelationRecord.from_dict(json.loads(json.dumps(run.to_dict())))
+    assert (again.asked, again.sut_calls, again.sut_shared, again.pytest_outcome) == (40, 6, 3, "xfailed")
+
+
+def test_the_summary_lines_total_includes_the_field_floor():
+    run = _run()
+    run.timings.update(total=2.0, floor=0.5)
+    assert run.summary_line().endswith("metric 0.12 s of 2.50 s"), run.summary_line()
