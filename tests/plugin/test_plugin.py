@@ -1112,14 +1112,22 @@ CLEAR_LOG_PLUGIN = """
 
 import os
 
+import pytest
+
 from pytest_n2r.scene.render_cache import RenderCache
 
+ROLE = []
 _clear = RenderCache.clear
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
+    ROLE.append(config.workerinput["workerid"] if hasattr(config, "workerinput") else "controller")
 
 
 def clear(self):
     with open(os.environ["N2R_TEST_CLEAR_LOG"], "a") as log:
-        log.write(os.environ.get("PYTEST_XDIST_WORKER", "controller") + "\\n")
+        log.write(ROLE[-1] + "\\n")
     return _clear(self)
 
 
