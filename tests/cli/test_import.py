@@ -17,6 +17,7 @@ def test_import_heldout_every_0_holds_none_out(tmp_path, capsys):
     assert "(0 held out)" in capsys.readouterr().err
     assert not any(v.split == "heldout" for v in load_scene(out).views)
 
+
 def test_import_background_and_its_name_and_held_count(tmp_path, capsys):
     from pytest_n2r.scene import load_scene
 
@@ -28,6 +29,7 @@ def test_import_background_and_its_name_and_held_count(tmp_path, capsys):
     assert 0 < held < len(scene.views)
     assert f"{len(scene.views)} views ({held} held out)" in err, err
     assert tuple(scene.background) == (1.0, 1.0, 1.0) and scene.name == "named"
+
 
 def test_import_of_a_fitted_scene_uses_the_documented_defaults(tmp_path, capsys):
     from pytest_n2r.demo.fitted import packaged_path

@@ -126,6 +126,7 @@ def test_a_splat_scene_files_report_edited_by_hand_is_an_error_naming_the_file(s
 def _cams(n):
     return [{"width": 64, "height": 48, "fx": 50.0, "fy": 50.0, "cx": 32.0, "cy": 24.0} for _ in range(n)]
 
+
 @pytest.mark.parametrize(("n", "more"), [(3, None), (4, "  ... and 1 more cameras"), (6, "  ... and 3 more cameras")])
 def test_the_camera_lines_show_three_and_count_the_rest(n, more):
     from pytest_n2r.cli.info import _camera_and_scale_lines
@@ -133,6 +134,7 @@ def test_the_camera_lines_show_three_and_count_the_rest(n, more):
     lines = _camera_and_scale_lines({"cameras": _cams(n), "metres_per_unit": None, "reference_length": 1.0})
     assert sum(line.startswith("  camera ") for line in lines) == min(n, 3)
     assert [line for line in lines if "more cameras" in line] == ([more] if more else [])
+
 
 def test_info_json_of_a_fitted_scene_counts_tensor_bytes_and_its_split(capsys):
     from pytest_n2r.demo.fitted import packaged_path
@@ -150,6 +152,7 @@ def test_info_json_of_a_fitted_scene_counts_tensor_bytes_and_its_split(capsys):
     text = capsys.readouterr().out
     assert f"{100 * info['field']['occupied_fraction']:.1f}% of cells occupied" in text, text
 
+
 def test_info_of_an_exact_scene_counts_its_split_and_photos(capsys):
     from pytest_n2r.demo import ground_truth
 
@@ -160,6 +163,7 @@ def test_info_of_an_exact_scene_counts_its_split_and_photos(capsys):
     assert (info["views"], info["train_views"], info["heldout_views"]) == (
         len(splits), splits.count("train"), splits.count("heldout"))
     assert info["photos_stored"] == sum(v.image is not None for v in scene.views)
+
 
 def test_report_lines_of_a_report_with_gains_history_and_compile_time():
     from pytest_n2r.cli.info import _report_lines

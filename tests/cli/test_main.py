@@ -89,12 +89,14 @@ def test_a_reader_that_left_is_exit_141_and_nothing_printed(monkeypatch, capsys)
     assert main(["info", "demo:wall"]) == 141
     assert capsys.readouterr().err == ""
 
+
 def test_out_of_memory_is_exit_1_with_a_hint(monkeypatch, capsys):
     def big(_args):
         raise MemoryError
     monkeypatch.setattr(pytest_n2r.cli.info, "run", big)
     assert main(["info", "demo:wall"]) == 1
     assert capsys.readouterr().err == "n2r info: error: out of memory (a smaller --size or --downscale needs less)\n"
+
 
 def test_an_os_error_on_a_file_names_the_file(monkeypatch, capsys):
     def vanished(_args):

@@ -13,6 +13,7 @@ def test_a_dangling_symlink_at_the_output_is_not_written_through(tmp_path, capsy
     assert "exists and is not a PNG image" in capsys.readouterr().err
     assert link.is_symlink() and not (tmp_path / "elsewhere").exists()
 
+
 def test_an_upper_case_png_suffix_is_a_png(tmp_path, capsys):
     assert main(["render", "demo:wall", "--size", "32", "-o", str(tmp_path / "OUT.PNG")]) == 0, capsys.readouterr().err
     assert (tmp_path / "OUT.PNG").read_bytes().startswith(b"\x89PNG")
@@ -20,11 +21,13 @@ def test_an_upper_case_png_suffix_is_a_png(tmp_path, capsys):
 
 # render.py -------------------------------------------------------------------------------------------------------
 
+
 def test_an_empty_folder_is_a_valid_output_folder(tmp_path, capsys):
     empty = tmp_path / "export"
     empty.mkdir()
     assert main(["demo", "export", "object", "-o", str(empty), "--size", "32x24"]) == 0, capsys.readouterr().err
     assert (empty / "transforms.json").is_file()
+
 
 def test_demo_build_does_not_replace_a_file_that_is_no_scene_without_force(tmp_path, monkeypatch, capsys):
     import pytest_n2r.demo.fitted

@@ -25,6 +25,7 @@ def test_the_depth_preview_is_black_off_the_object_and_warm_near(tmp_path, capsy
     assert preview[near][0] > preview[near][2], f"nearest pixel {preview[near]} is not warm"
     assert preview[far][2] > preview[far][0], f"farthest pixel {preview[far]} is not cool"
 
+
 def test_the_depth_previews_colour_range_is_that_of_the_object(tmp_path, capsys):
     """The 1st to 99th percentile of the solid pixels' depth span the colour map: the nearest solid pixel is its
     warm end, the farthest its cool end."""
@@ -39,6 +40,7 @@ def test_the_depth_previews_colour_range_is_that_of_the_object(tmp_path, capsys)
     d = np.where(opacity >= 0.5, depth, np.nan)
     near, far = np.unravel_index(np.nanargmin(d), d.shape), np.unravel_index(np.nanargmax(d), d.shape)
     assert (preview[near] == turbo[1]).all() and (preview[far] == turbo[0]).all(), (preview[near], preview[far])
+
 
 def test_render_units_scene_moves_by_scene_units(tmp_path, capsys):
 
