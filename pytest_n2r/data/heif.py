@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import IngestError
+from .nclx import nclx_icc
 
 __all__ = ["is_iso_media", "decode_heif", "heif_size", "heif_turn", "heif_errors"]
 
@@ -35,7 +36,8 @@ def heif_errors(path: Path) -> Iterator[None]:
 
 def decode_heif(path: Path, oriented: bool = True) -> tuple[np.ndarray, bytes | None]:
     """The HEIF photo at ``path``, upright (libheif applies ``irot`` / ``imir``) or, with ``oriented=False``, with
-    those undone (last applied, first undone), in an array of its own; and its ICC profile (``None`` when none).
+    those undone (last applied, first undone), in an array of its own; and its ICC profile: the one it embeds, else
+    the one its ``nclx`` colour box states (:func:`.nclx.nclx_icc`), ``None`` for sRGB.
 
     libheif converts HDR (10- and 12-bit) colour photos to 8 bits; a 16-bit result is scaled by :func:`to_rgb8`.
     """
@@ -44,7 +46,7 @@ def decode_heif(path: Path, oriented: bool = True) -> tuple[np.ndarray, bytes | 
     with heif_errors(path):
         heif = pillow_heif.open_heif(path, convert_hdr_to_8bit=True)
         image = np.array(heif)  # a copy: pillow-heif's is read-only
-    icc = heif.info.get("icc_profile")
+    icc = heif.info.get("icc_profile") or nclx_icc(heif.info.get("nclx_profile"), path)
     if oriented:
         return image, icc
     # the primary image's transformative properties in the order libheif applied them (pillow-heif keeps them on its
