@@ -29,8 +29,8 @@ __all__ = ["PhotoColourWarning", "has_alpha", "to_srgb", "warn_if_transparent", 
 
 
 class PhotoColourWarning(UserWarning):
-    """A photo whose colours are read with a caveat: transparent pixels whose alpha is dropped, or a colour profile
-    that could not be read (its pixels taken as sRGB)."""
+    """A photo whose colours are read with a caveat: transparent pixels whose alpha is dropped, a colour profile
+    that could not be read or applied (its pixels taken as sRGB)."""
 
 
 def to_srgb(image: np.ndarray, icc: bytes | None, path: str | os.PathLike) -> np.ndarray:
