@@ -116,3 +116,19 @@ def test_a_config_is_accepted_exactly_where_a_scene_file_holds_its_fields_shift(
     inside = shortest * (1 + 1e-9) <= step_ratio <= longest * (1 - 1e-9)
     assert not inside or accepted, (f"step_ratio={step_ratio!r} lies in the range {shortest!r}..{longest!r} named for "
                                     f"alpha_init={alpha_init!r}, yet the config is refused")
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"detail_grid_max": 4}, r"FieldConfig\.detail_grid_max=4: expected a grid size in 8\.\.1024"),
+    ({"detail_grid_max": 4096}, r"FieldConfig\.detail_grid_max=4096: expected a grid size in 8\.\.1024"),
+    ({"lr_final_ratio": 0.0}, r"FieldConfig\.lr_final_ratio=0\.0: expected a finite number > 0"),
+    ({"lr_final_ratio": -0.5}, r"FieldConfig\.lr_final_ratio=-0\.5: expected a finite number > 0"),
+    ({"tv": float("inf")}, r"FieldConfig\.tv=inf: expected a finite number >= 0"),
+    ({"tv_density": -2e-5}, r"FieldConfig\.tv_density=-2e-05: expected a finite number >= 0"),
+    ({"max_pixels_per_voxel": -1.0}, r"FieldConfig\.max_pixels_per_voxel=-1\.0: expected a finite number >= 0"),
+])
+def test_every_range_checked_setting_is_refused_out_of_range_naming_it(changes, message):
+    """The settings the table above leaves out: a detail grid the fit cannot build, a learning rate decaying to
+    zero or below, a negative or infinite regularization weight, each refused before any training time is spent."""
+    with pytest.raises(InvalidArgument, match=message):
+        FieldConfig(**changes)

@@ -109,3 +109,18 @@ def test_sample_opacity_is_in_0_1_and_the_half_voxel_fast_path_is_the_formula(x,
     assert 0.0 <= alpha <= 1.0, f"opacity {alpha} of raw density {x} at spacing {sigma_step}"
     expected = -np.expm1(-float(torch.nn.functional.softplus(torch.tensor(x, dtype=torch.float64))) * sigma_step)
     assert abs(alpha - expected) <= 1e-12, f"opacity {alpha} of raw density {x}, expected {expected}"
+
+
+def test_the_fields_sh_basis_is_the_3dgs_basis_the_splats_use():
+    """The field's colour basis (constants of :mod:`pytest_n2r.field.kernels`, shared by the torch and compiled
+    paths, so their agreement cannot see a wrong sign) is the 3DGS reference's, as a field converted to splats needs."""
+    from pytest_n2r.field.query import sh_basis
+
+    from ..render.splat_reference import sh_basis as reference_basis
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(200, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    for degree in (0, 1, 2):
+        np.testing.assert_allclose(sh_basis(torch.from_numpy(d), degree).numpy(), reference_basis(d, degree), rtol=0,
+                                   atol=1e-12, err_msg=f"the field's SH basis of degree {degree} is not the 3DGS one")

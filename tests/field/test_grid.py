@@ -265,3 +265,61 @@ def test_inconsistent_field_arrays_are_named(rows, width, occupancy, message):
                    rows=torch.zeros(64, dtype=torch.int64))
     with pytest.raises(InvalidArgument, match=r"sh_degree=3: expected 0"):
         n_sh_coefficients(3)
+
+
+def test_a_density_shift_that_is_not_a_number_is_refused_on_loading():
+    """JSON reads ``NaN``: a scene file whose density shift is NaN would load, and every sample would render NaN."""
+    field = random_field(resolution=6, occupied=0.5, seed=2)
+    meta = field.metadata() | {"density_shift": float("nan")}
+    with pytest.raises(SceneFileError, match=r"^bad\.n2r: field\.density_shift=nan; expected a finite number"):
+        SceneField.from_tensors(meta, field.tensors(), source="bad.n2r")
+
+
+def test_refining_a_field_emptier_than_float32_holds_keeps_its_values_finite():
+    """A raw density so low that its softplus underflows to 0 in float32 refines to a finite (very low) one: an
+    infinite raw density would make the saved scene file unreadable ("holds NaN or Inf")."""
+    field = SceneField.empty(SPACE, 6, sh_degree=0, alpha=0.05, step_ratio=0.5)
+    field.values[:, 0] = -200.0
+    fine = field.upsampled(11)
+    assert torch.isfinite(fine.values).all(), (
+        f"upsampling raw density -200 gave {int((~torch.isfinite(fine.values)).sum())} non-finite values")
+    back = SceneField.from_tensors(fine.metadata(), fine.tensors())
+    assert float(back.cell_alpha(0.5).max()) < 1e-9, "the refined empty field is no longer empty"
+
+
+def test_describe_reports_the_fraction_of_cells_occupied_and_the_vertices_stored():
+    field = SceneField.empty(SPACE, 9, sh_degree=0, alpha=0.05, step_ratio=0.5)
+    field.occupancy[:, :, 4:] = False  # 8³ cells, the half with k < 4 occupied: vertices k = 0..4 used
+    info = field.describe()
+    assert info["occupied_fraction"] == 0.5, f"half the cells occupied, describe() says {info['occupied_fraction']}"
+    assert info["stored_vertices"] == 9 * 9 * 5, f"describe() counts {info['stored_vertices']} used vertices; 405"
+    assert (info["resolution"], info["sh_degree"]) == (9, 0), info
+
+
+def test_a_sparse_field_without_the_vertices_of_an_occupied_cell_is_refused_not_read_from_another_row():
+    """Row -1 (not stored) would index the last row of ``values``: the cell's opacity and a compacted field's
+    values would come silently from another vertex."""
+    field = random_field(resolution=8, occupied=0.3, seed=5).compact()
+    field.occupancy[:] = True  # now cells whose corners the field does not store are occupied
+    for name, call in (("occupied_cell_alpha", lambda: field.occupied_cell_alpha(0.5)), ("compact", field.compact)):
+        with pytest.raises(InvalidArgument, match="does not store every vertex of its occupied cells"):
+            call()
+
+
+def test_refining_a_sparse_field_counts_a_vertex_it_does_not_store_as_zeros():
+    """A fine vertex halfway between a stored coarse vertex and one not stored takes half the stored value: the
+    unstored corner adds nothing (it used to be able to read row 0, another vertex's values)."""
+    field = SceneField.empty(SPACE, 5, sh_degree=0, alpha=0.05, step_ratio=0.5)
+    field.values[:, 1:] = 1.0
+    field.occupancy[:] = False
+    field.occupancy[0, 0, 0] = True
+    sparse = field.compact()  # stores the 8 corners of cell (0, 0, 0) only; row 0 is vertex (0, 0, 0)
+    fine = sparse.upsampled(9)  # fine vertex (3, 0, 0) lies halfway between coarse vertices 1 (stored) and 2 (not)
+    for ijk in ((3, 0, 0), (0, 3, 0), (0, 0, 3)):
+        flat = torch.tensor([(ijk[0] * 9 + ijk[1]) * 9 + ijk[2]])
+        row = fine.vertex_rows(flat)
+        assert int(row) >= 0, f"fine vertex {ijk} of the dilated occupancy is not stored"
+        colour = fine.values[row, 1:].reshape(-1).tolist()
+        assert colour == [0.5, 0.5, 0.5], (
+            f"fine vertex {ijk}, halfway to a coarse vertex not stored: colour coefficients {colour}, expected "
+            f"half the stored 1.0 (the unstored vertex counts as 0)")

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from pytest_n2r.splats.sh import view_colours
+from pytest_n2r.splats.sh import rgb_to_sh, view_colours
 
 from ..render.splat_reference import sh_basis
 
@@ -32,3 +34,14 @@ def test_the_compiled_colour_is_the_basis_times_the_coefficients_plus_a_half():
         expected = np.maximum(np.einsum("nk,nkc->nc", sh_basis(unit, degree), sh) + 0.5, 0.0)
         np.testing.assert_allclose(view_colours(sh, d), expected, atol=1e-12,
                                    err_msg=f"SH colours of degree {degree} differ from the basis")
+
+
+@settings(max_examples=50, deadline=None)
+@given(rgb=st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3),
+       direction=st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3).filter(lambda d: max(map(abs, d)) > 1e-3))
+def test_a_colour_stored_as_its_dc_coefficient_is_seen_as_that_colour(rgb, direction):
+    """``rgb_to_sh`` is the inverse of the renderer's colour at degree 0 (the demo's splats store their colours so)."""
+    sh = rgb_to_sh(np.array(rgb))[None, None, :]
+    seen = view_colours(sh, np.array([direction]))[0]
+    np.testing.assert_allclose(seen, rgb, rtol=0, atol=1e-12,
+                               err_msg=f"colour {rgb} stored by rgb_to_sh is seen as {seen.tolist()}")
