@@ -11,6 +11,7 @@ import pytest
 from pytest_n2r.data.capture import Capture
 from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.fit import fit
+from pytest_n2r.fit.appearance import APPEARANCE_JUMP
 from pytest_n2r.metrics.image_quality import psnr
 from pytest_n2r.render.field_render import FieldRenderer
 
@@ -76,3 +77,36 @@ def test_auto_with_nothing_measured_is_the_plain_fit_bit_for_bit(capture48, shor
 def test_appearance_takes_true_false_or_auto(capture48):
     with pytest.raises(InvalidArgument, match="appearance='yes': expected True, False or 'auto'"):
         fit(capture48, SHORT_CONFIG, max_steps=1, device="cpu", appearance="yes")
+
+
+def test_auto_measures_the_exposure_of_the_training_photos_only(capture48, monkeypatch):
+    """The held-out photos are the truth a fit is scored against: their colours must not decide how it is fitted."""
+    from pytest_n2r.fit import appearance as appearance_module
+
+    measured = []
+    real = appearance_module.measure_exposure
+
+    def spy(views, **kwargs):
+        measured.append([v.name for v in views])
+        return real(views, **kwargs)
+
+    monkeypatch.setattr(appearance_module, "measure_exposure", spy)
+    appearance_module.measured_appearance(capture48)
+    train = [v.name for v in capture48.train_views if v.image is not None]
+    others = sorted({name for names in measured for name in names} - set(train))
+    assert measured == [train], (f"appearance='auto' measured {[len(names) for names in measured]} photos, expected "
+                                 f"the {len(train)} training photos only; not training photos among them: {others}")
+
+
+@pytest.mark.parametrize(("jump", "wanted"), [
+    (None, False), (0.005, False), (0.012, False), (0.026, False), (0.033, False), (APPEARANCE_JUMP, False),
+    (0.073, True), (0.079, True), (0.099, True)])
+def test_auto_corrects_the_jumps_measured_to_gain_and_not_those_measured_to_wash(jump, wanted):
+    """needs_appearance's docstring: 0.026-0.033 (±0.15 stops) was a wash, 0.073-0.099 (±0.5 stops) a gain; the
+    threshold falls between them, and a jump equal to it does not exceed it."""
+    from types import SimpleNamespace
+
+    from pytest_n2r.fit.appearance import needs_appearance
+
+    assert needs_appearance(SimpleNamespace(jump=jump)) is wanted, (
+        f"a capture jumping {jump} was {'not ' if wanted else ''}given the correction (threshold {APPEARANCE_JUMP})")

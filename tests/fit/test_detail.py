@@ -160,3 +160,15 @@ def test_the_detail_settings_are_checked():
         FieldConfig(detail_grid_max=2000)
     with pytest.raises(InvalidArgument, match=r"max_pixels_per_voxel=-1\.0: expected a finite number >= 0"):
         FieldConfig(max_pixels_per_voxel=-1.0)
+
+
+def test_only_the_training_views_set_the_footprint():
+    """A held-out photo taken closer than every fitted one must not ask for a finer grid: the split leaks otherwise."""
+    import dataclasses
+
+    space = SceneSpace((0.0, 0.0, 0.0), 2.0)
+    capture = _capture([4.0, 4.0, 4.0])
+    closer = dataclasses.replace(_view("held", 0.5), split="heldout")  # sees all 32 points, 8× closer
+    detail = capture_detail(dataclasses.replace(capture, views=[*capture.views, closer]), space)
+    assert (detail.views, detail.close) == (3, pytest.approx(4.0 / 100.0 / 2.0)), (
+        f"{detail.views} views with a close footprint of {detail.close}: the held-out view was measured")

@@ -213,3 +213,102 @@ def test_the_report_says_where_each_grids_steps_spent_their_time(short_fit):
     total_s = sum(step_ms["all"]["wall_ms"].values()) * SHORT_STEPS / 1e3
     assert 0.8 * short_fit.report["train_seconds"] <= total_s <= short_fit.report["train_seconds"] + 0.01, \
         f"phases sum to {total_s:.3f} s of {short_fit.report['train_seconds']} s of training"
+
+
+@pytest.mark.parametrize("weight", ["sparsity", "distortion"])
+def test_each_prior_weight_adds_its_term_to_the_loss(capture48, weight):
+    """The first step of two trainers that differ only in one prior's weight draws the same rays and renders the
+    same colours: the losses differ by that prior. The sparsity prior is the mean opacity of a sample, which on the
+    untrained field is ``alpha_init`` everywhere."""
+
+    def first_step(value: float) -> tuple[float, float]:
+        config = SHORT_CONFIG.replace(sparsity=0.0, distortion=0.0).replace(**{weight: value})
+        return fit_module._Trainer(capture48, config, torch.device("cpu")).step(1.0)
+
+    (plain, plain_psnr), (weighted, weighted_psnr) = first_step(0.0), first_step(1.0)
+    assert weighted_psnr == plain_psnr, "the weight changed the rendered colours of the first step"
+    assert weighted > plain + 1e-4, f"{weight}=1 left the loss at {weighted} (without it {plain}): the term is missing"
+    if weight == "sparsity":
+        assert weighted - plain == pytest.approx(SHORT_CONFIG.alpha_init, rel=0.02), (
+            f"the sparsity term is {weighted - plain}, not the mean opacity of a sample ({SHORT_CONFIG.alpha_init})")
+
+
+def test_the_learning_rate_decays_to_lr_final_ratio_over_the_fit(capture48, monkeypatch):
+    """Step k of n steps runs at lr_final_ratio ** (k / n) of the configured rates."""
+    scales = []
+    real_step = fit_module._Trainer.step
+
+    def spy(self, lr_scale):
+        scales.append(lr_scale)
+        return real_step(self, lr_scale)
+
+    monkeypatch.setattr(fit_module._Trainer, "step", spy)
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=(), lr_final_ratio=0.05)
+    fit(capture48, config, max_steps=6, device="cpu")
+    expected = [0.05 ** (k / 6) for k in range(6)]
+    assert scales == pytest.approx(expected), f"learning-rate scales {scales}, expected {expected}"
+
+
+def test_the_seed_draws_the_training_batches(capture48):
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    one, two = (fit(capture48, config.replace(seed=seed), max_steps=2, device="cpu") for seed in (1, 2))
+    assert not torch.equal(one.field.values, two.field.values), "fits with seeds 1 and 2 gave the same field"
+
+
+def test_the_history_scores_the_heldout_views(capture48, monkeypatch):
+    """``report["history"]`` is held-out PSNR/SSIM during the fit: scored on the held-out photos, never the fitted."""
+    scored = []
+    real_evaluate = fit_module.evaluate_views
+
+    def spy(field, views, *args, **kwargs):
+        scored.append([v.name for v in views])
+        return real_evaluate(field, views, *args, **kwargs)
+
+    monkeypatch.setattr(fit_module, "evaluate_views", spy)
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    fit(capture48, config, max_steps=2, device="cpu", eval_at_s=(0.0,))
+    heldout = [v.name for v in capture48.heldout_views]
+    assert scored == [heldout], (f"the history scored {[len(names) for names in scored]} views, expected the "
+                                 f"{len(heldout)} held-out; fitted ones among them: "
+                                 f"{sorted({n for names in scored for n in names} - set(heldout))[:5]}")
+
+
+def test_a_fit_ending_between_prunes_prunes_its_field_at_the_end(capture48, monkeypatch):
+    """A fit ends wherever its budget, max_steps or stop() does, and its field is then pruned as at a prune (thin
+    haze and cells the rays left empty dropped), not left as the last periodic prune and the steps since made it."""
+    pruned = []
+    real_prune = fit_module._Trainer.prune
+
+    def spy(self):
+        real_prune(self)
+        pruned.append((self.steps, self.field.occupancy.clone()))
+
+    monkeypatch.setattr(fit_module._Trainer, "prune", spy)
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=(), prune_every=20, prune_after=20)
+    result = fit(capture48, config, max_steps=30, device="cpu")
+    assert [steps for steps, _ in pruned] == [20, 30], f"pruned after steps {[s for s, _ in pruned]}, not 20 and 30"
+    assert torch.equal(result.field.occupancy, pruned[-1][1]), "the fitted field is not the one the last prune left"
+
+
+def test_every_evaluation_due_is_recorded_when_it_falls_due(capture48):
+    """Evaluations due by the same step are each recorded after it, none later or lost at the end of the fit."""
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    history = fit(capture48, config, max_steps=2, device="cpu", eval_at_s=(0.0, 0.0, 1e-9)).report["history"]
+    assert [(h["seconds"], h["step"]) for h in history] == [(0.0, 1), (0.0, 1), (0.0, 1)], (
+        f"three evaluations due after the first step were recorded as {history}")
+
+
+def test_a_stop_ends_the_fit_there_and_the_report_says_whether_it_cut_the_fit_short(capture48):
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    asked = []
+
+    def stop_after(steps: int):
+        return lambda: asked.append(None) or len(asked) >= steps
+
+    early = fit(capture48, config, max_steps=5, device="cpu", stop=stop_after(2)).report
+    assert (early["steps"], early["stopped"]) == (2, True), (
+        f"a stop after step 2 of 5: steps {early['steps']}, stopped {early['stopped']}")
+    asked.clear()
+    last = fit(capture48, config, max_steps=3, device="cpu", stop=stop_after(3)).report
+    assert (last["steps"], last["stopped"]) == (3, False), (
+        f"a stop after the last of 3 steps cut nothing short: steps {last['steps']}, stopped {last['stopped']}")

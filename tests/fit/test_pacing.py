@@ -58,3 +58,26 @@ def test_a_budgeted_fit_grows_no_grid_its_measured_steps_price_past_the_budget(c
                                  f"of a {budget} s budget: grids {grids}, {report['train_seconds']} s of training")
     seconds, steps = report["train_seconds"], report["steps"]
     assert seconds < budget + max(10.0 * seconds / steps, 0.5), f"{steps} steps took {seconds} s: the budget overran"
+
+
+def test_a_grids_step_time_leaves_out_its_growth():
+    """Refining to a grid is charged to it, but is no step of it: counted in, its steps are priced too dear and the
+    budget starts fewer of them and grows no further grid."""
+    phases = StepPhases()
+    phases.start(24)
+    phases.steps[24] += 2
+    phases.seconds[24][StepPhases.NAMES.index("refine"), 0] = 5.0
+    phases.seconds[24][StepPhases.NAMES.index("march"), 0] = 0.2
+    phases.seconds[24][StepPhases.NAMES.index("prune"), 0] = 3.0
+    assert phases.step_seconds(24) == pytest.approx(0.1), (
+        f"two steps of 0.1 s after a 5 s growth and a 3 s prune: {phases.step_seconds(24)} s a step")
+
+
+def test_a_budgeted_fit_starts_no_step_priced_past_its_budget(capture48, monkeypatch):
+    """Once a step is timed, a step predicted to end more than BUDGET_OVERRUN of the budget past it is not started:
+    here every step is priced at a minute, so a 0.5 s budget takes the one step that was not yet priced."""
+    monkeypatch.setattr(StepPhases, "step_seconds", lambda self, grid: 60.0 if self.steps.get(grid) else None)
+    config = SHORT_CONFIG.replace(resolutions=(16,), stage_fractions=())
+    report = fit(capture48, config, time_budget_s=0.5, device="cpu").report
+    assert report["steps"] == 1, (f"a 0.5 s budget started {report['steps']} steps priced at 60 s each "
+                                  f"({report['train_seconds']} s of training)")

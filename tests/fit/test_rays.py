@@ -170,3 +170,15 @@ def test_a_view_without_a_rigid_pose_is_refused_naming_the_view(capture48, split
         fit(capture, SHORT_CONFIG, max_steps=1, device="cpu")
     assert str(info.value).startswith(f"view {name!r}: {found}"), \
         f"a {split} view with a {pose} pose: the refusal does not name the view and what is wrong: {info.value}"
+
+
+def test_rays_needing_more_than_the_headroom_are_refused_with_the_least_factor_that_fits(capture48, monkeypatch):
+    """Building the rays in 90 % of the free memory is more than HEADROOM (80 %) of it: refused, with the smallest
+    tenth by which shrinking each side of the photos (their pixels by its square) fits them."""
+    building = ray_bytes(capture48.train_views)[1]
+    free = int(building / 0.9)
+    message = _refusal(capture48, monkeypatch, {"cpu": free})
+    factor = float(message.split("at least ")[1].split("×")[0])
+    assert building / factor ** 2 <= HEADROOM * free < building / (factor - 0.1) ** 2, (
+        f"{factor}× smaller along each side is not the least tenth that fits {building} bytes in {HEADROOM:.0%} of "
+        f"{free}")

@@ -251,3 +251,36 @@ def test_adam_rows_with_a_zero_gradient_still_applies_momentum():
     expected = 1.0 - 0.1 * 0.45 / (np.sqrt(0.2475) + 1e-8)
     np.testing.assert_allclose(values[1], expected, rtol=1e-6, err_msg="adam_rows: momentum step with zero gradient")
     np.testing.assert_array_equal(values[[0, 2]], 1.0, err_msg="adam_rows changed rows it was not given")
+
+
+class _OffTheCPU(torch.Tensor):
+    """A CPU tensor that says it lives elsewhere: RowAdam then takes its torch path, the one CUDA fits run."""
+
+    @property
+    def device(self) -> torch.device:
+        return torch.device("meta")
+
+
+def test_row_adam_on_cuda_is_adam_on_the_touched_rows_only():
+    """The torch path of RowAdam (every CUDA fit's optimizer) held to textbook Adam as the compiled one is, on the
+    CPU: no CPU fit ever runs it."""
+    rng = np.random.default_rng(1)
+    start = rng.normal(size=(30, 5)).astype(np.float32)
+    values = torch.from_numpy(start.copy())
+    lrs = torch.tensor([0.2, 0.1, 0.1, 0.05, 0.05])
+    adam = RowAdam(values, lrs)
+    adam.values = values.as_subclass(_OffTheCPU)  # the same storage
+    assert adam.values.device.type != "cpu"
+    ref_values, ref_m, ref_v = start.astype(np.float64), np.zeros((30, 5)), np.zeros((30, 5))
+    for step, lr_scale in enumerate([1.0, 0.5, 1.0, 0.25], start=1):
+        rows = np.sort(rng.choice(24, size=9, replace=False))  # rows 24..29 are never touched
+        grad = rng.normal(size=(9, 5)).astype(np.float32) * 10.0 ** rng.uniform(-4, 2)
+        adam.step(torch.from_numpy(rows), torch.from_numpy(grad), lr_scale)
+        reference_adam(ref_values, ref_m, ref_v, rows, grad.astype(np.float64), lrs.numpy() * lr_scale, step)
+        np.testing.assert_allclose(values.numpy(), ref_values, rtol=0, atol=1e-6,
+                                   err_msg=f"RowAdam's torch path differs from textbook Adam after step {step}")
+        np.testing.assert_allclose(adam.m.numpy(), ref_m, rtol=1e-6, atol=1e-9,
+                                   err_msg=f"RowAdam's torch path: first moments differ after step {step}")
+        np.testing.assert_allclose(adam.v.numpy(), ref_v, rtol=1e-5, atol=1e-12,
+                                   err_msg=f"RowAdam's torch path: second moments differ after step {step}")
+    np.testing.assert_array_equal(values.numpy()[24:], start[24:], err_msg="RowAdam changed rows no step touched")

@@ -350,3 +350,162 @@ def test_a_few_views_get_the_exact_p_value_not_the_t_approximation(tmp_path):
                              n_resamples=10**6, alternative="greater")  # every pairing: P(|rho| >= |observed|)
     assert abs(psnr["rho"]) == pytest.approx(exact.statistic) and psnr["p"] == pytest.approx(exact.pvalue), (
         psnr, exact.statistic, exact.pvalue)
+
+
+def test_eight_views_still_get_the_exact_p_value():
+    """Exact up to EXACT_UP_TO (8) pairs: eight views ranked alike are 2 of the 8! pairings, p = 2/40 320, where
+    the t approximation gives 0."""
+    realness, shift = _shift_rows([20.0 + i for i in range(8)], [0.1 * i for i in range(8)])
+    psnr_row = next(r for r in rank_correlations(realness, shift) if r["image_quality"] == "psnr")
+    assert psnr_row["n"] == 8 and psnr_row["rho"] == pytest.approx(1.0), psnr_row
+    assert psnr_row["p"] == pytest.approx(2 / math.factorial(8)), f"8 views: p {psnr_row['p']}, exactly 2/8!"
+
+
+def _plane_study(blur: float, monkeypatch, **config) -> StudyResult:
+    """A study of a plane field blurred ``blur`` pixels whose held-out views store the sharp photo (no LPIPS)."""
+    import pytest_n2r.study.run as study_run
+
+    monkeypatch.setattr(study_run, "lpips", lambda *_a, **_k: None)
+    scene = BlurredPlane(blur=blur, name="plane", width=64, height=48)
+    config = StudyConfig(**{"examples": 1, "max_views": 4, "size": 64, "fps_frames": 1, "fps_sizes": ((32, 24),),
+                            "families": ("m1",), **config})
+    return run_study([scene], [resolve_sut("orb", None)], config)
+
+
+def test_the_study_measures_the_heldout_views_not_the_fitted_ones(monkeypatch):
+    """The reality-to-field shift of a fit is measured where it was not fitted (views 1 and 3 of the plane)."""
+    result = _plane_study(1.0, monkeypatch)
+    for name, rows in (("realness", result.realness), ("domain_shift", result.domain_shift),
+                       ("examples", result.examples)):
+        views = sorted({r["view"] for r in rows})
+        assert views == ["view1", "view3"], f"{name} measured the views {views}, expected the held-out view1, view3"
+
+
+def test_rq1_mutates_the_photo_not_the_render(monkeypatch):
+    """m1-m3 are the baseline of a mutated real photo against the photo: the field's blur changes τ0's row only."""
+    sharp, blurred = ({(r["view"], r["source"]): (r["psnr"], r["ssim"])
+                       for r in _plane_study(blur, monkeypatch).realness} for blur in (1.0, 3.0))
+    assert set(sharp) == set(blurred) and {source for _, source in sharp} == {"tau0", "m1", "m2", "m3"}, sharp
+    for key in sharp:
+        if key[1] == "tau0":
+            assert blurred[key][0] < sharp[key][0], f"{key}: a blurrier field did not score lower: {blurred[key]}"
+        else:
+            assert blurred[key] == sharp[key], f"{key}: the mutated photo's scores moved with the field's blur"
+
+
+@pytest.mark.parametrize(("width", "height", "sizes"), [(32, 24, [(32, 24), (64, 48)]), (24, 32, [(24, 32), (48, 64)])],
+                         ids=["landscape", "portrait"])
+def test_frames_per_second_are_of_one_frame(monkeypatch, width, height, sizes):
+    """RQ3 times ``fps_frames`` renders after a warm-up: a render of 0.25 s is 4 frames a second; a portrait scene
+    is timed at the sizes turned upright."""
+    import types
+
+    import pytest_n2r.study.run as study_run
+    from tests.plugin.fakescene import PlaneScene
+
+    clock = [0.0]
+
+    class Timed(PlaneScene):
+        def render(self, c2w, camera, outputs=("rgb",)):
+            clock[0] += 0.25
+            return super().render(c2w, camera, outputs)
+
+    monkeypatch.setattr(study_run, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    result = StudyResult()
+    config = StudyConfig(fps_frames=4, fps_sizes=((32, 24), (64, 48)))
+    study_run._rq3(result, Timed(name="timed", width=width, height=height), config, lambda _message: None)
+    assert [(r["width"], r["height"]) for r in result.fps] == sizes, f"a {width}x{height} scene timed at {result.fps}"
+    for row in result.fps:
+        assert row["seconds_per_frame"] == pytest.approx(0.25) and row["fps"] == pytest.approx(4.0), (
+            f"four 0.25 s renders reported as {row}")
+
+
+def test_the_mutation_draws_are_the_families_the_study_states():
+    """pytest_n2r/study/sampling.py: m1 ±13 to ±77 grey levels of either sign, m2 one noise patch of 20-50 % of the
+    sides anywhere, m3 six black patches of 3-8 % each."""
+    rng = np.random.default_rng(0)
+    levels = [sample_mutation("m1", rng).levels for _ in range(200)]
+    assert all(13 <= abs(level) <= 77 for level in levels), f"m1 drew {sorted(set(levels))}"
+    assert min(levels) <= -70 and max(levels) >= 70 and min(map(abs, levels)) <= 20, (
+        f"200 m1 draws span {min(levels)}..{max(levels)}: not both signs of the whole range")
+    noise = [sample_mutation("m2", rng) for _ in range(50)]
+    assert all(0.2 <= m.size <= 0.5 and 0 <= m.x <= 1 and 0 <= m.y <= 1 for m in noise), noise
+    black = [sample_mutation("m3", rng) for _ in range(50)]
+    assert all(m.count == 6 and 0.03 <= m.size <= 0.08 for m in black), black
+
+
+def test_detectors_are_scored_with_the_papers_parameters():
+    """Repeatability within 2 pixels and spread of 8-pixel discs; between two poses through the rendered depth,
+    at one pose (the reality-to-field shift) through the identity."""
+    sut = resolve_sut("orb", None)
+    across = {name: repr(metric) for name, metric in sut.metrics().items()}
+    same = {name: repr(metric) for name, metric in sut.same_pose_metrics().items()}
+    assert across == {"repeatability": "repeatability(px=2.0, matching='maximum', mapping='depth')",
+                      "ip_spread": "interest_point_spread(radius=8.0, mapping='depth')"}, across
+    assert same == {"repeatability": "repeatability(px=2.0, matching='maximum', mapping='homography')",
+                    "ip_spread": "interest_point_spread(radius=8.0, mapping='homography')"}, same
+
+
+def test_the_fidelity_report_averages_the_defined_samples_and_prints_each_in_its_column():
+    from pytest_n2r.relation.floor import FieldFloor, ShiftSample
+
+    def floor(metric: str, samples: tuple, nearby: tuple) -> FieldFloor:
+        return FieldFloor("s", "orb", metric, "64", "photo", samples=samples, nearby=nearby, nearby_degrees=5.0)
+
+    undefined = ShiftSample("v1", math.nan, math.nan, False, "no keypoint")
+    floors = {("orb", "repeatability"): floor("repeatability", (ShiftSample("v0", 0.6, 0.4, True), undefined),
+                                              (ShiftSample("v0", 0.9, 0.1, True), undefined)),
+              ("orb", "ip_spread"): floor("ip_spread", (ShiftSample("v0", 0.3, 0.7, True), undefined),
+                                          (ShiftSample("v0", 0.2, 0.8, True), undefined))}
+    images = ({"view": "v0", "psnr": 20.0, "ssim": 0.5}, {"view": "v1", "psnr": 30.0, "ssim": 0.7})
+    report = FidelityReport("s", "64", "photo", "", images, floors)
+    got = (report.score("orb", "repeatability"), report.score("orb", "ip_spread"), report.nearby_score("orb"))
+    assert got == (0.6, 0.3, 0.9), f"repeatability, spread and nearby repeatability {got}, expected (0.6, 0.3, 0.9)"
+    line = next(t.split() for t in report.format().splitlines() if t.strip().startswith("orb"))
+    assert line == ["orb", "0.600", "0.300", "0.900"], f"the orb row reads {line}: not repeatability, spread, nearby"
+
+
+def test_the_fidelity_report_measures_every_detector_on_the_views_it_scores():
+    """``max_views`` bounds the detectors' samples as it bounds the PSNR rows: the table says "mean of n views"."""
+    report = measure_fidelity(BlurredPlane(blur=1.0, name="two", width=160, height=120), size=None, max_views=1)
+    views = [row["view"] for row in report.images]
+    assert len(views) == 1, views
+    for key, floor in report.floors.items():
+        measured = [s.view for s in floor.samples]
+        assert measured == views, f"{key} measured the views {measured}, the report scores {views}"
+
+
+def test_the_realness_summary_has_a_row_per_scene_and_source(tmp_path):
+    realness = [{"scene": scene, "view": "v0", "source": "tau0", "psnr": psnr, "ssim": 0.5, "lpips": None}
+                for scene, psnr in (("a", 20.0), ("b", 30.0))]
+    write_study(StudyResult(realness=realness), tmp_path)
+    text = (tmp_path / "study.md").read_text()
+    for row in ("| a | tau0 | 20 | 0.5 | — | 1 | 1 |", "| b | tau0 | 30 | 0.5 | — | 1 | 1 |"):
+        assert row in text, f"the RQ1 table has no row {row}: {text}"
+
+
+class _EmptyAwayFromItsViews:
+    """The exact wall scene rendering nothing (opacity 0) on the left 40 % of the columns at any pose but its
+    captured views': every follow-up of a moved pose is 40 % emptier than its source, where the detector's points
+    on the rest still compare."""
+
+    def __init__(self) -> None:
+        self._scene = ground_truth("wall")
+
+    def __getattr__(self, name: str):
+        return getattr(self._scene, name)
+
+    def render(self, c2w, camera, outputs=("rgb",)):
+        view = self._scene.render(c2w, camera, outputs)
+        if view.opacity is None or any(np.allclose(c2w, v.c2w) for v in self._scene.views):
+            return view
+        opacity = view.opacity.copy()
+        opacity[:, : int(0.4 * opacity.shape[1])] = 0.0
+        return dataclasses.replace(view, opacity=opacity)
+
+
+def test_follow_ups_emptier_than_their_source_are_not_counted_as_inconsistencies():
+    config = StudyConfig(examples=2, max_views=1, size=160, fps_frames=1, fps_sizes=((64, 36),), families=("tau1",))
+    result = run_study([_EmptyAwayFromItsViews()], [resolve_sut("orb", None)], config)
+    assert result.examples and not any(r["valid"] for r in result.examples), (
+        f"follow-ups 40 % emptier than their source were judged valid: {[r['valid'] for r in result.examples]}")
