@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from pytest_n2r import GroundTruthScene
 from pytest_n2r.demo import ground_truth
@@ -51,3 +52,17 @@ def test_a_mask_without_a_module_is_named_by_its_name_not_an_error():
     exec("def moss(a, b):\n    return 0.5 + 0.0 * a * b\n", namespace)  # noqa: S102 - the case under test
     assert namespace["moss"].__module__ is None
     assert _scene(namespace["moss"]).content_hash, "no content hash for a scene of an exec'd mask"
+
+
+def test_the_builtin_masks_are_what_their_names_stand_for():
+    """A built-in mask is keyed by its hand-written name alone (above), so an edit that keeps the name keeps the scene's
+    content hash and the shipped twins' recipe digests: the twins would pass for fits of a scene that changed. Editing a
+    mask means a new name (``growth-v2``), a rebuilt twin and new values here."""
+    from pytest_n2r.demo.scenes import _growth_mask, _road_mask
+
+    a, b = np.meshgrid(np.linspace(-8, 8, 161), np.linspace(-2.6, 1.6, 43))
+    growth = float(_growth_mask(a.ravel(), b.ravel()).mean())
+    a, b = np.meshgrid(np.linspace(-25, 25, 201), np.linspace(-25, 25, 201))
+    road = float(_road_mask(a.ravel(), b.ravel()).mean())
+    assert (growth, road) == pytest.approx((0.33384189760293426, 0.09538379533572569), abs=1e-9), (
+        f"growth-v1 covers {growth!r} of the wall, road-v1 {road!r} of the ground: a mask changed under its name")

@@ -271,3 +271,20 @@ def test_no_home_folder_puts_the_cache_in_the_temporary_folder_with_a_warning(mo
         assert fitted_path("wall") == packaged_path("wall"), "the shipped twin should load without a home folder"
     finally:
         user_cache._temporary_cache_dir.cache_clear()
+
+
+def test_a_fit_another_worker_wrote_while_this_one_waited_is_not_fitted_again(tiny_recipes, monkeypatch):
+    """pytest-xdist workers wait on the cache's lock: the one that gets it second must load the first one's fit, not
+    spend minutes fitting it again. The first look (before the lock) finds nothing; the file is there under the lock."""
+    cached = find_fitted("wall")[1]
+    cached.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(cached, "w") as archive:  # what another worker's build left: all find_fitted reads
+        archive.writestr("scene.json", json.dumps({"report": {"recipe_digest": RECIPES["wall"].digest}}))
+    monkeypatch.setattr(fitted, "find_fitted", lambda name: (None, cached))
+    built = []
+    monkeypatch.setattr(fitted, "build_fitted", lambda name, *args, **kwargs: built.append(name))
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        assert fitted_path("wall") == cached
+    assert not built and not said, (
+        f"the fit another worker wrote was fitted again under the lock: {[str(w.message) for w in said]}")

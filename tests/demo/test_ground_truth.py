@@ -233,3 +233,28 @@ def test_bad_scene_arguments_are_named(arguments, error, match):
     assert scene.light.tolist() == [0.0, 0.0, 1.0] and scene.background.dtype == np.float32
     with pytest.raises(error, match=match):
         GroundTruthScene("crate", [crate], [], **{**valid, **arguments})
+
+
+@pytest.mark.parametrize("lo, hi", [((-0.1, -0.1, 0.5), (1.1, 1.1, 1.1)), ((0.2, -0.1, -0.1), (1.1, 1.1, 1.1))])
+def test_a_group_box_that_clips_its_children_from_below_is_refused(lo, hi):
+    """The box's lower corner is checked as its upper one is: a crate cut off at its bottom or side would change
+    pixels under the same content hash."""
+    with pytest.raises(InvalidArgument, match=r"primitives\[0\] is a Group whose box .* does not hold its child 0"):
+        _grouped_crate(lo, hi)
+
+
+@pytest.mark.parametrize("name", demo_scene_names())
+def test_a_camera_with_non_square_pixels_renders_the_depth_of_its_definition(name):
+    """The built-in cameras have square pixels, where fx and fy can be swapped unseen; a camera whose fy is 1.6 fx (and
+    whose principal point is off centre) renders the z-depth the vectorized definition gives."""
+    from pytest_n2r.geometry import Camera
+
+    scene = ground_truth(name)
+    view = scene.views[9]
+    square = view.camera.resized(48, 27)
+    camera = Camera(48, 27, square.fx, 1.6 * square.fy, square.cx + 3.0, square.cy - 2.0)
+    depth = scene.render(view.c2w, camera, ("depth",)).depth
+    want = scene.render_reference(view.c2w, camera, ("depth",))["depth"]
+    off = np.abs(depth - want) > 1e-5 * want
+    assert not off.any(), f"{name}: {off.sum()} of {off.size} depths differ from the definition's, e.g. " \
+                          f"{depth[off][0]:.4f} where it gives {want[off][0]:.4f}"

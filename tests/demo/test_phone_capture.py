@@ -4,6 +4,7 @@ JPEG or HEIC), ingested and fitted without manual steps, and scored against the 
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -289,3 +290,81 @@ def test_the_phone_capture_benchmark_runs(tmp_path, capsys, monkeypatch):
             assert (entry["mean"] is None) == (entry["defined"] == 0), f"{detector}: {entry}"
             if entry["defined"] == 0:
                 assert "n/a (0 of 6)" in printed
+
+
+def _developed(exact: np.ndarray, gain: float, white_balance, sigma: float) -> np.ndarray:
+    """What the module docstring says a phone makes of the exact view: gain and white balance on linear light (sRGB
+    decoded with gamma 2.2), then a Gaussian blur of ``sigma`` pixels (none below 0.05), before the codec."""
+    import cv2
+
+    linear = (exact.astype(np.float32) / 255.0) ** 2.2 * (gain * np.asarray(white_balance, np.float32))
+    out = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
+    return cv2.GaussianBlur(out, (0, 0), sigma) if sigma > 0.05 else out
+
+
+def test_each_photo_is_the_exact_view_through_the_exposure_white_balance_and_blur_it_reports(tmp_path):
+    """The truth returned with a photo is what was done to it: a gain applied twice, a white balance drawn but not
+    applied, a blur left out or a gamma forgotten leave photos a benchmark would score against the wrong truth."""
+    settings = PhoneSettings(size=96, exposure_stops=1.0, white_balance=0.3, blur_px=1.5, jpeg_quality=100)
+    photos = write_phone_capture("wall", tmp_path, settings, views=[1, 9, 17, 30, 41])
+    scene = ground_truth("wall")
+    for p in photos:
+        exact = scene.render(p.c2w, p.camera, ("rgb",)).rgb
+        photo = read_image(p.path).astype(np.float32)
+        error = float(np.abs(photo - _developed(exact, p.gain, p.white_balance, p.blur_px)).mean())
+        assert error < 1.5, (
+            f"{p.path.name}: {error:.2f} grey levels from the exact view developed with its reported gain "
+            f"{p.gain:.3f}, white balance {np.round(p.white_balance, 3)} and blur {p.blur_px:.2f} px")
+
+
+def test_the_jpeg_quality_is_the_one_asked_for(tmp_path):
+    """A lower quality stores smaller files, further from the exact view."""
+    scene = ground_truth("wall")
+    errors, sizes = {}, {}
+    for quality in (30, 100):
+        (p,) = write_phone_capture("wall", tmp_path / str(quality), PhoneSettings(size=96, jpeg_quality=quality),
+                                   views=[9])
+        exact = _developed(scene.render(p.c2w, p.camera, ("rgb",)).rgb, p.gain, p.white_balance, p.blur_px)
+        errors[quality] = float(np.abs(read_image(p.path).astype(np.float32) - exact).mean())
+        sizes[quality] = p.path.stat().st_size
+    assert sizes[30] < 0.6 * sizes[100] and errors[30] > 2 * errors[100], (
+        f"quality 30 and 100 stored {sizes} bytes, {errors} grey levels off: the quality was not applied")
+
+
+def test_the_seed_draws_another_capture(tmp_path):
+    """A capture is drawn from its seed: two seeds, other exposures and other shaken photos (a benchmark repeated
+    over seeds that got one capture each time would report one draw as many)."""
+    settings = PhoneSettings(size=32, shaken=0.5)
+    draws = {}
+    for seed in (0, 1):
+        photos = write_phone_capture("wall", tmp_path / str(seed), replace(settings, seed=seed), views=range(0, 48, 4),
+                                     poses=False)
+        draws[seed] = ([p.gain for p in photos], [p.shake_deg for p in photos])
+    assert draws[0][0] != draws[1][0], "seeds 0 and 1 drew the same exposures"
+    assert draws[0][1] != draws[1][1], "seeds 0 and 1 shook the same photos at the same angles"
+
+
+def test_a_portrait_photos_camera_is_the_landscape_sensor_turned(tmp_path):
+    """Turned 90° clockwise as the photo is viewed: the sensor's width and height swap and its principal point turns
+    with it (for the demo's centred principal point: the portrait image's centre)."""
+    landscape, _, portrait = write_phone_capture("wall", tmp_path, PhoneSettings(size=96), views=[0, 1, 2])
+    assert portrait.portrait and not landscape.portrait
+    a, b = landscape.camera, portrait.camera
+    assert (b.width, b.height, b.fx, b.fy) == (a.height, a.width, a.fy, a.fx), (a, b)
+    assert (b.cx, b.cy) == (a.height - 1 - a.cy, a.cx) == ((b.width - 1) / 2, (b.height - 1) / 2), (
+        f"the portrait camera's principal point is ({b.cx}, {b.cy}), not the landscape one's ({a.cx}, {a.cy}) turned")
+
+
+@pytest.mark.parametrize("settings, message", [
+    ({"jpeg_quality": 0}, r"PhoneSettings\.jpeg_quality=0: expected 1\.\.100"),
+    ({"jpeg_quality": 101}, r"PhoneSettings\.jpeg_quality=101: expected 1\.\.100"),
+    ({"white_balance": 1.0}, r"PhoneSettings\.white_balance=1\.0: expected less than 1"),
+    ({"exposure_stops": -0.5}, r"PhoneSettings\.exposure_stops=-0\.5: expected a number >= 0"),
+    ({"white_balance": -0.1}, r"PhoneSettings\.white_balance=-0\.1: expected a number >= 0"),
+    ({"blur_px": float("nan")}, r"PhoneSettings\.blur_px=nan: expected a number >= 0"),
+])
+def test_bad_exposure_and_codec_settings_are_named(settings, message):
+    """A white balance of 1 draws a channel gain of 0 (a black channel); a negative spread or blur, or a quality the
+    codec does not take, would be drawn or stored without a word."""
+    with pytest.raises(InvalidArgument, match=message):
+        PhoneSettings(**settings)

@@ -27,3 +27,29 @@ def test_a_size_that_is_no_pixel_count_is_refused_not_truncated(size, error, mes
     """``(480.7, 270.2)`` rendered at 480x270: the fractions were dropped without a word."""
     with pytest.raises(error, match=message):
         check_size(size, ground_truth("wall").views[0].camera)
+
+
+@pytest.mark.parametrize("name", ["wall", "object"])
+def test_each_capture_point_is_a_pixel_of_a_training_view_on_its_surface_within_twice_the_reference_length(name):
+    """As the docstring says: a point is back-projected from a pixel centre of a training view's 64-pixel depth map,
+    lies on the surface that view sees first, at most twice the reference length in front of it. Points back-projected
+    through the capture's camera instead of the depth map's, or far background kept, would give the fit wrong
+    bounds."""
+    from pytest_n2r.demo import capture
+    from pytest_n2r.geometry import project
+
+    scene = ground_truth(name)
+    points = capture(name, size=96).points
+    limit = 2 * scene.reference_length * (1 + 1e-6)
+    found = np.zeros(len(points), bool)
+    for view in scene.views:
+        if view.split != "train":
+            continue
+        small, origin = view.camera.fit_within(64), view.c2w[:3, 3]
+        uv, z = project(points, small, view.c2w)
+        at_pixel = (np.abs(uv - np.rint(uv)) < 1e-3).all(axis=1) & (z > 0)
+        t, _ = scene.cast(np.broadcast_to(origin, points.shape).copy(), points - origin)  # the point is at t = 1
+        found |= at_pixel & (np.abs(t - 1) < 1e-5) & (z <= limit)
+    assert found.all(), (
+        f"{name}: {np.sum(~found)} of {len(points)} capture points are no pixel of a training view's 64-pixel depth "
+        f"map on its first surface within {limit:.2f} units, e.g. {points[~found][0]}")

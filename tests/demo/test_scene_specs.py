@@ -8,7 +8,7 @@ import zipfile
 import pytest
 
 from pytest_n2r.demo.scene_specs import parse_scene_specs
-from pytest_n2r.errors import SceneFileError
+from pytest_n2r.errors import InvalidArgument, SceneFileError
 
 
 def test_a_scene_file_with_a_damaged_central_directory_is_a_scene_file_error(tmp_path):
@@ -26,3 +26,22 @@ def test_a_scene_file_with_a_damaged_central_directory_is_a_scene_file_error(tmp
     with pytest.raises(SceneFileError) as exc:
         parse_scene_specs([str(path)], tmp_path, "--n2r-scene")
     assert f"--n2r-scene {str(path)!r}: {path}: not a zip archive, or truncated" in str(exc.value), str(exc.value)
+
+
+def _scene_file(path):
+    """A zip archive with a ``scene.json``: all that parsing a spec opens."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("scene.json", "{}")
+    return path
+
+
+def test_two_scene_files_of_one_name_are_refused_and_one_named_twice_is_one_scene(tmp_path):
+    """Test ids use the scene name: without the check a second ``wall.n2r`` from another folder would silently replace
+    the first, and the session would test one scene where two were configured."""
+    a, b = _scene_file(tmp_path / "a" / "wall.n2r"), _scene_file(tmp_path / "b" / "wall.n2r")
+    with pytest.raises(InvalidArgument, match=r"--n2r-scene: two scenes are named 'wall' \(.*a.wall\.n2r and "
+                                              r".*b.wall\.n2r\); test ids use the scene name"):
+        parse_scene_specs([str(a), str(b)], tmp_path, "--n2r-scene")
+    specs = parse_scene_specs([str(a), "a/wall.n2r"], tmp_path, "--n2r-scene")
+    assert [(s.name, s.kind) for s in specs] == [("wall", "file")], specs

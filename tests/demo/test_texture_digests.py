@@ -81,3 +81,24 @@ def test_a_photo_texture_is_the_eager_one():
     assert [level.shape for level in photo.levels] == [level.shape for level in Texture(photo.image, "clamp").levels]
     with pytest.raises(AttributeError, match="has no attribute 'nothing'"):
         photo.nothing  # noqa: B018
+
+
+def test_a_photo_under_another_wrap_mode_gets_its_own_digest(photo_file):
+    """The wrap mode is part of a texture's digest: a cached digest of the mirrored photo must not be served for the
+    clamped one (two scenes would share a content hash, and so their renders)."""
+    mirrored = Texture.photo("brick", **RECIPE, wrap="mirror").digest()
+    clamped = Texture.photo("brick", **RECIPE, wrap="clamp")
+    assert clamped.digest() == texel_digest(clamped) != mirrored, "the clamped photo got the mirrored one's digest"
+
+
+def test_each_mip_level_is_the_2x2_mean_of_the_one_above():
+    """The levels are not in the digest (the texels are): a level filtered wrongly would change far surfaces' colours
+    under the same content hash."""
+    rng = np.random.default_rng(0)
+    texture = Texture(rng.uniform(0.0, 1.0, (37, 52, 3)).astype(np.float32))
+    assert [level.shape[:2] for level in texture.levels] == [(37, 52), (18, 26), (9, 13), (4, 6)]
+    for k, (above, level) in enumerate(zip(texture.levels, texture.levels[1:])):
+        h, w = level.shape[:2]
+        mean = above[:2 * h, :2 * w].reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
+        np.testing.assert_allclose(level, mean, rtol=0, atol=1e-6, err_msg=f"mip level {k + 1} is not the 2x2 mean "
+                                                                           f"of level {k}")
