@@ -26,6 +26,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import numbers
 import os
 import time
 import warnings
@@ -83,18 +84,22 @@ class FittedRecipe:
     def __post_init__(self) -> None:
         if self.scene not in SCENES:
             raise InvalidArgument(f"FittedRecipe.scene={self.scene!r}: expected one of {tuple(SCENES)}")
-        try:
-            w, h = (int(v) for v in self.size)
-        except (TypeError, ValueError):
+        try:  # whole numbers: a fraction was truncated without a word
+            w, h = self.size
+            if any(isinstance(v, bool) or int(v) != v for v in (w, h)):
+                raise ValueError
+            w, h = int(w), int(h)
+        except (TypeError, ValueError, OverflowError):
             raise InvalidArgument(
-                f"FittedRecipe.size={self.size!r}: expected a (width, height) pair in pixels") from None
+                f"FittedRecipe.size={self.size!r}: expected a (width, height) pair of whole pixels") from None
         if w < 8 or h < 8:
             raise InvalidArgument(f"FittedRecipe.size={self.size!r}: expected at least 8x8 pixels")
         object.__setattr__(self, "size", (w, h))
         for name in ("max_steps", "threads"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
                 raise InvalidArgument(f"FittedRecipe.{name}={value!r}: expected an integer >= 1")
+            object.__setattr__(self, name, int(value))
         if not isinstance(self.config, FieldConfig):
             raise InvalidArgument(f"FittedRecipe.config must be a FieldConfig, got {type(self.config).__name__}")
 

@@ -72,7 +72,7 @@ class PhoneSettings:
     file_format: str = "jpeg"
 
     def __post_init__(self) -> None:
-        for name in ("size", "portrait_every"):
+        for name in ("size", "portrait_every", "jpeg_quality", "seed"):
             if not _is_int(getattr(self, name)):
                 raise InvalidType(f"PhoneSettings.{name}={getattr(self, name)!r}: expected an int, not "
                                   f"{type(getattr(self, name)).__name__}")
@@ -84,13 +84,18 @@ class PhoneSettings:
                 f"PhoneSettings.file_format={self.file_format!r}: expected one of {list(FILE_FORMATS)}")
         if not 1 <= self.jpeg_quality <= 100:
             raise InvalidArgument(f"PhoneSettings.jpeg_quality={self.jpeg_quality!r}: expected 1..100")
-        for name in ("exposure_stops", "white_balance", "blur_px", "shake_px"):
-            if not getattr(self, name) >= 0:
-                raise InvalidArgument(f"PhoneSettings.{name}={getattr(self, name)!r}: expected a number >= 0")
+        for name in ("exposure_stops", "white_balance", "blur_px", "shake_px", "shaken"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise InvalidType(f"PhoneSettings.{name}={value!r}: expected a number, not {type(value).__name__}")
+            if not 0 <= value < float("inf"):
+                raise InvalidArgument(f"PhoneSettings.{name}={value!r}: expected a finite number >= 0")
         if self.white_balance >= 1:
             raise InvalidArgument(f"PhoneSettings.white_balance={self.white_balance!r}: expected less than 1")
         if not 0 <= self.shaken <= 1:
             raise InvalidArgument(f"PhoneSettings.shaken={self.shaken!r}: expected a probability in [0, 1]")
+        if self.seed < 0:
+            raise InvalidArgument(f"PhoneSettings.seed={self.seed!r}: expected an int >= 0")
         if self.portrait_every < 0:
             raise InvalidArgument(f"PhoneSettings.portrait_every={self.portrait_every!r}: expected >= 0 (0: none)")
 

@@ -7,6 +7,7 @@ import warnings
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 # pytester drops the modules an inner run imported first; importing them here keeps one copy of each (see
@@ -42,6 +43,8 @@ def tiny_recipes(monkeypatch, tmp_path):
     ({"scene": "moon"}, "FittedRecipe.scene"),
     ({"size": (4, 4)}, "FittedRecipe.size"),
     ({"size": "big"}, "FittedRecipe.size"),
+    ({"size": (240.9, 135.7)}, r"FittedRecipe\.size=\(240\.9, 135\.7\): expected a \(width, height\) pair of whole"),
+    ({"size": (True, 135)}, "FittedRecipe.size"),
     ({"max_steps": 0}, "FittedRecipe.max_steps"),
     ({"threads": 1.5}, "FittedRecipe.threads"),
     ({"config": {"seed": 0}}, "FittedRecipe.config"),
@@ -49,6 +52,15 @@ def tiny_recipes(monkeypatch, tmp_path):
 def test_a_bad_recipe_names_the_field(changes, field):
     with pytest.raises(InvalidArgument, match=field):
         RECIPES["wall"].replace(**changes)
+
+
+def test_whole_numbers_of_any_kind_make_the_same_recipe():
+    """A size of 240.9 was fitted at 240 without a word (refused above); numpy's integers, which a size or a step
+    count computed with numpy is, and whole floats give the recipe of the plain ints."""
+    base = RECIPES["wall"].replace(size=(240, 135), max_steps=10)
+    for same in (base.replace(size=(np.int64(240), 135.0)), base.replace(max_steps=np.int64(10))):
+        assert (same.size, same.max_steps, same.digest) == (base.size, base.max_steps, base.digest), same
+        assert all(type(v) is int for v in (*same.size, same.max_steps)), same
 
 
 def test_the_digest_follows_every_part_of_the_recipe():
