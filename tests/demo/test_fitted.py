@@ -300,3 +300,13 @@ def test_a_fit_another_worker_wrote_while_this_one_waited_is_not_fitted_again(ti
         assert fitted_path("wall") == cached
     assert not built and not said, (
         f"the fit another worker wrote was fitted again under the lock: {[str(w.message) for w in said]}")
+
+
+def test_the_cache_folder_named_with_a_tilde_is_under_the_home_folder(monkeypatch, tmp_path):
+    """``N2R_CACHE_DIR=~/n2r`` (quoted in a CI file, so no shell expands it) is the home folder's, not a folder named
+    ``~`` in the working directory."""
+    from pytest_n2r.demo.user_cache import cache_dir
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("N2R_CACHE_DIR", "~/n2r")
+    assert cache_dir() == tmp_path / "n2r", cache_dir()

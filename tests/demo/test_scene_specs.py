@@ -45,3 +45,11 @@ def test_two_scene_files_of_one_name_are_refused_and_one_named_twice_is_one_scen
         parse_scene_specs([str(a), str(b)], tmp_path, "--n2r-scene")
     specs = parse_scene_specs([str(a), "a/wall.n2r"], tmp_path, "--n2r-scene")
     assert [(s.name, s.kind) for s in specs] == [("wall", "file")], specs
+
+
+def test_a_splat_file_is_taken_whatever_the_case_of_its_suffix(tmp_path):
+    """Windows tools write ``scene.PLY``: a 3DGS ply is known by its suffix in any case, not refused as "not a scene
+    file" (its header is read when the scene loads)."""
+    (tmp_path / "garden.PLY").write_bytes(b"ply\nformat binary_little_endian 1.0\nend_header\n")
+    specs = parse_scene_specs(["garden.PLY"], tmp_path, "--n2r-scene")
+    assert [(s.name, s.kind) for s in specs] == [("garden", "file")], specs
