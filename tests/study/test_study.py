@@ -125,22 +125,25 @@ def test_missing_lpips_is_explained_once_in_the_notes(monkeypatch):
         f"expected one note saying why the LPIPS column is empty, got notes {result.notes}"
 
 
-class _HalfEmptyScene:
-    """The exact wall scene with the left 30 % of every render's columns empty (opacity 0): like an object
-    in the open, every view — the source too — shows some empty space."""
+class _EmptyOnTheLeft:
+    """The exact wall scene with the left ``share`` of a render's columns empty (opacity 0): in every render (like an
+    object in the open, every view, the source too, shows some empty space), or ``moved_only`` in renders at poses
+    other than its captured views' (every follow-up of a moved pose emptier than its source, while the detector's
+    points on the rest still compare)."""
 
-    def __init__(self) -> None:
+    def __init__(self, share: float, moved_only: bool = False) -> None:
         self._scene = ground_truth("wall")
+        self.share, self.moved_only = share, moved_only
 
     def __getattr__(self, name: str):
         return getattr(self._scene, name)
 
     def render(self, c2w, camera, outputs=("rgb",)):
         view = self._scene.render(c2w, camera, outputs)
-        if view.opacity is None:
+        if view.opacity is None or self.moved_only and any(np.allclose(c2w, v.c2w) for v in self._scene.views):
             return view
         opacity = view.opacity.copy()
-        opacity[:, : int(0.3 * opacity.shape[1])] = 0.0
+        opacity[:, : int(self.share * opacity.shape[1])] = 0.0
         return dataclasses.replace(view, opacity=opacity)
 
 
@@ -148,7 +151,7 @@ def test_follow_ups_are_judged_against_their_source_view():
     # 160 px: at 64 ORB (31-px borders) finds no keypoint, and an example with nothing to compare is not valid
     config = StudyConfig(examples=2, max_views=1, size=160, fps_frames=1, fps_sizes=((64, 36),),
                          families=("tau1",))
-    result = run_study([_HalfEmptyScene()], [resolve_sut("orb", None)], config)
+    result = run_study([_EmptyOnTheLeft(0.3)], [resolve_sut("orb", None)], config)
     valid = [r["valid"] for r in result.examples]
     assert valid and all(valid), (
         f"τ1 follow-ups of a view that is itself 30 % empty were rejected ({valid}): the validity check must "
@@ -484,28 +487,8 @@ def test_the_realness_summary_has_a_row_per_scene_and_source(tmp_path):
         assert row in text, f"the RQ1 table has no row {row}: {text}"
 
 
-class _EmptyAwayFromItsViews:
-    """The exact wall scene rendering nothing (opacity 0) on the left 40 % of the columns at any pose but its
-    captured views': every follow-up of a moved pose is 40 % emptier than its source, where the detector's points
-    on the rest still compare."""
-
-    def __init__(self) -> None:
-        self._scene = ground_truth("wall")
-
-    def __getattr__(self, name: str):
-        return getattr(self._scene, name)
-
-    def render(self, c2w, camera, outputs=("rgb",)):
-        view = self._scene.render(c2w, camera, outputs)
-        if view.opacity is None or any(np.allclose(c2w, v.c2w) for v in self._scene.views):
-            return view
-        opacity = view.opacity.copy()
-        opacity[:, : int(0.4 * opacity.shape[1])] = 0.0
-        return dataclasses.replace(view, opacity=opacity)
-
-
 def test_follow_ups_emptier_than_their_source_are_not_counted_as_inconsistencies():
     config = StudyConfig(examples=2, max_views=1, size=160, fps_frames=1, fps_sizes=((64, 36),), families=("tau1",))
-    result = run_study([_EmptyAwayFromItsViews()], [resolve_sut("orb", None)], config)
+    result = run_study([_EmptyOnTheLeft(0.4, moved_only=True)], [resolve_sut("orb", None)], config)
     assert result.examples and not any(r["valid"] for r in result.examples), (
         f"follow-ups 40 % emptier than their source were judged valid: {[r['valid'] for r in result.examples]}")
