@@ -98,7 +98,7 @@ def nclx_icc(nclx: Mapping[str, float] | None, path: str | os.PathLike) -> bytes
 
 
 def _chromaticities(nclx: Mapping[str, float]) -> tuple[tuple[float, float], ...]:
-    """The primaries' and white's ``(x, y)`` as libheif reports them, rounded to 4 places (stored as floats32);
+    """The primaries' and white's ``(x, y)`` as libheif reports them, rounded to 4 places (stored as float32);
     sRGB's where libheif reports none (unspecified primaries: all zero)."""
     stated = tuple((round(float(nclx.get(f"color_primary_{name}_x", 0.0)), 4),
                     round(float(nclx.get(f"color_primary_{name}_y", 0.0)), 4)) for name in _NAMES)

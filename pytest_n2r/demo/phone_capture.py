@@ -88,7 +88,7 @@ class PhoneSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
                 raise InvalidType(f"PhoneSettings.{name}={value!r}: expected a number, not {type(value).__name__}")
-            if not 0 <= value < float("inf"):
+            if name != "shaken" and not 0 <= value < float("inf"):  # shaken: a probability, below
                 raise InvalidArgument(f"PhoneSettings.{name}={value!r}: expected a finite number >= 0")
         if self.white_balance >= 1:
             raise InvalidArgument(f"PhoneSettings.white_balance={self.white_balance!r}: expected less than 1")
