@@ -31,7 +31,7 @@ from .artifacts import artifact_dir, save_pair
 from .determinism import check_deterministic, same_output
 from .failure import MAX_UNDEFINED, SAME_PIXELS, RelationFailure, failure_message, how_to_reproduce
 from .kept_results import kept_result, repainted_key
-from .outputs import SUTError, check_output
+from .outputs import SUTError, check_output, sut_image
 from .record import ExampleRecord, RelationRecord
 from .settings import RunSettings
 from .spec import Relation
@@ -73,6 +73,10 @@ class Evaluation:
     follow: RenderedView | None = None
     outputs: tuple[Any, Any] = (None, None)
 
+    def images(self) -> tuple[np.ndarray, np.ndarray]:  # of an example the SUT ran on: not rejected, not undefined
+        assert self.source is not None and self.follow is not None, "the SUT did not run on this example"
+        return sut_image(self.source, "source"), sut_image(self.follow, "follow-up")
+
 
 class Engine:
     """One relation on one scene with one SUT: evaluates drawn (or replayed) examples.
@@ -99,9 +103,8 @@ class Engine:
         needs = tuple(getattr(self.metric, "needs", ()) or ())
         self.outputs = normalize_outputs(("rgb", *needs, *(("opacity",) if relation.validity.outputs else ())))
         self.follow_outputs = normalize_outputs(("rgb", *needs, *relation.validity.outputs))
-        render_settings = getattr(scene, "settings", None)
-        self.render_settings = render_settings.to_dict() if callable(getattr(render_settings, "to_dict", None)) \
-            else {}
+        to_dict = getattr(getattr(scene, "settings", None), "to_dict", None)
+        self.render_settings = to_dict() if callable(to_dict) else {}
         self.shrinking = False  # False: the survey pass; True: the shrink pass (start_shrink_pass)
         self.failed = False
         self.gave_up = ""  # why the survey stopped drawing early ("" while it goes on)
@@ -158,7 +161,7 @@ class Engine:
                 # the first output another test left: a SUT object reconfigured since (a fixture's detector given
                 # another threshold, a module's function whose global a test patched) must not be judged by it
                 self.sharing_checked = True
-                fresh = self.run_sut(rendered.rgb, role, where)
+                fresh = self.run_sut(sut_image(rendered, role), role, where)
                 if not same_output(fresh, output):
                     self.sut_outputs.forget(self.sut)
                 output = fresh
@@ -167,9 +170,9 @@ class Engine:
                 check_output(output, role, where, self.metric)
                 return output
             else:
-                output = self.run_sut(rendered.rgb, role, where)
+                output = self.run_sut(sut_image(rendered, role), role, where)
         else:
-            output = self.run_sut(rendered.rgb, role, where)
+            output = self.run_sut(sut_image(rendered, role), role, where)
         if key is not None:
             self.sut_outputs.put(self.sut, key, output)
             self.own_outputs.add(key)
@@ -269,8 +272,8 @@ class Engine:
         follow = tau.follow_view(source, self.scene, render_follow)
         # the SUT's output is kept by render: the follow-up is one when it is what the render returned, unchanged
         follow_key = rendered[-1][1] if rendered and follow is rendered[-1][0] else None
-        if same_pixels(follow.rgb, source.rgb):  # a deterministic SUT cannot fail on it: not a test
-            record.status, record.reason = "undefined", SAME_PIXELS
+        if same_pixels(sut_image(follow, "follow-up"), sut_image(source, "source")):
+            record.status, record.reason = "undefined", SAME_PIXELS  # a deterministic SUT cannot fail on it
             return Evaluation(record, where)
         if tau.moves_camera:  # a new render: is it within what the scene renders faithfully?
             start = time.perf_counter()
@@ -337,8 +340,7 @@ class Engine:
             self.failing.add(drawn)
         if not self.shrinking:
             if record.valid and not record.passed and not self.run_record.inconsistencies:
-                check_deterministic(self.run_sut, evaluation.source.rgb, evaluation.follow.rgb,
-                                    *evaluation.outputs, evaluation.where)
+                check_deterministic(self.run_sut, *evaluation.images(), *evaluation.outputs, evaluation.where)
             self.count(record)
         elif self.failed:
             self.run_record.shrink_examples += 1
@@ -356,15 +358,16 @@ class Engine:
     def fail(self, view: SceneView, tau: FollowUp, evaluation: Evaluation, note: str = "") -> None:
         """Save the failure pictures and raise the :class:`RelationFailure` of ``evaluation``."""
         __tracebackhide__ = True
-        record, run = replace(evaluation.record), self.run_record
+        record, run, result = replace(evaluation.record), self.run_record, evaluation.result
+        assert result is not None, "a failure is an example whose metric compared the SUT's outputs"
         if self.settings.artifacts is not None:
             try:
                 record.images = save_pair(artifact_dir(self.settings.artifacts, run.nodeid),
-                                             evaluation.source.rgb, evaluation.follow.rgb, *evaluation.outputs)
+                                             *evaluation.images(), *evaluation.outputs)
             except OSError as exc:  # a full disk or a read-only folder must not hide the failure itself
                 self.images_error = f"not saved ({exc.strerror or exc}: {exc.filename or self.settings.artifacts})"
         run.minimal = record
-        message = failure_message(self.scene, self.relation, run, view, tau, evaluation.result, record, note=note,
+        message = failure_message(self.scene, self.relation, run, view, tau, result, record, note=note,
                                   images_error=self.images_error,
                                   reproduce=how_to_reproduce(self.settings.derandomize, self.settings.database,
                                                             forced_seed()))

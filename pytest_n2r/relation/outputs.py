@@ -1,4 +1,5 @@
-"""Checks of what the system under test returned, before a metric sees it, and the error it raises."""
+"""Checks of what the system under test is given and what it returned, before a metric sees it, and the error it
+raises."""
 
 from __future__ import annotations
 
@@ -7,10 +8,20 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SUTError, SUTOutputError
+from ..errors import InvalidArgument, SUTError, SUTOutputError
 from ..metrics.base import Metric
+from ..render.view import RenderedView
 
-__all__ = ["SUTError", "check_output"]
+__all__ = ["SUTError", "check_output", "sut_image"]
+
+
+def sut_image(view: RenderedView, role: str) -> np.ndarray:
+    """The image the system under test is given on the ``role`` view: its ``rgb``, or an :class:`InvalidArgument`
+    when the view has none (a scene whose render leaves out an output asked for, a follow-up of one's own)."""
+    if view.rgb is None:
+        raise InvalidArgument(f"the {role} view has no rgb image for the system under test; expected a view "
+                              "rendered with 'rgb' (a scene's render returns every output asked for)")
+    return view.rgb
 
 
 def check_output(output: Any, role: str, where: str, metric: Metric) -> None:

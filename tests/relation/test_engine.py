@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import ClassVar
 
 import cv2
@@ -20,7 +20,7 @@ from pytest_n2r.relation.artifacts import artifact_dir
 from pytest_n2r.relation.outputs import SUTError
 from pytest_n2r.render.size import RenderSize
 from pytest_n2r.scene.render_cache import RenderCache, render_key
-from pytest_n2r.strategies import Mutation, transforms
+from pytest_n2r.strategies import FollowUp, Mutation, transforms
 from tests.plugin.fakemetrics import AbsDifference, SameLabel
 from tests.plugin.fakescene import PlaneScene, decode_ramp_x
 
@@ -540,3 +540,30 @@ def test_an_eps_0_relation_passes_examples_whose_deviation_is_exactly_0():
         f"a constant SUT broke an eps=0 relation: {record.summary_line()}")
     assert record.valid_examples and all(e.deviation == 0.0 and e.passed for e in record.valid_examples), (
         f"an example of deviation 0 did not pass at eps=0: {[(e.deviation, e.passed) for e in record.examples]}")
+
+
+
+class _Blanked(FollowUp):
+    """A follow-up of one's own whose view has no image: its ``rgb`` left out."""
+
+    moves_camera: ClassVar[bool] = False
+
+    def follow_view(self, source, scene, render):
+        return replace(source, rgb=None)
+
+    def describe(self):
+        return "blanked()"
+
+    def record_fields(self):
+        return {"transform": None, "mutation": {"name": "blanked"}}
+
+    def explain(self, scene, note):
+        return []
+
+
+def test_a_follow_up_view_without_rgb_is_named_not_an_attribute_error():
+    """A follow-up of one's own whose view had no rgb failed inside the engine (``'NoneType' object has no attribute
+    'shape'``, comparing the two images' pixels) instead of saying which view lacked its image."""
+    relation = Relation.build(AbsDifference(), 255, st.just(_Blanked()), examples=3)
+    with pytest.raises(InvalidArgument, match=r"the follow-up view has no rgb image for the system under test"):
+        check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation, settings=FAST)
