@@ -94,6 +94,7 @@ class Validity:
         if not self.outputs:
             return Verdict(True)
         view.require(*self.outputs)
+        assert view.opacity is not None, "every check needs opacity: require raised without it"
         empty = float((view.opacity < 0.5).mean())
         before = float((source.opacity < 0.5).mean()) if source is not None and source.opacity is not None else 0.0
         if empty - before > self.max_empty_increase:
@@ -129,6 +130,8 @@ class Validity:
     def coverage(self, view: RenderedView, scene: Scene, cameras: Sequence[SceneView] | None = None) -> float:
         """Fraction of the view's sampled surface points inside some training camera's image (``cameras``,
         default: the scene's :func:`training_views`), all cameras projected in one array operation."""
+        view.require("depth", "opacity")
+        assert view.depth is not None and view.opacity is not None, "require raised without them"
         cam = view.camera
         us = np.linspace(0, cam.width - 1, self.grid)
         vs = np.linspace(0, cam.height - 1, self.grid)

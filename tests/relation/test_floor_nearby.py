@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from pytest_n2r.errors import InvalidArgument
 from pytest_n2r.geometry import Camera
 from pytest_n2r.relation.floor.nearby import brought_to_view, nearest_fitted_view
 from pytest_n2r.render.view import RenderedView
@@ -68,6 +69,14 @@ def test_a_pixel_with_no_surface_in_either_view_keeps_the_render():
 def test_an_image_of_another_size_than_its_view_is_refused():
     with pytest.raises(ValueError, match="image is 32x48 pixels but its view's depth is 64x48"):
         brought_to_view(_wall(0.0), _texture()[:, :32], _wall(0.0))
+
+
+def test_an_image_view_rendered_without_depth_is_named():
+    """The image's view is read through its depth: without it the call failed with ``'NoneType' object has no
+    attribute 'shape'`` instead of naming the argument and what it lacks."""
+    no_depth = RenderedView(CAMERA, _at(0.0), rgb=RENDER)
+    with pytest.raises(InvalidArgument, match=r"image_view was rendered without depth, opacity"):
+        brought_to_view(_wall(0.0), _texture(), no_depth)
 
 
 def test_the_nearest_fitted_view_is_another_usable_training_view():

@@ -139,3 +139,12 @@ def test_a_verdict_key_names_the_source_render():
     scene, follow = PlaneScene(), "2" * 64
     assert Validity().verdict_key(scene, "1" * 64, follow) != Validity().verdict_key(scene, "3" * 64, follow), (
         "another source render, same verdict key")
+
+
+def test_the_coverage_of_a_view_rendered_without_depth_names_what_it_lacks():
+    """``coverage`` reads the view's depth and opacity: on a view rendered without them it failed with
+    ``'NoneType' object is not subscriptable`` instead of naming the outputs it needs."""
+    scene = PlaneScene()
+    view = scene.views[1]
+    with pytest.raises(InvalidArgument, match=r"rendered without depth; expected a view rendered with outputs"):
+        Validity().coverage(scene.render(view.c2w, view.camera, ("rgb", "opacity")), scene)

@@ -62,6 +62,8 @@ def brought_to_view(view: RenderedView, image: np.ndarray, image_view: RenderedV
     import cv2
 
     view.require("rgb", "depth", "opacity")
+    image_view.require("depth", "opacity", name="image_view")
+    assert view.rgb is not None and view.depth is not None and image_view.depth is not None, "required above"
     if image.shape[:2] != image_view.depth.shape:
         raise ValueError(f"image is {image.shape[1]}x{image.shape[0]} pixels but its view's depth is "
                          f"{image_view.depth.shape[1]}x{image_view.depth.shape[0]}")
