@@ -65,6 +65,7 @@ def draw_output(rgb: np.ndarray, output: Any, color: tuple[int, int, int] = _GRE
     canvas = np.ascontiguousarray(rgb, dtype=np.uint8).copy()
     radius = max(2, round(max(canvas.shape[:2]) / 160))
     points = _keypoints(output)
+    text: str | None
     if points is not None:
         for u, v in points[np.isfinite(points).all(axis=1)]:
             cv2.circle(canvas, (int(round(u)), int(round(v))), radius, color, 1, cv2.LINE_AA)

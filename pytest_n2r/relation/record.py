@@ -80,9 +80,11 @@ class ExampleRecord:
             from ..strategies.mutation import mutation_from_dict
 
             return mutation_from_dict(self.mutation)
+        from .._validation import check_choice
+        from ..geometry import Units
         from ..strategies.pose_change import PoseChange
 
-        return PoseChange(**(self.transform or {}), units=self.units)
+        return PoseChange(**(self.transform or {}), units=check_choice("units", self.units, Units, "a unit"))
 
     @classmethod
     def from_dict(cls, data: dict) -> ExampleRecord:

@@ -163,8 +163,8 @@ def _add_note(exc: BaseException, note: str) -> None:
     """``exc.add_note(note)``, which Python 3.10 lacks: there the note is kept in ``__notes__`` as 3.11 keeps it."""
     if hasattr(exc, "add_note"):
         exc.add_note(note)
-    else:
-        exc.__notes__ = [*getattr(exc, "__notes__", ()), note]
+    else:  # 3.10 types no BaseException.__notes__: set as the dynamic attribute it is there
+        setattr(exc, "__notes__", [*getattr(exc, "__notes__", ()), note])  # noqa: B010
 
 
 def _not_an_error(exc: BaseException) -> BaseException | None:
@@ -223,7 +223,8 @@ def _search(engine: Engine, scene: Scene, relation: Relation, settings: RunSetti
 
     # key this run's database entries and (with derandomize or --hypothesis-seed) its seed to the test, scene and
     # relation
-    identity = example._hypothesis_internal_add_digest = run_identity(test_id, scene, relation)
+    identity = run_identity(test_id, scene, relation)
+    setattr(example, "_hypothesis_internal_add_digest", identity)  # noqa: B010 -- read by Hypothesis; no function type has it
     run.asked = relation.examples or settings.examples
     options: dict[str, Any] = {
         "max_examples": run.asked, "deadline": None,
@@ -276,6 +277,7 @@ def _report_as_drawn(engine: Engine, note: str) -> None:
     """Raise the failure of the survey's worst failing example as it was drawn, with ``note`` on why."""
     __tracebackhide__ = True
     worst = engine.run_record.worst
+    assert worst is not None, "reported after the survey found an inconsistent (so valid) example"
     view, tau = recorded_view(worst, "drawn"), worst.follow_up()
     engine.fail(view, tau, engine.evaluate(view, tau, camera=view.camera), note=note)
 

@@ -233,7 +233,7 @@ def _detached(value: Any) -> Any:
     return value if torch is None else _detach(value, torch.Tensor, 0)
 
 
-def _detach(value: Any, tensor: type, depth: int) -> Any:
+def _detach(value: Any, tensor: type[Any], depth: int) -> Any:
     if isinstance(value, tensor):
         return value.detach() if value.requires_grad else value
     if depth >= _DEPTH or not isinstance(value, (list, tuple, dict)) or len(value) > _ITEMS:

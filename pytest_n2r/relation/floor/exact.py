@@ -16,6 +16,7 @@ from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.render_cache import RenderCache
 from ..kept_results import repainted_key
+from ..outputs import sut_image
 from ..record import ExampleRecord
 from .measure import json_number
 from .reference import exact_twin, shift_sample
@@ -89,9 +90,10 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             continue
         if view.name not in sources:
             rendered, key = render_cache.render_keyed(twin, view.c2w, camera_of(view), outputs)
-            sources[view.name] = (rendered, key, sut(rendered.rgb))
+            sources[view.name] = (rendered, key, sut(sut_image(rendered, "source")))
         source, source_key, out_source = sources[view.name]
         tau = record.follow_up()
+        follow_key: str | None
         if tau.moves_camera:
             follow_c2w = tau.apply(view.c2w, scene.length_scale(tau.units))
             follow, follow_key = render_cache.render_keyed(twin, follow_c2w, camera_of(view), outputs)
@@ -99,7 +101,8 @@ def compare_exact(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
             follow = tau.apply_to_view(source)
             follow_key = repainted_key(source, source_key, follow)
         kept = (render_cache, source_key, follow_key) if follow_key is not None else None
-        sample = shift_sample(metric, out_source, sut(follow.rgb), source, follow, view.name, kept=kept)
+        sample = shift_sample(metric, out_source, sut(sut_image(follow, "follow-up")), source, follow, view.name,
+                              kept=kept)
         if sample.valid:
             pairs.append((float(record.deviation), sample.deviation))
         else:

@@ -28,6 +28,7 @@ from ...scene.base import Scene, SceneView, normalize_outputs
 from ...scene.cache_files import touch
 from ...scene.render_cache import RenderCache, source_digest
 from ..kept_results import output_digest, result_key
+from ..outputs import sut_image
 from .nearby import nearby_image
 from .reference import ShiftSample, exact_twin, floor_views, reference_image, reference_kind, shift_sample
 
@@ -245,10 +246,10 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
     # every SUT output the floor is computed from, before the store is asked: an edited SUT whose output changes
     # only on the (blurrier) field renders or nearby images is measured again, not given the old SUT's floor
     outs_real = [sut(image) for image in references]
-    outs_field = [sut(r.rgb) for r in renders]
+    outs_field = [sut(sut_image(r, "field")) for r in renders]
     outs_near = [None if near is None else sut(near.image) for near in nears]
     twin = exact_twin(scene) if kind == "exact" else None
-    outputs = {"reference": [output_digest(out) for out in outs_real],
+    digests = {"reference": [output_digest(out) for out in outs_real],
                "field": [output_digest(out) for out in outs_field],
                "nearby": [output_digest(out) if near is not None else "-" for out, near in zip(outs_near, nears)]}
     # the metric as its kept results are keyed (class, repr, its class's own result_version), or, for a metric of
@@ -260,11 +261,11 @@ def measure_floor(scene: Scene, sut: Callable[[np.ndarray], Any], metric: Metric
         f"{cls.__module__}.{cls.__qualname__}" if ours else None)
     spec = {"floor": FLOOR_VERSION, "pytest_n2r": __version__, "source": source_digest(), "numpy": np.__version__,
             "scene": scene.content_hash, "twin": twin.content_hash if twin is not None else None, "sut": name,
-            "outputs": outputs, "metric": repr(metric), "metric_key": metric_key,
+            "outputs": digests, "metric": repr(metric), "metric_key": metric_key,
             "result_version": type(metric).result_version, "size": size_text, "views": [v.name for v in views],
             "reference": kind, "nearby": nearby}
     key = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:32]
-    if metric_key is None or any(None in digests for digests in outputs.values()):
+    if metric_key is None or any(None in of_outputs for of_outputs in digests.values()):
         store, key = None, ""  # an unversioned metric or an output no digest names exactly: neither kept nor reused
     if store is not None and (known := store.get(key)) is not None:
         return known

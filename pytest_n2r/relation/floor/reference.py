@@ -18,6 +18,7 @@ from ...render.view import RenderedView
 from ...scene.base import Scene, SceneView
 from ...scene.render_cache import RenderCache
 from ..kept_results import kept_result
+from ..outputs import sut_image
 
 __all__ = ["ShiftSample", "exact_twin", "floor_views", "reference_image", "reference_kind", "shift_sample"]
 
@@ -118,4 +119,4 @@ def reference_image(scene: Scene, view: SceneView, camera: Camera, kind: str,
     if kind != "exact" or twin is None:
         raise ValueError(f"scene {scene.name!r} has no reference image of kind {kind!r}")
     do = render or (lambda s, c2w, cam: s.render(c2w, cam, ("rgb",)))
-    return do(twin, view.c2w, camera).rgb
+    return sut_image(do(twin, view.c2w, camera), "reference")
