@@ -132,7 +132,8 @@ class _VectorMetric(Metric):
         self.inputs = inputs
 
     def compute(self, out_source: Any, out_follow: Any, source: Any = None, follow: Any = None) -> MetricResult:
-        vectors, silent = [], []
+        vectors: list[np.ndarray | None] = []
+        silent: list[str] = []
         for value, which in ((out_source, "source"), (out_follow, "follow-up")):
             try:
                 vectors.append(as_vector(value, which))
@@ -143,12 +144,13 @@ class _VectorMetric(Metric):
             return MetricResult.undefined(self.name, f"{' and '.join(silent)} (nothing to compare)")
         a, b = vectors
         if a is None or b is None:  # an answer on one view only: a failure, as for keypoints on one side
-            self.check_classes(int((b if a is None else a).size))
+            answer = next(v for v in vectors if v is not None)  # one of the two: none returned above
+            self.check_classes(int(answer.size))
             answered = "follow-up" if a is None else "source"
             score = self.worst
             return MetricResult(self.name, score, self.deviation(score), {
                 "reason": f"{silent[0]} but the {answered} output is not: the SUT answered on one view only",
-                "classes": int((b if a is None else a).size)})
+                "classes": int(answer.size)})
         if a.shape != b.shape:
             raise SUTOutputError(
                 f"source output has {a.size} classes but follow-up output has {b.size}; "
@@ -188,7 +190,7 @@ class _VectorMetric(Metric):
         """
         mode = self.inputs
         if mode == "auto":
-            kinds = []
+            kinds: list[Literal["probabilities", "logits"]] = []
             for which, v, e in (("source", a, eps[0]), ("follow-up", b, eps[1])):
                 unit = bool(np.all(v >= 0) and np.all(v <= 1))
                 if unit and not is_probability_vector(v, e):

@@ -208,7 +208,8 @@ class DepthMapping(PointMapping):
         return self._map(uv_follow, self.follow, self.source)
 
     def _surface(self, view: RenderedView, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(has surface, depth) at points inside ``view``."""
+        """(has surface, depth) at points inside ``view`` (one checked by :func:`_check_view`)."""
+        assert view.depth is not None and view.opacity is not None, "a checked view has both"
         rows, cols = _nearest_index(uv, view.opacity.shape)
         depth = sample_depth(view.depth, uv, self.depth_tolerance)
         return (view.opacity[rows, cols] >= self.min_opacity) & np.isfinite(depth), depth

@@ -183,6 +183,7 @@ class _KeypointMetric(Metric):
         p = _unique_rows(raw)
         p.setflags(write=False)
         lifted = mapping.lift(p, source)
+        assert source.depth is not None and source.opacity is not None, "lift checked the view has both"
         if not (source.depth.flags.writeable or source.opacity.flags.writeable):
             self._kept[key] = (weakref.ref(source.depth), weakref.ref(source.opacity), p, lifted)
             while len(self._kept) > _KEPT_SOURCES:
