@@ -52,7 +52,7 @@ class PoseChange(Transform, FollowUp):
     @classmethod
     def of(cls, transform: Transform, units: Units | str = Units.REFERENCE) -> PoseChange:
         """``transform`` with its translation in ``units``."""
-        return cls(**transform.as_dict(), units=units)
+        return cls(**transform.as_dict(), units=check_choice("units", units, Units, "a unit"))
 
     @property
     def transform(self) -> Transform:

@@ -79,12 +79,12 @@ class PoseChangeFamily:
 
     def strategy(self) -> st.SearchStrategy[PoseChange]:
         """Hypothesis draws of this family; the ``repr`` is the :func:`transforms` call."""
-        extra: dict[str, Any] = {}
+        arguments: dict[str, Any] = dict(self.bounds)  # the bounds first, as the repr reads them
         if self.look_at:
-            extra["look_at"] = True
+            arguments["look_at"] = True
         if self.units is not Units.REFERENCE:
-            extra["units"] = self.units.value
-        return _transforms(**self.bounds, **extra)
+            arguments["units"] = self.units.value
+        return _transforms(**arguments)
 
     def sample(self, rng: np.random.Generator) -> PoseChange:
         """A pose change drawn uniformly within the bounds from ``rng`` (one ``uniform`` draw per bounded
