@@ -190,7 +190,7 @@ def compare_paired(baseline: dict[str, RelationRecord], current: list[RelationRe
     ran = {rel.nodeid for rel in current}
     out += [PairedComparison(nodeid, "missing", message=_why_missing(baseline[nodeid], collected, scenes))
             for nodeid in sorted(set(baseline) - ran)]
-    not_recorded = getattr(baseline, "not_recorded", frozenset())
+    not_recorded: Collection[str] = getattr(baseline, "not_recorded", frozenset())  # a loaded Baseline's
     # like with like: the scene names relation records carry (a loaded scene's name), never ``meta.scenes`` (the
     # configured names the test ids carry: 'make' for the scene ``myscenes:make`` named 'plane')
     base_scenes = {r.scene for r in baseline.values() if r.scene}

@@ -186,7 +186,7 @@ def meta_from_json(meta: Any) -> dict[str, Any]:
 
 #: What a baseline's ``meta`` records about the session that saved it, each field's types and what it is (for the
 #: docs and the messages). All are optional (older files lack them); a field not here is kept (a newer pytest-n2r's).
-META_FIELDS: dict[str, tuple[tuple[type, ...], str, str]] = {
+META_FIELDS: dict[str, tuple[tuple[type[Any], ...], str, str]] = {
     "not_recorded": ((list,), "relation test ids collected but not run (deselected or skipped)", "a list of test ids"),
     "pytest_n2r": ((str,), "the pytest-n2r version that saved it", "the pytest-n2r version, a string"),
     "saved": ((str,), "when, in UTC (ISO 8601, to the second)", "a UTC date, a string"),
@@ -222,10 +222,10 @@ def _camera(camera: Any, where: str) -> None:
         Camera.from_dict(camera)
     except (InvalidArgument, InvalidType) as exc:
         # Camera's messages start with the field they name ("Camera fx=0.0 must be > 0")
-        key = next((k for k in _CAMERA_FIELDS if str(exc).startswith(f"Camera {k}")), None)
-        if key is None:
+        named = next((k for k in _CAMERA_FIELDS if str(exc).startswith(f"Camera {k}")), None)
+        if named is None:
             raise BadField(f"{where}: {exc}") from None
-        raise BadField(f"{where}.{key}={camera.get(key)!r}; expected {_CAMERA_FIELDS[key]} ({exc})") from None
+        raise BadField(f"{where}.{named}={camera.get(named)!r}; expected {_CAMERA_FIELDS[named]} ({exc})") from None
 
 
 def _follow_up(e: dict, where: str) -> tuple[dict[str, float] | None, dict[str, Any] | None]:
