@@ -40,6 +40,7 @@ from ..errors import InvalidArgument, MetricUndefined, N2RError
 from ..geometry import Camera
 from ..metrics.image_quality import lpips, lpips_unavailable_reason, psnr, ssim
 from ..relation.floor import exact_twin, reference_image, shift_sample
+from ..relation.outputs import sut_image
 from ..relation.validity import Validity
 from ..render.view import RenderedView
 from ..scene.base import Scene, SceneView
@@ -175,7 +176,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                 _rq1(result, scene, view, source, real, suts, rq1_rng)
             elif not any("RQ1" in n and scene.name in n for n in result.notes):
                 result.notes.append(f"RQ1 skipped for {scene.name}: its views store no real photos")
-            sut_source = {sut.name: sut.fn(source.rgb) for sut in suts}
+            sut_source = {sut.name: sut.fn(sut_image(source, "source")) for sut in suts}
             for family in config.families:
                 for _ in range(config.examples):
                     if family.startswith("tau"):
@@ -188,7 +189,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
                         follow = mutation.apply_to_view(source)
                         valid, drawn = True, repr(mutation)
                     for sut in suts:
-                        out_f = sut.fn(follow.rgb) if valid else None
+                        out_f = sut.fn(sut_image(follow, "follow-up")) if valid else None
                         for name, metric in sut.metrics().items():
                             score, dev, ok = (_score(metric, sut_source[sut.name], out_f, source, follow)
                                               if valid else (float("nan"), float("nan"), False))
@@ -204,7 +205,7 @@ def run_study(scenes: Sequence[Scene], suts: Sequence[SUT], config: StudyConfig 
 
 def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedView, real: np.ndarray,
          suts: Sequence[SUT], rng: np.random.Generator) -> None:
-    images = {"tau0": source.rgb}
+    images = {"tau0": sut_image(source, "source")}
     images.update({f: sample_mutation(f, rng).apply(real) for f in MUTATION_FAMILIES})
     for name, img in images.items():
         perceptual = lpips(real, img)
@@ -216,7 +217,7 @@ def _rq1(result: StudyResult, scene: Scene, view: SceneView, source: RenderedVie
         })
     real_view = RenderedView(source.camera, source.c2w, rgb=real, depth=source.depth, opacity=source.opacity)
     for sut in suts:
-        out_real, out_field = sut.fn(real), sut.fn(source.rgb)
+        out_real, out_field = sut.fn(real), sut.fn(images["tau0"])
         for name, metric in sut.same_pose_metrics().items():
             sample = shift_sample(metric, out_real, out_field, real_view, source, view.name)
             result.domain_shift.append({"scene": scene.name, "view": view.name, "sut": sut.name,

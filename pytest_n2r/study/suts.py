@@ -99,10 +99,11 @@ def _builtin(name: str, points: int | None = None) -> Callable[[np.ndarray], np.
     # - AKAZE has no cap in OpenCV: the filter alone keeps the N of largest response of its uncapped detection.
     cap = 1000 if points is None else points
     makers = {
-        "orb": lambda: cv2.ORB_create(nfeatures=cap),
-        "sift": lambda: cv2.SIFT_create(nfeatures=cap),
+        "orb": lambda: cv2.ORB_create(nfeatures=cap),  # type: ignore[attr-defined]  # stubs: ORB.create only
+        "sift": lambda: cv2.SIFT_create(nfeatures=cap),  # type: ignore[attr-defined]  # stubs: SIFT.create only
         # OpenCV 5 moved AKAZE to the contrib module xfeatures2d
-        "akaze": lambda: (getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create)(),
+        "akaze": lambda: (getattr(cv2, "AKAZE_create", None)
+                          or cv2.xfeatures2d.AKAZE_create)(),  # type: ignore[attr-defined]  # stubs: AKAZE.create
     }
     return _opencv_detector(makers[name], points)
 
@@ -177,10 +178,12 @@ def _working_folder_importable() -> None:
         sys.path.append(cwd)
 
 
-def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None, *, points: int | None = None) -> SUT:
+def resolve_sut(spec: str, probe: np.ndarray | None, kind: Kind | None = None, *,
+                points: int | None = None) -> SUT:
     """A SUT from a built-in name (``orb``, ``sift``, ``akaze``) or ``package.module:attribute``.
 
-    ``probe`` (an RGB image) is run once to tell detectors from classifiers for imported SUTs; ``kind``
+    ``probe`` (an RGB image; ``None`` will do for a built-in SUT) is run once to tell detectors from classifiers
+    for imported SUTs; ``kind``
     (``"detector"`` or ``"classifier"``) says which where the output cannot (shape ``(1, K)``: one keypoint, or
     a batch of one score vector). ``points`` (``n2r study --points``): a built-in detector keeps the ``points``
     keypoints of largest response per image (see :func:`_builtin`); None keeps OpenCV's caps (1000 for ORB and SIFT,
@@ -214,4 +217,7 @@ def resolve_sut(spec: str, probe: np.ndarray, kind: Kind | None = None, *, point
         raise InvalidArgument(f"--sut {spec!r}: cannot import {attr!r} from {module_name!r} ({exc})") from None
     if not callable(fn):
         raise InvalidType(f"--sut {spec!r} is a {type(fn).__name__}, not a callable image -> output")
+    if probe is None:
+        raise InvalidArgument(f"--sut {spec!r} is imported: probe=None; expected an RGB image to run it on once "
+                              "(its output tells a detector from a classifier)")
     return SUT(attr, _kind_of(fn(probe), spec, kind), fn)

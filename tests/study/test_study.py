@@ -492,3 +492,19 @@ def test_follow_ups_emptier_than_their_source_are_not_counted_as_inconsistencies
     result = run_study([_EmptyOnTheLeft(0.4, moved_only=True)], [resolve_sut("orb", None)], config)
     assert result.examples and not any(r["valid"] for r in result.examples), (
         f"follow-ups 40 % emptier than their source were judged valid: {[r['valid'] for r in result.examples]}")
+
+
+def test_an_imported_sut_without_a_probe_image_is_refused():
+    """A probe image tells an imported SUT's kind (a built-in's is known: None will do there)."""
+    with pytest.raises(InvalidArgument, match=r"--sut 'numpy:ravel' is imported: probe=None; expected an RGB image"):
+        resolve_sut("numpy:ravel", None)
+
+
+def test_a_scene_whose_render_leaves_out_rgb_is_named_not_given_to_the_sut(monkeypatch):
+    """A scene of one's own whose render returns no rgb had None handed to the SUT (OpenCV's error, or the SUT's)."""
+    scene = BlurredPlane(photos=False)
+    original = scene._render
+    monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: {
+        k: v for k, v in original(c2w, cam, outputs).items() if k != "rgb"})
+    with pytest.raises(InvalidArgument, match=r"the source view has no rgb image for the system under test"):
+        run_study([scene], [resolve_sut("orb", None)], TINY)
