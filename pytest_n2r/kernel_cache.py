@@ -34,7 +34,7 @@ def ensure_kernel_cache(package: Path = Path(__file__).parent) -> Path | None:
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     numba_config = sys.modules.get("numba.core.config")
     if numba_config is not None:  # read at numba's import: set where its locators look now
-        numba_config.CACHE_DIR = str(folder)
+        numba_config.CACHE_DIR = str(folder)  # type: ignore[attr-defined]  # numba's config sets its names at run time
     return folder
 
 

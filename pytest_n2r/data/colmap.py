@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 import struct
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -113,7 +113,7 @@ def find_colmap_model(folder: str | os.PathLike) -> Path | None:
     return None
 
 
-def camera_from_colmap(model: str, width: int, height: int, params: Sequence[float], where: str = "camera") -> Camera:
+def camera_from_colmap(model: str, width: int, height: int, params: Iterable[float], where: str = "camera") -> Camera:
     """Our :class:`Camera` (OpenCV pixel centres and distortion) from a COLMAP camera model and params."""
     p = [float(x) for x in params]
     expected = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8, "FULL_OPENCV": 12}

@@ -24,6 +24,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     import PIL.Image
+    from PIL import ImageCms
 
 __all__ = ["PhotoColourWarning", "has_alpha", "to_srgb", "warn_if_transparent", "transparent"]
 
@@ -53,7 +54,7 @@ def to_srgb(image: np.ndarray, icc: bytes | None, path: str | os.PathLike) -> np
 
 
 @functools.lru_cache(maxsize=8)
-def _transform(icc: bytes) -> object | None:
+def _transform(icc: bytes) -> ImageCms.ImageCmsTransform | None:
     """Little CMS's transform from the RGB profile ``icc`` to sRGB, or ``None`` when there is nothing to do (not an
     RGB profile, or within one level of the identity on every colour of a 16-level grid)."""
     from PIL import Image, ImageCms
@@ -69,7 +70,7 @@ def _transform(icc: bytes) -> object | None:
 
 
 @functools.lru_cache(maxsize=1)
-def _srgb() -> object:
+def _srgb() -> ImageCms.ImageCmsProfile:
     from PIL import ImageCms
 
     return ImageCms.ImageCmsProfile(ImageCms.createProfile("sRGB"))

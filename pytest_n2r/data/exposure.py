@@ -161,7 +161,10 @@ def measure_exposure(views: Sequence[CapturedView], *, patch_px: float = 3.0, ne
         raise InvalidArgument(f"measure_exposure needs every view's image; not loaded: {', '.join(missing[:5])}"
                               + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
     cameras = [v.camera.fit_within(max_side) for v in views]
-    images = [v.image if c is v.camera else resize_image(v.image, c.width, c.height) for v, c in zip(views, cameras)]
+    images: list[np.ndarray] = []
+    for v, c in zip(views, cameras):
+        assert v.image is not None, "checked above: every image is loaded"
+        images.append(v.image if c is v.camera else resize_image(v.image, c.width, c.height))
     found = matched_pairs(images, cameras, [v.c2w for v in views], neighbours=neighbours, min_angle_deg=0.0)
     read: list[list[np.ndarray]] = [[np.empty(0), np.empty(0)] for _ in found]  # pair -> colours in i, in j
     by_photo: dict[int, list[tuple[int, int, np.ndarray]]] = {}

@@ -27,7 +27,7 @@ import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -38,6 +38,7 @@ from .listing import IMAGE_SUFFIXES, images_in_subfolders, list_images, other_fi
 
 if TYPE_CHECKING:
     import PIL.Image
+    import PIL.TiffImagePlugin
 
 __all__ = ["IMAGE_SUFFIXES", "list_images", "read_image", "read_image_size", "read_turn", "to_rgb8",
            "resize_image", "iter_readable", "images_in_subfolders", "subfolder_hint", "other_files"]
@@ -187,7 +188,8 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
     try:
         with _header(path) as im:
             # Pillow reports a TIFF's size upright already (it orients TIFFs on loading); its tags hold the stored one
-            width, height = (im.tag_v2[256], im.tag_v2[257]) if _is_tiff(head) else im.size
+            tags = cast("PIL.TiffImagePlugin.TiffImageFile", im).tag_v2 if _is_tiff(head) else None  # TIFF bytes
+            width, height = (tags[256], tags[257]) if tags is not None else im.size
             orientation = _exif_orientation(im, path)
     except (OSError, UnidentifiedImageError, KeyError):
         height, width = read_image(path).shape[:2]

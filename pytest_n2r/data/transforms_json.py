@@ -261,6 +261,7 @@ def _read_camera(meta: dict, raw: dict, where: str, image: Path | None, model: s
             raise IngestError(f"{where}: field {key!r}={side!r} must be a whole number of pixels (the image's "
                               f"{'width' if key == 'w' else 'height'})")
     if w is None or h is None:
+        assert image is not None, "refused above: no size and no image"
         w, h = photo_size(image, pixels)
     fx, fy = _number(meta, raw, "fl_x", where), _number(meta, raw, "fl_y", where)
     if fx is None:

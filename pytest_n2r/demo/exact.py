@@ -106,14 +106,15 @@ class GroundTruthScene(Scene):
     renderer_version = "5"
 
     def __init__(
-        self, name: str, primitives: Sequence[Primitive], views: Sequence[SceneView], *,
+        self, name: str, primitives: Sequence[Primitive | Group], views: Sequence[SceneView], *,
         light: Sequence[float], ambient: float, background: Sequence[float], far: float,
         supersample: int = 2, metres_per_unit: float | None = 1.0, reference_length: float | None = None,
     ) -> None:
         self.name = name
         self._items = tuple(primitives)
         flat: list[Primitive] = []
-        self._groups: list[tuple[np.ndarray, np.ndarray, list[int]]] = []
+        #: ``(box lo, box hi, members)`` of each group; a lone primitive's box is ``(None, None)``
+        self._groups: list[tuple[np.ndarray | None, np.ndarray | None, list[int]]] = []
         for index, item in enumerate(primitives):
             if isinstance(item, Group):
                 _check_group_box(name, index, item)
@@ -220,7 +221,7 @@ class GroundTruthScene(Scene):
         """:meth:`cast` by the vectorized numpy definition."""
         ts = np.full((len(self.primitives), len(o)), np.inf)
         for lo, hi, members in self._groups:
-            if lo is None:
+            if lo is None or hi is None:  # a lone primitive: both None
                 ts[members[0]] = self.primitives[members[0]].intersect(o, d)
                 continue
             t_near, t_far = slab_hits(o, d, lo, hi)

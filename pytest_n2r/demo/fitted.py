@@ -148,7 +148,7 @@ def _torch_threads(n: int) -> Iterator[None]:
 
     before_torch, before_numba = torch.get_num_threads(), numba.get_num_threads()
     torch.set_num_threads(n)
-    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))  # type: ignore[attr-defined]  # set at run time
     try:
         yield
     finally:

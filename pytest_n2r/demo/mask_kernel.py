@@ -53,7 +53,7 @@ def _module_with_trig(module: types.ModuleType) -> types.ModuleType:
     """A stand-in for ``numpy`` or ``math`` whose ``sin`` and ``cos`` are :mod:`.trig`'s."""
     shim = types.ModuleType(f"n2r_mask_{module.__name__}")
     shim.__dict__.update({k: v for k, v in vars(module).items() if not k.startswith("__")})
-    shim.sin, shim.cos = trig.sin, trig.cos
+    shim.__dict__.update(sin=trig.sin, cos=trig.cos)
     return shim
 
 
@@ -128,7 +128,7 @@ def _function_parts(fn: types.FunctionType, seen: set[int]) -> list[Any] | None:
     return parts
 
 
-def mask_fingerprint(fn: Callable) -> str | None:
+def mask_fingerprint(fn: types.FunctionType) -> str | None:
     """A name for the compiled form of mask ``fn`` (a plain Python function) that changes when the mask's code,
     a function it calls, their source files or a simple global it reads changes (see the module's
     *Convention*); ``None`` when the mask cannot be kept on disk.
@@ -166,13 +166,13 @@ def compile_mask(fn: Callable) -> Any:
         batch.__qualname__ = f"mask_{fingerprint or 'uncached'}"
         # a kernel piece: a process that finds another compiling it waits and loads it from numba's cache
         with claim_piece(batch.__qualname__) if fingerprint is not None else nullcontext():
-            batch = njit(MASK_SIGNATURE, nogil=True, error_model="numpy", cache=fingerprint is not None)(batch)
+            kernel = njit(MASK_SIGNATURE, nogil=True, error_model="numpy", cache=fingerprint is not None)(batch)
     except NumbaError as exc:
         raise InvalidArgument(
             f"Blend mask {name!r} cannot be compiled ({type(exc).__name__}); a mask must be a plain function "
             "of two floats written with numpy ufuncs and math") from None
-    _compiled[fn] = batch
-    return batch
+    _compiled[fn] = kernel
+    return kernel
 
 
 @njit(MASK_SIGNATURE, cache=True)

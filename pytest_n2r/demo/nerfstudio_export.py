@@ -38,8 +38,11 @@ def export_scene(scene: GroundTruthScene, out_dir: str | os.PathLike, size: int 
     cap = capture_scene(scene, size)
     marker = {"n2r_scene": scene.name, "n2r_content_hash": scene.content_hash, "n2r_complete": False, "frames": []}
     atomic_write_text(out / "transforms.json", json.dumps(marker, indent=1) + "\n")  # before any image
-    frames, train, val = [], [], []
+    frames: list[SourceFrame] = []
+    train: list[str] = []
+    val: list[str] = []
     for v in cap.views:
+        assert v.image is not None, "capture_scene renders every view's image"
         ok, png = cv2.imencode(".png", cv2.cvtColor(v.image, cv2.COLOR_RGB2BGR))  # OpenCV wants BGR
         if not ok:  # pragma: no cover - encoding an uint8 RGB image does not fail
             raise RuntimeError(f"could not encode {v.name}")

@@ -155,7 +155,7 @@ def _degrade(rgb: np.ndarray, gain: float, wb: np.ndarray, sigma: float, streak:
     linear = (rgb.astype(np.float32) / 255.0) ** 2.2 * (gain * wb.astype(np.float32))
     if streak is not None:  # the sensor integrates light while the phone moves: a smear in linear light
         linear = cv2.filter2D(linear, -1, streak.astype(np.float32), borderType=cv2.BORDER_REFLECT)
-    out = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
+    out: np.ndarray = np.clip(linear, 0.0, 1.0) ** (1 / 2.2) * 255.0
     if sigma > 0.05:
         out = cv2.GaussianBlur(out, (0, 0), sigma)
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
@@ -248,7 +248,9 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
             if draw < settings.shaken:
                 shake_px, shake_deg = settings.shake_px, 180.0 * float(angle)
         streak = streak_kernel(shake_px, shake_deg) if shake_px > 0 else None
-        upright = _degrade(scene.render(c2w, camera, ("rgb",)).rgb, gain, wb, sigma, streak)
+        rgb = scene.render(c2w, camera, ("rgb",)).rgb
+        assert rgb is not None, "rendered with rgb"
+        upright = _degrade(rgb, gain, wb, sigma, streak)
         path = out / f"photo_{index:03d}{suffix}"
         exif = Image.Exif()
         if exif_rotated:  # the phone keeps the sensor's landscape pixels and says how to turn them

@@ -36,8 +36,12 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from ..errors import InvalidArgument
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["sin", "cos", "tan", "fma", "norm3"]
 
@@ -143,7 +147,7 @@ def fma(a: float, b: float, c: float) -> float:
     return (na * nb * dc + nc * da * db) / (da * db * dc)  # an integer ratio, rounded once by the division
 
 
-def norm3(v: Sequence[float]) -> float:
+def norm3(v: Sequence[float] | np.ndarray) -> float:
     """The length of the 3-vector ``v`` as the shipped twins' BLAS summed it (module *Convention*)."""
     if len(v) != 3:
         raise InvalidArgument(f"norm3(v): expected a 3-vector, got {len(v)} components")

@@ -166,7 +166,7 @@ class CompiledScene:
             else:  # every thread-th band per thread: bands of sky and of wall interleave (the kernel drops the GIL)
                 list(render_pool().map(lambda first: _render_kernel(first, threads, *scratch[first], *args),
                                        range(threads)))
-        out = {}
+        out: dict[str, np.ndarray] = {}
         if want_rgb:
             out["rgb"] = rgb
         if want_depth:
@@ -186,7 +186,7 @@ class _Builder:
         self.node_kind: list[int] = []
         self.node_par: list[list[float]] = []
         self.node_child: list[tuple[int, int]] = []
-        self.rings: list[tuple[float, float, float, float]] = []
+        self.rings: list[tuple[float, ...]] = []  # (radius, r, g, b)
         self.masks: list[Any] = []
         self.textures: dict[int, int] = {}
         self.texture_list: list[Texture] = []
@@ -350,7 +350,13 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
                   background: np.ndarray) -> CompiledScene:
     """Flatten a scene's primitives (groups keep their box), materials and textures into kernel tables."""
     b = _Builder()
-    groups, boxes, kinds, prims, prim_mat, waves, bounds = [], [], [], [], [], [], []
+    groups: list[tuple[int, int, int]] = []
+    boxes: list[list[float]] = []
+    kinds: list[int] = []
+    prims: list[list[float]] = []
+    prim_mat: list[list[int]] = []
+    waves: list[list[float]] = []  # a relief's rows (amplitude, fx, px, fz, pz)
+    bounds: list[list[float]] = []
     for item in items:
         children = item.children if isinstance(item, Group) else (item,)
         first = len(kinds)
@@ -359,9 +365,8 @@ def compile_scene(items: list[Primitive | Group], light: np.ndarray, ambient: fl
             kinds.append(kind)
             prims.append(par)
             prim_mat.append(faces)
-        boxed = isinstance(item, Group)
-        groups.append((first, len(kinds), int(boxed)))
-        boxes.append([*item.lo, *item.hi] if boxed else [0.0] * 6)
+        groups.append((first, len(kinds), int(isinstance(item, Group))))
+        boxes.append([*item.lo, *item.hi] if isinstance(item, Group) else [0.0] * 6)
         bounds.extend(primitive_bounds(prim) for prim in children)
     tex_meta, texels = b.texture_tables()
     return CompiledScene(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import check_positive
-from ..data.capture import Capture, CapturedView
+from ..data.capture import Capture, CapturedView, Split
 from ..data.extent import scene_bounds
 from ..errors import InvalidArgument, InvalidType
 from ..geometry import Camera, backproject, pixel_grid
@@ -48,12 +48,17 @@ def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points
     views = []
     points = []
     for v in scene.views:
+        if v.split not in ("train", "heldout"):  # a capture's view is trained on or held out: no third kind
+            raise InvalidArgument(f"scene {scene.name!r}: view {v.name!r} has split={v.split!r}; a capture's views "
+                                  "are 'train' or 'heldout'")
+        split: Split = "train" if v.split == "train" else "heldout"
         camera = check_size(size, v.camera)
         image = scene.render(v.c2w, camera, "rgb").rgb
-        views.append(CapturedView(name=v.name, camera=camera, c2w=v.c2w.copy(), split=v.split, image=image))
+        views.append(CapturedView(name=v.name, camera=camera, c2w=v.c2w.copy(), split=split, image=image))
         if v.split == "train":
             small = v.camera.fit_within(64)
             depth = scene.render(v.c2w, small, ("depth", "opacity"))
+            assert depth.depth is not None and depth.opacity is not None, "rendered with both"
             hit = (depth.opacity.ravel() >= 1.0) & (depth.depth.ravel() <= 2 * scene.reference_length)
             uv = pixel_grid(small).reshape(-1, 2)[hit]
             points.append(backproject(uv, depth.depth.ravel()[hit].astype(np.float64), small, v.c2w))

@@ -58,7 +58,7 @@ def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = Z_UP) -> np.nd
 
 
 @njit(cache=True, error_model="numpy")
-def _smoothstep(lo: float, hi: float, x: np.ndarray) -> np.ndarray:
+def _smoothstep(lo: float | np.ndarray, hi: float | np.ndarray, x: np.ndarray) -> np.ndarray:
     """Smooth 0 → 1 between ``lo`` and ``hi`` (numpy ufuncs only: masks also run compiled, on floats; no
     zero-division check, ``lo < hi``, so that a loop over compiled masks vectorizes)."""
     s = np.minimum(np.maximum((x - lo) / (hi - lo), 0.0), 1.0)

@@ -49,7 +49,10 @@ def sample_splats(scene: GroundTruthScene, count: int, *, sh_degree: int = 0, se
         o, d = camera_rays(cam, view.c2w, uv)
         t, k = scene.cast(o, d)
         hit = np.isfinite(t)
-        origins.append(o[hit]), dirs.append(d[hit]), ts.append(t[hit]), which.append(k[hit])
+        origins.append(o[hit])
+        dirs.append(d[hit])
+        ts.append(t[hit])
+        which.append(k[hit])
     o, d, t, k = (np.concatenate(a) for a in (origins, dirs, ts, which))
     if len(t) < count:
         raise InvalidArgument(f"scene {scene.name!r}: the training views hit a surface {len(t)} times; asked for "

@@ -86,7 +86,7 @@ class Texture:
             raise InvalidArgument(f"wrap={wrap!r}; expected 'mirror' or 'clamp'")
         texture = cls.__new__(cls)
         texture.wrap = wrap
-        texture._recipe = (name, tint, gain, contrast, quarter_turns)
+        texture.__dict__["_recipe"] = (name, tint, gain, contrast, quarter_turns)  # not a field: read from __dict__
         return texture
 
     def __getattr__(self, name: str) -> Any:
@@ -187,7 +187,8 @@ def _code_digest() -> str:
     """What else the texels depend on: this module's source and the numpy and scikit-image versions."""
     import skimage
 
-    return hashlib.sha256(Path(__file__).read_bytes() + f"{np.__version__}/{skimage.__version__}".encode()).hexdigest()
+    versions = f"{np.__version__}/{skimage.__version__}"  # type: ignore[attr-defined]  # skimage's stub lacks it
+    return hashlib.sha256(Path(__file__).read_bytes() + versions.encode()).hexdigest()
 
 
 def _photo_digest(texture: Texture, recipe: tuple[Any, ...]) -> str:

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, fields, replace
+from typing import TYPE_CHECKING
 
 from ..errors import InvalidArgument
 from .density import MAX_DENSITY_SHIFT, alpha_range, density_shift_for, step_ratio_range
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 __all__ = ["LATER_SETTINGS", "SH_DEGREES", "FieldConfig", "check_setting_types"]
 
@@ -35,11 +39,12 @@ _KINDS: dict[str, tuple[str, Callable[[object], bool]]] = {
 }
 #: a colour: also a 1-D NumPy array of numbers (the caller checks its length and range and stores plain floats)
 _KINDS["tuple[float, float, float]"] = (
-    "three numbers", lambda v: (isinstance(v, (tuple, list)) or (type(v).__name__ == "ndarray" and v.ndim == 1))
+    "three numbers", lambda v: (isinstance(v, (tuple, list)) or (
+        type(v).__name__ == "ndarray" and getattr(v, "ndim", None) == 1 and isinstance(v, Iterable)))
     and all(isinstance(x, numbers.Real) and not isinstance(x, bool) for x in v))
 
 
-def check_setting_types(settings: object) -> None:
+def check_setting_types(settings: DataclassInstance) -> None:
     """Every field of the dataclass ``settings`` has its declared type, before any range is checked (a string,
     None or a bool where a number belongs is named, with the type expected and the default), else
     :class:`~pytest_n2r.errors.InvalidArgument`."""

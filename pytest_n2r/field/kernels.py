@@ -41,7 +41,7 @@ def block_occupancy(occupancy: np.ndarray) -> np.ndarray:
     nb = (n + BLOCK - 1) // BLOCK
     padded = np.zeros((nb * BLOCK,) * 3, dtype=bool)
     padded[:n, :n, :n] = occupancy.astype(bool)
-    return padded.reshape(nb, BLOCK, nb, BLOCK, nb, BLOCK).any(axis=(1, 3, 5)).astype(np.uint8)
+    return np.asarray(padded.reshape(nb, BLOCK, nb, BLOCK, nb, BLOCK).any(axis=(1, 3, 5)), dtype=np.uint8)
 
 
 def thread_ranges(n: int) -> np.ndarray:

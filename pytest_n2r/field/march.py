@@ -43,7 +43,7 @@ class MarchGrid:
 
     def numpy(self) -> tuple[np.ndarray, np.ndarray]:
         """``(cells, blocks)`` as uint8 arrays for the compiled kernels (built once)."""
-        if self._cells is None:
+        if self._cells is None or self._blocks is None:  # built together
             self._cells = np.ascontiguousarray(self.occupancy.cpu().numpy().astype(np.uint8))
             self._blocks = kernels.block_occupancy(self._cells)
         return self._cells, self._blocks

@@ -75,8 +75,8 @@ def project(points_world: np.ndarray, camera: Camera, c2w: np.ndarray) -> tuple[
     return np.stack([u, v], -1), z
 
 
-def pixels_from_camera(x: np.ndarray, y: np.ndarray, z: np.ndarray, fx: ArrayLike, fy: ArrayLike, cx: ArrayLike,
-                       cy: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+def pixels_from_camera(x: np.ndarray, y: np.ndarray, z: np.ndarray, fx: float | np.ndarray, fy: float | np.ndarray,
+                       cx: float | np.ndarray, cy: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Camera-frame coordinates → pixel coordinates ``(u, v)``, NaN where ``z <= 0`` (behind the camera).
 
     Every argument broadcasts (intrinsics in pixels), so one call projects into many cameras at once.

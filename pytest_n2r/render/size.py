@@ -91,9 +91,10 @@ for this view)
         if self.longer is not None:
             fitted = camera.scaled(self.longer / max(camera.width, camera.height))
         else:
-            fitted = camera.scaled(min(self.width / camera.width, self.height / camera.height))
-            if abs(fitted.width - self.width) <= 1 and abs(fitted.height - self.height) <= 1:
-                fitted = camera.resized(self.width, self.height)  # the same aspect, to a pixel: exactly the box
+            width, height = self._box()
+            fitted = camera.scaled(min(width / camera.width, height / camera.height))
+            if abs(fitted.width - width) <= 1 and abs(fitted.height - height) <= 1:
+                fitted = camera.resized(width, height)  # the same aspect, to a pixel: exactly the box
         if min(fitted.width, fitted.height) < MIN_SIDE:
             raise InvalidArgument(
                 f"a {camera.width}x{camera.height} view at render size {self} is {fitted.width}x{fitted.height} "
@@ -112,8 +113,14 @@ for this view)
                 side += 1
             return f"at least {side}"
         # the box scales the view by min(W / width, H / height): both ratios must reach ``need``
-        grow = max(need * camera.width / self.width, need * camera.height / self.height, 1.0)
-        return f"e.g. {math.ceil(self.width * grow)}x{math.ceil(self.height * grow)}"
+        width, height = self._box()
+        grow = max(need * camera.width / width, need * camera.height / height, 1.0)
+        return f"e.g. {math.ceil(width * grow)}x{math.ceil(height * grow)}"
+
+    def _box(self) -> tuple[int, int]:
+        """``(width, height)`` of a box size (one without ``longer``: :meth:`__post_init__` holds both set)."""
+        assert self.width is not None and self.height is not None, "a box size has a width and a height"
+        return self.width, self.height
 
     def __str__(self) -> str:
         return f"{self.width}x{self.height}" if self.longer is None else f"{self.longer}"

@@ -174,8 +174,8 @@ class SplatRenderer:
                 c.finish(trans, acc_rgb, acc_depth, background, out_rgb, out_depth, out_opacity)
         clock.lap("finish")
         self.stage_seconds = clock.seconds
-        result = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),
-                  "opacity": out_opacity.reshape(h, w)}
+        result: dict[str, np.ndarray] = {"rgb": out_rgb.reshape(h, w, 3), "depth": out_depth.reshape(h, w),
+                                         "opacity": out_opacity.reshape(h, w)}
         return {name: result[name] for name in outputs}
 
 

@@ -37,7 +37,8 @@ def render_pool() -> ThreadPoolExecutor:
     may be set to); a forked child gets its own (the parent's threads do not exist in it)."""
     global _POOL
     if _POOL is None or _POOL[0] != os.getpid():
-        _POOL = (os.getpid(), ThreadPoolExecutor(numba.config.NUMBA_NUM_THREADS, thread_name_prefix="n2r-render"))
+        threads = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # numba's config: set at run time
+        _POOL = (os.getpid(), ThreadPoolExecutor(threads, thread_name_prefix="n2r-render"))
     return _POOL[1]
 
 

@@ -12,6 +12,7 @@ import json
 import struct
 import zipfile
 import zlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ ZIP_TIME = (1980, 1, 1, 0, 0, 0)
 MAX_JSON_BYTES = 64 * 2**20
 
 
-def zip_bytes(entries: list[tuple[str, bytes, int, int | None]]) -> bytes:
+def zip_bytes(entries: Sequence[tuple[str, bytes, int, int | None]]) -> bytes:
     """A zip archive of ``(name, data, compression, level)`` in the given order, with fixed timestamps and
     modes."""
     buffer = io.BytesIO()

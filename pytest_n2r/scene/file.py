@@ -164,10 +164,12 @@ def save_scene(
     if not tensors["vertex_values"].isfinite().all():  # NaN, or beyond float16's ±65504
         raise InvalidArgument("save_scene: the field holds NaN or values beyond float16's ±65504, which a scene "
                               "file cannot store (nothing was written); the fit diverged")
-    entries = [(schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
-               (schema.FIELD_FILE, safetensors.torch.save(tensors), zipfile.ZIP_DEFLATED, 1)]
+    entries: list[tuple[str, bytes, int, int | None]] = [
+        (schema.SCENE_JSON, text.encode("utf-8"), zipfile.ZIP_DEFLATED, 6),
+        (schema.FIELD_FILE, safetensors.torch.save(tensors), zipfile.ZIP_DEFLATED, 1)]
     for view, member in zip(views, members):
         if member is not None:
+            assert view.image is not None, "frames_to_json names a member only for a view with an image"
             entries.append((member, _encode_jpeg(view.image, image_quality, view.name), zipfile.ZIP_STORED, None))
     return atomic_write_bytes(path, zip_bytes(entries))
 
@@ -219,7 +221,7 @@ def _decode_jpeg(payload: bytes, member: str, name: str, source: str, width: int
 def _read_photos(archive: zipfile.ZipFile, frames: list, source: str) -> dict[str, np.ndarray]:
     """The photos of ``frames`` by member name, each member decoded once (frames naming the same one share its
     array), once their decoded size (3 bytes a pixel, over the distinct members) is known to fit in memory."""
-    sizes = {}
+    sizes: dict[str, int] = {}
     for _, camera, _, _, member in frames:
         if member is not None:
             sizes.setdefault(member, 3 * camera.width * camera.height)
@@ -365,7 +367,8 @@ def read_scene_file(path: str | os.PathLike, *, images: bool = True, lazy_field:
         frames, reference_length, metres_per_unit, bounds, config, field_meta = _check_json(data, source)
         limit = field_limit(archive, field_meta, source)
         stored = StoredMember.read(archive, path, schema.FIELD_FILE, source, limit, "its safetensors header")
-        background = as_unit_rgb(field_meta["background"])  # checked by _check_json
+        background = as_unit_rgb(field_meta["background"])
+        assert background is not None, "checked by _check_json"
         photos = _read_photos(archive, frames, source) if images else {}
         views = [SceneView(index, name, camera, c2w, split, photos.get(member))
                  for index, (name, camera, c2w, split, member) in enumerate(frames)]

@@ -55,11 +55,11 @@ def load_scene(path: str | os.PathLike, device: str | torch.device = "auto", *, 
             raise InvalidType(f"settings must be a SplatSettings for the splat scene {path}, got "
                               f"{type(settings).__name__}")
         if is_ply:
-            from .splat_scene import load_splat_scene
+            from .splat_scene import MIN_COVERAGE, load_splat_scene
 
-            more = {} if min_coverage is None else {"min_coverage": min_coverage}
+            coverage = MIN_COVERAGE if min_coverage is None else min_coverage
             return load_splat_scene(path, cameras=cameras, dataparser_transforms=dataparser_transforms,
-                                    settings=settings, **more)
+                                    settings=settings, min_coverage=coverage)
         from .splat_file import read_splat_file
 
         return read_splat_file(path, settings=settings)

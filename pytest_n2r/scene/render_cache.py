@@ -257,12 +257,14 @@ class RenderCache:
         the directory is not a pytest-n2r cache (no ``CACHEDIR.TAG`` of pytest-n2r's, and other files in it)."""
         self._memory.clear()
         self._memory_used = 0
-        foreign = [] if self.directory is None else foreign_entries(self.directory)
+        if self.directory is None:
+            return
+        foreign = foreign_entries(self.directory)
         if foreign:
             raise InvalidArgument(f"{not_a_cache(self.directory, foreign)}; nothing was deleted (choose a new or empty "
                                   "folder for the cache)")
         for sub in (_SUBDIR, _DECISIONS, _FLOORS):
-            if self.directory is not None and (self.directory / sub).exists():
+            if (self.directory / sub).exists():
                 shutil.rmtree(self.directory / sub, ignore_errors=True)
 
     def disk_usage(self) -> int:
@@ -313,12 +315,12 @@ class RenderCache:
         except (OSError, ValueError):  # unreadable (disk trouble, another version's format): re-render
             discard(path)
             return None
-        value = _as_requested(value, name, camera)
-        if value is None:  # not what was asked for (damaged or planted): re-render
+        requested = _as_requested(value, name, camera)
+        if requested is None:  # not what was asked for (damaged or planted): re-render
             discard(path)
             return None
         touch(path)
-        return value
+        return requested
 
     def _disk_put(self, key: str, name: str, value: np.ndarray) -> None:
         if self.directory is None or value.nbytes > self.disk_bytes:

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -89,7 +89,9 @@ def frames_to_json(views: Sequence[Any], with_images: bool) -> tuple[list[dict],
                               "holds one view a name")
     cameras = list(dict.fromkeys(v.camera for v in views))
     camera_index = {cam: i for i, cam in enumerate(cameras)}
-    frames, members, taken = [], [], set()
+    frames: list[dict] = []
+    members: list[str | None] = []
+    taken: set[str] = set()
     for i, v in enumerate(views):
         if v.split not in SPLITS:
             raise InvalidArgument(f"view {v.name!r} has split={v.split!r}; expected one of {SPLITS}")
@@ -109,6 +111,11 @@ def require(data: Any, key: str, where: str, source: str) -> Any:
     return data[key]
 
 
+@overload
+def read_number(data: dict, key: str, source: str, *, positive: bool = True, optional: Literal[False] = False
+                ) -> float: ...
+@overload
+def read_number(data: dict, key: str, source: str, *, positive: bool = True, optional: bool) -> float | None: ...
 def read_number(data: dict, key: str, source: str, *, positive: bool = True, optional: bool = False) -> float | None:
     """A finite (positive, unless ``positive=False``) number of ``scene.json``; ``None`` allowed if ``optional``."""
     value = require(data, key, SCENE_JSON, source)

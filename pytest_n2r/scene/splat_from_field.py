@@ -87,11 +87,11 @@ def field_to_gaussians(field: SceneField, *, size: float = DEFAULT_SIZE, path: f
     sigma = F.softplus(values[:, 0] + field.density_shift)
     opacity = (-torch.expm1(-sigma * path)).clamp(max=_MAX_OPACITY).numpy()
     keep = opacity >= ALPHA_MIN
-    cells, values, opacity = cells[keep].numpy(), values[keep], opacity[keep]
+    kept, values, opacity = cells[keep].numpy(), values[keep], opacity[keep]
 
     space = field.space
     voxel = space.voxel_size(res)
-    centre = -space.half_size + voxel * (cells + 0.5)
+    centre = -space.half_size + voxel * (kept + 0.5)
     world = lambda q: np.asarray(space.center) + space.radius * uncontract(space, q)
     means = world(centre)
     extent = np.empty_like(means)

@@ -159,6 +159,7 @@ def _reference_renders(scene: Scene, views: Sequence[SceneView]) -> tuple[int, n
     depths, covered = [], []
     for view in picked:
         out = scene.render(view.c2w, view.camera.fit_within(REFERENCE_SIZE), ("depth", "opacity"))
+        assert out.depth is not None and out.opacity is not None, "rendered with both"
         depths.append(out.depth[out.opacity >= 0.5])
         covered.append(float(out.opacity.mean()))
     return len(picked), np.concatenate(depths), float(np.mean(covered))
@@ -265,7 +266,7 @@ def load_splat_scene(path: str | os.PathLike, *, cameras: str | os.PathLike | No
     else:
         captured = read_cameras(found)
         given = dataparser_transforms is not None
-        if given:
+        if dataparser_transforms is not None:
             frame = None if dataparser_transforms is False else Path(dataparser_transforms)
         else:
             frame = find_dataparser_transforms(path)

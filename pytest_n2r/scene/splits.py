@@ -20,7 +20,7 @@ def check_source_split(name: str, split: object) -> str:
     """``split`` if it is one of :data:`SOURCE_SPLITS`, else an error naming the argument ``name``."""
     if split not in SOURCE_SPLITS:
         raise InvalidArgument(f"{name}={split!r} is not a split; expected one of {SOURCE_SPLITS}")
-    return split  # type: ignore[return-value]
+    return split
 
 
 def scene_views(scene: Scene, split: str = "heldout") -> list[SceneView]:

@@ -75,7 +75,9 @@ class Gaussians:
     @property
     def sh_degree(self) -> int:
         """The spherical-harmonics degree, 0 to 3."""
-        return int(sh_degree_of(self.sh.shape[1]))
+        degree = sh_degree_of(self.sh.shape[1])
+        assert degree is not None, "__post_init__ checked the coefficient count"
+        return degree
 
     @property
     def opacities(self) -> np.ndarray:

@@ -53,3 +53,19 @@ def test_each_capture_point_is_a_pixel_of_a_training_view_on_its_surface_within_
     assert found.all(), (
         f"{name}: {np.sum(~found)} of {len(points)} capture points are no pixel of a training view's 64-pixel depth "
         f"map on its first surface within {limit:.2f} units, e.g. {points[~found][0]}")
+
+
+def test_a_view_neither_trained_on_nor_held_out_is_refused_by_name():
+    """A scene's view may have any split (a trajectory's are ``interpolated``); a capture's are ``train`` or
+    ``heldout``: such a view was put into the capture as a view of neither list, which the fit then ignored."""
+    import dataclasses
+
+    from pytest_n2r.demo import GroundTruthScene
+    from pytest_n2r.demo.rendered_capture import capture_scene
+
+    wall = ground_truth("wall")
+    odd = dataclasses.replace(wall.views[0], split="interpolated")
+    scene = GroundTruthScene("odd", list(wall.primitives), [odd, *wall.views[1:2]], light=(0, 0, 1), ambient=0.5,
+                             background=(0, 0, 0), far=30.0)
+    with pytest.raises(InvalidArgument, match=r"view 'wall_000.png' has split='interpolated'; .* 'train' or 'heldout'"):
+        capture_scene(scene, size=16)
