@@ -9,11 +9,15 @@ import io
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._output import FORCE_HELP, printable
 from ._scene import SCENE_HELP
+
+if TYPE_CHECKING:
+    from ..render.view import RenderedView
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
@@ -80,6 +84,18 @@ def _png(image: np.ndarray) -> bytes:
     return encoded.tobytes()
 
 
+def _output(rendered: RenderedView, name: str, scene: str) -> np.ndarray:
+    """Output ``name`` of ``rendered``; refused naming SCENE where it was asked for and not rendered (a Scene of one's
+    own whose ``_render`` leaves it out)."""
+    from ..errors import InvalidArgument
+
+    image = {"rgb": rendered.rgb, "depth": rendered.depth, "opacity": rendered.opacity}[name]
+    if image is None:
+        raise InvalidArgument(f"SCENE {scene!r} rendered no {name} where it was asked for one: its Scene's _render "
+                              "must return every output it is asked for")
+    return image
+
+
 def run(args: argparse.Namespace) -> int:
     from ..data.atomic import atomic_write_bytes
     from ..demo.scene_specs import load_scene_spec
@@ -118,14 +134,15 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     rendered = scene.render(c2w, camera, outputs)
     seconds = time.perf_counter() - start
-    encoded = {"rgb": _png(rendered.rgb)}
+    images = {name: _output(rendered, name, args.scene) for name in outputs}
+    encoded = {"rgb": _png(images["rgb"])}
     if args.depth:
         raw = io.BytesIO()
-        np.save(raw, rendered.depth)
-        encoded["depth"] = _png(depth_preview(rendered.depth, rendered.opacity))
+        np.save(raw, images["depth"])
+        encoded["depth"] = _png(depth_preview(images["depth"], images["opacity"]))
         encoded["depth_raw"] = raw.getvalue()
     if args.opacity:
-        encoded["opacity"] = _png(np.rint(rendered.opacity * 255).astype(np.uint8))
+        encoded["opacity"] = _png(np.rint(images["opacity"] * 255).astype(np.uint8))
     written = [atomic_write_bytes(paths[key], data) for key, data in encoded.items()]
     device, backend = getattr(scene, "device", None), getattr(scene, "backend", None)  # a Scene need not say
     where = f" on {device}" if device is not None else ""
