@@ -9,15 +9,11 @@ import io
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ._output import FORCE_HELP, printable
-from ._scene import SCENE_HELP
-
-if TYPE_CHECKING:
-    from ..render.view import RenderedView
+from ._scene import SCENE_HELP, scene_output
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
@@ -84,18 +80,6 @@ def _png(image: np.ndarray) -> bytes:
     return encoded.tobytes()
 
 
-def _output(rendered: RenderedView, name: str, scene: str) -> np.ndarray:
-    """Output ``name`` of ``rendered``; refused naming SCENE where it was asked for and not rendered (a Scene of one's
-    own whose ``_render`` leaves it out)."""
-    from ..errors import InvalidArgument
-
-    image = {"rgb": rendered.rgb, "depth": rendered.depth, "opacity": rendered.opacity}[name]
-    if image is None:
-        raise InvalidArgument(f"SCENE {scene!r} rendered no {name} where it was asked for one: its Scene's _render "
-                              "must return every output it is asked for")
-    return image
-
-
 def run(args: argparse.Namespace) -> int:
     from ..data.atomic import atomic_write_bytes
     from ..demo.scene_specs import load_scene_spec
@@ -134,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     rendered = scene.render(c2w, camera, outputs)
     seconds = time.perf_counter() - start
-    images = {name: _output(rendered, name, args.scene) for name in outputs}
+    images = {name: scene_output(rendered, name, args.scene) for name in outputs}
     encoded = {"rgb": _png(images["rgb"])}
     if args.depth:
         raw = io.BytesIO()
