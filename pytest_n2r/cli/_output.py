@@ -246,7 +246,7 @@ def tolerant_streams() -> Iterator[None]:
     for name in ("stdout", "stderr"):
         stream = getattr(sys, name, None)
         errors, encoding = getattr(stream, "errors", None), getattr(stream, "encoding", None)
-        if errors in (ESCAPE, BYTES) or not hasattr(stream, "reconfigure"):
+        if stream is None or errors in (ESCAPE, BYTES) or not hasattr(stream, "reconfigure"):
             continue
         try:
             raw = errors == "surrogateescape" or (

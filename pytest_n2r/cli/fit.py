@@ -17,7 +17,7 @@ import time
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, TextIO
 
 from ._output import FORCE_HELP, printable
 from .poses import ANY_ROLL_HELP, add_frames_dir_argument
@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 __all__ = ["add_parser", "run", "parse_duration", "parse_durations", "parse_config_override", "APPEARANCE"]
 
 #: ``--appearance`` as ``fit(appearance=...)`` takes it.
-APPEARANCE = {"auto": "auto", "on": True, "off": False}
+APPEARANCE: dict[str, bool | Literal["auto"]] = {"auto": "auto", "on": True, "off": False}
 #: The fewest pixels a view may have on a side after ``--downscale``: the fit scores its held-out views with SSIM,
 #: whose window is 11×11 pixels (:func:`pytest_n2r.metrics.image_quality.ssim`).
 MIN_VIEW_SIDE = 11
@@ -149,7 +149,11 @@ class _Progress:
         from tqdm import tqdm
 
         self.by_steps = max_steps is not None
-        total = max_steps if self.by_steps else round(time_budget_s)
+        if max_steps is not None:
+            total = max_steps
+        else:
+            assert time_budget_s is not None, "run() gives a fit without --max-steps a time budget (600 s by default)"
+            total = round(time_budget_s)
         self.bar = tqdm(total=total, desc="starting", dynamic_ncols=True, file=sys.stderr,
                         disable=None if sys.stderr is not None else True,
                         bar_format="fit {percentage:3.0f}%|{bar}| {desc}")
@@ -174,11 +178,12 @@ class _Progress:
         with warnings.catch_warnings():
             shown = warnings.showwarning
 
-            def show(message: Warning | str, category: type[Warning], *where: object, **kw: object) -> None:
+            def show(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                     file: TextIO | None = None, line: str | None = None) -> None:
                 if issubclass(category, GridMemoryLimit):
                     self.bar.write(f"n2r fit: memory: {message}", file=sys.stderr)
                 else:
-                    shown(message, category, *where, **kw)
+                    shown(message, category, filename, lineno, file, line)
 
             warnings.showwarning = show
             yield

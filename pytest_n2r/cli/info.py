@@ -9,7 +9,7 @@ import json
 import os
 import sys
 from collections.abc import Callable, Iterator
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeGuard
 
 from ._output import printable
 from ._scene import SCENE_HELP
@@ -17,6 +17,7 @@ from ._scene import SCENE_HELP
 if TYPE_CHECKING:
     from ..demo.scene_specs import SceneSpec
     from ..scene.base import Scene
+    from ..scene.field_scene import FieldScene
     from ..scene.file import SceneFile
     from ..study.fidelity import FidelityReport
 
@@ -44,6 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..render.size import RenderSize
+    from ..scene.base import Scene
     from ..scene.splat_file import is_splat_file, splat_info
     from ._scene import scene_argument
 
@@ -57,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         print(printable(_json(info) if args.json else _readable(format_splat_info, info, spec.source)))
         return 0
     scene = _open(spec, images=args.shift)
-    if not _instance(scene, "pytest_n2r.scene.file", "SceneFile"):  # an exact demo scene, a 3DGS .ply ...
+    if isinstance(scene, Scene):  # no scene file: an exact demo scene, a 3DGS .ply ...
         if args.shift:
             raise _no_photos(spec.source, f"no fitted scene file (a {type(scene).__name__})")
         print(printable(_json(scene_info_dict(scene, spec)) if args.json else format_scene_info(scene, spec)))
@@ -92,14 +94,14 @@ def _open(spec: SceneSpec, images: bool) -> SceneFile | Scene:
     from ..demo.scene_specs import load_scene_spec
 
     scene = load_scene_spec(spec, "cpu", images=images)
-    return scene.file if _instance(scene, "pytest_n2r.scene.field_scene", "FieldScene") else scene
+    return scene.file if _fitted(scene) else scene
 
 
-def _instance(obj: Any, module: str, name: str) -> bool:
-    """``isinstance(obj, module.name)`` without importing ``module``: an object of a class whose module is not
+def _fitted(scene: Scene) -> TypeGuard[FieldScene]:
+    """Whether ``scene`` is a fitted field's, without importing its module: a scene of a class whose module is not
     imported is none of its instances (the fitted-scene modules import torch, about 1 s an exact scene need not pay)."""
-    loaded = sys.modules.get(module)
-    return loaded is not None and isinstance(obj, getattr(loaded, name))
+    loaded = sys.modules.get("pytest_n2r.scene.field_scene")
+    return loaded is not None and isinstance(scene, loaded.FieldScene)
 
 
 def _json(data: dict) -> str:

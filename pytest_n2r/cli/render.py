@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ._output import FORCE_HELP, printable
-from ._scene import SCENE_HELP
+from ._scene import SCENE_HELP, scene_output
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
@@ -118,14 +118,15 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     rendered = scene.render(c2w, camera, outputs)
     seconds = time.perf_counter() - start
-    encoded = {"rgb": _png(rendered.rgb)}
+    images = {name: scene_output(rendered, name, args.scene) for name in outputs}
+    encoded = {"rgb": _png(images["rgb"])}
     if args.depth:
         raw = io.BytesIO()
-        np.save(raw, rendered.depth)
-        encoded["depth"] = _png(depth_preview(rendered.depth, rendered.opacity))
+        np.save(raw, images["depth"])
+        encoded["depth"] = _png(depth_preview(images["depth"], images["opacity"]))
         encoded["depth_raw"] = raw.getvalue()
     if args.opacity:
-        encoded["opacity"] = _png(np.rint(rendered.opacity * 255).astype(np.uint8))
+        encoded["opacity"] = _png(np.rint(images["opacity"] * 255).astype(np.uint8))
     written = [atomic_write_bytes(paths[key], data) for key, data in encoded.items()]
     device, backend = getattr(scene, "device", None), getattr(scene, "backend", None)  # a Scene need not say
     where = f" on {device}" if device is not None else ""

@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from ._output import printable
 from ._scene import SCENE_HELP
+
+if TYPE_CHECKING:
+    from ..study.suts import Kind
 
 
 def _eps_list(text: str) -> tuple[float, ...]:
@@ -30,7 +34,7 @@ def _wxh(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _sut_kind(text: str) -> tuple[str | None, str]:
+def _sut_kind(text: str) -> tuple[str | None, Kind]:
     """``SUT=KIND`` (one ``--sut``) or ``KIND`` (every imported ``--sut``) as ``(sut or None, kind)``."""
     from ..study.suts import KINDS
 
@@ -41,13 +45,13 @@ def _sut_kind(text: str) -> tuple[str | None, str]:
     return sut or None, kind
 
 
-def _kinds(suts: list[str], given: list[tuple[str | None, str]]) -> dict[str, str]:
+def _kinds(suts: list[str], given: list[tuple[str | None, Kind]]) -> dict[str, Kind]:
     """The kind given for each ``--sut`` (``SUT=KIND`` wins over a bare ``KIND``, which applies to the imported
     ones: a built-in's kind is known)."""
     from ..errors import InvalidArgument
     from ..study.suts import BUILTIN_SUTS
 
-    kinds = {}
+    kinds: dict[str, Kind] = {}
     for sut, kind in given:
         if sut is not None and sut not in suts:
             raise InvalidArgument(f"--sut-kind {sut}={kind}: {sut!r} is not one of the --sut given "
@@ -132,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from ..study import StudyConfig, resolve_sut, run_study, write_study
     from ..study.suts import check_points
     from ._output import check_output_dir
-    from ._scene import scene_arguments
+    from ._scene import scene_arguments, scene_output
 
     for option, value in (("--examples", args.examples), ("--views", args.views), ("--fps-frames", args.fps_frames)):
         if value < 1:
@@ -147,10 +151,12 @@ def run(args: argparse.Namespace) -> int:
     config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
                          fps_frames=args.fps_frames, seed=args.seed,
                          **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))
-    scenes = [load_scene_spec(spec, args.device) for spec in scene_arguments(args.scenes)]
+    specs = scene_arguments(args.scenes)
+    scenes = [load_scene_spec(spec, args.device) for spec in specs]
     check_render_size(scenes, args.size)
     view = scenes[0].views[0]
-    probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).rgb
+    probe = scene_output(scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)), "rgb",
+                         specs[0].source)
     suts = [resolve_sut(spec, probe, kinds.get(spec), points=args.points) for spec in args.sut]
     with tqdm(desc="n2r study", unit="step", file=sys.stderr, disable=None) as bar:
         def progress(message: str) -> None:

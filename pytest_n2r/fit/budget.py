@@ -89,9 +89,10 @@ def check_time_budget(time_budget_s: Any) -> float | None:
     expected = "expected a finite number of seconds > 0, or None"
     if isinstance(time_budget_s, bool) or not isinstance(time_budget_s, Real):
         raise InvalidType(f"time_budget_s={time_budget_s!r}: {expected}, not {type(time_budget_s).__name__}")
-    if not (math.isfinite(time_budget_s) and time_budget_s > 0):
+    seconds = float(time_budget_s)
+    if not (math.isfinite(seconds) and seconds > 0):
         raise InvalidArgument(f"time_budget_s={time_budget_s!r}: {expected}")
-    return float(time_budget_s)
+    return seconds
 
 
 def budget_config(config: FieldConfig, time_budget_s: float | None, *, max_steps: int | None = None,

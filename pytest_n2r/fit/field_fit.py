@@ -1,11 +1,10 @@
 """Fitting a scene field to a capture: coarse-to-fine sparse voxel optimization with empty-space skipping.
 
-Each step takes ``batch_rays`` random pixels of the training views, marches their rays through the current
-occupancy grid (only occupied cells are sampled), renders them differentiably and takes an Adam step on the
-grid rows those samples touched. Every ``prune_every`` steps cells the field left (nearly) empty are dropped
-from the occupancy, so training and rendering get faster as the field takes shape; at each stage the grid is
-refined. A non-finite loss stops the fit with :class:`~pytest_n2r.errors.FitError` (the last checkpoint
-stays good).
+Each step takes ``batch_rays`` random pixels of the training views, marches their rays through the current occupancy
+grid (only occupied cells are sampled), renders them differentiably and takes an Adam step on the grid rows those
+samples touched. Every ``prune_every`` steps cells the field left (nearly) empty are dropped from the occupancy, so
+training and rendering get faster as the field takes shape; at each stage the grid is refined. A non-finite loss stops
+the fit with :class:`~pytest_n2r.errors.FitError` (the last checkpoint stays good).
 """
 
 from __future__ import annotations
@@ -127,7 +126,8 @@ class _Trainer:
         the last stores every vertex of its dilated occupancy: a sixth stay in use on the fox's 224³ grid)."""
         old, self.field = self.field, self.field.compact()
         self._index_rows()
-        rows, old = old.vertex_rows(self.flat_of_row), None  # the old values go before the moments are gathered
+        rows = old.vertex_rows(self.flat_of_row)
+        del old  # the old values go before the moments are gathered
         self.adam.keep(rows, self.field.values)
 
     def _reset_visibility(self) -> None:
@@ -140,14 +140,11 @@ class _Trainer:
 
     def march(self, o: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The batch's occupied samples, packed: ``(ray_idx, t, offsets)`` (:mod:`pytest_n2r.field.march`)."""
-        if self.compiled:
-            return march_compiled(o, d, self.grid)
-        return march_dense(o, d, self.grid)
+        return (march_compiled if self.compiled else march_dense)(o, d, self.grid)
 
     def step(self, lr_scale: float) -> tuple[float, float]:
         """One optimization step; returns (loss, batch PSNR in dB)."""
-        c, f = self.config, self.field
-        clock = self.phases
+        c, f, clock = self.config, self.field, self.phases
         clock.start(f.resolution)
         clock.steps[f.resolution] += 1
         pick = torch.randint(self.rays.n, (c.batch_rays,), generator=self.generator).to(self.device)
@@ -165,9 +162,10 @@ class _Trainer:
         g = self.grid
         if self.compiled:
             s = lattice_positions(o, d, t, ray_idx, g.step, g.shell_samples, g.far)
-            rows, weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
-                                                  self.space.shell, f.resolution, self.row_map)
-            unique, inverse, weights = (torch.from_numpy(a) for a in (*self.row_index.unique(rows), weights))
+            assert self.row_index is not None  # built with the compiled kernels' tables (_index_rows)
+            rows, corner_weights, cells = sample_corners(o.numpy(), d.numpy(), t.numpy(), ray_idx.numpy(),
+                                                         self.space.shell, f.resolution, self.row_map)
+            unique, inverse, weights = (torch.from_numpy(a) for a in (*self.row_index.unique(rows), corner_weights))
             sub = f.values[unique].requires_grad_(True)
             clock.lap("corners")
             rgb, alpha_sum, dist, sample_weight = Composite.apply(
@@ -204,8 +202,9 @@ class _Trainer:
             loss.backward()
             clock.lap("backward")
             grad = sub.grad
+            assert grad is not None  # sub is a leaf of the loss wherever a sample was marched
             if c.tv > 0 or c.tv_density > 0:
-                if self.compiled:
+                if self.tv_rows is not None:  # the compiled prior's neighbour table (_index_rows)
                     add_tv_gradient(f.values, unique, self.tv_rows, self.tv_weights, grad)
                 else:
                     grad += self.tv_weights * tv_gradient(f, self.flat_of_row, unique)
@@ -252,8 +251,8 @@ class _Trainer:
             self.limits.append({"step": self.steps, **choice.describe()})
             warnings.warn(f"at step {self.steps}, {choice.message()}", GridMemoryLimit, stacklevel=4)  # fit's caller
         if not choice.limited or choice.resolution > self.field.resolution:
-            self.stage, self.adam = stage, None  # the old grid's moments go before the new grid is made
-            self.field = self.field.upsampled(choice.resolution)
+            del self.adam  # the old grid's moments go before the new grid is made
+            self.stage, self.field = stage, self.field.upsampled(choice.resolution)
             self._reset_optimizer()
 
 
@@ -300,6 +299,7 @@ def fit(
     if time_budget_s is None and max_steps is None:
         raise InvalidArgument("fit needs time_budget_s or max_steps (or both)")
     time_budget_s = check_time_budget(time_budget_s)
+    budget_s = math.inf if time_budget_s is None else time_budget_s  # with no budget, max_steps paces the fit
     if max_steps is not None and (isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1):
         raise InvalidArgument(f"max_steps={max_steps!r}: expected an integer >= 1")
     dev = resolve_device(device)
@@ -318,15 +318,15 @@ def fit(
     stopped = False
 
     def progress_fraction() -> float:
-        return trainer.steps / max_steps if max_steps is not None else train_s / time_budget_s
+        return trainer.steps / max_steps if max_steps is not None else train_s / budget_s
 
     def budget_left() -> bool:  # and a step on this grid predicted to end within it, or nearly (phases.py)
-        left_s, budget_s = (math.inf, math.inf) if time_budget_s is None else (time_budget_s - train_s, time_budget_s)
-        return progress_fraction() < 1.0 and left_s > 0 and trainer.phases.may_step(left_s, budget_s)
+        return (progress_fraction() < 1.0 and budget_s > train_s
+                and trainer.phases.may_step(budget_s - train_s, budget_s))
 
     def snapshot() -> FitResult:
-        return FitResult(trainer.field.quantized(), config, {"steps": trainer.steps, "train_seconds": round(train_s, 2),
-                                                              "grid_limits": list(trainer.limits)})
+        so_far = {"steps": trainer.steps, "train_seconds": round(train_s, 2), "grid_limits": list(trainer.limits)}
+        return FitResult(trainer.field.quantized(), trainer.config, so_far)
 
     compiles = trainer.compiles  # a fresh installation's kernel compiles: not training (compile_clock.py)
     while budget_left():
@@ -334,7 +334,7 @@ def fit(
         frac = progress_fraction()
         grow = config.stage(frac) > trainer.stage
         if grow and max_steps is None:  # paced by its budget: a grid grows once pruned, where growth fits (phases.py)
-            finer, left_s = config.resolutions[trainer.stage + 1], time_budget_s - train_s
+            finer, left_s = config.resolutions[trainer.stage + 1], budget_s - train_s
             grow = not trainer.compact_pending and trainer.phases.may_grow(finer, left_s)  # compact_pending: unpruned
         with compiles.counting():
             if grow:
@@ -368,7 +368,7 @@ def fit(
             break
     if trainer.steps >= config.prune_after:  # a very short fit has not had time to grow anything yet
         trainer.prune()
-    trainer.adam = None  # its moments (two floats a value) are not needed from here on
+    del trainer.adam  # its moments (two floats a value) are not needed from here on
     final = trainer.field.quantized()
     e0 = time.perf_counter()
     scores = final_scores(final, heldout, train, capture.reference_length)

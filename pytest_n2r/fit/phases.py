@@ -76,7 +76,8 @@ class StepPhases:
         out = {}
         grids = [(str(res), self.steps[res], s) for res, s in self.seconds.items()]
         if grids:
-            grids.append(("all", sum(self.steps.values()), sum(s for _, _, s in grids)))
+            total = sum((s for _, _, s in grids), np.zeros((len(self.NAMES), 2)))
+            grids.append(("all", sum(self.steps.values()), total))
         for name, steps, seconds in grids:
             ms = 1e3 * seconds / max(steps, 1)
             out[name] = {"steps": steps, **{kind: {p: round(float(ms[k, j]), 3) for k, p in enumerate(self.NAMES)}

@@ -97,10 +97,10 @@ def add_tv_gradient(values: torch.Tensor, unique: torch.Tensor, neighbours: np.n
 
     The kernel loops over a range of columns, not a list of them: the loop vectorizes (late in a fox fit
     17 → 7.5 ms a step, the same bits)."""
-    weights = weights.detach().cpu().double().numpy()
-    columns = np.flatnonzero(weights != 0.0)
+    per_column = weights.detach().cpu().double().numpy()
+    columns = np.flatnonzero(per_column != 0.0)
     if not len(columns) or not unique.numel():
         return
-    scale = (weights * (2.0 / unique.numel())).astype(np.float32)
+    scale = (per_column * (2.0 / unique.numel())).astype(np.float32)
     _add_tv(values.detach().numpy(), unique.numpy(), neighbours, int(columns[0]), int(columns[-1]) + 1, scale,
             grad.numpy())

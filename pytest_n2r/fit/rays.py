@@ -82,8 +82,16 @@ def fit_views(capture: Capture) -> list[CapturedView]:
 def ray_bytes(views: Sequence[CapturedView]) -> tuple[int, int]:
     """The bytes the rays of ``views`` take: held for the fit, and at the peak while they are built on the host
     (each photo's rays and their concatenation alive at once, with one photo's conversion)."""
-    sizes = [v.image.shape[0] * v.image.shape[1] for v in views]
+    sizes = [photo.shape[0] * photo.shape[1] for photo in map(_photo, views)]
     return RAY_BYTES * sum(sizes), 2 * RAY_BYTES * sum(sizes) + CONVERT_BYTES * max(sizes)
+
+
+def _photo(view: CapturedView) -> np.ndarray:
+    """The photo of ``view`` that its rays are coloured from; refused naming ``view`` where none was loaded."""
+    if view.image is None:
+        raise InvalidArgument(f"view {view.name!r} has no photo: training rays are drawn from photos (load the "
+                              "capture with images; fit_views keeps the training views that have one)")
+    return view.image
 
 
 class TrainingRays:
@@ -106,7 +114,7 @@ class TrainingRays:
             o, d = space.normalize_rays(*camera_rays(view.camera, view.c2w))
             origins.append(o.reshape(-1, 3)[0].copy())  # a copy: the view would keep the photo's every origin
             directions.append(d.reshape(-1, 3))
-            colors.append(view.image.reshape(-1, 3))
+            colors.append(_photo(view).reshape(-1, 3))
             owners.append(np.full(len(colors[-1]), k, dtype=np.int64))
         self.origins = torch.from_numpy(np.stack(origins)).to(device)
         self.view = torch.from_numpy(np.concatenate(owners)).to(device)

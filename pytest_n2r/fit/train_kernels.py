@@ -63,9 +63,10 @@ def lattice_positions(o: torch.Tensor, d: torch.Tensor, t: torch.Tensor, ray_idx
                       shell_samples: int, far: float) -> torch.Tensor:
     """:func:`pytest_n2r.field.lattice.lattice_position` compiled (CPU; the same operations in the same
     order, so the same float64 bits): each packed sample's position along its ray in contracted units."""
-    per_ray = [x.contiguous().numpy() for x in lattice_counts(o.double(), d.double(), step, shell_samples, far)]
+    counts = lattice_counts(o.double(), d.double(), step, shell_samples, far)
+    t0, dt, n_inner, ts, du = (x.contiguous().numpy() for x in counts)
     out = np.empty(t.shape[0])
-    _positions(t.numpy(), ray_idx.numpy(), *per_ray, step, out)
+    _positions(t.numpy(), ray_idx.numpy(), t0, dt, n_inner, ts, du, step, out)
     return torch.from_numpy(out)
 
 

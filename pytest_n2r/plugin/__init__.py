@@ -161,8 +161,8 @@ def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
                 f"{metafunc.definition.nodeid}: n2r_scene is parametrized by pytest-n2r over the configured scenes; "
                 f"choose this test's scenes with @pytest.mark.{SCENE_MARKER}(...), not @pytest.mark.parametrize")
     definitions = getattr(metafunc, "_arg2fixturedefs", {}).get("n2r_scene") or ()
-    if definitions and definitions[-1].func is not n2r_scene.__wrapped__ \
-            and "n2r_scene" not in definitions[-1].argnames:
+    ours = n2r_scene.__wrapped__  # type: ignore[attr-defined]  # set by pytest's fixture wrapper, not in its types
+    if definitions and definitions[-1].func is not ours and "n2r_scene" not in definitions[-1].argnames:
         return  # a conftest's own n2r_scene fixture replaces pytest-n2r's: its scene, not the configured ones
     session = session_of(metafunc.config)
     # the closest level's pins decide (a function's over its class's over its module's), as for a fixture, every
@@ -338,14 +338,15 @@ def _locate_at_the_test(item: pytest.Item, report: pytest.TestReport) -> None:
     """A relation's failure, raised from this plugin's hook (every frame hidden), located at the test function
     (``--tb=line``, IDEs and CI annotations read it) rather than in pluggy, without pytest's note that every
     traceback entry is hidden: the message is the whole failure."""
-    crash = getattr(report.longrepr, "reprcrash", None)
-    if not report.failed or crash is None or not hasattr(report.longrepr, "reprtraceback"):
+    longrepr: Any = report.longrepr  # read by what it has: pytest's ExceptionChainRepr is private (_pytest._code)
+    crash = getattr(longrepr, "reprcrash", None)
+    if not report.failed or crash is None or not hasattr(longrepr, "reprtraceback"):
         return
     path, line, _ = item.reportinfo()
-    at_test = report.longrepr.reprcrash = type(crash)(str(path), (line or 0) + 1, crash.message)
-    chain = getattr(report.longrepr, "chain", [])
+    at_test = longrepr.reprcrash = type(crash)(str(path), (line or 0) + 1, crash.message)
+    chain = getattr(longrepr, "chain", [])
     chain[-1:] = [(traceback, at_test, descr) for traceback, _, descr in chain[-1:]]  # what pytest-xdist ships
-    for traceback in [report.longrepr.reprtraceback, *(entry[0] for entry in chain)]:
+    for traceback in [longrepr.reprtraceback, *(entry[0] for entry in chain)]:
         if traceback.style == "value":
             traceback.extraline = None
 

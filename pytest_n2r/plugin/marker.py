@@ -67,7 +67,7 @@ def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None
             name = getattr(test.__func__, "__name__", repr(test))
             setattr(test.__func__, ERROR_ATTR, f"@metamorphic(...): {name} is a classmethod, which pytest does not "
                                                "collect as a test; make it a plain method or a staticmethod")
-            return test  # type: ignore[return-value]
+            return test
         if getattr(test, ERROR_ATTR, None) is not None:  # the inner decorator's error stands
             return test
         if getattr(test, RELATION_ATTR, None) is not None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -110,11 +111,12 @@ class Option:
         which pytest 9 refuses for an option registered as text, written as text for :attr:`parse` (a bool as
         ``yes`` / ``no``, or kept a bool where :attr:`typed_bool`; a list option's string split at whitespace, as
         in an ini file)."""
-        try:
+        if sys.version_info >= (3, 11):
             import tomllib
-        except ImportError:  # Python 3.10: pytest's own TOML reader
-            import tomli as tomllib
+        else:  # Python 3.10: pytest's own TOML reader (mypy run on 3.11 or later has no tomli to read)
+            import tomli as tomllib  # type: ignore[import-not-found, unused-ignore]
 
+        assert config.inipath is not None  # the value came from a TOML configuration file
         path = Path(config.inipath)
         data = tomllib.loads(path.read_text(encoding="utf-8"))
         table = data.get("tool", {}).get("pytest", {}) if path.name == "pyproject.toml" else data.get("pytest", {})

@@ -47,8 +47,7 @@ def cache_folder(value: str | bool, where: Where) -> Path | None:
     path = folder(value, where)
     from ..scene.cache_folder import foreign_entries, not_a_cache
 
-    foreign = [] if path is None else foreign_entries(path)
-    if foreign:
+    if path is not None and (foreign := foreign_entries(path)):
         raise InvalidArgument(f"{not_a_cache(path, foreign)}; choose a new or empty folder, or 'none'")
     return path
 

@@ -65,7 +65,7 @@ def family(spec: SceneSpec) -> str | None:
 def helper_specs(planned: list[SceneSpec], rendering: SceneSpec | None) -> list[SceneSpec]:
     """One scene of each :func:`family` in ``planned`` (in order) other than the family of ``rendering`` (the
     scene the session is about to render first): what the helper should compile; empty when there is none."""
-    seen = {None, family(rendering)} if rendering is not None else {None}
+    seen: set[str | None] = {None, family(rendering)} if rendering is not None else {None}
     out = []
     for spec in planned:
         if family(spec) not in seen:

@@ -19,10 +19,10 @@ from .options import option, read_options
 
 _RESULT = pytest.StashKey["dict"]()
 #: The files to write at the end of the session, by option name (``save_baseline``, ``json``, ``report``).
-_OUTPUTS = pytest.StashKey["dict"]()
+_OUTPUTS = pytest.StashKey[dict[str, Path]]()
 #: The relation test ids this process collected, selected or deselected (for a baseline's ``not_recorded``, and to
 #: tell a comparison's deselected relation from a renamed or deleted one).
-_COLLECTED = pytest.StashKey["set"]()
+_COLLECTED = pytest.StashKey[set[str]]()
 _OUTPUT_OPTIONS = ("save_baseline", "json", "report")
 
 
@@ -274,7 +274,8 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     outputs = config.stash.get(_OUTPUTS, {})
     if _is_worker(config):
         if _tracks_collected(config):
-            config.workeroutput["n2r_collected_relations"] = sorted(config.stash.get(_COLLECTED, set()))
+            collected = config.stash.get(_COLLECTED, set())
+            config.workeroutput["n2r_collected_relations"] = sorted(collected)  # type: ignore[attr-defined]  # xdist's
         return
     if not outputs and not config.getoption("n2r_compare"):
         return
@@ -304,8 +305,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             session.exitstatus = pytest.ExitCode.TESTS_FAILED
     written, problems = [], []
     path = outputs.get("save_baseline")
-    refused = _baseline_refused(session, records, path) if path is not None else None
-    if refused is not None:
+    if path is not None and (refused := _baseline_refused(session, records, path)) is not None:
         kept = "; the previous file is left as it was" if path.exists() else ""
         problems.append(f"did not save the baseline {path}: {refused}{kept}")
         path = None

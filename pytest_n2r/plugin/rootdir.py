@@ -74,8 +74,9 @@ def _setup(args: list[str], early: Any, invocation_dir: Path) -> tuple[Path, Pat
     try:
         from _pytest.config.findpaths import determine_setup
 
-        known = {"inifile": None, "override_ini": getattr(early, "override_ini", None), "args": args,
-                 "rootdir_cmd_arg": getattr(early, "rootdir", None) or None, "invocation_dir": invocation_dir}
+        known: dict[str, Any] = {  # what one pytest version's determine_setup or another's takes
+            "inifile": None, "override_ini": getattr(early, "override_ini", None), "args": args,
+            "rootdir_cmd_arg": getattr(early, "rootdir", None) or None, "invocation_dir": invocation_dir}
         accepted = inspect.signature(determine_setup).parameters
         root, ini, *_ = determine_setup(**{k: v for k, v in known.items() if k in accepted})
     except Exception:  # noqa: BLE001 -- pytest's internals moved: nothing to compare with

@@ -179,8 +179,9 @@ def _reason(report: pytest.TestReport) -> str:
     crash = getattr(longrepr, "reprcrash", None)
     if crash is not None:
         return str(crash.message)
-    if getattr(longrepr, "errorstring", None):  # a missing fixture (FixtureLookupErrorRepr)
-        return str(longrepr.errorstring).strip().splitlines()[0]
+    errorstring = getattr(longrepr, "errorstring", None)
+    if errorstring:  # a missing fixture (FixtureLookupErrorRepr)
+        return str(errorstring).strip().splitlines()[0]
     lines = [line.strip() for line in str(longrepr or "").splitlines() if line.strip()]
     errors = [line[1:].strip() for line in lines if line.startswith("E ")]  # pytest's marked lines, if any
     return (errors or lines or [""])[0]

@@ -56,6 +56,22 @@ def test_render_units_scene_moves_by_scene_units(tmp_path, capsys):
     assert np.array_equal(cv2.imread(str(out))[:, :, ::-1], want)
 
 
+def test_a_scene_of_ones_own_that_leaves_out_an_asked_output_is_refused_naming_it(tmp_path, capsys, monkeypatch):
+    """A Scene whose ``_render`` returns no depth though asked for it: an error naming SCENE and the output, not a
+    traceback from the depth preview, and nothing written."""
+    import pytest_n2r.demo.scene_specs
+    from pytest_n2r.demo import ground_truth
+
+    scene = ground_truth("wall")
+    full = scene._render
+    monkeypatch.setattr(scene, "_render", lambda c2w, camera, outputs: {
+        name: image for name, image in full(c2w, camera, outputs).items() if name != "depth"})
+    monkeypatch.setattr(pytest_n2r.demo.scene_specs, "load_scene_spec", lambda spec, device, images: scene)
+    assert main(["render", "demo:wall", "--size", "32", "--depth", "-o", str(tmp_path / "v.png")]) == 2
+    assert "SCENE 'demo:wall' rendered no depth where it was asked for one" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
 # import.py -------------------------------------------------------------------------------------------------------
 
 

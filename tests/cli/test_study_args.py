@@ -36,3 +36,16 @@ def test_a_size_too_small_for_ssim_is_refused_before_rendering(tmp_path, capsys,
     err = capsys.readouterr().err
     assert ("n2r study: error: --size 16: view 'wall_000.png' of wall would render 16x9 pixels; the study scores "
             "renders with SSIM, which needs at least 11 pixels a side: --size 19 or more") in err, err
+
+
+def test_a_scene_of_ones_own_that_renders_no_rgb_is_refused_naming_it(tmp_path, capsys, monkeypatch, no_study):
+    """The probe a study tells imported SUTs' kinds with: a Scene whose ``_render`` returns no rgb is named, not
+    handed to the SUT as None."""
+    import pytest_n2r.demo.scene_specs
+    from pytest_n2r.demo import ground_truth
+
+    scene = ground_truth("wall")
+    monkeypatch.setattr(scene, "_render", lambda c2w, camera, outputs: {})
+    monkeypatch.setattr(pytest_n2r.demo.scene_specs, "load_scene_spec", lambda spec, device: scene)
+    assert main(["study", "demo:wall", "--sut", "orb", "-o", str(tmp_path / "st")]) == 2
+    assert "n2r study: error: SCENE 'demo:wall' rendered no rgb where it was asked for one" in capsys.readouterr().err

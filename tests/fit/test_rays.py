@@ -51,6 +51,12 @@ def test_building_the_rays_takes_no_more_memory_than_they_are_priced_at(capture4
     assert 0.7 * building <= peak <= building, f"building took {peak} bytes at the peak, priced at {building}"
 
 
+def test_a_view_without_its_photo_is_refused_naming_it(capture48):
+    views = [*capture48.train_views[:1], dataclasses.replace(capture48.train_views[1], image=None)]
+    with pytest.raises(InvalidArgument, match=rf"view {re.escape(repr(views[1].name))} has no photo"):
+        TrainingRays(views, fit_space(capture48, SHORT_CONFIG), CPU)
+
+
 def _refusal(capture48, monkeypatch, free: dict[str, int | None], device: torch.device = CPU) -> str:
     monkeypatch.setattr("pytest_n2r.fit.rays.free_bytes", lambda dev: free[dev.type])
     with pytest.raises(FitError) as info:
