@@ -9,12 +9,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from ..demo.scene_specs import SceneSpec
-    from ..render.view import RenderedView
 
-__all__ = ["SCENE_HELP", "scene_argument", "scene_arguments", "scene_inputs", "scene_output"]
+__all__ = ["SCENE_HELP", "scene_argument", "scene_arguments", "scene_inputs"]
 
 #: The help of a SCENE argument: every form the plugin's ``--n2r-scene`` accepts.
 SCENE_HELP = ("a .n2r scene file or a 3DGS .ply, 'demo:<name>' (a built-in demo scene; 'demo:<name>-field' its "
@@ -38,18 +35,6 @@ def scene_arguments(texts: list[str]) -> list[SceneSpec]:
 def scene_inputs(spec: SceneSpec) -> list[Path]:
     """The input files of a scene (never overwritten by an output): its scene file, if it has one."""
     return [Path(spec.source)] if spec.kind == "file" else []
-
-
-def scene_output(rendered: RenderedView, name: str, scene: str) -> np.ndarray:
-    """Output ``name`` of a view that SCENE ``scene`` rendered; refused naming SCENE where it was asked for and not
-    rendered (a Scene of one's own whose ``_render`` leaves it out)."""
-    from ..errors import InvalidArgument
-
-    image = {"rgb": rendered.rgb, "depth": rendered.depth, "opacity": rendered.opacity}[name]
-    if image is None:
-        raise InvalidArgument(f"SCENE {scene!r} rendered no {name} where it was asked for one: its Scene's _render "
-                              "must return every output it is asked for")
-    return image
 
 
 def _importable(specs: list[SceneSpec]) -> list[SceneSpec]:

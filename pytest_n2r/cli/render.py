@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ._output import FORCE_HELP, printable
-from ._scene import SCENE_HELP, scene_output
+from ._scene import SCENE_HELP
 
 __all__ = ["add_parser", "run", "depth_preview", "output_paths"]
 
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     rendered = scene.render(c2w, camera, outputs)
     seconds = time.perf_counter() - start
-    images = {name: scene_output(rendered, name, args.scene) for name in outputs}
+    images = {name: rendered.output(name) for name in outputs}
     encoded = {"rgb": _png(images["rgb"])}
     if args.depth:
         raw = io.BytesIO()

@@ -136,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from ..study import StudyConfig, resolve_sut, run_study, write_study
     from ..study.suts import check_points
     from ._output import check_output_dir
-    from ._scene import scene_arguments, scene_output
+    from ._scene import scene_arguments
 
     for option, value in (("--examples", args.examples), ("--views", args.views), ("--fps-frames", args.fps_frames)):
         if value < 1:
@@ -151,12 +151,10 @@ def run(args: argparse.Namespace) -> int:
     config = StudyConfig(examples=args.examples, max_views=args.views, size=args.size, eps=args.eps,
                          fps_frames=args.fps_frames, seed=args.seed,
                          **({"fps_sizes": tuple(args.fps_sizes)} if args.fps_sizes else {}))
-    specs = scene_arguments(args.scenes)
-    scenes = [load_scene_spec(spec, args.device) for spec in specs]
+    scenes = [load_scene_spec(spec, args.device) for spec in scene_arguments(args.scenes)]
     check_render_size(scenes, args.size)
     view = scenes[0].views[0]
-    probe = scene_output(scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)), "rgb",
-                         specs[0].source)
+    probe = scenes[0].render(view.c2w, view.camera.fit_within(args.size), ("rgb",)).output("rgb")
     suts = [resolve_sut(spec, probe, kinds.get(spec), points=args.points) for spec in args.sut]
     with tqdm(desc="n2r study", unit="step", file=sys.stderr, disable=None) as bar:
         def progress(message: str) -> None:

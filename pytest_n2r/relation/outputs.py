@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidArgument, SUTError, SUTOutputError
+from ..errors import SUTError, SUTOutputError
 from ..metrics.base import Metric
 from ..render.view import RenderedView
 
@@ -16,12 +16,10 @@ __all__ = ["SUTError", "check_output", "sut_image"]
 
 
 def sut_image(view: RenderedView, role: str) -> np.ndarray:
-    """The image the system under test is given on the ``role`` view: its ``rgb``, or an :class:`InvalidArgument`
-    when the view has none (a scene whose render leaves out an output asked for, a follow-up of one's own)."""
-    if view.rgb is None:
-        raise InvalidArgument(f"the {role} view has no rgb image for the system under test; expected a view "
-                              "rendered with 'rgb' (a scene's render returns every output asked for)")
-    return view.rgb
+    """The image the system under test is given on the ``role`` view: its ``rgb``, or an
+    :class:`~pytest_n2r.errors.InvalidArgument` naming the view when it has none (a follow-up of one's own that
+    builds its view without it)."""
+    return view.output("rgb", name=f"the {role} view given to the system under test")
 
 
 def check_output(output: Any, role: str, where: str, metric: Metric) -> None:

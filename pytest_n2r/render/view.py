@@ -54,3 +54,9 @@ class RenderedView:
                 f"{name} was rendered without {', '.join(missing)}; expected a view rendered with outputs including "
                 f"{tuple(outputs)!r}"
             )
+
+    def output(self, output: str, name: str = "this view") -> np.ndarray:
+        """The rendered ``output`` (``"rgb"``, ``"depth"`` or ``"opacity"``); the error of :meth:`require`, naming the
+        view ``name``, if it was not rendered."""
+        self.require(output, name=name)
+        return getattr(self, output)

@@ -103,6 +103,26 @@ def check_render_camera(camera: Camera) -> Camera:
     return camera
 
 
+#: What :meth:`Scene._render` returns for each output: its dtype and its shape after the image's height and width.
+_RENDERED = {"rgb": (np.dtype(np.uint8), (3,)), "depth": (np.dtype(np.float32), ()),
+             "opacity": (np.dtype(np.float32), ())}
+
+
+def _check_rendered(scene: str, rendered: dict[str, np.ndarray], outputs: tuple[str, ...], camera: Camera) -> None:
+    """Refuse, naming the scene and the output, a render that left out an output it was asked for or returned one
+    of another shape or type than :class:`~pytest_n2r.render.view.RenderedView` describes (a ``_render`` of one's
+    own that returns a float RGB image in [0, 1], say): never a silently wrong picture."""
+    for name in outputs:
+        value = rendered.get(name)
+        dtype, channels = _RENDERED[name]
+        shape = (camera.height, camera.width, *channels)
+        if not isinstance(value, np.ndarray) or value.dtype != dtype or value.shape != shape:
+            got = "nothing" if value is None else (f"a {value.dtype} array of shape {value.shape}"
+                                                   if isinstance(value, np.ndarray) else type(value).__name__)
+            raise InvalidArgument(f"scene {scene!r} rendered {got} as {name!r}; its _render must return every "
+                                  f"output it is asked for, {name!r} as a {dtype} array of shape {shape}")
+
+
 class Scene(ABC):
     """A scene that renders RGB, z-depth and opacity at any pinhole camera and pose.
 
@@ -147,7 +167,9 @@ class Scene(ABC):
 
     @abstractmethod
     def _render(self, c2w: np.ndarray, camera: Camera, outputs: tuple[str, ...]) -> dict[str, np.ndarray]:
-        """Render the validated ``outputs`` (canonical order) and return them by name."""
+        """Render the validated ``outputs`` (canonical order) and return them by name, each as
+        :class:`~pytest_n2r.render.view.RenderedView` describes it (``rgb`` H×W×3 ``uint8``, ``depth`` and
+        ``opacity`` H×W ``float32``); :meth:`render` refuses anything else, naming the scene and the output."""
 
     def compile_apart(self) -> bool:
         """Compile the parts of this scene's renderer that compile apart from its kernels' first render (into
@@ -169,6 +191,7 @@ class Scene(ABC):
         check_render_camera(camera)
         outputs = normalize_outputs(outputs)
         rendered = self._render(c2w, camera, outputs)
+        _check_rendered(self.name, rendered, outputs, camera)
         for name in ("depth", "opacity"):
             value = rendered.get(name)
             if value is not None and not np.isfinite(value).all():

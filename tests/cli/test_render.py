@@ -68,7 +68,8 @@ def test_a_scene_of_ones_own_that_leaves_out_an_asked_output_is_refused_naming_i
         name: image for name, image in full(c2w, camera, outputs).items() if name != "depth"})
     monkeypatch.setattr(pytest_n2r.demo.scene_specs, "load_scene_spec", lambda spec, device, images: scene)
     assert main(["render", "demo:wall", "--size", "32", "--depth", "-o", str(tmp_path / "v.png")]) == 2
-    assert "SCENE 'demo:wall' rendered no depth where it was asked for one" in capsys.readouterr().err
+    assert "rendered nothing as 'depth'; its _render must return every output it is asked for" in \
+        capsys.readouterr().err
     assert not list(tmp_path.iterdir())
 
 

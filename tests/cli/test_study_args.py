@@ -48,4 +48,5 @@ def test_a_scene_of_ones_own_that_renders_no_rgb_is_refused_naming_it(tmp_path, 
     monkeypatch.setattr(scene, "_render", lambda c2w, camera, outputs: {})
     monkeypatch.setattr(pytest_n2r.demo.scene_specs, "load_scene_spec", lambda spec, device: scene)
     assert main(["study", "demo:wall", "--sut", "orb", "-o", str(tmp_path / "st")]) == 2
-    assert "n2r study: error: SCENE 'demo:wall' rendered no rgb where it was asked for one" in capsys.readouterr().err
+    assert "rendered nothing as 'rgb'; its _render must return every output it is asked for" in \
+        capsys.readouterr().err

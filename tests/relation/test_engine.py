@@ -565,5 +565,6 @@ def test_a_follow_up_view_without_rgb_is_named_not_an_attribute_error():
     """A follow-up of one's own whose view had no rgb failed inside the engine (``'NoneType' object has no attribute
     'shape'``, comparing the two images' pixels) instead of saying which view lacked its image."""
     relation = Relation.build(AbsDifference(), 255, st.just(_Blanked()), examples=3)
-    with pytest.raises(InvalidArgument, match=r"the follow-up view has no rgb image for the system under test"):
+    with pytest.raises(InvalidArgument,
+                       match=r"the follow-up view given to the system under test was rendered without rgb"):
         check_relation(PlaneScene(), lambda rgb: float(rgb.mean()), relation, settings=FAST)

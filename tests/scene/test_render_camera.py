@@ -128,3 +128,36 @@ def test_a_nan_depth_is_refused_naming_depth():
     scene = _NaNDepth()
     with pytest.raises(InvalidArgument, match=r"rendered \d+ NaN/Inf depth value"):
         scene.render(scene.views[0].c2w, scene.views[0].camera, ("depth",))
+
+
+class _Changed(PlaneScene):
+    """A plane whose ``_render`` changes one output as a Scene of one's own might get it wrong."""
+
+    def __init__(self, output: str, change):
+        super().__init__()
+        self.output, self.change = output, change
+
+    def _render(self, c2w, camera, outputs):
+        out = super()._render(c2w, camera, outputs)
+        out[self.output] = self.change(out[self.output])
+        return out
+
+
+@pytest.mark.parametrize(("output", "change", "got"), [
+    ("depth", lambda d: None, "nothing"),
+    ("rgb", lambda rgb: rgb.astype(np.float32) / 255, "a float32 array of shape (72, 96, 3)"),
+    ("rgb", lambda rgb: rgb[..., ::-1].tolist(), "list"),
+    ("rgb", lambda rgb: rgb[:, :, 0], "a uint8 array of shape (72, 96)"),
+    ("depth", lambda d: d.T, "a float32 array of shape (96, 72)"),
+    ("opacity", lambda a: a.astype(np.float64), "a float64 array of shape (72, 96)"),
+])
+def test_a_render_of_another_output_shape_or_type_is_refused_naming_it(output, change, got):
+    """Before: a left-out output failed later inside the render cache or a metric (``'NoneType' object has no
+    attribute 'nbytes'``), and a float RGB image in [0, 1] reached the SUT as a picture."""
+    scene = _Changed(output, change)
+    expected = {"rgb": "a uint8 array of shape (72, 96, 3)", "depth": "a float32 array of shape (72, 96)",
+                "opacity": "a float32 array of shape (72, 96)"}[output]
+    with pytest.raises(InvalidArgument) as caught:
+        scene.render(scene.views[0].c2w, scene.views[0].camera, ("rgb", "depth", "opacity"))
+    assert str(caught.value) == (f"scene 'plane' rendered {got} as {output!r}; its _render must return every output "
+                                 f"it is asked for, {output!r} as {expected}"), f"unexpected message: {caught.value}"

@@ -506,5 +506,5 @@ def test_a_scene_whose_render_leaves_out_rgb_is_named_not_given_to_the_sut(monke
     original = scene._render
     monkeypatch.setattr(scene, "_render", lambda c2w, cam, outputs: {
         k: v for k, v in original(c2w, cam, outputs).items() if k != "rgb"})
-    with pytest.raises(InvalidArgument, match=r"the source view has no rgb image for the system under test"):
+    with pytest.raises(InvalidArgument, match=r"rendered nothing as 'rgb'; its _render must return every output"):
         run_study([scene], [resolve_sut("orb", None)], TINY)
