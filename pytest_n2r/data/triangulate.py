@@ -81,7 +81,7 @@ def matched_pairs(
             raise InvalidArgument(
                 f"images[{k}] has size {img.shape[1]}x{img.shape[0]}; its camera is {cam.width}x{cam.height}")
 
-    sift = cv2.SIFT_create(nfeatures=max_features)  # type: ignore[attr-defined]  # OpenCV's stubs lack it
+    sift = cv2.SIFT.create(nfeatures=max_features)
     features = []
     for img in images:
         kps, desc = sift.detectAndCompute(cv2.cvtColor(img, cv2.COLOR_RGB2GRAY), None)

@@ -99,11 +99,11 @@ def _builtin(name: str, points: int | None = None) -> Callable[[np.ndarray], np.
     # - AKAZE has no cap in OpenCV: the filter alone keeps the N of largest response of its uncapped detection.
     cap = 1000 if points is None else points
     makers = {
-        "orb": lambda: cv2.ORB_create(nfeatures=cap),  # type: ignore[attr-defined]  # stubs: ORB.create only
-        "sift": lambda: cv2.SIFT_create(nfeatures=cap),  # type: ignore[attr-defined]  # stubs: SIFT.create only
-        # OpenCV 5 moved AKAZE to the contrib module xfeatures2d
+        "orb": lambda: cv2.ORB.create(nfeatures=cap),
+        "sift": lambda: cv2.SIFT.create(nfeatures=cap),
+        # OpenCV 5 moved AKAZE to the contrib module xfeatures2d (its stubs name it there, 4's in cv2)
         "akaze": lambda: (getattr(cv2, "AKAZE_create", None)
-                          or cv2.xfeatures2d.AKAZE_create)(),  # type: ignore[attr-defined]  # stubs: AKAZE.create
+                          or cv2.xfeatures2d.AKAZE_create)(),  # type: ignore[attr-defined, unused-ignore]
     }
     return _opencv_detector(makers[name], points)
 
