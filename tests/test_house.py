@@ -1,6 +1,6 @@
-"""House rules the whole repository keeps: ``ruff check .`` is clean (rules pinned in pyproject.toml), the imports
-follow the layers of docs/architecture.md (import-linter contracts in pyproject.toml) and no module grows into a
-500-line room."""
+"""House rules the whole repository keeps: ``ruff check .`` is clean (rules pinned in pyproject.toml), ``mypy``
+finds the package's annotations true (it ships py.typed), the imports follow the layers of docs/architecture.md
+(import-linter contracts in pyproject.toml) and no module grows into a 500-line room."""
 
 from __future__ import annotations
 
@@ -35,6 +35,15 @@ def test_ruff_check_is_clean():
         f"{result.stdout}{result.stderr}"
     )
 
+
+def test_mypy_finds_the_annotations_true():
+    """The package ships ``py.typed``: users' type checkers read its annotations, so ``mypy`` (the version pinned in
+    the dev extra, configured in pyproject.toml) must find none of them false."""
+    if importlib.util.find_spec("mypy") is None:
+        pytest.skip("mypy is not installed (pip install -e '.[dev]' installs the pinned version)")
+    result = subprocess.run([sys.executable, "-m", "mypy", "--cache-dir", os.devnull], cwd=REPO_ROOT,
+                            capture_output=True, text=True, check=False)  # pyproject.toml names the files
+    assert result.returncode == 0, f"`mypy` found annotations the code does not keep:\n{result.stdout}{result.stderr}"
 
 
 def test_imports_follow_the_architecture():
