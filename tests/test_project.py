@@ -79,7 +79,7 @@ def test_every_lazy_package_is_checked():
     found = {
         ".".join(path.parent.relative_to(REPO_ROOT).parts)
         for path in (REPO_ROOT / "pytest_n2r").rglob("__init__.py")
-        if re.search(r"^def __getattr__\(", path.read_text(encoding="utf-8"), re.MULTILINE)
+        if re.search(r"^ *def __getattr__\(", path.read_text(encoding="utf-8"), re.MULTILINE)
     }
     assert found == set(LAZY_PACKAGES), \
         f"packages with a lazy __getattr__ are {sorted(found)}; list each with its table in LAZY_PACKAGES"

@@ -45,6 +45,10 @@ class PoseChange(Transform, FollowUp):
     units: Units = Units.REFERENCE
     moves_camera: ClassVar[bool] = True
 
+    if TYPE_CHECKING:  # the generated __init__ as type checkers should read it: units by Units or by name
+        def __init__(self, roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0, x: float = 0.0, y: float = 0.0,
+                     z: float = 0.0, units: Units | str = Units.REFERENCE) -> None: ...
+
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "units", check_choice("units", self.units, Units, "a unit"))
