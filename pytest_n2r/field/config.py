@@ -6,7 +6,7 @@ import math
 import numbers
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, fields, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import InvalidArgument
 from .density import MAX_DENSITY_SHIFT, alpha_range, density_shift_for, step_ratio_range
@@ -219,5 +219,5 @@ class FieldConfig:
             raise InvalidArgument(f"field config has unknown keys {unknown}; known: {sorted(known)}")
         return cls(**data)
 
-    def replace(self, **changes) -> FieldConfig:
+    def replace(self, **changes: Any) -> FieldConfig:
         return replace(self, **changes)

@@ -346,7 +346,9 @@ class FieldRenderer:
 
 
 def render_rays_torch(field: SceneField, grid: MarchGrid, o: torch.Tensor, d: torch.Tensor,
-                      background: torch.Tensor, want_depth: bool, marched=None) -> dict[str, torch.Tensor]:
+                      background: torch.Tensor, want_depth: bool,
+                      marched: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None
+                      ) -> dict[str, torch.Tensor]:
     """Render normalized rays with torch (differentiable in ``field.values``); ``marched`` may pass samples
     already marched as ``(ray_idx, t, offsets)``."""
     ray_idx, t, offsets = march_dense(o, d, grid) if marched is None else marched

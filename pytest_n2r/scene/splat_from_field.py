@@ -20,6 +20,7 @@ blobs, so the splats lose detail (measured in docs/splat-scenes.md).
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -33,6 +34,9 @@ from ..render.splat_render import SplatSettings
 from ..splats.gaussians import Gaussians
 from ..splats.sh import SH_C0
 from .splat_scene import SplatScene
+
+if TYPE_CHECKING:
+    from .field_scene import FieldScene
 
 __all__ = ["DEFAULT_PATH", "DEFAULT_SIZE", "field_to_gaussians", "splat_scene_from_field", "uncontract"]
 
@@ -110,7 +114,7 @@ def field_to_gaussians(field: SceneField, *, size: float = DEFAULT_SIZE, path: f
                      log_scales=np.log(size * extent), opacity_logits=np.log(opacity / (1.0 - opacity)), sh=sh)
 
 
-def splat_scene_from_field(scene, *, size: float = DEFAULT_SIZE, path: float = DEFAULT_PATH,
+def splat_scene_from_field(scene: FieldScene, *, size: float = DEFAULT_SIZE, path: float = DEFAULT_PATH,
                            settings: SplatSettings | None = None) -> SplatScene:
     """A fitted scene (:class:`~pytest_n2r.scene.field_scene.FieldScene`) as a :class:`SplatScene` with the same
     views, reference length, scale and background (:func:`field_to_gaussians` with ``size`` and ``path``)."""
