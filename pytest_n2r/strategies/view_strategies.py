@@ -8,7 +8,7 @@ the split (and toward that captured view itself when interpolating).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import overload
 
 from hypothesis import strategies as st
 
@@ -41,9 +41,13 @@ class ViewPick:
         return candidates[self.index % len(candidates)]
 
 
+@overload
+def views(scene: None = None, *, split: str = "heldout", interpolate: bool = False) -> st.SearchStrategy[ViewPick]: ...
+@overload
+def views(scene: Scene, *, split: str = "heldout", interpolate: bool = False) -> st.SearchStrategy[SceneView]: ...
 def views(
     scene: Scene | None = None, *, split: str = "heldout", interpolate: bool = False
-) -> st.SearchStrategy[Any]:
+) -> st.SearchStrategy[ViewPick] | st.SearchStrategy[SceneView]:
     """Source views: captured views of ``split`` (``"heldout"``, ``"train"`` or ``"all"``), or with
     ``interpolate=True`` poses interpolated between consecutive views *of that split* in capture order
     (slerp of rotations, linear centres), which the field has not seen either.

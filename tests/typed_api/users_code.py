@@ -13,9 +13,10 @@ from hypothesis import strategies as st
 
 import pytest_n2r
 import pytest_n2r.scene
-from pytest_n2r import Camera, RenderedView, Scene, Transform, Units, load_scene, metamorphic
+from pytest_n2r import Camera, RenderedView, Scene, SceneView, Transform, Units, load_scene, metamorphic
 from pytest_n2r import strategies as n2r
 from pytest_n2r.metrics import Metric, repeatability
+from pytest_n2r.strategies import ViewPick
 from pytest_n2r.strategies.pose_change import PoseChange
 
 misspelt = pytest_n2r.Tranform  # type: ignore[attr-defined]  # an error, not Any: the lazy __getattr__ is hidden
@@ -26,6 +27,7 @@ units: Units = tau.units  # read back as the enumeration
 moved: Transform = Transform(yaw=10.0).then(Transform(x=0.1))
 changes: st.SearchStrategy[PoseChange] = n2r.transforms(yaw=10, x=(-0.1, 0.1), units=Units.REFERENCE)
 metric: Metric = repeatability(px=2)
+picks: st.SearchStrategy[ViewPick] = n2r.views(split="all", interpolate=True)  # resolved by the scene at hand
 
 
 def orb(rgb: np.ndarray) -> np.ndarray:
@@ -43,3 +45,7 @@ def render_first_view(path: str) -> np.ndarray:
     camera: Camera = view.camera.fit_within(320)
     rendered: RenderedView = scene.render(view.c2w, camera, ("rgb", "depth"))
     return rendered.output("rgb")
+
+
+def held_out_views(scene: Scene) -> st.SearchStrategy[SceneView]:
+    return n2r.views(scene, interpolate=True)
