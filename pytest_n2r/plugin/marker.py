@@ -11,19 +11,27 @@ the test, not a failure in the middle of a run.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from ..errors import N2RError
 from ..relation import Relation, Validity
 from . import ERROR_ATTR, RELATION_ATTR, RELATION_MARKER
+
+if TYPE_CHECKING:
+    from hypothesis.strategies import SearchStrategy
+
+    from ..geometry import Transform
+    from ..metrics.base import Metric
+    from ..render.size import RenderSize
 
 __all__ = ["metamorphic"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 
-def metamorphic(metric: Any, eps: float, *, transform: Any, examples: int | None = None,
-                size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
+def metamorphic(metric: Metric | str, eps: float, *, transform: SearchStrategy[Any] | Transform | str,
+                examples: int | None = None, size: RenderSize | str | int | tuple[int, int] | None = None,
+                search: str = "random", views: str = "heldout", interpolate: bool = False,
                 validity: Validity | None = None) -> Callable[[F], F]:
     """Check that the SUT the test returns satisfies a metamorphic relation on ``n2r_scene``.
 

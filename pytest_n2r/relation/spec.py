@@ -59,8 +59,9 @@ class Relation:
     validity: Validity = field(default_factory=Validity)
 
     @classmethod
-    def build(cls, metric: Any, eps: Any, transform: Any, *, examples: int | None = None,
-              size: Any = None, search: str = "random", views: str = "heldout", interpolate: bool = False,
+    def build(cls, metric: Metric | str, eps: float, transform: st.SearchStrategy[Any] | Transform | str, *,
+              examples: int | None = None, size: RenderSize | str | int | tuple[int, int] | None = None,
+              search: str = "random", views: str = "heldout", interpolate: bool = False,
               validity: Validity | None = None) -> Relation:
         """The relation of these arguments, each checked, with an error naming the bad one. The arguments are
         :func:`~pytest_n2r.metamorphic`'s (see its parameters); ``size`` may be anything
