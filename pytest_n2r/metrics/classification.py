@@ -258,9 +258,11 @@ class CosineSimilarity(_VectorMetric):
                                           inputs=mode, classes=int(a.size))
         if na == 0.0 or nb == 0.0:
             return self.result(0.0, inputs=mode, classes=int(a.size))
-        # 1 - cos = |â - b̂|² / 2 on unit vectors: exactly 0 for identical outputs, and no cancellation near 0
-        deviation = float(np.clip(0.5 * np.sum((a / na - b / nb) ** 2), 0.0, 2.0))
-        score = float(np.clip(1.0 - deviation, -1.0, 1.0))
+        # 1 - cos = |â - b̂|² / 2 on unit vectors: exactly 0 for identical outputs, and no cancellation near 0; held
+        # within the range, whose far end rounding can pass (two softmaxed logits favouring different classes, their
+        # cosine about 1e-16, gave a score of -2.2e-16 from non-negative vectors)
+        deviation = float(np.clip(0.5 * np.sum((a / na - b / nb) ** 2), 0.0, self.ideal - self.worst))
+        score = 1.0 - deviation
         return MetricResult(self.name, score, deviation, {"inputs": mode, "classes": int(a.size)})
 
     def __repr__(self) -> str:
