@@ -8,6 +8,8 @@ Each annotated assignment states the type a user expects; a misspelt name carrie
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from hypothesis import strategies as st
 
@@ -19,8 +21,9 @@ from pytest_n2r.metrics import Metric, repeatability
 from pytest_n2r.strategies import ViewPick
 from pytest_n2r.strategies.pose_change import PoseChange
 
-misspelt = pytest_n2r.Tranform  # type: ignore[attr-defined]  # an error, not Any: the lazy __getattr__ is hidden
-also_misspelt = pytest_n2r.scene.FieldScen  # type: ignore[attr-defined]  # the lazy subpackage's too
+if TYPE_CHECKING:  # read by mypy only: at run time these fail, as they should (pytest imports this file for doctests)
+    misspelt = pytest_n2r.Tranform  # type: ignore[attr-defined]  # an error, not Any: the lazy __getattr__ is hidden
+    also_misspelt = pytest_n2r.scene.FieldScen  # type: ignore[attr-defined]  # the lazy subpackage's too
 
 tau: PoseChange = PoseChange(yaw=5.0, x=0.1, units="scene")  # units by name, as the docs write them
 units: Units = tau.units  # read back as the enumeration
