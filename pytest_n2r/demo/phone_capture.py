@@ -248,8 +248,7 @@ def write_phone_capture(name: str, out_dir: str | os.PathLike, settings: PhoneSe
             if draw < settings.shaken:
                 shake_px, shake_deg = settings.shake_px, 180.0 * float(angle)
         streak = streak_kernel(shake_px, shake_deg) if shake_px > 0 else None
-        rgb = scene.render(c2w, camera, ("rgb",)).rgb
-        assert rgb is not None, "rendered with rgb"
+        rgb = scene.render(c2w, camera, ("rgb",)).output("rgb")
         upright = _degrade(rgb, gain, wb, sigma, streak)
         path = out / f"photo_{index:03d}{suffix}"
         exif = Image.Exif()

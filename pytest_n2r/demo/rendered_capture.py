@@ -57,11 +57,11 @@ def capture_scene(scene: GroundTruthScene, size: int | tuple[int, int], n_points
         views.append(CapturedView(name=v.name, camera=camera, c2w=v.c2w.copy(), split=split, image=image))
         if v.split == "train":
             small = v.camera.fit_within(64)
-            depth = scene.render(v.c2w, small, ("depth", "opacity"))
-            assert depth.depth is not None and depth.opacity is not None, "rendered with both"
-            hit = (depth.opacity.ravel() >= 1.0) & (depth.depth.ravel() <= 2 * scene.reference_length)
+            rendered = scene.render(v.c2w, small, ("depth", "opacity"))
+            depth, opacity = rendered.output("depth").ravel(), rendered.output("opacity").ravel()
+            hit = (opacity >= 1.0) & (depth <= 2 * scene.reference_length)
             uv = pixel_grid(small).reshape(-1, 2)[hit]
-            points.append(backproject(uv, depth.depth.ravel()[hit].astype(np.float64), small, v.c2w))
+            points.append(backproject(uv, depth[hit].astype(np.float64), small, v.c2w))
     pts = np.concatenate(points) if points else np.zeros((0, 3))
     if len(pts) > n_points:
         pts = pts[np.linspace(0, len(pts) - 1, n_points).round().astype(np.int64)]

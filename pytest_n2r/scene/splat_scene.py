@@ -159,9 +159,9 @@ def _reference_renders(scene: Scene, views: Sequence[SceneView]) -> tuple[int, n
     depths, covered = [], []
     for view in picked:
         out = scene.render(view.c2w, view.camera.fit_within(REFERENCE_SIZE), ("depth", "opacity"))
-        assert out.depth is not None and out.opacity is not None, "rendered with both"
-        depths.append(out.depth[out.opacity >= 0.5])
-        covered.append(float(out.opacity.mean()))
+        depth, opacity = out.output("depth"), out.output("opacity")
+        depths.append(depth[opacity >= 0.5])
+        covered.append(float(opacity.mean()))
     return len(picked), np.concatenate(depths), float(np.mean(covered))
 
 

@@ -148,9 +148,7 @@ class Mutation(FollowUp):
 
         if not isinstance(view, RenderedView):
             raise InvalidType(f"view must be a RenderedView, got {type(view).__name__}")
-        view.require("rgb")
-        assert view.rgb is not None, "require raised without it"
-        return replace(view, rgb=self.apply(view.rgb))
+        return replace(view, rgb=self.apply(view.output("rgb")))
 
     def follow_view(self, source: RenderedView, scene: Scene,
                     render: Callable[[np.ndarray], RenderedView]) -> RenderedView:

@@ -135,8 +135,7 @@ def measure_fidelity(scene: Scene, *, size: int | str | None = 480, max_views: i
     for view in floor_views(scene, max_views):
         camera = view.camera if render_size is None else render_size.apply(view.camera)
         # depth and opacity too: the floors bring the nearest other photo to the pose through them (one pass)
-        render = cache.render(scene, view.c2w, camera, ("rgb", "depth", "opacity")).rgb
-        assert render is not None, "rendered with rgb"
+        render = cache.render(scene, view.c2w, camera, ("rgb", "depth", "opacity")).output("rgb")
         reference = reference_image(scene, view, camera, kind, lambda s, c2w, cam: cache.render(s, c2w, cam))
         images.append({"view": view.name, "psnr": psnr(reference, render), "ssim": ssim(reference, render)})
     floors = {}
