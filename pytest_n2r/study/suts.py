@@ -184,9 +184,9 @@ def resolve_sut(spec: str, probe: np.ndarray | None, kind: Kind | None = None, *
 
     ``probe`` (an RGB image; ``None`` will do for a built-in SUT) is run once to tell detectors from classifiers
     for imported SUTs; ``kind`` (``"detector"`` or ``"classifier"``) says which where the output cannot (shape
-    ``(1, K)``: one keypoint, or a batch of one score vector). ``points`` (``n2r study --points``): a built-in detector keeps the ``points``
-    keypoints of largest response per image (see :func:`_builtin`); None keeps OpenCV's caps (1000 for ORB and SIFT,
-    none for AKAZE). An imported SUT runs as given, whatever ``points``.
+    ``(1, K)``: one keypoint, or a batch of one score vector). ``points`` (``n2r study --points``): a built-in
+    detector keeps the ``points`` keypoints of largest response per image (see :func:`_builtin`); None keeps OpenCV's
+    caps (1000 for ORB and SIFT, none for AKAZE). An imported SUT runs as given, whatever ``points``.
     """
     if not isinstance(spec, str):
         raise InvalidType(f"--sut {spec!r} must be a str: a built-in SUT ({', '.join(BUILTIN_SUTS)}) or "
